@@ -1,0 +1,11 @@
+// The `hysar` subcommands. Each returns the process exit code: 0 success, 1 failure, 2 usage.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace hs::cli {
+
+int run_render(const std::vector<std::string>& args);
+
+}  // namespace hs::cli

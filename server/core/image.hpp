@@ -1,0 +1,60 @@
+// Linear-radiance images in memory, and their files on disk.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <vector>
+
+#include <glm/vec4.hpp>
+
+#include "core/result.hpp"
+
+namespace hs {
+
+// Row-major RGBA float image, row 0 at the top. Values are linear radiance (scene units).
+struct ImageRgba32f {
+    uint32_t width = 0;
+    uint32_t height = 0;
+    std::vector<float> pixels;  // width * height * 4 floats
+
+    static ImageRgba32f zeros(uint32_t width, uint32_t height) {
+        return ImageRgba32f{width, height, std::vector<float>(size_t(width) * height * 4, 0.0f)};
+    }
+    size_t index(uint32_t x, uint32_t y) const { return (size_t(y) * width + x) * 4; }
+    glm::vec4 at(uint32_t x, uint32_t y) const {
+        const float* p = &pixels[index(x, y)];
+        return {p[0], p[1], p[2], p[3]};
+    }
+    void set(uint32_t x, uint32_t y, glm::vec4 v) {
+        float* p = &pixels[index(x, y)];
+        p[0] = v.r; p[1] = v.g; p[2] = v.b; p[3] = v.a;
+    }
+    bool empty() const { return width == 0 || height == 0; }
+};
+
+// 8-bit RGBA, row 0 at the top, for PNG files and display.
+struct ImageRgba8 {
+    uint32_t width = 0;
+    uint32_t height = 0;
+    std::vector<uint8_t> pixels;  // width * height * 4 bytes
+};
+
+// The documented tone map for 8-bit output (docs/SHADING.md, "Files"):
+//   display = srgb_oetf(clamp(L / white, 0, 1)) per colour channel, alpha = 1.
+// `white` is the linear radiance drawn as full white; NaN draws as magenta so it is never hidden.
+ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white);
+
+// sRGB opto-electronic transfer function (IEC 61966-2-1) of a value in [0, 1].
+float srgb_oetf(float linear);
+
+Result<void> write_png(const std::filesystem::path& path, const ImageRgba8& image);
+Result<ImageRgba8> read_png(const std::filesystem::path& path);
+
+// OpenEXR with 32-bit float R, G, B channels: the lossless linear-radiance file.
+Result<void> write_exr(const std::filesystem::path& path, const ImageRgba32f& image);
+Result<ImageRgba32f> read_exr(const std::filesystem::path& path);
+
+// Copies `tile` into `canvas` with its top-left corner at (x, y), clipped to the canvas.
+void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x, int y);
+
+}  // namespace hs

@@ -1,0 +1,258 @@
+#include "gpu/device.hpp"
+
+#include <cstdlib>
+#include <cstring>
+
+#include "core/log.hpp"
+
+namespace hs::gpu {
+
+const char* vk_result_string(VkResult r) {
+    switch (r) {
+#define HS_CASE(x) case x: return #x
+        HS_CASE(VK_SUCCESS); HS_CASE(VK_NOT_READY); HS_CASE(VK_TIMEOUT); HS_CASE(VK_INCOMPLETE);
+        HS_CASE(VK_ERROR_OUT_OF_HOST_MEMORY); HS_CASE(VK_ERROR_OUT_OF_DEVICE_MEMORY);
+        HS_CASE(VK_ERROR_INITIALIZATION_FAILED); HS_CASE(VK_ERROR_DEVICE_LOST);
+        HS_CASE(VK_ERROR_MEMORY_MAP_FAILED); HS_CASE(VK_ERROR_LAYER_NOT_PRESENT);
+        HS_CASE(VK_ERROR_EXTENSION_NOT_PRESENT); HS_CASE(VK_ERROR_FEATURE_NOT_PRESENT);
+        HS_CASE(VK_ERROR_INCOMPATIBLE_DRIVER); HS_CASE(VK_ERROR_TOO_MANY_OBJECTS);
+        HS_CASE(VK_ERROR_FORMAT_NOT_SUPPORTED); HS_CASE(VK_ERROR_OUT_OF_POOL_MEMORY);
+#undef HS_CASE
+        default: return "VkResult(other)";
+    }
+}
+
+DeviceCreateInfo device_info_from_environment(DeviceCreateInfo d) {
+    if (const char* e = std::getenv("HYSAR_DEVICE")) {
+        if (!std::strcmp(e, "cpu")) d.preference = DevicePreference::kCpu;
+        else if (!std::strcmp(e, "gpu")) d.preference = DevicePreference::kGpu;
+        else if (!std::strcmp(e, "auto")) d.preference = DevicePreference::kAuto;
+        else log::warn("HYSAR_DEVICE='{}' is not auto, cpu or gpu; ignored", e);
+    }
+    if (const char* e = std::getenv("HYSAR_VALIDATION")) d.validation = std::strcmp(e, "0") != 0;
+    return d;
+}
+
+VKAPI_ATTR VkBool32 VKAPI_CALL Device::debug_callback(
+    VkDebugUtilsMessageSeverityFlagBitsEXT severity, VkDebugUtilsMessageTypeFlagsEXT,
+    const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
+    auto* self = static_cast<Device*>(user);
+    if (severity >= VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT) {
+        self->validation_count_.fetch_add(1);
+        std::string msg = data && data->pMessage ? data->pMessage : "(no text)";
+        log::error("vulkan validation: {}", msg);
+        std::lock_guard lock(self->messages_mutex_);
+        self->messages_.push_back(std::move(msg));
+    }
+    return VK_FALSE;
+}
+
+std::vector<std::string> Device::validation_messages() const {
+    std::lock_guard lock(messages_mutex_);
+    return messages_;
+}
+
+Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
+    std::unique_ptr<Device> d(new Device());
+
+    uint32_t ext_count = 0;
+    HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, nullptr));
+    std::vector<VkExtensionProperties> exts(ext_count);
+    HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, exts.data()));
+    for (const auto& e : exts) d->debug_utils_ |= !std::strcmp(e.extensionName, VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+
+    std::vector<const char*> layers, instance_exts;
+    if (info.validation) {
+        uint32_t n = 0;
+        HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, nullptr));
+        std::vector<VkLayerProperties> props(n);
+        HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, props.data()));
+        bool found = false;
+        for (const auto& p : props) found |= !std::strcmp(p.layerName, "VK_LAYER_KHRONOS_validation");
+        if (!found) {
+            return make_error(ErrorCode::kUnsupported,
+                              "Vulkan validation was requested but VK_LAYER_KHRONOS_validation is not "
+                              "installed (Debian package vulkan-validationlayers)");
+        }
+        if (!d->debug_utils_) return make_error(ErrorCode::kUnsupported, "validation needs VK_EXT_debug_utils");
+        layers.push_back("VK_LAYER_KHRONOS_validation");
+        d->validation_ = true;
+    }
+    if (d->debug_utils_) instance_exts.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+
+    VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
+    app.pApplicationName = "hysar";
+    app.apiVersion = VK_API_VERSION_1_3;
+    VkDebugUtilsMessengerCreateInfoEXT mci{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
+    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+                      VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
+    mci.pfnUserCallback = &Device::debug_callback;
+    mci.pUserData = d.get();
+
+    VkInstanceCreateInfo ici{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
+    ici.pApplicationInfo = &app;
+    ici.enabledLayerCount = uint32_t(layers.size());
+    ici.ppEnabledLayerNames = layers.data();
+    ici.enabledExtensionCount = uint32_t(instance_exts.size());
+    ici.ppEnabledExtensionNames = instance_exts.data();
+    if (d->validation_) ici.pNext = &mci;  // also covers instance creation and destruction
+    HS_VK_TRY(vkCreateInstance(&ici, nullptr, &d->instance_));
+
+    if (d->debug_utils_) {
+        d->set_name_fn_ = (PFN_vkSetDebugUtilsObjectNameEXT)vkGetInstanceProcAddr(d->instance_, "vkSetDebugUtilsObjectNameEXT");
+        d->begin_label_fn_ = (PFN_vkCmdBeginDebugUtilsLabelEXT)vkGetInstanceProcAddr(d->instance_, "vkCmdBeginDebugUtilsLabelEXT");
+        d->end_label_fn_ = (PFN_vkCmdEndDebugUtilsLabelEXT)vkGetInstanceProcAddr(d->instance_, "vkCmdEndDebugUtilsLabelEXT");
+    }
+    if (d->validation_) {
+        auto create = (PFN_vkCreateDebugUtilsMessengerEXT)vkGetInstanceProcAddr(d->instance_, "vkCreateDebugUtilsMessengerEXT");
+        HS_CHECK(create != nullptr, "debug utils advertised but vkCreateDebugUtilsMessengerEXT missing");
+        HS_VK_TRY(create(d->instance_, &mci, nullptr, &d->messenger_));
+    }
+
+    // Pick a physical device: Vulkan 1.3, a graphics+compute queue, and the preferred kind.
+    uint32_t pd_count = 0;
+    HS_VK_TRY(vkEnumeratePhysicalDevices(d->instance_, &pd_count, nullptr));
+    std::vector<VkPhysicalDevice> pds(pd_count);
+    HS_VK_TRY(vkEnumeratePhysicalDevices(d->instance_, &pd_count, pds.data()));
+    int best_score = -1;
+    std::string seen;
+    for (VkPhysicalDevice pd : pds) {
+        VkPhysicalDeviceProperties props;
+        vkGetPhysicalDeviceProperties(pd, &props);
+        seen += fmt::format("{}{} ({})", seen.empty() ? "" : ", ", props.deviceName,
+                            props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? "cpu" : "gpu");
+        if (props.apiVersion < VK_API_VERSION_1_3) continue;
+        const bool cpu = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
+        if (info.preference == DevicePreference::kCpu && !cpu) continue;
+        if (info.preference == DevicePreference::kGpu && cpu) continue;
+        uint32_t qn = 0;
+        vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, nullptr);
+        std::vector<VkQueueFamilyProperties> qs(qn);
+        vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, qs.data());
+        int family = -1;
+        for (uint32_t i = 0; i < qn; ++i)
+            if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) { family = int(i); break; }
+        if (family < 0) continue;
+        int score = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU ? 3
+                    : props.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ? 2 : cpu ? 1 : 0;
+        if (score > best_score) {
+            best_score = score;
+            d->physical_ = pd;
+            d->queue_family_ = uint32_t(family);
+            d->name_ = props.deviceName;
+            d->is_cpu_ = cpu;
+        }
+    }
+    if (!d->physical_) {
+        const char* want = info.preference == DevicePreference::kCpu ? "a CPU Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)"
+                         : info.preference == DevicePreference::kGpu ? "a hardware Vulkan 1.3 GPU"
+                                                                       : "any Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)";
+        return make_error(ErrorCode::kUnsupported, fmt::format("no suitable device: wanted {}; found: {}", want, seen.empty() ? "none" : seen));
+    }
+    vkGetPhysicalDeviceMemoryProperties(d->physical_, &d->memory_props_);
+
+    float prio = 1.0f;
+    VkDeviceQueueCreateInfo qci{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
+    qci.queueFamilyIndex = d->queue_family_;
+    qci.queueCount = 1;
+    qci.pQueuePriorities = &prio;
+    VkPhysicalDeviceVulkan13Features f13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
+    f13.dynamicRendering = VK_TRUE;
+    f13.synchronization2 = VK_TRUE;
+    VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
+    f12.timelineSemaphore = VK_TRUE;
+    f12.pNext = &f13;
+    VkDeviceCreateInfo dci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
+    dci.pNext = &f12;
+    dci.queueCreateInfoCount = 1;
+    dci.pQueueCreateInfos = &qci;
+    HS_VK_TRY(vkCreateDevice(d->physical_, &dci, nullptr, &d->device_));
+    vkGetDeviceQueue(d->device_, d->queue_family_, 0, &d->queue_);
+
+    VkCommandPoolCreateInfo pci{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+    pci.flags = VK_COMMAND_POOL_CREATE_TRANSIENT_BIT;
+    pci.queueFamilyIndex = d->queue_family_;
+    VkCommandPool pool;
+    HS_VK_TRY(vkCreateCommandPool(d->device_, &pci, nullptr, &pool));
+    d->pool_ = CommandPoolHandle(d->device_, pool);
+    VkFenceCreateInfo fci{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
+    VkFence fence;
+    HS_VK_TRY(vkCreateFence(d->device_, &fci, nullptr, &fence));
+    d->fence_ = FenceHandle(d->device_, fence);
+    d->set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), "hysar.command_pool");
+    d->set_name(VK_OBJECT_TYPE_FENCE, uint64_t(fence), "hysar.submit_fence");
+    log::debug("vulkan device: {}{}", d->name_, d->validation_ ? " (validation on)" : "");
+    return d;
+}
+
+Device::~Device() {
+    if (device_) {
+        vkDeviceWaitIdle(device_);
+        pool_.reset();
+        fence_.reset();
+        vkDestroyDevice(device_, nullptr);
+    }
+    if (messenger_) {
+        auto destroy = (PFN_vkDestroyDebugUtilsMessengerEXT)vkGetInstanceProcAddr(instance_, "vkDestroyDebugUtilsMessengerEXT");
+        if (destroy) destroy(instance_, messenger_, nullptr);
+    }
+    if (instance_) vkDestroyInstance(instance_, nullptr);
+}
+
+void Device::set_name(VkObjectType type, uint64_t handle, const std::string& name) const {
+    if (!set_name_fn_) return;
+    VkDebugUtilsObjectNameInfoEXT ni{VK_STRUCTURE_TYPE_DEBUG_UTILS_OBJECT_NAME_INFO_EXT};
+    ni.objectType = type;
+    ni.objectHandle = handle;
+    ni.pObjectName = name.c_str();
+    set_name_fn_(device_, &ni);
+}
+
+void Device::begin_label(VkCommandBuffer cmd, const char* label) const {
+    if (!begin_label_fn_) return;
+    VkDebugUtilsLabelEXT l{VK_STRUCTURE_TYPE_DEBUG_UTILS_LABEL_EXT};
+    l.pLabelName = label;
+    begin_label_fn_(cmd, &l);
+}
+
+void Device::end_label(VkCommandBuffer cmd) const {
+    if (end_label_fn_) end_label_fn_(cmd);
+}
+
+Result<uint32_t> Device::find_memory_type(uint32_t bits, VkMemoryPropertyFlags props) const {
+    for (uint32_t i = 0; i < memory_props_.memoryTypeCount; ++i)
+        if ((bits & (1u << i)) && (memory_props_.memoryTypes[i].propertyFlags & props) == props) return i;
+    return make_error(ErrorCode::kUnsupported, fmt::format("no memory type with properties 0x{:x}", props));
+}
+
+Result<void> Device::submit_and_wait(const char* label, const std::function<void(VkCommandBuffer)>& record) {
+    std::lock_guard lock(submit_mutex_);
+    VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+    ai.commandPool = pool_.get();
+    ai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    ai.commandBufferCount = 1;
+    VkCommandBuffer cmd;
+    HS_VK_TRY(vkAllocateCommandBuffers(device_, &ai, &cmd));
+    set_name(VK_OBJECT_TYPE_COMMAND_BUFFER, uint64_t(cmd), label);
+    VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    HS_VK_TRY(vkBeginCommandBuffer(cmd, &bi));
+    begin_label(cmd, label);
+    record(cmd);
+    end_label(cmd);
+    HS_VK_TRY(vkEndCommandBuffer(cmd));
+    VkSubmitInfo si{VK_STRUCTURE_TYPE_SUBMIT_INFO};
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    VkFence fence = fence_.get();
+    HS_VK_TRY(vkResetFences(device_, 1, &fence));
+    HS_VK_TRY(vkQueueSubmit(queue_, 1, &si, fence));
+    VkResult wr = vkWaitForFences(device_, 1, &fence, VK_TRUE, UINT64_MAX);
+    vkFreeCommandBuffers(device_, pool_.get(), 1, &cmd);
+    HS_VK_TRY(wr);
+    HS_VK_TRY(vkResetCommandPool(device_, pool_.get(), 0));
+    return {};
+}
+
+}  // namespace hs::gpu

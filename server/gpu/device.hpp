@@ -1,0 +1,88 @@
+// The Vulkan instance and logical device: lavapipe on CPU-only machines, a real GPU where
+// there is one. No hidden globals: pass Device& explicitly (a test can make two).
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "gpu/handle.hpp"
+
+namespace hs::gpu {
+
+enum class DevicePreference {
+    kAuto,  // a discrete or integrated GPU if present, else a CPU device (lavapipe)
+    kCpu,   // a CPU device only (lavapipe); an error if none
+    kGpu,   // a hardware GPU only; an error if none
+};
+
+struct DeviceCreateInfo {
+    DevicePreference preference = DevicePreference::kAuto;
+    bool validation = false;  // enable VK_LAYER_KHRONOS_validation; its messages are counted
+};
+
+// `defaults` with HYSAR_DEVICE (auto|cpu|gpu) and HYSAR_VALIDATION (0|1) applied over them.
+DeviceCreateInfo device_info_from_environment(DeviceCreateInfo defaults = {});
+
+class Device {
+public:
+    static Result<std::unique_ptr<Device>> create(const DeviceCreateInfo& info);
+    ~Device();
+    Device(const Device&) = delete;
+    Device& operator=(const Device&) = delete;
+
+    VkDevice vk() const { return device_; }
+    VkPhysicalDevice physical() const { return physical_; }
+    const std::string& name() const { return name_; }
+    bool is_cpu() const { return is_cpu_; }
+    bool validation_enabled() const { return validation_; }
+
+    // Validation messages (warnings and errors) seen so far, and their texts.
+    uint32_t validation_message_count() const { return validation_count_.load(); }
+    std::vector<std::string> validation_messages() const;
+
+    // Names an object for debuggers and validation messages (VK_EXT_debug_utils); no-op without.
+    void set_name(VkObjectType type, uint64_t handle, const std::string& name) const;
+
+    // Records with `record`, submits to the queue and waits. Thread: any one thread at a time;
+    // holds the device's submit lock. `label` names the command buffer's debug region.
+    Result<void> submit_and_wait(const char* label, const std::function<void(VkCommandBuffer)>& record);
+
+    // Debug-region helpers for command recording (no-ops without VK_EXT_debug_utils).
+    void begin_label(VkCommandBuffer cmd, const char* label) const;
+    void end_label(VkCommandBuffer cmd) const;
+
+    Result<uint32_t> find_memory_type(uint32_t type_bits, VkMemoryPropertyFlags props) const;
+
+private:
+    Device() = default;
+    static VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT,
+                                                         VkDebugUtilsMessageTypeFlagsEXT,
+                                                         const VkDebugUtilsMessengerCallbackDataEXT*, void*);
+
+    VkInstance instance_ = VK_NULL_HANDLE;
+    VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+    VkPhysicalDevice physical_ = VK_NULL_HANDLE;
+    VkDevice device_ = VK_NULL_HANDLE;
+    VkQueue queue_ = VK_NULL_HANDLE;
+    uint32_t queue_family_ = 0;
+    std::string name_;
+    bool is_cpu_ = false;
+    bool validation_ = false;
+    bool debug_utils_ = false;
+    VkPhysicalDeviceMemoryProperties memory_props_{};
+    CommandPoolHandle pool_;
+    FenceHandle fence_;
+    std::mutex submit_mutex_;
+    std::atomic<uint32_t> validation_count_{0};
+    mutable std::mutex messages_mutex_;
+    std::vector<std::string> messages_;
+    PFN_vkSetDebugUtilsObjectNameEXT set_name_fn_ = nullptr;
+    PFN_vkCmdBeginDebugUtilsLabelEXT begin_label_fn_ = nullptr;
+    PFN_vkCmdEndDebugUtilsLabelEXT end_label_fn_ = nullptr;
+};
+
+}  // namespace hs::gpu

@@ -1,0 +1,173 @@
+#include "gpu/resources.hpp"
+
+#include <cstring>
+
+#include <glm/gtc/packing.hpp>
+
+namespace hs::gpu {
+
+const char* to_string(ColorFormat f) {
+    switch (f) {
+        case ColorFormat::kRgba8Unorm: return "rgba8";
+        case ColorFormat::kRgba16Float: return "rgba16f";
+        case ColorFormat::kRgba32Float: return "rgba32f";
+    }
+    return "?";
+}
+
+VkFormat to_vk(ColorFormat f) {
+    switch (f) {
+        case ColorFormat::kRgba8Unorm: return VK_FORMAT_R8G8B8A8_UNORM;
+        case ColorFormat::kRgba16Float: return VK_FORMAT_R16G16B16A16_SFLOAT;
+        case ColorFormat::kRgba32Float: return VK_FORMAT_R32G32B32A32_SFLOAT;
+    }
+    return VK_FORMAT_UNDEFINED;
+}
+
+float max_value(ColorFormat f) {
+    switch (f) {
+        case ColorFormat::kRgba8Unorm: return 1.0f;
+        case ColorFormat::kRgba16Float: return 65504.0f;
+        case ColorFormat::kRgba32Float: return 3.0e38f;
+    }
+    return 1.0f;
+}
+
+namespace {
+size_t bytes_per_pixel(ColorFormat f) {
+    return f == ColorFormat::kRgba8Unorm ? 4 : f == ColorFormat::kRgba16Float ? 8 : 16;
+}
+
+Result<MemoryHandle> allocate(Device& dev, VkMemoryRequirements req, VkMemoryPropertyFlags props) {
+    HS_ASSIGN_OR_RETURN(uint32_t type, dev.find_memory_type(req.memoryTypeBits, props));
+    VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
+    ai.allocationSize = req.size;
+    ai.memoryTypeIndex = type;
+    VkDeviceMemory mem;
+    HS_VK_TRY(vkAllocateMemory(dev.vk(), &ai, nullptr, &mem));
+    return MemoryHandle(dev.vk(), mem);
+}
+
+struct ImageParts {
+    MemoryHandle mem;
+    ImageHandle image;
+    ImageViewHandle view;
+};
+
+Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat format, VkImageUsageFlags usage,
+                              VkImageAspectFlags aspect, const std::string& name) {
+    VkImageCreateInfo ici{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
+    ici.imageType = VK_IMAGE_TYPE_2D;
+    ici.format = format;
+    ici.extent = {w, h, 1};
+    ici.mipLevels = 1;
+    ici.arrayLayers = 1;
+    ici.samples = VK_SAMPLE_COUNT_1_BIT;
+    ici.tiling = VK_IMAGE_TILING_OPTIMAL;
+    ici.usage = usage;
+    ici.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    VkImage image;
+    HS_VK_TRY(vkCreateImage(dev.vk(), &ici, nullptr, &image));
+    ImageParts parts;
+    parts.image = ImageHandle(dev.vk(), image);
+    dev.set_name(VK_OBJECT_TYPE_IMAGE, uint64_t(image), name);
+    VkMemoryRequirements req;
+    vkGetImageMemoryRequirements(dev.vk(), image, &req);
+    HS_ASSIGN_OR_RETURN(parts.mem, allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT));
+    HS_VK_TRY(vkBindImageMemory(dev.vk(), image, parts.mem.get(), 0));
+    VkImageViewCreateInfo vci{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
+    vci.image = image;
+    vci.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    vci.format = format;
+    vci.subresourceRange = {aspect, 0, 1, 0, 1};
+    VkImageView view;
+    HS_VK_TRY(vkCreateImageView(dev.vk(), &vci, nullptr, &view));
+    parts.view = ImageViewHandle(dev.vk(), view);
+    dev.set_name(VK_OBJECT_TYPE_IMAGE_VIEW, uint64_t(view), name + ".view");
+    return parts;
+}
+}  // namespace
+
+Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage, const std::string& name) {
+    if (size == 0) return make_error(ErrorCode::kInvalidArgument, fmt::format("buffer '{}' of size 0", name));
+    VkBufferCreateInfo bci{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+    bci.size = size;
+    switch (usage) {
+        case BufferUsage::kVertex: bci.usage = VK_BUFFER_USAGE_VERTEX_BUFFER_BIT; break;
+        case BufferUsage::kIndex: bci.usage = VK_BUFFER_USAGE_INDEX_BUFFER_BIT; break;
+        case BufferUsage::kUniform: bci.usage = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT; break;
+        case BufferUsage::kStorage: bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT; break;
+        case BufferUsage::kReadback: bci.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT; break;
+    }
+    VkBuffer buf;
+    HS_VK_TRY(vkCreateBuffer(dev.vk(), &bci, nullptr, &buf));
+    Buffer b;
+    b.buffer_ = BufferHandle(dev.vk(), buf);
+    b.size_ = size;
+    dev.set_name(VK_OBJECT_TYPE_BUFFER, uint64_t(buf), name);
+    VkMemoryRequirements req;
+    vkGetBufferMemoryRequirements(dev.vk(), buf, &req);
+    VkMemoryPropertyFlags props = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    if (usage == BufferUsage::kReadback) {
+        // Prefer cached memory for CPU reads where the device offers it.
+        auto cached = dev.find_memory_type(req.memoryTypeBits, props | VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+        if (cached) props |= VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
+    }
+    HS_ASSIGN_OR_RETURN(b.memory_, allocate(dev, req, props));
+    HS_VK_TRY(vkBindBufferMemory(dev.vk(), buf, b.memory_.get(), 0));
+    HS_VK_TRY(vkMapMemory(dev.vk(), b.memory_.get(), 0, VK_WHOLE_SIZE, 0, &b.mapped_));
+    return b;
+}
+
+void Buffer::write(const void* data, uint64_t size, uint64_t offset) {
+    HS_CHECK(offset + size <= size_, "Buffer::write out of range");
+    std::memcpy(static_cast<char*>(mapped_) + offset, data, size);
+}
+
+Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
+                                          const std::string& name) {
+    if (w == 0 || h == 0 || w > 16384 || h > 16384)
+        return make_error(ErrorCode::kInvalidArgument, fmt::format("render target '{}': size {}x{} outside 1..16384", name, w, h));
+    RenderTarget t;
+    t.width_ = w;
+    t.height_ = h;
+    t.format_ = format;
+    HS_ASSIGN_OR_RETURN(auto color, make_image(dev, w, h, to_vk(format),
+                                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                                               VK_IMAGE_ASPECT_COLOR_BIT, name + ".color"));
+    HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
+                                               VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
+                                               VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth"));
+    t.color_mem_ = std::move(color.mem);
+    t.color_ = std::move(color.image);
+    t.color_view_ = std::move(color.view);
+    t.depth_mem_ = std::move(depth.mem);
+    t.depth_ = std::move(depth.image);
+    t.depth_view_ = std::move(depth.view);
+    HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
+                                                     BufferUsage::kReadback, name + ".readback"));
+    return t;
+}
+
+ImageRgba32f RenderTarget::read() const {
+    ImageRgba32f img = ImageRgba32f::zeros(width_, height_);
+    const size_t n = size_t(width_) * height_ * 4;
+    switch (format_) {
+        case ColorFormat::kRgba8Unorm: {
+            auto* p = static_cast<const uint8_t*>(readback_.mapped());
+            for (size_t i = 0; i < n; ++i) img.pixels[i] = p[i] / 255.0f;
+            break;
+        }
+        case ColorFormat::kRgba16Float: {
+            auto* p = static_cast<const uint16_t*>(readback_.mapped());
+            for (size_t i = 0; i < n; ++i) img.pixels[i] = glm::unpackHalf1x16(p[i]);
+            break;
+        }
+        case ColorFormat::kRgba32Float:
+            std::memcpy(img.pixels.data(), readback_.mapped(), n * sizeof(float));
+            break;
+    }
+    return img;
+}
+
+}  // namespace hs::gpu

@@ -1,0 +1,72 @@
+// Buffers and render targets with their memory. All memory here is host-visible and coherent:
+// on lavapipe every allocation is system memory, and the scene data is small (docs/ARCHITECTURE.md).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "core/image.hpp"
+#include "gpu/device.hpp"
+
+namespace hs::gpu {
+
+enum class ColorFormat { kRgba8Unorm, kRgba16Float, kRgba32Float };
+const char* to_string(ColorFormat f);
+VkFormat to_vk(ColorFormat f);
+// The largest radiance a target of this format stores (shader output clamp).
+float max_value(ColorFormat f);
+
+enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback };
+
+class Buffer {
+public:
+    static Result<Buffer> create(Device& device, uint64_t size_bytes, BufferUsage usage, const std::string& name);
+    Buffer() = default;
+    Buffer(Buffer&&) noexcept = default;
+    Buffer& operator=(Buffer&&) noexcept = default;
+
+    // Copies `size` bytes at `offset` into the (mapped) buffer. HS_CHECKs the range.
+    void write(const void* data, uint64_t size, uint64_t offset = 0);
+    const void* mapped() const { return mapped_; }
+    void* mapped() { return mapped_; }
+    VkBuffer vk() const { return buffer_.get(); }
+    uint64_t size() const { return size_; }
+
+private:
+    MemoryHandle memory_;
+    BufferHandle buffer_;
+    void* mapped_ = nullptr;  // valid while memory_ lives (unmapped implicitly on free)
+    uint64_t size_ = 0;
+};
+
+// A colour attachment, a depth attachment and a readback buffer of one size and format.
+class RenderTarget {
+public:
+    static Result<RenderTarget> create(Device& device, uint32_t width, uint32_t height,
+                                       ColorFormat format, const std::string& name);
+    RenderTarget() = default;
+    RenderTarget(RenderTarget&&) noexcept = default;
+    RenderTarget& operator=(RenderTarget&&) noexcept = default;
+
+    uint32_t width() const { return width_; }
+    uint32_t height() const { return height_; }
+    ColorFormat format() const { return format_; }
+    VkImage color() const { return color_.get(); }
+    VkImageView color_view() const { return color_view_.get(); }
+    VkImage depth() const { return depth_.get(); }
+    VkImageView depth_view() const { return depth_view_.get(); }
+    VkBuffer readback() const { return readback_.vk(); }
+
+    // Converts the readback buffer (filled by CommandList::end_render) to linear float RGBA.
+    ImageRgba32f read() const;
+
+private:
+    uint32_t width_ = 0, height_ = 0;
+    ColorFormat format_ = ColorFormat::kRgba16Float;
+    MemoryHandle color_mem_, depth_mem_;
+    ImageHandle color_, depth_;
+    ImageViewHandle color_view_, depth_view_;
+    Buffer readback_;
+};
+
+}  // namespace hs::gpu

@@ -1,0 +1,39 @@
+// `hysar`: the HySAR render server's command line.
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+
+namespace {
+void usage(FILE* f) {
+    std::fprintf(f,
+                 "usage: hysar <command> [options]\n"
+                 "\n"
+                 "commands:\n"
+                 "  render   render the projector frame and the VD layers of the Fig. 7 viewpoints,\n"
+                 "           compare them with the double-precision reference, write a contact sheet\n"
+                 "           (hysar render --help)\n"
+                 "\n"
+                 "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
+                 "turns on the Vulkan validation layer.\n");
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 2) {
+        usage(stderr);
+        return 2;
+    }
+    std::string cmd = argv[1];
+    std::vector<std::string> args(argv + 2, argv + argc);
+    if (cmd == "render") return hs::cli::run_render(args);
+    if (cmd == "--help" || cmd == "-h" || cmd == "help") {
+        usage(stdout);
+        return 0;
+    }
+    std::fprintf(stderr, "hysar: unknown command '%s'\n\n", cmd.c_str());
+    usage(stderr);
+    return 2;
+}

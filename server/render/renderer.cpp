@@ -1,0 +1,170 @@
+#include "render/renderer.hpp"
+
+#include <chrono>
+
+#include <fmt/format.h>
+#include <glm/gtc/constants.hpp>
+
+#include "gpu/shared_layout.hpp"
+#include "scene/camera.hpp"
+#include "scene/mesh.hpp"
+#include "shaders/prop_frag.h"
+#include "shaders/prop_vert.h"
+
+namespace hs::render {
+
+namespace {
+bool has_emission(const scene::Scene& s) {
+    return s.material.emission.r > 0 || s.material.emission.g > 0 || s.material.emission.b > 0;
+}
+bool has_point_lights(const scene::Scene& s) {
+    for (const auto& l : s.lights)
+        if (l.type == scene::LightType::kPoint) return true;
+    return false;
+}
+}  // namespace
+
+std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene::Specular& spec) {
+    std::vector<std::string> e;
+    const bool falloff = s.effects.point_light_falloff && has_point_lights(s);
+    if (!vd) {
+        e.push_back("diffuse");
+        if (falloff) e.push_back("point-light-falloff");
+        return e;
+    }
+    if (spec.model != scene::SpecularModel::kNone) {
+        e.push_back(std::string("specular:") + scene::to_string(spec.model));
+        if (spec.anisotropic()) e.push_back("anisotropy");
+        if (falloff) e.push_back("point-light-falloff");
+    }
+    if (has_emission(s)) e.push_back("emission");
+    return e;
+}
+
+Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const scene::Scene& scene,
+                                                   const RendererCreateInfo& info) {
+    std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
+    HS_ASSIGN_OR_RETURN(r->mesh_, scene::build_prop_mesh(scene.prop));
+    const auto& m = r->mesh_;
+    HS_ASSIGN_OR_RETURN(r->positions_, gpu::Buffer::create(device, m.positions.size() * 12, gpu::BufferUsage::kVertex, "prop.positions"));
+    HS_ASSIGN_OR_RETURN(r->normals_, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex, "prop.normals"));
+    HS_ASSIGN_OR_RETURN(r->indices_, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex, "prop.indices"));
+    r->positions_.write(m.positions.data(), m.positions.size() * 12);
+    r->normals_.write(m.normals.data(), m.normals.size() * 12);
+    r->indices_.write(m.indices.data(), m.indices.size() * 4);
+    return r;
+}
+
+Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spec) {
+    const scene::Specular none{};
+    const scene::Specular& sp = vd ? spec : none;
+    const std::string key = fmt::format("{}|{}|{}|{}|{}|{}|{},{},{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
+                                        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
+                                        sp.tangent_axis.x + 10 * sp.tangent_axis.y + 100 * sp.tangent_axis.z);
+    if (auto it = variants_.find(key); it != variants_.end()) return &it->second;
+
+    Variant v;
+    v.effects = effects_of(scene_, vd, sp);
+    const bool falloff = scene_.effects.point_light_falloff;
+    gpu::GraphicsPipelineInfo pi;
+    pi.vertex_spv = kPropVertSpv;
+    pi.fragment_spv = kPropFragSpv;
+    pi.color_format = info_.format;
+    pi.push_constant_bytes = sizeof(gpu::GpuPush);
+    pi.name = fmt::format("pipeline.{}.{}", vd ? "viewer-vd" : "projector-vi", scene::to_string(sp.model));
+    pi.spec.set_int(HS_SC_PASS_KIND, vd ? 1 : 0)
+        .set_int(HS_SC_SPEC_MODEL, int(sp.model))
+        .set_bool(HS_SC_EMISSION, vd && has_emission(scene_))
+        .set_bool(HS_SC_POINT_FALLOFF, falloff)
+        .set_int(HS_SC_NUM_LIGHTS, int(scene_.lights.size()))
+        .set_float(HS_SC_OUTPUT_MAX, gpu::max_value(info_.format))
+        .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic());
+    HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
+    ++pipelines_built_;
+
+    gpu::GpuScene block{};
+    block.albedo_over_pi = glm::vec4(glm::vec3(scene_.material.albedo / glm::pi<double>()), 0);
+    block.spec_colour = glm::vec4(glm::vec3(sp.colour), 0);
+    block.spec_params = glm::vec4(float(sp.exponent), float(sp.alpha_x), float(sp.alpha_y), float(scene::kMinLightDistance));
+    block.tangent_axis = glm::vec4(glm::vec3(sp.tangent_axis), 0);
+    block.emission = glm::vec4(glm::vec3(scene_.material.emission), 0);
+    for (size_t i = 0; i < scene_.lights.size() && i < HS_MAX_LIGHTS; ++i) {
+        const auto& l = scene_.lights[i];
+        glm::dvec3 E = l.colour * l.intensity;
+        block.lights[i].irradiance = glm::vec4(glm::vec3(E), 0);
+        block.lights[i].position_or_direction = l.type == scene::LightType::kPoint
+                                                    ? glm::vec4(glm::vec3(l.position), 1.0f)
+                                                    : glm::vec4(glm::vec3(-l.direction), 0.0f);
+    }
+    HS_ASSIGN_OR_RETURN(v.scene_block, gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform, pi.name + ".scene"));
+    v.scene_block.write(&block, sizeof(block));
+    v.pipeline.bind_uniform(device_, v.scene_block);
+    auto [it, inserted] = variants_.emplace(key, std::move(v));
+    return &it->second;
+}
+
+Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h) {
+    auto key = std::make_tuple(w, h);
+    if (auto it = targets_.find(key); it != targets_.end()) return &it->second;
+    HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, info_.format, fmt::format("target.{}x{}", w, h)));
+    auto [it, inserted] = targets_.emplace(key, std::move(t));
+    return &it->second;
+}
+
+Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose, const char* label) {
+    auto t0 = std::chrono::steady_clock::now();
+    HS_ASSIGN_OR_RETURN(gpu::RenderTarget * t, target(k.width, k.height));
+    gpu::GpuPush push{};
+    glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(pose);
+    push.clip_from_world = glm::mat4(clip);
+    push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
+    HS_TRY(gpu::execute(device_, label, [&](gpu::CommandList& cl) {
+        cl.begin_render(*t, glm::vec4(0.0f), label);
+        cl.bind(v.pipeline);
+        cl.push_constants(v.pipeline, &push, sizeof(push));
+        cl.draw_indexed(positions_, normals_, indices_, uint32_t(mesh_.indices.size()));
+        cl.end_render_and_read_back(*t);
+    }));
+    RenderResult r;
+    r.image = t->read();
+    r.report.ran = true;
+    r.report.effects = v.effects;
+    r.report.render_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    return r;
+}
+
+Result<RenderResult> Renderer::render_projector() {
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, scene_.projector.intrinsics, scene_.projector.pose, "pass.projector-vi"));
+    r.report.pass = "projector-vi";
+    ++projector_renders_;
+    return r;
+}
+
+Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye) {
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, eye, "pass.eye-vi"));
+    r.report.pass = "eye-vi";
+    return r;
+}
+
+Result<RenderResult> Renderer::render_eye(const scene::Specular& spec, const scene::Intrinsics& k, const scene::Pose& eye) {
+    if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
+        return make_error(ErrorCode::kInvalidArgument, fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
+    if (effects_of(scene_, true, spec).empty()) {
+        // Nothing view-dependent: an OST display shows black as see-through, so the layer is
+        // black and no GPU work is recorded.
+        RenderResult r;
+        r.image = ImageRgba32f::zeros(k.width, k.height);
+        r.report.pass = "viewer-vd";
+        r.report.ran = false;
+        r.report.skipped_because = "the material has no specular term and no emission";
+        return r;
+    }
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, eye, "pass.viewer-vd"));
+    r.report.pass = "viewer-vd";
+    return r;
+}
+
+}  // namespace hs::render

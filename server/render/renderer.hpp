@@ -1,0 +1,90 @@
+// The two passes of paper eq. (2): the projector (VI) pass and the viewer (VD) pass.
+// Created-once resources (mesh buffers, pipelines and their scene blocks) live in the Renderer;
+// per-request state is the render target, cached by size and format.
+// Thread: one thread at a time (the device's submit lock serialises submissions).
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "core/image.hpp"
+#include "gpu/commands.hpp"
+#include "gpu/device.hpp"
+#include "gpu/pipeline.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::render {
+
+struct RendererCreateInfo {
+    gpu::ColorFormat format = gpu::ColorFormat::kRgba16Float;  // HDR target of both passes
+    double near_m = 0.01;  // depth range of every camera, metres
+    double far_m = 100.0;
+};
+
+// What one pass did: whether it was recorded, the effects compiled in, and its wall time.
+struct PassReport {
+    std::string pass;                  // "projector-vi" or "viewer-vd"
+    bool ran = false;                  // false: nothing to draw, no GPU work was recorded
+    std::string skipped_because;       // when !ran
+    std::vector<std::string> effects;  // the terms compiled into the pipeline
+    double render_ms = 0;              // record + submit + wait + readback, wall clock
+};
+
+struct RenderResult {
+    ImageRgba32f image;  // linear radiance, alpha = 1 where the prop covers the pixel
+    PassReport report;
+};
+
+class Renderer {
+public:
+    static Result<std::unique_ptr<Renderer>> create(gpu::Device& device, const scene::Scene& scene,
+                                                    const RendererCreateInfo& info);
+
+    // The projector frame: per projector pixel, the diffuse radiance sum_i L_d of the prop
+    // point it lights (VI). Counted in projector_render_count().
+    Result<RenderResult> render_projector();
+
+    // One eye's VD layer for the given specular model: sum_i L_s(p, l_i, v) + L_e; black where
+    // there is none. A material without specular and emission records no GPU work.
+    Result<RenderResult> render_eye(const scene::Specular& spec, const scene::Intrinsics& k,
+                                    const scene::Pose& eye);
+
+    // The VI term seen from an eye (what a perfectly calibrated projector shows that viewer):
+    // sum_i L_d at the prop points the eye sees. For simulation and contact sheets.
+    Result<RenderResult> render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye);
+
+    uint64_t projector_render_count() const { return projector_renders_; }
+    uint64_t pipelines_built() const { return pipelines_built_; }
+    const scene::Mesh& mesh() const { return mesh_; }
+    gpu::ColorFormat format() const { return info_.format; }
+
+private:
+    struct Variant {  // one specialised pipeline and the scene block it reads
+        gpu::GraphicsPipeline pipeline;
+        gpu::Buffer scene_block;
+        std::vector<std::string> effects;
+    };
+    Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
+        : device_(device), scene_(scene), info_(info) {}
+    Result<Variant*> variant(bool vd, const scene::Specular& spec);
+    Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h);
+    Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose, const char* label);
+
+    gpu::Device& device_;
+    scene::Scene scene_;
+    RendererCreateInfo info_;
+    scene::Mesh mesh_;
+    gpu::Buffer positions_, normals_, indices_;
+    std::map<std::string, Variant> variants_;
+    std::map<std::tuple<uint32_t, uint32_t>, gpu::RenderTarget> targets_;
+    uint64_t projector_renders_ = 0;
+    uint64_t pipelines_built_ = 0;
+};
+
+// Effects and specialisation key of a pass, as the renderer decides them from the scene.
+std::vector<std::string> effects_of(const scene::Scene& scene, bool vd, const scene::Specular& spec);
+
+}  // namespace hs::render

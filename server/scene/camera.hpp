@@ -1,0 +1,44 @@
+// Poses, view and projection transforms. Pure math on scene types.
+#pragma once
+
+#include <array>
+
+#include <glm/mat4x4.hpp>
+
+#include "core/result.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::scene {
+
+// Builds a pose from a position and a quaternion that need not be unit length. A quaternion of
+// norm below 1e-6 or with a non-finite component is an error (it names no rotation).
+Result<Pose> make_pose(glm::dvec3 position, glm::dquat orientation);
+
+// A pose at `eye` looking at `target`. When the look direction is (nearly) parallel to `up`,
+// a fixed perpendicular up is chosen so the pose stays well defined. eye == target is an error.
+Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up = {0, 1, 0});
+
+// Symmetric intrinsics from full fields of view (radians).
+Intrinsics intrinsics_from_fov(uint32_t width, uint32_t height, double fov_x_rad, double fov_y_rad);
+
+// Horizontal and vertical fields of view from a diagonal one and the pixel aspect.
+void fov_from_diagonal(double fov_diag_rad, uint32_t width, uint32_t height, double* fov_x_rad,
+                       double* fov_y_rad);
+
+glm::dmat4 world_from_frame(const Pose& pose);
+glm::dmat4 frame_from_world(const Pose& pose);
+
+// Vulkan clip space (x right, y down, depth 0..1) from a -z-forward frame through pinhole
+// intrinsics; a point that projects to OpenCV pixel (u, v) lands on framebuffer (u+0.5, v+0.5).
+glm::dmat4 clip_from_frame(const Intrinsics& k, double near_m, double far_m);
+
+// The two eye poses of a head pose: left at -ipd/2, right at +ipd/2 along the head's x axis.
+std::array<Pose, 2> eye_poses(const Pose& head, double ipd_m);
+
+// World-space unit ray direction through OpenCV pixel (u, v) (pixel centres at integers).
+glm::dvec3 pixel_ray(const Intrinsics& k, const Pose& pose, double u, double v);
+
+// The head pose at azimuth `angle_deg` and height `height_m` of the scene's viewing plan.
+Result<Pose> viewing_pose(const Viewing& viewing, double angle_deg, double height_m);
+
+}  // namespace hs::scene

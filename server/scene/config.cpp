@@ -1,0 +1,374 @@
+#include "scene/config.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <optional>
+#include <set>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <glm/trigonometric.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/check.hpp"
+#include "scene/camera.hpp"
+
+namespace hs::scene {
+
+using json = nlohmann::json;
+
+const char* to_string(SpecularModel m) {
+    switch (m) {
+        case SpecularModel::kNone: return "none";
+        case SpecularModel::kPhong: return "phong";
+        case SpecularModel::kBlinnPhong: return "blinn-phong";
+        case SpecularModel::kWard: return "ward";
+        case SpecularModel::kKajiyaKay: return "kajiya-kay";
+    }
+    return "?";
+}
+
+Result<SpecularModel> parse_specular_model(std::string_view s) {
+    if (s == "none") return SpecularModel::kNone;
+    if (s == "phong") return SpecularModel::kPhong;
+    if (s == "blinn-phong") return SpecularModel::kBlinnPhong;
+    if (s == "ward") return SpecularModel::kWard;
+    if (s == "kajiya-kay") return SpecularModel::kKajiyaKay;
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("unknown specular model '{}' (expected none, phong, blinn-phong, "
+                                  "ward or kajiya-kay)",
+                                  s));
+}
+
+const ViewerProfile* Scene::find_viewer(const std::string& n) const {
+    for (const auto& v : viewers)
+        if (v.name == n) return &v;
+    return nullptr;
+}
+
+namespace {
+
+// Reads typed values out of JSON, keeping the first error with its file and key path.
+class Reader {
+public:
+    explicit Reader(std::string source) : source_(std::move(source)) {}
+
+    bool failed() const { return error_.has_value(); }
+    Error error() const { return *error_; }
+
+    void fail(const std::string& path, const std::string& what) {
+        if (!error_) error_ = make_error(ErrorCode::kParse, fmt::format("{}: {}: {}", source_, path, what));
+    }
+
+    // Rejects keys outside `allowed`, so a misspelt key is an error rather than silently ignored.
+    void only(const json& obj, const std::string& path, std::initializer_list<const char*> allowed) {
+        if (!obj.is_object()) return;
+        std::set<std::string> ok(allowed.begin(), allowed.end());
+        for (auto it = obj.begin(); it != obj.end(); ++it) {
+            if (!ok.count(it.key())) {
+                std::string list;
+                for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+                fail(join(path, it.key()), fmt::format("unknown key (expected one of: {})", list));
+            }
+        }
+    }
+
+    const json* member(const json& obj, const std::string& path, const char* key, bool required) {
+        if (!obj.is_object()) {
+            fail(path, fmt::format("expected an object, got {}", obj.type_name()));
+            return nullptr;
+        }
+        auto it = obj.find(key);
+        if (it == obj.end()) {
+            if (required) fail(join(path, key), "missing required key");
+            return nullptr;
+        }
+        return &*it;
+    }
+
+    double number(const json& obj, const std::string& path, const char* key,
+                  std::optional<double> def, double lo, double hi) {
+        const json* v = member(obj, path, key, !def.has_value());
+        if (!v) return def.value_or(0.0);
+        if (!v->is_number()) {
+            fail(join(path, key), fmt::format("expected a number, got {}", v->type_name()));
+            return def.value_or(0.0);
+        }
+        double x = v->get<double>();
+        if (!std::isfinite(x) || x < lo || x > hi) {
+            fail(join(path, key), fmt::format("expected a number in [{}, {}], got {}", lo, hi, x));
+        }
+        return x;
+    }
+
+    uint32_t integer(const json& obj, const std::string& path, const char* key,
+                     std::optional<uint32_t> def, uint32_t lo, uint32_t hi) {
+        const json* v = member(obj, path, key, !def.has_value());
+        if (!v) return def.value_or(0);
+        if (!v->is_number_integer() || v->get<int64_t>() < int64_t(lo) || v->get<int64_t>() > int64_t(hi)) {
+            fail(join(path, key), fmt::format("expected an integer in [{}, {}], got {}", lo, hi, v->dump()));
+            return def.value_or(lo);
+        }
+        return uint32_t(v->get<int64_t>());
+    }
+
+    glm::dvec3 vec3(const json& obj, const std::string& path, const char* key,
+                    std::optional<glm::dvec3> def, double lo = -1e6, double hi = 1e6) {
+        const json* v = member(obj, path, key, !def.has_value());
+        if (!v) return def.value_or(glm::dvec3(0.0));
+        if (!v->is_array() || v->size() != 3 || !(*v)[0].is_number() || !(*v)[1].is_number() ||
+            !(*v)[2].is_number()) {
+            fail(join(path, key), fmt::format("expected an array of 3 numbers, got {}", v->dump()));
+            return def.value_or(glm::dvec3(0.0));
+        }
+        glm::dvec3 r((*v)[0].get<double>(), (*v)[1].get<double>(), (*v)[2].get<double>());
+        for (int i = 0; i < 3; ++i) {
+            if (!std::isfinite(r[i]) || r[i] < lo || r[i] > hi) {
+                fail(join(path, key), fmt::format("component {} must lie in [{}, {}], got {}", i, lo, hi, r[i]));
+            }
+        }
+        return r;
+    }
+
+    std::string string(const json& obj, const std::string& path, const char* key,
+                       std::optional<std::string> def) {
+        const json* v = member(obj, path, key, !def.has_value());
+        if (!v) return def.value_or("");
+        if (!v->is_string()) {
+            fail(join(path, key), fmt::format("expected a string, got {}", v->type_name()));
+            return def.value_or("");
+        }
+        return v->get<std::string>();
+    }
+
+    bool boolean(const json& obj, const std::string& path, const char* key, bool def) {
+        const json* v = member(obj, path, key, false);
+        if (!v) return def;
+        if (!v->is_boolean()) {
+            fail(join(path, key), fmt::format("expected true or false, got {}", v->dump()));
+            return def;
+        }
+        return v->get<bool>();
+    }
+
+    static std::string join(const std::string& path, const std::string& key) {
+        return path.empty() ? key : path + "." + key;
+    }
+
+private:
+    std::string source_;
+    std::optional<Error> error_;
+};
+
+Specular read_specular(Reader& r, const json& j, const std::string& path) {
+    r.only(j, path, {"model", "colour", "exponent", "alpha_x", "alpha_y", "tangent_axis"});
+    Specular s;
+    auto model = parse_specular_model(r.string(j, path, "model", std::nullopt));
+    if (!model) r.fail(Reader::join(path, "model"), model.error().message);
+    else s.model = model.value();
+    s.colour = r.vec3(j, path, "colour", glm::dvec3(0.0), 0.0, 1e3);
+    s.exponent = r.number(j, path, "exponent", 1.0, 1.0, 1e6);
+    s.alpha_x = r.number(j, path, "alpha_x", 0.2, 1e-6, 10.0);
+    s.alpha_y = r.number(j, path, "alpha_y", s.alpha_x, 1e-6, 10.0);
+    s.tangent_axis = r.vec3(j, path, "tangent_axis", glm::dvec3(1, 0, 0));
+    if (glm::length(s.tangent_axis) < 1e-9) r.fail(Reader::join(path, "tangent_axis"), "must not be zero");
+    else s.tangent_axis = glm::normalize(s.tangent_axis);
+    return s;
+}
+
+Pose read_pose(Reader& r, const json& j, const std::string& path) {
+    r.only(j, path, {"position", "look_at", "up", "orientation_wxyz"});
+    glm::dvec3 pos = r.vec3(j, path, "position", std::nullopt);
+    if (j.is_object() && j.contains("orientation_wxyz")) {
+        const json& q = j["orientation_wxyz"];
+        if (!q.is_array() || q.size() != 4) {
+            r.fail(Reader::join(path, "orientation_wxyz"), "expected an array of 4 numbers (w, x, y, z)");
+            return {};
+        }
+        glm::dquat quat(q[0].get<double>(), q[1].get<double>(), q[2].get<double>(), q[3].get<double>());
+        auto p = make_pose(pos, quat);
+        if (!p) r.fail(Reader::join(path, "orientation_wxyz"), p.error().message);
+        return p ? p.value() : Pose{};
+    }
+    glm::dvec3 target = r.vec3(j, path, "look_at", std::nullopt);
+    glm::dvec3 up = r.vec3(j, path, "up", glm::dvec3(0, 1, 0));
+    if (r.failed()) return {};
+    auto p = look_at(pos, target, up);
+    if (!p) r.fail(path, p.error().message);
+    return p ? p.value() : Pose{};
+}
+
+}  // namespace
+
+Result<Scene> parse_scene(std::string_view text, const std::string& source,
+                          const std::filesystem::path& base_dir) {
+    json root;
+    try {
+        root = json::parse(text);
+    } catch (const json::parse_error& e) {
+        return make_error(ErrorCode::kParse, fmt::format("{}: malformed JSON: {}", source, e.what()));
+    }
+    Reader r(source);
+    Scene s;
+    if (!root.is_object()) return make_error(ErrorCode::kParse, fmt::format("{}: expected a JSON object at the top", source));
+    r.only(root, "", {"schema_version", "name", "prop", "material", "specular_presets", "lights",
+                      "projector", "viewers", "viewing", "effects", "comment"});
+    s.schema_version = int(r.integer(root, "", "schema_version", std::nullopt, 0, 1000));
+    if (!r.failed() && s.schema_version != kSchemaVersion) {
+        r.fail("schema_version", fmt::format("this build reads schema_version {}, the file has {}",
+                                             kSchemaVersion, s.schema_version));
+    }
+    s.name = r.string(root, "", "name", "unnamed");
+
+    // prop
+    if (const json* p = r.member(root, "", "prop", true)) {
+        r.only(*p, "prop", {"kind", "centre", "radius_m", "segments", "rings", "gltf", "translation", "scale"});
+        std::string kind = r.string(*p, "prop", "kind", std::nullopt);
+        if (kind == "hemisphere") {
+            s.prop.kind = Prop::Kind::kHemisphere;
+            s.prop.hemisphere.centre = r.vec3(*p, "prop", "centre", s.prop.hemisphere.centre);
+            s.prop.hemisphere.radius = r.number(*p, "prop", "radius_m", 0.15, 1e-3, 100.0);
+            s.prop.hemisphere.segments = r.integer(*p, "prop", "segments", 256, 3, 8192);
+            s.prop.hemisphere.rings = r.integer(*p, "prop", "rings", 64, 1, 4096);
+        } else if (kind == "gltf") {
+            s.prop.kind = Prop::Kind::kGltf;
+            std::filesystem::path g = r.string(*p, "prop", "gltf", std::nullopt);
+            s.prop.gltf_path = (g.is_absolute() ? g : base_dir / g).string();
+            s.prop.gltf_translation = r.vec3(*p, "prop", "translation", glm::dvec3(0.0));
+            s.prop.gltf_scale = r.number(*p, "prop", "scale", 1.0, 1e-6, 1e6);
+        } else if (!r.failed()) {
+            r.fail("prop.kind", fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
+        }
+    }
+
+    // material
+    if (const json* m = r.member(root, "", "material", true)) {
+        r.only(*m, "material", {"albedo", "specular", "emission"});
+        s.material.albedo = r.vec3(*m, "material", "albedo", std::nullopt, 0.0, 1.0);
+        if (const json* sp = r.member(*m, "material", "specular", false)) {
+            s.material.specular = read_specular(r, *sp, "material.specular");
+        }
+        s.material.emission = r.vec3(*m, "material", "emission", glm::dvec3(0.0), 0.0, 1e6);
+    }
+    if (const json* presets = r.member(root, "", "specular_presets", false)) {
+        if (!presets->is_object()) r.fail("specular_presets", "expected an object of named specular blocks");
+        else
+            for (auto it = presets->begin(); it != presets->end(); ++it)
+                s.specular_presets[it.key()] = read_specular(r, it.value(), "specular_presets." + it.key());
+    }
+
+    // lights
+    if (const json* ls = r.member(root, "", "lights", true)) {
+        if (!ls->is_array()) r.fail("lights", "expected an array");
+        else if (ls->size() > kMaxLights)
+            r.fail("lights", fmt::format("at most {} lights are supported, got {}", kMaxLights, ls->size()));
+        else
+            for (size_t i = 0; i < ls->size(); ++i) {
+                const json& lj = (*ls)[i];
+                std::string path = fmt::format("lights[{}]", i);
+                r.only(lj, path, {"type", "colour", "intensity", "direction", "position", "name"});
+                Light l;
+                std::string type = r.string(lj, path, "type", std::nullopt);
+                l.colour = r.vec3(lj, path, "colour", glm::dvec3(1.0), 0.0, 1e6);
+                l.intensity = r.number(lj, path, "intensity", std::nullopt, 0.0, 1e12);
+                if (type == "directional") {
+                    l.type = LightType::kDirectional;
+                    l.direction = r.vec3(lj, path, "direction", std::nullopt);
+                    if (glm::length(l.direction) < 1e-9) r.fail(path + ".direction", "must not be zero");
+                    else l.direction = glm::normalize(l.direction);
+                } else if (type == "point") {
+                    l.type = LightType::kPoint;
+                    l.position = r.vec3(lj, path, "position", std::nullopt);
+                } else if (!r.failed()) {
+                    r.fail(path + ".type", fmt::format("expected \"directional\" or \"point\", got \"{}\"", type));
+                }
+                s.lights.push_back(l);
+            }
+    }
+
+    // projector
+    if (const json* pj = r.member(root, "", "projector", true)) {
+        r.only(*pj, "projector", {"name", "width", "height", "fx", "fy", "cx", "cy", "pose"});
+        Intrinsics& k = s.projector.intrinsics;
+        s.projector.name = r.string(*pj, "projector", "name", "projector");
+        k.width = r.integer(*pj, "projector", "width", std::nullopt, 1, 16384);
+        k.height = r.integer(*pj, "projector", "height", std::nullopt, 1, 16384);
+        k.fx = r.number(*pj, "projector", "fx", std::nullopt, 1e-3, 1e7);
+        k.fy = r.number(*pj, "projector", "fy", k.fx, 1e-3, 1e7);
+        k.cx = r.number(*pj, "projector", "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
+        k.cy = r.number(*pj, "projector", "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
+        if (const json* pose = r.member(*pj, "projector", "pose", true)) {
+            s.projector.pose = read_pose(r, *pose, "projector.pose");
+        }
+    }
+
+    // viewers
+    if (const json* vs = r.member(root, "", "viewers", true)) {
+        if (!vs->is_array() || vs->empty()) r.fail("viewers", "expected a non-empty array of headset profiles");
+        else
+            for (size_t i = 0; i < vs->size(); ++i) {
+                const json& vj = (*vs)[i];
+                std::string path = fmt::format("viewers[{}]", i);
+                r.only(vj, path, {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg",
+                                  "fov_diagonal_deg", "ipd_m", "alpha", "comment"});
+                ViewerProfile v;
+                v.name = r.string(vj, path, "name", std::nullopt);
+                v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, 16384);
+                v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, 16384);
+                if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
+                    double d = r.number(vj, path, "fov_diagonal_deg", std::nullopt, 0.1, 179.0);
+                    fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad, &v.fov_y_rad);
+                } else {
+                    v.fov_x_rad = glm::radians(r.number(vj, path, "fov_x_deg", std::nullopt, 0.1, 179.0));
+                    v.fov_y_rad = glm::radians(r.number(vj, path, "fov_y_deg", std::nullopt, 0.1, 179.0));
+                }
+                v.ipd_m = r.number(vj, path, "ipd_m", 0.063, 0.0, 0.2);
+                v.alpha = r.number(vj, path, "alpha", 1.0, 0.0, 1.0);
+                if (!r.failed() && s.find_viewer(v.name)) r.fail(path + ".name", fmt::format("duplicate viewer name '{}'", v.name));
+                s.viewers.push_back(v);
+            }
+    }
+
+    if (const json* vw = r.member(root, "", "viewing", false)) {
+        r.only(*vw, "viewing", {"target", "distance_m", "angles_deg", "heights_m", "default_height"});
+        s.viewing.target = r.vec3(*vw, "viewing", "target", s.viewing.target);
+        s.viewing.distance_m = r.number(*vw, "viewing", "distance_m", s.viewing.distance_m, 1e-3, 1e4);
+        if (const json* a = r.member(*vw, "viewing", "angles_deg", false)) {
+            s.viewing.angles_deg.clear();
+            if (!a->is_array() || a->empty()) r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
+            else
+                for (const auto& x : *a) {
+                    if (!x.is_number()) { r.fail("viewing.angles_deg", "expected numbers"); break; }
+                    s.viewing.angles_deg.push_back(x.get<double>());
+                }
+        }
+        if (const json* h = r.member(*vw, "viewing", "heights_m", false)) {
+            s.viewing.heights_m.clear();
+            if (!h->is_object() || h->empty()) r.fail("viewing.heights_m", "expected an object of name: height");
+            else
+                for (auto it = h->begin(); it != h->end(); ++it)
+                    s.viewing.heights_m[it.key()] = r.number(*h, "viewing.heights_m", it.key().c_str(), std::nullopt, -1e4, 1e4);
+        }
+        s.viewing.default_height = r.string(*vw, "viewing", "default_height", s.viewing.default_height);
+        if (!r.failed() && !s.viewing.heights_m.count(s.viewing.default_height))
+            r.fail("viewing.default_height", fmt::format("'{}' is not a key of viewing.heights_m", s.viewing.default_height));
+    }
+
+    if (const json* e = r.member(root, "", "effects", false)) {
+        r.only(*e, "effects", {"point_light_falloff"});
+        s.effects.point_light_falloff = r.boolean(*e, "effects", "point_light_falloff", true);
+    }
+
+    if (r.failed()) return r.error();
+    return s;
+}
+
+Result<Scene> load_scene_file(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return make_error(ErrorCode::kNotFound, fmt::format("{}: cannot open scene file", path.string()));
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return parse_scene(ss.str(), path.string(), path.parent_path());
+}
+
+}  // namespace hs::scene

@@ -1,0 +1,106 @@
+#include "scene/mesh.hpp"
+
+#include <cmath>
+
+#include <fmt/format.h>
+#include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
+
+#include "core/log.hpp"
+
+namespace hs::scene {
+
+Mesh tessellate_hemisphere(const Hemisphere& h) {
+    Mesh m;
+    const uint32_t S = h.segments, R = h.rings;
+    const glm::dvec3 c = h.centre;
+    // Pole vertex, then R rings of S+1 vertices (the seam is duplicated for the UVs).
+    auto add = [&](double theta, double phi, glm::vec2 uv) {
+        glm::dvec3 n(std::sin(theta) * std::cos(phi), std::cos(theta), -std::sin(theta) * std::sin(phi));
+        m.positions.push_back(glm::vec3(c + h.radius * n));
+        m.normals.push_back(glm::vec3(n));
+        m.uvs.push_back(uv);
+    };
+    add(0.0, 0.0, {0.5f, 0.0f});
+    for (uint32_t r = 1; r <= R; ++r) {
+        double theta = 0.5 * glm::pi<double>() * r / R;
+        for (uint32_t s = 0; s <= S; ++s) {
+            double phi = 2.0 * glm::pi<double>() * s / S;
+            add(theta, phi, {float(s) / S, float(r) / R});
+        }
+    }
+    auto ring = [&](uint32_t r, uint32_t s) { return 1 + (r - 1) * (S + 1) + s; };
+    // phi grows counter-clockwise seen from above (x towards -z), so (pole, s, s+1) is CCW
+    // seen from outside.
+    for (uint32_t s = 0; s < S; ++s) {
+        m.indices.insert(m.indices.end(), {0u, ring(1, s), ring(1, s + 1)});
+    }
+    for (uint32_t r = 1; r < R; ++r) {
+        for (uint32_t s = 0; s < S; ++s) {
+            uint32_t a = ring(r, s), b = ring(r, s + 1), cc = ring(r + 1, s), d = ring(r + 1, s + 1);
+            m.indices.insert(m.indices.end(), {a, cc, d, a, d, b});
+        }
+    }
+    return m;
+}
+
+void clean_mesh(Mesh& m, double min_area) {
+    const size_t n = m.positions.size();
+    std::vector<uint32_t> kept;
+    kept.reserve(m.indices.size());
+    uint32_t dropped = 0;
+    for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+        uint32_t i0 = m.indices[t], i1 = m.indices[t + 1], i2 = m.indices[t + 2];
+        if (i0 >= n || i1 >= n || i2 >= n) { ++dropped; continue; }
+        glm::dvec3 a = m.positions[i0], b = m.positions[i1], c = m.positions[i2];
+        double area = 0.5 * glm::length(glm::cross(b - a, c - a));
+        if (!(area > min_area)) { ++dropped; continue; }  // also drops NaN positions
+        kept.insert(kept.end(), {i0, i1, i2});
+    }
+    m.indices.swap(kept);
+    m.dropped_triangles += dropped;
+
+    bool need_normals = m.normals.size() != n;
+    for (size_t i = 0; !need_normals && i < n; ++i) {
+        float l = glm::length(m.normals[i]);
+        need_normals = !(l > 0.5f && l < 1.5f);
+    }
+    if (need_normals) {
+        // Area-weighted: the unnormalised cross product weighs each face by twice its area, so
+        // sliver triangles contribute little and never a NaN.
+        std::vector<glm::dvec3> acc(n, glm::dvec3(0.0));
+        for (size_t t = 0; t < m.indices.size(); t += 3) {
+            glm::dvec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]],
+                       c = m.positions[m.indices[t + 2]];
+            glm::dvec3 fn = glm::cross(b - a, c - a);
+            for (int k = 0; k < 3; ++k) acc[m.indices[t + k]] += fn;
+        }
+        m.normals.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            double l = glm::length(acc[i]);
+            m.normals[i] = l > 0 ? glm::vec3(acc[i] / l) : glm::vec3(0, 1, 0);
+        }
+    } else {
+        for (auto& nn : m.normals) nn = glm::normalize(nn);
+    }
+    if (m.uvs.size() != n) m.uvs.assign(n, glm::vec2(0.0f));
+}
+
+Result<Mesh> build_prop_mesh(const Prop& prop) {
+    Mesh m;
+    if (prop.kind == Prop::Kind::kHemisphere) {
+        m = tessellate_hemisphere(prop.hemisphere);
+    } else {
+        HS_ASSIGN_OR_RETURN(m, load_gltf_mesh(prop.gltf_path, prop.gltf_scale, prop.gltf_translation));
+    }
+    clean_mesh(m);
+    if (m.dropped_triangles > 0) {
+        log::warn("prop mesh: dropped {} degenerate triangle(s)", m.dropped_triangles);
+    }
+    if (m.empty()) {
+        return make_error(ErrorCode::kInvalidArgument, "prop mesh has no non-degenerate triangle");
+    }
+    return m;
+}
+
+}  // namespace hs::scene

@@ -1,0 +1,142 @@
+// The scene model: pure data, no GPU and no file formats. Units: metres, radians unless a name
+// says _deg. World frame: right-handed, +y up, the floor at y = 0.
+// Every camera-like frame (projector, head, eye) is x right, y up, looking along -z (the glTF and
+// OpenXR convention); a Pose maps that frame to the world (T_world_frame).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <glm/gtc/quaternion.hpp>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+#include <glm/vec4.hpp>
+
+namespace hs::scene {
+
+struct Pose {
+    glm::dvec3 position{0.0};            // metres, world frame
+    glm::dquat orientation{1, 0, 0, 0};  // unit quaternion, world from frame (w, x, y, z)
+};
+
+// Pinhole intrinsics in the OpenCV convention: u right, v down, pixel centres at integers.
+struct Intrinsics {
+    uint32_t width = 0;   // pixels
+    uint32_t height = 0;  // pixels
+    double fx = 0, fy = 0;  // focal lengths, pixels
+    double cx = 0, cy = 0;  // principal point, pixels
+};
+
+enum class SpecularModel { kNone = 0, kPhong = 1, kBlinnPhong = 2, kWard = 3, kKajiyaKay = 4 };
+const char* to_string(SpecularModel model);
+
+struct Specular {
+    SpecularModel model = SpecularModel::kNone;
+    glm::dvec3 colour{0.0};    // k_s (Phong, Blinn, Kajiya-Kay) or rho_s (Ward), linear RGB
+    double exponent = 1.0;     // Phong, Blinn-Phong, Kajiya-Kay: cosine exponent, >= 1
+    double alpha_x = 0.2;      // Ward: RMS slope along the tangent, > 0
+    double alpha_y = 0.2;      // Ward: RMS slope along the bitangent, > 0
+    // Ward and Kajiya-Kay: the surface tangent is this world direction projected onto the
+    // tangent plane (brushing direction); where it is parallel to the normal a fixed fallback
+    // perpendicular is used (docs/SHADING.md).
+    glm::dvec3 tangent_axis{1.0, 0.0, 0.0};
+
+    bool anisotropic() const { return model == SpecularModel::kWard && alpha_x != alpha_y; }
+};
+
+struct Material {
+    glm::dvec3 albedo{0.8};  // diffuse reflectance rho_d in [0, 1], linear RGB (Lambert: rho_d / pi)
+    Specular specular;
+    glm::dvec3 emission{0.0};  // L_e, radiance added to the VD layer, linear RGB
+};
+
+enum class LightType { kDirectional, kPoint };
+
+struct Light {
+    LightType type = LightType::kDirectional;
+    glm::dvec3 colour{1.0};      // linear RGB, multiplies intensity
+    double intensity = 1.0;      // directional: irradiance W/m^2 at normal incidence;
+                                 // point: radiant intensity W/sr
+    glm::dvec3 direction{0, -1, 0};  // directional: unit direction the light travels, world
+    glm::dvec3 position{0.0};        // point: metres, world
+};
+
+// Where the point-light falloff 1/d^2 is evaluated with d clamped from below (docs/SHADING.md).
+inline constexpr double kMinLightDistance = 1e-3;  // metres
+
+struct Mesh {
+    std::vector<glm::vec3> positions;  // metres, world frame
+    std::vector<glm::vec3> normals;    // unit, world frame, one per position
+    std::vector<glm::vec2> uvs;        // one per position
+    std::vector<uint32_t> indices;     // triangle list, counter-clockwise seen from outside
+    uint32_t dropped_triangles = 0;    // degenerate triangles removed while loading
+    bool empty() const { return indices.empty(); }
+};
+
+struct Hemisphere {
+    glm::dvec3 centre{0.0, 0.695, 0.0};  // centre of the flat base, metres, world
+    double radius = 0.15;                // metres
+    uint32_t segments = 256;             // tessellation around the vertical axis, >= 3
+    uint32_t rings = 64;                 // tessellation from the pole to the base, >= 1
+};
+
+struct Prop {
+    enum class Kind { kHemisphere, kGltf } kind = Kind::kHemisphere;
+    Hemisphere hemisphere;       // kind == kHemisphere: the exact shape, dome up (+y)
+    std::string gltf_path;       // kind == kGltf: absolute, or resolved against the scene file
+    glm::dvec3 gltf_translation{0.0};  // metres, applied after the glTF's own node transforms
+    double gltf_scale = 1.0;
+};
+
+struct Projector {
+    std::string name;
+    Intrinsics intrinsics;
+    Pose pose;  // T_world_projector
+};
+
+// An optical see-through headset's display, one eye. Eyes are at -ipd/2 and +ipd/2 along the
+// head's x axis; both share these intrinsics.
+struct ViewerProfile {
+    std::string name;
+    uint32_t eye_width = 0;   // pixels
+    uint32_t eye_height = 0;  // pixels
+    double fov_x_rad = 0;     // full horizontal field of view
+    double fov_y_rad = 0;     // full vertical field of view
+    double ipd_m = 0.063;     // interpupillary distance
+    double alpha = 1.0;       // transparency of the optics in [0, 1] (paper eq. 3)
+};
+
+// How `hysar render` places viewers, as in the paper's Fig. 7.
+struct Viewing {
+    glm::dvec3 target{0.0, 0.745, 0.0};  // the point every viewer looks at, metres, world
+    double distance_m = 0.8;             // horizontal distance from target
+    std::vector<double> angles_deg{-40, -20, 0, 20, 40};  // azimuth about +y, 0 = from +z
+    std::map<std::string, double> heights_m{{"H", 1.35}, {"M", 1.10}, {"L", 0.90}};
+    std::string default_height = "M";
+};
+
+struct Effects {
+    bool point_light_falloff = true;  // 1/d^2 for point lights; off makes them constant irradiance
+};
+
+struct Scene {
+    int schema_version = 1;
+    std::string name;
+    Prop prop;
+    Material material;
+    std::map<std::string, Specular> specular_presets;  // named alternatives (Fig. 7 rows)
+    std::vector<Light> lights;
+    Projector projector;
+    std::vector<ViewerProfile> viewers;  // at least one
+    Viewing viewing;
+    Effects effects;
+
+    const ViewerProfile* find_viewer(const std::string& name) const;
+};
+
+inline constexpr int kSchemaVersion = 1;
+inline constexpr size_t kMaxLights = 64;
+
+}  // namespace hs::scene

@@ -1,0 +1,62 @@
+// Double-precision reference of the HySAR material split (paper eq. 2) and of each specular
+// model, written from the original papers. It is the oracle for the GPU tests and benchmarks;
+// the GLSL in shaders/shading.glsl is written separately so that the two check each other.
+//
+// Conventions (docs/SHADING.md): n, l, v, t are unit vectors pointing away from the surface
+// (l towards the light, v towards the viewer). E is the light's irradiance at normal incidence.
+//   VI:  L_d = rho_d / pi * E * max(n.l, 0)                            (Lambert)
+//   VD:  L_s = k_s * E * S(n, l, v, t)      for Phong, Blinn-Phong, Kajiya-Kay
+//        L_s = rho_s * E * W(n, l, v, t)    for Ward (W includes the n.l factor)
+// Every specular term is zero unless n.l > 0 and n.v > 0 (light and viewer above the surface).
+#pragma once
+
+#include <optional>
+
+#include <glm/vec3.hpp>
+
+#include "scene/scene.hpp"
+
+namespace hs::shading {
+
+// Phong 1975, "Illumination for computer generated pictures": W cos^n(s), s the angle between
+// the mirror direction r = 2(n.l)n - l and v.
+double phong(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, double exponent);
+
+// Blinn 1977, "Models of light reflection for computer synthesized pictures": (n.h)^n with
+// h the unit bisector of l and v.
+double blinn_phong(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, double exponent);
+
+// Ward 1992, "Measuring and modeling anisotropic reflection", eq. 5, times n.l:
+//   exp(-((h.t/ax)^2 + (h.b/ay)^2) / (h.n)^2) / (4 pi ax ay sqrt(n.l n.v)) * n.l,  b = n x t.
+// sqrt(n.l n.v) is floored at kWardMinCosProduct^(1/2) so that grazing views stay finite.
+double ward(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, glm::dvec3 t, double alpha_x, double alpha_y);
+inline constexpr double kWardMinCosProduct = 1e-8;
+
+// Kajiya and Kay 1989, "Rendering fur with three dimensional textures": cos^p of the angle
+// between v and the cone of mirror directions around the fibre tangent t:
+//   cos = sin(t,l) sin(t,v) - (t.l)(t.v)   (l and v both point away from the surface).
+double kajiya_kay(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, glm::dvec3 t, double exponent);
+
+// The tangent field of the anisotropic models: `axis` projected onto the plane of n; where the
+// projection is shorter than kTangentFallbackLength, a fixed fallback axis is projected instead.
+glm::dvec3 tangent_from_axis(glm::dvec3 n, glm::dvec3 axis);
+inline constexpr double kTangentFallbackLength = 1e-4;
+
+// Direction to the light and its irradiance at normal incidence at surface point p.
+struct LightAtPoint {
+    glm::dvec3 l;  // unit, towards the light; a point light at p itself gives l = n
+    glm::dvec3 E;  // linear RGB
+};
+LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff);
+
+// Paper eq. (2), VI part: sum_i L_d(p, l_i).
+glm::dvec3 diffuse_radiance(const scene::Scene& scene, glm::dvec3 p, glm::dvec3 n);
+
+// Paper eq. (2), VD part: L_e + sum_i L_s(p, l_i, v), with `spec` the specular model in use.
+glm::dvec3 specular_radiance(const scene::Scene& scene, const scene::Specular& spec,
+                             glm::dvec3 p, glm::dvec3 n, glm::dvec3 v);
+
+// The specular factor (S or W above) of one model for one light direction.
+double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, glm::dvec3 v);
+
+}  // namespace hs::shading

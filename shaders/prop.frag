@@ -1,0 +1,69 @@
+#version 450
+#extension GL_GOOGLE_include_directive : require
+#include "shared.h"
+
+// Which terms run is decided by the scene and compiled in here; a disabled term is dead code.
+layout(constant_id = HS_SC_PASS_KIND) const int kPassKind = 0;
+layout(constant_id = HS_SC_SPEC_MODEL) const int kSpecModel = 0;
+layout(constant_id = HS_SC_EMISSION) const bool kEmission = false;
+layout(constant_id = HS_SC_POINT_FALLOFF) const bool kPointFalloff = true;
+layout(constant_id = HS_SC_NUM_LIGHTS) const int kNumLights = 1;
+layout(constant_id = HS_SC_OUTPUT_MAX) const float kOutputMax = 65504.0;
+layout(constant_id = HS_SC_ANISOTROPIC) const bool kAnisotropic = false;
+
+layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
+layout(push_constant) uniform Push { GpuPush pc; };
+
+layout(location = 0) in vec3 in_position;
+layout(location = 1) in vec3 in_normal;
+layout(location = 0) out vec4 out_radiance;
+
+#include "shading.glsl"
+
+// Direction to light i and its irradiance at normal incidence (docs/SHADING.md, "Lights").
+void light_at(int i, vec3 p, vec3 n, out vec3 l, out vec3 E) {
+    GpuLight light = scene.lights[i];
+    E = light.irradiance.rgb;
+    if (light.position_or_direction.w == 0.0) {
+        l = light.position_or_direction.xyz;
+        return;
+    }
+    vec3 d = light.position_or_direction.xyz - p;
+    float dist = length(d);
+    l = dist > 1e-9 ? d / dist : n;  // a light on the surface shines along the normal
+    if (kPointFalloff) {
+        float dc = max(dist, scene.spec_params.w);
+        E /= dc * dc;
+    }
+}
+
+void main() {
+    vec3 n = in_normal * inversesqrt(max(dot(in_normal, in_normal), 1e-30));
+    vec3 p = in_position;
+    vec3 sum = vec3(0.0);
+    if (kPassKind == 0) {
+        // Paper eq. (2), VI: sum_i L_d(p, l_i).
+        for (int i = 0; i < kNumLights; ++i) {
+            vec3 l, E;
+            light_at(i, p, n, l, E);
+            sum += E * max(dot(n, l), 0.0);
+        }
+        sum *= scene.albedo_over_pi.rgb;
+    } else {
+        // Paper eq. (2), VD: L_e + sum_i L_s(p, l_i, v).
+        vec3 v = normalize(pc.eye_position.xyz - p);
+        if (kSpecModel != 0) {
+            vec3 s = vec3(0.0);
+            for (int i = 0; i < kNumLights; ++i) {
+                vec3 l, E;
+                light_at(i, p, n, l, E);
+                s += E * hs_specular_factor(kSpecModel, kAnisotropic, n, l, v,
+                                            scene.tangent_axis.xyz, scene.spec_params.xyz);
+            }
+            sum += scene.spec_colour.rgb * s;
+        }
+        if (kEmission) sum += scene.emission.rgb;
+    }
+    // A 16-bit float target holds at most 65504: clamp rather than write inf (docs/SHADING.md).
+    out_radiance = vec4(min(sum, vec3(kOutputMax)), 1.0);
+}

@@ -1,0 +1,70 @@
+// The specular models and the VI/VD split in GLSL (docs/SHADING.md). Written separately from
+// the C++ reference in server/shading/ so the two check each other. All vectors unit, pointing
+// away from the surface. Every specular term is zero unless n.l > 0 and n.v > 0.
+
+const float kPi = 3.14159265358979;
+const float kWardMinCosProduct = 1e-8;
+const float kTangentFallbackLength = 1e-4;
+
+// x^e on (0, 1], zero below: no pow of a negative number or of zero.
+float hs_lobe(float x, float e) { return x > 0.0 ? pow(min(x, 1.0), e) : 0.0; }
+
+vec3 hs_tangent_from_axis(vec3 n, vec3 axis) {
+    vec3 t = axis - dot(axis, n) * n;
+    float len = length(t);
+    if (len < kTangentFallbackLength) {
+        vec3 a2 = abs(n.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0);
+        t = a2 - dot(a2, n) * n;
+        len = length(t);
+    }
+    return t / len;
+}
+
+// Phong 1975.
+float hs_phong(vec3 n, vec3 l, vec3 v, float e) {
+    vec3 r = 2.0 * dot(n, l) * n - l;
+    return hs_lobe(dot(r, v), e);
+}
+
+// Blinn 1977. |l + v| >= n.l + n.v > 0 under the visibility gate.
+float hs_blinn_phong(vec3 n, vec3 l, vec3 v, float e) {
+    vec3 h = l + v;
+    return hs_lobe(dot(n, h) * inversesqrt(max(dot(h, h), 1e-30)), e);
+}
+
+// Ward 1992, times n.l. `aniso` selects the tangent-frame form; the isotropic form needs no
+// tangent: (h.t)^2 + (h.b)^2 = |h|^2 - (h.n)^2.
+float hs_ward(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso) {
+    float nl = dot(n, l), nv = dot(n, v);
+    vec3 h = l + v;
+    float hn = dot(h, n);
+    float num;
+    if (aniso) {
+        vec3 t = hs_tangent_from_axis(n, axis);
+        vec3 b = cross(n, t);
+        float ht = dot(h, t) / ax, hb = dot(h, b) / ay;
+        num = ht * ht + hb * hb;
+    } else {
+        num = max(dot(h, h) - hn * hn, 0.0) / (ax * ax);
+    }
+    float expo = -num / max(hn * hn, 1e-30);
+    return exp(expo) * nl / (4.0 * kPi * ax * ay * sqrt(max(nl * nv, kWardMinCosProduct)));
+}
+
+// Kajiya and Kay 1989: cos of the angle between v and the mirror cone around t.
+float hs_kajiya_kay(vec3 n, vec3 l, vec3 v, vec3 axis, float e) {
+    vec3 t = hs_tangent_from_axis(n, axis);
+    float tl = clamp(dot(t, l), -1.0, 1.0), tv = clamp(dot(t, v), -1.0, 1.0);
+    float c = sqrt(max(1.0 - tl * tl, 0.0)) * sqrt(max(1.0 - tv * tv, 0.0)) - tl * tv;
+    return hs_lobe(c, e);
+}
+
+// The specular factor of `model` (a specialization constant at every call site).
+float hs_specular_factor(int model, bool aniso, vec3 n, vec3 l, vec3 v, vec3 axis, vec3 params) {
+    if (!(dot(n, l) > 0.0 && dot(n, v) > 0.0)) return 0.0;
+    if (model == 1) return hs_phong(n, l, v, params.x);
+    if (model == 2) return hs_blinn_phong(n, l, v, params.x);
+    if (model == 3) return hs_ward(n, l, v, axis, params.y, params.z, aniso);
+    if (model == 4) return hs_kajiya_kay(n, l, v, axis, params.x);
+    return 0.0;
+}

@@ -1,0 +1,66 @@
+// Buffer layouts, bindings and limits shared by GLSL and C++ (std140 / std430 compatible:
+// every member is a vec4 or mat4). C++ static_asserts the sizes in gpu/shared_layout.hpp.
+#ifndef HYSAR_SHADERS_SHARED_H
+#define HYSAR_SHADERS_SHARED_H
+
+#ifdef __cplusplus
+#include <cstdint>
+#include <glm/mat4x4.hpp>
+#include <glm/vec4.hpp>
+namespace hs::gpu_shared {
+using vec4 = glm::vec4;
+using mat4 = glm::mat4;
+using uint = uint32_t;
+#endif
+
+#define HS_MAX_LIGHTS 64
+#define HS_BINDING_SCENE 0
+#define HS_BINDING_PROBE_IN 0
+#define HS_BINDING_PROBE_OUT 1
+#define HS_PROBE_LOCAL_SIZE 64
+
+// Specialization constant ids (gpu/shared_layout.hpp mirrors them as an enum).
+#define HS_SC_PASS_KIND 0      // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission)
+#define HS_SC_SPEC_MODEL 1     // scene::SpecularModel: 0 none, 1 phong, 2 blinn-phong, 3 ward, 4 kajiya-kay
+#define HS_SC_EMISSION 2       // bool: add the material's emission
+#define HS_SC_POINT_FALLOFF 3  // bool: 1/d^2 for point lights
+#define HS_SC_NUM_LIGHTS 4     // int: number of lights read from the scene block
+#define HS_SC_OUTPUT_MAX 5     // float: clamp of written radiance (65504 for 16-bit float targets)
+#define HS_SC_ANISOTROPIC 6    // bool: Ward with alpha_x != alpha_y (needs the tangent frame)
+
+struct GpuLight {
+    vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light; w: 1 point, 0 directional
+    vec4 irradiance;             // rgb: colour * intensity (W/m^2 at normal incidence, or W/sr for points)
+};
+
+struct GpuScene {
+    vec4 albedo_over_pi;  // rgb: rho_d / pi
+    vec4 spec_colour;     // rgb: k_s or rho_s
+    vec4 spec_params;     // x: exponent, y: alpha_x, z: alpha_y, w: min light distance (m)
+    vec4 tangent_axis;    // xyz: unit world axis projected to the tangent plane
+    vec4 emission;        // rgb: L_e
+    GpuLight lights[HS_MAX_LIGHTS];
+};
+
+struct GpuPush {
+    mat4 clip_from_world;  // Vulkan clip space from world (scene/camera.hpp)
+    vec4 eye_position;     // xyz: viewer eye (VD pass) in metres, world
+};
+
+// One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).
+struct GpuProbeCase {
+    vec4 n;  // xyz unit normal
+    vec4 l;  // xyz unit direction to the light
+    vec4 v;  // xyz unit direction to the viewer
+    vec4 t;  // xyz tangent axis (projected to the plane of n in the shader)
+    vec4 params;  // x exponent, y alpha_x, z alpha_y
+};
+struct GpuProbeResult {
+    vec4 value;  // x: specular factor (S or W), y: diffuse cosine max(n.l, 0), zw: 0
+};
+
+#ifdef __cplusplus
+}  // namespace hs::gpu_shared
+#endif
+
+#endif
