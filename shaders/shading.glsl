@@ -26,17 +26,25 @@ float hs_phong(vec3 n, vec3 l, vec3 v, float e) {
     return hs_lobe(dot(r, v), e);
 }
 
-// Blinn 1977. |l + v| >= n.l + n.v > 0 under the visibility gate.
-float hs_blinn_phong(vec3 n, vec3 l, vec3 v, float e) {
+// l + v scaled so its largest component is 1: at grazing angles |l + v|^2 would underflow in
+// fp32 (l = (1, 0, 1e-30), v = (-1, 0, 1e-30)). Non-zero under the visibility gate, because
+// n.(l + v) = n.l + n.v > 0.
+vec3 hs_scaled_half(vec3 l, vec3 v) {
     vec3 h = l + v;
-    return hs_lobe(dot(n, h) * inversesqrt(max(dot(h, h), 1e-30)), e);
+    return h / max(max(abs(h.x), abs(h.y)), abs(h.z));
+}
+
+// Blinn 1977.
+float hs_blinn_phong(vec3 n, vec3 l, vec3 v, float e) {
+    vec3 h = hs_scaled_half(l, v);
+    return hs_lobe(dot(n, h) * inversesqrt(dot(h, h)), e);
 }
 
 // Ward 1992, times n.l. `aniso` selects the tangent-frame form; the isotropic form needs no
 // tangent: (h.t)^2 + (h.b)^2 = |h|^2 - (h.n)^2.
 float hs_ward(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso) {
     float nl = dot(n, l), nv = dot(n, v);
-    vec3 h = l + v;
+    vec3 h = hs_scaled_half(l, v);  // the ratio below does not depend on the scale of h
     float hn = dot(h, n);
     float num;
     if (aniso) {
@@ -47,7 +55,7 @@ float hs_ward(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso)
     } else {
         num = max(dot(h, h) - hn * hn, 0.0) / (ax * ax);
     }
-    float expo = -num / max(hn * hn, 1e-30);
+    float expo = -num / (hn * hn);  // hn >= 1/sqrt(3): no division by zero
     return exp(expo) * nl / (4.0 * kPi * ax * ay * sqrt(max(nl * nv, kWardMinCosProduct)));
 }
 

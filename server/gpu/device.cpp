@@ -160,6 +160,7 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     VkPhysicalDeviceVulkan13Features f13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
     f13.dynamicRendering = VK_TRUE;
     f13.synchronization2 = VK_TRUE;
+    f13.maintenance4 = VK_TRUE;  // glslang's SPIR-V 1.6 declares workgroup sizes with LocalSizeId
     VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
     f12.timelineSemaphore = VK_TRUE;
     f12.pNext = &f13;

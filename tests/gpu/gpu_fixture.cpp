@@ -1,0 +1,44 @@
+#include "gpu_fixture.hpp"
+
+#include "scene/camera.hpp"
+
+namespace hs::test {
+
+gpu::Device& device() {
+    static std::unique_ptr<gpu::Device> d = [] {
+        gpu::DeviceCreateInfo info;
+        info.validation = true;
+        info = gpu::device_info_from_environment(info);
+        auto r = gpu::Device::create(info);
+        if (!r.ok()) {
+            ADD_FAILURE() << "no Vulkan device: " << r.error().message;
+            std::abort();
+        }
+        std::printf("[gpu] device: %s, validation %s\n", r.value()->name().c_str(),
+                    r.value()->validation_enabled() ? "on" : "OFF");
+        return std::move(r).value();
+    }();
+    return *d;
+}
+
+void GpuTest::SetUp() { messages_before_ = device().validation_message_count(); }
+
+void GpuTest::TearDown() {
+    const uint32_t after = device().validation_message_count();
+    EXPECT_EQ(after, messages_before_) << "Vulkan validation reported " << after - messages_before_ << " message(s)";
+}
+
+std::unique_ptr<render::Renderer> GpuTest::make_renderer(const scene::Scene& s, gpu::ColorFormat f) {
+    render::RendererCreateInfo ri;
+    ri.format = f;
+    auto r = render::Renderer::create(device(), s, ri);
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message);
+    return r.ok() ? std::move(r).value() : nullptr;
+}
+
+scene::Intrinsics GpuTest::small_eye(uint32_t div) {
+    const auto& v = scene::default_scene().viewers.front();
+    return scene::intrinsics_from_fov(v.eye_width / div, v.eye_height / div, v.fov_x_rad, v.fov_y_rad);
+}
+
+}  // namespace hs::test

@@ -1,0 +1,201 @@
+// Numerical hard cases through whole renders: finite output, and agreement with the reference
+// where the reference is finite.
+#include <cmath>
+
+#include "gpu_fixture.hpp"
+#include "scene/camera.hpp"
+#include "shading/compare.hpp"
+#include "shading/brdf.hpp"
+#include "shading/reference.hpp"
+
+using namespace hs;
+using namespace hs::test;
+
+namespace {
+
+class HardCases : public GpuTest {};
+
+size_t count_non_finite(const ImageRgba32f& img) {
+    size_t n = 0;
+    for (float v : img.pixels) n += !std::isfinite(v);
+    return n;
+}
+
+double channel_sum(const ImageRgba32f& img) {
+    double s = 0;
+    for (size_t i = 0; i < img.pixels.size(); ++i)
+        if (i % 4 != 3) s += img.pixels[i];
+    return s;
+}
+
+scene::Pose front_eye() { return scene::look_at({0.05, 1.1, 0.8}, {0, 0.745, 0}).value(); }
+
+TEST_F(HardCases, ManyBrightLightsClampInHalfFloat) {
+    scene::Scene s = scene::default_scene();
+    s.lights.clear();
+    for (int i = 0; i < int(scene::kMaxLights); ++i) {
+        scene::Light l;
+        l.type = scene::LightType::kPoint;
+        l.intensity = 1e9;
+        double a = 2 * M_PI * i / scene::kMaxLights;
+        l.position = {0.4 * std::cos(a), 1.2, 0.4 * std::sin(a) + 0.2};
+        s.lights.push_back(l);
+    }
+    s.projector.intrinsics = {240, 150, 375, 375, 119.5, 74.5};
+    auto r = make_renderer(s, gpu::ColorFormat::kRgba16Float);
+    auto vd = r->render_eye(s.specular_presets.at("ward"), small_eye(8), front_eye());
+    auto vi = r->render_projector();
+    ASSERT_TRUE(vd.ok() && vi.ok());
+    for (const auto* img : {&vd->image, &vi->image}) {
+        EXPECT_EQ(count_non_finite(*img), 0u);
+        float mx = 0;
+        for (float v : img->pixels) mx = std::max(mx, v);
+        EXPECT_EQ(mx, 65504.0f) << "the documented clamp is the largest finite half float";
+    }
+}
+
+// Sum of the reference's diffuse radiance over the pixels of one eye.
+double reference_diffuse_sum(const scene::Scene& s, const scene::Intrinsics& k, const scene::Pose& eye) {
+    double sum = 0;
+    for (uint32_t y = 0; y < k.height; ++y)
+        for (uint32_t x = 0; x < k.width; ++x) {
+            auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, x, y));
+            if (!hit) continue;
+            glm::dvec3 L = shading::diffuse_radiance(s, hit->p, hit->n);
+            sum += L.r + L.g + L.b;
+        }
+    return sum;
+}
+
+TEST_F(HardCases, PointLightAtZeroDistance) {
+    // A light exactly on the pole of the prop: distance 0 there, and below the tangent plane of
+    // every other point of the sphere. Output is finite and within the documented bound
+    // rho_d/pi * I / d_min^2 (d clamped at kMinLightDistance), VI and VD alike.
+    scene::Scene s = scene::default_scene();
+    s.lights.resize(1);
+    s.lights[0].type = scene::LightType::kPoint;
+    s.lights[0].intensity = 1e-4;
+    s.lights[0].position = {0.0, 0.845, 0.0};
+    auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
+    const auto k = small_eye(4);
+    const auto eye = front_eye();
+    const double bound = s.lights[0].intensity / (scene::kMinLightDistance * scene::kMinLightDistance);
+    for (const char* preset : {"phong", "ward", "kajiya-kay"}) {
+        auto vd = r->render_eye(s.specular_presets.at(preset), k, eye);
+        ASSERT_TRUE(vd.ok());
+        EXPECT_EQ(count_non_finite(vd->image), 0u) << preset;
+    }
+    auto vi = r->render_eye_diffuse(k, eye);
+    auto proj = r->render_projector();
+    ASSERT_TRUE(vi.ok() && proj.ok());
+    for (const auto* img : {&vi->image, &proj->image}) {
+        EXPECT_EQ(count_non_finite(*img), 0u);
+        float mx = 0;
+        for (size_t i = 0; i < img->pixels.size(); ++i)
+            if (i % 4 != 3) mx = std::max(mx, img->pixels[i]);
+        EXPECT_LE(mx, bound);
+    }
+}
+
+TEST_F(HardCases, PointLightTwoCentimetresOffTheSurface) {
+    // Irradiance peaks steeply under the light: compare the total light, not single pixels.
+    scene::Scene s = scene::default_scene();
+    s.lights.resize(1);
+    s.lights[0].type = scene::LightType::kPoint;
+    s.lights[0].intensity = 1e-3;
+    s.lights[0].position = {0.0, 0.865, 0.0};
+    auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
+    const auto k = small_eye(4);
+    const auto eye = front_eye();
+    auto vi = r->render_eye_diffuse(k, eye);
+    ASSERT_TRUE(vi.ok());
+    EXPECT_EQ(count_non_finite(vi->image), 0u);
+    const double ref_sum = reference_diffuse_sum(s, k, eye);
+    ASSERT_GT(ref_sum, 0);
+    EXPECT_NEAR(channel_sum(vi->image) / ref_sum, 1.0, 0.02);
+}
+
+TEST_F(HardCases, PointLightTenThousandMetresAway) {
+    scene::Scene s = scene::default_scene();
+    s.lights.resize(1);
+    s.lights[0].type = scene::LightType::kPoint;
+    s.lights[0].intensity = 1e8;  // E = 1 at 1e4 m
+    s.lights[0].position = glm::dvec3(0.3, 0.8, 0.5) * (1e4 / glm::length(glm::dvec3(0.3, 0.8, 0.5)));
+    auto r = make_renderer(s);
+    const auto k = small_eye(4);
+    const auto eye = front_eye();
+    auto vd = r->render_eye(s.specular_presets.at("blinn-phong"), k, eye);
+    ASSERT_TRUE(vd.ok());
+    std::vector<float> ndv;
+    auto ref = shading::reference_viewer(s, s.specular_presets.at("blinn-phong"), k, eye, &ndv);
+    auto st = shading::compare_images(vd->image, ref.value(), ndv, 0.1);
+    EXPECT_EQ(st.non_finite, 0u);
+    ASSERT_GT(st.reference_peak, 0.1);
+    EXPECT_LE(st.interior_max_abs, 0.02 * st.reference_peak + 2e-3);
+}
+
+TEST_F(HardCases, NonUnitQuaternionPoseRendersLikeTheUnitOne) {
+    scene::Scene s = scene::default_scene();
+    auto r = make_renderer(s);
+    const auto k = small_eye(8);
+    scene::Pose unit = front_eye();
+    auto scaled = scene::make_pose(unit.position, unit.orientation * 7.0);
+    auto tiny = scene::make_pose(unit.position, unit.orientation * 2e-6);
+    ASSERT_TRUE(scaled.ok() && tiny.ok());
+    auto a = r->render_eye(s.specular_presets.at("phong"), k, unit);
+    auto b = r->render_eye(s.specular_presets.at("phong"), k, scaled.value());
+    auto c = r->render_eye(s.specular_presets.at("phong"), k, tiny.value());
+    ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+    auto sb = shading::compare_images(b->image, a->image, {}, 0), sc = shading::compare_images(c->image, a->image, {}, 0);
+    EXPECT_LE(sb.max_abs, 1e-3);
+    EXPECT_LE(sc.max_abs, 1e-3);
+    EXPECT_FALSE(scene::make_pose(unit.position, glm::dquat(0, 0, 0, 0)).ok());
+}
+
+TEST_F(HardCases, LookingStraightDownAlongTheUpVector) {
+    scene::Scene s = scene::default_scene();
+    auto r = make_renderer(s);
+    const auto k = small_eye(4);
+    auto eye = scene::look_at({0, 1.6, 0}, {0, 0.695, 0}, {0, 1, 0});  // direction parallel to up
+    ASSERT_TRUE(eye.ok());
+    auto vd = r->render_eye(s.specular_presets.at("phong"), k, eye.value());
+    ASSERT_TRUE(vd.ok());
+    std::vector<float> ndv;
+    auto ref = shading::reference_viewer(s, s.specular_presets.at("phong"), k, eye.value(), &ndv);
+    auto st = shading::compare_images(vd->image, ref.value(), ndv, 0.1);
+    EXPECT_EQ(st.non_finite, 0u);
+    ASSERT_GT(st.interior_pixels, 1000u);
+    EXPECT_LE(st.interior_max_abs, 0.02 * st.reference_peak + 2e-3);
+}
+
+TEST_F(HardCases, SliverTrianglesRenderFinite) {
+    // 8192 segments in a single ring: every triangle is a 0.1 mm x 21 cm sliver.
+    scene::Scene s = scene::default_scene();
+    s.prop.hemisphere.segments = 8192;
+    s.prop.hemisphere.rings = 1;
+    auto r = make_renderer(s);
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->mesh().dropped_triangles, 0u);
+    auto vd = r->render_eye(s.specular_presets.at("kajiya-kay"), small_eye(4), front_eye());
+    auto vi = r->render_eye_diffuse(small_eye(4), front_eye());
+    ASSERT_TRUE(vd.ok() && vi.ok());
+    EXPECT_EQ(count_non_finite(vd->image), 0u);
+    EXPECT_EQ(count_non_finite(vi->image), 0u);
+    EXPECT_GT(channel_sum(vi->image), 0.0);
+}
+
+TEST_F(HardCases, ValidationMessagesAreCaught) {
+    // Proves the hook that fails every GPU test: an invalid call must be counted.
+    const uint32_t before = device().validation_message_count();
+    VkBufferCreateInfo bci{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
+    bci.size = 64;
+    bci.usage = 0;  // invalid: no usage bit
+    VkBuffer b = VK_NULL_HANDLE;
+    if (vkCreateBuffer(device().vk(), &bci, nullptr, &b) == VK_SUCCESS && b) vkDestroyBuffer(device().vk(), b, nullptr);
+    const uint32_t after = device().validation_message_count();
+    EXPECT_GT(after, before) << "the validation layer did not report an invalid vkCreateBuffer";
+    // This test's own messages are expected: do not let TearDown count them.
+    SetUp();
+}
+
+}  // namespace

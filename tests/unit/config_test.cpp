@@ -1,0 +1,131 @@
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "scene/config.hpp"
+
+using namespace hs;
+using namespace hs::scene;
+
+namespace {
+std::string default_text() { return std::string(default_scene_json()); }
+
+// Applies `edit` to the default scene's JSON and parses the result.
+Result<Scene> parse_edited(const std::function<void(nlohmann::json&)>& edit) {
+    auto j = nlohmann::json::parse(default_text());
+    edit(j);
+    return parse_scene(j.dump(), "edited.json", ".");
+}
+}  // namespace
+
+TEST(Config, DefaultSceneIsThePaperRoom) {
+    Scene s = default_scene();
+    EXPECT_EQ(s.schema_version, 1);
+    EXPECT_EQ(s.prop.kind, Prop::Kind::kHemisphere);
+    EXPECT_DOUBLE_EQ(s.prop.hemisphere.radius, 0.15);       // 30 cm diameter
+    EXPECT_DOUBLE_EQ(s.prop.hemisphere.centre.y, 0.695);    // on a 69.5 cm desk
+    ASSERT_EQ(s.lights.size(), 3u);
+    int points = 0;
+    for (const auto& l : s.lights)
+        if (l.type == LightType::kPoint) {
+            ++points;
+            EXPECT_NEAR(l.position.y, 1.10, 1e-9);  // about 110 cm up (Fig. 6)
+        }
+    EXPECT_EQ(points, 2);
+    EXPECT_EQ(s.projector.intrinsics.width, 1920u);
+    EXPECT_EQ(s.projector.intrinsics.height, 1200u);
+    const ViewerProfile* holo = s.find_viewer("hololens");
+    ASSERT_NE(holo, nullptr);
+    EXPECT_EQ(holo->eye_width, 1268u);
+    EXPECT_EQ(holo->eye_height, 720u);
+    EXPECT_NEAR(holo->fov_x_rad, 30.0 * M_PI / 180, 1e-12);
+    EXPECT_NEAR(holo->fov_y_rad, 17.0 * M_PI / 180, 1e-12);
+    const ViewerProfile* bt = s.find_viewer("moverio-bt200");
+    ASSERT_NE(bt, nullptr);
+    EXPECT_EQ(bt->eye_width, 960u);
+    // 23 deg diagonal over 960 x 540: the diagonal recomposes from the two fields of view.
+    double diag = 2 * std::atan(std::hypot(std::tan(bt->fov_x_rad / 2), std::tan(bt->fov_y_rad / 2)));
+    EXPECT_NEAR(diag, 23.0 * M_PI / 180, 1e-12);
+    for (const char* p : {"phong", "blinn-phong", "ward", "ward-aniso", "kajiya-kay"})
+        EXPECT_TRUE(s.specular_presets.count(p)) << p;
+    EXPECT_TRUE(s.specular_presets.at("ward-aniso").anisotropic());
+}
+
+TEST(Config, FileOnDiskMatchesEmbeddedDefault) {
+    auto s = load_scene_file(std::filesystem::path(HYSAR_SOURCE_DIR) / "configs/exp1-room.json");
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    EXPECT_EQ(s->name, default_scene().name);
+}
+
+TEST(Config, MalformedJsonNamesTheFile) {
+    auto s = parse_scene("{ \"schema_version\": 1, ", "broken.json", ".");
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("broken.json"), std::string::npos);
+    EXPECT_NE(s.error().message.find("malformed JSON"), std::string::npos);
+}
+
+TEST(Config, MissingKeyNamesThePath) {
+    auto s = parse_edited([](auto& j) { j["projector"].erase("width"); });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("projector.width"), std::string::npos) << s.error().message;
+    EXPECT_NE(s.error().message.find("missing"), std::string::npos);
+}
+
+TEST(Config, WrongTypeSaysWhatWasExpected) {
+    auto s = parse_edited([](auto& j) { j["material"]["specular"]["exponent"] = "shiny"; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("material.specular.exponent"), std::string::npos) << s.error().message;
+    EXPECT_NE(s.error().message.find("expected a number"), std::string::npos);
+}
+
+TEST(Config, OutOfRangeValuesAreRejected) {
+    auto s = parse_edited([](auto& j) { j["material"]["albedo"] = {0.5, 1.5, 0.5}; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("material.albedo"), std::string::npos) << s.error().message;
+    auto a = parse_edited([](auto& j) { j["specular_presets"]["ward"]["alpha_x"] = 0.0; });
+    ASSERT_FALSE(a.ok());
+    EXPECT_NE(a.error().message.find("alpha_x"), std::string::npos) << a.error().message;
+}
+
+TEST(Config, UnknownKeyIsAnError) {
+    auto s = parse_edited([](auto& j) { j["material"]["specular"]["exponnent"] = 3; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("exponnent"), std::string::npos) << s.error().message;
+}
+
+TEST(Config, SchemaVersionIsChecked) {
+    auto s = parse_edited([](auto& j) { j["schema_version"] = 7; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("schema_version"), std::string::npos);
+}
+
+TEST(Config, UnknownModelListsTheKnownOnes) {
+    auto s = parse_edited([](auto& j) { j["material"]["specular"]["model"] = "cook-torrance"; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("kajiya-kay"), std::string::npos) << s.error().message;
+}
+
+TEST(Config, TooManyLightsIsAnError) {
+    auto s = parse_edited([](auto& j) {
+        for (int i = 0; i < 70; ++i) j["lights"].push_back(j["lights"][0]);
+    });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("at most 64"), std::string::npos) << s.error().message;
+}
+
+TEST(Config, ZeroQuaternionPoseIsAnError) {
+    auto s = parse_edited([](auto& j) {
+        j["projector"]["pose"] = {{"position", {0, 2, 0}}, {"orientation_wxyz", {0, 0, 0, 0}}};
+    });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("names no rotation"), std::string::npos) << s.error().message;
+}
+
+TEST(Config, MissingFileIsNotFound) {
+    auto s = load_scene_file("/nonexistent/scene.json");
+    ASSERT_FALSE(s.ok());
+    EXPECT_EQ(s.error().code, ErrorCode::kNotFound);
+    EXPECT_NE(s.error().message.find("/nonexistent/scene.json"), std::string::npos);
+}
