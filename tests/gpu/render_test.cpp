@@ -24,6 +24,8 @@ struct Case {
     double angle_deg;
 };
 
+void PrintTo(const Case& c, std::ostream* os) { *os << c.preset << " at " << c.angle_deg << " deg"; }
+
 class ModelAgreement : public GpuTest, public ::testing::WithParamInterface<Case> {};
 
 TEST_P(ModelAgreement, MatchesTheDoubleReference) {
