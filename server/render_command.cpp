@@ -238,7 +238,7 @@ Result<void> run(const Options& o) {
     log::info("projector frame {}x{}: {:.1f} ms", proj.image.width, proj.image.height, proj.report.render_ms);
 
     // 2. VD layers per model, height, angle and eye; 3. the contact sheet (right eye).
-    const scene::Intrinsics k = scene::intrinsics_from_fov(viewer->eye_width, viewer->eye_height, viewer->fov_x_rad, viewer->fov_y_rad);
+    const scene::Intrinsics k = scene::eye_intrinsics(*viewer);
     const uint32_t factor = std::max<uint32_t>(1, (viewer->eye_width + 319) / 320);
     const int cell_w = int(viewer->eye_width / factor), cell_h = int(viewer->eye_height / factor);
     const int label_w = 200, header_h = 28, gap = 4;

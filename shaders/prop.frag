@@ -10,12 +10,18 @@ layout(constant_id = HS_SC_POINT_FALLOFF) const bool kPointFalloff = true;
 layout(constant_id = HS_SC_NUM_LIGHTS) const int kNumLights = 1;
 layout(constant_id = HS_SC_OUTPUT_MAX) const float kOutputMax = 65504.0;
 layout(constant_id = HS_SC_ANISOTROPIC) const bool kAnisotropic = false;
+layout(constant_id = HS_SC_MESH_TANGENT) const bool kMeshTangent = false;
+
+layout(constant_id = HS_SC_ALBEDO_TEXTURE) const bool kAlbedoTexture = false;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
+layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
 layout(push_constant) uniform Push { GpuPush pc; };
 
 layout(location = 0) in vec3 in_position;
 layout(location = 1) in vec3 in_normal;
+layout(location = 2) in vec3 in_tangent;
+layout(location = 3) in vec2 in_uv;
 layout(location = 0) out vec4 out_radiance;
 
 #include "shading.glsl"
@@ -49,6 +55,7 @@ void main() {
             sum += E * max(dot(n, l), 0.0);
         }
         sum *= scene.albedo_over_pi.rgb;
+        if (kAlbedoTexture) sum *= texture(albedo_texture, in_uv).rgb;  // sRGB decoded by the sampler
     } else {
         // Paper eq. (2), VD: L_e + sum_i L_s(p, l_i, v).
         vec3 v = normalize(pc.eye_position.xyz - p);
@@ -58,7 +65,8 @@ void main() {
                 vec3 l, E;
                 light_at(i, p, n, l, E);
                 s += E * hs_specular_factor(kSpecModel, kAnisotropic, n, l, v,
-                                            scene.tangent_axis.xyz, scene.spec_params.xyz);
+                                            kMeshTangent ? in_tangent : scene.tangent_axis.xyz,
+                                            scene.spec_params.xyz);
             }
             sum += scene.spec_colour.rgb * s;
         }

@@ -15,6 +15,7 @@ using uint = uint32_t;
 
 #define HS_MAX_LIGHTS 64
 #define HS_BINDING_SCENE 0
+#define HS_BINDING_ALBEDO_TEXTURE 1
 #define HS_BINDING_PROBE_IN 0
 #define HS_BINDING_PROBE_OUT 1
 #define HS_PROBE_LOCAL_SIZE 64
@@ -27,6 +28,8 @@ using uint = uint32_t;
 #define HS_SC_NUM_LIGHTS 4     // int: number of lights read from the scene block
 #define HS_SC_OUTPUT_MAX 5     // float: clamp of written radiance (65504 for 16-bit float targets)
 #define HS_SC_ANISOTROPIC 6    // bool: Ward with alpha_x != alpha_y (needs the tangent frame)
+#define HS_SC_MESH_TANGENT 7   // bool: the tangent comes from the mesh, not from tangent_axis
+#define HS_SC_ALBEDO_TEXTURE 8 // bool: albedo = colour * texture(uv)
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light; w: 1 point, 0 directional

@@ -70,10 +70,10 @@ void CommandList::push_constants(const GraphicsPipeline& p, const void* data, ui
     vkCmdPushConstants(cmd_, p.layout(), VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, size, data);
 }
 
-void CommandList::draw_indexed(const Buffer& positions, const Buffer& normals, const Buffer& indices, uint32_t count) {
-    VkBuffer vbs[2] = {positions.vk(), normals.vk()};
-    VkDeviceSize offs[2] = {0, 0};
-    vkCmdBindVertexBuffers(cmd_, 0, 2, vbs, offs);
+void CommandList::draw_indexed(const VertexStreams& s, const Buffer& indices, uint32_t count) {
+    VkBuffer vbs[4] = {s.positions->vk(), s.normals->vk(), s.tangents->vk(), s.uvs->vk()};
+    VkDeviceSize offs[4] = {0, 0, 0, 0};
+    vkCmdBindVertexBuffers(cmd_, 0, 4, vbs, offs);
     vkCmdBindIndexBuffer(cmd_, indices.vk(), 0, VK_INDEX_TYPE_UINT32);
     vkCmdDrawIndexed(cmd_, count, 1, 0, 0, 0);
 }

@@ -17,8 +17,15 @@ public:
     void begin_render(RenderTarget& target, glm::vec4 clear, const char* label);
     void bind(const GraphicsPipeline& pipeline);
     void push_constants(const GraphicsPipeline& pipeline, const void* data, uint32_t size);
-    // Draws `index_count` indices (uint32) over position and normal streams.
-    void draw_indexed(const Buffer& positions, const Buffer& normals, const Buffer& indices, uint32_t index_count);
+    // The vertex streams of GraphicsPipeline's fixed layout.
+    struct VertexStreams {
+        const Buffer* positions;
+        const Buffer* normals;
+        const Buffer* tangents;
+        const Buffer* uvs;
+    };
+    // Draws `index_count` indices (uint32) over the vertex streams.
+    void draw_indexed(const VertexStreams& streams, const Buffer& indices, uint32_t index_count);
     // Ends rendering and copies the colour attachment into the target's readback buffer.
     void end_render_and_read_back(RenderTarget& target);
 

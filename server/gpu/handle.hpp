@@ -51,5 +51,6 @@ using DescriptorSetLayoutHandle = Handle<VkDescriptorSetLayout, vkDestroyDescrip
 using DescriptorPoolHandle = Handle<VkDescriptorPool, vkDestroyDescriptorPool>;
 using CommandPoolHandle = Handle<VkCommandPool, vkDestroyCommandPool>;
 using FenceHandle = Handle<VkFence, vkDestroyFence>;
+using SamplerHandle = Handle<VkSampler, vkDestroySampler>;
 
 }  // namespace hs::gpu

@@ -42,10 +42,16 @@ struct SetParts {
     VkDescriptorSet set = VK_NULL_HANDLE;
 };
 
-Result<SetParts> make_set(Device& dev, VkDescriptorType type, uint32_t count, VkShaderStageFlags stages,
+// One set whose binding i has type types[i].
+Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& types, VkShaderStageFlags stages,
                           const std::string& name) {
+    const uint32_t count = uint32_t(types.size());
     std::vector<VkDescriptorSetLayoutBinding> bindings(count);
-    for (uint32_t i = 0; i < count; ++i) bindings[i] = {i, type, 1, stages, nullptr};
+    std::vector<VkDescriptorPoolSize> sizes;
+    for (uint32_t i = 0; i < count; ++i) {
+        bindings[i] = {i, types[i], 1, stages, nullptr};
+        sizes.push_back({types[i], 1});
+    }
     VkDescriptorSetLayoutCreateInfo lci{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
     lci.bindingCount = count;
     lci.pBindings = bindings.data();
@@ -54,11 +60,10 @@ Result<SetParts> make_set(Device& dev, VkDescriptorType type, uint32_t count, Vk
     SetParts p;
     p.layout = DescriptorSetLayoutHandle(dev.vk(), layout);
     dev.set_name(VK_OBJECT_TYPE_DESCRIPTOR_SET_LAYOUT, uint64_t(layout), name + ".set_layout");
-    VkDescriptorPoolSize size{type, count};
     VkDescriptorPoolCreateInfo pci{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pci.maxSets = 1;
-    pci.poolSizeCount = 1;
-    pci.pPoolSizes = &size;
+    pci.poolSizeCount = uint32_t(sizes.size());
+    pci.pPoolSizes = sizes.data();
     VkDescriptorPool pool;
     HS_VK_TRY(vkCreateDescriptorPool(dev.vk(), &pci, nullptr, &pool));
     p.pool = DescriptorPoolHandle(dev.vk(), pool);
@@ -91,7 +96,8 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     p.push_bytes_ = info.push_constant_bytes;
     HS_ASSIGN_OR_RETURN(auto vs, make_module(dev, info.vertex_spv, info.name + ".vert"));
     HS_ASSIGN_OR_RETURN(auto fs, make_module(dev, info.fragment_spv, info.name + ".frag"));
-    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
+    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER},
+                                           VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);
     p.set_ = set.set;
@@ -110,12 +116,14 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     stages[1].pName = "main";
     stages[1].pSpecializationInfo = &spec;
 
-    VkVertexInputBindingDescription vb[2] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX}, {1, 12, VK_VERTEX_INPUT_RATE_VERTEX}};
-    VkVertexInputAttributeDescription va[2] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0}, {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0}};
+    VkVertexInputBindingDescription vb[4] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX}, {1, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {2, 12, VK_VERTEX_INPUT_RATE_VERTEX}, {3, 8, VK_VERTEX_INPUT_RATE_VERTEX}};
+    VkVertexInputAttributeDescription va[4] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0}, {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {2, 2, VK_FORMAT_R32G32B32_SFLOAT, 0}, {3, 3, VK_FORMAT_R32G32_SFLOAT, 0}};
     VkPipelineVertexInputStateCreateInfo vi{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
-    vi.vertexBindingDescriptionCount = 2;
+    vi.vertexBindingDescriptionCount = 4;
     vi.pVertexBindingDescriptions = vb;
-    vi.vertexAttributeDescriptionCount = 2;
+    vi.vertexAttributeDescriptionCount = 4;
     vi.pVertexAttributeDescriptions = va;
     VkPipelineInputAssemblyStateCreateInfo ia{VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
     ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
@@ -168,21 +176,27 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     return p;
 }
 
-void GraphicsPipeline::bind_uniform(Device& dev, const Buffer& uniform) {
+void GraphicsPipeline::bind_resources(Device& dev, const Buffer& uniform, const Texture& texture) {
     VkDescriptorBufferInfo bi{uniform.vk(), 0, uniform.size()};
-    VkWriteDescriptorSet w{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-    w.dstSet = set_;
-    w.dstBinding = 0;
-    w.descriptorCount = 1;
-    w.descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER;
-    w.pBufferInfo = &bi;
-    vkUpdateDescriptorSets(dev.vk(), 1, &w, 0, nullptr);
+    VkDescriptorImageInfo ii{texture.sampler(), texture.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+    VkWriteDescriptorSet w[2] = {{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}};
+    w[0].dstSet = set_;
+    w[0].dstBinding = 0;
+    w[0].descriptorCount = 1;
+    w[0].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER;
+    w[0].pBufferInfo = &bi;
+    w[1].dstSet = set_;
+    w[1].dstBinding = 1;
+    w[1].descriptorCount = 1;
+    w[1].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+    w[1].pImageInfo = &ii;
+    vkUpdateDescriptorSets(dev.vk(), 2, w, 0, nullptr);
 }
 
 Result<ComputePipeline> ComputePipeline::create(Device& dev, const ComputePipelineInfo& info) {
     ComputePipeline p;
     HS_ASSIGN_OR_RETURN(auto cs, make_module(dev, info.spv, info.name + ".comp"));
-    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, info.storage_buffers,
+    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, std::vector<VkDescriptorType>(info.storage_buffers, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER),
                                            VK_SHADER_STAGE_COMPUTE_BIT, info.name));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);

@@ -34,9 +34,9 @@ struct GraphicsPipelineInfo {
     std::string name;                        // debug name
 };
 
-// Vertex input is fixed: binding 0 positions (vec3), binding 1 normals (vec3). Descriptor
-// set 0 has one uniform buffer at binding 0 (fragment stage). Depth test on, back faces culled
-// (counter-clockwise is front).
+// Vertex input is fixed: binding 0 positions (vec3), 1 normals (vec3), 2 tangents (vec3),
+// 3 UVs (vec2). Descriptor set 0: a uniform buffer at binding 0 and a combined image sampler
+// at binding 1 (fragment stage). Depth test on, back faces culled (counter-clockwise is front).
 class GraphicsPipeline {
 public:
     static Result<GraphicsPipeline> create(Device& device, const GraphicsPipelineInfo& info);
@@ -44,8 +44,9 @@ public:
     GraphicsPipeline(GraphicsPipeline&&) noexcept = default;
     GraphicsPipeline& operator=(GraphicsPipeline&&) noexcept = default;
 
-    // Points binding 0 at `uniform`. Call before recording, not while a submission uses it.
-    void bind_uniform(Device& device, const Buffer& uniform);
+    // Points binding 0 at `uniform` and binding 1 at `texture`. Call before recording, not
+    // while a submission uses the set.
+    void bind_resources(Device& device, const Buffer& uniform, const Texture& texture);
 
     VkPipeline vk() const { return pipeline_.get(); }
     VkPipelineLayout layout() const { return layout_.get(); }

@@ -98,6 +98,7 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage, con
         case BufferUsage::kUniform: bci.usage = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT; break;
         case BufferUsage::kStorage: bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT; break;
         case BufferUsage::kReadback: bci.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT; break;
+        case BufferUsage::kStaging: bci.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT; break;
     }
     VkBuffer buf;
     HS_VK_TRY(vkCreateBuffer(dev.vk(), &bci, nullptr, &buf));
@@ -122,6 +123,60 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage, con
 void Buffer::write(const void* data, uint64_t size, uint64_t offset) {
     HS_CHECK(offset + size <= size_, "Buffer::write out of range");
     std::memcpy(static_cast<char*>(mapped_) + offset, data, size);
+}
+
+Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::string& name) {
+    if (img.width == 0 || img.height == 0 || img.width > 8192 || img.height > 8192)
+        return make_error(ErrorCode::kInvalidArgument, fmt::format("texture '{}': size {}x{} outside 1..8192", name, img.width, img.height));
+    Texture t;
+    HS_ASSIGN_OR_RETURN(auto parts, make_image(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB,
+                                               VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
+                                               VK_IMAGE_ASPECT_COLOR_BIT, name));
+    t.memory_ = std::move(parts.mem);
+    t.image_ = std::move(parts.image);
+    t.view_ = std::move(parts.view);
+    HS_ASSIGN_OR_RETURN(auto staging, Buffer::create(dev, img.pixels.size(), BufferUsage::kStaging, name + ".staging"));
+    staging.write(img.pixels.data(), img.pixels.size());
+    VkImage image = t.image_.get();
+    HS_TRY(dev.submit_and_wait("upload.texture", [&](VkCommandBuffer cmd) {
+        VkImageMemoryBarrier2 b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER_2};
+        b.srcStageMask = VK_PIPELINE_STAGE_2_NONE;
+        b.dstStageMask = VK_PIPELINE_STAGE_2_COPY_BIT;
+        b.dstAccessMask = VK_ACCESS_2_TRANSFER_WRITE_BIT;
+        b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+        b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+        b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+        b.image = image;
+        b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+        VkDependencyInfo di{VK_STRUCTURE_TYPE_DEPENDENCY_INFO};
+        di.imageMemoryBarrierCount = 1;
+        di.pImageMemoryBarriers = &b;
+        vkCmdPipelineBarrier2(cmd, &di);
+        VkBufferImageCopy region{};
+        region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+        region.imageExtent = {img.width, img.height, 1};
+        vkCmdCopyBufferToImage(cmd, staging.vk(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+        b.srcStageMask = VK_PIPELINE_STAGE_2_COPY_BIT;
+        b.srcAccessMask = VK_ACCESS_2_TRANSFER_WRITE_BIT;
+        b.dstStageMask = VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT;
+        b.dstAccessMask = VK_ACCESS_2_SHADER_SAMPLED_READ_BIT;
+        b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+        b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+        vkCmdPipelineBarrier2(cmd, &di);
+    }));
+    VkSamplerCreateInfo sci{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
+    sci.magFilter = VK_FILTER_LINEAR;
+    sci.minFilter = VK_FILTER_LINEAR;
+    sci.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
+    sci.addressModeU = VK_SAMPLER_ADDRESS_MODE_REPEAT;
+    sci.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+    sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+    sci.maxLod = 0.0f;
+    VkSampler sampler;
+    HS_VK_TRY(vkCreateSampler(dev.vk(), &sci, nullptr, &sampler));
+    t.sampler_ = SamplerHandle(dev.vk(), sampler);
+    dev.set_name(VK_OBJECT_TYPE_SAMPLER, uint64_t(sampler), name + ".sampler");
+    return t;
 }
 
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,

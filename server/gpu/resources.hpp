@@ -16,7 +16,7 @@ VkFormat to_vk(ColorFormat f);
 // The largest radiance a target of this format stores (shader output clamp).
 float max_value(ColorFormat f);
 
-enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback };
+enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback, kStaging };
 
 class Buffer {
 public:
@@ -37,6 +37,25 @@ private:
     BufferHandle buffer_;
     void* mapped_ = nullptr;  // valid while memory_ lives (unmapped implicitly on free)
     uint64_t size_ = 0;
+};
+
+// A sampled RGBA8 sRGB texture (decoded to linear by the sampler) with its sampler: linear
+// filtering, repeat in u, clamp to edge in v, no mipmaps. Uploaded once at creation.
+class Texture {
+public:
+    static Result<Texture> create(Device& device, const ImageRgba8& image, const std::string& name);
+    Texture() = default;
+    Texture(Texture&&) noexcept = default;
+    Texture& operator=(Texture&&) noexcept = default;
+
+    VkImageView view() const { return view_.get(); }
+    VkSampler sampler() const { return sampler_.get(); }
+
+private:
+    MemoryHandle memory_;
+    ImageHandle image_;
+    ImageViewHandle view_;
+    SamplerHandle sampler_;
 };
 
 // A colour attachment, a depth attachment and a readback buffer of one size and format.

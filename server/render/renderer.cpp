@@ -29,12 +29,15 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
     const bool falloff = s.effects.point_light_falloff && has_point_lights(s);
     if (!vd) {
         e.push_back("diffuse");
+        if (s.material.albedo_texture) e.push_back("albedo-texture");
         if (falloff) e.push_back("point-light-falloff");
         return e;
     }
     if (spec.model != scene::SpecularModel::kNone) {
         e.push_back(std::string("specular:") + scene::to_string(spec.model));
         if (spec.anisotropic()) e.push_back("anisotropy");
+        if (spec.uses_tangent() && spec.tangent_source == scene::Specular::TangentSource::kMesh)
+            e.push_back("mesh-tangents");
         if (falloff) e.push_back("point-light-falloff");
     }
     if (has_emission(s)) e.push_back("emission");
@@ -49,18 +52,25 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     HS_ASSIGN_OR_RETURN(r->positions_, gpu::Buffer::create(device, m.positions.size() * 12, gpu::BufferUsage::kVertex, "prop.positions"));
     HS_ASSIGN_OR_RETURN(r->normals_, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex, "prop.normals"));
     HS_ASSIGN_OR_RETURN(r->indices_, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex, "prop.indices"));
+    HS_ASSIGN_OR_RETURN(r->tangents_, gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex, "prop.tangents"));
+    HS_ASSIGN_OR_RETURN(r->uvs_, gpu::Buffer::create(device, m.uvs.size() * 8, gpu::BufferUsage::kVertex, "prop.uvs"));
     r->positions_.write(m.positions.data(), m.positions.size() * 12);
     r->normals_.write(m.normals.data(), m.normals.size() * 12);
+    r->tangents_.write(m.tangents.data(), m.tangents.size() * 12);
+    r->uvs_.write(m.uvs.data(), m.uvs.size() * 8);
     r->indices_.write(m.indices.data(), m.indices.size() * 4);
+    const ImageRgba8 white{1, 1, {255, 255, 255, 255}};
+    const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
+    HS_ASSIGN_OR_RETURN(r->albedo_texture_, gpu::Texture::create(device, tex, "material.albedo_texture"));
     return r;
 }
 
 Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spec) {
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
-    const std::string key = fmt::format("{}|{}|{}|{}|{}|{}|{},{},{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
-                                        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
-                                        sp.tangent_axis.x + 10 * sp.tangent_axis.y + 100 * sp.tangent_axis.z);
+    const std::string key = fmt::format("{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
+                                        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
+                                        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source));
     if (auto it = variants_.find(key); it != variants_.end()) return &it->second;
 
     Variant v;
@@ -78,7 +88,9 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
         .set_bool(HS_SC_POINT_FALLOFF, falloff)
         .set_int(HS_SC_NUM_LIGHTS, int(scene_.lights.size()))
         .set_float(HS_SC_OUTPUT_MAX, gpu::max_value(info_.format))
-        .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic());
+        .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
+        .set_bool(HS_SC_MESH_TANGENT, sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
+        .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr);
     HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
     ++pipelines_built_;
 
@@ -98,7 +110,7 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     }
     HS_ASSIGN_OR_RETURN(v.scene_block, gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform, pi.name + ".scene"));
     v.scene_block.write(&block, sizeof(block));
-    v.pipeline.bind_uniform(device_, v.scene_block);
+    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
     return &it->second;
 }
@@ -122,7 +134,7 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
         cl.begin_render(*t, glm::vec4(0.0f), label);
         cl.bind(v.pipeline);
         cl.push_constants(v.pipeline, &push, sizeof(push));
-        cl.draw_indexed(positions_, normals_, indices_, uint32_t(mesh_.indices.size()));
+        cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_, uint32_t(mesh_.indices.size()));
         cl.end_render_and_read_back(*t);
     }));
     RenderResult r;

@@ -77,7 +77,8 @@ private:
     scene::Scene scene_;
     RendererCreateInfo info_;
     scene::Mesh mesh_;
-    gpu::Buffer positions_, normals_, indices_;
+    gpu::Buffer positions_, normals_, tangents_, uvs_, indices_;
+    gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t>, gpu::RenderTarget> targets_;
     uint64_t projector_renders_ = 0;

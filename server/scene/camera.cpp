@@ -58,6 +58,11 @@ Intrinsics intrinsics_from_fov(uint32_t w, uint32_t h, double fov_x, double fov_
     return k;
 }
 
+Intrinsics eye_intrinsics(const ViewerProfile& v) {
+    if (v.has_intrinsics) return v.intrinsics;
+    return intrinsics_from_fov(v.eye_width, v.eye_height, v.fov_x_rad, v.fov_y_rad);
+}
+
 void fov_from_diagonal(double fov_diag, uint32_t w, uint32_t h, double* fov_x, double* fov_y) {
     double diag = std::sqrt(double(w) * w + double(h) * h);
     double t = std::tan(0.5 * fov_diag);

@@ -21,6 +21,9 @@ Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up = {0, 1, 0
 // Symmetric intrinsics from full fields of view (radians).
 Intrinsics intrinsics_from_fov(uint32_t width, uint32_t height, double fov_x_rad, double fov_y_rad);
 
+// One eye's intrinsics: the profile's own, or symmetric ones from its fields of view.
+Intrinsics eye_intrinsics(const ViewerProfile& viewer);
+
 // Horizontal and vertical fields of view from a diagonal one and the pixel aspect.
 void fov_from_diagonal(double fov_diag_rad, uint32_t width, uint32_t height, double* fov_x_rad,
                        double* fov_y_rad);

@@ -161,7 +161,7 @@ private:
 };
 
 Specular read_specular(Reader& r, const json& j, const std::string& path) {
-    r.only(j, path, {"model", "colour", "exponent", "alpha_x", "alpha_y", "tangent_axis"});
+    r.only(j, path, {"model", "colour", "exponent", "alpha_x", "alpha_y", "tangent_axis", "tangent_source"});
     Specular s;
     auto model = parse_specular_model(r.string(j, path, "model", std::nullopt));
     if (!model) r.fail(Reader::join(path, "model"), model.error().message);
@@ -173,6 +173,9 @@ Specular read_specular(Reader& r, const json& j, const std::string& path) {
     s.tangent_axis = r.vec3(j, path, "tangent_axis", glm::dvec3(1, 0, 0));
     if (glm::length(s.tangent_axis) < 1e-9) r.fail(Reader::join(path, "tangent_axis"), "must not be zero");
     else s.tangent_axis = glm::normalize(s.tangent_axis);
+    std::string src = r.string(j, path, "tangent_source", "axis");
+    if (src == "mesh") s.tangent_source = Specular::TangentSource::kMesh;
+    else if (src != "axis") r.fail(Reader::join(path, "tangent_source"), fmt::format("expected \"axis\" or \"mesh\", got \"{}\"", src));
     return s;
 }
 
@@ -243,8 +246,19 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
 
     // material
     if (const json* m = r.member(root, "", "material", true)) {
-        r.only(*m, "material", {"albedo", "specular", "emission"});
+        r.only(*m, "material", {"albedo", "albedo_texture", "specular", "emission"});
         s.material.albedo = r.vec3(*m, "material", "albedo", std::nullopt, 0.0, 1.0);
+        if (m->is_object() && m->contains("albedo_texture")) {
+            std::filesystem::path t = r.string(*m, "material", "albedo_texture", std::nullopt);
+            if (!r.failed()) {
+                s.material.albedo_texture_path = (t.is_absolute() ? t : base_dir / t).string();
+                auto img = read_png(s.material.albedo_texture_path);
+                if (!img) r.fail("material.albedo_texture", img.error().message);
+                else if (img->width > 8192 || img->height > 8192)
+                    r.fail("material.albedo_texture", fmt::format("{}x{} exceeds 8192x8192", img->width, img->height));
+                else s.material.albedo_texture = std::make_shared<const ImageRgba8>(std::move(img).value());
+            }
+        }
         if (const json* sp = r.member(*m, "material", "specular", false)) {
             s.material.specular = read_specular(r, *sp, "material.specular");
         }
@@ -310,12 +324,23 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                 const json& vj = (*vs)[i];
                 std::string path = fmt::format("viewers[{}]", i);
                 r.only(vj, path, {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg",
-                                  "fov_diagonal_deg", "ipd_m", "alpha", "comment"});
+                                  "fov_diagonal_deg", "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
                 ViewerProfile v;
                 v.name = r.string(vj, path, "name", std::nullopt);
                 v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, 16384);
                 v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, 16384);
-                if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
+                if (vj.is_object() && vj.contains("fx")) {
+                    Intrinsics& k = v.intrinsics;
+                    v.has_intrinsics = true;
+                    k.width = v.eye_width;
+                    k.height = v.eye_height;
+                    k.fx = r.number(vj, path, "fx", std::nullopt, 1e-3, 1e7);
+                    k.fy = r.number(vj, path, "fy", k.fx, 1e-3, 1e7);
+                    k.cx = r.number(vj, path, "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
+                    k.cy = r.number(vj, path, "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
+                    v.fov_x_rad = 2 * std::atan(0.5 * k.width / k.fx);
+                    v.fov_y_rad = 2 * std::atan(0.5 * k.height / k.fy);
+                } else if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
                     double d = r.number(vj, path, "fov_diagonal_deg", std::nullopt, 0.1, 179.0);
                     fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad, &v.fov_y_rad);
                 } else {

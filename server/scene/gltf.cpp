@@ -91,6 +91,11 @@ Result<void> append_mesh(const tinygltf::Model& model, int mesh_index, const glm
             HS_ASSIGN_OR_RETURN(uv, read_accessor(model, it->second, TINYGLTF_TYPE_VEC2, path, "TEXCOORD_0"));
             if (uv.size() / 2 != nv) return gltf_error(path, "TEXCOORD_0 and POSITION counts differ");
         }
+        std::vector<double> tan;
+        if (auto it = prim.attributes.find("TANGENT"); it != prim.attributes.end()) {
+            HS_ASSIGN_OR_RETURN(tan, read_accessor(model, it->second, TINYGLTF_TYPE_VEC4, path, "TANGENT"));
+            if (tan.size() / 4 != nv) return gltf_error(path, "TANGENT and POSITION counts differ");
+        }
         std::vector<double> idx;
         if (prim.indices >= 0) {
             HS_ASSIGN_OR_RETURN(idx, read_accessor(model, prim.indices, TINYGLTF_TYPE_SCALAR, path, "indices"));
@@ -107,6 +112,8 @@ Result<void> append_mesh(const tinygltf::Model& model, int mesh_index, const glm
                 out.normals.push_back(glm::vec3(n));
             }
             out.uvs.push_back(uv.empty() ? glm::vec2(0) : glm::vec2(uv[2 * i], uv[2 * i + 1]));
+            glm::dvec3 t = tan.empty() ? glm::dvec3(1, 0, 0) : glm::dvec3(tan[4 * i], tan[4 * i + 1], tan[4 * i + 2]);
+            out.tangents.push_back(glm::vec3(glm::dmat3(xf) * t));
         }
         if (!have_normals) out.normals.clear();  // computed for the whole mesh by clean_mesh
         for (double v : idx) {

@@ -1,5 +1,6 @@
 #include "scene/mesh.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -9,6 +10,20 @@
 #include "core/log.hpp"
 
 namespace hs::scene {
+
+glm::dvec3 hemisphere_tangent(glm::dvec3 n) {
+    // d/dphi of (sin t cos p, cos t, -sin t sin p) is proportional to (n.z, 0, -n.x).
+    glm::dvec3 t(n.z, 0.0, -n.x);
+    double len = glm::length(t);
+    return len > 1e-12 ? t / len : glm::dvec3(1.0, 0.0, 0.0);  // the pole: any horizontal axis
+}
+
+glm::dvec2 hemisphere_uv(glm::dvec3 n) {
+    double phi = std::atan2(-n.z, n.x);
+    if (phi < 0) phi += 2.0 * glm::pi<double>();
+    double theta = std::acos(std::clamp(n.y, -1.0, 1.0));
+    return {phi / (2.0 * glm::pi<double>()), theta / (0.5 * glm::pi<double>())};
+}
 
 Mesh tessellate_hemisphere(const Hemisphere& h) {
     Mesh m;
@@ -20,8 +35,14 @@ Mesh tessellate_hemisphere(const Hemisphere& h) {
         m.positions.push_back(glm::vec3(c + h.radius * n));
         m.normals.push_back(glm::vec3(n));
         m.uvs.push_back(uv);
+        m.tangents.push_back(glm::vec3(-std::sin(phi), 0.0f, -std::cos(phi)));  // d/dphi, unit
     };
-    add(0.0, 0.0, {0.5f, 0.0f});
+    // One pole vertex per segment, at the segment's middle azimuth, so that UVs and tangents
+    // stay continuous into the top ring.
+    for (uint32_t s = 0; s < S; ++s) {
+        double phi = 2.0 * glm::pi<double>() * (s + 0.5) / S;
+        add(0.0, phi, {float((s + 0.5) / S), 0.0f});
+    }
     for (uint32_t r = 1; r <= R; ++r) {
         double theta = 0.5 * glm::pi<double>() * r / R;
         for (uint32_t s = 0; s <= S; ++s) {
@@ -29,11 +50,11 @@ Mesh tessellate_hemisphere(const Hemisphere& h) {
             add(theta, phi, {float(s) / S, float(r) / R});
         }
     }
-    auto ring = [&](uint32_t r, uint32_t s) { return 1 + (r - 1) * (S + 1) + s; };
+    auto ring = [&](uint32_t r, uint32_t s) { return S + (r - 1) * (S + 1) + s; };
     // phi grows counter-clockwise seen from above (x towards -z), so (pole, s, s+1) is CCW
     // seen from outside.
     for (uint32_t s = 0; s < S; ++s) {
-        m.indices.insert(m.indices.end(), {0u, ring(1, s), ring(1, s + 1)});
+        m.indices.insert(m.indices.end(), {s, ring(1, s), ring(1, s + 1)});
     }
     for (uint32_t r = 1; r < R; ++r) {
         for (uint32_t s = 0; s < S; ++s) {
@@ -84,6 +105,11 @@ void clean_mesh(Mesh& m, double min_area) {
         for (auto& nn : m.normals) nn = glm::normalize(nn);
     }
     if (m.uvs.size() != n) m.uvs.assign(n, glm::vec2(0.0f));
+    if (m.tangents.size() != n) m.tangents.assign(n, glm::vec3(1.0f, 0.0f, 0.0f));
+    for (auto& t : m.tangents) {
+        float l = glm::length(t);
+        t = (l > 1e-12f && std::isfinite(l)) ? t / l : glm::vec3(1.0f, 0.0f, 0.0f);
+    }
 }
 
 Result<Mesh> build_prop_mesh(const Prop& prop) {

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,8 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 #include <glm/vec4.hpp>
+
+#include "core/image.hpp"
 
 namespace hs::scene {
 
@@ -42,12 +45,23 @@ struct Specular {
     // tangent plane (brushing direction); where it is parallel to the normal a fixed fallback
     // perpendicular is used (docs/SHADING.md).
     glm::dvec3 tangent_axis{1.0, 0.0, 0.0};
+    // Where t comes from: kAxis projects tangent_axis; kMesh uses the mesh's tangents (glTF
+    // TANGENT, or the hemisphere's azimuthal direction: a lathe-turned finish), orthogonalised
+    // against the normal.
+    enum class TangentSource { kAxis, kMesh } tangent_source = TangentSource::kAxis;
 
+    bool uses_tangent() const {
+        return model == SpecularModel::kKajiyaKay || anisotropic();
+    }
     bool anisotropic() const { return model == SpecularModel::kWard && alpha_x != alpha_y; }
 };
 
 struct Material {
     glm::dvec3 albedo{0.8};  // diffuse reflectance rho_d in [0, 1], linear RGB (Lambert: rho_d / pi)
+    // Optional sRGB-encoded texture multiplying `albedo`, sampled at the mesh UVs: bilinear,
+    // repeating in u, clamped in v (docs/SHADING.md). Null when the material has none.
+    std::shared_ptr<const ImageRgba8> albedo_texture;
+    std::string albedo_texture_path;
     Specular specular;
     glm::dvec3 emission{0.0};  // L_e, radiance added to the VD layer, linear RGB
 };
@@ -70,6 +84,8 @@ struct Mesh {
     std::vector<glm::vec3> positions;  // metres, world frame
     std::vector<glm::vec3> normals;    // unit, world frame, one per position
     std::vector<glm::vec2> uvs;        // one per position
+    std::vector<glm::vec3> tangents;   // unit, world frame, one per position (glTF TANGENT.xyz,
+                                       // the hemisphere's azimuthal direction, or +x if absent)
     std::vector<uint32_t> indices;     // triangle list, counter-clockwise seen from outside
     uint32_t dropped_triangles = 0;    // degenerate triangles removed while loading
     bool empty() const { return indices.empty(); }
@@ -104,6 +120,8 @@ struct ViewerProfile {
     uint32_t eye_height = 0;  // pixels
     double fov_x_rad = 0;     // full horizontal field of view
     double fov_y_rad = 0;     // full vertical field of view
+    bool has_intrinsics = false;  // true: `intrinsics` below, not the fields of view, define the eye
+    Intrinsics intrinsics;        // per-eye pinhole intrinsics (pixels), when has_intrinsics
     double ipd_m = 0.063;     // interpupillary distance
     double alpha = 1.0;       // transparency of the optics in [0, 1] (paper eq. 3)
 };

@@ -70,34 +70,60 @@ LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, boo
     return {l, c / (dc * dc)};
 }
 
-glm::dvec3 diffuse_radiance(const scene::Scene& s, glm::dvec3 p, glm::dvec3 n) {
+glm::dvec3 sample_albedo_texture(const ImageRgba8& tex, glm::dvec2 uv) {
+    auto decode = [](uint8_t c) {  // IEC 61966-2-1 sRGB EOTF
+        double x = c / 255.0;
+        return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
+    };
+    auto texel = [&](int64_t x, int64_t y) {
+        x = ((x % tex.width) + tex.width) % tex.width;  // repeat
+        y = std::clamp<int64_t>(y, 0, tex.height - 1);  // clamp to edge
+        const uint8_t* p = &tex.pixels[(size_t(y) * tex.width + size_t(x)) * 4];
+        return glm::dvec3(decode(p[0]), decode(p[1]), decode(p[2]));
+    };
+    const double x = uv.x * tex.width - 0.5, y = uv.y * tex.height - 0.5;
+    const double x0 = std::floor(x), y0 = std::floor(y), fx = x - x0, fy = y - y0;
+    const auto ix = int64_t(x0), iy = int64_t(y0);
+    return (1 - fy) * ((1 - fx) * texel(ix, iy) + fx * texel(ix + 1, iy)) +
+           fy * ((1 - fx) * texel(ix, iy + 1) + fx * texel(ix + 1, iy + 1));
+}
+
+glm::dvec3 diffuse_radiance(const scene::Scene& s, glm::dvec3 p, glm::dvec3 n, glm::dvec2 uv) {
     glm::dvec3 sum(0.0);
     for (const auto& light : s.lights) {
         LightAtPoint la = light_at(light, p, n, s.effects.point_light_falloff);
         sum += la.E * std::max(glm::dot(n, la.l), 0.0);
     }
-    return s.material.albedo / kPi * sum;
+    glm::dvec3 albedo = s.material.albedo;
+    if (s.material.albedo_texture) albedo *= sample_albedo_texture(*s.material.albedo_texture, uv);
+    return albedo / kPi * sum;
 }
 
-double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, glm::dvec3 v) {
+glm::dvec3 shading_tangent(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 surface_tangent) {
+    const bool mesh = spec.tangent_source == scene::Specular::TangentSource::kMesh;
+    return tangent_from_axis(n, mesh ? surface_tangent : spec.tangent_axis);
+}
+
+double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, glm::dvec3 v,
+                       glm::dvec3 surface_tangent) {
     using M = scene::SpecularModel;
     switch (spec.model) {
         case M::kNone: return 0.0;
         case M::kPhong: return phong(n, l, v, spec.exponent);
         case M::kBlinnPhong: return blinn_phong(n, l, v, spec.exponent);
-        case M::kWard: return ward(n, l, v, tangent_from_axis(n, spec.tangent_axis), spec.alpha_x, spec.alpha_y);
-        case M::kKajiyaKay: return kajiya_kay(n, l, v, tangent_from_axis(n, spec.tangent_axis), spec.exponent);
+        case M::kWard: return ward(n, l, v, shading_tangent(spec, n, surface_tangent), spec.alpha_x, spec.alpha_y);
+        case M::kKajiyaKay: return kajiya_kay(n, l, v, shading_tangent(spec, n, surface_tangent), spec.exponent);
     }
     return 0.0;
 }
 
 glm::dvec3 specular_radiance(const scene::Scene& s, const scene::Specular& spec, glm::dvec3 p,
-                             glm::dvec3 n, glm::dvec3 v) {
+                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent) {
     glm::dvec3 sum = s.material.emission;
     if (spec.model == scene::SpecularModel::kNone) return sum;
     for (const auto& light : s.lights) {
         LightAtPoint la = light_at(light, p, n, s.effects.point_light_falloff);
-        sum += spec.colour * la.E * specular_factor(spec, n, la.l, v);
+        sum += spec.colour * la.E * specular_factor(spec, n, la.l, v, surface_tangent);
     }
     return sum;
 }

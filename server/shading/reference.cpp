@@ -5,6 +5,7 @@
 #include <glm/geometric.hpp>
 
 #include "scene/camera.hpp"
+#include "scene/mesh.hpp"
 #include "shading/brdf.hpp"
 
 namespace hs::shading {
@@ -45,7 +46,7 @@ Result<ImageRgba32f> reference_projector(const scene::Scene& s) {
             glm::dvec3 d = scene::pixel_ray(k, s.projector.pose, x, y);
             auto hit = intersect_hemisphere(s.prop.hemisphere, s.projector.pose.position, d);
             if (!hit) continue;
-            glm::dvec3 L = diffuse_radiance(s, hit->p, hit->n);
+            glm::dvec3 L = diffuse_radiance(s, hit->p, hit->n, scene::hemisphere_uv(hit->n));
             img.set(x, y, glm::vec4(glm::vec3(L), 1.0f));
         }
     }
@@ -63,7 +64,7 @@ Result<ImageRgba32f> reference_viewer(const scene::Scene& s, const scene::Specul
             glm::dvec3 d = scene::pixel_ray(k, eye, x, y);
             auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d);
             if (!hit) continue;
-            glm::dvec3 L = specular_radiance(s, spec, hit->p, hit->n, -d);
+            glm::dvec3 L = specular_radiance(s, spec, hit->p, hit->n, -d, scene::hemisphere_tangent(hit->n));
             img.set(x, y, glm::vec4(glm::vec3(L), 1.0f));
             if (ndv) (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
         }

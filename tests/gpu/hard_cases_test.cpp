@@ -4,6 +4,7 @@
 
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
+#include "scene/mesh.hpp"
 #include "shading/compare.hpp"
 #include "shading/brdf.hpp"
 #include "shading/reference.hpp"
@@ -61,7 +62,7 @@ double reference_diffuse_sum(const scene::Scene& s, const scene::Intrinsics& k, 
         for (uint32_t x = 0; x < k.width; ++x) {
             auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, x, y));
             if (!hit) continue;
-            glm::dvec3 L = shading::diffuse_radiance(s, hit->p, hit->n);
+            glm::dvec3 L = shading::diffuse_radiance(s, hit->p, hit->n, scene::hemisphere_uv(hit->n));
             sum += L.r + L.g + L.b;
         }
     return sum;

@@ -129,3 +129,36 @@ TEST(Config, MissingFileIsNotFound) {
     EXPECT_EQ(s.error().code, ErrorCode::kNotFound);
     EXPECT_NE(s.error().message.find("/nonexistent/scene.json"), std::string::npos);
 }
+
+TEST(Config, ViewerIntrinsicsInsteadOfFieldOfView) {
+    auto s = parse_edited([](auto& j) {
+        auto& v = j["viewers"][0];
+        v.erase("fov_x_deg");
+        v.erase("fov_y_deg");
+        v["fx"] = 2000.0;
+        v["cx"] = 600.0;
+    });
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    const ViewerProfile& v = s->viewers[0];
+    EXPECT_TRUE(v.has_intrinsics);
+    EXPECT_DOUBLE_EQ(v.intrinsics.fy, 2000.0);  // fy defaults to fx
+    EXPECT_DOUBLE_EQ(v.intrinsics.cx, 600.0);
+    EXPECT_DOUBLE_EQ(v.intrinsics.cy, 0.5 * (720 - 1));
+    EXPECT_NEAR(v.fov_x_rad, 2 * std::atan(634.0 / 2000.0), 1e-12);
+}
+
+TEST(Config, TangentSourceIsChecked) {
+    auto ok = parse_edited([](auto& j) { j["specular_presets"]["kajiya-kay"]["tangent_source"] = "mesh"; });
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    EXPECT_EQ(ok->specular_presets.at("kajiya-kay").tangent_source, Specular::TangentSource::kMesh);
+    auto bad = parse_edited([](auto& j) { j["material"]["specular"]["tangent_source"] = "uv"; });
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("tangent_source"), std::string::npos) << bad.error().message;
+}
+
+TEST(Config, MissingAlbedoTextureNamesTheFile) {
+    auto s = parse_edited([](auto& j) { j["material"]["albedo_texture"] = "/nonexistent/brass.png"; });
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.error().message.find("material.albedo_texture"), std::string::npos) << s.error().message;
+    EXPECT_NE(s.error().message.find("/nonexistent/brass.png"), std::string::npos) << s.error().message;
+}

@@ -70,6 +70,15 @@ TEST(Mesh, HemisphereIsOutwardAndOnTheSphere) {
         EXPECT_NEAR(glm::length(m.normals[i]), 1.0f, 1e-6f);
         EXPECT_GE(m.positions[i].y, float(h.centre.y) - 1e-6f);
     }
+    // UVs and tangents agree with the analytic ones the reference uses (the seam has u = 1).
+    for (size_t i = size_t(h.segments); i < m.positions.size(); ++i) {
+        glm::dvec2 uv = hemisphere_uv(glm::dvec3(m.normals[i]));
+        double du = std::abs(uv.x - m.uvs[i].x);
+        EXPECT_LT(std::min(du, std::abs(du - 1.0)), 1e-5) << "vertex " << i;
+        EXPECT_NEAR(uv.y, m.uvs[i].y, 1e-5) << "vertex " << i;
+        glm::dvec3 t = hemisphere_tangent(glm::dvec3(m.normals[i]));
+        EXPECT_LT(glm::distance(t, glm::dvec3(m.tangents[i])), 1e-5) << "vertex " << i;
+    }
     for (size_t t = 0; t < m.indices.size(); t += 3) {
         glm::vec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]], c = m.positions[m.indices[t + 2]];
         glm::vec3 fn = glm::cross(b - a, c - a);
@@ -114,6 +123,8 @@ TEST(Mesh, GltfLoadsWithComputedNormals) {
     EXPECT_NEAR(m->positions[2].x, 0.5f, 1e-6f);
     EXPECT_NEAR(m->positions[2].y, 1.5f, 1e-6f);
     for (auto n : m->normals) EXPECT_NEAR(n.z, 1.0f, 1e-5f);
+    ASSERT_EQ(m->tangents.size(), m->positions.size());  // no TANGENT attribute: +x
+    for (auto t : m->tangents) EXPECT_EQ(t, glm::vec3(1, 0, 0));
     std::remove(path.c_str());
 }
 
