@@ -4,24 +4,21 @@
 
 namespace hs::gpu {
 
+SpecConstants& SpecConstants::add(uint32_t id, uint32_t bits) {
+    entries_.push_back({id, uint32_t(data_.size() * 4), 4});
+    data_.push_back(bits);
+    return *this;
+}
 SpecConstants& SpecConstants::set_int(uint32_t id, int32_t v) {
     uint32_t bits;
     std::memcpy(&bits, &v, 4);
-    entries_.push_back({id, uint32_t(data_.size() * 4), 4});
-    data_.push_back(bits);
-    return *this;
+    return add(id, bits);
 }
-SpecConstants& SpecConstants::set_bool(uint32_t id, bool v) {
-    entries_.push_back({id, uint32_t(data_.size() * 4), 4});  // VkBool32
-    data_.push_back(v ? 1u : 0u);
-    return *this;
-}
+SpecConstants& SpecConstants::set_bool(uint32_t id, bool v) { return add(id, v ? 1u : 0u); }  // VkBool32
 SpecConstants& SpecConstants::set_float(uint32_t id, float v) {
     uint32_t bits;
     std::memcpy(&bits, &v, 4);
-    entries_.push_back({id, uint32_t(data_.size() * 4), 4});
-    data_.push_back(bits);
-    return *this;
+    return add(id, bits);
 }
 
 namespace {

@@ -21,6 +21,7 @@ public:
     const std::vector<uint32_t>& data() const { return data_; }
 
 private:
+    SpecConstants& add(uint32_t id, uint32_t bits);
     std::vector<VkSpecializationMapEntry> entries_;
     std::vector<uint32_t> data_;
 };

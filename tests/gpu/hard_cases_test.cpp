@@ -29,6 +29,17 @@ double channel_sum(const ImageRgba32f& img) {
     return s;
 }
 
+// The default room lit by one point light alone.
+scene::Scene one_point_light(double intensity, glm::dvec3 position) {
+    scene::Scene s = scene::default_scene();
+    s.lights.resize(1);
+    s.lights[0].type = scene::LightType::kPoint;
+    s.lights[0].colour = {1, 1, 1};
+    s.lights[0].intensity = intensity;
+    s.lights[0].position = position;
+    return s;
+}
+
 scene::Pose front_eye() { return scene::look_at({0.05, 1.1, 0.8}, {0, 0.745, 0}).value(); }
 
 TEST_F(HardCases, ManyBrightLightsClampInHalfFloat) {
@@ -72,11 +83,7 @@ TEST_F(HardCases, PointLightAtZeroDistance) {
     // A light exactly on the pole of the prop: distance 0 there, and below the tangent plane of
     // every other point of the sphere. Output is finite and within the documented bound
     // rho_d/pi * I / d_min^2 (d clamped at kMinLightDistance), VI and VD alike.
-    scene::Scene s = scene::default_scene();
-    s.lights.resize(1);
-    s.lights[0].type = scene::LightType::kPoint;
-    s.lights[0].intensity = 1e-4;
-    s.lights[0].position = {0.0, 0.845, 0.0};
+    scene::Scene s = one_point_light(1e-4, {0.0, 0.845, 0.0});
     auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
     const auto k = small_eye(4);
     const auto eye = front_eye();
@@ -100,11 +107,7 @@ TEST_F(HardCases, PointLightAtZeroDistance) {
 
 TEST_F(HardCases, PointLightTwoCentimetresOffTheSurface) {
     // Irradiance peaks steeply under the light: compare the total light, not single pixels.
-    scene::Scene s = scene::default_scene();
-    s.lights.resize(1);
-    s.lights[0].type = scene::LightType::kPoint;
-    s.lights[0].intensity = 1e-3;
-    s.lights[0].position = {0.0, 0.865, 0.0};
+    scene::Scene s = one_point_light(1e-3, {0.0, 0.865, 0.0});
     auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
     const auto k = small_eye(4);
     const auto eye = front_eye();
@@ -117,11 +120,8 @@ TEST_F(HardCases, PointLightTwoCentimetresOffTheSurface) {
 }
 
 TEST_F(HardCases, PointLightTenThousandMetresAway) {
-    scene::Scene s = scene::default_scene();
-    s.lights.resize(1);
-    s.lights[0].type = scene::LightType::kPoint;
-    s.lights[0].intensity = 1e8;  // E = 1 at 1e4 m
-    s.lights[0].position = glm::dvec3(0.3, 0.8, 0.5) * (1e4 / glm::length(glm::dvec3(0.3, 0.8, 0.5)));
+    // E = 1 at 1e4 m.
+    scene::Scene s = one_point_light(1e8, glm::dvec3(0.3, 0.8, 0.5) * (1e4 / glm::length(glm::dvec3(0.3, 0.8, 0.5))));
     auto r = make_renderer(s);
     const auto k = small_eye(4);
     const auto eye = front_eye();
