@@ -419,7 +419,8 @@ void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames
 void Server::Impl::render_loop() {
     std::unique_ptr<render::Renderer> renderer;
     scene::Scene current;
-    auto rebuild = [&](const scene::Scene& s) -> bool {
+    // Builds the renderer for `s` and publishes its projector frame as scene `version`.
+    auto rebuild = [&](const scene::Scene& s, uint32_t version) -> bool {
         auto r = render::Renderer::create(device, s, info.renderer);
         if (!r) {
             log::error("render: cannot build the scene: {}", r.error().message);
@@ -438,10 +439,8 @@ void Server::Impl::render_loop() {
         pf.height = proj->image.height;
         pf.format = proto::PixelFormat::kRgba8;
         pf.data = encode_pixels(proj->image, pf.format);
-        uint32_t version;
         {
             std::lock_guard lock(mutex);
-            version = scene_version;
             ++projector_renders;
             projector_ms_total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
             last_projector_report = {{"pass", proj->report.pass}, {"effects", proj->report.effects},
@@ -452,11 +451,13 @@ void Server::Impl::render_loop() {
         asio::post(io, [this, bytes] { publish_projector_frame(bytes); });
         return true;
     };
+    uint32_t version;
     {
         std::lock_guard lock(mutex);
         current = scene;
+        version = scene_version;
     }
-    if (!rebuild(current)) {
+    if (!rebuild(current, version)) {
         log::error("render: the initial scene cannot be rendered; stopping");
         asio::post(io, [this] { io.stop(); });
         return;
@@ -470,10 +471,10 @@ void Server::Impl::render_loop() {
         }
         if (next) {
             scene::Scene s = std::move(*next);
-            if (rebuild(s)) {
+            if (rebuild(s, version + 1)) {
                 std::lock_guard lock(mutex);
                 scene = s;
-                ++scene_version;
+                scene_version = ++version;
             }
         }
         for (const ViewerJob& job : batch) {

@@ -1,0 +1,396 @@
+// Loopback end-to-end tests of `hysar serve`: real sockets, real Vulkan (lavapipe), validation on.
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "clients/connection.hpp"
+#include "gpu/device.hpp"
+#include "render/renderer.hpp"
+#include "scene/camera.hpp"
+#include "scene/config.hpp"
+#include "stream/layer_codec.hpp"
+#include "stream/server.hpp"
+
+using namespace hs;
+namespace proto = hs::protocol;
+using client::Connection;
+
+namespace {
+
+constexpr const char* kToken = "test-token";
+
+gpu::Device& device() {
+    static std::unique_ptr<gpu::Device> d = [] {
+        gpu::DeviceCreateInfo info;
+        info.validation = true;
+        auto r = gpu::Device::create(gpu::device_info_from_environment(info));
+        if (!r.ok()) {
+            std::fprintf(stderr, "no Vulkan device: %s\n", r.error().message.c_str());
+            std::abort();
+        }
+        return std::move(r).value();
+    }();
+    return *d;
+}
+
+// The default room with a small projector, so each test's projector pass is quick.
+scene::Scene test_scene() {
+    scene::Scene s = scene::default_scene();
+    s.projector.intrinsics = {480, 300, 750, 750, 239.5, 149.5};
+    return s;
+}
+
+size_t rss_kib() {
+    std::ifstream f("/proc/self/statm");
+    size_t pages = 0, resident = 0;
+    f >> pages >> resident;
+    return resident * size_t(sysconf(_SC_PAGESIZE)) / 1024;
+}
+
+class ServerTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        messages_before_ = device().validation_message_count();
+        stream::ServerCreateInfo info;
+        info.port = 0;
+        info.token = kToken;
+        auto s = stream::Server::create(device(), test_scene(), info);
+        ASSERT_TRUE(s.ok()) << s.error().message;
+        server_ = std::move(s).value();
+        thread_ = std::thread([this] { server_->run(); });
+        address_ = "127.0.0.1:" + std::to_string(server_->port());
+    }
+    void TearDown() override {
+        server_->stop();
+        thread_.join();
+        EXPECT_EQ(device().validation_message_count(), messages_before_) << "Vulkan validation reported messages";
+    }
+
+    std::unique_ptr<Connection> connect() {
+        auto c = Connection::open(address_);
+        if (auto* e = std::get_if<std::string>(&c)) {
+            ADD_FAILURE() << *e;
+            return nullptr;
+        }
+        return std::move(std::get<std::unique_ptr<Connection>>(c));
+    }
+
+    std::unique_ptr<Connection> headset(const proto::RegisterDisplay& d, const std::string& name = "hmd") {
+        auto c = connect();
+        if (!c) return nullptr;
+        auto err = c->hello(proto::Role::kHmd, kToken, name);
+        EXPECT_FALSE(err) << *err;
+        EXPECT_TRUE(c->send(d));
+        return c;
+    }
+
+    // Receives until a message of type T arrives (skipping others) or the time runs out.
+    template <typename T>
+    std::optional<T> receive_a(Connection& c, int timeout_ms = 20000) {
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+        while (std::chrono::steady_clock::now() < deadline) {
+            auto r = c.receive(500);
+            if (std::holds_alternative<std::string>(r)) return std::nullopt;
+            if (auto* m = std::get_if<proto::Message>(&r))
+                if (auto* t = std::get_if<T>(m)) return *t;
+        }
+        return std::nullopt;
+    }
+
+    // Expects an Error with `code`; when `closes`, the server then closes the connection.
+    void expect_error(Connection& c, proto::ErrorCode code, bool closes) {
+        auto e = receive_a<proto::Error>(c, 10000);
+        ASSERT_TRUE(e) << "no Error message";
+        EXPECT_EQ(int(e->code), int(code)) << e->message;
+        EXPECT_FALSE(e->message.empty());
+        if (closes) {
+            auto r = c.receive(5000);
+            EXPECT_TRUE(std::holds_alternative<std::string>(r)) << "the server kept the connection open";
+        }
+    }
+
+    // A headset display of the HoloLens' fields of view at 1/8 of its resolution.
+    static proto::RegisterDisplay small_display(proto::PixelFormat f = proto::PixelFormat::kRgba16f,
+                                                proto::FrameMode mode = proto::FrameMode::kOnRequest) {
+        const auto& v = scene::default_scene().viewers.front();
+        auto k = scene::intrinsics_from_fov(v.eye_width / 8, v.eye_height / 8, v.fov_x_rad, v.fov_y_rad);
+        return {k.width, k.height, k.fx, k.fy, k.cx, k.cy, v.ipd_m, f, proto::Encoding::kRaw, mode};
+    }
+
+    static proto::Pose pose_at(double angle_deg, uint64_t t) {
+        auto s = scene::default_scene();
+        auto p = scene::viewing_pose(s.viewing, angle_deg, 1.10).value();
+        return {t, {p.position.x, p.position.y, p.position.z},
+                {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z}};
+    }
+
+    // Both eyes of one frame for the pose stamped `t`.
+    std::vector<proto::VdLayer> frame_for(Connection& c, uint64_t t) {
+        std::vector<proto::VdLayer> got;
+        while (got.size() < 2) {
+            auto l = receive_a<proto::VdLayer>(c);
+            if (!l) break;
+            if (l->pose_time_ns == t) got.push_back(*l);
+        }
+        return got;
+    }
+
+    std::unique_ptr<stream::Server> server_;
+    std::thread thread_;
+    std::string address_;
+    uint32_t messages_before_ = 0;
+};
+
+TEST_F(ServerTest, ProjectorFrameIsRenderedOnceForEveryProjector) {
+    auto a = connect(), b = connect();
+    ASSERT_FALSE(a->hello(proto::Role::kProjector, kToken, "projector-a"));
+    ASSERT_FALSE(b->hello(proto::Role::kProjector, kToken, "projector-b"));
+    auto fa = receive_a<proto::ProjectorFrame>(*a), fb = receive_a<proto::ProjectorFrame>(*b);
+    ASSERT_TRUE(fa && fb);
+    EXPECT_EQ(fa->width, 480u);
+    EXPECT_EQ(fa->data, fb->data);
+    size_t lit = 0;
+    for (size_t i = 0; i < fa->data.size(); i += 4) lit += fa->data[i] > 0;
+    EXPECT_GT(lit, 1000u) << "the projector frame is empty";
+    EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 1u);
+}
+
+
+class HeadsetCount : public ServerTest, public ::testing::WithParamInterface<int> {};
+
+TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
+    const int n = GetParam();
+    const auto display = small_display();
+    std::vector<std::unique_ptr<Connection>> hmds;
+    for (int i = 0; i < n; ++i) hmds.push_back(headset(display, "hmd-" + std::to_string(i)));
+    std::vector<double> angles;
+    for (int i = 0; i < n; ++i) angles.push_back(n == 1 ? 0.0 : -40.0 + 80.0 * i / (n - 1));
+    for (int i = 0; i < n; ++i) {
+        ASSERT_TRUE(hmds[i]->send(pose_at(angles[i], 1000 + i)));
+        ASSERT_TRUE(hmds[i]->send(proto::FrameRequest{}));
+    }
+    // The offline renderer, for the same poses.
+    render::RendererCreateInfo ri;
+    auto offline = render::Renderer::create(device(), test_scene(), ri).value();
+    scene::Intrinsics k{display.eye_width, display.eye_height, display.fx, display.fy, display.cx, display.cy};
+    for (int i = 0; i < n; ++i) {
+        auto layers = frame_for(*hmds[i], 1000 + i);
+        ASSERT_EQ(layers.size(), 2u) << "headset " << i;
+        EXPECT_NE(layers[0].eye, layers[1].eye);
+        auto pose = pose_at(angles[i], 0);
+        auto head = scene::make_pose({pose.position_m[0], pose.position_m[1], pose.position_m[2]},
+                                     glm::dquat(pose.orientation_wxyz[0], pose.orientation_wxyz[1], pose.orientation_wxyz[2],
+                                                pose.orientation_wxyz[3]))
+                        .value();
+        for (const auto& l : layers) {
+            auto want = offline->render_eye(scene::default_scene().material.specular, k, scene::eye_poses(head, display.ipd_m)[l.eye]);
+            ASSERT_TRUE(want.ok());
+            auto got = stream::decode_pixels(l.data, l.width, l.height, l.format);
+            ASSERT_EQ(got.pixels.size(), want->image.pixels.size());
+            double max_diff = 0, peak = 0;
+            for (size_t p = 0; p < got.pixels.size(); ++p) {
+                max_diff = std::max(max_diff, double(std::abs(got.pixels[p] - want->image.pixels[p])));
+                peak = std::max(peak, double(want->image.pixels[p]));
+            }
+            EXPECT_GT(peak, 0.1) << "no highlight to compare";
+            EXPECT_LE(max_diff, 1e-3) << "headset " << i << " eye " << int(l.eye) << " got another pose's layer";
+        }
+    }
+    auto st = server_->stats();
+    EXPECT_EQ(st["projector_renders"].get<uint64_t>(), 1u);
+    EXPECT_EQ(st["viewers"].size(), size_t(n));
+}
+
+INSTANTIATE_TEST_SUITE_P(Loopback, HeadsetCount, ::testing::Values(1, 4, 16));
+
+TEST_F(ServerTest, LatestPoseWins) {
+    auto c = headset(small_display());
+    for (uint64_t t = 1; t <= 50; ++t) ASSERT_TRUE(c->send(pose_at(-40.0 + t, t)));
+    ASSERT_TRUE(c->send(proto::FrameRequest{}));
+    auto l = receive_a<proto::VdLayer>(*c);
+    ASSERT_TRUE(l);
+    EXPECT_EQ(l->pose_time_ns, 50u) << "a stale pose was rendered";
+    auto v = server_->stats()["viewers"][0];
+    EXPECT_GE(v["superseded_poses"].get<uint64_t>(), 1u);
+}
+
+TEST_F(ServerTest, ContinuousModeRendersEachNewPose) {
+    auto c = headset(small_display(proto::PixelFormat::kRgba8, proto::FrameMode::kContinuous));
+    ASSERT_TRUE(c->send(pose_at(0, 7)));
+    auto first = frame_for(*c, 7);
+    ASSERT_EQ(first.size(), 2u);
+    EXPECT_EQ(first[0].format, proto::PixelFormat::kRgba8);
+    ASSERT_TRUE(c->send(pose_at(20, 8)));
+    EXPECT_EQ(frame_for(*c, 8).size(), 2u);
+}
+
+TEST_F(ServerTest, BadFramesCostOnlyTheirSession) {
+    auto good = headset(small_display(), "good");
+    auto bad_bytes = [&](std::vector<uint8_t> bytes, proto::ErrorCode code) {
+        auto c = connect();
+        ASSERT_TRUE(c->send_bytes(bytes.data(), bytes.size()));
+        expect_error(*c, code, true);
+    };
+    auto ping = proto::encode(proto::Ping{1});
+    auto b = ping;
+    b[0] = 'X';
+    bad_bytes(b, proto::ErrorCode::kBadMagic);
+    b = ping;
+    b[4] = 9;
+    bad_bytes(b, proto::ErrorCode::kBadVersion);
+    b = ping;
+    b[6] = 99;
+    bad_bytes(b, proto::ErrorCode::kUnknownType);
+    b = proto::encode(proto::SceneUpdate{"{}"});
+    uint32_t huge = 0x7fffffff;
+    std::memcpy(&b[8], &huge, 4);
+    bad_bytes(b, proto::ErrorCode::kTooLarge);
+    // A lying inner length: Hello whose token length runs past the payload.
+    b = proto::encode(proto::Hello{proto::Role::kHmd, kToken, "x"});
+    b[proto::kHeaderBytes + 1] = 200;
+    bad_bytes(b, proto::ErrorCode::kMalformed);
+    // A truncated frame, then the client vanishes.
+    {
+        auto c = connect();
+        auto h = proto::encode(proto::Hello{proto::Role::kHmd, kToken, "truncated"});
+        ASSERT_TRUE(c->send_bytes(h.data(), h.size() - 3));
+    }
+    // The good session still works.
+    ASSERT_TRUE(good->send(pose_at(0, 77)));
+    ASSERT_TRUE(good->send(proto::FrameRequest{}));
+    EXPECT_EQ(frame_for(*good, 77).size(), 2u);
+}
+
+TEST_F(ServerTest, WrongTokenAndMessagesBeforeHello) {
+    {
+        auto c = connect();
+        auto err = c->hello(proto::Role::kHmd, "not-the-token", "intruder");
+        ASSERT_TRUE(err);
+        EXPECT_NE(err->find("wrong token"), std::string::npos) << *err;
+    }
+    {
+        auto c = connect();
+        ASSERT_TRUE(c->send(proto::Ping{5}));
+        expect_error(*c, proto::ErrorCode::kUnauthorized, true);
+    }
+}
+
+TEST_F(ServerTest, InvalidRequestsKeepTheSessionOpen) {
+    auto c = connect();
+    ASSERT_FALSE(c->hello(proto::Role::kHmd, kToken, "clumsy"));
+    ASSERT_TRUE(c->send(pose_at(0, 1)));  // before RegisterDisplay
+    expect_error(*c, proto::ErrorCode::kOutOfOrder, false);
+    auto absurd = small_display();
+    absurd.eye_width = 100000;
+    ASSERT_TRUE(c->send(absurd));
+    expect_error(*c, proto::ErrorCode::kInvalidDisplay, false);
+    ASSERT_TRUE(c->send(small_display()));
+    auto p = pose_at(0, 2);
+    p.orientation_wxyz = {NAN, 0, 0, 0};
+    ASSERT_TRUE(c->send(p));
+    expect_error(*c, proto::ErrorCode::kInvalidPose, false);
+    p.orientation_wxyz = {INFINITY, 0, 0, 1};
+    ASSERT_TRUE(c->send(p));
+    expect_error(*c, proto::ErrorCode::kInvalidPose, false);
+    p.orientation_wxyz = {2, 0, 0, 0};  // not unit
+    ASSERT_TRUE(c->send(p));
+    expect_error(*c, proto::ErrorCode::kInvalidPose, false);
+    ASSERT_TRUE(c->send(proto::SceneUpdate{std::string(scene::default_scene_json())}));
+    expect_error(*c, proto::ErrorCode::kForbidden, false);
+    // After all that, the session still renders a valid pose.
+    ASSERT_TRUE(c->send(pose_at(0, 3)));
+    ASSERT_TRUE(c->send(proto::FrameRequest{}));
+    EXPECT_EQ(frame_for(*c, 3).size(), 2u);
+}
+
+TEST_F(ServerTest, AdminSceneUpdateRerendersTheProjectorOnce) {
+    auto proj = connect();
+    ASSERT_FALSE(proj->hello(proto::Role::kProjector, kToken, "projector"));
+    auto first = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(first);
+    auto admin = connect();
+    ASSERT_FALSE(admin->hello(proto::Role::kAdmin, kToken, "admin"));
+    ASSERT_TRUE(admin->send(proto::SceneUpdate{"{ not json"}));
+    expect_error(*admin, proto::ErrorCode::kSceneRejected, false);
+    auto j = nlohmann::json::parse(scene::default_scene_json());
+    j["material"]["albedo"] = {0.2, 0.6, 0.9};
+    j["projector"]["width"] = 480;
+    j["projector"]["height"] = 300;
+    j["projector"]["fx"] = 750;
+    j["projector"]["fy"] = 750;
+    j["projector"]["cx"] = 239.5;
+    j["projector"]["cy"] = 149.5;
+    ASSERT_TRUE(admin->send(proto::SceneUpdate{j.dump()}));
+    auto second = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(second);
+    EXPECT_EQ(second->scene_version, first->scene_version + 1);
+    EXPECT_NE(second->data, first->data);
+    EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 2u);
+}
+
+TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
+    // A continuous-mode headset that sends poses and never reads.
+    auto stalled = headset(small_display(proto::PixelFormat::kRgba16f, proto::FrameMode::kContinuous), "stalled");
+    auto active = headset(small_display(), "active");
+    auto served = [&](int seconds) {
+        int frames = 0;
+        auto end = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+        uint64_t t = 1;
+        while (std::chrono::steady_clock::now() < end) {
+            stalled->send(pose_at(double(t % 80) - 40, t));
+            active->send(pose_at(0, 100000 + t));
+            active->send(proto::FrameRequest{});
+            if (frame_for(*active, 100000 + t).size() == 2) ++frames;
+            ++t;
+        }
+        return frames;
+    };
+    served(1);  // warm up: pipelines, targets, socket buffers fill
+    const size_t rss_before = rss_kib();
+    const int frames = served(3);
+    const size_t rss_after = rss_kib();
+    EXPECT_GT(frames, 5) << "the active headset was starved";
+    EXPECT_LT(rss_after, rss_before + 32 * 1024) << "server memory grew by " << (rss_after - rss_before) << " KiB";
+    for (const auto& v : server_->stats()["viewers"])
+        EXPECT_LE(v["in_flight"].get<uint32_t>(), 2u) << v.dump();
+    std::printf("[stall] active headset: %d frames in 3 s; RSS %zu -> %zu KiB\n", frames, rss_before, rss_after);
+}
+
+TEST_F(ServerTest, ClientVanishingMidFrame) {
+    for (int i = 0; i < 5; ++i) {
+        auto c = headset(small_display(), "vanishing");
+        c->send(pose_at(0, 1));
+        c->send(proto::FrameRequest{});
+        c->close();  // gone before its layers are written
+    }
+    auto good = headset(small_display(), "good");
+    ASSERT_TRUE(good->send(pose_at(10, 5)));
+    ASSERT_TRUE(good->send(proto::FrameRequest{}));
+    EXPECT_EQ(frame_for(*good, 5).size(), 2u);
+}
+
+TEST_F(ServerTest, PingAndStats) {
+    auto c = connect();
+    ASSERT_FALSE(c->hello(proto::Role::kAdmin, kToken, "monitor"));
+    ASSERT_TRUE(c->send(proto::Ping{client::now_ns()}, 9));
+    auto pong = receive_a<proto::Pong>(*c);
+    ASSERT_TRUE(pong);
+    EXPECT_GT(pong->server_time_ns, 0u);
+    // The first projector render runs when the server starts: ask until it is counted.
+    nlohmann::json j;
+    for (int i = 0; i < 100; ++i) {
+        ASSERT_TRUE(c->send(proto::StatsRequest{}));
+        auto st = receive_a<proto::Stats>(*c);
+        ASSERT_TRUE(st);
+        j = nlohmann::json::parse(st->json);
+        if (j["projector_renders"].get<uint64_t>() > 0) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    EXPECT_EQ(j["projector_renders"].get<uint64_t>(), 1u);
+    EXPECT_TRUE(j["passes"]["projector"]["effects"].is_array());
+}
+
+}  // namespace
