@@ -354,7 +354,9 @@ TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
     const size_t rss_after = rss_kib();
     EXPECT_GT(frames, 5) << "the active headset was starved";
     EXPECT_LT(rss_after, rss_before + 32 * 1024) << "server memory grew by " << (rss_after - rss_before) << " KiB";
-    for (const auto& v : server_->stats()["viewers"])
+    const auto stats = server_->stats();
+    ASSERT_EQ(stats["viewers"].size(), 2u);
+    for (const auto& v : stats["viewers"])
         EXPECT_LE(v["in_flight"].get<uint32_t>(), 2u) << v.dump();
     std::printf("[stall] active headset: %d frames in 3 s; RSS %zu -> %zu KiB\n", frames, rss_before, rss_after);
 }

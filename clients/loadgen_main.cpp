@@ -1,0 +1,183 @@
+// hysar-loadgen: N simulated headsets in one process, each sending poses at a rate in
+// continuous mode. Prints a table and writes JSON: layers per second (total and per viewer),
+// pose-to-layer latency p50/p95/p99 on the client's clock, bytes per second, superseded poses
+// (from the server's stats) and errors.
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <mutex>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "clients/args.hpp"
+#include "clients/common.hpp"
+#include "clients/connection.hpp"
+
+using namespace hs::client;
+namespace proto = hs::protocol;
+using Clock = std::chrono::steady_clock;
+
+static const char* kUsage =
+    "usage: hysar-loadgen [--connect ADDR] (--token T | --token-file F) --viewers N --rate HZ\n"
+    "                     --seconds S [--profile FILE] [--scale S] [--format rgba8|rgba16f] [--json FILE]\n"
+    "\n"
+    "  --viewers N   simulated headsets, each on its own connection (default 1)\n"
+    "  --rate HZ     poses per second per headset (default 30); the server renders the latest\n"
+    "  --seconds S   how long to run (default 5)\n"
+    "  --scale S     resolution multiplier of the profile (default 0.25)\n"
+    "  --json FILE   also write the results as JSON\n"
+    "Exits 1 when any headset saw an error or received no layer.\n";
+
+struct ViewerResult {
+    uint64_t layers = 0, bytes = 0, errors = 0, poses = 0;
+    std::vector<double> latency_ms;
+    std::string first_error;
+};
+
+int main(int argc, char** argv) {
+    Args args(argc, argv,
+              {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds", "--profile", "--scale", "--format",
+               "--json"},
+              {}, kUsage);
+    const int n = int(args.number("--viewers", 1, 1, 1024));
+    const double rate = args.number("--rate", 30, 0.1, 1000), seconds = args.number("--seconds", 5, 0.1, 3600);
+    const std::string address = args.get("--connect", "127.0.0.1:7700"), token = args.token();
+    proto::RegisterDisplay display;
+    if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
+                                args.number("--scale", 0.25, 0.01, 8), &display)) {
+        std::fprintf(stderr, "hysar-loadgen: %s\n", err->c_str());
+        return 1;
+    }
+    display.format = args.get("--format", "rgba8") == "rgba16f" ? proto::PixelFormat::kRgba16f : proto::PixelFormat::kRgba8;
+    display.mode = proto::FrameMode::kContinuous;
+
+    std::vector<ViewerResult> results(n);
+    std::atomic<int> ready{0}, finished{0};
+    std::atomic<bool> stats_taken{false};
+    auto run_viewer = [&](int i) {
+        ViewerResult& r = results[i];
+        auto fail = [&](const std::string& e) {
+            ++r.errors;
+            if (r.first_error.empty()) r.first_error = e;
+        };
+        auto c = Connection::open(address);
+        if (auto* e = std::get_if<std::string>(&c)) {
+            ++ready;
+            ++finished;
+            return fail(*e);
+        }
+        auto& conn = *std::get<std::unique_ptr<Connection>>(c);
+        if (auto e = conn.hello(proto::Role::kHmd, token, "loadgen-" + std::to_string(i))) {
+            ++ready;
+            ++finished;
+            return fail(*e);
+        }
+        conn.send(display);
+        ++ready;
+        while (ready.load() < n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        const double base = n > 1 ? -40.0 + 80.0 * i / (n - 1) : 0.0;
+        const Clock::time_point start = Clock::now();
+        const Clock::time_point end = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+        const auto period = std::chrono::duration<double>(1.0 / rate);
+        auto next_pose = start;
+        for (auto now = Clock::now(); now < end; now = Clock::now()) {
+            if (now >= next_pose) {
+                double t = std::chrono::duration<double>(now - start).count();
+                conn.send(orbit_pose(base + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, now_ns()));
+                ++r.poses;
+                next_pose += std::chrono::duration_cast<Clock::duration>(period);
+            }
+            int wait = int(std::chrono::duration_cast<std::chrono::milliseconds>(std::min(next_pose, end) - Clock::now()).count());
+            auto m = conn.receive(std::max(wait, 0));
+            if (auto* e = std::get_if<std::string>(&m)) {
+                ++finished;
+                return fail(*e);
+            }
+            if (auto* msg = std::get_if<proto::Message>(&m)) {
+                if (auto* l = std::get_if<proto::VdLayer>(msg)) {
+                    ++r.layers;
+                    r.bytes += l->data.size() + proto::kHeaderBytes + 31;
+                    if (l->eye == 1) r.latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
+                } else if (auto* e = std::get_if<proto::Error>(msg)) {
+                    fail("server error " + std::to_string(int(e->code)) + ": " + e->message);
+                }
+            }
+        }
+        // Stay connected until the server's stats are read: it forgets a viewer that leaves.
+        ++finished;
+        while (!stats_taken.load()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        conn.send(proto::Bye{0});
+    };
+    std::vector<std::thread> threads;
+    for (int i = 0; i < n; ++i) threads.emplace_back(run_viewer, i);
+    while (finished.load() < n) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+
+    // The server's view: superseded poses per viewer (an admin session asks for stats).
+    uint64_t superseded = 0;
+    if (auto c = Connection::open(address); std::holds_alternative<std::unique_ptr<Connection>>(c)) {
+        auto& conn = *std::get<std::unique_ptr<Connection>>(c);
+        if (!conn.hello(proto::Role::kAdmin, token, "loadgen-stats") && conn.send(proto::StatsRequest{})) {
+            for (int k = 0; k < 10; ++k) {
+                auto m = conn.receive(2000);
+                auto* msg = std::get_if<proto::Message>(&m);
+                if (!msg) break;
+                if (auto* s = std::get_if<proto::Stats>(msg)) {
+                    // Keep the parsed document alive for the loop (it iterates a member of it).
+                    const auto stats = nlohmann::json::parse(s->json, nullptr, false);
+                    if (stats.is_discarded()) break;
+                    for (const auto& v : stats["viewers"])
+                        if (v["name"].get<std::string>().rfind("loadgen-", 0) == 0) superseded += v["superseded_poses"].get<uint64_t>();
+                    break;
+                }
+            }
+        }
+    }
+    stats_taken = true;
+    for (auto& t : threads) t.join();
+
+    std::vector<double> all;
+    uint64_t layers = 0, bytes = 0, errors = 0, starved = 0, min_layers = UINT64_MAX;
+    for (const auto& r : results) {
+        all.insert(all.end(), r.latency_ms.begin(), r.latency_ms.end());
+        layers += r.layers;
+        bytes += r.bytes;
+        errors += r.errors;
+        starved += r.layers == 0;
+        min_layers = std::min(min_layers, r.layers);
+    }
+    const double lps = layers / seconds;
+    std::printf("\n%-26s %12s\n", "hysar-loadgen", "");
+    std::printf("%-26s %12d\n", "viewers", n);
+    std::printf("%-26s %12ux%u\n", "eye resolution", display.eye_width, display.eye_height);
+    std::printf("%-26s %12.1f\n", "pose rate per viewer (Hz)", rate);
+    std::printf("%-26s %12.1f\n", "seconds", seconds);
+    std::printf("%-26s %12.1f\n", "layers/s total", lps);
+    std::printf("%-26s %12.2f\n", "layers/s per viewer", lps / n);
+    std::printf("%-26s %12.2f\n", "min layers/s of a viewer", min_layers / seconds);
+    std::printf("%-26s %12.1f\n", "latency p50 (ms)", percentile(all, 0.50));
+    std::printf("%-26s %12.1f\n", "latency p95 (ms)", percentile(all, 0.95));
+    std::printf("%-26s %12.1f\n", "latency p99 (ms)", percentile(all, 0.99));
+    std::printf("%-26s %12.2f\n", "MB/s", bytes / seconds / 1e6);
+    std::printf("%-26s %12llu\n", "superseded poses", (unsigned long long)superseded);
+    std::printf("%-26s %12llu\n", "viewers with no layer", (unsigned long long)starved);
+    std::printf("%-26s %12llu\n", "errors", (unsigned long long)errors);
+    for (const auto& r : results)
+        if (!r.first_error.empty()) std::printf("  first error: %s\n", r.first_error.c_str());
+    if (args.has("--json")) {
+        nlohmann::json per = nlohmann::json::array();
+        for (size_t i = 0; i < results.size(); ++i)
+            per.push_back({{"viewer", i}, {"layers", results[i].layers}, {"poses", results[i].poses},
+                           {"layers_per_s", results[i].layers / seconds}, {"bytes", results[i].bytes},
+                           {"latency_ms_p50", percentile(results[i].latency_ms, 0.5)}, {"errors", results[i].errors}});
+        nlohmann::json j{{"viewers", n}, {"rate_hz", rate}, {"seconds", seconds},
+                         {"eye_width", display.eye_width}, {"eye_height", display.eye_height},
+                         {"layers_per_s", lps}, {"layers_per_s_per_viewer", lps / n},
+                         {"latency_ms", {{"p50", percentile(all, 0.5)}, {"p95", percentile(all, 0.95)}, {"p99", percentile(all, 0.99)}}},
+                         {"bytes_per_s", bytes / seconds}, {"superseded_poses", superseded}, {"errors", errors},
+                         {"viewers_without_layers", starved}, {"per_viewer", per}};
+        std::ofstream(args.get("--json", "")) << j.dump(2) << "\n";
+    }
+    return errors || starved ? 1 : 0;
+}

@@ -1,0 +1,62 @@
+// hysar-projector: a projector client. Receives projector frames and writes them as PNG.
+#include <cstdio>
+#include <filesystem>
+
+#include "clients/args.hpp"
+#include "clients/common.hpp"
+#include "clients/connection.hpp"
+
+using namespace hs::client;
+namespace proto = hs::protocol;
+
+static const char* kUsage =
+    "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR] [--frames N]\n"
+    "                       [--timeout SECONDS] [--name NAME]\n"
+    "\n"
+    "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
+    "  --out DIR       where frames are written as projector_v<scene version>.png (default out/projector)\n"
+    "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n";
+
+int main(int argc, char** argv) {
+    Args args(argc, argv, {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name"}, {}, kUsage);
+    const int frames_wanted = int(args.number("--frames", 1, 0, 1e9));
+    const int timeout_ms = int(args.number("--timeout", 60, 0.1, 1e6) * 1000);
+    const std::filesystem::path out = args.get("--out", "out/projector");
+    auto c = Connection::open(args.get("--connect", "127.0.0.1:7700"));
+    if (auto* e = std::get_if<std::string>(&c)) {
+        std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
+        return 1;
+    }
+    auto& conn = *std::get<std::unique_ptr<Connection>>(c);
+    if (auto err = conn.hello(proto::Role::kProjector, args.token(), args.get("--name", "projector"))) {
+        std::fprintf(stderr, "hysar-projector: %s\n", err->c_str());
+        return 1;
+    }
+    std::filesystem::create_directories(out);
+    int frames = 0;
+    while (frames_wanted == 0 || frames < frames_wanted) {
+        auto r = conn.receive(timeout_ms);
+        if (std::holds_alternative<std::monostate>(r)) {
+            std::fprintf(stderr, "hysar-projector: no frame within the timeout\n");
+            return 1;
+        }
+        if (auto* e = std::get_if<std::string>(&r)) {
+            if (frames_wanted == 0) break;  // the server closed
+            std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
+            return 1;
+        }
+        const auto& m = std::get<proto::Message>(r);
+        if (std::holds_alternative<proto::Bye>(m)) break;
+        if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
+            std::string file = (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
+            if (!write_layer_png(file, f->width, f->height, f->format, f->data)) {
+                std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
+                return 1;
+            }
+            std::printf("projector frame v%u %ux%u -> %s\n", f->scene_version, f->width, f->height, file.c_str());
+            ++frames;
+        }
+    }
+    conn.send(proto::Bye{0});
+    return 0;
+}

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Viewer-count scale test: hysar serve on a Unix socket, hysar-loadgen at 1, 8 and 32 headsets
+# for a few seconds each. Asserts no errors and every headset served (loadgen exits 1
+# otherwise); the throughput tables stay in the test log. Timing targets live in benchmarks.
+set -euo pipefail
+bin="$1"        # build folder
+seconds="${2:-3}"
+dir=$(mktemp -d)
+trap 'kill -TERM "$server" 2>/dev/null || true; rm -rf "$dir"' EXIT
+echo "scale-test-token" > "$dir/token"
+HYSAR_VALIDATION=1 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/hysar.sock" --token-file "$dir/token" \
+  --stats-file "$dir/stats.json" > "$dir/serve.log" 2>&1 &
+server=$!
+for _ in $(seq 100); do [[ -S "$dir/hysar.sock" ]] && break; sleep 0.1; done
+[[ -S "$dir/hysar.sock" ]] || { echo "the server did not start:"; cat "$dir/serve.log"; exit 1; }
+for n in 1 8 32; do
+  "$bin/clients/hysar-loadgen" --connect "unix:$dir/hysar.sock" --token-file "$dir/token" \
+    --viewers "$n" --rate 30 --seconds "$seconds" --json "$dir/loadgen_$n.json"
+done
+kill -TERM "$server"
+for _ in $(seq 100); do kill -0 "$server" 2>/dev/null || break; sleep 0.1; done
+if kill -0 "$server" 2>/dev/null; then echo "the server did not stop on SIGTERM"; exit 1; fi
+wait "$server" || { echo "the server exited with an error:"; tail -20 "$dir/serve.log"; exit 1; }
+grep -q '"projector_renders": 1' "$dir/stats.json" || { echo "projector rendered more than once"; cat "$dir/stats.json"; exit 1; }
+if grep -q "validation" "$dir/serve.log"; then echo "Vulkan validation messages:"; grep validation "$dir/serve.log"; exit 1; fi
+echo "scale test: 1, 8 and 32 headsets served, no errors"
