@@ -1,5 +1,7 @@
 #include "clients/common.hpp"
 
+#include "protocol/tiles.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -110,6 +112,12 @@ float half_to_float(uint16_t h) {
 }
 }  // namespace
 
+std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t w, uint32_t h, protocol::PixelFormat format,
+                                                           protocol::Encoding encoding, const std::vector<uint8_t>& data) {
+    if (encoding == protocol::Encoding::kRaw) return data;
+    return protocol::decode_tiles(data, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8);
+}
+
 bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::PixelFormat format,
                      const std::vector<uint8_t>& data) {
     std::vector<uint8_t> rgba8;
@@ -122,10 +130,11 @@ bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::
             std::memcpy(&hv, &data[i * 2], 2);
             float x = std::clamp(half_to_float(hv), 0.0f, 1.0f);
             float s = x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
-            rgba8[i] = i % 4 == 3 ? 255 : uint8_t(std::lround(s * 255));
+            rgba8[i] = uint8_t(std::lround(s * 255));
         }
     }
     if (rgba8.size() != size_t(w) * h * 4) return false;
+    for (size_t i = 3; i < rgba8.size(); i += 4) rgba8[i] = 255;  // PNGs are shown opaque: black is black
     return stbi_write_png(path.c_str(), int(w), int(h), 4, rgba8.data(), int(w * 4)) != 0;
 }
 

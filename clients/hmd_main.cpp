@@ -21,7 +21,8 @@ namespace proto = hs::protocol;
 static const char* kUsage =
     "usage: hysar-hmd [--connect ADDR] (--token T | --token-file F) [--profile FILE] [--scale S]\n"
     "                 [--angles LIST | --orbit SECONDS | --csv FILE] [--distance M] [--height M]\n"
-    "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--name NAME] [--out DIR]\n"
+    "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
+    "                 [--name NAME] [--out DIR]\n"
     "                 [--summary FILE]\n"
     "\n"
     "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
@@ -35,7 +36,7 @@ static const char* kUsage =
 int main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles", "--orbit", "--csv", "--distance",
-               "--height", "--target", "--format", "--name", "--out", "--summary"},
+               "--height", "--target", "--format", "--encoding", "--name", "--out", "--summary"},
               {}, kUsage);
     proto::RegisterDisplay display;
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
@@ -46,6 +47,9 @@ int main(int argc, char** argv) {
     const std::string fmt = args.get("--format", "rgba8");
     if (fmt != "rgba8" && fmt != "rgba16f") args.fail("--format: expected rgba8 or rgba16f");
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
+    const std::string enc = args.get("--encoding", "sparse");
+    if (enc != "raw" && enc != "sparse") args.fail("--encoding: expected raw or sparse");
+    display.encoding = enc == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
     const std::string name = args.get("--name", "hmd");
     const std::filesystem::path out = args.get("--out", "out/hmd");
     const double distance = args.number("--distance", 0.8, 0.01, 100), height = args.number("--height", 1.10, -100, 100);
@@ -122,7 +126,13 @@ int main(int argc, char** argv) {
             if (!label.empty() || stills) {
                 std::string file = (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
                                            (l->eye ? "_right.png" : "_left.png"))).string();
-                if (!write_layer_png(file, l->width, l->height, l->format, l->data)) ++errors;
+                auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
+                if (auto* e = std::get_if<std::string>(&raw)) {
+                    ++errors;
+                    std::fprintf(stderr, "hysar-hmd: layer %u: %s\n", l->frame_id, e->c_str());
+                } else if (!write_layer_png(file, l->width, l->height, l->format, std::get<std::vector<uint8_t>>(raw))) {
+                    ++errors;
+                }
             }
         } else if (auto* e = std::get_if<proto::Error>(&m)) {
             ++errors;

@@ -21,7 +21,8 @@ using Clock = std::chrono::steady_clock;
 
 static const char* kUsage =
     "usage: hysar-loadgen [--connect ADDR] (--token T | --token-file F) --viewers N --rate HZ\n"
-    "                     --seconds S [--profile FILE] [--scale S] [--format rgba8|rgba16f] [--json FILE]\n"
+    "                     --seconds S [--profile FILE] [--scale S] [--format rgba8|rgba16f]\n"
+    "                     [--encoding raw|sparse] [--json FILE]\n"
     "\n"
     "  --viewers N   simulated headsets, each on its own connection (default 1)\n"
     "  --rate HZ     poses per second per headset (default 30); the server renders the latest\n"
@@ -39,7 +40,7 @@ struct ViewerResult {
 int main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds", "--profile", "--scale", "--format",
-               "--json"},
+               "--encoding", "--json"},
               {}, kUsage);
     const int n = int(args.number("--viewers", 1, 1, 1024));
     const double rate = args.number("--rate", 30, 0.1, 1000), seconds = args.number("--seconds", 5, 0.1, 3600);
@@ -52,6 +53,7 @@ int main(int argc, char** argv) {
     }
     display.format = args.get("--format", "rgba8") == "rgba16f" ? proto::PixelFormat::kRgba16f : proto::PixelFormat::kRgba8;
     display.mode = proto::FrameMode::kContinuous;
+    display.encoding = args.get("--encoding", "sparse") == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
 
     std::vector<ViewerResult> results(n);
     std::atomic<int> ready{0}, finished{0};

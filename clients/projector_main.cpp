@@ -49,7 +49,12 @@ int main(int argc, char** argv) {
         if (std::holds_alternative<proto::Bye>(m)) break;
         if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
             std::string file = (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
-            if (!write_layer_png(file, f->width, f->height, f->format, f->data)) {
+            auto raw = raw_pixels(f->width, f->height, f->format, f->encoding, f->data);
+            if (auto* e = std::get_if<std::string>(&raw)) {
+                std::fprintf(stderr, "hysar-projector: frame v%u: %s\n", f->scene_version, e->c_str());
+                return 1;
+            }
+            if (!write_layer_png(file, f->width, f->height, f->format, std::get<std::vector<uint8_t>>(raw))) {
                 std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
                 return 1;
             }

@@ -9,15 +9,29 @@
 namespace hs::stream {
 
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format) {
-    if (format == protocol::PixelFormat::kRgba8) return tonemap_srgb8(image, kLayerWhite).pixels;
+    if (format == protocol::PixelFormat::kRgba8) {
+        std::vector<uint8_t> out = tonemap_srgb8(image, kLayerWhite).pixels;
+        for (size_t i = 0; i < out.size(); i += 4) out[i + 3] = (out[i] | out[i + 1] | out[i + 2]) ? 255 : 0;
+        return out;
+    }
     std::vector<uint8_t> out(image.pixels.size() * 2);
-    for (size_t i = 0; i < image.pixels.size(); ++i) {
-        float v = image.pixels[i];
-        v = std::isnan(v) ? 0.0f : std::clamp(v, -65504.0f, 65504.0f);
-        uint16_t h = glm::packHalf1x16(v);
-        std::memcpy(&out[i * 2], &h, 2);
+    for (size_t i = 0; i < image.pixels.size(); i += 4) {
+        uint16_t h[4];
+        for (int c = 0; c < 3; ++c) {
+            float v = image.pixels[i + c];
+            v = std::isnan(v) ? 0.0f : std::clamp(v, -65504.0f, 65504.0f);
+            h[c] = glm::packHalf1x16(v);
+        }
+        h[3] = (h[0] | h[1] | h[2]) ? glm::packHalf1x16(1.0f) : 0;  // -0.0 counts as light: keeps it lossless
+        std::memcpy(&out[i * 2], h, 8);
     }
     return out;
+}
+
+std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h, protocol::PixelFormat format,
+                                  protocol::Encoding encoding, protocol::TileCodec codec) {
+    if (encoding == protocol::Encoding::kRaw) return raw;
+    return protocol::encode_tiles(raw, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8, codec);
 }
 
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h, protocol::PixelFormat format) {

@@ -6,6 +6,7 @@
 
 #include "core/image.hpp"
 #include "protocol/protocol.hpp"
+#include "protocol/tiles.hpp"
 
 namespace hs::stream {
 
@@ -13,8 +14,21 @@ namespace hs::stream {
 inline constexpr float kLayerWhite = 1.0f;
 
 // Raw pixel bytes of `image` in `format`: RGBA8 through tonemap_srgb8(image, kLayerWhite),
-// RGBA16F as IEEE half floats of the linear radiance (clamped to 65504).
+// RGBA16F as IEEE half floats of the linear radiance (clamped to 65504). Alpha is 0 exactly
+// where the colour is 0 and full elsewhere (PROTOCOL.md: alpha carries no information for an
+// additive display; this makes black tiles all-zero bytes for the sparse encoding).
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format);
+
+// The layer bytes of `raw` pixels in `encoding` (sparse tiles use `codec`).
+std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t width, uint32_t height,
+                                  protocol::PixelFormat format, protocol::Encoding encoding, protocol::TileCodec codec);
+
+// The codec the server uses for sparse tiles, chosen from `hysar bench encoding`
+// (docs/ARCHITECTURE.md, "Layer encoding"): zstd for RGBA8 (40% fewer bytes than LZ4 for
+// +0.35 ms), LZ4 for RGBA16F (zstd's encode time doubles there).
+constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat f) {
+    return f == protocol::PixelFormat::kRgba8 ? protocol::TileCodec::kZstd : protocol::TileCodec::kLz4;
+}
 
 // The inverse of encode_pixels for RGBA16F (exact up to half precision); RGBA8 decodes the
 // sRGB values back to linear. Returns an empty image when the byte count does not fit.

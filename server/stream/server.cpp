@@ -500,10 +500,11 @@ void Server::Impl::render_loop() {
                     layer.pose_time_ns = job.pose.client_time_ns;
                     layer.eye = e;
                     layer.format = d.format;
-                    layer.encoding = proto::Encoding::kRaw;
+                    layer.encoding = d.encoding;
                     layer.width = k.width;
                     layer.height = k.height;
-                    layer.data = encode_pixels(out->image, d.format);
+                    layer.data = encode_layer(encode_pixels(out->image, d.format), k.width, k.height, d.format, d.encoding,
+                                              default_tile_codec(d.format));
                     frames.push_back(proto::encode(layer));
                     std::lock_guard lock(mutex);
                     vd_render_ms_total += out->report.render_ms;
