@@ -6,7 +6,13 @@ set -euo pipefail
 bin="$1"        # build folder
 seconds="${2:-3}"
 dir=$(mktemp -d)
-trap 'kill -TERM "$server" 2>/dev/null || true; rm -rf "$dir"' EXIT
+on_exit() {
+  rc=$?
+  kill -TERM "$server" 2>/dev/null || true
+  if [[ $rc -ne 0 && -f "$dir/serve.log" ]]; then echo "--- server log (last 40 lines) ---"; tail -40 "$dir/serve.log"; fi
+  rm -rf "$dir"
+}
+trap on_exit EXIT
 echo "scale-test-token" > "$dir/token"
 HYSAR_VALIDATION=1 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/hysar.sock" --token-file "$dir/token" \
   --stats-file "$dir/stats.json" > "$dir/serve.log" 2>&1 &
@@ -14,6 +20,7 @@ server=$!
 for _ in $(seq 100); do [[ -S "$dir/hysar.sock" ]] && break; sleep 0.1; done
 [[ -S "$dir/hysar.sock" ]] || { echo "the server did not start:"; cat "$dir/serve.log"; exit 1; }
 for n in 1 8 32; do
+  echo "--- hysar-loadgen --viewers $n ---"
   "$bin/clients/hysar-loadgen" --connect "unix:$dir/hysar.sock" --token-file "$dir/token" \
     --viewers "$n" --rate 30 --seconds "$seconds" --json "$dir/loadgen_$n.json"
 done
