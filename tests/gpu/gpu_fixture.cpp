@@ -37,7 +37,8 @@ std::unique_ptr<render::Renderer> GpuTest::make_renderer(const scene::Scene& s, 
 }
 
 scene::Intrinsics GpuTest::small_eye(uint32_t div) {
-    const auto& v = scene::default_scene().viewers.front();
+    const scene::Scene s = scene::default_scene();
+    const auto& v = s.viewers.front();
     return scene::intrinsics_from_fov(v.eye_width / div, v.eye_height / div, v.fov_x_rad, v.fov_y_rad);  // FOV-defined profile
 }
 

@@ -116,7 +116,8 @@ protected:
     // A headset display of the HoloLens' fields of view at 1/8 of its resolution.
     static proto::RegisterDisplay small_display(proto::PixelFormat f = proto::PixelFormat::kRgba16f,
                                                 proto::FrameMode mode = proto::FrameMode::kOnRequest) {
-        const auto& v = scene::default_scene().viewers.front();
+        const scene::Scene s = scene::default_scene();
+        const auto& v = s.viewers.front();
         auto k = scene::intrinsics_from_fov(v.eye_width / 8, v.eye_height / 8, v.fov_x_rad, v.fov_y_rad);
         return {k.width, k.height, k.fx, k.fy, k.cx, k.cy, v.ipd_m, f, proto::Encoding::kRaw, mode};
     }
