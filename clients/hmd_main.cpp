@@ -13,6 +13,7 @@
 #include "clients/args.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
+#include "clients/window.hpp"
 
 using namespace hs;
 using namespace hs::client;
@@ -22,7 +23,7 @@ static const char* kUsage =
     "usage: hysar-hmd [--connect ADDR] (--token T | --token-file F) [--profile FILE] [--scale S]\n"
     "                 [--angles LIST | --orbit SECONDS | --csv FILE] [--distance M] [--height M]\n"
     "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
-    "                 [--name NAME] [--out DIR]\n"
+    "                 [--name NAME] [--out DIR] [--window]\n"
     "                 [--summary FILE]\n"
     "\n"
     "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
@@ -31,13 +32,14 @@ static const char* kUsage =
     "  --angles LIST    view angles in degrees around the target (default -40,-20,0,20,40)\n"
     "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous mode)\n"
     "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
-    "  --out DIR        where layers are written as PNG (default out/hmd)\n";
+    "  --out DIR        where layers are written as PNG (default out/hmd)\n"
+    "  --window         show the latest layers in a window, left and right eye side by side\n";
 
 int main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles", "--orbit", "--csv", "--distance",
                "--height", "--target", "--format", "--encoding", "--name", "--out", "--summary"},
-              {}, kUsage);
+              {"--window"}, kUsage);
     proto::RegisterDisplay display;
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
                                 args.number("--scale", 1.0, 0.01, 8.0), &display)) {
@@ -116,10 +118,33 @@ int main(int argc, char** argv) {
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
     conn.send(display);
     std::filesystem::create_directories(out);
+    std::unique_ptr<ImageWindow> window;
+    std::vector<uint8_t> side_by_side;
+    if (args.has("--window")) {
+        auto w = ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
+        if (auto* e = std::get_if<std::string>(&w)) {
+            std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+            return 1;
+        }
+        window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
+        side_by_side.assign(size_t(display.eye_width) * 2 * display.eye_height * 4, 0);
+    }
     std::vector<double> latency_ms;
     uint64_t bytes = 0, layers = 0, errors = 0;
     auto handle = [&](const proto::Message& m, const std::string& label) {
         if (auto* l = std::get_if<proto::VdLayer>(&m)) {
+            if (window && l->format == proto::PixelFormat::kRgba8 && l->width == display.eye_width &&
+                l->height == display.eye_height) {
+                auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
+                if (auto* px = std::get_if<std::vector<uint8_t>>(&raw)) {
+                    const size_t row = size_t(l->width) * 4;
+                    for (uint32_t y = 0; y < l->height; ++y)
+                        for (size_t i = 0; i < row; ++i)
+                            side_by_side[(size_t(y) * 2 * l->width) * 4 + l->eye * row + i] = i % 4 == 3 ? 255 : (*px)[y * row + i];
+                    if (l->eye == 1) window->show(side_by_side, 2 * l->width, l->height);
+                }
+                window->poll();
+            }
             ++layers;
             bytes += l->data.size();
             if (l->eye == 1) latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);

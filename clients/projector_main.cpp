@@ -5,20 +5,35 @@
 #include "clients/args.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
+#include "clients/window.hpp"
 
 using namespace hs::client;
 namespace proto = hs::protocol;
 
 static const char* kUsage =
     "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR] [--frames N]\n"
-    "                       [--timeout SECONDS] [--name NAME]\n"
+    "                       [--timeout SECONDS] [--name NAME] [--window] [--monitor N]\n"
+    "                       [--screenshot FILE]\n"
     "\n"
     "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
     "  --out DIR       where frames are written as projector_v<scene version>.png (default out/projector)\n"
-    "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n";
+    "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n"
+    "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on monitor N\n"
+    "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n";
 
 int main(int argc, char** argv) {
-    Args args(argc, argv, {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name"}, {}, kUsage);
+    Args args(argc, argv,
+              {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name", "--monitor", "--screenshot"},
+              {"--window"}, kUsage);
+    std::unique_ptr<ImageWindow> window;
+    if (args.has("--window")) {
+        auto w = ImageWindow::open("hysar-projector", 960, 600, int(args.number("--monitor", -1, -1, 64)));
+        if (auto* e = std::get_if<std::string>(&w)) {
+            std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
+            return 1;
+        }
+        window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
+    }
     const int frames_wanted = int(args.number("--frames", 1, 0, 1e9));
     const int timeout_ms = int(args.number("--timeout", 60, 0.1, 1e6) * 1000);
     const std::filesystem::path out = args.get("--out", "out/projector");
@@ -59,7 +74,23 @@ int main(int argc, char** argv) {
                 return 1;
             }
             std::printf("projector frame v%u %ux%u -> %s\n", f->scene_version, f->width, f->height, file.c_str());
+            if (window) {
+                auto px = std::get<std::vector<uint8_t>>(raw);
+                if (f->format == proto::PixelFormat::kRgba8) {
+                    for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
+                    window->show(px, f->width, f->height);
+                }
+                if (!window->poll()) break;
+            }
             ++frames;
+        }
+    }
+    if (window && args.has("--screenshot")) {
+        uint32_t w = 0, h = 0;
+        auto px = window->read_back(&w, &h);
+        if (!write_layer_png(args.get("--screenshot", ""), w, h, proto::PixelFormat::kRgba8, px)) {
+            std::fprintf(stderr, "hysar-projector: cannot write the screenshot\n");
+            return 1;
         }
     }
     conn.send(proto::Bye{0});

@@ -8,7 +8,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config clang libclang-rt-14-dev
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libglm-dev libfmt-dev nlohmann-json3-dev libtinygltf-dev libstb-dev libopenexr-dev
-  libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev
+  libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev libglfw3-dev libgl-dev xvfb xauth
 )
 
 missing=()
