@@ -1,5 +1,6 @@
 #include "render/renderer.hpp"
 
+#include <algorithm>
 #include <chrono>
 
 #include <fmt/format.h>
@@ -115,10 +116,10 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     return &it->second;
 }
 
-Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h) {
-    auto key = std::make_tuple(w, h);
+Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slot) {
+    auto key = std::make_tuple(w, h, slot);
     if (auto it = targets_.find(key); it != targets_.end()) return &it->second;
-    HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, info_.format, fmt::format("target.{}x{}", w, h)));
+    HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, info_.format, fmt::format("target.{}x{}.{}", w, h, slot)));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
@@ -143,6 +144,56 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
     r.report.effects = v.effects;
     r.report.render_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return r;
+}
+
+Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeRequest>& reqs) {
+    auto t0 = std::chrono::steady_clock::now();
+    struct Item {
+        Variant* variant = nullptr;  // null: nothing view-dependent, no work
+        gpu::RenderTarget* target = nullptr;
+        gpu::GpuPush push{};
+    };
+    std::vector<Item> items(reqs.size());
+    std::map<std::pair<uint32_t, uint32_t>, uint32_t> slots;  // next free target slot per size
+    for (size_t i = 0; i < reqs.size(); ++i) {
+        const auto& k = reqs[i].intrinsics;
+        if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
+            return make_error(ErrorCode::kInvalidArgument, fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
+        if (effects_of(scene_, true, reqs[i].spec).empty()) continue;
+        HS_ASSIGN_OR_RETURN(items[i].variant, variant(true, reqs[i].spec));
+        HS_ASSIGN_OR_RETURN(items[i].target, target(k.width, k.height, slots[{k.width, k.height}]++));
+        glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(reqs[i].eye);
+        items[i].push.clip_from_world = glm::mat4(clip);
+        items[i].push.eye_position = glm::vec4(glm::vec3(reqs[i].eye.position), 1.0f);
+    }
+    const bool any = std::any_of(items.begin(), items.end(), [](const Item& it) { return it.variant != nullptr; });
+    if (any) {
+        HS_TRY(gpu::execute(device_, "pass.viewer-vd.batch", [&](gpu::CommandList& cl) {
+            for (auto& it : items) {
+                if (!it.variant) continue;
+                cl.begin_render(*it.target, glm::vec4(0.0f), "pass.viewer-vd");
+                cl.bind(it.variant->pipeline);
+                cl.push_constants(it.variant->pipeline, &it.push, sizeof(it.push));
+                cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_, uint32_t(mesh_.indices.size()));
+                cl.end_render_and_read_back(*it.target);
+            }
+        }));
+    }
+    std::vector<RenderResult> out(reqs.size());
+    for (size_t i = 0; i < reqs.size(); ++i) {
+        out[i].report.pass = "viewer-vd";
+        if (!items[i].variant) {
+            out[i].image = ImageRgba32f::zeros(reqs[i].intrinsics.width, reqs[i].intrinsics.height);
+            out[i].report.skipped_because = "the material has no specular term and no emission";
+            continue;
+        }
+        out[i].image = items[i].target->read();
+        out[i].report.ran = true;
+        out[i].report.effects = items[i].variant->effects;
+    }
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    for (auto& r : out) r.report.render_ms = ms / double(out.size());
+    return out;
 }
 
 Result<RenderResult> Renderer::render_projector() {

@@ -52,6 +52,16 @@ public:
     Result<RenderResult> render_eye(const scene::Specular& spec, const scene::Intrinsics& k,
                                     const scene::Pose& eye);
 
+    // Several eyes (of one or many viewers) recorded into one command buffer and one
+    // submission; each gets its own target. Results are in request order; report.render_ms is
+    // the whole batch's time divided evenly. Eyes with nothing view-dependent record no work.
+    struct EyeRequest {
+        scene::Specular spec;
+        scene::Intrinsics intrinsics;
+        scene::Pose eye;
+    };
+    Result<std::vector<RenderResult>> render_eyes(const std::vector<EyeRequest>& requests);
+
     // The VI term seen from an eye (what a perfectly calibrated projector shows that viewer):
     // sum_i L_d at the prop points the eye sees. For simulation and contact sheets.
     Result<RenderResult> render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye);
@@ -70,7 +80,8 @@ private:
     Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
         : device_(device), scene_(scene), info_(info) {}
     Result<Variant*> variant(bool vd, const scene::Specular& spec);
-    Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h);
+    // The slot-th target of this size (a batch needs one per eye).
+    Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
     Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose, const char* label);
 
     gpu::Device& device_;
@@ -80,7 +91,7 @@ private:
     gpu::Buffer positions_, normals_, tangents_, uvs_, indices_;
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
-    std::map<std::tuple<uint32_t, uint32_t>, gpu::RenderTarget> targets_;
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, gpu::RenderTarget> targets_;
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
 };

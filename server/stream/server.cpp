@@ -72,6 +72,7 @@ struct Server::Impl {
     nlohmann::json last_projector_report, last_vd_report;
     double vd_render_ms_total = 0, vd_encode_ms_total = 0, projector_ms_total = 0;
     uint64_t vd_layers = 0;
+    uint64_t batches = 0, batched_eyes = 0, max_batch_eyes = 0;  // viewer-pass submissions and their eyes
     std::map<uint32_t, std::pair<std::string, proto::Role>> session_info;
 
     Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i) {}
@@ -477,43 +478,26 @@ void Server::Impl::render_loop() {
                 scene_version = ++version;
             }
         }
-        for (const ViewerJob& job : batch) {
-            const auto& d = job.display;
-            scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
-            const auto& q = job.pose.orientation_wxyz;
-            auto head = scene::make_pose({job.pose.position_m[0], job.pose.position_m[1], job.pose.position_m[2]},
+        if (batch.empty()) continue;
+        // Every eye of every ready headset in one submission.
+        std::vector<render::Renderer::EyeRequest> eyes;
+        std::vector<bool> valid(batch.size(), true);
+        for (size_t j = 0; j < batch.size(); ++j) {
+            const auto& d = batch[j].display;
+            const auto& q = batch[j].pose.orientation_wxyz;
+            auto head = scene::make_pose({batch[j].pose.position_m[0], batch[j].pose.position_m[1], batch[j].pose.position_m[2]},
                                          glm::dquat(q[0], q[1], q[2], q[3]));
-            std::vector<std::vector<uint8_t>> frames;
-            bool failed = !head.ok();
-            if (head.ok()) {
-                auto eyes = scene::eye_poses(head.value(), d.ipd_m);
-                for (uint8_t e = 0; e < 2 && !failed; ++e) {
-                    auto out = renderer->render_eye(current.material.specular, k, eyes[e]);
-                    if (!out) {
-                        log::error("render: session {}: {}", job.session_id, out.error().message);
-                        failed = true;
-                        break;
-                    }
-                    auto t0 = Clock::now();
-                    proto::VdLayer layer;
-                    layer.frame_id = job.frame_id;
-                    layer.pose_time_ns = job.pose.client_time_ns;
-                    layer.eye = e;
-                    layer.format = d.format;
-                    layer.encoding = d.encoding;
-                    layer.width = k.width;
-                    layer.height = k.height;
-                    layer.data = encode_layer(encode_pixels(out->image, d.format), k.width, k.height, d.format, d.encoding,
-                                              default_tile_codec(d.format));
-                    frames.push_back(proto::encode(layer));
-                    std::lock_guard lock(mutex);
-                    vd_render_ms_total += out->report.render_ms;
-                    vd_encode_ms_total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-                    ++vd_layers;
-                    last_vd_report = {{"pass", out->report.pass}, {"ran", out->report.ran}, {"effects", out->report.effects}};
-                }
-            }
-            if (failed) {
+            valid[j] = head.ok();
+            scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
+            scene::Pose p = head.ok() ? head.value() : scene::Pose{};
+            for (const auto& e : scene::eye_poses(p, d.ipd_m)) eyes.push_back({current.material.specular, k, e});
+        }
+        auto rendered = renderer->render_eyes(eyes);
+        if (!rendered) log::error("render: batch of {} eye(s) failed: {}", eyes.size(), rendered.error().message);
+        for (size_t j = 0; j < batch.size(); ++j) {
+            const ViewerJob& job = batch[j];
+            const auto& d = job.display;
+            if (!rendered || !valid[j]) {
                 asio::post(io, [this, id = job.session_id] {
                     auto it = sessions.find(id);
                     if (it != sessions.end())
@@ -522,9 +506,36 @@ void Server::Impl::render_loop() {
                 });
                 continue;
             }
+            std::vector<std::vector<uint8_t>> frames;
+            for (uint8_t e = 0; e < 2; ++e) {
+                const render::RenderResult& out = rendered.value()[2 * j + e];
+                auto t0 = Clock::now();
+                proto::VdLayer layer;
+                layer.frame_id = job.frame_id;
+                layer.pose_time_ns = job.pose.client_time_ns;
+                layer.eye = e;
+                layer.format = d.format;
+                layer.encoding = d.encoding;
+                layer.width = d.eye_width;
+                layer.height = d.eye_height;
+                layer.data = encode_layer(encode_pixels(out.image, d.format), d.eye_width, d.eye_height, d.format, d.encoding,
+                                          default_tile_codec(d.format));
+                frames.push_back(proto::encode(layer));
+                std::lock_guard lock(mutex);
+                vd_render_ms_total += out.report.render_ms;
+                vd_encode_ms_total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+                ++vd_layers;
+                last_vd_report = {{"pass", out.report.pass}, {"ran", out.report.ran}, {"effects", out.report.effects}};
+            }
             asio::post(io, [this, id = job.session_id, frames = std::move(frames), t = job.pose_received]() mutable {
                 deliver(id, std::move(frames), t);
             });
+        }
+        {
+            std::lock_guard lock(mutex);
+            ++batches;
+            batched_eyes += eyes.size();
+            max_batch_eyes = std::max<uint64_t>(max_batch_eyes, eyes.size());
         }
     }
 }
@@ -549,7 +560,9 @@ nlohmann::json Server::Impl::stats() const {
             {"viewers", viewers},
             {"passes", {{"projector", last_projector_report}, {"viewer", last_vd_report}}},
             {"timing_ms", {{"vd_render_mean", vd_render_ms_total / n}, {"vd_encode_mean", vd_encode_ms_total / n},
-                           {"projector_total", projector_ms_total}, {"vd_layers", vd_layers}}}};
+                           {"projector_total", projector_ms_total}, {"vd_layers", vd_layers}}},
+            {"batches", {{"submissions", batches}, {"eyes", batched_eyes}, {"max_eyes", max_batch_eyes},
+                         {"eyes_per_submission", batches ? double(batched_eyes) / double(batches) : 0.0}}}};
 }
 
 }  // namespace hs::stream

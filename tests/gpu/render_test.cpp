@@ -187,6 +187,29 @@ TEST_F(Passes, PipelinesAreBuiltOncePerEffectSet) {
     EXPECT_EQ(r->pipelines_built(), 2u);
 }
 
+TEST_F(Passes, BatchedEyesEqualSingleRenders) {
+    scene::Scene s = scene::default_scene();
+    auto r = make_renderer(s);
+    const auto k = small_eye(8), k2 = small_eye(4);
+    std::vector<render::Renderer::EyeRequest> reqs;
+    for (double a : {-40.0, 0.0, 40.0}) {
+        auto head = scene::viewing_pose(s.viewing, a, 1.10).value();
+        for (const auto& e : scene::eye_poses(head, 0.063)) reqs.push_back({s.specular_presets.at("ward-aniso"), a == 0 ? k2 : k, e});
+    }
+    reqs.push_back({scene::Specular{}, k, reqs[0].eye});  // nothing view-dependent: no work, black
+    auto batch = r->render_eyes(reqs);
+    ASSERT_TRUE(batch.ok()) << batch.error().message;
+    ASSERT_EQ(batch->size(), reqs.size());
+    for (size_t i = 0; i + 1 < reqs.size(); ++i) {
+        auto single = r->render_eye(reqs[i].spec, reqs[i].intrinsics, reqs[i].eye);
+        ASSERT_TRUE(single.ok());
+        EXPECT_EQ((*batch)[i].image.pixels, single->image.pixels) << "eye " << i;
+        EXPECT_TRUE((*batch)[i].report.ran);
+    }
+    EXPECT_FALSE(batch->back().report.ran);
+    for (float v : batch->back().image.pixels) EXPECT_EQ(v, 0.0f);
+}
+
 TEST_F(Passes, BadEyeResolutionIsAnError) {
     auto r = make_renderer(scene::default_scene());
     scene::Intrinsics k = small_eye();
