@@ -292,7 +292,6 @@ private:
     proto::Role role_ = proto::Role::kHmd;
     std::string name_;
 
-    friend struct hs::stream::Server::Impl;
 };
 
 }  // namespace
@@ -406,9 +405,12 @@ void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames
         scheduler.complete(id, 0, 0.0);
         return;
     }
+    // Our own reference: a send() that finds the queue full closes the session, which erases
+    // its entry from `sessions`.
+    std::shared_ptr<Session> session = it->second;
     auto remaining = std::make_shared<size_t>(frames.size());
     for (auto& f : frames) {
-        it->second->send(std::move(f), [this, id, remaining, bytes, pose_received] {
+        session->send(std::move(f), [this, id, remaining, bytes, pose_received] {
             if (--*remaining == 0) {
                 double ms = std::chrono::duration<double, std::milli>(Clock::now() - pose_received).count();
                 scheduler.complete(id, bytes, ms);
