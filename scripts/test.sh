@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Set-up, then the whole test suite through ctest (GPU tests on lavapipe, validation on).
-# Long sweeps and soaks run only with HYSAR_LONG_TESTS=1 (see README).
+# HYSAR_FUZZ_SECONDS=N runs the decoder fuzzer for N seconds instead of 30 (see README).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -10,7 +10,8 @@ jobs=$(nproc 2>/dev/null || echo 2)
 # the protocol tests (leak checking on), the decoders' libFuzzer run, the server's loopback
 # tests and the scale test. Leak checking is off for those that load the Vulkan driver: Mesa
 # frees some allocations only when it is unloaded, where LeakSanitizer can no longer name them.
-CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_SANITIZE=ON >/dev/null
+CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_SANITIZE=ON \
+  -DHYSAR_FUZZ_SECONDS="${HYSAR_FUZZ_SECONDS:-30}" >/dev/null
 cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs_fuzz_seeds hs_net_tests hysar \
   hysar-loadgen
 (cd build-san && ctest --output-on-failure --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
