@@ -13,7 +13,8 @@ namespace hs::client {
 class Args {
 public:
     // `with_value`: options that take a value; `flags`: options that do not.
-    Args(int argc, char** argv, std::set<std::string> with_value, std::set<std::string> flags, const char* usage)
+    Args(int argc, char** argv, std::set<std::string> with_value, std::set<std::string> flags,
+         const char* usage)
         : usage_(usage) {
         for (int i = 1; i < argc; ++i) {
             std::string a = argv[i];
@@ -24,7 +25,8 @@ public:
             if (flags.count(a)) {
                 values_[a] = "1";
             } else if (with_value.count(a)) {
-                if (i + 1 >= argc) fail(a + " needs a value");
+                if (i + 1 >= argc)
+                    fail(a + " needs a value");
                 values_[a] = argv[++i];
             } else {
                 fail("unknown option '" + a + "'");
@@ -41,23 +43,28 @@ public:
         return it == values_.end() ? def : it->second;
     }
     double number(const std::string& k, double def, double lo, double hi) const {
-        if (!has(k)) return def;
+        if (!has(k))
+            return def;
         try {
             size_t used = 0;
             double v = std::stod(get(k, ""), &used);
-            if (used == get(k, "").size() && v >= lo && v <= hi) return v;
+            if (used == get(k, "").size() && v >= lo && v <= hi)
+                return v;
         } catch (...) {
         }
-        fail(k + ": expected a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + get(k, "") + "'");
+        fail(k + ": expected a number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+             "], got '" + get(k, "") + "'");
     }
     // --token, or the first line of --token-file.
     std::string token() const {
-        if (has("--token")) return get("--token", "");
+        if (has("--token"))
+            return get("--token", "");
         if (has("--token-file")) {
             std::ifstream in(get("--token-file", ""));
             std::string t;
             std::getline(in, t);
-            if (t.empty()) fail(get("--token-file", "") + ": cannot read a token from its first line");
+            if (t.empty())
+                fail(get("--token-file", "") + ": cannot read a token from its first line");
             return t;
         }
         fail("give the installation's token with --token or --token-file (hysar serve prints it)");

@@ -13,23 +13,28 @@ namespace hs::client {
 
 // A headset profile file (configs/devices/*.json): eye_width, eye_height, and fov_x_deg +
 // fov_y_deg, or fov_diagonal_deg, or fx (+ fy, cx, cy); ipd_m. `scale` multiplies the resolution.
-std::optional<std::string> load_profile(const std::string& path, double scale, protocol::RegisterDisplay* out);
+std::optional<std::string> load_profile(const std::string& path, double scale,
+                                        protocol::RegisterDisplay* out);
 
 // A pose at `eye` looking at `target` (world frame, +y up), stamped `t_ns`.
 protocol::Pose look_at_pose(std::array<double, 3> eye, std::array<double, 3> target, uint64_t t_ns);
 
-// The paper's viewpoints: azimuth `angle_deg` about +y around `target` at `distance_m`, height `height_m`.
-protocol::Pose orbit_pose(double angle_deg, double distance_m, double height_m, std::array<double, 3> target, uint64_t t_ns);
+// The paper's viewpoints: azimuth `angle_deg` about +y around `target` at `distance_m`, height
+// `height_m`.
+protocol::Pose orbit_pose(double angle_deg, double distance_m, double height_m,
+                          std::array<double, 3> target, uint64_t t_ns);
 
 double percentile(std::vector<double> v, double p);
 
 // The raw pixel bytes of a layer or frame in any encoding, or an error sentence.
-std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t width, uint32_t height, protocol::PixelFormat format,
-                                                           protocol::Encoding encoding, const std::vector<uint8_t>& data);
+std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t width, uint32_t height,
+                                                           protocol::PixelFormat format,
+                                                           protocol::Encoding encoding,
+                                                           const std::vector<uint8_t>& data);
 
 // Writes raw RGBA8 pixels as PNG; RGBA16F ones are tone-mapped (white = 1, sRGB) first.
-bool write_layer_png(const std::string& path, uint32_t width, uint32_t height, protocol::PixelFormat format,
-                     const std::vector<uint8_t>& raw);
+bool write_layer_png(const std::string& path, uint32_t width, uint32_t height,
+                     protocol::PixelFormat format, const std::vector<uint8_t>& raw);
 
 std::vector<double> parse_list(const std::string& s);
 

@@ -28,8 +28,9 @@ public:
     std::variant<std::monostate, protocol::Message, std::string> receive(int timeout_ms);
 
     // Hello with the token, then Welcome. Returns an error sentence on failure.
-    std::optional<std::string> hello(protocol::Role role, const std::string& token, const std::string& name,
-                                     protocol::Welcome* welcome = nullptr, int timeout_ms = 10000);
+    std::optional<std::string> hello(protocol::Role role, const std::string& token,
+                                     const std::string& name, protocol::Welcome* welcome = nullptr,
+                                     int timeout_ms = 10000);
     void close();
     int fd() const { return fd_; }
 

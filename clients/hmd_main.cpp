@@ -37,8 +37,9 @@ static const char* kUsage =
 
 int main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles", "--orbit", "--csv", "--distance",
-               "--height", "--target", "--format", "--encoding", "--name", "--out", "--summary"},
+              {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles",
+               "--orbit", "--csv", "--distance", "--height", "--target", "--format", "--encoding",
+               "--name", "--out", "--summary"},
               {"--window"}, kUsage);
     proto::RegisterDisplay display;
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
@@ -47,18 +48,22 @@ int main(int argc, char** argv) {
         return 1;
     }
     const std::string fmt = args.get("--format", "rgba8");
-    if (fmt != "rgba8" && fmt != "rgba16f") args.fail("--format: expected rgba8 or rgba16f");
+    if (fmt != "rgba8" && fmt != "rgba16f")
+        args.fail("--format: expected rgba8 or rgba16f");
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
     const std::string enc = args.get("--encoding", "sparse");
-    if (enc != "raw" && enc != "sparse") args.fail("--encoding: expected raw or sparse");
+    if (enc != "raw" && enc != "sparse")
+        args.fail("--encoding: expected raw or sparse");
     display.encoding = enc == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
     const std::string name = args.get("--name", "hmd");
     const std::filesystem::path out = args.get("--out", "out/hmd");
-    const double distance = args.number("--distance", 0.8, 0.01, 100), height = args.number("--height", 1.10, -100, 100);
+    const double distance = args.number("--distance", 0.8, 0.01, 100),
+                 height = args.number("--height", 1.10, -100, 100);
     std::array<double, 3> target{0.0, 0.745, 0.0};
     if (args.has("--target")) {
         auto t = parse_list(args.get("--target", ""));
-        if (t.size() != 3) args.fail("--target: expected X,Y,Z");
+        if (t.size() != 3)
+            args.fail("--target: expected X,Y,Z");
         target = {t[0], t[1], t[2]};
     }
     // The trajectory: (seconds from start, pose, label).
@@ -70,22 +75,26 @@ int main(int argc, char** argv) {
     std::vector<Step> steps;
     if (args.has("--csv")) {
         std::ifstream in(args.get("--csv", ""));
-        if (!in) args.fail(args.get("--csv", "") + ": cannot open");
+        if (!in)
+            args.fail(args.get("--csv", "") + ": cannot open");
         std::string line;
         int n = 0;
         while (std::getline(in, line)) {
             ++n;
-            if (line.empty() || line[0] == '#' || !std::isdigit(uint8_t(line[0]))) continue;
+            if (line.empty() || line[0] == '#' || !std::isdigit(uint8_t(line[0])))
+                continue;
             std::vector<double> v;
             try {
                 v = parse_list(line);
             } catch (...) {
             }
             if (v.size() != 8) {
-                std::fprintf(stderr, "hysar-hmd: %s:%d: expected t_s,x,y,z,qw,qx,qy,qz\n", args.get("--csv", "").c_str(), n);
+                std::fprintf(stderr, "hysar-hmd: %s:%d: expected t_s,x,y,z,qw,qx,qy,qz\n",
+                             args.get("--csv", "").c_str(), n);
                 return 1;
             }
-            steps.push_back({v[0], proto::Pose{0, {v[1], v[2], v[3]}, {v[4], v[5], v[6], v[7]}}, "csv" + std::to_string(n)});
+            steps.push_back({v[0], proto::Pose{0, {v[1], v[2], v[3]}, {v[4], v[5], v[6], v[7]}},
+                             "csv" + std::to_string(n)});
         }
     } else if (args.has("--orbit")) {
         const double secs = args.number("--orbit", 10, 0.1, 3600);
@@ -94,14 +103,17 @@ int main(int argc, char** argv) {
     } else {
         for (double a : parse_list(args.get("--angles", "-40,-20,0,20,40"))) {
             char label[32];
-            std::snprintf(label, sizeof label, "%s%03d", a < 0 ? "m" : "p", int(std::lround(std::abs(a))));
+            std::snprintf(label, sizeof label, "%s%03d", a < 0 ? "m" : "p",
+                          int(std::lround(std::abs(a))));
             steps.push_back({0.0, orbit_pose(a, distance, height, target, 0), label});
         }
     }
-    if (steps.empty()) args.fail("the trajectory has no pose");
+    if (steps.empty())
+        args.fail("the trajectory has no pose");
     for (const auto& s : steps)
         if (auto bad = proto::validate_pose(s.pose)) {
-            std::fprintf(stderr, "hysar-hmd: trajectory pose '%s': %s\n", s.label.c_str(), bad->c_str());
+            std::fprintf(stderr, "hysar-hmd: trajectory pose '%s': %s\n", s.label.c_str(),
+                         bad->c_str());
             return 1;
         }
     auto c = Connection::open(args.get("--connect", "127.0.0.1:7700"));
@@ -121,7 +133,8 @@ int main(int argc, char** argv) {
     std::unique_ptr<ImageWindow> window;
     std::vector<uint8_t> side_by_side;
     if (args.has("--window")) {
-        auto w = ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
+        auto w =
+            ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
         if (auto* e = std::get_if<std::string>(&w)) {
             std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
             return 1;
@@ -133,35 +146,42 @@ int main(int argc, char** argv) {
     uint64_t bytes = 0, layers = 0, errors = 0;
     auto handle = [&](const proto::Message& m, const std::string& label) {
         if (auto* l = std::get_if<proto::VdLayer>(&m)) {
-            if (window && l->format == proto::PixelFormat::kRgba8 && l->width == display.eye_width &&
-                l->height == display.eye_height) {
+            if (window && l->format == proto::PixelFormat::kRgba8 &&
+                l->width == display.eye_width && l->height == display.eye_height) {
                 auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
                 if (auto* px = std::get_if<std::vector<uint8_t>>(&raw)) {
                     const size_t row = size_t(l->width) * 4;
                     for (uint32_t y = 0; y < l->height; ++y)
                         for (size_t i = 0; i < row; ++i)
-                            side_by_side[(size_t(y) * 2 * l->width) * 4 + l->eye * row + i] = i % 4 == 3 ? 255 : (*px)[y * row + i];
-                    if (l->eye == 1) window->show(side_by_side, 2 * l->width, l->height);
+                            side_by_side[(size_t(y) * 2 * l->width) * 4 + l->eye * row + i] =
+                                i % 4 == 3 ? 255 : (*px)[y * row + i];
+                    if (l->eye == 1)
+                        window->show(side_by_side, 2 * l->width, l->height);
                 }
                 window->poll();
             }
             ++layers;
             bytes += l->data.size();
-            if (l->eye == 1) latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
+            if (l->eye == 1)
+                latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
             if (!label.empty() || stills) {
-                std::string file = (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
-                                           (l->eye ? "_right.png" : "_left.png"))).string();
+                std::string file =
+                    (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
+                            (l->eye ? "_right.png" : "_left.png")))
+                        .string();
                 auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
                 if (auto* e = std::get_if<std::string>(&raw)) {
                     ++errors;
                     std::fprintf(stderr, "hysar-hmd: layer %u: %s\n", l->frame_id, e->c_str());
-                } else if (!write_layer_png(file, l->width, l->height, l->format, std::get<std::vector<uint8_t>>(raw))) {
+                } else if (!write_layer_png(file, l->width, l->height, l->format,
+                                            std::get<std::vector<uint8_t>>(raw))) {
                     ++errors;
                 }
             }
         } else if (auto* e = std::get_if<proto::Error>(&m)) {
             ++errors;
-            std::fprintf(stderr, "hysar-hmd: server error %d: %s\n", int(e->code), e->message.c_str());
+            std::fprintf(stderr, "hysar-hmd: server error %d: %s\n", int(e->code),
+                         e->message.c_str());
         }
     };
     const auto start = std::chrono::steady_clock::now();
@@ -171,13 +191,16 @@ int main(int argc, char** argv) {
             // Drain whatever arrived meanwhile.
             for (;;) {
                 auto r = conn.receive(0);
-                if (auto* m = std::get_if<proto::Message>(&r)) handle(*m, s.label);
-                else break;
+                if (auto* m = std::get_if<proto::Message>(&r))
+                    handle(*m, s.label);
+                else
+                    break;
             }
         }
         s.pose.client_time_ns = now_ns();
         conn.send(s.pose);
-        if (!stills) continue;
+        if (!stills)
+            continue;
         conn.send(proto::FrameRequest{});
         int eyes = 0;
         while (eyes < 2) {
@@ -187,20 +210,29 @@ int main(int argc, char** argv) {
                 return 1;
             }
             if (std::holds_alternative<std::monostate>(r)) {
-                std::fprintf(stderr, "hysar-hmd: no layers within 30 s for pose '%s'\n", s.label.c_str());
+                std::fprintf(stderr, "hysar-hmd: no layers within 30 s for pose '%s'\n",
+                             s.label.c_str());
                 return 1;
             }
             const auto& m = std::get<proto::Message>(r);
-            if (auto* l = std::get_if<proto::VdLayer>(&m); l && l->pose_time_ns == s.pose.client_time_ns) ++eyes;
+            if (auto* l = std::get_if<proto::VdLayer>(&m);
+                l && l->pose_time_ns == s.pose.client_time_ns)
+                ++eyes;
             handle(m, s.label);
         }
     }
     conn.send(proto::Bye{0});
-    nlohmann::json summary{{"name", name}, {"frames", layers / 2}, {"layers", layers}, {"bytes", bytes},
-                           {"latency_ms_p50", percentile(latency_ms, 0.5)}, {"latency_ms_p95", percentile(latency_ms, 0.95)},
+    nlohmann::json summary{{"name", name},
+                           {"frames", layers / 2},
+                           {"layers", layers},
+                           {"bytes", bytes},
+                           {"latency_ms_p50", percentile(latency_ms, 0.5)},
+                           {"latency_ms_p95", percentile(latency_ms, 0.95)},
                            {"errors", errors}};
-    if (args.has("--summary")) std::ofstream(args.get("--summary", "")) << summary.dump(2) << "\n";
-    std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %llu errors\n", name.c_str(), (unsigned long long)(layers / 2),
-                percentile(latency_ms, 0.5), bytes / 1e6, (unsigned long long)errors);
+    if (args.has("--summary"))
+        std::ofstream(args.get("--summary", "")) << summary.dump(2) << "\n";
+    std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %llu errors\n", name.c_str(),
+                (unsigned long long)(layers / 2), percentile(latency_ms, 0.5), bytes / 1e6,
+                (unsigned long long)errors);
     return errors ? 1 : 0;
 }

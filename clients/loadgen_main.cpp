@@ -39,11 +39,12 @@ struct ViewerResult {
 
 int main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds", "--profile", "--scale", "--format",
-               "--encoding", "--json"},
+              {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds",
+               "--profile", "--scale", "--format", "--encoding", "--json"},
               {}, kUsage);
     const int n = int(args.number("--viewers", 1, 1, 1024));
-    const double rate = args.number("--rate", 30, 0.1, 1000), seconds = args.number("--seconds", 5, 0.1, 3600);
+    const double rate = args.number("--rate", 30, 0.1, 1000),
+                 seconds = args.number("--seconds", 5, 0.1, 3600);
     const std::string address = args.get("--connect", "127.0.0.1:7700"), token = args.token();
     proto::RegisterDisplay display;
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
@@ -51,9 +52,11 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "hysar-loadgen: %s\n", err->c_str());
         return 1;
     }
-    display.format = args.get("--format", "rgba8") == "rgba16f" ? proto::PixelFormat::kRgba16f : proto::PixelFormat::kRgba8;
+    display.format = args.get("--format", "rgba8") == "rgba16f" ? proto::PixelFormat::kRgba16f
+                                                                : proto::PixelFormat::kRgba8;
     display.mode = proto::FrameMode::kContinuous;
-    display.encoding = args.get("--encoding", "sparse") == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
+    display.encoding = args.get("--encoding", "sparse") == "raw" ? proto::Encoding::kRaw
+                                                                 : proto::Encoding::kSparseTiles;
 
     std::vector<ViewerResult> results(n);
     std::atomic<int> ready{0}, finished{0};
@@ -62,7 +65,8 @@ int main(int argc, char** argv) {
         ViewerResult& r = results[i];
         auto fail = [&](const std::string& e) {
             ++r.errors;
-            if (r.first_error.empty()) r.first_error = e;
+            if (r.first_error.empty())
+                r.first_error = e;
         };
         auto c = Connection::open(address);
         if (auto* e = std::get_if<std::string>(&c)) {
@@ -81,17 +85,21 @@ int main(int argc, char** argv) {
         while (ready.load() < n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
         const double base = n > 1 ? -40.0 + 80.0 * i / (n - 1) : 0.0;
         const Clock::time_point start = Clock::now();
-        const Clock::time_point end = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+        const Clock::time_point end = start + std::chrono::duration_cast<Clock::duration>(
+                                                  std::chrono::duration<double>(seconds));
         const auto period = std::chrono::duration<double>(1.0 / rate);
         auto next_pose = start;
         for (auto now = Clock::now(); now < end; now = Clock::now()) {
             if (now >= next_pose) {
                 double t = std::chrono::duration<double>(now - start).count();
-                conn.send(orbit_pose(base + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, now_ns()));
+                conn.send(
+                    orbit_pose(base + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, now_ns()));
                 ++r.poses;
                 next_pose += std::chrono::duration_cast<Clock::duration>(period);
             }
-            int wait = int(std::chrono::duration_cast<std::chrono::milliseconds>(std::min(next_pose, end) - Clock::now()).count());
+            int wait = int(std::chrono::duration_cast<std::chrono::milliseconds>(
+                               std::min(next_pose, end) - Clock::now())
+                               .count());
             auto m = conn.receive(std::max(wait, 0));
             if (auto* e = std::get_if<std::string>(&m)) {
                 ++finished;
@@ -101,7 +109,8 @@ int main(int argc, char** argv) {
                 if (auto* l = std::get_if<proto::VdLayer>(msg)) {
                     ++r.layers;
                     r.bytes += l->data.size() + proto::kHeaderBytes + 31;
-                    if (l->eye == 1) r.latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
+                    if (l->eye == 1)
+                        r.latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
                 } else if (auto* e = std::get_if<proto::Error>(msg)) {
                     fail("server error " + std::to_string(int(e->code)) + ": " + e->message);
                 }
@@ -118,19 +127,24 @@ int main(int argc, char** argv) {
 
     // The server's view: superseded poses per viewer (an admin session asks for stats).
     uint64_t superseded = 0;
-    if (auto c = Connection::open(address); std::holds_alternative<std::unique_ptr<Connection>>(c)) {
+    if (auto c = Connection::open(address);
+        std::holds_alternative<std::unique_ptr<Connection>>(c)) {
         auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-        if (!conn.hello(proto::Role::kAdmin, token, "loadgen-stats") && conn.send(proto::StatsRequest{})) {
+        if (!conn.hello(proto::Role::kAdmin, token, "loadgen-stats") &&
+            conn.send(proto::StatsRequest{})) {
             for (int k = 0; k < 10; ++k) {
                 auto m = conn.receive(2000);
                 auto* msg = std::get_if<proto::Message>(&m);
-                if (!msg) break;
+                if (!msg)
+                    break;
                 if (auto* s = std::get_if<proto::Stats>(msg)) {
                     // Keep the parsed document alive for the loop (it iterates a member of it).
                     const auto stats = nlohmann::json::parse(s->json, nullptr, false);
-                    if (stats.is_discarded()) break;
+                    if (stats.is_discarded())
+                        break;
                     for (const auto& v : stats["viewers"])
-                        if (v["name"].get<std::string>().rfind("loadgen-", 0) == 0) superseded += v["superseded_poses"].get<uint64_t>();
+                        if (v["name"].get<std::string>().rfind("loadgen-", 0) == 0)
+                            superseded += v["superseded_poses"].get<uint64_t>();
                     break;
                 }
             }
@@ -166,19 +180,34 @@ int main(int argc, char** argv) {
     std::printf("%-26s %12llu\n", "viewers with no layer", (unsigned long long)starved);
     std::printf("%-26s %12llu\n", "errors", (unsigned long long)errors);
     for (const auto& r : results)
-        if (!r.first_error.empty()) std::printf("  first error: %s\n", r.first_error.c_str());
+        if (!r.first_error.empty())
+            std::printf("  first error: %s\n", r.first_error.c_str());
     if (args.has("--json")) {
         nlohmann::json per = nlohmann::json::array();
         for (size_t i = 0; i < results.size(); ++i)
-            per.push_back({{"viewer", i}, {"layers", results[i].layers}, {"poses", results[i].poses},
-                           {"layers_per_s", results[i].layers / seconds}, {"bytes", results[i].bytes},
-                           {"latency_ms_p50", percentile(results[i].latency_ms, 0.5)}, {"errors", results[i].errors}});
-        nlohmann::json j{{"viewers", n}, {"rate_hz", rate}, {"seconds", seconds},
-                         {"eye_width", display.eye_width}, {"eye_height", display.eye_height},
-                         {"layers_per_s", lps}, {"layers_per_s_per_viewer", lps / n},
-                         {"latency_ms", {{"p50", percentile(all, 0.5)}, {"p95", percentile(all, 0.95)}, {"p99", percentile(all, 0.99)}}},
-                         {"bytes_per_s", bytes / seconds}, {"superseded_poses", superseded}, {"errors", errors},
-                         {"viewers_without_layers", starved}, {"per_viewer", per}};
+            per.push_back({{"viewer", i},
+                           {"layers", results[i].layers},
+                           {"poses", results[i].poses},
+                           {"layers_per_s", results[i].layers / seconds},
+                           {"bytes", results[i].bytes},
+                           {"latency_ms_p50", percentile(results[i].latency_ms, 0.5)},
+                           {"errors", results[i].errors}});
+        nlohmann::json j{{"viewers", n},
+                         {"rate_hz", rate},
+                         {"seconds", seconds},
+                         {"eye_width", display.eye_width},
+                         {"eye_height", display.eye_height},
+                         {"layers_per_s", lps},
+                         {"layers_per_s_per_viewer", lps / n},
+                         {"latency_ms",
+                          {{"p50", percentile(all, 0.5)},
+                           {"p95", percentile(all, 0.95)},
+                           {"p99", percentile(all, 0.99)}}},
+                         {"bytes_per_s", bytes / seconds},
+                         {"superseded_poses", superseded},
+                         {"errors", errors},
+                         {"viewers_without_layers", starved},
+                         {"per_viewer", per}};
         std::ofstream(args.get("--json", "")) << j.dump(2) << "\n";
     }
     return errors || starved ? 1 : 0;

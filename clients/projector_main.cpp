@@ -11,23 +11,28 @@ using namespace hs::client;
 namespace proto = hs::protocol;
 
 static const char* kUsage =
-    "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR] [--frames N]\n"
+    "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR] [--frames "
+    "N]\n"
     "                       [--timeout SECONDS] [--name NAME] [--window] [--monitor N]\n"
     "                       [--screenshot FILE]\n"
     "\n"
     "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
-    "  --out DIR       where frames are written as projector_v<scene version>.png (default out/projector)\n"
+    "  --out DIR       where frames are written as projector_v<scene version>.png (default "
+    "out/projector)\n"
     "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n"
-    "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on monitor N\n"
+    "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on "
+    "monitor N\n"
     "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n";
 
 int main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name", "--monitor", "--screenshot"},
+              {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name",
+               "--monitor", "--screenshot"},
               {"--window"}, kUsage);
     std::unique_ptr<ImageWindow> window;
     if (args.has("--window")) {
-        auto w = ImageWindow::open("hysar-projector", 960, 600, int(args.number("--monitor", -1, -1, 64)));
+        auto w = ImageWindow::open("hysar-projector", 960, 600,
+                                   int(args.number("--monitor", -1, -1, 64)));
         if (auto* e = std::get_if<std::string>(&w)) {
             std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
             return 1;
@@ -43,7 +48,8 @@ int main(int argc, char** argv) {
         return 1;
     }
     auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-    if (auto err = conn.hello(proto::Role::kProjector, args.token(), args.get("--name", "projector"))) {
+    if (auto err =
+            conn.hello(proto::Role::kProjector, args.token(), args.get("--name", "projector"))) {
         std::fprintf(stderr, "hysar-projector: %s\n", err->c_str());
         return 1;
     }
@@ -56,31 +62,38 @@ int main(int argc, char** argv) {
             return 1;
         }
         if (auto* e = std::get_if<std::string>(&r)) {
-            if (frames_wanted == 0) break;  // the server closed
+            if (frames_wanted == 0)
+                break;  // the server closed
             std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
             return 1;
         }
         const auto& m = std::get<proto::Message>(r);
-        if (std::holds_alternative<proto::Bye>(m)) break;
+        if (std::holds_alternative<proto::Bye>(m))
+            break;
         if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
-            std::string file = (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
+            std::string file =
+                (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
             auto raw = raw_pixels(f->width, f->height, f->format, f->encoding, f->data);
             if (auto* e = std::get_if<std::string>(&raw)) {
-                std::fprintf(stderr, "hysar-projector: frame v%u: %s\n", f->scene_version, e->c_str());
+                std::fprintf(stderr, "hysar-projector: frame v%u: %s\n", f->scene_version,
+                             e->c_str());
                 return 1;
             }
-            if (!write_layer_png(file, f->width, f->height, f->format, std::get<std::vector<uint8_t>>(raw))) {
+            if (!write_layer_png(file, f->width, f->height, f->format,
+                                 std::get<std::vector<uint8_t>>(raw))) {
                 std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
                 return 1;
             }
-            std::printf("projector frame v%u %ux%u -> %s\n", f->scene_version, f->width, f->height, file.c_str());
+            std::printf("projector frame v%u %ux%u -> %s\n", f->scene_version, f->width, f->height,
+                        file.c_str());
             if (window) {
                 auto px = std::get<std::vector<uint8_t>>(raw);
                 if (f->format == proto::PixelFormat::kRgba8) {
                     for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
                     window->show(px, f->width, f->height);
                 }
-                if (!window->poll()) break;
+                if (!window->poll())
+                    break;
             }
             ++frames;
         }

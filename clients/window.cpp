@@ -10,20 +10,26 @@ namespace hs::client {
 
 namespace {
 std::string g_last_error;
-void on_error(int, const char* text) { g_last_error = text ? text : "unknown GLFW error"; }
+void on_error(int, const char* text) {
+    g_last_error = text ? text : "unknown GLFW error";
+}
 }  // namespace
 
-std::variant<std::unique_ptr<ImageWindow>, std::string> ImageWindow::open(const std::string& title, uint32_t w, uint32_t h,
-                                                                           int monitor) {
+std::variant<std::unique_ptr<ImageWindow>, std::string> ImageWindow::open(const std::string& title,
+                                                                          uint32_t w, uint32_t h,
+                                                                          int monitor) {
     glfwSetErrorCallback(on_error);
-    if (!glfwInit()) return "cannot open a window (no display? set DISPLAY or run under xvfb-run): " + g_last_error;
+    if (!glfwInit())
+        return "cannot open a window (no display? set DISPLAY or run under xvfb-run): " +
+               g_last_error;
     GLFWmonitor* mon = nullptr;
     if (monitor >= 0) {
         int count = 0;
         GLFWmonitor** mons = glfwGetMonitors(&count);
         if (monitor >= count) {
             glfwTerminate();
-            return "monitor " + std::to_string(monitor) + " does not exist (" + std::to_string(count) + " connected)";
+            return "monitor " + std::to_string(monitor) + " does not exist (" +
+                   std::to_string(count) + " connected)";
         }
         mon = mons[monitor];
         const GLFWvidmode* mode = glfwGetVideoMode(mon);
@@ -49,7 +55,8 @@ std::variant<std::unique_ptr<ImageWindow>, std::string> ImageWindow::open(const 
 }
 
 ImageWindow::~ImageWindow() {
-    if (window_) glfwDestroyWindow(static_cast<GLFWwindow*>(window_));
+    if (window_)
+        glfwDestroyWindow(static_cast<GLFWwindow*>(window_));
     glfwTerminate();
 }
 
@@ -62,7 +69,8 @@ void ImageWindow::show(const std::vector<uint8_t>& rgba8, uint32_t w, uint32_t h
     if (w && h && rgba8.size() == size_t(w) * h * 4) {
         // Fit, centred; rows are drawn top-down by a negative vertical zoom from the top edge.
         const float s = std::min(float(fw) / float(w), float(fh) / float(h));
-        const float x0 = 0.5f * (float(fw) - s * float(w)), y_top = 0.5f * (float(fh) + s * float(h));
+        const float x0 = 0.5f * (float(fw) - s * float(w)),
+                    y_top = 0.5f * (float(fh) + s * float(h));
         glMatrixMode(GL_PROJECTION);
         glLoadIdentity();
         glOrtho(0, fw, 0, fh, -1, 1);
@@ -94,7 +102,8 @@ std::vector<uint8_t> ImageWindow::read_back(uint32_t* w, uint32_t* h) {
     const uint32_t fw = shown_w_, fh = shown_h_;
     std::vector<uint8_t> flipped(shown_.size());
     for (uint32_t y = 0; y < fh; ++y)
-        std::copy_n(&shown_[size_t(fh - 1 - y) * fw * 4], size_t(fw) * 4, &flipped[size_t(y) * fw * 4]);
+        std::copy_n(&shown_[size_t(fh - 1 - y) * fw * 4], size_t(fw) * 4,
+                    &flipped[size_t(y) * fw * 4]);
     *w = fw;
     *h = fh;
     return flipped;

@@ -14,8 +14,10 @@ class ImageWindow {
 public:
     // `monitor` >= 0 opens full-screen on that monitor (a projector); -1 a normal window of
     // width x height. Returns an error sentence when no display is available.
-    static std::variant<std::unique_ptr<ImageWindow>, std::string> open(const std::string& title, uint32_t width,
-                                                                         uint32_t height, int monitor);
+    static std::variant<std::unique_ptr<ImageWindow>, std::string> open(const std::string& title,
+                                                                        uint32_t width,
+                                                                        uint32_t height,
+                                                                        int monitor);
     ~ImageWindow();
 
     // Draws `rgba8` (rows top to bottom) scaled to fit the window, keeping its aspect.

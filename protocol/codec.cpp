@@ -12,7 +12,8 @@ namespace hs::protocol {
 const char* to_string(MessageType t) {
     switch (t) {
 #define HS_MESSAGE(name, id, max, dir) \
-    case MessageType::k##name: return #name;
+    case MessageType::k##name:         \
+        return #name;
 #include "protocol/messages.def"
 #undef HS_MESSAGE
     }
@@ -22,7 +23,8 @@ const char* to_string(MessageType t) {
 std::optional<uint32_t> max_payload(uint16_t type) {
     switch (type) {
 #define HS_MESSAGE(name, id, max, dir) \
-    case id: return uint32_t(max);
+    case id:                           \
+        return uint32_t(max);
 #include "protocol/messages.def"
 #undef HS_MESSAGE
     }
@@ -33,8 +35,9 @@ MessageType type_of(const Message& m) {
     return std::visit(
         [](const auto& v) -> MessageType {
             using T = std::decay_t<decltype(v)>;
-#define HS_MESSAGE(name, id, max, dir) \
-    if constexpr (std::is_same_v<T, name>) return MessageType::k##name;
+#define HS_MESSAGE(name, id, max, dir)     \
+    if constexpr (std::is_same_v<T, name>) \
+        return MessageType::k##name;
 #include "protocol/messages.def"
 #undef HS_MESSAGE
         },
@@ -52,7 +55,9 @@ public:
         std::memcpy(b, &v, sizeof(T));
         out.insert(out.end(), b, b + sizeof(T));
     }
-    void bytes(const void* p, size_t n) { out.insert(out.end(), (const uint8_t*)p, (const uint8_t*)p + n); }
+    void bytes(const void* p, size_t n) {
+        out.insert(out.end(), (const uint8_t*)p, (const uint8_t*)p + n);
+    }
     void str16(const std::string& s) {
         put<uint16_t>(uint16_t(s.size()));
         bytes(s.data(), s.size());
@@ -69,41 +74,52 @@ public:
     explicit Reader(std::span<const uint8_t> b) : b_(b) {}
     template <typename T>
     bool get(T& v) {
-        if (b_.size() - pos_ < sizeof(T)) return fail("payload ends inside a field");
+        if (b_.size() - pos_ < sizeof(T))
+            return fail("payload ends inside a field");
         std::memcpy(&v, b_.data() + pos_, sizeof(T));
         pos_ += sizeof(T);
         return true;
     }
     bool bytes(size_t n, std::vector<uint8_t>& out) {
-        if (b_.size() - pos_ < n) return fail("payload shorter than its declared data length");
+        if (b_.size() - pos_ < n)
+            return fail("payload shorter than its declared data length");
         out.assign(b_.begin() + pos_, b_.begin() + pos_ + n);
         pos_ += n;
         return true;
     }
     bool str16(std::string& s, size_t max, const char* what) {
         uint16_t n;
-        if (!get(n)) return false;
-        if (n > max) return fail(std::string(what) + " longer than " + std::to_string(max) + " bytes");
-        if (b_.size() - pos_ < n) return fail(std::string(what) + " runs past the payload");
+        if (!get(n))
+            return false;
+        if (n > max)
+            return fail(std::string(what) + " longer than " + std::to_string(max) + " bytes");
+        if (b_.size() - pos_ < n)
+            return fail(std::string(what) + " runs past the payload");
         s.assign((const char*)b_.data() + pos_, n);
         pos_ += n;
         return true;
     }
     bool str32(std::string& s, size_t max, const char* what) {
         uint32_t n;
-        if (!get(n)) return false;
-        if (n > max) return fail(std::string(what) + " longer than the limit");
-        if (b_.size() - pos_ < n) return fail(std::string(what) + " runs past the payload");
+        if (!get(n))
+            return false;
+        if (n > max)
+            return fail(std::string(what) + " longer than the limit");
+        if (b_.size() - pos_ < n)
+            return fail(std::string(what) + " runs past the payload");
         s.assign((const char*)b_.data() + pos_, n);
         pos_ += n;
         return true;
     }
     bool fail(std::string m) {
-        if (error.empty()) error = std::move(m);
+        if (error.empty())
+            error = std::move(m);
         return false;
     }
     bool done() {
-        if (pos_ != b_.size()) return fail(std::to_string(b_.size() - pos_) + " trailing byte(s) after the last field");
+        if (pos_ != b_.size())
+            return fail(std::to_string(b_.size() - pos_) +
+                        " trailing byte(s) after the last field");
         return true;
     }
     std::string error;
@@ -113,9 +129,15 @@ private:
     size_t pos_ = 0;
 };
 
-bool valid_format(uint8_t f) { return f == uint8_t(PixelFormat::kRgba8) || f == uint8_t(PixelFormat::kRgba16f); }
-bool valid_encoding(uint8_t e) { return e == uint8_t(Encoding::kRaw) || e == uint8_t(Encoding::kSparseTiles); }
-size_t bytes_per_pixel(PixelFormat f) { return f == PixelFormat::kRgba8 ? 4 : 8; }
+bool valid_format(uint8_t f) {
+    return f == uint8_t(PixelFormat::kRgba8) || f == uint8_t(PixelFormat::kRgba16f);
+}
+bool valid_encoding(uint8_t e) {
+    return e == uint8_t(Encoding::kRaw) || e == uint8_t(Encoding::kSparseTiles);
+}
+size_t bytes_per_pixel(PixelFormat f) {
+    return f == PixelFormat::kRgba8 ? 4 : 8;
+}
 
 void encode_payload(Writer& w, const Message& m) {
     std::visit(
@@ -179,10 +201,14 @@ void encode_payload(Writer& w, const Message& m) {
 
 // Checks a layer's pixel data against its size, format and encoding.
 bool check_image(Reader& r, uint32_t w, uint32_t h, uint8_t fmt, uint8_t enc, size_t data_bytes) {
-    if (!valid_format(fmt)) return r.fail("unknown pixel format " + std::to_string(fmt));
-    if (!valid_encoding(enc)) return r.fail("unknown encoding " + std::to_string(enc));
-    if (w == 0 || h == 0 || w > 16384 || h > 16384) return r.fail("image size out of 1..16384");
-    if (enc == uint8_t(Encoding::kRaw) && data_bytes != size_t(w) * h * bytes_per_pixel(PixelFormat(fmt)))
+    if (!valid_format(fmt))
+        return r.fail("unknown pixel format " + std::to_string(fmt));
+    if (!valid_encoding(enc))
+        return r.fail("unknown encoding " + std::to_string(enc));
+    if (w == 0 || h == 0 || w > 16384 || h > 16384)
+        return r.fail("image size out of 1..16384");
+    if (enc == uint8_t(Encoding::kRaw) &&
+        data_bytes != size_t(w) * h * bytes_per_pixel(PixelFormat(fmt)))
         return r.fail("raw data length does not match width x height x bytes per pixel");
     return true;
 }
@@ -203,28 +229,35 @@ std::vector<uint8_t> encode(const Message& m, uint32_t sequence) {
 }
 
 std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes) {
-    if (bytes.size() != kHeaderBytes) return DecodeError{ErrorCode::kMalformed, "a header is exactly 16 bytes"};
+    if (bytes.size() != kHeaderBytes)
+        return DecodeError{ErrorCode::kMalformed, "a header is exactly 16 bytes"};
     Header h;
     std::memcpy(&h.magic, bytes.data(), 4);
     std::memcpy(&h.version, bytes.data() + 4, 2);
     std::memcpy(&h.type, bytes.data() + 6, 2);
     std::memcpy(&h.payload_bytes, bytes.data() + 8, 4);
     std::memcpy(&h.sequence, bytes.data() + 12, 4);
-    if (h.magic != kMagic) return DecodeError{ErrorCode::kBadMagic, "bad magic: not a HySAR frame"};
+    if (h.magic != kMagic)
+        return DecodeError{ErrorCode::kBadMagic, "bad magic: not a HySAR frame"};
     if (h.version != kVersion)
         return DecodeError{ErrorCode::kBadVersion, "protocol version " + std::to_string(h.version) +
-                                                       " is not supported (this server speaks " + std::to_string(kVersion) + ")"};
+                                                       " is not supported (this server speaks " +
+                                                       std::to_string(kVersion) + ")"};
     auto max = max_payload(h.type);
-    if (!max) return DecodeError{ErrorCode::kUnknownType, "unknown message type " + std::to_string(h.type)};
+    if (!max)
+        return DecodeError{ErrorCode::kUnknownType,
+                           "unknown message type " + std::to_string(h.type)};
     if (h.payload_bytes > *max)
-        return DecodeError{ErrorCode::kTooLarge, std::string(to_string(MessageType(h.type))) + " payload of " +
-                                                     std::to_string(h.payload_bytes) + " bytes exceeds its limit of " +
-                                                     std::to_string(*max)};
+        return DecodeError{ErrorCode::kTooLarge,
+                           std::string(to_string(MessageType(h.type))) + " payload of " +
+                               std::to_string(h.payload_bytes) + " bytes exceeds its limit of " +
+                               std::to_string(*max)};
     return h;
 }
 
 std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<const uint8_t> p) {
-    if (p.size() != h.payload_bytes) return DecodeError{ErrorCode::kMalformed, "payload length differs from the header's"};
+    if (p.size() != h.payload_bytes)
+        return DecodeError{ErrorCode::kMalformed, "payload length differs from the header's"};
     Reader r(p);
     Message out;
     bool ok = true;
@@ -232,8 +265,10 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
         case MessageType::kHello: {
             Hello m;
             uint8_t role = 0;
-            ok = r.get(role) && r.str16(m.token, kMaxTokenBytes, "token") && r.str16(m.client_name, kMaxNameBytes, "client name");
-            if (ok && (role < 1 || role > 3)) ok = r.fail("unknown role " + std::to_string(role));
+            ok = r.get(role) && r.str16(m.token, kMaxTokenBytes, "token") &&
+                 r.str16(m.client_name, kMaxNameBytes, "client name");
+            if (ok && (role < 1 || role > 3))
+                ok = r.fail("unknown role " + std::to_string(role));
             m.role = Role(role);
             out = m;
             break;
@@ -247,11 +282,15 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
         case MessageType::kRegisterDisplay: {
             RegisterDisplay m;
             uint8_t f = 0, e = 0, mode = 0;
-            ok = r.get(m.eye_width) && r.get(m.eye_height) && r.get(m.fx) && r.get(m.fy) && r.get(m.cx) && r.get(m.cy) &&
-                 r.get(m.ipd_m) && r.get(f) && r.get(e) && r.get(mode);
-            if (ok && !valid_format(f)) ok = r.fail("unknown pixel format " + std::to_string(f));
-            if (ok && !valid_encoding(e)) ok = r.fail("unknown encoding " + std::to_string(e));
-            if (ok && mode > 1) ok = r.fail("unknown frame mode " + std::to_string(mode));
+            ok = r.get(m.eye_width) && r.get(m.eye_height) && r.get(m.fx) && r.get(m.fy) &&
+                 r.get(m.cx) && r.get(m.cy) && r.get(m.ipd_m) && r.get(f) && r.get(e) &&
+                 r.get(mode);
+            if (ok && !valid_format(f))
+                ok = r.fail("unknown pixel format " + std::to_string(f));
+            if (ok && !valid_encoding(e))
+                ok = r.fail("unknown encoding " + std::to_string(e));
+            if (ok && mode > 1)
+                ok = r.fail("unknown frame mode " + std::to_string(mode));
             m.format = PixelFormat(f);
             m.encoding = Encoding(e);
             m.mode = FrameMode(mode);
@@ -266,15 +305,20 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
             out = m;
             break;
         }
-        case MessageType::kFrameRequest: out = FrameRequest{}; break;
-        case MessageType::kStatsRequest: out = StatsRequest{}; break;
+        case MessageType::kFrameRequest:
+            out = FrameRequest{};
+            break;
+        case MessageType::kStatsRequest:
+            out = StatsRequest{};
+            break;
         case MessageType::kVdLayer: {
             VdLayer m;
             uint8_t f = 0, e = 0;
             uint32_t n = 0;
-            ok = r.get(m.frame_id) && r.get(m.pose_time_ns) && r.get(m.eye) && r.get(f) && r.get(e) && r.get(m.width) &&
-                 r.get(m.height) && r.get(n) && r.bytes(n, m.data);
-            if (ok && m.eye > 1) ok = r.fail("eye must be 0 (left) or 1 (right)");
+            ok = r.get(m.frame_id) && r.get(m.pose_time_ns) && r.get(m.eye) && r.get(f) &&
+                 r.get(e) && r.get(m.width) && r.get(m.height) && r.get(n) && r.bytes(n, m.data);
+            if (ok && m.eye > 1)
+                ok = r.fail("eye must be 0 (left) or 1 (right)");
             ok = ok && check_image(r, m.width, m.height, f, e, m.data.size());
             m.format = PixelFormat(f);
             m.encoding = Encoding(e);
@@ -285,8 +329,8 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
             ProjectorFrame m;
             uint8_t f = 0, e = 0;
             uint32_t n = 0;
-            ok = r.get(m.scene_version) && r.get(m.width) && r.get(m.height) && r.get(f) && r.get(e) && r.get(n) &&
-                 r.bytes(n, m.data);
+            ok = r.get(m.scene_version) && r.get(m.width) && r.get(m.height) && r.get(f) &&
+                 r.get(e) && r.get(n) && r.bytes(n, m.data);
             ok = ok && check_image(r, m.width, m.height, f, e, m.data.size());
             m.format = PixelFormat(f);
             m.encoding = Encoding(e);
@@ -331,47 +375,65 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
             out = m;
             break;
         }
-        default: return DecodeError{ErrorCode::kUnknownType, "unknown message type " + std::to_string(h.type)};
+        default:
+            return DecodeError{ErrorCode::kUnknownType,
+                               "unknown message type " + std::to_string(h.type)};
     }
-    if (ok) ok = r.done();
-    if (!ok) return DecodeError{ErrorCode::kMalformed, std::string(to_string(MessageType(h.type))) + ": " + r.error};
+    if (ok)
+        ok = r.done();
+    if (!ok)
+        return DecodeError{ErrorCode::kMalformed,
+                           std::string(to_string(MessageType(h.type))) + ": " + r.error};
     return out;
 }
 
-std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, Header* header_out) {
-    if (bytes.size() < kHeaderBytes) return DecodeError{ErrorCode::kMalformed, "frame shorter than its 16-byte header"};
+std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes,
+                                                Header* header_out) {
+    if (bytes.size() < kHeaderBytes)
+        return DecodeError{ErrorCode::kMalformed, "frame shorter than its 16-byte header"};
     auto h = decode_header(bytes.first(kHeaderBytes));
-    if (auto* e = std::get_if<DecodeError>(&h)) return *e;
+    if (auto* e = std::get_if<DecodeError>(&h))
+        return *e;
     const Header& hd = std::get<Header>(h);
-    if (header_out) *header_out = hd;
+    if (header_out)
+        *header_out = hd;
     if (bytes.size() - kHeaderBytes != hd.payload_bytes)
-        return DecodeError{ErrorCode::kMalformed, "frame length differs from 16 + the header's payload length"};
+        return DecodeError{ErrorCode::kMalformed,
+                           "frame length differs from 16 + the header's payload length"};
     return decode_payload(hd, bytes.subspan(kHeaderBytes));
 }
 
 std::optional<std::string> validate_pose(const Pose& p) {
     for (double d : p.position_m)
-        if (!std::isfinite(d)) return "pose position has a non-finite component";
+        if (!std::isfinite(d))
+            return "pose position has a non-finite component";
     double n2 = 0;
     for (double d : p.orientation_wxyz) {
-        if (!std::isfinite(d)) return "pose quaternion has a non-finite component";
+        if (!std::isfinite(d))
+            return "pose quaternion has a non-finite component";
         n2 += d * d;
     }
     if (std::abs(std::sqrt(n2) - 1.0) > kUnitQuaternionTolerance)
         return "pose quaternion is not unit length (norm " + std::to_string(std::sqrt(n2)) + ")";
     for (double d : p.position_m)
-        if (std::abs(d) > 1e4) return "pose position is more than 10 km from the origin";
+        if (std::abs(d) > 1e4)
+            return "pose position is more than 10 km from the origin";
     return std::nullopt;
 }
 
 std::optional<std::string> validate_display(const RegisterDisplay& d) {
-    if (d.eye_width < 1 || d.eye_height < 1 || d.eye_width > kMaxEyePixels || d.eye_height > kMaxEyePixels)
-        return "eye resolution " + std::to_string(d.eye_width) + "x" + std::to_string(d.eye_height) + " is outside 1..8192";
+    if (d.eye_width < 1 || d.eye_height < 1 || d.eye_width > kMaxEyePixels ||
+        d.eye_height > kMaxEyePixels)
+        return "eye resolution " + std::to_string(d.eye_width) + "x" +
+               std::to_string(d.eye_height) + " is outside 1..8192";
     for (double v : {d.fx, d.fy})
-        if (!std::isfinite(v) || v <= 0 || v > 1e6) return "focal length must be finite and in (0, 1e6] pixels";
+        if (!std::isfinite(v) || v <= 0 || v > 1e6)
+            return "focal length must be finite and in (0, 1e6] pixels";
     for (double v : {d.cx, d.cy})
-        if (!std::isfinite(v) || std::abs(v) > 1e5) return "principal point must be finite and within 1e5 pixels";
-    if (!std::isfinite(d.ipd_m) || d.ipd_m < 0 || d.ipd_m > 0.2) return "ipd_m must lie in [0, 0.2]";
+        if (!std::isfinite(v) || std::abs(v) > 1e5)
+            return "principal point must be finite and within 1e5 pixels";
+    if (!std::isfinite(d.ipd_m) || d.ipd_m < 0 || d.ipd_m > 0.2)
+        return "ipd_m must lie in [0, 0.2]";
     return std::nullopt;
 }
 

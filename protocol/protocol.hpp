@@ -18,7 +18,7 @@ inline constexpr uint16_t kVersion = 1;
 inline constexpr size_t kHeaderBytes = 16;
 inline constexpr size_t kMaxTokenBytes = 256;
 inline constexpr size_t kMaxNameBytes = 64;
-inline constexpr uint32_t kMaxEyePixels = 8192;     // per side
+inline constexpr uint32_t kMaxEyePixels = 8192;           // per side
 inline constexpr double kUnitQuaternionTolerance = 1e-3;  // | |q| - 1 | above this is rejected
 
 enum class MessageType : uint16_t {
@@ -41,13 +41,13 @@ enum class ErrorCode : uint16_t {
     kBadVersion = 2,
     kUnknownType = 3,
     kTooLarge = 4,
-    kMalformed = 5,       // payload does not decode: short, trailing bytes, bad field value
-    kUnauthorized = 6,    // wrong token, or a message before Hello
-    kForbidden = 7,       // allowed to others only (SceneUpdate from a non-admin)
-    kOutOfOrder = 8,      // e.g. Pose before RegisterDisplay
-    kInvalidPose = 9,     // NaN, infinite, non-unit quaternion
-    kInvalidDisplay = 10, // absurd resolution or intrinsics
-    kSceneRejected = 11,  // SceneUpdate JSON did not parse into a scene
+    kMalformed = 5,        // payload does not decode: short, trailing bytes, bad field value
+    kUnauthorized = 6,     // wrong token, or a message before Hello
+    kForbidden = 7,        // allowed to others only (SceneUpdate from a non-admin)
+    kOutOfOrder = 8,       // e.g. Pose before RegisterDisplay
+    kInvalidPose = 9,      // NaN, infinite, non-unit quaternion
+    kInvalidDisplay = 10,  // absurd resolution or intrinsics
+    kSceneRejected = 11,   // SceneUpdate JSON did not parse into a scene
     kServerBusy = 12,
     kInternal = 13,
 };
@@ -72,15 +72,16 @@ struct Welcome {
 };
 struct RegisterDisplay {
     uint32_t eye_width = 0, eye_height = 0;  // pixels, 1..8192
-    double fx = 0, fy = 0, cx = 0, cy = 0;   // per-eye pinhole intrinsics, pixels (OpenCV convention)
-    double ipd_m = 0.063;                    // metres, 0..0.2
+    double fx = 0, fy = 0, cx = 0,
+           cy = 0;         // per-eye pinhole intrinsics, pixels (OpenCV convention)
+    double ipd_m = 0.063;  // metres, 0..0.2
     PixelFormat format = PixelFormat::kRgba8;
     Encoding encoding = Encoding::kRaw;
     FrameMode mode = FrameMode::kOnRequest;
 };
 struct Pose {
-    uint64_t client_time_ns = 0;               // the client's clock when the pose was sampled
-    std::array<double, 3> position_m{};        // world frame, metres
+    uint64_t client_time_ns = 0;         // the client's clock when the pose was sampled
+    std::array<double, 3> position_m{};  // world frame, metres
     std::array<double, 4> orientation_wxyz{1, 0, 0, 0};  // unit quaternion, world from head
 };
 struct FrameRequest {};
@@ -122,8 +123,9 @@ struct Bye {
     uint16_t reason = 0;  // 0 normal
 };
 
-using Message = std::variant<Hello, Welcome, RegisterDisplay, Pose, FrameRequest, VdLayer, ProjectorFrame,
-                             SceneUpdate, StatsRequest, Stats, Ping, Pong, Error, Bye>;
+using Message =
+    std::variant<Hello, Welcome, RegisterDisplay, Pose, FrameRequest, VdLayer, ProjectorFrame,
+                 SceneUpdate, StatsRequest, Stats, Ping, Pong, Error, Bye>;
 MessageType type_of(const Message& m);
 
 // A decoding failure: the code to send back and a sentence saying what was wrong.
@@ -141,10 +143,12 @@ std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes);
 
 // Decodes a payload of a validated header. The payload must be exactly header.payload_bytes
 // long; trailing bytes, short fields and bad field values are errors.
-std::variant<Message, DecodeError> decode_payload(const Header& header, std::span<const uint8_t> payload);
+std::variant<Message, DecodeError> decode_payload(const Header& header,
+                                                  std::span<const uint8_t> payload);
 
 // Decodes one whole frame; `bytes` must hold exactly one frame.
-std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, Header* header_out = nullptr);
+std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes,
+                                                Header* header_out = nullptr);
 
 // Field checks shared by both ends.
 std::optional<std::string> validate_pose(const Pose& p);

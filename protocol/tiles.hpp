@@ -16,11 +16,13 @@ inline constexpr uint16_t kDefaultTileSize = 32;
 
 // Encodes raw pixel bytes (width x height x bytes_per_pixel, rows top to bottom).
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t width, uint32_t height,
-                                  uint32_t bytes_per_pixel, TileCodec codec, uint16_t tile_size = kDefaultTileSize);
+                                  uint32_t bytes_per_pixel, TileCodec codec,
+                                  uint16_t tile_size = kDefaultTileSize);
 
 // Decodes to raw pixel bytes, or an error sentence; never reads or writes out of bounds,
 // whatever the input.
-std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uint8_t> data, uint32_t width,
-                                                             uint32_t height, uint32_t bytes_per_pixel);
+std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uint8_t> data,
+                                                             uint32_t width, uint32_t height,
+                                                             uint32_t bytes_per_pixel);
 
 }  // namespace hs::protocol

@@ -8,19 +8,20 @@
 
 namespace {
 void usage(FILE* f) {
-    std::fprintf(f,
-                 "usage: hysar <command> [options]\n"
-                 "\n"
-                 "commands:\n"
-                 "  render   render the projector frame and the VD layers of the Fig. 7 viewpoints,\n"
-                 "           compare them with the double-precision reference, write a contact sheet\n"
-                 "           (hysar render --help)\n"
-                 "  serve    the render server: one projector frame per scene version, VD layers per\n"
-                 "           headset pose, over the protocol of protocol/PROTOCOL.md (hysar serve --help)\n"
-                 "  bench    measured costs: hysar bench encoding (hysar bench --help)\n"
-                 "\n"
-                 "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
-                 "turns on the Vulkan validation layer.\n");
+    std::fprintf(
+        f,
+        "usage: hysar <command> [options]\n"
+        "\n"
+        "commands:\n"
+        "  render   render the projector frame and the VD layers of the Fig. 7 viewpoints,\n"
+        "           compare them with the double-precision reference, write a contact sheet\n"
+        "           (hysar render --help)\n"
+        "  serve    the render server: one projector frame per scene version, VD layers per\n"
+        "           headset pose, over the protocol of protocol/PROTOCOL.md (hysar serve --help)\n"
+        "  bench    measured costs: hysar bench encoding (hysar bench --help)\n"
+        "\n"
+        "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
+        "turns on the Vulkan validation layer.\n");
 }
 }  // namespace
 
@@ -31,9 +32,12 @@ int main(int argc, char** argv) {
     }
     std::string cmd = argv[1];
     std::vector<std::string> args(argv + 2, argv + argc);
-    if (cmd == "render") return hs::cli::run_render(args);
-    if (cmd == "serve") return hs::cli::run_serve(args);
-    if (cmd == "bench") return hs::cli::run_bench(args);
+    if (cmd == "render")
+        return hs::cli::run_render(args);
+    if (cmd == "serve")
+        return hs::cli::run_serve(args);
+    if (cmd == "bench")
+        return hs::cli::run_bench(args);
     if (cmd == "--help" || cmd == "-h" || cmd == "help") {
         usage(stdout);
         return 0;

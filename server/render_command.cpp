@@ -47,7 +47,8 @@ const char* kRenderHelp =
     "  --no-exr         write no float EXR files\n"
     "\n"
     "writes DIR/projector.png (+.exr), DIR/vd/<model>_<angle>_<height>_<eye>.png (+.exr),\n"
-    "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the reference).\n";
+    "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the "
+    "reference).\n";
 
 struct Options {
     std::optional<fs::path> scene;
@@ -69,7 +70,8 @@ std::vector<std::string> split(const std::string& s) {
     std::stringstream ss(s);
     std::string item;
     while (std::getline(ss, item, ','))
-        if (!item.empty()) out.push_back(item);
+        if (!item.empty())
+            out.push_back(item);
     return out;
 }
 
@@ -77,10 +79,12 @@ Result<double> parse_number(const std::string& flag, const std::string& s) {
     try {
         size_t used = 0;
         double v = std::stod(s, &used);
-        if (used == s.size() && std::isfinite(v)) return v;
+        if (used == s.size() && std::isfinite(v))
+            return v;
     } catch (...) {
     }
-    return make_error(ErrorCode::kInvalidArgument, fmt::format("{}: '{}' is not a number", flag, s));
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: '{}' is not a number", flag, s));
 }
 
 Result<Options> parse(const std::vector<std::string>& args) {
@@ -88,39 +92,68 @@ Result<Options> parse(const std::vector<std::string>& args) {
     for (size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
         auto value = [&]() -> Result<std::string> {
-            if (i + 1 >= args.size()) return make_error(ErrorCode::kInvalidArgument, fmt::format("{} needs a value", a));
+            if (i + 1 >= args.size())
+                return make_error(ErrorCode::kInvalidArgument, fmt::format("{} needs a value", a));
             return args[++i];
         };
-        if (a == "--scene") { HS_ASSIGN_OR_RETURN(auto v, value()); o.scene = v; }
-        else if (a == "--out") { HS_ASSIGN_OR_RETURN(auto v, value()); o.out = v; }
-        else if (a == "--angles") {
+        if (a == "--scene") {
             HS_ASSIGN_OR_RETURN(auto v, value());
-            for (const auto& x : split(v)) { HS_ASSIGN_OR_RETURN(double d, parse_number(a, x)); o.angles.push_back(d); }
-            if (o.angles.empty()) return make_error(ErrorCode::kInvalidArgument, "--angles: empty list");
-        } else if (a == "--heights") { HS_ASSIGN_OR_RETURN(auto v, value()); o.heights = split(v); }
-        else if (a == "--model") { HS_ASSIGN_OR_RETURN(auto v, value()); o.models = split(v); }
-        else if (a == "--viewer") { HS_ASSIGN_OR_RETURN(o.viewer, value()); }
-        else if (a == "--format") {
+            o.scene = v;
+        } else if (a == "--out") {
             HS_ASSIGN_OR_RETURN(auto v, value());
-            if (v == "rgba16f") o.format = gpu::ColorFormat::kRgba16Float;
-            else if (v == "rgba32f") o.format = gpu::ColorFormat::kRgba32Float;
-            else if (v == "rgba8") o.format = gpu::ColorFormat::kRgba8Unorm;
-            else return make_error(ErrorCode::kInvalidArgument, fmt::format("--format: '{}' is not rgba16f, rgba32f or rgba8", v));
+            o.out = v;
+        } else if (a == "--angles") {
+            HS_ASSIGN_OR_RETURN(auto v, value());
+            for (const auto& x : split(v)) {
+                HS_ASSIGN_OR_RETURN(double d, parse_number(a, x));
+                o.angles.push_back(d);
+            }
+            if (o.angles.empty())
+                return make_error(ErrorCode::kInvalidArgument, "--angles: empty list");
+        } else if (a == "--heights") {
+            HS_ASSIGN_OR_RETURN(auto v, value());
+            o.heights = split(v);
+        } else if (a == "--model") {
+            HS_ASSIGN_OR_RETURN(auto v, value());
+            o.models = split(v);
+        } else if (a == "--viewer") {
+            HS_ASSIGN_OR_RETURN(o.viewer, value());
+        } else if (a == "--format") {
+            HS_ASSIGN_OR_RETURN(auto v, value());
+            if (v == "rgba16f")
+                o.format = gpu::ColorFormat::kRgba16Float;
+            else if (v == "rgba32f")
+                o.format = gpu::ColorFormat::kRgba32Float;
+            else if (v == "rgba8")
+                o.format = gpu::ColorFormat::kRgba8Unorm;
+            else
+                return make_error(
+                    ErrorCode::kInvalidArgument,
+                    fmt::format("--format: '{}' is not rgba16f, rgba32f or rgba8", v));
         } else if (a == "--device") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             o.device_set = true;
-            if (v == "auto") o.device = gpu::DevicePreference::kAuto;
-            else if (v == "cpu") o.device = gpu::DevicePreference::kCpu;
-            else if (v == "gpu") o.device = gpu::DevicePreference::kGpu;
-            else return make_error(ErrorCode::kInvalidArgument, fmt::format("--device: '{}' is not auto, cpu or gpu", v));
+            if (v == "auto")
+                o.device = gpu::DevicePreference::kAuto;
+            else if (v == "cpu")
+                o.device = gpu::DevicePreference::kCpu;
+            else if (v == "gpu")
+                o.device = gpu::DevicePreference::kGpu;
+            else
+                return make_error(ErrorCode::kInvalidArgument,
+                                  fmt::format("--device: '{}' is not auto, cpu or gpu", v));
         } else if (a == "--white") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             HS_ASSIGN_OR_RETURN(double w, parse_number(a, v));
-            if (!(w > 0)) return make_error(ErrorCode::kInvalidArgument, "--white must be > 0");
+            if (!(w > 0))
+                return make_error(ErrorCode::kInvalidArgument, "--white must be > 0");
             o.white = float(w);
-        } else if (a == "--no-reference") o.reference = false;
-        else if (a == "--no-exr") o.exr = false;
-        else return make_error(ErrorCode::kInvalidArgument, fmt::format("unknown option '{}'", a));
+        } else if (a == "--no-reference")
+            o.reference = false;
+        else if (a == "--no-exr")
+            o.exr = false;
+        else
+            return make_error(ErrorCode::kInvalidArgument, fmt::format("unknown option '{}'", a));
     }
     return o;
 }
@@ -130,14 +163,18 @@ struct ModelChoice {
     scene::Specular spec;
 };
 
-Result<std::vector<ModelChoice>> resolve_models(const scene::Scene& s, const std::vector<std::string>& names) {
+Result<std::vector<ModelChoice>> resolve_models(const scene::Scene& s,
+                                                const std::vector<std::string>& names) {
     std::vector<std::string> list = names;
     if (list.empty()) {
         for (const char* n : {"phong", "blinn-phong", "ward", "ward-aniso", "kajiya-kay"})
-            if (s.specular_presets.count(n)) list.push_back(n);
+            if (s.specular_presets.count(n))
+                list.push_back(n);
         for (const auto& [n, sp] : s.specular_presets)
-            if (std::find(list.begin(), list.end(), n) == list.end()) list.push_back(n);
-        if (list.empty()) list.push_back(scene::to_string(s.material.specular.model));
+            if (std::find(list.begin(), list.end(), n) == list.end())
+                list.push_back(n);
+        if (list.empty())
+            list.push_back(scene::to_string(s.material.specular.model));
     }
     std::vector<ModelChoice> out;
     for (const auto& n : list) {
@@ -146,7 +183,10 @@ Result<std::vector<ModelChoice>> resolve_models(const scene::Scene& s, const std
             continue;
         }
         auto model = scene::parse_specular_model(n);
-        if (!model) return make_error(ErrorCode::kInvalidArgument, fmt::format("--model: '{}' is neither a preset of the scene nor a model name", n));
+        if (!model)
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("--model: '{}' is neither a preset of the scene nor a model name", n));
         scene::Specular sp = s.material.specular;
         sp.model = model.value();
         out.push_back({n, sp});
@@ -154,18 +194,26 @@ Result<std::vector<ModelChoice>> resolve_models(const scene::Scene& s, const std
     return out;
 }
 
-std::string angle_tag(double a) { return fmt::format("{}{:03d}", a < 0 ? "m" : "p", int(std::lround(std::abs(a)))); }
+std::string angle_tag(double a) {
+    return fmt::format("{}{:03d}", a < 0 ? "m" : "p", int(std::lround(std::abs(a))));
+}
 
 json stats_json(const shading::ErrorStats& e) {
-    return json{{"rmse", e.rmse}, {"max_abs", e.max_abs}, {"interior_rmse", e.interior_rmse},
-                {"interior_max_abs", e.interior_max_abs}, {"reference_peak", e.reference_peak},
-                {"pixels", e.pixels}, {"interior_pixels", e.interior_pixels}, {"non_finite", e.non_finite}};
+    return json{{"rmse", e.rmse},
+                {"max_abs", e.max_abs},
+                {"interior_rmse", e.interior_rmse},
+                {"interior_max_abs", e.interior_max_abs},
+                {"reference_peak", e.reference_peak},
+                {"pixels", e.pixels},
+                {"interior_pixels", e.interior_pixels},
+                {"non_finite", e.non_finite}};
 }
 
 ImageRgba32f add_images(const ImageRgba32f& a, const ImageRgba32f& b) {
     ImageRgba32f r = a;
     for (size_t i = 0; i < r.pixels.size(); ++i)
-        if (i % 4 != 3) r.pixels[i] += b.pixels[i];
+        if (i % 4 != 3)
+            r.pixels[i] += b.pixels[i];
     return r;
 }
 
@@ -181,13 +229,18 @@ Result<void> run(const Options& o) {
     } else {
         s = scene::default_scene();
     }
-    const scene::ViewerProfile* viewer = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
-    if (!viewer) return make_error(ErrorCode::kInvalidArgument, fmt::format("--viewer: the scene has no viewer '{}'", o.viewer));
+    const scene::ViewerProfile* viewer =
+        o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
+    if (!viewer)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("--viewer: the scene has no viewer '{}'", o.viewer));
     HS_ASSIGN_OR_RETURN(auto models, resolve_models(s, o.models));
     std::vector<double> angles = o.angles.empty() ? s.viewing.angles_deg : o.angles;
     std::vector<std::pair<std::string, double>> heights;
-    for (const auto& h : o.heights.empty() ? std::vector<std::string>{s.viewing.default_height} : o.heights) {
-        if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end()) heights.push_back(*it);
+    for (const auto& h :
+         o.heights.empty() ? std::vector<std::string>{s.viewing.default_height} : o.heights) {
+        if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end())
+            heights.push_back(*it);
         else {
             HS_ASSIGN_OR_RETURN(double m, parse_number("--heights", h));
             heights.push_back({fmt::format("{:.2f}m", m), m});
@@ -196,17 +249,21 @@ Result<void> run(const Options& o) {
 
     std::error_code ec;
     fs::create_directories(o.out / "vd", ec);
-    if (ec) return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}", o.out.string(), ec.message()));
+    if (ec)
+        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}",
+                                                      o.out.string(), ec.message()));
 
     gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
-    if (o.device_set) di.preference = o.device;
+    if (o.device_set)
+        di.preference = o.device;
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(di));
     render::RendererCreateInfo ri;
     ri.format = o.format;
     HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(*device, s, ri));
-    log::info("device: {}; scene: {}; prop mesh: {} triangles; viewer: {} ({}x{} per eye); format: {}",
-              device->name(), s.name, renderer->mesh().indices.size() / 3, viewer->name, viewer->eye_width,
-              viewer->eye_height, gpu::to_string(o.format));
+    log::info(
+        "device: {}; scene: {}; prop mesh: {} triangles; viewer: {} ({}x{} per eye); format: {}",
+        device->name(), s.name, renderer->mesh().indices.size() / 3, viewer->name,
+        viewer->eye_width, viewer->eye_height, gpu::to_string(o.format));
 
     json report;
     report["scene"] = s.name;
@@ -220,22 +277,30 @@ Result<void> run(const Options& o) {
 
     auto write_pair = [&](const fs::path& stem, const ImageRgba32f& img) -> Result<void> {
         HS_TRY(write_png(fs::path(stem).concat(".png"), tonemap_srgb8(img, o.white)));
-        if (o.exr) HS_TRY(write_exr(fs::path(stem).concat(".exr"), img));
+        if (o.exr)
+            HS_TRY(write_exr(fs::path(stem).concat(".exr"), img));
         return {};
     };
 
     // 1. The projector (VI) frame, rendered once.
     HS_ASSIGN_OR_RETURN(auto proj, renderer->render_projector());
     HS_TRY(write_pair(o.out / "projector", proj.image));
-    json pj{{"file", "projector.png"}, {"kind", "projector-vi"}, {"width", proj.image.width},
-            {"height", proj.image.height}, {"render_ms", proj.report.render_ms}, {"effects", proj.report.effects}};
+    json pj{{"file", "projector.png"},
+            {"kind", "projector-vi"},
+            {"width", proj.image.width},
+            {"height", proj.image.height},
+            {"render_ms", proj.report.render_ms},
+            {"effects", proj.report.effects}};
     if (o.reference) {
         auto ref = shading::reference_projector(s);
-        if (ref) pj["error"] = stats_json(shading::compare_images(proj.image, ref.value(), {}, 0.0));
-        else pj["error"] = ref.error().message;
+        if (ref)
+            pj["error"] = stats_json(shading::compare_images(proj.image, ref.value(), {}, 0.0));
+        else
+            pj["error"] = ref.error().message;
     }
     images.push_back(pj);
-    log::info("projector frame {}x{}: {:.1f} ms", proj.image.width, proj.image.height, proj.report.render_ms);
+    log::info("projector frame {}x{}: {:.1f} ms", proj.image.width, proj.image.height,
+              proj.report.render_ms);
 
     // 2. VD layers per model, height, angle and eye; 3. the contact sheet (right eye).
     const scene::Intrinsics k = scene::eye_intrinsics(*viewer);
@@ -243,10 +308,12 @@ Result<void> run(const Options& o) {
     const int cell_w = int(viewer->eye_width / factor), cell_h = int(viewer->eye_height / factor);
     const int label_w = 200, header_h = 28, gap = 4;
     const size_t rows_per_height = models.size() + 1;
-    ImageRgba8 sheet = make_canvas(uint32_t(label_w + angles.size() * (cell_w + gap)),
-                                   uint32_t(header_h + heights.size() * rows_per_height * (cell_h + gap)), 24);
+    ImageRgba8 sheet =
+        make_canvas(uint32_t(label_w + angles.size() * (cell_w + gap)),
+                    uint32_t(header_h + heights.size() * rows_per_height * (cell_h + gap)), 24);
     for (size_t a = 0; a < angles.size(); ++a)
-        draw_text(sheet, label_w + int(a) * (cell_w + gap) + cell_w / 2 - 30, 6, fmt::format("{:+.0f} deg", angles[a]), 2, 230, 230, 230);
+        draw_text(sheet, label_w + int(a) * (cell_w + gap) + cell_w / 2 - 30, 6,
+                  fmt::format("{:+.0f} deg", angles[a]), 2, 230, 230, 230);
 
     const size_t total = models.size() * heights.size() * angles.size() * 2;
     size_t done = 0;
@@ -254,14 +321,16 @@ Result<void> run(const Options& o) {
         const auto& [hname, hm] = heights[hi];
         const int row0 = header_h + int(hi * rows_per_height) * (cell_h + gap);
         draw_text(sheet, 6, row0 + cell_h / 2 - 14, "#0 projector", 2, 230, 230, 230);
-        draw_text(sheet, 6, row0 + cell_h / 2 + 4, fmt::format("(VI) h={}", hname), 2, 160, 160, 160);
+        draw_text(sheet, 6, row0 + cell_h / 2 + 4, fmt::format("(VI) h={}", hname), 2, 160, 160,
+                  160);
         for (size_t mi = 0; mi < models.size(); ++mi)
             draw_text(sheet, 6, row0 + int(mi + 1) * (cell_h + gap) + cell_h / 2 - 7,
                       fmt::format("#{} {}", mi + 1, models[mi].name), 2, 230, 230, 230);
         for (size_t ai = 0; ai < angles.size(); ++ai) {
             HS_ASSIGN_OR_RETURN(scene::Pose head, scene::viewing_pose(s.viewing, angles[ai], hm));
             const auto eyes = scene::eye_poses(head, viewer->ipd_m);
-            // What the right eye sees of the projected VI: the row-0 cell and the base of the others.
+            // What the right eye sees of the projected VI: the row-0 cell and the base of the
+            // others.
             HS_ASSIGN_OR_RETURN(auto vi_eye, renderer->render_eye_diffuse(k, eyes[1]));
             const int x = label_w + int(ai) * (cell_w + gap);
             blit(sheet, downscale(tonemap_srgb8(vi_eye.image, o.white), factor), x, row0);
@@ -269,32 +338,49 @@ Result<void> run(const Options& o) {
                 for (int e = 0; e < 2; ++e) {
                     const char* eye_name = e == 0 ? "left" : "right";
                     HS_ASSIGN_OR_RETURN(auto vd, renderer->render_eye(models[mi].spec, k, eyes[e]));
-                    const std::string stem = fmt::format("{}_{}_{}_{}", models[mi].name, angle_tag(angles[ai]), hname, eye_name);
+                    const std::string stem = fmt::format("{}_{}_{}_{}", models[mi].name,
+                                                         angle_tag(angles[ai]), hname, eye_name);
                     HS_TRY(write_pair(o.out / "vd" / stem, vd.image));
-                    json ij{{"file", "vd/" + stem + ".png"}, {"kind", "viewer-vd"}, {"model", models[mi].name},
-                            {"specular_model", scene::to_string(models[mi].spec.model)}, {"angle_deg", angles[ai]},
-                            {"height", hname}, {"height_m", hm}, {"eye", eye_name}, {"width", k.width}, {"height_px", k.height},
-                            {"render_ms", vd.report.render_ms}, {"pass_ran", vd.report.ran}, {"effects", vd.report.effects}};
-                    if (!vd.report.ran) ij["skipped_because"] = vd.report.skipped_because;
+                    json ij{{"file", "vd/" + stem + ".png"},
+                            {"kind", "viewer-vd"},
+                            {"model", models[mi].name},
+                            {"specular_model", scene::to_string(models[mi].spec.model)},
+                            {"angle_deg", angles[ai]},
+                            {"height", hname},
+                            {"height_m", hm},
+                            {"eye", eye_name},
+                            {"width", k.width},
+                            {"height_px", k.height},
+                            {"render_ms", vd.report.render_ms},
+                            {"pass_ran", vd.report.ran},
+                            {"effects", vd.report.effects}};
+                    if (!vd.report.ran)
+                        ij["skipped_because"] = vd.report.skipped_because;
                     std::string err_text = "";
                     if (o.reference) {
                         std::vector<float> ndv;
                         auto ref = shading::reference_viewer(s, models[mi].spec, k, eyes[e], &ndv);
                         if (ref) {
-                            auto st = shading::compare_images(vd.image, ref.value(), ndv, kInteriorMinNdotV);
+                            auto st = shading::compare_images(vd.image, ref.value(), ndv,
+                                                              kInteriorMinNdotV);
                             ij["error"] = stats_json(st);
-                            err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}", st.rmse, st.interior_rmse, st.max_abs);
+                            err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}",
+                                                   st.rmse, st.interior_rmse, st.max_abs);
                         } else {
                             ij["error"] = ref.error().message;
                         }
                     }
                     images.push_back(ij);
                     ++done;
-                    log::info("[{}/{}] {} {:+.0f} deg h={} {}: {:.1f} ms{}", done, total, models[mi].name, angles[ai], hname,
-                              eye_name, vd.report.render_ms, err_text);
+                    log::info("[{}/{}] {} {:+.0f} deg h={} {}: {:.1f} ms{}", done, total,
+                              models[mi].name, angles[ai], hname, eye_name, vd.report.render_ms,
+                              err_text);
                     if (e == 1) {
                         const int y = row0 + int(mi + 1) * (cell_h + gap);
-                        blit(sheet, downscale(tonemap_srgb8(add_images(vi_eye.image, vd.image), o.white), factor), x, y);
+                        blit(sheet,
+                             downscale(tonemap_srgb8(add_images(vi_eye.image, vd.image), o.white),
+                                       factor),
+                             x, y);
                     }
                 }
             }
@@ -304,12 +390,14 @@ Result<void> run(const Options& o) {
     report["images"] = images;
     report["projector_renders"] = renderer->projector_render_count();
     report["pipelines_built"] = renderer->pipelines_built();
-    report["total_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    report["total_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     std::ofstream(o.out / "render.json") << report.dump(2) << "\n";
     if (device->validation_enabled() && device->validation_message_count() > 0)
-        return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)", device->validation_message_count()));
-    std::printf("wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n", o.out.c_str(), done,
-                report["total_s"].get<double>());
+        return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
+                                                          device->validation_message_count()));
+    std::printf("wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n",
+                o.out.c_str(), done, report["total_s"].get<double>());
     return {};
 }
 

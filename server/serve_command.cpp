@@ -37,7 +37,9 @@ std::string random_token() {
 }
 
 std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) { g_stop.store(true); }
+extern "C" void on_signal(int) {
+    g_stop.store(true);
+}
 
 }  // namespace
 
@@ -48,7 +50,8 @@ int run_serve(const std::vector<std::string>& args) {
     for (size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
         auto value = [&]() -> std::optional<std::string> {
-            if (i + 1 >= args.size()) return std::nullopt;
+            if (i + 1 >= args.size())
+                return std::nullopt;
             return args[++i];
         };
         std::optional<std::string> v;
@@ -56,7 +59,8 @@ int run_serve(const std::vector<std::string>& args) {
             std::fputs(kServeHelp, stdout);
             return 0;
         }
-        if (a != "--scene" && a != "--listen" && a != "--unix" && a != "--token-file" && a != "--device" && a != "--stats-file") {
+        if (a != "--scene" && a != "--listen" && a != "--unix" && a != "--token-file" &&
+            a != "--device" && a != "--stats-file") {
             std::fprintf(stderr, "hysar serve: unknown option '%s'\n\n%s", a.c_str(), kServeHelp);
             return 2;
         }
@@ -64,27 +68,37 @@ int run_serve(const std::vector<std::string>& args) {
             std::fprintf(stderr, "hysar serve: %s needs a value\n", a.c_str());
             return 2;
         }
-        if (a == "--scene") scene_path = v;
-        else if (a == "--unix") info.unix_path = *v;
-        else if (a == "--token-file") token_file = v;
-        else if (a == "--stats-file") stats_file = v;
+        if (a == "--scene")
+            scene_path = v;
+        else if (a == "--unix")
+            info.unix_path = *v;
+        else if (a == "--token-file")
+            token_file = v;
+        else if (a == "--stats-file")
+            stats_file = v;
         else if (a == "--device") {
-            if (*v == "cpu") di.preference = gpu::DevicePreference::kCpu;
-            else if (*v == "gpu") di.preference = gpu::DevicePreference::kGpu;
-            else if (*v == "auto") di.preference = gpu::DevicePreference::kAuto;
+            if (*v == "cpu")
+                di.preference = gpu::DevicePreference::kCpu;
+            else if (*v == "gpu")
+                di.preference = gpu::DevicePreference::kGpu;
+            else if (*v == "auto")
+                di.preference = gpu::DevicePreference::kAuto;
             else {
-                std::fprintf(stderr, "hysar serve: --device: '%s' is not auto, cpu or gpu\n", v->c_str());
+                std::fprintf(stderr, "hysar serve: --device: '%s' is not auto, cpu or gpu\n",
+                             v->c_str());
                 return 2;
             }
         } else if (a == "--listen") {
             auto colon = v->rfind(':');
             int port = -1;
             try {
-                if (colon != std::string::npos) port = std::stoi(v->substr(colon + 1));
+                if (colon != std::string::npos)
+                    port = std::stoi(v->substr(colon + 1));
             } catch (...) {
             }
             if (colon == std::string::npos || port < 0 || port > 65535) {
-                std::fprintf(stderr, "hysar serve: --listen: expected HOST:PORT, got '%s'\n", v->c_str());
+                std::fprintf(stderr, "hysar serve: --listen: expected HOST:PORT, got '%s'\n",
+                             v->c_str());
                 return 2;
             }
             info.host = v->substr(0, colon);
@@ -106,11 +120,13 @@ int run_serve(const std::vector<std::string>& args) {
         std::ifstream in(*token_file);
         std::getline(in, info.token);
         if (!in && info.token.empty()) {
-            std::fprintf(stderr, "hysar serve: %s: cannot read the token file\n", token_file->c_str());
+            std::fprintf(stderr, "hysar serve: %s: cannot read the token file\n",
+                         token_file->c_str());
             return 1;
         }
         if (info.token.empty()) {
-            std::fprintf(stderr, "hysar serve: %s: the token file's first line is empty\n", token_file->c_str());
+            std::fprintf(stderr, "hysar serve: %s: the token file's first line is empty\n",
+                         token_file->c_str());
             return 1;
         }
     } else {
@@ -127,8 +143,10 @@ int run_serve(const std::vector<std::string>& args) {
         std::fprintf(stderr, "hysar serve: %s\n", server.error().message.c_str());
         return 1;
     }
-    std::printf("serving '%s' on %s:%u%s (device: %s)\n", s.name.c_str(), info.host.c_str(), server.value()->port(),
-                info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(), device.value()->name().c_str());
+    std::printf("serving '%s' on %s:%u%s (device: %s)\n", s.name.c_str(), info.host.c_str(),
+                server.value()->port(),
+                info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
+                device.value()->name().c_str());
     std::fflush(stdout);
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
@@ -142,8 +160,10 @@ int run_serve(const std::vector<std::string>& args) {
     g_stop.store(true);
     watcher.join();
     auto stats = srv.stats();
-    if (stats_file) std::ofstream(*stats_file) << stats.dump(2) << "\n";
-    std::printf("stopped: %llu projector render(s)\n", (unsigned long long)stats["projector_renders"].get<uint64_t>());
+    if (stats_file)
+        std::ofstream(*stats_file) << stats.dump(2) << "\n";
+    std::printf("stopped: %llu projector render(s)\n",
+                (unsigned long long)stats["projector_renders"].get<uint64_t>());
     return 0;
 }
 

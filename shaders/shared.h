@@ -21,19 +21,22 @@ using uint = uint32_t;
 #define HS_PROBE_LOCAL_SIZE 64
 
 // Specialization constant ids (gpu/shared_layout.hpp mirrors them as an enum).
-#define HS_SC_PASS_KIND 0      // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission)
-#define HS_SC_SPEC_MODEL 1     // scene::SpecularModel: 0 none, 1 phong, 2 blinn-phong, 3 ward, 4 kajiya-kay
-#define HS_SC_EMISSION 2       // bool: add the material's emission
-#define HS_SC_POINT_FALLOFF 3  // bool: 1/d^2 for point lights
-#define HS_SC_NUM_LIGHTS 4     // int: number of lights read from the scene block
-#define HS_SC_OUTPUT_MAX 5     // float: clamp of written radiance (65504 for 16-bit float targets)
-#define HS_SC_ANISOTROPIC 6    // bool: Ward with alpha_x != alpha_y (needs the tangent frame)
-#define HS_SC_MESH_TANGENT 7   // bool: the tangent comes from the mesh, not from tangent_axis
-#define HS_SC_ALBEDO_TEXTURE 8 // bool: albedo = colour * texture(uv)
+#define HS_SC_PASS_KIND \
+    0  // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission)
+#define HS_SC_SPEC_MODEL \
+    1  // scene::SpecularModel: 0 none, 1 phong, 2 blinn-phong, 3 ward, 4 kajiya-kay
+#define HS_SC_EMISSION 2        // bool: add the material's emission
+#define HS_SC_POINT_FALLOFF 3   // bool: 1/d^2 for point lights
+#define HS_SC_NUM_LIGHTS 4      // int: number of lights read from the scene block
+#define HS_SC_OUTPUT_MAX 5      // float: clamp of written radiance (65504 for 16-bit float targets)
+#define HS_SC_ANISOTROPIC 6     // bool: Ward with alpha_x != alpha_y (needs the tangent frame)
+#define HS_SC_MESH_TANGENT 7    // bool: the tangent comes from the mesh, not from tangent_axis
+#define HS_SC_ALBEDO_TEXTURE 8  // bool: albedo = colour * texture(uv)
 
 struct GpuLight {
-    vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light; w: 1 point, 0 directional
-    vec4 irradiance;             // rgb: colour * intensity (W/m^2 at normal incidence, or W/sr for points)
+    vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light;
+                                 // w: 1 point, 0 directional
+    vec4 irradiance;  // rgb: colour * intensity (W/m^2 at normal incidence, or W/sr for points)
 };
 
 struct GpuScene {
@@ -52,10 +55,10 @@ struct GpuPush {
 
 // One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).
 struct GpuProbeCase {
-    vec4 n;  // xyz unit normal
-    vec4 l;  // xyz unit direction to the light
-    vec4 v;  // xyz unit direction to the viewer
-    vec4 t;  // xyz tangent axis (projected to the plane of n in the shader)
+    vec4 n;       // xyz unit normal
+    vec4 l;       // xyz unit direction to the light
+    vec4 v;       // xyz unit direction to the viewer
+    vec4 t;       // xyz tangent axis (projected to the plane of n in the shader)
     vec4 params;  // x exponent, y alpha_x, z alpha_y
 };
 struct GpuProbeResult {

@@ -6,9 +6,9 @@ namespace hs::detail {
 [[noreturn]] void check_failed(const char* file, int line, const char* expr, const char* msg);
 }
 
-#define HS_CHECK(cond, msg)                                           \
-    do {                                                              \
-        if (!(cond)) [[unlikely]] {                                   \
+#define HS_CHECK(cond, msg)                                             \
+    do {                                                                \
+        if (!(cond)) [[unlikely]] {                                     \
             ::hs::detail::check_failed(__FILE__, __LINE__, #cond, msg); \
-        }                                                             \
+        }                                                               \
     } while (0)

@@ -13,11 +13,15 @@ void fill_rect(ImageRgba8& img, int x, int y, int w, int h, uint8_t r, uint8_t g
     for (int yy = y0; yy < y1; ++yy)
         for (int xx = x0; xx < x1; ++xx) {
             uint8_t* p = &img.pixels[(size_t(yy) * img.width + xx) * 4];
-            p[0] = r; p[1] = g; p[2] = b; p[3] = 255;
+            p[0] = r;
+            p[1] = g;
+            p[2] = b;
+            p[3] = 255;
         }
 }
 
-void draw_text(ImageRgba8& img, int x, int y, const std::string& text, int scale, uint8_t r, uint8_t g, uint8_t b) {
+void draw_text(ImageRgba8& img, int x, int y, const std::string& text, int scale, uint8_t r,
+               uint8_t g, uint8_t b) {
     // stb_easy_font emits axis-aligned quads of 4 vertices (x, y, z floats + 4 colour bytes).
     std::vector<char> buf(std::max<size_t>(text.size() * 300, 1024));
     std::string t = text;
@@ -31,7 +35,8 @@ void draw_text(ImageRgba8& img, int x, int y, const std::string& text, int scale
 }
 
 ImageRgba8 downscale(const ImageRgba8& img, uint32_t f) {
-    if (f <= 1) return img;
+    if (f <= 1)
+        return img;
     ImageRgba8 out{img.width / f, img.height / f, {}};
     out.pixels.resize(size_t(out.width) * out.height * 4);
     for (uint32_t y = 0; y < out.height; ++y)

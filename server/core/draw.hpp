@@ -8,7 +8,8 @@
 namespace hs {
 
 // Draws `text` with its top-left at (x, y), each font pixel `scale` x `scale` image pixels.
-void draw_text(ImageRgba8& image, int x, int y, const std::string& text, int scale, uint8_t r, uint8_t g, uint8_t b);
+void draw_text(ImageRgba8& image, int x, int y, const std::string& text, int scale, uint8_t r,
+               uint8_t g, uint8_t b);
 
 // Fills a rectangle, clipped to the image.
 void fill_rect(ImageRgba8& image, int x, int y, int w, int h, uint8_t r, uint8_t g, uint8_t b);

@@ -39,11 +39,13 @@ ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white) {
 
 Result<void> write_png(const std::filesystem::path& path, const ImageRgba8& image) {
     if (image.width == 0 || image.height == 0) {
-        return make_error(ErrorCode::kInvalidArgument, fmt::format("{}: refusing to write an empty image", path.string()));
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{}: refusing to write an empty image", path.string()));
     }
     int ok = stbi_write_png(path.c_str(), int(image.width), int(image.height), 4,
                             image.pixels.data(), int(image.width * 4));
-    if (!ok) return make_error(ErrorCode::kIo, fmt::format("{}: could not write PNG", path.string()));
+    if (!ok)
+        return make_error(ErrorCode::kIo, fmt::format("{}: could not write PNG", path.string()));
     return {};
 }
 
@@ -73,7 +75,8 @@ Result<void> write_exr(const std::filesystem::path& path, const ImageRgba32f& im
         file.setFrameBuffer(fb);
         file.writePixels(int(image.height));
     } catch (const std::exception& e) {
-        return make_error(ErrorCode::kIo, fmt::format("{}: could not write EXR: {}", path.string(), e.what()));
+        return make_error(ErrorCode::kIo,
+                          fmt::format("{}: could not write EXR: {}", path.string(), e.what()));
     }
     return {};
 }
@@ -97,17 +100,20 @@ Result<ImageRgba32f> read_exr(const std::filesystem::path& path) {
         for (size_t i = 3; i < image.pixels.size(); i += 4) image.pixels[i] = 1.0f;
         return image;
     } catch (const std::exception& e) {
-        return make_error(ErrorCode::kIo, fmt::format("{}: could not read EXR: {}", path.string(), e.what()));
+        return make_error(ErrorCode::kIo,
+                          fmt::format("{}: could not read EXR: {}", path.string(), e.what()));
     }
 }
 
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x0, int y0) {
     for (uint32_t y = 0; y < tile.height; ++y) {
         int cy = y0 + int(y);
-        if (cy < 0 || cy >= int(canvas.height)) continue;
+        if (cy < 0 || cy >= int(canvas.height))
+            continue;
         for (uint32_t x = 0; x < tile.width; ++x) {
             int cx = x0 + int(x);
-            if (cx < 0 || cx >= int(canvas.width)) continue;
+            if (cx < 0 || cx >= int(canvas.width))
+                continue;
             std::memcpy(&canvas.pixels[(size_t(cy) * canvas.width + cx) * 4],
                         &tile.pixels[(size_t(y) * tile.width + x) * 4], 4);
         }

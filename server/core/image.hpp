@@ -27,7 +27,10 @@ struct ImageRgba32f {
     }
     void set(uint32_t x, uint32_t y, glm::vec4 v) {
         float* p = &pixels[index(x, y)];
-        p[0] = v.r; p[1] = v.g; p[2] = v.b; p[3] = v.a;
+        p[0] = v.r;
+        p[1] = v.g;
+        p[2] = v.b;
+        p[3] = v.a;
     }
     bool empty() const { return width == 0 || height == 0; }
 };

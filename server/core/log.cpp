@@ -12,12 +12,18 @@ namespace hs {
 
 const char* to_string(ErrorCode code) {
     switch (code) {
-        case ErrorCode::kInvalidArgument: return "invalid argument";
-        case ErrorCode::kNotFound: return "not found";
-        case ErrorCode::kParse: return "parse error";
-        case ErrorCode::kUnsupported: return "unsupported";
-        case ErrorCode::kDevice: return "device error";
-        case ErrorCode::kIo: return "i/o error";
+        case ErrorCode::kInvalidArgument:
+            return "invalid argument";
+        case ErrorCode::kNotFound:
+            return "not found";
+        case ErrorCode::kParse:
+            return "parse error";
+        case ErrorCode::kUnsupported:
+            return "unsupported";
+        case ErrorCode::kDevice:
+            return "device error";
+        case ErrorCode::kIo:
+            return "i/o error";
     }
     return "unknown error";
 }
@@ -28,8 +34,12 @@ std::atomic<Level> g_level{Level::kInfo};
 std::mutex g_mutex;
 }  // namespace
 
-void set_level(Level l) { g_level.store(l); }
-Level level() { return g_level.load(std::memory_order_relaxed); }
+void set_level(Level l) {
+    g_level.store(l);
+}
+Level level() {
+    return g_level.load(std::memory_order_relaxed);
+}
 
 void write(Level l, std::string_view message) {
     static const char* kNames[] = {"debug", "info", "warn", "error"};

@@ -67,12 +67,12 @@ private:
 }  // namespace hs
 
 // Propagates an Error from an expression yielding Result<...>.
-#define HS_TRY(expr)                       \
-    do {                                   \
-        auto hs_try_r_ = (expr);           \
-        if (!hs_try_r_.ok()) {             \
-            return hs_try_r_.error();      \
-        }                                  \
+#define HS_TRY(expr)                  \
+    do {                              \
+        auto hs_try_r_ = (expr);      \
+        if (!hs_try_r_.ok()) {        \
+            return hs_try_r_.error(); \
+        }                             \
     } while (0)
 
 #define HS_CONCAT_INNER_(a, b) a##b

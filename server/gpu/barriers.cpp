@@ -2,9 +2,10 @@
 
 namespace hs::gpu {
 
-void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect, VkImageLayout from,
-                   VkImageLayout to, VkPipelineStageFlags2 src_stage, VkAccessFlags2 src_access,
-                   VkPipelineStageFlags2 dst_stage, VkAccessFlags2 dst_access) {
+void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
+                   VkImageLayout from, VkImageLayout to, VkPipelineStageFlags2 src_stage,
+                   VkAccessFlags2 src_access, VkPipelineStageFlags2 dst_stage,
+                   VkAccessFlags2 dst_access) {
     VkImageMemoryBarrier2 b{VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER_2};
     b.srcStageMask = src_stage;
     b.srcAccessMask = src_access;
@@ -22,7 +23,8 @@ void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect
     vkCmdPipelineBarrier2(cmd, &di);
 }
 
-void host_read_barrier(VkCommandBuffer cmd, VkPipelineStageFlags2 src_stage, VkAccessFlags2 src_access) {
+void host_read_barrier(VkCommandBuffer cmd, VkPipelineStageFlags2 src_stage,
+                       VkAccessFlags2 src_access) {
     VkMemoryBarrier2 mb{VK_STRUCTURE_TYPE_MEMORY_BARRIER_2};
     mb.srcStageMask = src_stage;
     mb.srcAccessMask = src_access;

@@ -6,11 +6,13 @@
 namespace hs::gpu {
 
 // A layout transition of the whole (single-mip, single-layer) image.
-void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect, VkImageLayout from,
-                   VkImageLayout to, VkPipelineStageFlags2 src_stage, VkAccessFlags2 src_access,
-                   VkPipelineStageFlags2 dst_stage, VkAccessFlags2 dst_access);
+void image_barrier(VkCommandBuffer cmd, VkImage image, VkImageAspectFlags aspect,
+                   VkImageLayout from, VkImageLayout to, VkPipelineStageFlags2 src_stage,
+                   VkAccessFlags2 src_access, VkPipelineStageFlags2 dst_stage,
+                   VkAccessFlags2 dst_access);
 
 // Makes writes of `src_stage` visible to host reads after the submission's fence.
-void host_read_barrier(VkCommandBuffer cmd, VkPipelineStageFlags2 src_stage, VkAccessFlags2 src_access);
+void host_read_barrier(VkCommandBuffer cmd, VkPipelineStageFlags2 src_stage,
+                       VkAccessFlags2 src_access);
 
 }  // namespace hs::gpu

@@ -29,7 +29,8 @@ public:
     // Ends rendering and copies the colour attachment into the target's readback buffer.
     void end_render_and_read_back(RenderTarget& target);
 
-    void dispatch(const ComputePipeline& pipeline, const void* push, uint32_t push_size, uint32_t groups_x);
+    void dispatch(const ComputePipeline& pipeline, const void* push, uint32_t push_size,
+                  uint32_t groups_x);
 
 private:
     Device& device_;
@@ -37,6 +38,7 @@ private:
 };
 
 // Records with `record`, submits and waits (Device::submit_and_wait).
-Result<void> execute(Device& device, const char* label, const std::function<void(CommandList&)>& record);
+Result<void> execute(Device& device, const char* label,
+                     const std::function<void(CommandList&)>& record);
 
 }  // namespace hs::gpu

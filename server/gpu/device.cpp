@@ -9,27 +9,44 @@ namespace hs::gpu {
 
 const char* vk_result_string(VkResult r) {
     switch (r) {
-#define HS_CASE(x) case x: return #x
-        HS_CASE(VK_SUCCESS); HS_CASE(VK_NOT_READY); HS_CASE(VK_TIMEOUT); HS_CASE(VK_INCOMPLETE);
-        HS_CASE(VK_ERROR_OUT_OF_HOST_MEMORY); HS_CASE(VK_ERROR_OUT_OF_DEVICE_MEMORY);
-        HS_CASE(VK_ERROR_INITIALIZATION_FAILED); HS_CASE(VK_ERROR_DEVICE_LOST);
-        HS_CASE(VK_ERROR_MEMORY_MAP_FAILED); HS_CASE(VK_ERROR_LAYER_NOT_PRESENT);
-        HS_CASE(VK_ERROR_EXTENSION_NOT_PRESENT); HS_CASE(VK_ERROR_FEATURE_NOT_PRESENT);
-        HS_CASE(VK_ERROR_INCOMPATIBLE_DRIVER); HS_CASE(VK_ERROR_TOO_MANY_OBJECTS);
-        HS_CASE(VK_ERROR_FORMAT_NOT_SUPPORTED); HS_CASE(VK_ERROR_OUT_OF_POOL_MEMORY);
+#define HS_CASE(x) \
+    case x:        \
+        return #x
+        HS_CASE(VK_SUCCESS);
+        HS_CASE(VK_NOT_READY);
+        HS_CASE(VK_TIMEOUT);
+        HS_CASE(VK_INCOMPLETE);
+        HS_CASE(VK_ERROR_OUT_OF_HOST_MEMORY);
+        HS_CASE(VK_ERROR_OUT_OF_DEVICE_MEMORY);
+        HS_CASE(VK_ERROR_INITIALIZATION_FAILED);
+        HS_CASE(VK_ERROR_DEVICE_LOST);
+        HS_CASE(VK_ERROR_MEMORY_MAP_FAILED);
+        HS_CASE(VK_ERROR_LAYER_NOT_PRESENT);
+        HS_CASE(VK_ERROR_EXTENSION_NOT_PRESENT);
+        HS_CASE(VK_ERROR_FEATURE_NOT_PRESENT);
+        HS_CASE(VK_ERROR_INCOMPATIBLE_DRIVER);
+        HS_CASE(VK_ERROR_TOO_MANY_OBJECTS);
+        HS_CASE(VK_ERROR_FORMAT_NOT_SUPPORTED);
+        HS_CASE(VK_ERROR_OUT_OF_POOL_MEMORY);
 #undef HS_CASE
-        default: return "VkResult(other)";
+        default:
+            return "VkResult(other)";
     }
 }
 
 DeviceCreateInfo device_info_from_environment(DeviceCreateInfo d) {
     if (const char* e = std::getenv("HYSAR_DEVICE")) {
-        if (!std::strcmp(e, "cpu")) d.preference = DevicePreference::kCpu;
-        else if (!std::strcmp(e, "gpu")) d.preference = DevicePreference::kGpu;
-        else if (!std::strcmp(e, "auto")) d.preference = DevicePreference::kAuto;
-        else log::warn("HYSAR_DEVICE='{}' is not auto, cpu or gpu; ignored", e);
+        if (!std::strcmp(e, "cpu"))
+            d.preference = DevicePreference::kCpu;
+        else if (!std::strcmp(e, "gpu"))
+            d.preference = DevicePreference::kGpu;
+        else if (!std::strcmp(e, "auto"))
+            d.preference = DevicePreference::kAuto;
+        else
+            log::warn("HYSAR_DEVICE='{}' is not auto, cpu or gpu; ignored", e);
     }
-    if (const char* e = std::getenv("HYSAR_VALIDATION")) d.validation = std::strcmp(e, "0") != 0;
+    if (const char* e = std::getenv("HYSAR_VALIDATION"))
+        d.validation = std::strcmp(e, "0") != 0;
     return d;
 }
 
@@ -59,7 +76,8 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, nullptr));
     std::vector<VkExtensionProperties> exts(ext_count);
     HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, exts.data()));
-    for (const auto& e : exts) d->debug_utils_ |= !std::strcmp(e.extensionName, VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+    for (const auto& e : exts)
+        d->debug_utils_ |= !std::strcmp(e.extensionName, VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
 
     std::vector<const char*> layers, instance_exts;
     if (info.validation) {
@@ -68,24 +86,30 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
         std::vector<VkLayerProperties> props(n);
         HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, props.data()));
         bool found = false;
-        for (const auto& p : props) found |= !std::strcmp(p.layerName, "VK_LAYER_KHRONOS_validation");
+        for (const auto& p : props)
+            found |= !std::strcmp(p.layerName, "VK_LAYER_KHRONOS_validation");
         if (!found) {
-            return make_error(ErrorCode::kUnsupported,
-                              "Vulkan validation was requested but VK_LAYER_KHRONOS_validation is not "
-                              "installed (Debian package vulkan-validationlayers)");
+            return make_error(
+                ErrorCode::kUnsupported,
+                "Vulkan validation was requested but VK_LAYER_KHRONOS_validation is not "
+                "installed (Debian package vulkan-validationlayers)");
         }
-        if (!d->debug_utils_) return make_error(ErrorCode::kUnsupported, "validation needs VK_EXT_debug_utils");
+        if (!d->debug_utils_)
+            return make_error(ErrorCode::kUnsupported, "validation needs VK_EXT_debug_utils");
         layers.push_back("VK_LAYER_KHRONOS_validation");
         d->validation_ = true;
     }
-    if (d->debug_utils_) instance_exts.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+    if (d->debug_utils_)
+        instance_exts.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
 
     VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
     app.pApplicationName = "hysar";
     app.apiVersion = VK_API_VERSION_1_3;
     VkDebugUtilsMessengerCreateInfoEXT mci{VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT};
-    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
-    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
+    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT |
+                          VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT |
+                      VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
                       VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
     mci.pfnUserCallback = &Device::debug_callback;
     mci.pUserData = d.get();
@@ -96,17 +120,23 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     ici.ppEnabledLayerNames = layers.data();
     ici.enabledExtensionCount = uint32_t(instance_exts.size());
     ici.ppEnabledExtensionNames = instance_exts.data();
-    if (d->validation_) ici.pNext = &mci;  // also covers instance creation and destruction
+    if (d->validation_)
+        ici.pNext = &mci;  // also covers instance creation and destruction
     HS_VK_TRY(vkCreateInstance(&ici, nullptr, &d->instance_));
 
     if (d->debug_utils_) {
-        d->set_name_fn_ = (PFN_vkSetDebugUtilsObjectNameEXT)vkGetInstanceProcAddr(d->instance_, "vkSetDebugUtilsObjectNameEXT");
-        d->begin_label_fn_ = (PFN_vkCmdBeginDebugUtilsLabelEXT)vkGetInstanceProcAddr(d->instance_, "vkCmdBeginDebugUtilsLabelEXT");
-        d->end_label_fn_ = (PFN_vkCmdEndDebugUtilsLabelEXT)vkGetInstanceProcAddr(d->instance_, "vkCmdEndDebugUtilsLabelEXT");
+        d->set_name_fn_ = (PFN_vkSetDebugUtilsObjectNameEXT)vkGetInstanceProcAddr(
+            d->instance_, "vkSetDebugUtilsObjectNameEXT");
+        d->begin_label_fn_ = (PFN_vkCmdBeginDebugUtilsLabelEXT)vkGetInstanceProcAddr(
+            d->instance_, "vkCmdBeginDebugUtilsLabelEXT");
+        d->end_label_fn_ = (PFN_vkCmdEndDebugUtilsLabelEXT)vkGetInstanceProcAddr(
+            d->instance_, "vkCmdEndDebugUtilsLabelEXT");
     }
     if (d->validation_) {
-        auto create = (PFN_vkCreateDebugUtilsMessengerEXT)vkGetInstanceProcAddr(d->instance_, "vkCreateDebugUtilsMessengerEXT");
-        HS_CHECK(create != nullptr, "debug utils advertised but vkCreateDebugUtilsMessengerEXT missing");
+        auto create = (PFN_vkCreateDebugUtilsMessengerEXT)vkGetInstanceProcAddr(
+            d->instance_, "vkCreateDebugUtilsMessengerEXT");
+        HS_CHECK(create != nullptr,
+                 "debug utils advertised but vkCreateDebugUtilsMessengerEXT missing");
         HS_VK_TRY(create(d->instance_, &mci, nullptr, &d->messenger_));
     }
 
@@ -122,20 +152,30 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
         vkGetPhysicalDeviceProperties(pd, &props);
         seen += fmt::format("{}{} ({})", seen.empty() ? "" : ", ", props.deviceName,
                             props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU ? "cpu" : "gpu");
-        if (props.apiVersion < VK_API_VERSION_1_3) continue;
+        if (props.apiVersion < VK_API_VERSION_1_3)
+            continue;
         const bool cpu = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
-        if (info.preference == DevicePreference::kCpu && !cpu) continue;
-        if (info.preference == DevicePreference::kGpu && cpu) continue;
+        if (info.preference == DevicePreference::kCpu && !cpu)
+            continue;
+        if (info.preference == DevicePreference::kGpu && cpu)
+            continue;
         uint32_t qn = 0;
         vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, nullptr);
         std::vector<VkQueueFamilyProperties> qs(qn);
         vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, qs.data());
         int family = -1;
         for (uint32_t i = 0; i < qn; ++i)
-            if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) { family = int(i); break; }
-        if (family < 0) continue;
-        int score = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU ? 3
-                    : props.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ? 2 : cpu ? 1 : 0;
+            if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) &&
+                (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) {
+                family = int(i);
+                break;
+            }
+        if (family < 0)
+            continue;
+        int score = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU     ? 3
+                    : props.deviceType == VK_PHYSICAL_DEVICE_TYPE_INTEGRATED_GPU ? 2
+                    : cpu                                                        ? 1
+                                                                                 : 0;
         if (score > best_score) {
             best_score = score;
             d->physical_ = pd;
@@ -145,10 +185,15 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
         }
     }
     if (!d->physical_) {
-        const char* want = info.preference == DevicePreference::kCpu ? "a CPU Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)"
-                         : info.preference == DevicePreference::kGpu ? "a hardware Vulkan 1.3 GPU"
-                                                                       : "any Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)";
-        return make_error(ErrorCode::kUnsupported, fmt::format("no suitable device: wanted {}; found: {}", want, seen.empty() ? "none" : seen));
+        const char* want =
+            info.preference == DevicePreference::kCpu
+                ? "a CPU Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)"
+            : info.preference == DevicePreference::kGpu
+                ? "a hardware Vulkan 1.3 GPU"
+                : "any Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)";
+        return make_error(ErrorCode::kUnsupported,
+                          fmt::format("no suitable device: wanted {}; found: {}", want,
+                                      seen.empty() ? "none" : seen));
     }
     vkGetPhysicalDeviceMemoryProperties(d->physical_, &d->memory_props_);
 
@@ -195,14 +240,18 @@ Device::~Device() {
         vkDestroyDevice(device_, nullptr);
     }
     if (messenger_) {
-        auto destroy = (PFN_vkDestroyDebugUtilsMessengerEXT)vkGetInstanceProcAddr(instance_, "vkDestroyDebugUtilsMessengerEXT");
-        if (destroy) destroy(instance_, messenger_, nullptr);
+        auto destroy = (PFN_vkDestroyDebugUtilsMessengerEXT)vkGetInstanceProcAddr(
+            instance_, "vkDestroyDebugUtilsMessengerEXT");
+        if (destroy)
+            destroy(instance_, messenger_, nullptr);
     }
-    if (instance_) vkDestroyInstance(instance_, nullptr);
+    if (instance_)
+        vkDestroyInstance(instance_, nullptr);
 }
 
 void Device::set_name(VkObjectType type, uint64_t handle, const std::string& name) const {
-    if (!set_name_fn_) return;
+    if (!set_name_fn_)
+        return;
     VkDebugUtilsObjectNameInfoEXT ni{VK_STRUCTURE_TYPE_DEBUG_UTILS_OBJECT_NAME_INFO_EXT};
     ni.objectType = type;
     ni.objectHandle = handle;
@@ -211,23 +260,28 @@ void Device::set_name(VkObjectType type, uint64_t handle, const std::string& nam
 }
 
 void Device::begin_label(VkCommandBuffer cmd, const char* label) const {
-    if (!begin_label_fn_) return;
+    if (!begin_label_fn_)
+        return;
     VkDebugUtilsLabelEXT l{VK_STRUCTURE_TYPE_DEBUG_UTILS_LABEL_EXT};
     l.pLabelName = label;
     begin_label_fn_(cmd, &l);
 }
 
 void Device::end_label(VkCommandBuffer cmd) const {
-    if (end_label_fn_) end_label_fn_(cmd);
+    if (end_label_fn_)
+        end_label_fn_(cmd);
 }
 
 Result<uint32_t> Device::find_memory_type(uint32_t bits, VkMemoryPropertyFlags props) const {
     for (uint32_t i = 0; i < memory_props_.memoryTypeCount; ++i)
-        if ((bits & (1u << i)) && (memory_props_.memoryTypes[i].propertyFlags & props) == props) return i;
-    return make_error(ErrorCode::kUnsupported, fmt::format("no memory type with properties 0x{:x}", props));
+        if ((bits & (1u << i)) && (memory_props_.memoryTypes[i].propertyFlags & props) == props)
+            return i;
+    return make_error(ErrorCode::kUnsupported,
+                      fmt::format("no memory type with properties 0x{:x}", props));
 }
 
-Result<void> Device::submit_and_wait(const char* label, const std::function<void(VkCommandBuffer)>& record) {
+Result<void> Device::submit_and_wait(const char* label,
+                                     const std::function<void(VkCommandBuffer)>& record) {
     std::lock_guard lock(submit_mutex_);
     VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
     ai.commandPool = pool_.get();

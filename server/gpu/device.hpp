@@ -49,7 +49,8 @@ public:
 
     // Records with `record`, submits to the queue and waits. Thread: any one thread at a time;
     // holds the device's submit lock. `label` names the command buffer's debug region.
-    Result<void> submit_and_wait(const char* label, const std::function<void(VkCommandBuffer)>& record);
+    Result<void> submit_and_wait(const char* label,
+                                 const std::function<void(VkCommandBuffer)>& record);
 
     // Debug-region helpers for command recording (no-ops without VK_EXT_debug_utils).
     void begin_label(VkCommandBuffer cmd, const char* label) const;
@@ -59,9 +60,9 @@ public:
 
 private:
     Device() = default;
-    static VKAPI_ATTR VkBool32 VKAPI_CALL debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT,
-                                                         VkDebugUtilsMessageTypeFlagsEXT,
-                                                         const VkDebugUtilsMessengerCallbackDataEXT*, void*);
+    static VKAPI_ATTR VkBool32 VKAPI_CALL
+    debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT, VkDebugUtilsMessageTypeFlagsEXT,
+                   const VkDebugUtilsMessengerCallbackDataEXT*, void*);
 
     VkInstance instance_ = VK_NULL_HANDLE;
     VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;

@@ -17,7 +17,8 @@ public:
     Handle(const Handle&) = delete;
     Handle& operator=(const Handle&) = delete;
     Handle(Handle&& o) noexcept
-        : device_(std::exchange(o.device_, VK_NULL_HANDLE)), handle_(std::exchange(o.handle_, VK_NULL_HANDLE)) {}
+        : device_(std::exchange(o.device_, VK_NULL_HANDLE)),
+          handle_(std::exchange(o.handle_, VK_NULL_HANDLE)) {}
     Handle& operator=(Handle&& o) noexcept {
         if (this != &o) {
             reset();
@@ -29,7 +30,8 @@ public:
     ~Handle() { reset(); }
 
     void reset() {
-        if (handle_ != VK_NULL_HANDLE) Destroy(device_, handle_, nullptr);
+        if (handle_ != VK_NULL_HANDLE)
+            Destroy(device_, handle_, nullptr);
         handle_ = VK_NULL_HANDLE;
     }
     T get() const { return handle_; }

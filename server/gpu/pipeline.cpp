@@ -14,7 +14,9 @@ SpecConstants& SpecConstants::set_int(uint32_t id, int32_t v) {
     std::memcpy(&bits, &v, 4);
     return add(id, bits);
 }
-SpecConstants& SpecConstants::set_bool(uint32_t id, bool v) { return add(id, v ? 1u : 0u); }  // VkBool32
+SpecConstants& SpecConstants::set_bool(uint32_t id, bool v) {
+    return add(id, v ? 1u : 0u);
+}  // VkBool32
 SpecConstants& SpecConstants::set_float(uint32_t id, float v) {
     uint32_t bits;
     std::memcpy(&bits, &v, 4);
@@ -22,8 +24,11 @@ SpecConstants& SpecConstants::set_float(uint32_t id, float v) {
 }
 
 namespace {
-Result<ShaderModuleHandle> make_module(Device& dev, std::span<const uint32_t> spv, const std::string& name) {
-    if (spv.empty()) return make_error(ErrorCode::kInvalidArgument, fmt::format("shader '{}' has no SPIR-V", name));
+Result<ShaderModuleHandle> make_module(Device& dev, std::span<const uint32_t> spv,
+                                       const std::string& name) {
+    if (spv.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("shader '{}' has no SPIR-V", name));
     VkShaderModuleCreateInfo ci{VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO};
     ci.codeSize = spv.size_bytes();
     ci.pCode = spv.data();
@@ -40,8 +45,8 @@ struct SetParts {
 };
 
 // One set whose binding i has type types[i].
-Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& types, VkShaderStageFlags stages,
-                          const std::string& name) {
+Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& types,
+                          VkShaderStageFlags stages, const std::string& name) {
     const uint32_t count = uint32_t(types.size());
     std::vector<VkDescriptorSetLayoutBinding> bindings(count);
     std::vector<VkDescriptorPoolSize> sizes;
@@ -73,8 +78,9 @@ Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& type
     return p;
 }
 
-Result<PipelineLayoutHandle> make_layout(Device& dev, VkDescriptorSetLayout set_layout, uint32_t push_bytes,
-                                         VkShaderStageFlags push_stages, const std::string& name) {
+Result<PipelineLayoutHandle> make_layout(Device& dev, VkDescriptorSetLayout set_layout,
+                                         uint32_t push_bytes, VkShaderStageFlags push_stages,
+                                         const std::string& name) {
     VkPushConstantRange range{push_stages, 0, push_bytes};
     VkPipelineLayoutCreateInfo ci{VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO};
     ci.setLayoutCount = 1;
@@ -93,18 +99,23 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     p.push_bytes_ = info.push_constant_bytes;
     HS_ASSIGN_OR_RETURN(auto vs, make_module(dev, info.vertex_spv, info.name + ".vert"));
     HS_ASSIGN_OR_RETURN(auto fs, make_module(dev, info.fragment_spv, info.name + ".frag"));
-    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER},
+    HS_ASSIGN_OR_RETURN(auto set, make_set(dev,
+                                           {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER,
+                                            VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER},
                                            VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);
     p.set_ = set.set;
-    HS_ASSIGN_OR_RETURN(p.layout_, make_layout(dev, p.set_layout_.get(), info.push_constant_bytes,
-                                               VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
+    HS_ASSIGN_OR_RETURN(
+        p.layout_,
+        make_layout(dev, p.set_layout_.get(), info.push_constant_bytes,
+                    VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
 
     VkSpecializationInfo spec{uint32_t(info.spec.entries().size()), info.spec.entries().data(),
                               info.spec.data().size() * 4, info.spec.data().data()};
-    VkPipelineShaderStageCreateInfo stages[2] = {{VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO},
-                                                 {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO}};
+    VkPipelineShaderStageCreateInfo stages[2] = {
+        {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO},
+        {VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO}};
     stages[0].stage = VK_SHADER_STAGE_VERTEX_BIT;
     stages[0].module = vs.get();
     stages[0].pName = "main";
@@ -113,34 +124,45 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     stages[1].pName = "main";
     stages[1].pSpecializationInfo = &spec;
 
-    VkVertexInputBindingDescription vb[4] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX}, {1, 12, VK_VERTEX_INPUT_RATE_VERTEX},
-                                             {2, 12, VK_VERTEX_INPUT_RATE_VERTEX}, {3, 8, VK_VERTEX_INPUT_RATE_VERTEX}};
-    VkVertexInputAttributeDescription va[4] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0}, {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0},
-                                               {2, 2, VK_FORMAT_R32G32B32_SFLOAT, 0}, {3, 3, VK_FORMAT_R32G32_SFLOAT, 0}};
-    VkPipelineVertexInputStateCreateInfo vi{VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+    VkVertexInputBindingDescription vb[4] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {1, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {2, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {3, 8, VK_VERTEX_INPUT_RATE_VERTEX}};
+    VkVertexInputAttributeDescription va[4] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {2, 2, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {3, 3, VK_FORMAT_R32G32_SFLOAT, 0}};
+    VkPipelineVertexInputStateCreateInfo vi{
+        VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
     vi.vertexBindingDescriptionCount = 4;
     vi.pVertexBindingDescriptions = vb;
     vi.vertexAttributeDescriptionCount = 4;
     vi.pVertexAttributeDescriptions = va;
-    VkPipelineInputAssemblyStateCreateInfo ia{VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
+    VkPipelineInputAssemblyStateCreateInfo ia{
+        VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
     ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
     VkPipelineViewportStateCreateInfo vp{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
     vp.viewportCount = 1;
     vp.scissorCount = 1;
-    VkPipelineRasterizationStateCreateInfo rs{VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
+    VkPipelineRasterizationStateCreateInfo rs{
+        VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
     rs.polygonMode = VK_POLYGON_MODE_FILL;
     rs.cullMode = VK_CULL_MODE_BACK_BIT;
     rs.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
     rs.lineWidth = 1.0f;
-    VkPipelineMultisampleStateCreateInfo ms{VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
+    VkPipelineMultisampleStateCreateInfo ms{
+        VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
     ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
-    VkPipelineDepthStencilStateCreateInfo ds{VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
+    VkPipelineDepthStencilStateCreateInfo ds{
+        VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
     ds.depthTestEnable = VK_TRUE;
     ds.depthWriteEnable = VK_TRUE;
     ds.depthCompareOp = VK_COMPARE_OP_LESS;
     VkPipelineColorBlendAttachmentState cb{};
-    cb.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT | VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
-    VkPipelineColorBlendStateCreateInfo cbs{VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
+    cb.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
+                        VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+    VkPipelineColorBlendStateCreateInfo cbs{
+        VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
     cbs.attachmentCount = 1;
     cbs.pAttachments = &cb;
     VkDynamicState dyn[] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
@@ -175,8 +197,10 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
 
 void GraphicsPipeline::bind_resources(Device& dev, const Buffer& uniform, const Texture& texture) {
     VkDescriptorBufferInfo bi{uniform.vk(), 0, uniform.size()};
-    VkDescriptorImageInfo ii{texture.sampler(), texture.view(), VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-    VkWriteDescriptorSet w[2] = {{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}, {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}};
+    VkDescriptorImageInfo ii{texture.sampler(), texture.view(),
+                             VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+    VkWriteDescriptorSet w[2] = {{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET},
+                                 {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}};
     w[0].dstSet = set_;
     w[0].dstBinding = 0;
     w[0].descriptorCount = 1;
@@ -193,8 +217,11 @@ void GraphicsPipeline::bind_resources(Device& dev, const Buffer& uniform, const 
 Result<ComputePipeline> ComputePipeline::create(Device& dev, const ComputePipelineInfo& info) {
     ComputePipeline p;
     HS_ASSIGN_OR_RETURN(auto cs, make_module(dev, info.spv, info.name + ".comp"));
-    HS_ASSIGN_OR_RETURN(auto set, make_set(dev, std::vector<VkDescriptorType>(info.storage_buffers, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER),
-                                           VK_SHADER_STAGE_COMPUTE_BIT, info.name));
+    HS_ASSIGN_OR_RETURN(auto set,
+                        make_set(dev,
+                                 std::vector<VkDescriptorType>(info.storage_buffers,
+                                                               VK_DESCRIPTOR_TYPE_STORAGE_BUFFER),
+                                 VK_SHADER_STAGE_COMPUTE_BIT, info.name));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);
     p.set_ = set.set;

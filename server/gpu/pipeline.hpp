@@ -27,12 +27,12 @@ private:
 };
 
 struct GraphicsPipelineInfo {
-    std::span<const uint32_t> vertex_spv;    // SPIR-V words (generated header)
+    std::span<const uint32_t> vertex_spv;  // SPIR-V words (generated header)
     std::span<const uint32_t> fragment_spv;
-    SpecConstants spec;                      // applied to the fragment stage
+    SpecConstants spec;  // applied to the fragment stage
     ColorFormat color_format = ColorFormat::kRgba16Float;
-    uint32_t push_constant_bytes = 0;        // vertex + fragment stages
-    std::string name;                        // debug name
+    uint32_t push_constant_bytes = 0;  // vertex + fragment stages
+    std::string name;                  // debug name
 };
 
 // Vertex input is fixed: binding 0 positions (vec3), 1 normals (vec3), 2 tangents (vec3),

@@ -10,27 +10,36 @@ namespace hs::gpu {
 
 const char* to_string(ColorFormat f) {
     switch (f) {
-        case ColorFormat::kRgba8Unorm: return "rgba8";
-        case ColorFormat::kRgba16Float: return "rgba16f";
-        case ColorFormat::kRgba32Float: return "rgba32f";
+        case ColorFormat::kRgba8Unorm:
+            return "rgba8";
+        case ColorFormat::kRgba16Float:
+            return "rgba16f";
+        case ColorFormat::kRgba32Float:
+            return "rgba32f";
     }
     return "?";
 }
 
 VkFormat to_vk(ColorFormat f) {
     switch (f) {
-        case ColorFormat::kRgba8Unorm: return VK_FORMAT_R8G8B8A8_UNORM;
-        case ColorFormat::kRgba16Float: return VK_FORMAT_R16G16B16A16_SFLOAT;
-        case ColorFormat::kRgba32Float: return VK_FORMAT_R32G32B32A32_SFLOAT;
+        case ColorFormat::kRgba8Unorm:
+            return VK_FORMAT_R8G8B8A8_UNORM;
+        case ColorFormat::kRgba16Float:
+            return VK_FORMAT_R16G16B16A16_SFLOAT;
+        case ColorFormat::kRgba32Float:
+            return VK_FORMAT_R32G32B32A32_SFLOAT;
     }
     return VK_FORMAT_UNDEFINED;
 }
 
 float max_value(ColorFormat f) {
     switch (f) {
-        case ColorFormat::kRgba8Unorm: return 1.0f;
-        case ColorFormat::kRgba16Float: return 65504.0f;
-        case ColorFormat::kRgba32Float: return 3.0e38f;
+        case ColorFormat::kRgba8Unorm:
+            return 1.0f;
+        case ColorFormat::kRgba16Float:
+            return 65504.0f;
+        case ColorFormat::kRgba32Float:
+            return 3.0e38f;
     }
     return 1.0f;
 }
@@ -56,8 +65,9 @@ struct ImageParts {
     ImageViewHandle view;
 };
 
-Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat format, VkImageUsageFlags usage,
-                              VkImageAspectFlags aspect, const std::string& name) {
+Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat format,
+                              VkImageUsageFlags usage, VkImageAspectFlags aspect,
+                              const std::string& name) {
     VkImageCreateInfo ici{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
     ici.imageType = VK_IMAGE_TYPE_2D;
     ici.format = format;
@@ -90,17 +100,31 @@ Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat form
 }
 }  // namespace
 
-Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage, const std::string& name) {
-    if (size == 0) return make_error(ErrorCode::kInvalidArgument, fmt::format("buffer '{}' of size 0", name));
+Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage,
+                              const std::string& name) {
+    if (size == 0)
+        return make_error(ErrorCode::kInvalidArgument, fmt::format("buffer '{}' of size 0", name));
     VkBufferCreateInfo bci{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
     bci.size = size;
     switch (usage) {
-        case BufferUsage::kVertex: bci.usage = VK_BUFFER_USAGE_VERTEX_BUFFER_BIT; break;
-        case BufferUsage::kIndex: bci.usage = VK_BUFFER_USAGE_INDEX_BUFFER_BIT; break;
-        case BufferUsage::kUniform: bci.usage = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT; break;
-        case BufferUsage::kStorage: bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT; break;
-        case BufferUsage::kReadback: bci.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT; break;
-        case BufferUsage::kStaging: bci.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT; break;
+        case BufferUsage::kVertex:
+            bci.usage = VK_BUFFER_USAGE_VERTEX_BUFFER_BIT;
+            break;
+        case BufferUsage::kIndex:
+            bci.usage = VK_BUFFER_USAGE_INDEX_BUFFER_BIT;
+            break;
+        case BufferUsage::kUniform:
+            bci.usage = VK_BUFFER_USAGE_UNIFORM_BUFFER_BIT;
+            break;
+        case BufferUsage::kStorage:
+            bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+            break;
+        case BufferUsage::kReadback:
+            bci.usage = VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+            break;
+        case BufferUsage::kStaging:
+            bci.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
+            break;
     }
     VkBuffer buf;
     HS_VK_TRY(vkCreateBuffer(dev.vk(), &bci, nullptr, &buf));
@@ -110,11 +134,14 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage, con
     dev.set_name(VK_OBJECT_TYPE_BUFFER, uint64_t(buf), name);
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(dev.vk(), buf, &req);
-    VkMemoryPropertyFlags props = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    VkMemoryPropertyFlags props =
+        VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
     if (usage == BufferUsage::kReadback) {
         // Prefer cached memory for CPU reads where the device offers it.
-        auto cached = dev.find_memory_type(req.memoryTypeBits, props | VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
-        if (cached) props |= VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
+        auto cached =
+            dev.find_memory_type(req.memoryTypeBits, props | VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
+        if (cached)
+            props |= VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     }
     HS_ASSIGN_OR_RETURN(b.memory_, allocate(dev, req, props));
     HS_VK_TRY(vkBindBufferMemory(dev.vk(), buf, b.memory_.get(), 0));
@@ -129,15 +156,19 @@ void Buffer::write(const void* data, uint64_t size, uint64_t offset) {
 
 Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::string& name) {
     if (img.width == 0 || img.height == 0 || img.width > 8192 || img.height > 8192)
-        return make_error(ErrorCode::kInvalidArgument, fmt::format("texture '{}': size {}x{} outside 1..8192", name, img.width, img.height));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("texture '{}': size {}x{} outside 1..8192", name, img.width, img.height));
     Texture t;
-    HS_ASSIGN_OR_RETURN(auto parts, make_image(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB,
-                                               VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
-                                               VK_IMAGE_ASPECT_COLOR_BIT, name));
+    HS_ASSIGN_OR_RETURN(auto parts,
+                        make_image(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB,
+                                   VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
+                                   VK_IMAGE_ASPECT_COLOR_BIT, name));
     t.memory_ = std::move(parts.mem);
     t.image_ = std::move(parts.image);
     t.view_ = std::move(parts.view);
-    HS_ASSIGN_OR_RETURN(auto staging, Buffer::create(dev, img.pixels.size(), BufferUsage::kStaging, name + ".staging"));
+    HS_ASSIGN_OR_RETURN(auto staging, Buffer::create(dev, img.pixels.size(), BufferUsage::kStaging,
+                                                     name + ".staging"));
     staging.write(img.pixels.data(), img.pixels.size());
     VkImage image = t.image_.get();
     HS_TRY(dev.submit_and_wait("upload.texture", [&](VkCommandBuffer cmd) {
@@ -147,7 +178,8 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
         VkBufferImageCopy region{};
         region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
         region.imageExtent = {img.width, img.height, 1};
-        vkCmdCopyBufferToImage(cmd, staging.vk(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &region);
+        vkCmdCopyBufferToImage(cmd, staging.vk(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1,
+                               &region);
         image_barrier(cmd, image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
                       VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL, VK_PIPELINE_STAGE_2_COPY_BIT,
                       VK_ACCESS_2_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_2_FRAGMENT_SHADER_BIT,
@@ -171,13 +203,16 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
                                           const std::string& name) {
     if (w == 0 || h == 0 || w > 16384 || h > 16384)
-        return make_error(ErrorCode::kInvalidArgument, fmt::format("render target '{}': size {}x{} outside 1..16384", name, w, h));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("render target '{}': size {}x{} outside 1..16384", name, w, h));
     RenderTarget t;
     t.width_ = w;
     t.height_ = h;
     t.format_ = format;
     HS_ASSIGN_OR_RETURN(auto color, make_image(dev, w, h, to_vk(format),
-                                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT |
+                                                   VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
                                                VK_IMAGE_ASPECT_COLOR_BIT, name + ".color"));
     HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
                                                VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
@@ -189,7 +224,7 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     t.depth_ = std::move(depth.image);
     t.depth_view_ = std::move(depth.view);
     HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
-                                                     BufferUsage::kReadback, name + ".readback"));
+                                                    BufferUsage::kReadback, name + ".readback"));
     return t;
 }
 

@@ -1,5 +1,6 @@
 // Buffers and render targets with their memory. All memory here is host-visible and coherent:
-// on lavapipe every allocation is system memory, and the scene data is small (docs/ARCHITECTURE.md).
+// on lavapipe every allocation is system memory, and the scene data is small
+// (docs/ARCHITECTURE.md).
 #pragma once
 
 #include <cstdint>
@@ -20,7 +21,8 @@ enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback, kStagin
 
 class Buffer {
 public:
-    static Result<Buffer> create(Device& device, uint64_t size_bytes, BufferUsage usage, const std::string& name);
+    static Result<Buffer> create(Device& device, uint64_t size_bytes, BufferUsage usage,
+                                 const std::string& name);
     Buffer() = default;
     Buffer(Buffer&&) noexcept = default;
     Buffer& operator=(Buffer&&) noexcept = default;

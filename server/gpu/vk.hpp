@@ -14,20 +14,20 @@ const char* vk_result_string(VkResult r);
 }
 
 // In a function returning Result<...>: a failing call becomes an ErrorCode::kDevice Error.
-#define HS_VK_TRY(call)                                                                        \
-    do {                                                                                       \
-        VkResult hs_vk_r_ = (call);                                                            \
-        if (hs_vk_r_ != VK_SUCCESS) {                                                          \
-            return ::hs::make_error(::hs::ErrorCode::kDevice,                                  \
-                                    fmt::format("{} failed: {} ({}:{})", #call,                \
-                                                ::hs::gpu::vk_result_string(hs_vk_r_), __FILE__, \
-                                                __LINE__));                                    \
-        }                                                                                      \
+#define HS_VK_TRY(call)                                                                            \
+    do {                                                                                           \
+        VkResult hs_vk_r_ = (call);                                                                \
+        if (hs_vk_r_ != VK_SUCCESS) {                                                              \
+            return ::hs::make_error(                                                               \
+                ::hs::ErrorCode::kDevice,                                                          \
+                fmt::format("{} failed: {} ({}:{})", #call, ::hs::gpu::vk_result_string(hs_vk_r_), \
+                            __FILE__, __LINE__));                                                  \
+        }                                                                                          \
     } while (0)
 
 // Where failure can only be a programmer's bug (e.g. ending a command buffer we began).
-#define HS_VK_CHECK(call)                                              \
-    do {                                                               \
-        VkResult hs_vk_r_ = (call);                                    \
+#define HS_VK_CHECK(call)                                                        \
+    do {                                                                         \
+        VkResult hs_vk_r_ = (call);                                              \
         HS_CHECK(hs_vk_r_ == VK_SUCCESS, ::hs::gpu::vk_result_string(hs_vk_r_)); \
     } while (0)

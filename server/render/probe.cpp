@@ -8,10 +8,12 @@ namespace hs::render {
 
 Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const scene::Specular& spec,
                                                    const std::vector<ProbeCase>& cases) {
-    if (cases.empty()) return std::vector<ProbeResult>{};
+    if (cases.empty())
+        return std::vector<ProbeResult>{};
     gpu::ComputePipelineInfo pi;
     pi.spv = kProbeCompSpv;
-    pi.spec.set_int(HS_SC_SPEC_MODEL, int(spec.model)).set_bool(HS_SC_ANISOTROPIC, spec.anisotropic());
+    pi.spec.set_int(HS_SC_SPEC_MODEL, int(spec.model))
+        .set_bool(HS_SC_ANISOTROPIC, spec.anisotropic());
     pi.storage_buffers = 2;
     pi.push_constant_bytes = 4;
     pi.name = "pipeline.shading-probe";
@@ -24,8 +26,11 @@ Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const sc
         in[i].t = glm::vec4(glm::vec3(cases[i].tangent_axis), 0);
         in[i].params = glm::vec4(float(spec.exponent), float(spec.alpha_x), float(spec.alpha_y), 0);
     }
-    HS_ASSIGN_OR_RETURN(auto in_buf, gpu::Buffer::create(device, in.size() * sizeof(in[0]), gpu::BufferUsage::kStorage, "probe.in"));
-    HS_ASSIGN_OR_RETURN(auto out_buf, gpu::Buffer::create(device, in.size() * sizeof(gpu::GpuProbeResult), gpu::BufferUsage::kStorage, "probe.out"));
+    HS_ASSIGN_OR_RETURN(auto in_buf, gpu::Buffer::create(device, in.size() * sizeof(in[0]),
+                                                         gpu::BufferUsage::kStorage, "probe.in"));
+    HS_ASSIGN_OR_RETURN(auto out_buf,
+                        gpu::Buffer::create(device, in.size() * sizeof(gpu::GpuProbeResult),
+                                            gpu::BufferUsage::kStorage, "probe.out"));
     in_buf.write(in.data(), in.size() * sizeof(in[0]));
     pipeline.bind_storage(device, HS_BINDING_PROBE_IN, in_buf);
     pipeline.bind_storage(device, HS_BINDING_PROBE_OUT, out_buf);

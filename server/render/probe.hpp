@@ -10,7 +10,7 @@
 namespace hs::render {
 
 struct ProbeCase {
-    glm::dvec3 n, l, v;           // unit vectors away from the surface
+    glm::dvec3 n, l, v;  // unit vectors away from the surface
     glm::dvec3 tangent_axis{1, 0, 0};
 };
 

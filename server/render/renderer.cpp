@@ -20,7 +20,8 @@ bool has_emission(const scene::Scene& s) {
 }
 bool has_point_lights(const scene::Scene& s) {
     for (const auto& l : s.lights)
-        if (l.type == scene::LightType::kPoint) return true;
+        if (l.type == scene::LightType::kPoint)
+            return true;
     return false;
 }
 }  // namespace
@@ -30,18 +31,23 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
     const bool falloff = s.effects.point_light_falloff && has_point_lights(s);
     if (!vd) {
         e.push_back("diffuse");
-        if (s.material.albedo_texture) e.push_back("albedo-texture");
-        if (falloff) e.push_back("point-light-falloff");
+        if (s.material.albedo_texture)
+            e.push_back("albedo-texture");
+        if (falloff)
+            e.push_back("point-light-falloff");
         return e;
     }
     if (spec.model != scene::SpecularModel::kNone) {
         e.push_back(std::string("specular:") + scene::to_string(spec.model));
-        if (spec.anisotropic()) e.push_back("anisotropy");
+        if (spec.anisotropic())
+            e.push_back("anisotropy");
         if (spec.uses_tangent() && spec.tangent_source == scene::Specular::TangentSource::kMesh)
             e.push_back("mesh-tangents");
-        if (falloff) e.push_back("point-light-falloff");
+        if (falloff)
+            e.push_back("point-light-falloff");
     }
-    if (has_emission(s)) e.push_back("emission");
+    if (has_emission(s))
+        e.push_back("emission");
     return e;
 }
 
@@ -50,11 +56,19 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
     HS_ASSIGN_OR_RETURN(r->mesh_, scene::build_prop_mesh(scene.prop));
     const auto& m = r->mesh_;
-    HS_ASSIGN_OR_RETURN(r->positions_, gpu::Buffer::create(device, m.positions.size() * 12, gpu::BufferUsage::kVertex, "prop.positions"));
-    HS_ASSIGN_OR_RETURN(r->normals_, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex, "prop.normals"));
-    HS_ASSIGN_OR_RETURN(r->indices_, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex, "prop.indices"));
-    HS_ASSIGN_OR_RETURN(r->tangents_, gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex, "prop.tangents"));
-    HS_ASSIGN_OR_RETURN(r->uvs_, gpu::Buffer::create(device, m.uvs.size() * 8, gpu::BufferUsage::kVertex, "prop.uvs"));
+    HS_ASSIGN_OR_RETURN(r->positions_,
+                        gpu::Buffer::create(device, m.positions.size() * 12,
+                                            gpu::BufferUsage::kVertex, "prop.positions"));
+    HS_ASSIGN_OR_RETURN(
+        r->normals_, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex,
+                                         "prop.normals"));
+    HS_ASSIGN_OR_RETURN(r->indices_, gpu::Buffer::create(device, m.indices.size() * 4,
+                                                         gpu::BufferUsage::kIndex, "prop.indices"));
+    HS_ASSIGN_OR_RETURN(
+        r->tangents_, gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex,
+                                          "prop.tangents"));
+    HS_ASSIGN_OR_RETURN(r->uvs_, gpu::Buffer::create(device, m.uvs.size() * 8,
+                                                     gpu::BufferUsage::kVertex, "prop.uvs"));
     r->positions_.write(m.positions.data(), m.positions.size() * 12);
     r->normals_.write(m.normals.data(), m.normals.size() * 12);
     r->tangents_.write(m.tangents.data(), m.tangents.size() * 12);
@@ -62,17 +76,20 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     r->indices_.write(m.indices.data(), m.indices.size() * 4);
     const ImageRgba8 white{1, 1, {255, 255, 255, 255}};
     const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
-    HS_ASSIGN_OR_RETURN(r->albedo_texture_, gpu::Texture::create(device, tex, "material.albedo_texture"));
+    HS_ASSIGN_OR_RETURN(r->albedo_texture_,
+                        gpu::Texture::create(device, tex, "material.albedo_texture"));
     return r;
 }
 
 Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spec) {
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
-    const std::string key = fmt::format("{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
-                                        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
-                                        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source));
-    if (auto it = variants_.find(key); it != variants_.end()) return &it->second;
+    const std::string key = fmt::format(
+        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
+        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x, sp.tangent_axis.y,
+        sp.tangent_axis.z, int(sp.tangent_source));
+    if (auto it = variants_.find(key); it != variants_.end())
+        return &it->second;
 
     Variant v;
     v.effects = effects_of(scene_, vd, sp);
@@ -82,7 +99,8 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     pi.fragment_spv = kPropFragSpv;
     pi.color_format = info_.format;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
-    pi.name = fmt::format("pipeline.{}.{}", vd ? "viewer-vd" : "projector-vi", scene::to_string(sp.model));
+    pi.name = fmt::format("pipeline.{}.{}", vd ? "viewer-vd" : "projector-vi",
+                          scene::to_string(sp.model));
     pi.spec.set_int(HS_SC_PASS_KIND, vd ? 1 : 0)
         .set_int(HS_SC_SPEC_MODEL, int(sp.model))
         .set_bool(HS_SC_EMISSION, vd && has_emission(scene_))
@@ -90,7 +108,8 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
         .set_int(HS_SC_NUM_LIGHTS, int(scene_.lights.size()))
         .set_float(HS_SC_OUTPUT_MAX, gpu::max_value(info_.format))
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
-        .set_bool(HS_SC_MESH_TANGENT, sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
+        .set_bool(HS_SC_MESH_TANGENT,
+                  sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
         .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr);
     HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
     ++pipelines_built_;
@@ -98,7 +117,8 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     gpu::GpuScene block{};
     block.albedo_over_pi = glm::vec4(glm::vec3(scene_.material.albedo / glm::pi<double>()), 0);
     block.spec_colour = glm::vec4(glm::vec3(sp.colour), 0);
-    block.spec_params = glm::vec4(float(sp.exponent), float(sp.alpha_x), float(sp.alpha_y), float(scene::kMinLightDistance));
+    block.spec_params = glm::vec4(float(sp.exponent), float(sp.alpha_x), float(sp.alpha_y),
+                                  float(scene::kMinLightDistance));
     block.tangent_axis = glm::vec4(glm::vec3(sp.tangent_axis), 0);
     block.emission = glm::vec4(glm::vec3(scene_.material.emission), 0);
     for (size_t i = 0; i < scene_.lights.size() && i < HS_MAX_LIGHTS; ++i) {
@@ -109,7 +129,9 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
                                                     ? glm::vec4(glm::vec3(l.position), 1.0f)
                                                     : glm::vec4(glm::vec3(-l.direction), 0.0f);
     }
-    HS_ASSIGN_OR_RETURN(v.scene_block, gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform, pi.name + ".scene"));
+    HS_ASSIGN_OR_RETURN(v.scene_block,
+                        gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
+                                            pi.name + ".scene"));
     v.scene_block.write(&block, sizeof(block));
     v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
@@ -118,31 +140,38 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
 
 Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slot) {
     auto key = std::make_tuple(w, h, slot);
-    if (auto it = targets_.find(key); it != targets_.end()) return &it->second;
-    HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, info_.format, fmt::format("target.{}x{}.{}", w, h, slot)));
+    if (auto it = targets_.find(key); it != targets_.end())
+        return &it->second;
+    HS_ASSIGN_OR_RETURN(auto t,
+                        gpu::RenderTarget::create(device_, w, h, info_.format,
+                                                  fmt::format("target.{}x{}.{}", w, h, slot)));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
 
-Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose, const char* label) {
+Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
+                                    const char* label) {
     auto t0 = std::chrono::steady_clock::now();
     HS_ASSIGN_OR_RETURN(gpu::RenderTarget * t, target(k.width, k.height));
     gpu::GpuPush push{};
-    glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(pose);
+    glm::dmat4 clip =
+        scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(pose);
     push.clip_from_world = glm::mat4(clip);
     push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
     HS_TRY(gpu::execute(device_, label, [&](gpu::CommandList& cl) {
         cl.begin_render(*t, glm::vec4(0.0f), label);
         cl.bind(v.pipeline);
         cl.push_constants(v.pipeline, &push, sizeof(push));
-        cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_, uint32_t(mesh_.indices.size()));
+        cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
+                        uint32_t(mesh_.indices.size()));
         cl.end_render_and_read_back(*t);
     }));
     RenderResult r;
     r.image = t->read();
     r.report.ran = true;
     r.report.effects = v.effects;
-    r.report.render_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    r.report.render_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return r;
 }
 
@@ -158,23 +187,31 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
     for (size_t i = 0; i < reqs.size(); ++i) {
         const auto& k = reqs[i].intrinsics;
         if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
-            return make_error(ErrorCode::kInvalidArgument, fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
-        if (effects_of(scene_, true, reqs[i].spec).empty()) continue;
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
+        if (effects_of(scene_, true, reqs[i].spec).empty())
+            continue;
         HS_ASSIGN_OR_RETURN(items[i].variant, variant(true, reqs[i].spec));
-        HS_ASSIGN_OR_RETURN(items[i].target, target(k.width, k.height, slots[{k.width, k.height}]++));
-        glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(reqs[i].eye);
+        HS_ASSIGN_OR_RETURN(items[i].target,
+                            target(k.width, k.height, slots[{k.width, k.height}]++));
+        glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) *
+                          scene::frame_from_world(reqs[i].eye);
         items[i].push.clip_from_world = glm::mat4(clip);
         items[i].push.eye_position = glm::vec4(glm::vec3(reqs[i].eye.position), 1.0f);
     }
-    const bool any = std::any_of(items.begin(), items.end(), [](const Item& it) { return it.variant != nullptr; });
+    const bool any = std::any_of(items.begin(), items.end(),
+                                 [](const Item& it) { return it.variant != nullptr; });
     if (any) {
         HS_TRY(gpu::execute(device_, "pass.viewer-vd.batch", [&](gpu::CommandList& cl) {
             for (auto& it : items) {
-                if (!it.variant) continue;
+                if (!it.variant)
+                    continue;
                 cl.begin_render(*it.target, glm::vec4(0.0f), "pass.viewer-vd");
                 cl.bind(it.variant->pipeline);
                 cl.push_constants(it.variant->pipeline, &it.push, sizeof(it.push));
-                cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_, uint32_t(mesh_.indices.size()));
+                cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
+                                uint32_t(mesh_.indices.size()));
                 cl.end_render_and_read_back(*it.target);
             }
         }));
@@ -191,29 +228,34 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         out[i].report.ran = true;
         out[i].report.effects = items[i].variant->effects;
     }
-    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     for (auto& r : out) r.report.render_ms = ms / double(out.size());
     return out;
 }
 
 Result<RenderResult> Renderer::render_projector() {
     HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
-    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, scene_.projector.intrinsics, scene_.projector.pose, "pass.projector-vi"));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, scene_.projector.intrinsics, scene_.projector.pose,
+                                             "pass.projector-vi"));
     r.report.pass = "projector-vi";
     ++projector_renders_;
     return r;
 }
 
-Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye) {
+Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k,
+                                                  const scene::Pose& eye) {
     HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
     HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, eye, "pass.eye-vi"));
     r.report.pass = "eye-vi";
     return r;
 }
 
-Result<RenderResult> Renderer::render_eye(const scene::Specular& spec, const scene::Intrinsics& k, const scene::Pose& eye) {
+Result<RenderResult> Renderer::render_eye(const scene::Specular& spec, const scene::Intrinsics& k,
+                                          const scene::Pose& eye) {
     if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
-        return make_error(ErrorCode::kInvalidArgument, fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
     if (effects_of(scene_, true, spec).empty()) {
         // Nothing view-dependent: an OST display shows black as see-through, so the layer is
         // black and no GPU work is recorded.

@@ -82,7 +82,8 @@ private:
     Result<Variant*> variant(bool vd, const scene::Specular& spec);
     // The slot-th target of this size (a batch needs one per eye).
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
-    Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose, const char* label);
+    Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
+                              const char* label);
 
     gpu::Device& device_;
     scene::Scene scene_;
@@ -97,6 +98,7 @@ private:
 };
 
 // Effects and specialisation key of a pass, as the renderer decides them from the scene.
-std::vector<std::string> effects_of(const scene::Scene& scene, bool vd, const scene::Specular& spec);
+std::vector<std::string> effects_of(const scene::Scene& scene, bool vd,
+                                    const scene::Specular& spec);
 
 }  // namespace hs::render

@@ -8,7 +8,9 @@
 namespace hs::scene {
 
 namespace {
-bool finite(glm::dvec3 v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+bool finite(glm::dvec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
 }  // namespace
 
 Result<Pose> make_pose(glm::dvec3 position, glm::dquat q) {
@@ -17,7 +19,8 @@ Result<Pose> make_pose(glm::dvec3 position, glm::dquat q) {
     }
     double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
     if (!std::isfinite(n)) {
-        return make_error(ErrorCode::kInvalidArgument, "pose quaternion has a non-finite component");
+        return make_error(ErrorCode::kInvalidArgument,
+                          "pose quaternion has a non-finite component");
     }
     if (n < 1e-6) {
         return make_error(ErrorCode::kInvalidArgument,
@@ -32,7 +35,8 @@ Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up) {
     }
     glm::dvec3 d = target - eye;
     double len = glm::length(d);
-    if (len < 1e-9) return make_error(ErrorCode::kInvalidArgument, "look_at: eye and target coincide");
+    if (len < 1e-9)
+        return make_error(ErrorCode::kInvalidArgument, "look_at: eye and target coincide");
     glm::dvec3 fwd = d / len;  // the frame's -z
     glm::dvec3 upn = glm::length(up) > 0 ? glm::normalize(up) : glm::dvec3(0, 1, 0);
     glm::dvec3 right = glm::cross(fwd, upn);
@@ -59,7 +63,8 @@ Intrinsics intrinsics_from_fov(uint32_t w, uint32_t h, double fov_x, double fov_
 }
 
 Intrinsics eye_intrinsics(const ViewerProfile& v) {
-    if (v.has_intrinsics) return v.intrinsics;
+    if (v.has_intrinsics)
+        return v.intrinsics;
     return intrinsics_from_fov(v.eye_width, v.eye_height, v.fov_x_rad, v.fov_y_rad);
 }
 

@@ -19,21 +19,31 @@ using json = nlohmann::json;
 
 const char* to_string(SpecularModel m) {
     switch (m) {
-        case SpecularModel::kNone: return "none";
-        case SpecularModel::kPhong: return "phong";
-        case SpecularModel::kBlinnPhong: return "blinn-phong";
-        case SpecularModel::kWard: return "ward";
-        case SpecularModel::kKajiyaKay: return "kajiya-kay";
+        case SpecularModel::kNone:
+            return "none";
+        case SpecularModel::kPhong:
+            return "phong";
+        case SpecularModel::kBlinnPhong:
+            return "blinn-phong";
+        case SpecularModel::kWard:
+            return "ward";
+        case SpecularModel::kKajiyaKay:
+            return "kajiya-kay";
     }
     return "?";
 }
 
 Result<SpecularModel> parse_specular_model(std::string_view s) {
-    if (s == "none") return SpecularModel::kNone;
-    if (s == "phong") return SpecularModel::kPhong;
-    if (s == "blinn-phong") return SpecularModel::kBlinnPhong;
-    if (s == "ward") return SpecularModel::kWard;
-    if (s == "kajiya-kay") return SpecularModel::kKajiyaKay;
+    if (s == "none")
+        return SpecularModel::kNone;
+    if (s == "phong")
+        return SpecularModel::kPhong;
+    if (s == "blinn-phong")
+        return SpecularModel::kBlinnPhong;
+    if (s == "ward")
+        return SpecularModel::kWard;
+    if (s == "kajiya-kay")
+        return SpecularModel::kKajiyaKay;
     return make_error(ErrorCode::kInvalidArgument,
                       fmt::format("unknown specular model '{}' (expected none, phong, blinn-phong, "
                                   "ward or kajiya-kay)",
@@ -42,7 +52,8 @@ Result<SpecularModel> parse_specular_model(std::string_view s) {
 
 const ViewerProfile* Scene::find_viewer(const std::string& n) const {
     for (const auto& v : viewers)
-        if (v.name == n) return &v;
+        if (v.name == n)
+            return &v;
     return nullptr;
 }
 
@@ -57,12 +68,15 @@ public:
     Error error() const { return *error_; }
 
     void fail(const std::string& path, const std::string& what) {
-        if (!error_) error_ = make_error(ErrorCode::kParse, fmt::format("{}: {}: {}", source_, path, what));
+        if (!error_)
+            error_ = make_error(ErrorCode::kParse, fmt::format("{}: {}: {}", source_, path, what));
     }
 
     // Rejects keys outside `allowed`, so a misspelt key is an error rather than silently ignored.
-    void only(const json& obj, const std::string& path, std::initializer_list<const char*> allowed) {
-        if (!obj.is_object()) return;
+    void only(const json& obj, const std::string& path,
+              std::initializer_list<const char*> allowed) {
+        if (!obj.is_object())
+            return;
         std::set<std::string> ok(allowed.begin(), allowed.end());
         for (auto it = obj.begin(); it != obj.end(); ++it) {
             if (!ok.count(it.key())) {
@@ -80,7 +94,8 @@ public:
         }
         auto it = obj.find(key);
         if (it == obj.end()) {
-            if (required) fail(join(path, key), "missing required key");
+            if (required)
+                fail(join(path, key), "missing required key");
             return nullptr;
         }
         return &*it;
@@ -89,7 +104,8 @@ public:
     double number(const json& obj, const std::string& path, const char* key,
                   std::optional<double> def, double lo, double hi) {
         const json* v = member(obj, path, key, !def.has_value());
-        if (!v) return def.value_or(0.0);
+        if (!v)
+            return def.value_or(0.0);
         if (!v->is_number()) {
             fail(join(path, key), fmt::format("expected a number, got {}", v->type_name()));
             return def.value_or(0.0);
@@ -104,9 +120,12 @@ public:
     uint32_t integer(const json& obj, const std::string& path, const char* key,
                      std::optional<uint32_t> def, uint32_t lo, uint32_t hi) {
         const json* v = member(obj, path, key, !def.has_value());
-        if (!v) return def.value_or(0);
-        if (!v->is_number_integer() || v->get<int64_t>() < int64_t(lo) || v->get<int64_t>() > int64_t(hi)) {
-            fail(join(path, key), fmt::format("expected an integer in [{}, {}], got {}", lo, hi, v->dump()));
+        if (!v)
+            return def.value_or(0);
+        if (!v->is_number_integer() || v->get<int64_t>() < int64_t(lo) ||
+            v->get<int64_t>() > int64_t(hi)) {
+            fail(join(path, key),
+                 fmt::format("expected an integer in [{}, {}], got {}", lo, hi, v->dump()));
             return def.value_or(lo);
         }
         return uint32_t(v->get<int64_t>());
@@ -115,7 +134,8 @@ public:
     glm::dvec3 vec3(const json& obj, const std::string& path, const char* key,
                     std::optional<glm::dvec3> def, double lo = -1e6, double hi = 1e6) {
         const json* v = member(obj, path, key, !def.has_value());
-        if (!v) return def.value_or(glm::dvec3(0.0));
+        if (!v)
+            return def.value_or(glm::dvec3(0.0));
         if (!v->is_array() || v->size() != 3 || !(*v)[0].is_number() || !(*v)[1].is_number() ||
             !(*v)[2].is_number()) {
             fail(join(path, key), fmt::format("expected an array of 3 numbers, got {}", v->dump()));
@@ -124,7 +144,8 @@ public:
         glm::dvec3 r((*v)[0].get<double>(), (*v)[1].get<double>(), (*v)[2].get<double>());
         for (int i = 0; i < 3; ++i) {
             if (!std::isfinite(r[i]) || r[i] < lo || r[i] > hi) {
-                fail(join(path, key), fmt::format("component {} must lie in [{}, {}], got {}", i, lo, hi, r[i]));
+                fail(join(path, key),
+                     fmt::format("component {} must lie in [{}, {}], got {}", i, lo, hi, r[i]));
             }
         }
         return r;
@@ -133,7 +154,8 @@ public:
     std::string string(const json& obj, const std::string& path, const char* key,
                        std::optional<std::string> def) {
         const json* v = member(obj, path, key, !def.has_value());
-        if (!v) return def.value_or("");
+        if (!v)
+            return def.value_or("");
         if (!v->is_string()) {
             fail(join(path, key), fmt::format("expected a string, got {}", v->type_name()));
             return def.value_or("");
@@ -143,7 +165,8 @@ public:
 
     bool boolean(const json& obj, const std::string& path, const char* key, bool def) {
         const json* v = member(obj, path, key, false);
-        if (!v) return def;
+        if (!v)
+            return def;
         if (!v->is_boolean()) {
             fail(join(path, key), fmt::format("expected true or false, got {}", v->dump()));
             return def;
@@ -161,21 +184,29 @@ private:
 };
 
 Specular read_specular(Reader& r, const json& j, const std::string& path) {
-    r.only(j, path, {"model", "colour", "exponent", "alpha_x", "alpha_y", "tangent_axis", "tangent_source"});
+    r.only(j, path,
+           {"model", "colour", "exponent", "alpha_x", "alpha_y", "tangent_axis", "tangent_source"});
     Specular s;
     auto model = parse_specular_model(r.string(j, path, "model", std::nullopt));
-    if (!model) r.fail(Reader::join(path, "model"), model.error().message);
-    else s.model = model.value();
+    if (!model)
+        r.fail(Reader::join(path, "model"), model.error().message);
+    else
+        s.model = model.value();
     s.colour = r.vec3(j, path, "colour", glm::dvec3(0.0), 0.0, 1e3);
     s.exponent = r.number(j, path, "exponent", 1.0, 1.0, 1e6);
     s.alpha_x = r.number(j, path, "alpha_x", 0.2, 1e-6, 10.0);
     s.alpha_y = r.number(j, path, "alpha_y", s.alpha_x, 1e-6, 10.0);
     s.tangent_axis = r.vec3(j, path, "tangent_axis", glm::dvec3(1, 0, 0));
-    if (glm::length(s.tangent_axis) < 1e-9) r.fail(Reader::join(path, "tangent_axis"), "must not be zero");
-    else s.tangent_axis = glm::normalize(s.tangent_axis);
+    if (glm::length(s.tangent_axis) < 1e-9)
+        r.fail(Reader::join(path, "tangent_axis"), "must not be zero");
+    else
+        s.tangent_axis = glm::normalize(s.tangent_axis);
     std::string src = r.string(j, path, "tangent_source", "axis");
-    if (src == "mesh") s.tangent_source = Specular::TangentSource::kMesh;
-    else if (src != "axis") r.fail(Reader::join(path, "tangent_source"), fmt::format("expected \"axis\" or \"mesh\", got \"{}\"", src));
+    if (src == "mesh")
+        s.tangent_source = Specular::TangentSource::kMesh;
+    else if (src != "axis")
+        r.fail(Reader::join(path, "tangent_source"),
+               fmt::format("expected \"axis\" or \"mesh\", got \"{}\"", src));
     return s;
 }
 
@@ -185,19 +216,24 @@ Pose read_pose(Reader& r, const json& j, const std::string& path) {
     if (j.is_object() && j.contains("orientation_wxyz")) {
         const json& q = j["orientation_wxyz"];
         if (!q.is_array() || q.size() != 4) {
-            r.fail(Reader::join(path, "orientation_wxyz"), "expected an array of 4 numbers (w, x, y, z)");
+            r.fail(Reader::join(path, "orientation_wxyz"),
+                   "expected an array of 4 numbers (w, x, y, z)");
             return {};
         }
-        glm::dquat quat(q[0].get<double>(), q[1].get<double>(), q[2].get<double>(), q[3].get<double>());
+        glm::dquat quat(q[0].get<double>(), q[1].get<double>(), q[2].get<double>(),
+                        q[3].get<double>());
         auto p = make_pose(pos, quat);
-        if (!p) r.fail(Reader::join(path, "orientation_wxyz"), p.error().message);
+        if (!p)
+            r.fail(Reader::join(path, "orientation_wxyz"), p.error().message);
         return p ? p.value() : Pose{};
     }
     glm::dvec3 target = r.vec3(j, path, "look_at", std::nullopt);
     glm::dvec3 up = r.vec3(j, path, "up", glm::dvec3(0, 1, 0));
-    if (r.failed()) return {};
+    if (r.failed())
+        return {};
     auto p = look_at(pos, target, up);
-    if (!p) r.fail(path, p.error().message);
+    if (!p)
+        r.fail(path, p.error().message);
     return p ? p.value() : Pose{};
 }
 
@@ -209,13 +245,17 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
     try {
         root = json::parse(text);
     } catch (const json::parse_error& e) {
-        return make_error(ErrorCode::kParse, fmt::format("{}: malformed JSON: {}", source, e.what()));
+        return make_error(ErrorCode::kParse,
+                          fmt::format("{}: malformed JSON: {}", source, e.what()));
     }
     Reader r(source);
     Scene s;
-    if (!root.is_object()) return make_error(ErrorCode::kParse, fmt::format("{}: expected a JSON object at the top", source));
-    r.only(root, "", {"schema_version", "name", "prop", "material", "specular_presets", "lights",
-                      "projector", "viewers", "viewing", "effects", "comment"});
+    if (!root.is_object())
+        return make_error(ErrorCode::kParse,
+                          fmt::format("{}: expected a JSON object at the top", source));
+    r.only(root, "",
+           {"schema_version", "name", "prop", "material", "specular_presets", "lights", "projector",
+            "viewers", "viewing", "effects", "comment"});
     s.schema_version = int(r.integer(root, "", "schema_version", std::nullopt, 0, 1000));
     if (!r.failed() && s.schema_version != kSchemaVersion) {
         r.fail("schema_version", fmt::format("this build reads schema_version {}, the file has {}",
@@ -225,7 +265,8 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
 
     // prop
     if (const json* p = r.member(root, "", "prop", true)) {
-        r.only(*p, "prop", {"kind", "centre", "radius_m", "segments", "rings", "gltf", "translation", "scale"});
+        r.only(*p, "prop",
+               {"kind", "centre", "radius_m", "segments", "rings", "gltf", "translation", "scale"});
         std::string kind = r.string(*p, "prop", "kind", std::nullopt);
         if (kind == "hemisphere") {
             s.prop.kind = Prop::Kind::kHemisphere;
@@ -240,7 +281,8 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
             s.prop.gltf_translation = r.vec3(*p, "prop", "translation", glm::dvec3(0.0));
             s.prop.gltf_scale = r.number(*p, "prop", "scale", 1.0, 1e-6, 1e6);
         } else if (!r.failed()) {
-            r.fail("prop.kind", fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
+            r.fail("prop.kind",
+                   fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
         }
     }
 
@@ -253,10 +295,14 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
             if (!r.failed()) {
                 s.material.albedo_texture_path = (t.is_absolute() ? t : base_dir / t).string();
                 auto img = read_png(s.material.albedo_texture_path);
-                if (!img) r.fail("material.albedo_texture", img.error().message);
+                if (!img)
+                    r.fail("material.albedo_texture", img.error().message);
                 else if (img->width > 8192 || img->height > 8192)
-                    r.fail("material.albedo_texture", fmt::format("{}x{} exceeds 8192x8192", img->width, img->height));
-                else s.material.albedo_texture = std::make_shared<const ImageRgba8>(std::move(img).value());
+                    r.fail("material.albedo_texture",
+                           fmt::format("{}x{} exceeds 8192x8192", img->width, img->height));
+                else
+                    s.material.albedo_texture =
+                        std::make_shared<const ImageRgba8>(std::move(img).value());
             }
         }
         if (const json* sp = r.member(*m, "material", "specular", false)) {
@@ -265,17 +311,21 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         s.material.emission = r.vec3(*m, "material", "emission", glm::dvec3(0.0), 0.0, 1e6);
     }
     if (const json* presets = r.member(root, "", "specular_presets", false)) {
-        if (!presets->is_object()) r.fail("specular_presets", "expected an object of named specular blocks");
+        if (!presets->is_object())
+            r.fail("specular_presets", "expected an object of named specular blocks");
         else
             for (auto it = presets->begin(); it != presets->end(); ++it)
-                s.specular_presets[it.key()] = read_specular(r, it.value(), "specular_presets." + it.key());
+                s.specular_presets[it.key()] =
+                    read_specular(r, it.value(), "specular_presets." + it.key());
     }
 
     // lights
     if (const json* ls = r.member(root, "", "lights", true)) {
-        if (!ls->is_array()) r.fail("lights", "expected an array");
+        if (!ls->is_array())
+            r.fail("lights", "expected an array");
         else if (ls->size() > kMaxLights)
-            r.fail("lights", fmt::format("at most {} lights are supported, got {}", kMaxLights, ls->size()));
+            r.fail("lights",
+                   fmt::format("at most {} lights are supported, got {}", kMaxLights, ls->size()));
         else
             for (size_t i = 0; i < ls->size(); ++i) {
                 const json& lj = (*ls)[i];
@@ -288,13 +338,16 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                 if (type == "directional") {
                     l.type = LightType::kDirectional;
                     l.direction = r.vec3(lj, path, "direction", std::nullopt);
-                    if (glm::length(l.direction) < 1e-9) r.fail(path + ".direction", "must not be zero");
-                    else l.direction = glm::normalize(l.direction);
+                    if (glm::length(l.direction) < 1e-9)
+                        r.fail(path + ".direction", "must not be zero");
+                    else
+                        l.direction = glm::normalize(l.direction);
                 } else if (type == "point") {
                     l.type = LightType::kPoint;
                     l.position = r.vec3(lj, path, "position", std::nullopt);
                 } else if (!r.failed()) {
-                    r.fail(path + ".type", fmt::format("expected \"directional\" or \"point\", got \"{}\"", type));
+                    r.fail(path + ".type",
+                           fmt::format("expected \"directional\" or \"point\", got \"{}\"", type));
                 }
                 s.lights.push_back(l);
             }
@@ -318,13 +371,15 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
 
     // viewers
     if (const json* vs = r.member(root, "", "viewers", true)) {
-        if (!vs->is_array() || vs->empty()) r.fail("viewers", "expected a non-empty array of headset profiles");
+        if (!vs->is_array() || vs->empty())
+            r.fail("viewers", "expected a non-empty array of headset profiles");
         else
             for (size_t i = 0; i < vs->size(); ++i) {
                 const json& vj = (*vs)[i];
                 std::string path = fmt::format("viewers[{}]", i);
-                r.only(vj, path, {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg",
-                                  "fov_diagonal_deg", "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
+                r.only(vj, path,
+                       {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg",
+                        "fov_diagonal_deg", "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
                 ViewerProfile v;
                 v.name = r.string(vj, path, "name", std::nullopt);
                 v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, 16384);
@@ -342,41 +397,55 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                     v.fov_y_rad = 2 * std::atan(0.5 * k.height / k.fy);
                 } else if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
                     double d = r.number(vj, path, "fov_diagonal_deg", std::nullopt, 0.1, 179.0);
-                    fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad, &v.fov_y_rad);
+                    fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad,
+                                      &v.fov_y_rad);
                 } else {
-                    v.fov_x_rad = glm::radians(r.number(vj, path, "fov_x_deg", std::nullopt, 0.1, 179.0));
-                    v.fov_y_rad = glm::radians(r.number(vj, path, "fov_y_deg", std::nullopt, 0.1, 179.0));
+                    v.fov_x_rad =
+                        glm::radians(r.number(vj, path, "fov_x_deg", std::nullopt, 0.1, 179.0));
+                    v.fov_y_rad =
+                        glm::radians(r.number(vj, path, "fov_y_deg", std::nullopt, 0.1, 179.0));
                 }
                 v.ipd_m = r.number(vj, path, "ipd_m", 0.063, 0.0, 0.2);
                 v.alpha = r.number(vj, path, "alpha", 1.0, 0.0, 1.0);
-                if (!r.failed() && s.find_viewer(v.name)) r.fail(path + ".name", fmt::format("duplicate viewer name '{}'", v.name));
+                if (!r.failed() && s.find_viewer(v.name))
+                    r.fail(path + ".name", fmt::format("duplicate viewer name '{}'", v.name));
                 s.viewers.push_back(v);
             }
     }
 
     if (const json* vw = r.member(root, "", "viewing", false)) {
-        r.only(*vw, "viewing", {"target", "distance_m", "angles_deg", "heights_m", "default_height"});
+        r.only(*vw, "viewing",
+               {"target", "distance_m", "angles_deg", "heights_m", "default_height"});
         s.viewing.target = r.vec3(*vw, "viewing", "target", s.viewing.target);
-        s.viewing.distance_m = r.number(*vw, "viewing", "distance_m", s.viewing.distance_m, 1e-3, 1e4);
+        s.viewing.distance_m =
+            r.number(*vw, "viewing", "distance_m", s.viewing.distance_m, 1e-3, 1e4);
         if (const json* a = r.member(*vw, "viewing", "angles_deg", false)) {
             s.viewing.angles_deg.clear();
-            if (!a->is_array() || a->empty()) r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
+            if (!a->is_array() || a->empty())
+                r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
             else
                 for (const auto& x : *a) {
-                    if (!x.is_number()) { r.fail("viewing.angles_deg", "expected numbers"); break; }
+                    if (!x.is_number()) {
+                        r.fail("viewing.angles_deg", "expected numbers");
+                        break;
+                    }
                     s.viewing.angles_deg.push_back(x.get<double>());
                 }
         }
         if (const json* h = r.member(*vw, "viewing", "heights_m", false)) {
             s.viewing.heights_m.clear();
-            if (!h->is_object() || h->empty()) r.fail("viewing.heights_m", "expected an object of name: height");
+            if (!h->is_object() || h->empty())
+                r.fail("viewing.heights_m", "expected an object of name: height");
             else
                 for (auto it = h->begin(); it != h->end(); ++it)
-                    s.viewing.heights_m[it.key()] = r.number(*h, "viewing.heights_m", it.key().c_str(), std::nullopt, -1e4, 1e4);
+                    s.viewing.heights_m[it.key()] = r.number(
+                        *h, "viewing.heights_m", it.key().c_str(), std::nullopt, -1e4, 1e4);
         }
-        s.viewing.default_height = r.string(*vw, "viewing", "default_height", s.viewing.default_height);
+        s.viewing.default_height =
+            r.string(*vw, "viewing", "default_height", s.viewing.default_height);
         if (!r.failed() && !s.viewing.heights_m.count(s.viewing.default_height))
-            r.fail("viewing.default_height", fmt::format("'{}' is not a key of viewing.heights_m", s.viewing.default_height));
+            r.fail("viewing.default_height",
+                   fmt::format("'{}' is not a key of viewing.heights_m", s.viewing.default_height));
     }
 
     if (const json* e = r.member(root, "", "effects", false)) {
@@ -384,13 +453,16 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         s.effects.point_light_falloff = r.boolean(*e, "effects", "point_light_falloff", true);
     }
 
-    if (r.failed()) return r.error();
+    if (r.failed())
+        return r.error();
     return s;
 }
 
 Result<Scene> load_scene_file(const std::filesystem::path& path) {
     std::ifstream in(path, std::ios::binary);
-    if (!in) return make_error(ErrorCode::kNotFound, fmt::format("{}: cannot open scene file", path.string()));
+    if (!in)
+        return make_error(ErrorCode::kNotFound,
+                          fmt::format("{}: cannot open scene file", path.string()));
     std::stringstream ss;
     ss << in.rdbuf();
     return parse_scene(ss.str(), path.string(), path.parent_path());

@@ -20,7 +20,8 @@ glm::dvec3 hemisphere_tangent(glm::dvec3 n) {
 
 glm::dvec2 hemisphere_uv(glm::dvec3 n) {
     double phi = std::atan2(-n.z, n.x);
-    if (phi < 0) phi += 2.0 * glm::pi<double>();
+    if (phi < 0)
+        phi += 2.0 * glm::pi<double>();
     double theta = std::acos(std::clamp(n.y, -1.0, 1.0));
     return {phi / (2.0 * glm::pi<double>()), theta / (0.5 * glm::pi<double>())};
 }
@@ -31,7 +32,8 @@ Mesh tessellate_hemisphere(const Hemisphere& h) {
     const glm::dvec3 c = h.centre;
     // Pole vertex, then R rings of S+1 vertices (the seam is duplicated for the UVs).
     auto add = [&](double theta, double phi, glm::vec2 uv) {
-        glm::dvec3 n(std::sin(theta) * std::cos(phi), std::cos(theta), -std::sin(theta) * std::sin(phi));
+        glm::dvec3 n(std::sin(theta) * std::cos(phi), std::cos(theta),
+                     -std::sin(theta) * std::sin(phi));
         m.positions.push_back(glm::vec3(c + h.radius * n));
         m.normals.push_back(glm::vec3(n));
         m.uvs.push_back(uv);
@@ -58,7 +60,8 @@ Mesh tessellate_hemisphere(const Hemisphere& h) {
     }
     for (uint32_t r = 1; r < R; ++r) {
         for (uint32_t s = 0; s < S; ++s) {
-            uint32_t a = ring(r, s), b = ring(r, s + 1), cc = ring(r + 1, s), d = ring(r + 1, s + 1);
+            uint32_t a = ring(r, s), b = ring(r, s + 1), cc = ring(r + 1, s),
+                     d = ring(r + 1, s + 1);
             m.indices.insert(m.indices.end(), {a, cc, d, a, d, b});
         }
     }
@@ -72,10 +75,16 @@ void clean_mesh(Mesh& m, double min_area) {
     uint32_t dropped = 0;
     for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
         uint32_t i0 = m.indices[t], i1 = m.indices[t + 1], i2 = m.indices[t + 2];
-        if (i0 >= n || i1 >= n || i2 >= n) { ++dropped; continue; }
+        if (i0 >= n || i1 >= n || i2 >= n) {
+            ++dropped;
+            continue;
+        }
         glm::dvec3 a = m.positions[i0], b = m.positions[i1], c = m.positions[i2];
         double area = 0.5 * glm::length(glm::cross(b - a, c - a));
-        if (!(area > min_area)) { ++dropped; continue; }  // also drops NaN positions
+        if (!(area > min_area)) {
+            ++dropped;
+            continue;
+        }  // also drops NaN positions
         kept.insert(kept.end(), {i0, i1, i2});
     }
     m.indices.swap(kept);
@@ -104,8 +113,10 @@ void clean_mesh(Mesh& m, double min_area) {
     } else {
         for (auto& nn : m.normals) nn = glm::normalize(nn);
     }
-    if (m.uvs.size() != n) m.uvs.assign(n, glm::vec2(0.0f));
-    if (m.tangents.size() != n) m.tangents.assign(n, glm::vec3(1.0f, 0.0f, 0.0f));
+    if (m.uvs.size() != n)
+        m.uvs.assign(n, glm::vec2(0.0f));
+    if (m.tangents.size() != n)
+        m.tangents.assign(n, glm::vec3(1.0f, 0.0f, 0.0f));
     for (auto& t : m.tangents) {
         float l = glm::length(t);
         t = (l > 1e-12f && std::isfinite(l)) ? t / l : glm::vec3(1.0f, 0.0f, 0.0f);
@@ -117,7 +128,8 @@ Result<Mesh> build_prop_mesh(const Prop& prop) {
     if (prop.kind == Prop::Kind::kHemisphere) {
         m = tessellate_hemisphere(prop.hemisphere);
     } else {
-        HS_ASSIGN_OR_RETURN(m, load_gltf_mesh(prop.gltf_path, prop.gltf_scale, prop.gltf_translation));
+        HS_ASSIGN_OR_RETURN(m,
+                            load_gltf_mesh(prop.gltf_path, prop.gltf_scale, prop.gltf_translation));
     }
     clean_mesh(m);
     if (m.dropped_triangles > 0) {

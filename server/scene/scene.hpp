@@ -26,8 +26,8 @@ struct Pose {
 
 // Pinhole intrinsics in the OpenCV convention: u right, v down, pixel centres at integers.
 struct Intrinsics {
-    uint32_t width = 0;   // pixels
-    uint32_t height = 0;  // pixels
+    uint32_t width = 0;     // pixels
+    uint32_t height = 0;    // pixels
     double fx = 0, fy = 0;  // focal lengths, pixels
     double cx = 0, cy = 0;  // principal point, pixels
 };
@@ -37,10 +37,10 @@ const char* to_string(SpecularModel model);
 
 struct Specular {
     SpecularModel model = SpecularModel::kNone;
-    glm::dvec3 colour{0.0};    // k_s (Phong, Blinn, Kajiya-Kay) or rho_s (Ward), linear RGB
-    double exponent = 1.0;     // Phong, Blinn-Phong, Kajiya-Kay: cosine exponent, >= 1
-    double alpha_x = 0.2;      // Ward: RMS slope along the tangent, > 0
-    double alpha_y = 0.2;      // Ward: RMS slope along the bitangent, > 0
+    glm::dvec3 colour{0.0};  // k_s (Phong, Blinn, Kajiya-Kay) or rho_s (Ward), linear RGB
+    double exponent = 1.0;   // Phong, Blinn-Phong, Kajiya-Kay: cosine exponent, >= 1
+    double alpha_x = 0.2;    // Ward: RMS slope along the tangent, > 0
+    double alpha_y = 0.2;    // Ward: RMS slope along the bitangent, > 0
     // Ward and Kajiya-Kay: the surface tangent is this world direction projected onto the
     // tangent plane (brushing direction); where it is parallel to the normal a fixed fallback
     // perpendicular is used (docs/SHADING.md).
@@ -50,14 +50,13 @@ struct Specular {
     // against the normal.
     enum class TangentSource { kAxis, kMesh } tangent_source = TangentSource::kAxis;
 
-    bool uses_tangent() const {
-        return model == SpecularModel::kKajiyaKay || anisotropic();
-    }
+    bool uses_tangent() const { return model == SpecularModel::kKajiyaKay || anisotropic(); }
     bool anisotropic() const { return model == SpecularModel::kWard && alpha_x != alpha_y; }
 };
 
 struct Material {
-    glm::dvec3 albedo{0.8};  // diffuse reflectance rho_d in [0, 1], linear RGB (Lambert: rho_d / pi)
+    glm::dvec3 albedo{
+        0.8};  // diffuse reflectance rho_d in [0, 1], linear RGB (Lambert: rho_d / pi)
     // Optional sRGB-encoded texture multiplying `albedo`, sampled at the mesh UVs: bilinear,
     // repeating in u, clamped in v (docs/SHADING.md). Null when the material has none.
     std::shared_ptr<const ImageRgba8> albedo_texture;
@@ -70,9 +69,9 @@ enum class LightType { kDirectional, kPoint };
 
 struct Light {
     LightType type = LightType::kDirectional;
-    glm::dvec3 colour{1.0};      // linear RGB, multiplies intensity
-    double intensity = 1.0;      // directional: irradiance W/m^2 at normal incidence;
-                                 // point: radiant intensity W/sr
+    glm::dvec3 colour{1.0};          // linear RGB, multiplies intensity
+    double intensity = 1.0;          // directional: irradiance W/m^2 at normal incidence;
+                                     // point: radiant intensity W/sr
     glm::dvec3 direction{0, -1, 0};  // directional: unit direction the light travels, world
     glm::dvec3 position{0.0};        // point: metres, world
 };
@@ -100,8 +99,8 @@ struct Hemisphere {
 
 struct Prop {
     enum class Kind { kHemisphere, kGltf } kind = Kind::kHemisphere;
-    Hemisphere hemisphere;       // kind == kHemisphere: the exact shape, dome up (+y)
-    std::string gltf_path;       // kind == kGltf: absolute, or resolved against the scene file
+    Hemisphere hemisphere;  // kind == kHemisphere: the exact shape, dome up (+y)
+    std::string gltf_path;  // kind == kGltf: absolute, or resolved against the scene file
     glm::dvec3 gltf_translation{0.0};  // metres, applied after the glTF's own node transforms
     double gltf_scale = 1.0;
 };
@@ -120,10 +119,11 @@ struct ViewerProfile {
     uint32_t eye_height = 0;  // pixels
     double fov_x_rad = 0;     // full horizontal field of view
     double fov_y_rad = 0;     // full vertical field of view
-    bool has_intrinsics = false;  // true: `intrinsics` below, not the fields of view, define the eye
-    Intrinsics intrinsics;        // per-eye pinhole intrinsics (pixels), when has_intrinsics
-    double ipd_m = 0.063;     // interpupillary distance
-    double alpha = 1.0;       // transparency of the optics in [0, 1] (paper eq. 3)
+    bool has_intrinsics =
+        false;              // true: `intrinsics` below, not the fields of view, define the eye
+    Intrinsics intrinsics;  // per-eye pinhole intrinsics (pixels), when has_intrinsics
+    double ipd_m = 0.063;   // interpupillary distance
+    double alpha = 1.0;     // transparency of the optics in [0, 1] (paper eq. 3)
 };
 
 // How `hysar render` places viewers, as in the paper's Fig. 7.

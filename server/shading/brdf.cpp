@@ -12,7 +12,9 @@ namespace {
 constexpr double kPi = glm::pi<double>();
 
 // x^e for x in (0, 1]: zero for x <= 0 (below the lobe) so no pow of a negative number.
-double lobe(double x, double e) { return x > 0.0 ? std::pow(std::min(x, 1.0), e) : 0.0; }
+double lobe(double x, double e) {
+    return x > 0.0 ? std::pow(std::min(x, 1.0), e) : 0.0;
+}
 
 bool lit_and_seen(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v) {
     return glm::dot(n, l) > 0.0 && glm::dot(n, v) > 0.0;
@@ -20,30 +22,36 @@ bool lit_and_seen(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v) {
 }  // namespace
 
 double phong(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, double e) {
-    if (!lit_and_seen(n, l, v)) return 0.0;
+    if (!lit_and_seen(n, l, v))
+        return 0.0;
     glm::dvec3 r = 2.0 * glm::dot(n, l) * n - l;
     return lobe(glm::dot(r, v), e);
 }
 
 double blinn_phong(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, double e) {
-    if (!lit_and_seen(n, l, v)) return 0.0;
+    if (!lit_and_seen(n, l, v))
+        return 0.0;
     glm::dvec3 h = l + v;  // |h| >= n.h = n.l + n.v > 0, so h is never the zero vector here
     return lobe(glm::dot(n, h) / glm::length(h), e);
 }
 
 double ward(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, glm::dvec3 t, double ax, double ay) {
-    if (!lit_and_seen(n, l, v)) return 0.0;
+    if (!lit_and_seen(n, l, v))
+        return 0.0;
     const double nl = glm::dot(n, l), nv = glm::dot(n, v);
     glm::dvec3 b = glm::cross(n, t);
     glm::dvec3 h = l + v;  // the ratio below is scale-invariant, so h need not be normalised
     const double ht = glm::dot(h, t) / ax, hb = glm::dot(h, b) / ay, hn = glm::dot(h, n);
     const double expo = -(ht * ht + hb * hb) / (hn * hn);
-    return std::exp(expo) * nl / (4.0 * kPi * ax * ay * std::sqrt(std::max(nl * nv, kWardMinCosProduct)));
+    return std::exp(expo) * nl /
+           (4.0 * kPi * ax * ay * std::sqrt(std::max(nl * nv, kWardMinCosProduct)));
 }
 
 double kajiya_kay(glm::dvec3 n, glm::dvec3 l, glm::dvec3 v, glm::dvec3 t, double e) {
-    if (!lit_and_seen(n, l, v)) return 0.0;
-    const double tl = std::clamp(glm::dot(t, l), -1.0, 1.0), tv = std::clamp(glm::dot(t, v), -1.0, 1.0);
+    if (!lit_and_seen(n, l, v))
+        return 0.0;
+    const double tl = std::clamp(glm::dot(t, l), -1.0, 1.0),
+                 tv = std::clamp(glm::dot(t, v), -1.0, 1.0);
     const double c = std::sqrt(1.0 - tl * tl) * std::sqrt(1.0 - tv * tv) - tl * tv;
     return lobe(c, e);
 }
@@ -61,11 +69,13 @@ glm::dvec3 tangent_from_axis(glm::dvec3 n, glm::dvec3 axis) {
 
 LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff) {
     glm::dvec3 c = light.colour * light.intensity;
-    if (light.type == scene::LightType::kDirectional) return {-light.direction, c};
+    if (light.type == scene::LightType::kDirectional)
+        return {-light.direction, c};
     glm::dvec3 d = light.position - p;
     double dist = glm::length(d);
     glm::dvec3 l = dist > 1e-9 ? d / dist : n;
-    if (!falloff) return {l, c};
+    if (!falloff)
+        return {l, c};
     double dc = std::max(dist, scene::kMinLightDistance);
     return {l, c / (dc * dc)};
 }
@@ -95,7 +105,8 @@ glm::dvec3 diffuse_radiance(const scene::Scene& s, glm::dvec3 p, glm::dvec3 n, g
         sum += la.E * std::max(glm::dot(n, la.l), 0.0);
     }
     glm::dvec3 albedo = s.material.albedo;
-    if (s.material.albedo_texture) albedo *= sample_albedo_texture(*s.material.albedo_texture, uv);
+    if (s.material.albedo_texture)
+        albedo *= sample_albedo_texture(*s.material.albedo_texture, uv);
     return albedo / kPi * sum;
 }
 
@@ -108,11 +119,17 @@ double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, 
                        glm::dvec3 surface_tangent) {
     using M = scene::SpecularModel;
     switch (spec.model) {
-        case M::kNone: return 0.0;
-        case M::kPhong: return phong(n, l, v, spec.exponent);
-        case M::kBlinnPhong: return blinn_phong(n, l, v, spec.exponent);
-        case M::kWard: return ward(n, l, v, shading_tangent(spec, n, surface_tangent), spec.alpha_x, spec.alpha_y);
-        case M::kKajiyaKay: return kajiya_kay(n, l, v, shading_tangent(spec, n, surface_tangent), spec.exponent);
+        case M::kNone:
+            return 0.0;
+        case M::kPhong:
+            return phong(n, l, v, spec.exponent);
+        case M::kBlinnPhong:
+            return blinn_phong(n, l, v, spec.exponent);
+        case M::kWard:
+            return ward(n, l, v, shading_tangent(spec, n, surface_tangent), spec.alpha_x,
+                        spec.alpha_y);
+        case M::kKajiyaKay:
+            return kajiya_kay(n, l, v, shading_tangent(spec, n, surface_tangent), spec.exponent);
     }
     return 0.0;
 }
@@ -120,7 +137,8 @@ double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, 
 glm::dvec3 specular_radiance(const scene::Scene& s, const scene::Specular& spec, glm::dvec3 p,
                              glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent) {
     glm::dvec3 sum = s.material.emission;
-    if (spec.model == scene::SpecularModel::kNone) return sum;
+    if (spec.model == scene::SpecularModel::kNone)
+        return sum;
     for (const auto& light : s.lights) {
         LightAtPoint la = light_at(light, p, n, s.effects.point_light_falloff);
         sum += spec.colour * la.E * specular_factor(spec, n, la.l, v, surface_tangent);

@@ -50,16 +50,16 @@ struct LightAtPoint {
 LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff);
 
 // Paper eq. (2), VI part: sum_i L_d(p, l_i), with the albedo texture (if any) at `uv`.
-glm::dvec3 diffuse_radiance(const scene::Scene& scene, glm::dvec3 p, glm::dvec3 n, glm::dvec2 uv = {0, 0});
+glm::dvec3 diffuse_radiance(const scene::Scene& scene, glm::dvec3 p, glm::dvec3 n,
+                            glm::dvec2 uv = {0, 0});
 
 // The albedo texture's linear value at uv, as a Vulkan sampler computes it: texels decoded
 // from sRGB, then bilinear filtering, repeating in u, clamped to the edge in v.
 glm::dvec3 sample_albedo_texture(const ImageRgba8& texture, glm::dvec2 uv);
 
 // Paper eq. (2), VD part: L_e + sum_i L_s(p, l_i, v), with `spec` the specular model in use.
-glm::dvec3 specular_radiance(const scene::Scene& scene, const scene::Specular& spec,
-                             glm::dvec3 p, glm::dvec3 n, glm::dvec3 v,
-                             glm::dvec3 surface_tangent = {1, 0, 0});
+glm::dvec3 specular_radiance(const scene::Scene& scene, const scene::Specular& spec, glm::dvec3 p,
+                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent = {1, 0, 0});
 
 // The specular factor (S or W above) of one model for one light direction. `surface_tangent`
 // is the mesh's tangent at the point, used when spec.tangent_source is kMesh.

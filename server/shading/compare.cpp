@@ -7,8 +7,8 @@
 
 namespace hs::shading {
 
-ErrorStats compare_images(const ImageRgba32f& a, const ImageRgba32f& ref, const std::vector<float>& ndv,
-                          double min_ndv) {
+ErrorStats compare_images(const ImageRgba32f& a, const ImageRgba32f& ref,
+                          const std::vector<float>& ndv, double min_ndv) {
     HS_CHECK(a.width == ref.width && a.height == ref.height, "compare_images: sizes differ");
     ErrorStats s;
     double sum = 0, isum = 0;
@@ -18,16 +18,20 @@ ErrorStats compare_images(const ImageRgba32f& a, const ImageRgba32f& ref, const 
         const float* q = &ref.pixels[i * 4];
         for (int c = 0; c < 3; ++c) s.non_finite += !std::isfinite(p[c]);
         const bool ca = p[3] > 0.5f, cr = q[3] > 0.5f;
-        if (!ca && !cr) continue;
+        if (!ca && !cr)
+            continue;
         ++s.pixels;
         const bool interior = ca && cr && (ndv.empty() || ndv[i] >= min_ndv);
-        if (interior) ++s.interior_pixels;
+        if (interior)
+            ++s.interior_pixels;
         for (int c = 0; c < 3; ++c) {
             double d = double(p[c]) - double(q[c]);
-            if (!std::isfinite(d)) d = INFINITY;
+            if (!std::isfinite(d))
+                d = INFINITY;
             sum += d * d;
             s.max_abs = std::max(s.max_abs, std::abs(d));
-            if (cr) s.reference_peak = std::max(s.reference_peak, double(q[c]));
+            if (cr)
+                s.reference_peak = std::max(s.reference_peak, double(q[c]));
             if (interior) {
                 isum += d * d;
                 s.interior_max_abs = std::max(s.interior_max_abs, std::abs(d));

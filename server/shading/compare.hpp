@@ -15,7 +15,7 @@ struct ErrorStats {
     double reference_peak = 0;  // largest reference channel value over covered pixels
     size_t pixels = 0;          // covered by either
     size_t interior_pixels = 0;
-    size_t non_finite = 0;      // NaN or inf channels in `image`
+    size_t non_finite = 0;  // NaN or inf channels in `image`
 };
 
 // `n_dot_v` (per pixel, from reference_viewer) may be empty: then interior = covered by both.

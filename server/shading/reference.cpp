@@ -16,23 +16,29 @@ std::optional<Hit> intersect_hemisphere(const scene::Hemisphere& h, glm::dvec3 o
     double b = glm::dot(oc, d);
     double cc = glm::dot(oc, oc) - h.radius * h.radius;
     double disc = b * b - cc;
-    if (disc < 0.0) return std::nullopt;
+    if (disc < 0.0)
+        return std::nullopt;
     double q = -(b + std::copysign(std::sqrt(disc), b));
     double t0 = q, t1 = q != 0.0 ? cc / q : 0.0;
-    if (t0 > t1) std::swap(t0, t1);
+    if (t0 > t1)
+        std::swap(t0, t1);
     double t = t0 > 1e-9 ? t0 : t1;  // nearest hit in front of the origin
-    if (!(t > 1e-9)) return std::nullopt;
+    if (!(t > 1e-9))
+        return std::nullopt;
     glm::dvec3 p = o + t * d;
     glm::dvec3 n = (p - h.centre) / h.radius;
-    if (glm::dot(n, d) >= 0.0) return std::nullopt;  // the inside: culled as on the GPU
-    if (p.y < h.centre.y) return std::nullopt;        // below the base: not part of the dome
+    if (glm::dot(n, d) >= 0.0)
+        return std::nullopt;  // the inside: culled as on the GPU
+    if (p.y < h.centre.y)
+        return std::nullopt;  // below the base: not part of the dome
     return Hit{t, p, glm::normalize(n)};
 }
 
 namespace {
 Result<void> require_hemisphere(const scene::Scene& s) {
     if (s.prop.kind != scene::Prop::Kind::kHemisphere)
-        return make_error(ErrorCode::kUnsupported, "the exact reference covers the hemisphere prop only");
+        return make_error(ErrorCode::kUnsupported,
+                          "the exact reference covers the hemisphere prop only");
     return {};
 }
 }  // namespace
@@ -45,7 +51,8 @@ Result<ImageRgba32f> reference_projector(const scene::Scene& s) {
         for (uint32_t x = 0; x < k.width; ++x) {
             glm::dvec3 d = scene::pixel_ray(k, s.projector.pose, x, y);
             auto hit = intersect_hemisphere(s.prop.hemisphere, s.projector.pose.position, d);
-            if (!hit) continue;
+            if (!hit)
+                continue;
             glm::dvec3 L = diffuse_radiance(s, hit->p, hit->n, scene::hemisphere_uv(hit->n));
             img.set(x, y, glm::vec4(glm::vec3(L), 1.0f));
         }
@@ -58,15 +65,19 @@ Result<ImageRgba32f> reference_viewer(const scene::Scene& s, const scene::Specul
                                       std::vector<float>* ndv) {
     HS_TRY(require_hemisphere(s));
     ImageRgba32f img = ImageRgba32f::zeros(k.width, k.height);
-    if (ndv) ndv->assign(size_t(k.width) * k.height, 0.0f);
+    if (ndv)
+        ndv->assign(size_t(k.width) * k.height, 0.0f);
     for (uint32_t y = 0; y < k.height; ++y) {
         for (uint32_t x = 0; x < k.width; ++x) {
             glm::dvec3 d = scene::pixel_ray(k, eye, x, y);
             auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d);
-            if (!hit) continue;
-            glm::dvec3 L = specular_radiance(s, spec, hit->p, hit->n, -d, scene::hemisphere_tangent(hit->n));
+            if (!hit)
+                continue;
+            glm::dvec3 L =
+                specular_radiance(s, spec, hit->p, hit->n, -d, scene::hemisphere_tangent(hit->n));
             img.set(x, y, glm::vec4(glm::vec3(L), 1.0f));
-            if (ndv) (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
+            if (ndv)
+                (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
         }
     }
     return img;

@@ -10,13 +10,14 @@
 namespace hs::shading {
 
 struct Hit {
-    double t;          // ray parameter, metres
-    glm::dvec3 p;      // world point
-    glm::dvec3 n;      // unit outward normal
+    double t;      // ray parameter, metres
+    glm::dvec3 p;  // world point
+    glm::dvec3 n;  // unit outward normal
 };
 
 // Nearest front-facing hit of the ray with the open hemisphere (dome up, base hidden), if any.
-std::optional<Hit> intersect_hemisphere(const scene::Hemisphere& h, glm::dvec3 origin, glm::dvec3 dir);
+std::optional<Hit> intersect_hemisphere(const scene::Hemisphere& h, glm::dvec3 origin,
+                                        glm::dvec3 dir);
 
 // The projector (VI) frame: at each projector pixel centre, the diffuse radiance of the prop
 // point it lights; alpha = 1 where the prop is hit. Hemisphere props only.

@@ -11,7 +11,8 @@ namespace hs::stream {
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format) {
     if (format == protocol::PixelFormat::kRgba8) {
         std::vector<uint8_t> out = tonemap_srgb8(image, kLayerWhite).pixels;
-        for (size_t i = 0; i < out.size(); i += 4) out[i + 3] = (out[i] | out[i + 1] | out[i + 2]) ? 255 : 0;
+        for (size_t i = 0; i < out.size(); i += 4)
+            out[i + 3] = (out[i] | out[i + 1] | out[i + 2]) ? 255 : 0;
         return out;
     }
     std::vector<uint8_t> out(image.pixels.size() * 2);
@@ -22,30 +23,39 @@ std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFor
             v = std::isnan(v) ? 0.0f : std::clamp(v, -65504.0f, 65504.0f);
             h[c] = glm::packHalf1x16(v);
         }
-        h[3] = (h[0] | h[1] | h[2]) ? glm::packHalf1x16(1.0f) : 0;  // -0.0 counts as light: keeps it lossless
+        h[3] = (h[0] | h[1] | h[2]) ? glm::packHalf1x16(1.0f)
+                                    : 0;  // -0.0 counts as light: keeps it lossless
         std::memcpy(&out[i * 2], h, 8);
     }
     return out;
 }
 
-std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h, protocol::PixelFormat format,
-                                  protocol::Encoding encoding, protocol::TileCodec codec) {
-    if (encoding == protocol::Encoding::kRaw) return raw;
-    return protocol::encode_tiles(raw, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8, codec);
+std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h,
+                                  protocol::PixelFormat format, protocol::Encoding encoding,
+                                  protocol::TileCodec codec) {
+    if (encoding == protocol::Encoding::kRaw)
+        return raw;
+    return protocol::encode_tiles(raw, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8,
+                                  codec);
 }
 
-ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h, protocol::PixelFormat format) {
+ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h,
+                           protocol::PixelFormat format) {
     const size_t n = size_t(w) * h * 4;
     ImageRgba32f img = ImageRgba32f::zeros(w, h);
     if (format == protocol::PixelFormat::kRgba8) {
-        if (bytes.size() != n) return {};
+        if (bytes.size() != n)
+            return {};
         for (size_t i = 0; i < n; ++i) {
             double x = bytes[i] / 255.0;
-            img.pixels[i] = i % 4 == 3 ? float(x) : float(x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4));
+            img.pixels[i] =
+                i % 4 == 3 ? float(x)
+                           : float(x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4));
         }
         return img;
     }
-    if (bytes.size() != n * 2) return {};
+    if (bytes.size() != n * 2)
+        return {};
     for (size_t i = 0; i < n; ++i) {
         uint16_t hv;
         std::memcpy(&hv, &bytes[i * 2], 2);

@@ -21,13 +21,15 @@ std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFor
 
 // The layer bytes of `raw` pixels in `encoding` (sparse tiles use `codec`).
 std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t width, uint32_t height,
-                                  protocol::PixelFormat format, protocol::Encoding encoding, protocol::TileCodec codec);
+                                  protocol::PixelFormat format, protocol::Encoding encoding,
+                                  protocol::TileCodec codec);
 
 // The codec the server uses for sparse tiles, chosen from `hysar bench encoding`
 // (docs/ARCHITECTURE.md, "Layer encoding"): zstd for RGBA8 (40% fewer bytes than LZ4 for
 // +0.35 ms), LZ4 for RGBA16F (zstd's encode time doubles there).
 constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat f) {
-    return f == protocol::PixelFormat::kRgba8 ? protocol::TileCodec::kZstd : protocol::TileCodec::kLz4;
+    return f == protocol::PixelFormat::kRgba8 ? protocol::TileCodec::kZstd
+                                              : protocol::TileCodec::kLz4;
 }
 
 // The inverse of encode_pixels for RGBA16F (exact up to half precision); RGBA8 decodes the

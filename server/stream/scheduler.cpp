@@ -3,7 +3,8 @@
 namespace hs::stream {
 
 bool Scheduler::ready(const Slot& s) const {
-    if (!s.pose || s.counters.in_flight >= kMaxInFlight) return false;
+    if (!s.pose || s.counters.in_flight >= kMaxInFlight)
+        return false;
     return s.display.mode == protocol::FrameMode::kContinuous ? s.pose_fresh : s.requests > 0;
 }
 
@@ -25,9 +26,11 @@ bool Scheduler::set_pose(uint32_t id, const protocol::Pose& pose) {
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(id);
-        if (it == slots_.end()) return false;
+        if (it == slots_.end())
+            return false;
         Slot& s = it->second;
-        if (s.pose_fresh) ++s.counters.superseded_poses;
+        if (s.pose_fresh)
+            ++s.counters.superseded_poses;
         s.pose = pose;
         s.pose_received = std::chrono::steady_clock::now();
         s.pose_fresh = true;
@@ -40,7 +43,8 @@ bool Scheduler::request_frame(uint32_t id) {
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(id);
-        if (it == slots_.end()) return false;
+        if (it == slots_.end())
+            return false;
         it->second.requests = std::min<uint32_t>(it->second.requests + 1, kMaxInFlight);
     }
     cv_.notify_one();
@@ -50,19 +54,24 @@ bool Scheduler::request_frame(uint32_t id) {
 std::vector<ViewerJob> Scheduler::wait_for_batch() {
     std::unique_lock lock(mutex_);
     cv_.wait(lock, [&] {
-        if (stopped_ || woken_) return true;
+        if (stopped_ || woken_)
+            return true;
         for (const auto& [id, s] : slots_)
-            if (ready(s)) return true;
+            if (ready(s))
+                return true;
         return false;
     });
     woken_ = false;
     std::vector<ViewerJob> batch;
-    if (stopped_) return batch;
+    if (stopped_)
+        return batch;
     for (auto& [id, s] : slots_) {
-        if (!ready(s)) continue;
+        if (!ready(s))
+            continue;
         batch.push_back({id, s.next_frame++, s.display, *s.pose, s.pose_received});
         s.pose_fresh = false;
-        if (s.requests > 0) --s.requests;
+        if (s.requests > 0)
+            --s.requests;
         ++s.counters.in_flight;
         ++s.counters.frames;
     }
@@ -73,11 +82,14 @@ void Scheduler::complete(uint32_t id, uint64_t bytes, double latency_ms) {
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(id);
-        if (it == slots_.end()) return;
+        if (it == slots_.end())
+            return;
         ViewerCounters& c = it->second.counters;
-        if (c.in_flight > 0) --c.in_flight;
+        if (c.in_flight > 0)
+            --c.in_flight;
         c.bytes_sent += bytes;
-        if (c.latency_ms.size() >= 1024) c.latency_ms.erase(c.latency_ms.begin());
+        if (c.latency_ms.size() >= 1024)
+            c.latency_ms.erase(c.latency_ms.begin());
         c.latency_ms.push_back(latency_ms);
     }
     cv_.notify_one();

@@ -26,8 +26,8 @@ struct ViewerJob {
 };
 
 struct ViewerCounters {
-    uint64_t frames = 0;           // frames rendered (a frame = both eyes)
-    uint64_t superseded_poses = 0; // poses replaced by a newer one before they were rendered
+    uint64_t frames = 0;            // frames rendered (a frame = both eyes)
+    uint64_t superseded_poses = 0;  // poses replaced by a newer one before they were rendered
     uint64_t bytes_sent = 0;
     uint32_t in_flight = 0;
     std::vector<double> latency_ms;  // pose received -> layers handed to the socket, last 1024
@@ -57,8 +57,8 @@ private:
         protocol::RegisterDisplay display;
         std::optional<protocol::Pose> pose;
         std::chrono::steady_clock::time_point pose_received;
-        bool pose_fresh = false;   // a pose not yet rendered
-        uint32_t requests = 0;     // mode on-request: frames asked for and not yet rendered (<= 2)
+        bool pose_fresh = false;  // a pose not yet rendered
+        uint32_t requests = 0;    // mode on-request: frames asked for and not yet rendered (<= 2)
         uint32_t next_frame = 1;
         ViewerCounters counters;
     };

@@ -8,8 +8,8 @@
 #include <mutex>
 #include <thread>
 
-#include <asio.hpp>
 #include <fmt/format.h>
+#include <asio.hpp>
 
 #include "core/log.hpp"
 #include "scene/camera.hpp"
@@ -28,7 +28,9 @@ namespace {
 constexpr size_t kMaxQueuedMessages = 64;
 
 uint64_t now_ns() {
-    return uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count());
+    return uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch())
+            .count());
 }
 
 bool same_token(const std::string& a, const std::string& b) {
@@ -40,7 +42,8 @@ bool same_token(const std::string& a, const std::string& b) {
 }
 
 double percentile(std::vector<double> v, double p) {
-    if (v.empty()) return 0.0;
+    if (v.empty())
+        return 0.0;
     std::sort(v.begin(), v.end());
     return v[std::min(v.size() - 1, size_t(p * (v.size() - 1) + 0.5))];
 }
@@ -61,18 +64,20 @@ struct Server::Impl {
     // Network thread only.
     std::map<uint32_t, std::shared_ptr<Session>> sessions;
     uint32_t next_session_id = 1;
-    std::shared_ptr<const std::vector<uint8_t>> projector_frame;  // the encoded frame of the current scene
+    std::shared_ptr<const std::vector<uint8_t>>
+        projector_frame;  // the encoded frame of the current scene
 
     // Shared between threads under `mutex`.
     mutable std::mutex mutex;
-    scene::Scene scene;                // the scene being served
+    scene::Scene scene;  // the scene being served
     std::optional<scene::Scene> pending_scene;
     uint32_t scene_version = 1;
     uint64_t projector_renders = 0;
     nlohmann::json last_projector_report, last_vd_report;
     double vd_render_ms_total = 0, vd_encode_ms_total = 0, projector_ms_total = 0;
     uint64_t vd_layers = 0;
-    uint64_t batches = 0, batched_eyes = 0, max_batch_eyes = 0;  // viewer-pass submissions and their eyes
+    uint64_t batches = 0, batched_eyes = 0,
+             max_batch_eyes = 0;  // viewer-pass submissions and their eyes
     std::map<uint32_t, std::pair<std::string, proto::Role>> session_info;
 
     Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i) {}
@@ -81,7 +86,8 @@ struct Server::Impl {
     void start_session(Socket socket);
     void render_loop();
     void publish_projector_frame(std::shared_ptr<const std::vector<uint8_t>> frame);
-    void deliver(uint32_t session_id, std::vector<std::vector<uint8_t>> frames, Clock::time_point pose_received);
+    void deliver(uint32_t session_id, std::vector<std::vector<uint8_t>> frames,
+                 Clock::time_point pose_received);
     void remove_session(uint32_t id);
     nlohmann::json stats() const;
 };
@@ -90,7 +96,8 @@ namespace {
 
 class Session : public std::enable_shared_from_this<Session> {
 public:
-    Session(Server::Impl& srv, Socket socket, uint32_t id) : srv_(srv), socket_(std::move(socket)), id_(id) {}
+    Session(Server::Impl& srv, Socket socket, uint32_t id)
+        : srv_(srv), socket_(std::move(socket)), id_(id) {}
 
     void start() { read_header(); }
     uint32_t id() const { return id_; }
@@ -100,32 +107,40 @@ public:
     // dropped with the session). Thread: network.
     void send(std::vector<uint8_t> bytes, std::function<void()> on_sent = nullptr) {
         if (closed_) {
-            if (on_sent) on_sent();
+            if (on_sent)
+                on_sent();
             return;
         }
         if (queue_.size() >= kMaxQueuedMessages) {
             log::warn("session {} ({}): not reading; closing it", id_, name_);
-            if (on_sent) on_sent();
+            if (on_sent)
+                on_sent();
             close();
             return;
         }
-        queue_.push_back({std::make_shared<std::vector<uint8_t>>(std::move(bytes)), std::move(on_sent)});
-        if (!writing_) write_next();
+        queue_.push_back(
+            {std::make_shared<std::vector<uint8_t>>(std::move(bytes)), std::move(on_sent)});
+        if (!writing_)
+            write_next();
     }
     void send_shared(std::shared_ptr<const std::vector<uint8_t>> bytes) {
-        if (closed_ || queue_.size() >= kMaxQueuedMessages) return;
+        if (closed_ || queue_.size() >= kMaxQueuedMessages)
+            return;
         queue_.push_back({std::move(bytes), nullptr});
-        if (!writing_) write_next();
+        if (!writing_)
+            write_next();
     }
 
     void close() {
-        if (closed_) return;
+        if (closed_)
+            return;
         closed_ = true;
         asio::error_code ec;
         socket_.shutdown(asio::socket_base::shutdown_both, ec);
         socket_.close(ec);
         for (auto& q : queue_)
-            if (q.on_sent) q.on_sent();
+            if (q.on_sent)
+                q.on_sent();
         queue_.clear();
         srv_.remove_session(id_);
     }
@@ -136,7 +151,8 @@ private:
         std::function<void()> on_sent;
     };
 
-    void error(proto::ErrorCode code, const std::string& message, bool then_close, uint32_t sequence) {
+    void error(proto::ErrorCode code, const std::string& message, bool then_close,
+               uint32_t sequence) {
         log::info("session {} ({}): error {}: {}", id_, name_, int(code), message);
         auto bytes = proto::encode(proto::Error{code, message}, sequence);
         if (!then_close) {
@@ -151,24 +167,32 @@ private:
     void read_header() {
         auto self = shared_from_this();
         asio::async_read(socket_, asio::buffer(header_), [this, self](asio::error_code ec, size_t) {
-            if (ec) return close();
+            if (ec)
+                return close();
             auto h = proto::decode_header(header_);
-            if (auto* e = std::get_if<proto::DecodeError>(&h)) return error(e->code, e->message, true, 0);
+            if (auto* e = std::get_if<proto::DecodeError>(&h))
+                return error(e->code, e->message, true, 0);
             hdr_ = std::get<proto::Header>(h);
             payload_.resize(hdr_.payload_bytes);
-            if (hdr_.payload_bytes == 0) return on_payload();
-            asio::async_read(socket_, asio::buffer(payload_), [this, self](asio::error_code ec2, size_t) {
-                if (ec2) return close();
-                on_payload();
-            });
+            if (hdr_.payload_bytes == 0)
+                return on_payload();
+            asio::async_read(socket_, asio::buffer(payload_),
+                             [this, self](asio::error_code ec2, size_t) {
+                                 if (ec2)
+                                     return close();
+                                 on_payload();
+                             });
         });
     }
 
     void on_payload() {
         auto m = proto::decode_payload(hdr_, payload_);
-        if (auto* e = std::get_if<proto::DecodeError>(&m)) return error(e->code, e->message, true, hdr_.sequence);
-        if (!handle(std::get<proto::Message>(m))) return;  // the session is closing
-        if (!closed_ && !closing_after_write_) read_header();
+        if (auto* e = std::get_if<proto::DecodeError>(&m))
+            return error(e->code, e->message, true, hdr_.sequence);
+        if (!handle(std::get<proto::Message>(m)))
+            return;  // the session is closing
+        if (!closed_ && !closing_after_write_)
+            read_header();
     }
 
     // Returns false when the session is closing.
@@ -177,7 +201,8 @@ private:
         if (!authed_) {
             auto* hello = std::get_if<proto::Hello>(&msg);
             if (!hello) {
-                error(proto::ErrorCode::kUnauthorized, "the first message must be Hello", true, seq);
+                error(proto::ErrorCode::kUnauthorized, "the first message must be Hello", true,
+                      seq);
                 return false;
             }
             if (!same_token(hello->token, srv_.info.token)) {
@@ -193,9 +218,14 @@ private:
                 version = srv_.scene_version;
                 srv_.session_info[id_] = {name_, role_};
             }
-            log::info("session {}: {} '{}' joined", id_, role_ == proto::Role::kProjector ? "projector" : role_ == proto::Role::kHmd ? "headset" : "admin", name_);
+            log::info("session {}: {} '{}' joined", id_,
+                      role_ == proto::Role::kProjector ? "projector"
+                      : role_ == proto::Role::kHmd     ? "headset"
+                                                       : "admin",
+                      name_);
             send(proto::encode(proto::Welcome{id_, now_ns(), version}, seq));
-            if (role_ == proto::Role::kProjector && srv_.projector_frame) send_shared(srv_.projector_frame);
+            if (role_ == proto::Role::kProjector && srv_.projector_frame)
+                send_shared(srv_.projector_frame);
             return true;
         }
         return std::visit(
@@ -205,7 +235,8 @@ private:
                     error(proto::ErrorCode::kOutOfOrder, "Hello was already received", false, seq);
                 } else if constexpr (std::is_same_v<T, proto::RegisterDisplay>) {
                     if (role_ != proto::Role::kHmd) {
-                        error(proto::ErrorCode::kForbidden, "only a headset (role hmd) registers a display", false, seq);
+                        error(proto::ErrorCode::kForbidden,
+                              "only a headset (role hmd) registers a display", false, seq);
                     } else if (auto bad = proto::validate_display(m)) {
                         error(proto::ErrorCode::kInvalidDisplay, *bad, false, seq);
                     } else {
@@ -214,20 +245,26 @@ private:
                     }
                 } else if constexpr (std::is_same_v<T, proto::Pose>) {
                     if (!registered_) {
-                        error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false, seq);
+                        error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false,
+                              seq);
                     } else if (auto bad = proto::validate_pose(m)) {
                         error(proto::ErrorCode::kInvalidPose, *bad, false, seq);
                     } else {
                         srv_.scheduler.set_pose(id_, m);
                     }
                 } else if constexpr (std::is_same_v<T, proto::FrameRequest>) {
-                    if (!registered_) error(proto::ErrorCode::kOutOfOrder, "FrameRequest before RegisterDisplay", false, seq);
-                    else srv_.scheduler.request_frame(id_);
+                    if (!registered_)
+                        error(proto::ErrorCode::kOutOfOrder, "FrameRequest before RegisterDisplay",
+                              false, seq);
+                    else
+                        srv_.scheduler.request_frame(id_);
                 } else if constexpr (std::is_same_v<T, proto::SceneUpdate>) {
                     if (role_ != proto::Role::kAdmin) {
-                        error(proto::ErrorCode::kForbidden, "only an admin session may change the scene", false, seq);
+                        error(proto::ErrorCode::kForbidden,
+                              "only an admin session may change the scene", false, seq);
                     } else {
-                        auto s = scene::parse_scene(m.scene_json, fmt::format("SceneUpdate from session {}", id_), ".");
+                        auto s = scene::parse_scene(
+                            m.scene_json, fmt::format("SceneUpdate from session {}", id_), ".");
                         if (!s) {
                             error(proto::ErrorCode::kSceneRejected, s.error().message, false, seq);
                         } else {
@@ -245,11 +282,14 @@ private:
                 } else if constexpr (std::is_same_v<T, proto::Bye>) {
                     close();
                     return false;
-                } else if constexpr (std::is_same_v<T, proto::Pong> || std::is_same_v<T, proto::Error>) {
+                } else if constexpr (std::is_same_v<T, proto::Pong> ||
+                                     std::is_same_v<T, proto::Error>) {
                     // Informational from the client; nothing to do.
                 } else {
                     error(proto::ErrorCode::kForbidden,
-                          fmt::format("{} is sent by the server, not to it", proto::to_string(proto::type_of(m))), false, seq);
+                          fmt::format("{} is sent by the server, not to it",
+                                      proto::to_string(proto::type_of(m))),
+                          false, seq);
                 }
                 return !closed_;
             },
@@ -261,20 +301,25 @@ private:
     void write_next() {
         if (queue_.empty() || closed_) {
             writing_ = false;
-            if (closing_after_write_ && queue_.empty()) close();
+            if (closing_after_write_ && queue_.empty())
+                close();
             return;
         }
         writing_ = true;
         auto self = shared_from_this();
         auto bytes = queue_.front().bytes;
-        asio::async_write(socket_, asio::buffer(*bytes), [this, self, bytes](asio::error_code ec, size_t) {
-            if (closed_) return;
-            auto done = std::move(queue_.front().on_sent);
-            queue_.pop_front();
-            if (done) done();
-            if (ec) return close();
-            write_next();
-        });
+        asio::async_write(socket_, asio::buffer(*bytes),
+                          [this, self, bytes](asio::error_code ec, size_t) {
+                              if (closed_)
+                                  return;
+                              auto done = std::move(queue_.front().on_sent);
+                              queue_.pop_front();
+                              if (done)
+                                  done();
+                              if (ec)
+                                  return close();
+                              write_next();
+                          });
     }
 
     Server::Impl& srv_;
@@ -291,7 +336,6 @@ private:
     bool registered_ = false;
     proto::Role role_ = proto::Role::kHmd;
     std::string name_;
-
 };
 
 }  // namespace
@@ -300,11 +344,14 @@ Server::Server(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 Server::~Server() {
     stop();
-    if (impl_->render_thread.joinable()) impl_->render_thread.join();
+    if (impl_->render_thread.joinable())
+        impl_->render_thread.join();
 }
 
-Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene::Scene& scene, const ServerCreateInfo& info) {
-    if (info.token.empty()) return make_error(ErrorCode::kInvalidArgument, "the server needs a non-empty token");
+Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene::Scene& scene,
+                                               const ServerCreateInfo& info) {
+    if (info.token.empty())
+        return make_error(ErrorCode::kInvalidArgument, "the server needs a non-empty token");
     auto impl = std::make_unique<Impl>(device, info);
     impl->scene = scene;
     try {
@@ -319,21 +366,27 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
                 impl->io, asio::local::stream_protocol::endpoint(info.unix_path));
         }
     } catch (const std::exception& e) {
-        return make_error(ErrorCode::kIo, fmt::format("cannot listen on {}:{}{}: {}", info.host, info.port,
-                                                      info.unix_path.empty() ? "" : " / " + info.unix_path, e.what()));
+        return make_error(
+            ErrorCode::kIo,
+            fmt::format("cannot listen on {}:{}{}: {}", info.host, info.port,
+                        info.unix_path.empty() ? "" : " / " + info.unix_path, e.what()));
     }
     return std::unique_ptr<Server>(new Server(std::move(impl)));
 }
 
-uint16_t Server::port() const { return impl_->tcp_acceptor.local_endpoint().port(); }
+uint16_t Server::port() const {
+    return impl_->tcp_acceptor.local_endpoint().port();
+}
 
 void Server::stop() {
-    if (impl_->stopping.exchange(true)) return;
+    if (impl_->stopping.exchange(true))
+        return;
     impl_->scheduler.stop();
     asio::post(impl_->io, [impl = impl_.get()] {
         asio::error_code ec;
         impl->tcp_acceptor.close(ec);
-        if (impl->unix_acceptor) impl->unix_acceptor->close(ec);
+        if (impl->unix_acceptor)
+            impl->unix_acceptor->close(ec);
         auto sessions = impl->sessions;
         for (auto& [id, s] : sessions) {
             s->send(proto::encode(proto::Bye{0}));
@@ -346,16 +399,20 @@ void Server::stop() {
 void Server::run() {
     impl_->render_thread = std::thread([impl = impl_.get()] { impl->render_loop(); });
     impl_->accept_tcp();
-    if (impl_->unix_acceptor) impl_->accept_unix();
+    if (impl_->unix_acceptor)
+        impl_->accept_unix();
     impl_->io.run();
     impl_->scheduler.stop();
-    if (impl_->render_thread.joinable()) impl_->render_thread.join();
-    if (!impl_->info.unix_path.empty()) ::unlink(impl_->info.unix_path.c_str());
+    if (impl_->render_thread.joinable())
+        impl_->render_thread.join();
+    if (!impl_->info.unix_path.empty())
+        ::unlink(impl_->info.unix_path.c_str());
 }
 
 void Server::Impl::accept_tcp() {
     tcp_acceptor.async_accept([this](asio::error_code ec, asio::ip::tcp::socket s) {
-        if (ec) return;  // closed by stop()
+        if (ec)
+            return;  // closed by stop()
         s.set_option(asio::ip::tcp::no_delay(true));
         start_session(Socket(std::move(s)));
         accept_tcp();
@@ -363,18 +420,21 @@ void Server::Impl::accept_tcp() {
 }
 
 void Server::Impl::accept_unix() {
-    unix_acceptor->async_accept([this](asio::error_code ec, asio::local::stream_protocol::socket s) {
-        if (ec) return;
-        start_session(Socket(std::move(s)));
-        accept_unix();
-    });
+    unix_acceptor->async_accept(
+        [this](asio::error_code ec, asio::local::stream_protocol::socket s) {
+            if (ec)
+                return;
+            start_session(Socket(std::move(s)));
+            accept_unix();
+        });
 }
 
 void Server::Impl::start_session(Socket socket) {
     const uint32_t id = next_session_id++;
     auto session = std::make_shared<Session>(*this, std::move(socket), id);
     if (sessions.size() >= info.max_sessions) {
-        session->send(proto::encode(proto::Error{proto::ErrorCode::kServerBusy, "too many sessions"}));
+        session->send(
+            proto::encode(proto::Error{proto::ErrorCode::kServerBusy, "too many sessions"}));
         session->close();
         return;
     }
@@ -394,10 +454,12 @@ void Server::Impl::remove_session(uint32_t id) {
 void Server::Impl::publish_projector_frame(std::shared_ptr<const std::vector<uint8_t>> frame) {
     projector_frame = frame;
     for (auto& [id, s] : sessions)
-        if (s->is_projector()) s->send_shared(frame);
+        if (s->is_projector())
+            s->send_shared(frame);
 }
 
-void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames, Clock::time_point pose_received) {
+void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames,
+                           Clock::time_point pose_received) {
     auto it = sessions.find(id);
     uint64_t bytes = 0;
     for (const auto& f : frames) bytes += f.size();
@@ -412,7 +474,8 @@ void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames
     for (auto& f : frames) {
         session->send(std::move(f), [this, id, remaining, bytes, pose_received] {
             if (--*remaining == 0) {
-                double ms = std::chrono::duration<double, std::milli>(Clock::now() - pose_received).count();
+                double ms =
+                    std::chrono::duration<double, std::milli>(Clock::now() - pose_received).count();
                 scheduler.complete(id, bytes, ms);
             }
         });
@@ -445,8 +508,10 @@ void Server::Impl::render_loop() {
         {
             std::lock_guard lock(mutex);
             ++projector_renders;
-            projector_ms_total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-            last_projector_report = {{"pass", proj->report.pass}, {"effects", proj->report.effects},
+            projector_ms_total +=
+                std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+            last_projector_report = {{"pass", proj->report.pass},
+                                     {"effects", proj->report.effects},
                                      {"render_ms", proj->report.render_ms}};
         }
         pf.scene_version = version;
@@ -480,22 +545,27 @@ void Server::Impl::render_loop() {
                 scene_version = ++version;
             }
         }
-        if (batch.empty()) continue;
+        if (batch.empty())
+            continue;
         // Every eye of every ready headset in one submission.
         std::vector<render::Renderer::EyeRequest> eyes;
         std::vector<bool> valid(batch.size(), true);
         for (size_t j = 0; j < batch.size(); ++j) {
             const auto& d = batch[j].display;
             const auto& q = batch[j].pose.orientation_wxyz;
-            auto head = scene::make_pose({batch[j].pose.position_m[0], batch[j].pose.position_m[1], batch[j].pose.position_m[2]},
+            auto head = scene::make_pose({batch[j].pose.position_m[0], batch[j].pose.position_m[1],
+                                          batch[j].pose.position_m[2]},
                                          glm::dquat(q[0], q[1], q[2], q[3]));
             valid[j] = head.ok();
             scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
             scene::Pose p = head.ok() ? head.value() : scene::Pose{};
-            for (const auto& e : scene::eye_poses(p, d.ipd_m)) eyes.push_back({current.material.specular, k, e});
+            for (const auto& e : scene::eye_poses(p, d.ipd_m))
+                eyes.push_back({current.material.specular, k, e});
         }
         auto rendered = renderer->render_eyes(eyes);
-        if (!rendered) log::error("render: batch of {} eye(s) failed: {}", eyes.size(), rendered.error().message);
+        if (!rendered)
+            log::error("render: batch of {} eye(s) failed: {}", eyes.size(),
+                       rendered.error().message);
         for (size_t j = 0; j < batch.size(); ++j) {
             const ViewerJob& job = batch[j];
             const auto& d = job.display;
@@ -503,7 +573,8 @@ void Server::Impl::render_loop() {
                 asio::post(io, [this, id = job.session_id] {
                     auto it = sessions.find(id);
                     if (it != sessions.end())
-                        it->second->send(proto::encode(proto::Error{proto::ErrorCode::kInternal, "rendering this frame failed"}));
+                        it->second->send(proto::encode(proto::Error{
+                            proto::ErrorCode::kInternal, "rendering this frame failed"}));
                     scheduler.complete(id, 0, 0.0);
                 });
                 continue;
@@ -520,18 +591,22 @@ void Server::Impl::render_loop() {
                 layer.encoding = d.encoding;
                 layer.width = d.eye_width;
                 layer.height = d.eye_height;
-                layer.data = encode_layer(encode_pixels(out.image, d.format), d.eye_width, d.eye_height, d.format, d.encoding,
-                                          default_tile_codec(d.format));
+                layer.data =
+                    encode_layer(encode_pixels(out.image, d.format), d.eye_width, d.eye_height,
+                                 d.format, d.encoding, default_tile_codec(d.format));
                 frames.push_back(proto::encode(layer));
                 std::lock_guard lock(mutex);
                 vd_render_ms_total += out.report.render_ms;
-                vd_encode_ms_total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+                vd_encode_ms_total +=
+                    std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
                 ++vd_layers;
-                last_vd_report = {{"pass", out.report.pass}, {"ran", out.report.ran}, {"effects", out.report.effects}};
+                last_vd_report = {{"pass", out.report.pass},
+                                  {"ran", out.report.ran},
+                                  {"effects", out.report.effects}};
             }
-            asio::post(io, [this, id = job.session_id, frames = std::move(frames), t = job.pose_received]() mutable {
-                deliver(id, std::move(frames), t);
-            });
+            asio::post(io,
+                       [this, id = job.session_id, frames = std::move(frames),
+                        t = job.pose_received]() mutable { deliver(id, std::move(frames), t); });
         }
         {
             std::lock_guard lock(mutex);
@@ -542,7 +617,9 @@ void Server::Impl::render_loop() {
     }
 }
 
-nlohmann::json Server::stats() const { return impl_->stats(); }
+nlohmann::json Server::stats() const {
+    return impl_->stats();
+}
 
 nlohmann::json Server::Impl::stats() const {
     auto counters = scheduler.counters();
@@ -550,9 +627,13 @@ nlohmann::json Server::Impl::stats() const {
     nlohmann::json viewers = nlohmann::json::array();
     for (const auto& [id, c] : counters) {
         auto info = session_info.find(id);
-        viewers.push_back({{"session", id}, {"name", info != session_info.end() ? info->second.first : ""},
-                           {"frames", c.frames}, {"superseded_poses", c.superseded_poses}, {"bytes_sent", c.bytes_sent},
-                           {"in_flight", c.in_flight}, {"latency_ms_p50", percentile(c.latency_ms, 0.5)},
+        viewers.push_back({{"session", id},
+                           {"name", info != session_info.end() ? info->second.first : ""},
+                           {"frames", c.frames},
+                           {"superseded_poses", c.superseded_poses},
+                           {"bytes_sent", c.bytes_sent},
+                           {"in_flight", c.in_flight},
+                           {"latency_ms_p50", percentile(c.latency_ms, 0.5)},
                            {"latency_ms_p95", percentile(c.latency_ms, 0.95)}});
     }
     const double n = double(std::max<uint64_t>(vd_layers, 1));
@@ -561,10 +642,16 @@ nlohmann::json Server::Impl::stats() const {
             {"sessions", session_info.size()},
             {"viewers", viewers},
             {"passes", {{"projector", last_projector_report}, {"viewer", last_vd_report}}},
-            {"timing_ms", {{"vd_render_mean", vd_render_ms_total / n}, {"vd_encode_mean", vd_encode_ms_total / n},
-                           {"projector_total", projector_ms_total}, {"vd_layers", vd_layers}}},
-            {"batches", {{"submissions", batches}, {"eyes", batched_eyes}, {"max_eyes", max_batch_eyes},
-                         {"eyes_per_submission", batches ? double(batched_eyes) / double(batches) : 0.0}}}};
+            {"timing_ms",
+             {{"vd_render_mean", vd_render_ms_total / n},
+              {"vd_encode_mean", vd_encode_ms_total / n},
+              {"projector_total", projector_ms_total},
+              {"vd_layers", vd_layers}}},
+            {"batches",
+             {{"submissions", batches},
+              {"eyes", batched_eyes},
+              {"max_eyes", max_batch_eyes},
+              {"eyes_per_submission", batches ? double(batched_eyes) / double(batches) : 0.0}}}};
 }
 
 }  // namespace hs::stream

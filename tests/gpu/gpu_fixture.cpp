@@ -21,14 +21,18 @@ gpu::Device& device() {
     return *d;
 }
 
-void GpuTest::SetUp() { messages_before_ = device().validation_message_count(); }
+void GpuTest::SetUp() {
+    messages_before_ = device().validation_message_count();
+}
 
 void GpuTest::TearDown() {
     const uint32_t after = device().validation_message_count();
-    EXPECT_EQ(after, messages_before_) << "Vulkan validation reported " << after - messages_before_ << " message(s)";
+    EXPECT_EQ(after, messages_before_)
+        << "Vulkan validation reported " << after - messages_before_ << " message(s)";
 }
 
-std::unique_ptr<render::Renderer> GpuTest::make_renderer(const scene::Scene& s, gpu::ColorFormat f) {
+std::unique_ptr<render::Renderer> GpuTest::make_renderer(const scene::Scene& s,
+                                                         gpu::ColorFormat f) {
     render::RendererCreateInfo ri;
     ri.format = f;
     auto r = render::Renderer::create(device(), s, ri);
@@ -39,7 +43,8 @@ std::unique_ptr<render::Renderer> GpuTest::make_renderer(const scene::Scene& s, 
 scene::Intrinsics GpuTest::small_eye(uint32_t div) {
     const scene::Scene s = scene::default_scene();
     const auto& v = s.viewers.front();
-    return scene::intrinsics_from_fov(v.eye_width / div, v.eye_height / div, v.fov_x_rad, v.fov_y_rad);  // FOV-defined profile
+    return scene::intrinsics_from_fov(v.eye_width / div, v.eye_height / div, v.fov_x_rad,
+                                      v.fov_y_rad);  // FOV-defined profile
 }
 
 }  // namespace hs::test

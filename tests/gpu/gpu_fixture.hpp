@@ -18,8 +18,8 @@ protected:
     void TearDown() override;
 
     // A renderer of `scene` (rgba16f unless told), failing the test on error.
-    std::unique_ptr<render::Renderer> make_renderer(const scene::Scene& scene,
-                                                    gpu::ColorFormat f = gpu::ColorFormat::kRgba16Float);
+    std::unique_ptr<render::Renderer> make_renderer(
+        const scene::Scene& scene, gpu::ColorFormat f = gpu::ColorFormat::kRgba16Float);
 
     // The default headset's intrinsics at 1/`div` of its resolution (same fields of view).
     static scene::Intrinsics small_eye(uint32_t div = 4);

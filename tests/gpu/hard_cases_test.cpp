@@ -5,8 +5,8 @@
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
-#include "shading/compare.hpp"
 #include "shading/brdf.hpp"
+#include "shading/compare.hpp"
 #include "shading/reference.hpp"
 
 using namespace hs;
@@ -25,7 +25,8 @@ size_t count_non_finite(const ImageRgba32f& img) {
 double channel_sum(const ImageRgba32f& img) {
     double s = 0;
     for (size_t i = 0; i < img.pixels.size(); ++i)
-        if (i % 4 != 3) s += img.pixels[i];
+        if (i % 4 != 3)
+            s += img.pixels[i];
     return s;
 }
 
@@ -40,7 +41,9 @@ scene::Scene one_point_light(double intensity, glm::dvec3 position) {
     return s;
 }
 
-scene::Pose front_eye() { return scene::look_at({0.05, 1.1, 0.8}, {0, 0.745, 0}).value(); }
+scene::Pose front_eye() {
+    return scene::look_at({0.05, 1.1, 0.8}, {0, 0.745, 0}).value();
+}
 
 TEST_F(HardCases, ManyBrightLightsClampInHalfFloat) {
     scene::Scene s = scene::default_scene();
@@ -67,13 +70,17 @@ TEST_F(HardCases, ManyBrightLightsClampInHalfFloat) {
 }
 
 // Sum of the reference's diffuse radiance over the pixels of one eye.
-double reference_diffuse_sum(const scene::Scene& s, const scene::Intrinsics& k, const scene::Pose& eye) {
+double reference_diffuse_sum(const scene::Scene& s, const scene::Intrinsics& k,
+                             const scene::Pose& eye) {
     double sum = 0;
     for (uint32_t y = 0; y < k.height; ++y)
         for (uint32_t x = 0; x < k.width; ++x) {
-            auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, x, y));
-            if (!hit) continue;
-            glm::dvec3 L = shading::diffuse_radiance(s, hit->p, hit->n, scene::hemisphere_uv(hit->n));
+            auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position,
+                                                     scene::pixel_ray(k, eye, x, y));
+            if (!hit)
+                continue;
+            glm::dvec3 L =
+                shading::diffuse_radiance(s, hit->p, hit->n, scene::hemisphere_uv(hit->n));
             sum += L.r + L.g + L.b;
         }
     return sum;
@@ -87,7 +94,8 @@ TEST_F(HardCases, PointLightAtZeroDistance) {
     auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
     const auto k = small_eye(4);
     const auto eye = front_eye();
-    const double bound = s.lights[0].intensity / (scene::kMinLightDistance * scene::kMinLightDistance);
+    const double bound =
+        s.lights[0].intensity / (scene::kMinLightDistance * scene::kMinLightDistance);
     for (const char* preset : {"phong", "ward", "kajiya-kay"}) {
         auto vd = r->render_eye(s.specular_presets.at(preset), k, eye);
         ASSERT_TRUE(vd.ok());
@@ -100,7 +108,8 @@ TEST_F(HardCases, PointLightAtZeroDistance) {
         EXPECT_EQ(count_non_finite(*img), 0u);
         float mx = 0;
         for (size_t i = 0; i < img->pixels.size(); ++i)
-            if (i % 4 != 3) mx = std::max(mx, img->pixels[i]);
+            if (i % 4 != 3)
+                mx = std::max(mx, img->pixels[i]);
         EXPECT_LE(mx, bound);
     }
 }
@@ -121,7 +130,8 @@ TEST_F(HardCases, PointLightTwoCentimetresOffTheSurface) {
 
 TEST_F(HardCases, PointLightTenThousandMetresAway) {
     // E = 1 at 1e4 m.
-    scene::Scene s = one_point_light(1e8, glm::dvec3(0.3, 0.8, 0.5) * (1e4 / glm::length(glm::dvec3(0.3, 0.8, 0.5))));
+    scene::Scene s = one_point_light(
+        1e8, glm::dvec3(0.3, 0.8, 0.5) * (1e4 / glm::length(glm::dvec3(0.3, 0.8, 0.5))));
     auto r = make_renderer(s);
     const auto k = small_eye(4);
     const auto eye = front_eye();
@@ -147,7 +157,8 @@ TEST_F(HardCases, NonUnitQuaternionPoseRendersLikeTheUnitOne) {
     auto b = r->render_eye(s.specular_presets.at("phong"), k, scaled.value());
     auto c = r->render_eye(s.specular_presets.at("phong"), k, tiny.value());
     ASSERT_TRUE(a.ok() && b.ok() && c.ok());
-    auto sb = shading::compare_images(b->image, a->image, {}, 0), sc = shading::compare_images(c->image, a->image, {}, 0);
+    auto sb = shading::compare_images(b->image, a->image, {}, 0),
+         sc = shading::compare_images(c->image, a->image, {}, 0);
     EXPECT_LE(sb.max_abs, 1e-3);
     EXPECT_LE(sc.max_abs, 1e-3);
     EXPECT_FALSE(scene::make_pose(unit.position, glm::dquat(0, 0, 0, 0)).ok());
@@ -192,7 +203,8 @@ TEST_F(HardCases, ValidationMessagesAreCaught) {
     bci.size = 64;
     bci.usage = 0;  // invalid: no usage bit
     VkBuffer b = VK_NULL_HANDLE;
-    if (vkCreateBuffer(device().vk(), &bci, nullptr, &b) == VK_SUCCESS && b) vkDestroyBuffer(device().vk(), b, nullptr);
+    if (vkCreateBuffer(device().vk(), &bci, nullptr, &b) == VK_SUCCESS && b)
+        vkDestroyBuffer(device().vk(), b, nullptr);
     const uint32_t after = device().validation_message_count();
     EXPECT_GT(after, before) << "the validation layer did not report an invalid vkCreateBuffer";
     // This test's own messages are expected: do not let TearDown count them.

@@ -19,7 +19,8 @@ dvec3 dir(double theta, double phi) {
 
 // fp32 agreement: relative 2e-3 (pow with exponents up to 1e4 amplifies the 6e-8 rounding of a
 // cosine by the exponent) plus an absolute floor of 1e-6 of the model's peak.
-void expect_agree(const scene::Specular& spec, const std::vector<render::ProbeCase>& cases, double peak) {
+void expect_agree(const scene::Specular& spec, const std::vector<render::ProbeCase>& cases,
+                  double peak) {
     auto out = render::run_shading_probe(device(), spec, cases);
     ASSERT_TRUE(out.ok()) << out.error().message;
     ASSERT_EQ(out->size(), cases.size());
@@ -29,30 +30,34 @@ void expect_agree(const scene::Specular& spec, const std::vector<render::ProbeCa
         case_spec.tangent_axis = c.tangent_axis;
         double want = shading::specular_factor(case_spec, c.n, c.l, c.v);
         double got = (*out)[i].specular;
-        ASSERT_TRUE(std::isfinite(got)) << scene::to_string(spec.model) << " case " << i << " is not finite";
+        ASSERT_TRUE(std::isfinite(got))
+            << scene::to_string(spec.model) << " case " << i << " is not finite";
         EXPECT_GE(got, 0.0);
         EXPECT_NEAR(got, want, 2e-3 * std::abs(want) + 1e-6 * peak)
-            << scene::to_string(spec.model) << " case " << i << " (exponent " << spec.exponent << ", alpha " << spec.alpha_x << ")";
+            << scene::to_string(spec.model) << " case " << i << " (exponent " << spec.exponent
+            << ", alpha " << spec.alpha_x << ")";
     }
 }
 
 std::vector<render::ProbeCase> hard_vectors() {
     const dvec3 n(0, 0, 1);
     std::vector<render::ProbeCase> cs;
-    auto add = [&](dvec3 l, dvec3 v) { cs.push_back({n, glm::normalize(l), glm::normalize(v), {1, 0, 0}}); };
-    add(dir(0.5, 0), dir(0.5, glm::pi<double>()));          // mirror: the lobe's peak
-    add(dir(0.5, 0), dir(0.52, glm::pi<double>()));         // just off the peak
-    add(dir(0.5, 0), dir(0.9, 2.0));                        // far off
-    add({1, 0, 0}, dir(0.3, 1.0));                          // n.l = 0 exactly
-    add({1, 0, -1e-7}, dir(0.3, 1.0));                      // n.l slightly negative
-    add(dir(0.3, 1.0), {0, 1, 0});                          // n.v = 0 exactly
-    add(dir(0.3, 1.0), {0, 1, -1e-7});                      // n.v slightly negative
-    add(dir(0.4, 0.2), -dir(0.4, 0.2));                     // opposite: no half vector
-    add({1, 0, 1e-6}, {-1, 0, 1e-6});                       // both grazing, mirror pair
-    add({1, 0, 1e-30}, {-1, 0, 1e-30});                     // grazing below float precision
-    add({0, 0, 1}, {0, 0, 1});                              // both along the normal
-    add({1, 0, 1e-9}, dir(0.6, 2.5));                       // l parallel to the tangent
-    add(dir(0.6, 2.5), {1, 0, 1e-9});                       // v parallel to the tangent
+    auto add = [&](dvec3 l, dvec3 v) {
+        cs.push_back({n, glm::normalize(l), glm::normalize(v), {1, 0, 0}});
+    };
+    add(dir(0.5, 0), dir(0.5, glm::pi<double>()));   // mirror: the lobe's peak
+    add(dir(0.5, 0), dir(0.52, glm::pi<double>()));  // just off the peak
+    add(dir(0.5, 0), dir(0.9, 2.0));                 // far off
+    add({1, 0, 0}, dir(0.3, 1.0));                   // n.l = 0 exactly
+    add({1, 0, -1e-7}, dir(0.3, 1.0));               // n.l slightly negative
+    add(dir(0.3, 1.0), {0, 1, 0});                   // n.v = 0 exactly
+    add(dir(0.3, 1.0), {0, 1, -1e-7});               // n.v slightly negative
+    add(dir(0.4, 0.2), -dir(0.4, 0.2));              // opposite: no half vector
+    add({1, 0, 1e-6}, {-1, 0, 1e-6});                // both grazing, mirror pair
+    add({1, 0, 1e-30}, {-1, 0, 1e-30});              // grazing below float precision
+    add({0, 0, 1}, {0, 0, 1});                       // both along the normal
+    add({1, 0, 1e-9}, dir(0.6, 2.5));                // l parallel to the tangent
+    add(dir(0.6, 2.5), {1, 0, 1e-9});                // v parallel to the tangent
     return cs;
 }
 
@@ -87,7 +92,8 @@ TEST_F(Probe, KajiyaKayTangentParallelToLightOrView) {
         s.exponent = e;
         expect_agree(s, hard_vectors(), 1.0);
         auto cs = hard_vectors();
-        for (auto& c : cs) c.tangent_axis = {0, 0, 1};  // axis along the normal: the fallback tangent
+        for (auto& c : cs)
+            c.tangent_axis = {0, 0, 1};  // axis along the normal: the fallback tangent
         expect_agree(s, cs, 1.0);
     }
 }
@@ -98,7 +104,8 @@ TEST_F(Probe, DiffuseCosineIsClampedAtZero) {
     auto out = render::run_shading_probe(device(), s, hard_vectors());
     ASSERT_TRUE(out.ok());
     auto cs = hard_vectors();
-    for (size_t i = 0; i < cs.size(); ++i) EXPECT_NEAR((*out)[i].diffuse, std::max(0.0, glm::dot(cs[i].n, cs[i].l)), 1e-6);
+    for (size_t i = 0; i < cs.size(); ++i)
+        EXPECT_NEAR((*out)[i].diffuse, std::max(0.0, glm::dot(cs[i].n, cs[i].l)), 1e-6);
 }
 
 }  // namespace

@@ -24,7 +24,9 @@ struct Case {
     double angle_deg;
 };
 
-void PrintTo(const Case& c, std::ostream* os) { *os << c.preset << " at " << c.angle_deg << " deg"; }
+void PrintTo(const Case& c, std::ostream* os) {
+    *os << c.preset << " at " << c.angle_deg << " deg";
+}
 
 class ModelAgreement : public GpuTest, public ::testing::WithParamInterface<Case> {};
 
@@ -50,33 +52,40 @@ TEST_P(ModelAgreement, MatchesTheDoubleReference) {
         // interpolated normals pick a different t. Those pixels are left out of the interior.
         for (uint32_t y = 0; y < k.height; ++y)
             for (uint32_t x = 0; x < k.width; ++x) {
-                auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, x, y));
-                if (hit && glm::length(glm::cross(hit->n, spec.tangent_axis)) < kTangentSingularSin) ndv[size_t(y) * k.width + x] = 0;
+                auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position,
+                                                         scene::pixel_ray(k, eye, x, y));
+                if (hit && glm::length(glm::cross(hit->n, spec.tangent_axis)) < kTangentSingularSin)
+                    ndv[size_t(y) * k.width + x] = 0;
             }
     }
     auto st = shading::compare_images(out->image, ref.value(), ndv, 0.1);
-    ASSERT_GT(st.reference_peak, 0.05) << "the reference has no highlight: the test would prove nothing";
+    ASSERT_GT(st.reference_peak, 0.05)
+        << "the reference has no highlight: the test would prove nothing";
     ASSERT_GT(st.interior_pixels, 1000u);
     EXPECT_EQ(st.non_finite, 0u);
     EXPECT_LE(st.interior_max_abs, kMaxRel * st.reference_peak + kMaxAbs)
         << c.preset << " at " << c.angle_deg << " deg: peak " << st.reference_peak;
-    EXPECT_LE(st.rmse, kRmseRel * st.reference_peak + kRmseAbs) << c.preset << " at " << c.angle_deg;
-    std::printf("[agreement] %-12s %+4.0f deg: peak %.4f  interior max %.2e  rmse %.2e\n", c.preset, c.angle_deg,
-                st.reference_peak, st.interior_max_abs, st.rmse);
+    EXPECT_LE(st.rmse, kRmseRel * st.reference_peak + kRmseAbs)
+        << c.preset << " at " << c.angle_deg;
+    std::printf("[agreement] %-12s %+4.0f deg: peak %.4f  interior max %.2e  rmse %.2e\n", c.preset,
+                c.angle_deg, st.reference_peak, st.interior_max_abs, st.rmse);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Fig7, ModelAgreement,
-    ::testing::Values(Case{"phong", -40}, Case{"phong", 0}, Case{"phong", 40}, Case{"blinn-phong", -20},
-                      Case{"blinn-phong", 20}, Case{"ward", -40}, Case{"ward", 0}, Case{"ward-aniso", -20},
-                      Case{"ward-aniso", 40}, Case{"kajiya-kay", 0}, Case{"kajiya-kay", 40}),
-    [](const auto& info) {
-        std::string n = std::string(info.param.preset) + "_" + (info.param.angle_deg < 0 ? "m" : "p") +
-                        std::to_string(int(std::abs(info.param.angle_deg)));
-        for (auto& ch : n)
-            if (ch == '-') ch = '_';
-        return n;
-    });
+INSTANTIATE_TEST_SUITE_P(Fig7, ModelAgreement,
+                         ::testing::Values(Case{"phong", -40}, Case{"phong", 0}, Case{"phong", 40},
+                                           Case{"blinn-phong", -20}, Case{"blinn-phong", 20},
+                                           Case{"ward", -40}, Case{"ward", 0},
+                                           Case{"ward-aniso", -20}, Case{"ward-aniso", 40},
+                                           Case{"kajiya-kay", 0}, Case{"kajiya-kay", 40}),
+                         [](const auto& info) {
+                             std::string n = std::string(info.param.preset) + "_" +
+                                             (info.param.angle_deg < 0 ? "m" : "p") +
+                                             std::to_string(int(std::abs(info.param.angle_deg)));
+                             for (auto& ch : n)
+                                 if (ch == '-')
+                                     ch = '_';
+                             return n;
+                         });
 
 class Passes : public GpuTest {};
 
@@ -116,15 +125,19 @@ TEST_F(Passes, HighlightMovesWithTheViewAngle) {
     const auto k = small_eye();
     auto brightest = [&](double angle) {
         auto head = scene::viewing_pose(s.viewing, angle, 1.10).value();
-        auto out = r->render_eye(s.specular_presets.at("phong"), k, scene::eye_poses(head, 0.063)[1]).value();
+        auto out =
+            r->render_eye(s.specular_presets.at("phong"), k, scene::eye_poses(head, 0.063)[1])
+                .value();
         // The direction (from the eye) to the brightest pixel, in world space.
         float best = -1;
         uint32_t bx = 0, by = 0;
         for (uint32_t y = 0; y < out.image.height; ++y)
             for (uint32_t x = 0; x < out.image.width; ++x)
-                if (float v = out.image.at(x, y).g; v > best) best = v, bx = x, by = y;
+                if (float v = out.image.at(x, y).g; v > best)
+                    best = v, bx = x, by = y;
         auto eye = scene::eye_poses(head, 0.063)[1];
-        auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, bx, by));
+        auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position,
+                                                 scene::pixel_ray(k, eye, bx, by));
         EXPECT_TRUE(hit) << "the brightest pixel is not on the prop";
         return hit ? hit->p : glm::dvec3(0);
     };
@@ -137,7 +150,8 @@ TEST_F(Passes, NoViewDependentTermRecordsNoWork) {
     s.material.specular = {};
     auto r = make_renderer(s);
     const auto k = small_eye(8);
-    auto out = r->render_eye(s.material.specular, k, scene::look_at({0, 1.1, 0.8}, {0, 0.745, 0}).value());
+    auto out =
+        r->render_eye(s.material.specular, k, scene::look_at({0, 1.1, 0.8}, {0, 0.745, 0}).value());
     ASSERT_TRUE(out.ok());
     EXPECT_FALSE(out->report.ran);
     EXPECT_FALSE(out->report.skipped_because.empty());
@@ -150,7 +164,8 @@ TEST_F(Passes, EmissionOnlyIsCompiledInAndExact) {
     s.material.specular = {};
     s.material.emission = {0.25, 0.5, 0.125};
     auto r = make_renderer(s);
-    auto out = r->render_eye(s.material.specular, small_eye(8), scene::look_at({0, 1.1, 0.8}, {0, 0.745, 0}).value());
+    auto out = r->render_eye(s.material.specular, small_eye(8),
+                             scene::look_at({0, 1.1, 0.8}, {0, 0.745, 0}).value());
     ASSERT_TRUE(out.ok());
     EXPECT_TRUE(out->report.ran);
     ASSERT_EQ(out->report.effects, std::vector<std::string>{"emission"});
@@ -194,7 +209,8 @@ TEST_F(Passes, BatchedEyesEqualSingleRenders) {
     std::vector<render::Renderer::EyeRequest> reqs;
     for (double a : {-40.0, 0.0, 40.0}) {
         auto head = scene::viewing_pose(s.viewing, a, 1.10).value();
-        for (const auto& e : scene::eye_poses(head, 0.063)) reqs.push_back({s.specular_presets.at("ward-aniso"), a == 0 ? k2 : k, e});
+        for (const auto& e : scene::eye_poses(head, 0.063))
+            reqs.push_back({s.specular_presets.at("ward-aniso"), a == 0 ? k2 : k, e});
     }
     reqs.push_back({scene::Specular{}, k, reqs[0].eye});  // nothing view-dependent: no work, black
     auto batch = r->render_eyes(reqs);

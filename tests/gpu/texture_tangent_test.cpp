@@ -1,8 +1,8 @@
 // The albedo texture (VI) and mesh tangents (VD) against the reference.
+#include <unistd.h>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <unistd.h>
 
 #include <nlohmann/json.hpp>
 
@@ -52,7 +52,8 @@ TEST_F(TextureAndTangents, TexturedProjectorFrameMatchesTheReference) {
     auto r = make_renderer(s);
     auto out = r->render_projector();
     ASSERT_TRUE(out.ok()) << out.error().message;
-    EXPECT_NE(std::find(out->report.effects.begin(), out->report.effects.end(), "albedo-texture"), out->report.effects.end());
+    EXPECT_NE(std::find(out->report.effects.begin(), out->report.effects.end(), "albedo-texture"),
+              out->report.effects.end());
     auto ref = shading::reference_projector(s);
     ASSERT_TRUE(ref.ok());
     auto st = shading::compare_images(out->image, ref.value(), {}, 0.0);
@@ -60,8 +61,8 @@ TEST_F(TextureAndTangents, TexturedProjectorFrameMatchesTheReference) {
     EXPECT_EQ(st.non_finite, 0u);
     EXPECT_LE(st.interior_max_abs, 0.02 * st.reference_peak + 2e-3);
     EXPECT_LE(st.rmse, 0.005 * st.reference_peak + 5e-4);
-    std::printf("[agreement] textured projector: peak %.4f interior max %.2e rmse %.2e\n", st.reference_peak,
-                st.interior_max_abs, st.rmse);
+    std::printf("[agreement] textured projector: peak %.4f interior max %.2e rmse %.2e\n",
+                st.reference_peak, st.interior_max_abs, st.rmse);
 }
 
 TEST_F(TextureAndTangents, TextureIsCompiledOutOfTheViewDependentPass) {
@@ -82,23 +83,27 @@ TEST_F(TextureAndTangents, MeshTangentsMatchTheReference) {
             auto eye = scene::eye_poses(head, 0.063)[1];
             auto out = r->render_eye(spec, k, eye);
             ASSERT_TRUE(out.ok());
-            EXPECT_NE(std::find(out->report.effects.begin(), out->report.effects.end(), "mesh-tangents"),
-                      out->report.effects.end());
+            EXPECT_NE(
+                std::find(out->report.effects.begin(), out->report.effects.end(), "mesh-tangents"),
+                out->report.effects.end());
             std::vector<float> ndv;
             auto ref = shading::reference_viewer(s, spec, k, eye, &ndv);
             ASSERT_TRUE(ref.ok());
             // The azimuthal field is singular at the pole: leave out pixels within 14.5 deg of it.
             for (uint32_t y = 0; y < k.height; ++y)
                 for (uint32_t x = 0; x < k.width; ++x) {
-                    auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position, scene::pixel_ray(k, eye, x, y));
-                    if (hit && std::hypot(hit->n.x, hit->n.z) < 0.25) ndv[size_t(y) * k.width + x] = 0;
+                    auto hit = shading::intersect_hemisphere(s.prop.hemisphere, eye.position,
+                                                             scene::pixel_ray(k, eye, x, y));
+                    if (hit && std::hypot(hit->n.x, hit->n.z) < 0.25)
+                        ndv[size_t(y) * k.width + x] = 0;
                 }
             auto st = shading::compare_images(out->image, ref.value(), ndv, 0.1);
             ASSERT_GT(st.reference_peak, 0.05) << preset;
             EXPECT_EQ(st.non_finite, 0u);
-            EXPECT_LE(st.interior_max_abs, 0.02 * st.reference_peak + 2e-3) << preset << " at " << angle;
-            std::printf("[agreement] %s mesh tangents %+.0f deg: peak %.4f interior max %.2e\n", preset, angle,
-                        st.reference_peak, st.interior_max_abs);
+            EXPECT_LE(st.interior_max_abs, 0.02 * st.reference_peak + 2e-3)
+                << preset << " at " << angle;
+            std::printf("[agreement] %s mesh tangents %+.0f deg: peak %.4f interior max %.2e\n",
+                        preset, angle, st.reference_peak, st.interior_max_abs);
         }
     }
 }

@@ -27,17 +27,20 @@ int main(int argc, char** argv) {
     for (int y = 0; y < sh; ++y)
         for (int x = 0; x < sw; ++x) {
             int fx = int((x + 0.5 - x0) / s), fy = int((y + 0.5 - y0) / s);
-            if (fx < 0 || fy < 0 || fx >= fw || fy >= fh) continue;
+            if (fx < 0 || fy < 0 || fx >= fw || fy >= fh)
+                continue;
             for (int c = 0; c < 3; ++c) {
-                int a = shot[(size_t(y) * sw + x) * 4 + c], b = frame[(size_t(fy) * fw + fx) * 4 + c];
+                int a = shot[(size_t(y) * sw + x) * 4 + c],
+                    b = frame[(size_t(fy) * fw + fx) * 4 + c];
                 sum += std::abs(a - b);
                 peak = std::max(peak, a);
                 ++count;
             }
         }
     const double mad = count ? sum / count : 1e9;
-    std::printf("compare_png: %dx%d shows %dx%d at scale %.3f: mean |difference| %.2f levels, peak %d\n", sw, sh, fw, fh, s,
-                mad, peak);
+    std::printf(
+        "compare_png: %dx%d shows %dx%d at scale %.3f: mean |difference| %.2f levels, peak %d\n",
+        sw, sh, fw, fh, s, mad, peak);
     stbi_image_free(shot);
     stbi_image_free(frame);
     if (peak < 50) {

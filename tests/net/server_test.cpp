@@ -8,12 +8,12 @@
 
 #include "clients/connection.hpp"
 #include "gpu/device.hpp"
+#include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 #include "stream/layer_codec.hpp"
 #include "stream/server.hpp"
-#include "protocol/tiles.hpp"
 
 using namespace hs;
 namespace proto = hs::protocol;
@@ -67,7 +67,8 @@ protected:
     void TearDown() override {
         server_->stop();
         thread_.join();
-        EXPECT_EQ(device().validation_message_count(), messages_before_) << "Vulkan validation reported messages";
+        EXPECT_EQ(device().validation_message_count(), messages_before_)
+            << "Vulkan validation reported messages";
     }
 
     std::unique_ptr<Connection> connect() {
@@ -79,9 +80,11 @@ protected:
         return std::move(std::get<std::unique_ptr<Connection>>(c));
     }
 
-    std::unique_ptr<Connection> headset(const proto::RegisterDisplay& d, const std::string& name = "hmd") {
+    std::unique_ptr<Connection> headset(const proto::RegisterDisplay& d,
+                                        const std::string& name = "hmd") {
         auto c = connect();
-        if (!c) return nullptr;
+        if (!c)
+            return nullptr;
         auto err = c->hello(proto::Role::kHmd, kToken, name);
         EXPECT_FALSE(err) << *err;
         EXPECT_TRUE(c->send(d));
@@ -94,9 +97,11 @@ protected:
         auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
         while (std::chrono::steady_clock::now() < deadline) {
             auto r = c.receive(500);
-            if (std::holds_alternative<std::string>(r)) return std::nullopt;
+            if (std::holds_alternative<std::string>(r))
+                return std::nullopt;
             if (auto* m = std::get_if<proto::Message>(&r))
-                if (auto* t = std::get_if<T>(m)) return *t;
+                if (auto* t = std::get_if<T>(m))
+                    return *t;
         }
         return std::nullopt;
     }
@@ -109,23 +114,27 @@ protected:
         EXPECT_FALSE(e->message.empty());
         if (closes) {
             auto r = c.receive(5000);
-            EXPECT_TRUE(std::holds_alternative<std::string>(r)) << "the server kept the connection open";
+            EXPECT_TRUE(std::holds_alternative<std::string>(r))
+                << "the server kept the connection open";
         }
     }
 
     // A headset display of the HoloLens' fields of view at 1/8 of its resolution.
-    static proto::RegisterDisplay small_display(proto::PixelFormat f = proto::PixelFormat::kRgba16f,
-                                                proto::FrameMode mode = proto::FrameMode::kOnRequest) {
+    static proto::RegisterDisplay small_display(
+        proto::PixelFormat f = proto::PixelFormat::kRgba16f,
+        proto::FrameMode mode = proto::FrameMode::kOnRequest) {
         const scene::Scene s = scene::default_scene();
         const auto& v = s.viewers.front();
-        auto k = scene::intrinsics_from_fov(v.eye_width / 8, v.eye_height / 8, v.fov_x_rad, v.fov_y_rad);
+        auto k =
+            scene::intrinsics_from_fov(v.eye_width / 8, v.eye_height / 8, v.fov_x_rad, v.fov_y_rad);
         return {k.width, k.height, k.fx, k.fy, k.cx, k.cy, v.ipd_m, f, proto::Encoding::kRaw, mode};
     }
 
     static proto::Pose pose_at(double angle_deg, uint64_t t) {
         auto s = scene::default_scene();
         auto p = scene::viewing_pose(s.viewing, angle_deg, 1.10).value();
-        return {t, {p.position.x, p.position.y, p.position.z},
+        return {t,
+                {p.position.x, p.position.y, p.position.z},
                 {p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z}};
     }
 
@@ -134,8 +143,10 @@ protected:
         std::vector<proto::VdLayer> got;
         while (got.size() < 2) {
             auto l = receive_a<proto::VdLayer>(c);
-            if (!l) break;
-            if (l->pose_time_ns == t) got.push_back(*l);
+            if (!l)
+                break;
+            if (l->pose_time_ns == t)
+                got.push_back(*l);
         }
         return got;
     }
@@ -160,7 +171,6 @@ TEST_F(ServerTest, ProjectorFrameIsRenderedOnceForEveryProjector) {
     EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 1u);
 }
 
-
 class HeadsetCount : public ServerTest, public ::testing::WithParamInterface<int> {};
 
 TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
@@ -177,29 +187,34 @@ TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
     // The offline renderer, for the same poses.
     render::RendererCreateInfo ri;
     auto offline = render::Renderer::create(device(), test_scene(), ri).value();
-    scene::Intrinsics k{display.eye_width, display.eye_height, display.fx, display.fy, display.cx, display.cy};
+    scene::Intrinsics k{display.eye_width, display.eye_height, display.fx,
+                        display.fy,        display.cx,         display.cy};
     for (int i = 0; i < n; ++i) {
         auto layers = frame_for(*hmds[i], 1000 + i);
         ASSERT_EQ(layers.size(), 2u) << "headset " << i;
         EXPECT_NE(layers[0].eye, layers[1].eye);
         auto pose = pose_at(angles[i], 0);
         auto head = scene::make_pose({pose.position_m[0], pose.position_m[1], pose.position_m[2]},
-                                     glm::dquat(pose.orientation_wxyz[0], pose.orientation_wxyz[1], pose.orientation_wxyz[2],
-                                                pose.orientation_wxyz[3]))
+                                     glm::dquat(pose.orientation_wxyz[0], pose.orientation_wxyz[1],
+                                                pose.orientation_wxyz[2], pose.orientation_wxyz[3]))
                         .value();
         for (const auto& l : layers) {
-            auto want = offline->render_eye(scene::default_scene().material.specular, k, scene::eye_poses(head, display.ipd_m)[l.eye]);
+            auto want = offline->render_eye(scene::default_scene().material.specular, k,
+                                            scene::eye_poses(head, display.ipd_m)[l.eye]);
             ASSERT_TRUE(want.ok());
             auto got = stream::decode_pixels(l.data, l.width, l.height, l.format);
             ASSERT_EQ(got.pixels.size(), want->image.pixels.size());
             double max_diff = 0, peak = 0;
             for (size_t p = 0; p < got.pixels.size(); ++p) {
-                if (p % 4 == 3) continue;  // alpha: 0 where the layer adds no light (PROTOCOL.md)
-                max_diff = std::max(max_diff, double(std::abs(got.pixels[p] - want->image.pixels[p])));
+                if (p % 4 == 3)
+                    continue;  // alpha: 0 where the layer adds no light (PROTOCOL.md)
+                max_diff =
+                    std::max(max_diff, double(std::abs(got.pixels[p] - want->image.pixels[p])));
                 peak = std::max(peak, double(want->image.pixels[p]));
             }
             EXPECT_GT(peak, 0.1) << "no highlight to compare";
-            EXPECT_LE(max_diff, 1e-3) << "headset " << i << " eye " << int(l.eye) << " got another pose's layer";
+            EXPECT_LE(max_diff, 1e-3)
+                << "headset " << i << " eye " << int(l.eye) << " got another pose's layer";
         }
     }
     auto st = server_->stats();
@@ -230,7 +245,8 @@ TEST_F(ServerTest, SparseLayersEqualRawLayers) {
         const auto& s = lb[0].eye == e ? lb[0] : lb[1];
         EXPECT_EQ(s.encoding, proto::Encoding::kSparseTiles);
         auto dec = proto::decode_tiles(s.data, s.width, s.height, 4);
-        ASSERT_TRUE(std::holds_alternative<std::vector<uint8_t>>(dec)) << std::get<std::string>(dec);
+        ASSERT_TRUE(std::holds_alternative<std::vector<uint8_t>>(dec))
+            << std::get<std::string>(dec);
         EXPECT_EQ(std::get<std::vector<uint8_t>>(dec), r.data) << "eye " << e;
         EXPECT_LT(s.data.size(), r.data.size() / 2) << "sparse tiles saved too little";
     }
@@ -363,7 +379,8 @@ TEST_F(ServerTest, AdminSceneUpdateRerendersTheProjectorOnce) {
 
 TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
     // A continuous-mode headset that sends poses and never reads.
-    auto stalled = headset(small_display(proto::PixelFormat::kRgba16f, proto::FrameMode::kContinuous), "stalled");
+    auto stalled = headset(
+        small_display(proto::PixelFormat::kRgba16f, proto::FrameMode::kContinuous), "stalled");
     auto active = headset(small_display(), "active");
     auto served = [&](int seconds) {
         int frames = 0;
@@ -373,7 +390,8 @@ TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
             stalled->send(pose_at(double(t % 80) - 40, t));
             active->send(pose_at(0, 100000 + t));
             active->send(proto::FrameRequest{});
-            if (frame_for(*active, 100000 + t).size() == 2) ++frames;
+            if (frame_for(*active, 100000 + t).size() == 2)
+                ++frames;
             ++t;
         }
         return frames;
@@ -383,12 +401,14 @@ TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
     const int frames = served(3);
     const size_t rss_after = rss_kib();
     EXPECT_GT(frames, 5) << "the active headset was starved";
-    EXPECT_LT(rss_after, rss_before + 32 * 1024) << "server memory grew by " << (rss_after - rss_before) << " KiB";
+    EXPECT_LT(rss_after, rss_before + 32 * 1024)
+        << "server memory grew by " << (rss_after - rss_before) << " KiB";
     const auto stats = server_->stats();
     ASSERT_EQ(stats["viewers"].size(), 2u);
     for (const auto& v : stats["viewers"])
         EXPECT_LE(v["in_flight"].get<uint32_t>(), 2u) << v.dump();
-    std::printf("[stall] active headset: %d frames in 3 s; RSS %zu -> %zu KiB\n", frames, rss_before, rss_after);
+    std::printf("[stall] active headset: %d frames in 3 s; RSS %zu -> %zu KiB\n", frames,
+                rss_before, rss_after);
 }
 
 TEST_F(ServerTest, ClientVanishingMidFrame) {
@@ -418,7 +438,8 @@ TEST_F(ServerTest, PingAndStats) {
         auto st = receive_a<proto::Stats>(*c);
         ASSERT_TRUE(st);
         j = nlohmann::json::parse(st->json);
-        if (j["projector_renders"].get<uint64_t>() > 0) break;
+        if (j["projector_renders"].get<uint64_t>() > 0)
+            break;
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
     EXPECT_EQ(j["projector_renders"].get<uint64_t>(), 1u);

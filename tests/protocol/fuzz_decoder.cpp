@@ -24,9 +24,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     // Sparse-tile payloads of decoded layers, and the raw bytes as a tile stream.
     if (auto* m = std::get_if<Message>(&r))
         if (auto* l = std::get_if<VdLayer>(m); l && l->encoding == Encoding::kSparseTiles)
-            (void)decode_tiles(l->data, l->width, l->height, l->format == PixelFormat::kRgba8 ? 4 : 8);
+            (void)decode_tiles(l->data, l->width, l->height,
+                               l->format == PixelFormat::kRgba8 ? 4 : 8);
     (void)decode_tiles(bytes, 61, 37, 4);
     // Header-only decoding of any 16-byte prefix.
-    if (size >= kHeaderBytes) (void)decode_header(bytes.first(kHeaderBytes));
+    if (size >= kHeaderBytes)
+        (void)decode_header(bytes.first(kHeaderBytes));
     return 0;
 }

@@ -23,7 +23,8 @@ std::string hex(const std::vector<uint8_t>& b) {
 std::string strip(std::string s) {
     std::string o;
     for (char c : s)
-        if (c != ' ') o += c;
+        if (c != ' ')
+            o += c;
     return o;
 }
 
@@ -60,7 +61,15 @@ std::vector<Message> every_message() {
     pf.height = 1;
     pf.format = PixelFormat::kRgba16f;
     pf.data = {0, 60, 0, 60, 0, 60, 0, 60};
-    RegisterDisplay rd{1268, 720, 2366.0, 2409.6, 633.5, 359.5, 0.063, PixelFormat::kRgba8, Encoding::kSparseTiles,
+    RegisterDisplay rd{1268,
+                       720,
+                       2366.0,
+                       2409.6,
+                       633.5,
+                       359.5,
+                       0.063,
+                       PixelFormat::kRgba8,
+                       Encoding::kSparseTiles,
                        FrameMode::kContinuous};
     return {Hello{Role::kAdmin, "secret-token", "loadgen-3"},
             Welcome{5, 123456789, 3},
@@ -106,14 +115,18 @@ TEST(Protocol, GoldenBytes) {
     l.width = 1;
     l.height = 1;
     l.data = {1, 2, 3, 4};
-    EXPECT_EQ(hex(encode(l)), strip("48595352 0100 0600 1f000000 00000000  02000000 0900000000000000 01 01 01"
-                                    " 01000000 01000000 04000000 01020304"));
-    EXPECT_EQ(hex(encode(SceneUpdate{"{}"})), strip("48595352 0100 0800 06000000 00000000  02000000 7b7d"));
-    EXPECT_EQ(hex(encode(RegisterDisplay{2, 1, 1.0, 1.0, 0.5, 0.0, 0.0, PixelFormat::kRgba8, Encoding::kRaw,
-                                         FrameMode::kOnRequest})),
-              strip("48595352 0100 0300 33000000 00000000  02000000 01000000"
-                    " 000000000000f03f 000000000000f03f 000000000000e03f 0000000000000000 0000000000000000"
-                    " 01 01 00"));
+    EXPECT_EQ(hex(encode(l)),
+              strip("48595352 0100 0600 1f000000 00000000  02000000 0900000000000000 01 01 01"
+                    " 01000000 01000000 04000000 01020304"));
+    EXPECT_EQ(hex(encode(SceneUpdate{"{}"})),
+              strip("48595352 0100 0800 06000000 00000000  02000000 7b7d"));
+    EXPECT_EQ(
+        hex(encode(RegisterDisplay{2, 1, 1.0, 1.0, 0.5, 0.0, 0.0, PixelFormat::kRgba8,
+                                   Encoding::kRaw, FrameMode::kOnRequest})),
+        strip(
+            "48595352 0100 0300 33000000 00000000  02000000 01000000"
+            " 000000000000f03f 000000000000f03f 000000000000e03f 0000000000000000 0000000000000000"
+            " 01 01 00"));
 }
 
 TEST(Protocol, EveryMessageRoundTrips) {
@@ -121,7 +134,8 @@ TEST(Protocol, EveryMessageRoundTrips) {
         auto bytes = encode(m, 99);
         Header h;
         auto r = decode_frame(bytes, &h);
-        ASSERT_TRUE(std::holds_alternative<Message>(r)) << to_string(type_of(m)) << ": " << std::get<DecodeError>(r).message;
+        ASSERT_TRUE(std::holds_alternative<Message>(r))
+            << to_string(type_of(m)) << ": " << std::get<DecodeError>(r).message;
         EXPECT_EQ(h.sequence, 99u);
         EXPECT_EQ(type_of(std::get<Message>(r)), type_of(m));
         EXPECT_EQ(encode(std::get<Message>(r), 99), bytes) << to_string(type_of(m));
@@ -167,7 +181,8 @@ TEST(Protocol, RejectsOversizePayloadFromTheHeaderAlone) {
 TEST(Protocol, RejectsLyingLengths) {
     for (const Message& m : every_message()) {
         auto b = encode(m);
-        if (b.size() == kHeaderBytes) continue;
+        if (b.size() == kHeaderBytes)
+            continue;
         // Header says one byte more than the frame holds, and one byte less.
         for (int delta : {+1, -1}) {
             auto c = b;
@@ -176,7 +191,8 @@ TEST(Protocol, RejectsLyingLengths) {
             n += delta;
             std::memcpy(&c[8], &n, 4);
             auto r = decode_frame(c);
-            EXPECT_TRUE(std::holds_alternative<DecodeError>(r)) << to_string(type_of(m)) << " delta " << delta;
+            EXPECT_TRUE(std::holds_alternative<DecodeError>(r))
+                << to_string(type_of(m)) << " delta " << delta;
         }
     }
     // An inner length that lies: the layer's data length claims more bytes than follow.
@@ -215,12 +231,14 @@ TEST(Protocol, TruncationAtEveryByteOffsetIsAnError) {
         for (size_t cut = 0; cut < b.size(); ++cut) {
             std::vector<uint8_t> t(b.begin(), b.begin() + cut);
             auto r = decode_frame(t);
-            EXPECT_TRUE(std::holds_alternative<DecodeError>(r)) << to_string(type_of(m)) << " cut at " << cut;
+            EXPECT_TRUE(std::holds_alternative<DecodeError>(r))
+                << to_string(type_of(m)) << " cut at " << cut;
             // Fix the header's length to the truncated payload: a short field must still be caught.
             if (cut > kHeaderBytes) {
                 uint32_t n = uint32_t(cut - kHeaderBytes);
                 std::memcpy(&t[8], &n, 4);
-                EXPECT_TRUE(std::holds_alternative<DecodeError>(decode_frame(t))) << to_string(type_of(m)) << " honest cut " << cut;
+                EXPECT_TRUE(std::holds_alternative<DecodeError>(decode_frame(t)))
+                    << to_string(type_of(m)) << " honest cut " << cut;
             }
         }
     }
@@ -259,7 +277,11 @@ TEST(Protocol, PoseValidation) {
 }
 
 TEST(Protocol, DisplayValidation) {
-    RegisterDisplay d{1268, 720, 2366, 2409, 633.5, 359.5, 0.063, PixelFormat::kRgba8, Encoding::kRaw, FrameMode::kOnRequest};
+    RegisterDisplay d{1268,           720,
+                      2366,           2409,
+                      633.5,          359.5,
+                      0.063,          PixelFormat::kRgba8,
+                      Encoding::kRaw, FrameMode::kOnRequest};
     EXPECT_FALSE(validate_display(d));
     d.eye_width = 100000;
     EXPECT_NE(validate_display(d)->find("resolution"), std::string::npos);
@@ -285,7 +307,8 @@ std::vector<uint8_t> sparse_image(uint32_t w, uint32_t h, uint32_t bpp, int blob
         int cx = int(rng() % w), cy = int(rng() % h), r = 3 + int(rng() % 20);
         for (int y = std::max(0, cy - r); y < std::min<int>(h, cy + r); ++y)
             for (int x = std::max(0, cx - r); x < std::min<int>(w, cx + r); ++x)
-                for (uint32_t c = 0; c < bpp; ++c) img[(size_t(y) * w + x) * bpp + c] = uint8_t(rng());
+                for (uint32_t c = 0; c < bpp; ++c)
+                    img[(size_t(y) * w + x) * bpp + c] = uint8_t(rng());
     }
     return img;
 }
@@ -298,8 +321,10 @@ TEST(Tiles, LosslessForEveryCodec) {
                 auto img = sparse_image(317, 181, bpp, blobs, uint32_t(blobs * 31 + bpp));
                 auto enc = encode_tiles(img, 317, 181, bpp, codec);
                 auto dec = decode_tiles(enc, 317, 181, bpp);
-                ASSERT_TRUE(std::holds_alternative<std::vector<uint8_t>>(dec)) << std::get<std::string>(dec);
-                EXPECT_EQ(std::get<std::vector<uint8_t>>(dec), img) << "codec " << int(codec) << " blobs " << blobs;
+                ASSERT_TRUE(std::holds_alternative<std::vector<uint8_t>>(dec))
+                    << std::get<std::string>(dec);
+                EXPECT_EQ(std::get<std::vector<uint8_t>>(dec), img)
+                    << "codec " << int(codec) << " blobs " << blobs;
                 if (blobs == 0) {
                     EXPECT_LT(enc.size(), 64u) << "an empty layer must cost almost nothing";
                 }

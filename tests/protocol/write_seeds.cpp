@@ -19,11 +19,21 @@ int main(int argc, char** argv) {
     ProjectorFrame pf;
     pf.width = pf.height = 1;
     pf.data = {1, 2, 3, 4};
-    const Message all[] = {Hello{Role::kHmd, "token", "name"}, Welcome{1, 2, 3},
-                           RegisterDisplay{64, 32, 50, 50, 31.5, 15.5, 0.063, PixelFormat::kRgba8, Encoding::kRaw,
-                                           FrameMode::kOnRequest},
-                           Pose{1, {0, 1, 0}, {1, 0, 0, 0}}, FrameRequest{}, layer, pf, SceneUpdate{"{}"},
-                           StatsRequest{}, Stats{"{}"}, Ping{1}, Pong{1, 2}, Error{ErrorCode::kMalformed, "x"}, Bye{0}};
+    const Message all[] = {Hello{Role::kHmd, "token", "name"},
+                           Welcome{1, 2, 3},
+                           RegisterDisplay{64, 32, 50, 50, 31.5, 15.5, 0.063, PixelFormat::kRgba8,
+                                           Encoding::kRaw, FrameMode::kOnRequest},
+                           Pose{1, {0, 1, 0}, {1, 0, 0, 0}},
+                           FrameRequest{},
+                           layer,
+                           pf,
+                           SceneUpdate{"{}"},
+                           StatsRequest{},
+                           Stats{"{}"},
+                           Ping{1},
+                           Pong{1, 2},
+                           Error{ErrorCode::kMalformed, "x"},
+                           Bye{0}};
     for (const Message& m : all) {
         auto bytes = encode(m, 1);
         std::ofstream(std::filesystem::path(argv[1]) / to_string(type_of(m)), std::ios::binary)

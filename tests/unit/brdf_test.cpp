@@ -74,7 +74,8 @@ TEST(Brdf, ExponentsFromOneToTenThousand) {
     for (double e : {1.0, 10.0, 100.0, 1e3, 1e4}) {
         for (double dv : {0.0, 1e-4, 1e-2, 0.5}) {
             dvec3 v = dir(0.5 + dv, glm::pi<double>());
-            for (double s : {phong(kN, l, v, e), blinn_phong(kN, l, v, e), kajiya_kay(kN, l, v, kT, e)}) {
+            for (double s :
+                 {phong(kN, l, v, e), blinn_phong(kN, l, v, e), kajiya_kay(kN, l, v, kT, e)}) {
                 EXPECT_TRUE(std::isfinite(s));
                 EXPECT_GE(s, 0.0);
                 EXPECT_LE(s, 1.0);
@@ -88,7 +89,8 @@ TEST(Brdf, WardRoughnessDownToTenToTheMinusFour) {
     for (double a : {1e-1, 1e-2, 1e-3, 1e-4}) {
         double peak = ward(kN, l, dir(0.5, glm::pi<double>()), kT, a, a);
         EXPECT_TRUE(std::isfinite(peak));
-        EXPECT_NEAR(peak, std::cos(0.5) / (4 * glm::pi<double>() * a * a * std::cos(0.5)), peak * 1e-12);
+        EXPECT_NEAR(peak, std::cos(0.5) / (4 * glm::pi<double>() * a * a * std::cos(0.5)),
+                    peak * 1e-12);
         double off = ward(kN, l, dir(0.51, glm::pi<double>()), kT, a, a);
         EXPECT_TRUE(std::isfinite(off));
         // 0.01 rad off the mirror: for narrow lobes the exponential has all but vanished (wide
@@ -104,8 +106,9 @@ TEST(Brdf, KajiyaKayTangentParallelToLightOrView) {
     dvec3 t = tangent_from_axis(kN, kT);
     EXPECT_NEAR(glm::length(t - kT), 0.0, 1e-15);
     dvec3 near_t = glm::normalize(dvec3(1, 0, 1e-9));
-    for (double s : {kajiya_kay(kN, near_t, dir(0.3, 2.0), kT, 20), kajiya_kay(kN, dir(0.3, 2.0), near_t, kT, 20),
-                     kajiya_kay(kN, near_t, near_t, kT, 20)}) {
+    for (double s :
+         {kajiya_kay(kN, near_t, dir(0.3, 2.0), kT, 20),
+          kajiya_kay(kN, dir(0.3, 2.0), near_t, kT, 20), kajiya_kay(kN, near_t, near_t, kT, 20)}) {
         EXPECT_TRUE(std::isfinite(s));
         EXPECT_GE(s, 0.0);
         EXPECT_LE(s, 1.0);
@@ -139,10 +142,10 @@ TEST(Reference, HemisphereIntersection) {
     ASSERT_TRUE(hit);
     EXPECT_NEAR(hit->p.y, 0.845, 1e-12);
     EXPECT_NEAR(hit->n.y, 1.0, 1e-12);
-    EXPECT_FALSE(intersect_hemisphere(h, {0, 2, 0}, {0, 1, 0}));           // pointing away
-    EXPECT_FALSE(intersect_hemisphere(h, {1, 0.6, 0}, {-1, 0, 0}));        // below the base
-    EXPECT_FALSE(intersect_hemisphere(h, {0.2, 2, 0}, {0, -1, 0}));        // misses
-    auto tangent = intersect_hemisphere(h, {0.15, 2, 0}, {0, -1, 0});      // grazing the rim
+    EXPECT_FALSE(intersect_hemisphere(h, {0, 2, 0}, {0, 1, 0}));       // pointing away
+    EXPECT_FALSE(intersect_hemisphere(h, {1, 0.6, 0}, {-1, 0, 0}));    // below the base
+    EXPECT_FALSE(intersect_hemisphere(h, {0.2, 2, 0}, {0, -1, 0}));    // misses
+    auto tangent = intersect_hemisphere(h, {0.15, 2, 0}, {0, -1, 0});  // grazing the rim
     if (tangent) {
         EXPECT_TRUE(std::isfinite(tangent->n.x));
     }
@@ -155,5 +158,6 @@ TEST(Reference, DiffuseOnlySceneHasNoViewDependentLight) {
     auto k = scene::Intrinsics{64, 36, 80, 80, 31.5, 17.5};
     auto img = reference_viewer(s, none, k, eye);
     ASSERT_TRUE(img.ok());
-    for (size_t i = 0; i < img->pixels.size(); i += 4) EXPECT_EQ(img->pixels[i] + img->pixels[i + 1] + img->pixels[i + 2], 0.0f);
+    for (size_t i = 0; i < img->pixels.size(); i += 4)
+        EXPECT_EQ(img->pixels[i] + img->pixels[i + 1] + img->pixels[i + 2], 0.0f);
 }

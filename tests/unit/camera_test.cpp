@@ -26,7 +26,8 @@ TEST(Camera, ProjectionMatchesPixelRays) {
 }
 
 TEST(Camera, LookDirectionParallelToUpStaysDefined) {
-    for (glm::dvec3 target : {glm::dvec3(0, -1, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 1e-12, 0) + glm::dvec3(0, 0.5, 0)}) {
+    for (glm::dvec3 target : {glm::dvec3(0, -1, 0), glm::dvec3(0, 1, 0),
+                              glm::dvec3(0, 1e-12, 0) + glm::dvec3(0, 0.5, 0)}) {
         auto p = look_at({0, 0, 0}, target, {0, 1, 0});
         ASSERT_TRUE(p.ok());
         glm::dvec3 fwd = p->orientation * glm::dvec3(0, 0, -1);

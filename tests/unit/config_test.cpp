@@ -10,7 +10,9 @@ using namespace hs;
 using namespace hs::scene;
 
 namespace {
-std::string default_text() { return std::string(default_scene_json()); }
+std::string default_text() {
+    return std::string(default_scene_json());
+}
 
 // Applies `edit` to the default scene's JSON and parses the result.
 Result<Scene> parse_edited(const std::function<void(nlohmann::json&)>& edit) {
@@ -24,8 +26,8 @@ TEST(Config, DefaultSceneIsThePaperRoom) {
     Scene s = default_scene();
     EXPECT_EQ(s.schema_version, 1);
     EXPECT_EQ(s.prop.kind, Prop::Kind::kHemisphere);
-    EXPECT_DOUBLE_EQ(s.prop.hemisphere.radius, 0.15);       // 30 cm diameter
-    EXPECT_DOUBLE_EQ(s.prop.hemisphere.centre.y, 0.695);    // on a 69.5 cm desk
+    EXPECT_DOUBLE_EQ(s.prop.hemisphere.radius, 0.15);     // 30 cm diameter
+    EXPECT_DOUBLE_EQ(s.prop.hemisphere.centre.y, 0.695);  // on a 69.5 cm desk
     ASSERT_EQ(s.lights.size(), 3u);
     int points = 0;
     for (const auto& l : s.lights)
@@ -46,7 +48,8 @@ TEST(Config, DefaultSceneIsThePaperRoom) {
     ASSERT_NE(bt, nullptr);
     EXPECT_EQ(bt->eye_width, 960u);
     // 23 deg diagonal over 960 x 540: the diagonal recomposes from the two fields of view.
-    double diag = 2 * std::atan(std::hypot(std::tan(bt->fov_x_rad / 2), std::tan(bt->fov_y_rad / 2)));
+    double diag =
+        2 * std::atan(std::hypot(std::tan(bt->fov_x_rad / 2), std::tan(bt->fov_y_rad / 2)));
     EXPECT_NEAR(diag, 23.0 * M_PI / 180, 1e-12);
     for (const char* p : {"phong", "blinn-phong", "ward", "ward-aniso", "kajiya-kay"})
         EXPECT_TRUE(s.specular_presets.count(p)) << p;
@@ -76,7 +79,8 @@ TEST(Config, MissingKeyNamesThePath) {
 TEST(Config, WrongTypeSaysWhatWasExpected) {
     auto s = parse_edited([](auto& j) { j["material"]["specular"]["exponent"] = "shiny"; });
     ASSERT_FALSE(s.ok());
-    EXPECT_NE(s.error().message.find("material.specular.exponent"), std::string::npos) << s.error().message;
+    EXPECT_NE(s.error().message.find("material.specular.exponent"), std::string::npos)
+        << s.error().message;
     EXPECT_NE(s.error().message.find("expected a number"), std::string::npos);
 }
 
@@ -148,7 +152,8 @@ TEST(Config, ViewerIntrinsicsInsteadOfFieldOfView) {
 }
 
 TEST(Config, TangentSourceIsChecked) {
-    auto ok = parse_edited([](auto& j) { j["specular_presets"]["kajiya-kay"]["tangent_source"] = "mesh"; });
+    auto ok = parse_edited(
+        [](auto& j) { j["specular_presets"]["kajiya-kay"]["tangent_source"] = "mesh"; });
     ASSERT_TRUE(ok.ok()) << ok.error().message;
     EXPECT_EQ(ok->specular_presets.at("kajiya-kay").tangent_source, Specular::TangentSource::kMesh);
     auto bad = parse_edited([](auto& j) { j["material"]["specular"]["tangent_source"] = "uv"; });
@@ -157,8 +162,11 @@ TEST(Config, TangentSourceIsChecked) {
 }
 
 TEST(Config, MissingAlbedoTextureNamesTheFile) {
-    auto s = parse_edited([](auto& j) { j["material"]["albedo_texture"] = "/nonexistent/brass.png"; });
+    auto s =
+        parse_edited([](auto& j) { j["material"]["albedo_texture"] = "/nonexistent/brass.png"; });
     ASSERT_FALSE(s.ok());
-    EXPECT_NE(s.error().message.find("material.albedo_texture"), std::string::npos) << s.error().message;
-    EXPECT_NE(s.error().message.find("/nonexistent/brass.png"), std::string::npos) << s.error().message;
+    EXPECT_NE(s.error().message.find("material.albedo_texture"), std::string::npos)
+        << s.error().message;
+    EXPECT_NE(s.error().message.find("/nonexistent/brass.png"), std::string::npos)
+        << s.error().message;
 }

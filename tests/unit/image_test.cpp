@@ -10,9 +10,9 @@ using namespace hs;
 TEST(Image, TonemapIsDocumentedSrgb) {
     ImageRgba32f img = ImageRgba32f::zeros(4, 1);
     img.set(0, 0, {0, 0, 0, 1});
-    img.set(1, 0, {0.5f, 0.5f, 0.5f, 1});   // half of white = 0.5 linear
-    img.set(2, 0, {10, 10, 10, 1});          // above white: clamped
-    img.set(3, 0, {NAN, 0, 0, 1});           // NaN draws as magenta, never hidden
+    img.set(1, 0, {0.5f, 0.5f, 0.5f, 1});  // half of white = 0.5 linear
+    img.set(2, 0, {10, 10, 10, 1});        // above white: clamped
+    img.set(3, 0, {NAN, 0, 0, 1});         // NaN draws as magenta, never hidden
     ImageRgba8 out = tonemap_srgb8(img, 1.0f);
     EXPECT_EQ(out.pixels[0], 0);
     EXPECT_EQ(out.pixels[4], std::lround(srgb_oetf(0.5f) * 255));
@@ -26,7 +26,8 @@ TEST(Image, TonemapIsDocumentedSrgb) {
 TEST(Image, ExrRoundTripIsLossless) {
     ImageRgba32f img = ImageRgba32f::zeros(7, 5);
     for (uint32_t y = 0; y < 5; ++y)
-        for (uint32_t x = 0; x < 7; ++x) img.set(x, y, {x * 1e-7f, y * 1234.5f, 65504.0f * 3 + x, 1});
+        for (uint32_t x = 0; x < 7; ++x)
+            img.set(x, y, {x * 1e-7f, y * 1234.5f, 65504.0f * 3 + x, 1});
     auto path = std::filesystem::temp_directory_path() / "hysar_test_roundtrip.exr";
     ASSERT_TRUE(write_exr(path, img).ok());
     auto back = read_exr(path);

@@ -1,7 +1,7 @@
+#include <unistd.h>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <unistd.h>
 #include <filesystem>
 #include <fstream>
 
@@ -14,7 +14,9 @@ using namespace hs::scene;
 
 namespace {
 std::string temp_path(const std::string& name) {
-    return (std::filesystem::temp_directory_path() / ("hysar_test_" + std::to_string(::getpid()) + "_" + name)).string();
+    return (std::filesystem::temp_directory_path() /
+            ("hysar_test_" + std::to_string(::getpid()) + "_" + name))
+        .string();
 }
 
 // Base64 of little-endian bytes.
@@ -22,7 +24,8 @@ std::string base64(const std::vector<uint8_t>& d) {
     static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     std::string out;
     for (size_t i = 0; i < d.size(); i += 3) {
-        uint32_t v = d[i] << 16 | (i + 1 < d.size() ? d[i + 1] << 8 : 0) | (i + 2 < d.size() ? d[i + 2] : 0);
+        uint32_t v =
+            d[i] << 16 | (i + 1 < d.size() ? d[i + 1] << 8 : 0) | (i + 2 < d.size() ? d[i + 2] : 0);
         out += t[v >> 18 & 63];
         out += t[v >> 12 & 63];
         out += i + 1 < d.size() ? t[v >> 6 & 63] : '=';
@@ -32,8 +35,8 @@ std::string base64(const std::vector<uint8_t>& d) {
 }
 
 // A glTF with `positions` (no normals) and uint16 `indices`, its buffer embedded as a data URI.
-std::string write_gltf(const std::string& name, const std::vector<float>& positions, const std::vector<uint16_t>& indices,
-                       int index_count_override = -1) {
+std::string write_gltf(const std::string& name, const std::vector<float>& positions,
+                       const std::vector<uint16_t>& indices, int index_count_override = -1) {
     std::vector<uint8_t> bytes(positions.size() * 4 + indices.size() * 2);
     std::memcpy(bytes.data(), positions.data(), positions.size() * 4);
     std::memcpy(bytes.data() + positions.size() * 4, indices.data(), indices.size() * 2);
@@ -44,15 +47,16 @@ std::string write_gltf(const std::string& name, const std::vector<float>& positi
     }
     int icount = index_count_override >= 0 ? index_count_override : int(indices.size());
     char buf[4096];
-    std::snprintf(buf, sizeof buf,
+    std::snprintf(
+        buf, sizeof buf,
         R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],
 "meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],
 "buffers":[{"byteLength":%zu,"uri":"data:application/octet-stream;base64,%s"}],
 "bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":%zu},{"buffer":0,"byteOffset":%zu,"byteLength":%zu}],
 "accessors":[{"bufferView":0,"componentType":5126,"count":%zu,"type":"VEC3","min":[%g,%g,%g],"max":[%g,%g,%g]},
 {"bufferView":1,"componentType":5123,"count":%d,"type":"SCALAR"}]})",
-        bytes.size(), base64(bytes).c_str(), positions.size() * 4, positions.size() * 4, indices.size() * 2,
-        positions.size() / 3, mn[0], mn[1], mn[2], mx[0], mx[1], mx[2], icount);
+        bytes.size(), base64(bytes).c_str(), positions.size() * 4, positions.size() * 4,
+        indices.size() * 2, positions.size() / 3, mn[0], mn[1], mn[2], mx[0], mx[1], mx[2], icount);
     std::string path = temp_path(name);
     std::ofstream(path) << buf;
     return path;
@@ -80,7 +84,8 @@ TEST(Mesh, HemisphereIsOutwardAndOnTheSphere) {
         EXPECT_LT(glm::distance(t, glm::dvec3(m.tangents[i])), 1e-5) << "vertex " << i;
     }
     for (size_t t = 0; t < m.indices.size(); t += 3) {
-        glm::vec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]], c = m.positions[m.indices[t + 2]];
+        glm::vec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]],
+                  c = m.positions[m.indices[t + 2]];
         glm::vec3 fn = glm::cross(b - a, c - a);
         glm::vec3 centroid = (a + b + c) / 3.0f - glm::vec3(h.centre);
         EXPECT_GT(glm::dot(fn, centroid), 0.0f) << "triangle " << t / 3 << " faces inwards";
