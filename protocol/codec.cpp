@@ -58,12 +58,10 @@ public:
     void bytes(const void* p, size_t n) {
         out.insert(out.end(), (const uint8_t*)p, (const uint8_t*)p + n);
     }
-    void str16(const std::string& s) {
-        put<uint16_t>(uint16_t(s.size()));
-        bytes(s.data(), s.size());
-    }
-    void str32(const std::string& s) {
-        put<uint32_t>(uint32_t(s.size()));
+    // A string preceded by its byte length as a `Len` (u16: str16, u32: str32).
+    template <typename Len>
+    void str(const std::string& s) {
+        put<Len>(Len(s.size()));
         bytes(s.data(), s.size());
     }
     std::vector<uint8_t> out;
@@ -87,24 +85,14 @@ public:
         pos_ += n;
         return true;
     }
-    bool str16(std::string& s, size_t max, const char* what) {
-        uint16_t n;
+    // A string preceded by its byte length as a `Len`, at most `max` bytes.
+    template <typename Len>
+    bool str(std::string& s, size_t max, const char* what) {
+        Len n;
         if (!get(n))
             return false;
         if (n > max)
             return fail(std::string(what) + " longer than " + std::to_string(max) + " bytes");
-        if (b_.size() - pos_ < n)
-            return fail(std::string(what) + " runs past the payload");
-        s.assign((const char*)b_.data() + pos_, n);
-        pos_ += n;
-        return true;
-    }
-    bool str32(std::string& s, size_t max, const char* what) {
-        uint32_t n;
-        if (!get(n))
-            return false;
-        if (n > max)
-            return fail(std::string(what) + " longer than the limit");
         if (b_.size() - pos_ < n)
             return fail(std::string(what) + " runs past the payload");
         s.assign((const char*)b_.data() + pos_, n);
@@ -145,8 +133,8 @@ void encode_payload(Writer& w, const Message& m) {
             using T = std::decay_t<decltype(v)>;
             if constexpr (std::is_same_v<T, Hello>) {
                 w.put<uint8_t>(uint8_t(v.role));
-                w.str16(v.token);
-                w.str16(v.client_name);
+                w.str<uint16_t>(v.token);
+                w.str<uint16_t>(v.client_name);
             } else if constexpr (std::is_same_v<T, Welcome>) {
                 w.put(v.session_id);
                 w.put(v.server_time_ns);
@@ -181,9 +169,9 @@ void encode_payload(Writer& w, const Message& m) {
                 w.put<uint32_t>(uint32_t(v.data.size()));
                 w.bytes(v.data.data(), v.data.size());
             } else if constexpr (std::is_same_v<T, SceneUpdate>) {
-                w.str32(v.scene_json);
+                w.str<uint32_t>(v.scene_json);
             } else if constexpr (std::is_same_v<T, Stats>) {
-                w.str32(v.json);
+                w.str<uint32_t>(v.json);
             } else if constexpr (std::is_same_v<T, Ping>) {
                 w.put(v.client_time_ns);
             } else if constexpr (std::is_same_v<T, Pong>) {
@@ -191,7 +179,7 @@ void encode_payload(Writer& w, const Message& m) {
                 w.put(v.server_time_ns);
             } else if constexpr (std::is_same_v<T, Error>) {
                 w.put<uint16_t>(uint16_t(v.code));
-                w.str16(v.message.substr(0, 1000));
+                w.str<uint16_t>(v.message.substr(0, 1000));
             } else if constexpr (std::is_same_v<T, Bye>) {
                 w.put(v.reason);
             }  // FrameRequest, StatsRequest: empty payloads
@@ -265,8 +253,8 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
         case MessageType::kHello: {
             Hello m;
             uint8_t role = 0;
-            ok = r.get(role) && r.str16(m.token, kMaxTokenBytes, "token") &&
-                 r.str16(m.client_name, kMaxNameBytes, "client name");
+            ok = r.get(role) && r.str<uint16_t>(m.token, kMaxTokenBytes, "token") &&
+                 r.str<uint16_t>(m.client_name, kMaxNameBytes, "client name");
             if (ok && (role < 1 || role > 3))
                 ok = r.fail("unknown role " + std::to_string(role));
             m.role = Role(role);
@@ -339,13 +327,13 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
         }
         case MessageType::kSceneUpdate: {
             SceneUpdate m;
-            ok = r.str32(m.scene_json, 1048576 - 4, "scene JSON");
+            ok = r.str<uint32_t>(m.scene_json, 1048576 - 4, "scene JSON");
             out = std::move(m);
             break;
         }
         case MessageType::kStats: {
             Stats m;
-            ok = r.str32(m.json, 1048576 - 4, "stats JSON");
+            ok = r.str<uint32_t>(m.json, 1048576 - 4, "stats JSON");
             out = std::move(m);
             break;
         }
@@ -364,7 +352,7 @@ std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<con
         case MessageType::kError: {
             Error m;
             uint16_t code = 0;
-            ok = r.get(code) && r.str16(m.message, 1000, "error message");
+            ok = r.get(code) && r.str<uint16_t>(m.message, 1000, "error message");
             m.code = ErrorCode(code);
             out = std::move(m);
             break;

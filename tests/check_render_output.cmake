@@ -1,5 +1,5 @@
 # Asserts what `hysar render` wrote: the files exist and render.json has the expected entries.
-foreach(f projector.png projector.png sheet.png render.json vd/phong_m040_M_left.png vd/kajiya-kay_p040_M_right.png)
+foreach(f projector.png sheet.png render.json vd/phong_m040_M_left.png vd/kajiya-kay_p040_M_right.png)
     if(NOT EXISTS ${DIR}/${f})
         message(FATAL_ERROR "hysar render did not write ${DIR}/${f}")
     endif()

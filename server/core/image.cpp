@@ -1,6 +1,7 @@
 #include "core/image.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -22,17 +23,109 @@ float srgb_oetf(float x) {
     return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
 }
 
+uint8_t srgb8_formula(float linear) {
+    return static_cast<uint8_t>(std::lround(srgb_oetf(linear) * 255.0f));
+}
+
+namespace {
+uint32_t float_bits(float f) {
+    uint32_t b;
+    std::memcpy(&b, &f, 4);
+    return b;
+}
+
+// thresholds[k - 1] is the smallest float that srgb8_formula maps to code k (k = 1..255): the
+// formula is monotone, so the code of x is the number of thresholds <= x. Each threshold is
+// found by bisecting the bit patterns of non-negative floats (ordered like their values) with
+// the formula itself, so the table reproduces it bit for bit.
+const std::array<float, 255>& srgb8_thresholds() {
+    static const std::array<float, 255> table = [] {
+        std::array<float, 255> t{};
+        auto as_float = [](uint32_t bits) {
+            float f;
+            std::memcpy(&f, &bits, 4);
+            return f;
+        };
+        uint32_t one;
+        const float one_f = 1.0f;
+        std::memcpy(&one, &one_f, 4);
+        for (int k = 1; k <= 255; ++k) {
+            uint32_t lo = 0, hi = one;  // srgb8_formula(0) = 0 < k <= 255 = srgb8_formula(1)
+            while (lo < hi) {
+                uint32_t mid = lo + (hi - lo) / 2;
+                if (srgb8_formula(as_float(mid)) >= k)
+                    hi = mid;
+                else
+                    lo = mid + 1;
+            }
+            t[k - 1] = as_float(lo);
+        }
+        return t;
+    }();
+    return table;
+}
+
+// Codes below 2^-24 are 0 (the first boundary is about 1.5e-4). Above it, the top 16 bits of a
+// positive float (exponent and 7 mantissa bits) pick one of 3072 log-spaced buckets, which
+// follow the sRGB curve's shape; each holds the code of its smallest float, and a value then
+// steps past at most a few boundaries.
+constexpr float kBucketFloor = 1.0f / 16777216.0f;  // 2^-24
+
+struct Srgb8Table {
+    const std::array<float, 255>* thresholds;
+    std::vector<uint8_t> bucket_code;
+    uint32_t first_bucket;
+};
+
+const Srgb8Table& srgb8_table() {
+    static const Srgb8Table table = [] {
+        Srgb8Table t{&srgb8_thresholds(), {}, float_bits(kBucketFloor) >> 16};
+        const uint32_t end = float_bits(1.0f) >> 16;
+        for (uint32_t b = t.first_bucket; b < end; ++b) {
+            float smallest;
+            const uint32_t bits = b << 16;
+            std::memcpy(&smallest, &bits, 4);
+            const auto& th = *t.thresholds;
+            t.bucket_code.push_back(
+                uint8_t(std::upper_bound(th.begin(), th.end(), smallest) - th.begin()));
+        }
+        return t;
+    }();
+    return table;
+}
+}  // namespace
+
+namespace {
+// The code of `linear` from the table; `t` fetched once by the caller.
+inline uint8_t srgb8_from(const Srgb8Table& t, float linear) {
+    if (!(linear >= kBucketFloor))
+        return linear > 0.0f ? srgb8_formula(linear) : 0;  // also NaN
+    if (linear >= 1.0f)
+        return 255;
+    const auto& th = *t.thresholds;
+    unsigned code = t.bucket_code[(float_bits(linear) >> 16) - t.first_bucket];
+    while (code < 255 && linear >= th[code]) ++code;
+    return uint8_t(code);
+}
+}  // namespace
+
+uint8_t srgb8(float linear) {
+    return srgb8_from(srgb8_table(), linear);
+}
+
 ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white) {
     ImageRgba8 out{image.width, image.height, std::vector<uint8_t>(image.pixels.size())};
     const float inv_white = white > 0.0f ? 1.0f / white : 1.0f;
+    const Srgb8Table& table = srgb8_table();
     for (size_t i = 0; i < image.pixels.size(); i += 4) {
-        bool nan = false;
-        for (int c = 0; c < 3; ++c) nan |= std::isnan(image.pixels[i + c]);
-        for (int c = 0; c < 3; ++c) {
-            float v = nan ? (c == 1 ? 0.0f : 1.0f) : srgb_oetf(image.pixels[i + c] * inv_white);
-            out.pixels[i + c] = static_cast<uint8_t>(std::lround(v * 255.0f));
+        const float* p = &image.pixels[i];
+        uint8_t* o = &out.pixels[i];
+        if (std::isnan(p[0]) || std::isnan(p[1]) || std::isnan(p[2])) {
+            o[0] = 255, o[1] = 0, o[2] = 255;  // magenta: never hidden
+        } else {
+            for (int c = 0; c < 3; ++c) o[c] = srgb8_from(table, p[c] * inv_white);
         }
-        out.pixels[i + 3] = 255;
+        o[3] = 255;
     }
     return out;
 }

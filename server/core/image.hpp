@@ -50,6 +50,12 @@ ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white);
 // sRGB opto-electronic transfer function (IEC 61966-2-1) of a value in [0, 1].
 float srgb_oetf(float linear);
 
+// The 8-bit code of a linear value: lround(srgb_oetf(clamp(linear, 0, 1)) * 255).
+// srgb8_formula evaluates that with pow; srgb8 gives the same code bit for bit from a table of
+// the 255 code boundaries (a binary search, no pow), for the per-pixel paths.
+uint8_t srgb8_formula(float linear);
+uint8_t srgb8(float linear);
+
 Result<void> write_png(const std::filesystem::path& path, const ImageRgba8& image);
 Result<ImageRgba8> read_png(const std::filesystem::path& path);
 

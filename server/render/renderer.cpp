@@ -149,23 +149,31 @@ Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slo
     return &it->second;
 }
 
+gpu::GpuPush Renderer::push_for(const scene::Intrinsics& k, const scene::Pose& pose) const {
+    gpu::GpuPush push{};
+    push.clip_from_world = glm::mat4(scene::clip_from_frame(k, info_.near_m, info_.far_m) *
+                                     scene::frame_from_world(pose));
+    push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
+    return push;
+}
+
+void Renderer::record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
+                      const gpu::GpuPush& push, const char* label) const {
+    cl.begin_render(t, glm::vec4(0.0f), label);
+    cl.bind(v.pipeline);
+    cl.push_constants(v.pipeline, &push, sizeof(push));
+    cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
+                    uint32_t(mesh_.indices.size()));
+    cl.end_render_and_read_back(t);
+}
+
 Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
                                     const char* label) {
     auto t0 = std::chrono::steady_clock::now();
     HS_ASSIGN_OR_RETURN(gpu::RenderTarget * t, target(k.width, k.height));
-    gpu::GpuPush push{};
-    glm::dmat4 clip =
-        scene::clip_from_frame(k, info_.near_m, info_.far_m) * scene::frame_from_world(pose);
-    push.clip_from_world = glm::mat4(clip);
-    push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
-    HS_TRY(gpu::execute(device_, label, [&](gpu::CommandList& cl) {
-        cl.begin_render(*t, glm::vec4(0.0f), label);
-        cl.bind(v.pipeline);
-        cl.push_constants(v.pipeline, &push, sizeof(push));
-        cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
-                        uint32_t(mesh_.indices.size()));
-        cl.end_render_and_read_back(*t);
-    }));
+    const gpu::GpuPush push = push_for(k, pose);
+    HS_TRY(gpu::execute(device_, label,
+                        [&](gpu::CommandList& cl) { record(cl, v, *t, push, label); }));
     RenderResult r;
     r.image = t->read();
     r.report.ran = true;
@@ -195,25 +203,15 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         HS_ASSIGN_OR_RETURN(items[i].variant, variant(true, reqs[i].spec));
         HS_ASSIGN_OR_RETURN(items[i].target,
                             target(k.width, k.height, slots[{k.width, k.height}]++));
-        glm::dmat4 clip = scene::clip_from_frame(k, info_.near_m, info_.far_m) *
-                          scene::frame_from_world(reqs[i].eye);
-        items[i].push.clip_from_world = glm::mat4(clip);
-        items[i].push.eye_position = glm::vec4(glm::vec3(reqs[i].eye.position), 1.0f);
+        items[i].push = push_for(k, reqs[i].eye);
     }
     const bool any = std::any_of(items.begin(), items.end(),
                                  [](const Item& it) { return it.variant != nullptr; });
     if (any) {
         HS_TRY(gpu::execute(device_, "pass.viewer-vd.batch", [&](gpu::CommandList& cl) {
-            for (auto& it : items) {
-                if (!it.variant)
-                    continue;
-                cl.begin_render(*it.target, glm::vec4(0.0f), "pass.viewer-vd");
-                cl.bind(it.variant->pipeline);
-                cl.push_constants(it.variant->pipeline, &it.push, sizeof(it.push));
-                cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
-                                uint32_t(mesh_.indices.size()));
-                cl.end_render_and_read_back(*it.target);
-            }
+            for (auto& it : items)
+                if (it.variant)
+                    record(cl, *it.variant, *it.target, it.push, "pass.viewer-vd");
         }));
     }
     std::vector<RenderResult> out(reqs.size());
@@ -253,23 +251,8 @@ Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k,
 
 Result<RenderResult> Renderer::render_eye(const scene::Specular& spec, const scene::Intrinsics& k,
                                           const scene::Pose& eye) {
-    if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
-    if (effects_of(scene_, true, spec).empty()) {
-        // Nothing view-dependent: an OST display shows black as see-through, so the layer is
-        // black and no GPU work is recorded.
-        RenderResult r;
-        r.image = ImageRgba32f::zeros(k.width, k.height);
-        r.report.pass = "viewer-vd";
-        r.report.ran = false;
-        r.report.skipped_because = "the material has no specular term and no emission";
-        return r;
-    }
-    HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));
-    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, eye, "pass.viewer-vd"));
-    r.report.pass = "viewer-vd";
-    return r;
+    HS_ASSIGN_OR_RETURN(auto results, render_eyes({EyeRequest{spec, k, eye}}));
+    return std::move(results.front());
 }
 
 }  // namespace hs::render

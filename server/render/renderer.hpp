@@ -14,6 +14,7 @@
 #include "gpu/commands.hpp"
 #include "gpu/device.hpp"
 #include "gpu/pipeline.hpp"
+#include "gpu/shared_layout.hpp"
 #include "scene/scene.hpp"
 
 namespace hs::render {
@@ -82,6 +83,10 @@ private:
     Result<Variant*> variant(bool vd, const scene::Specular& spec);
     // The slot-th target of this size (a batch needs one per eye).
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
+    gpu::GpuPush push_for(const scene::Intrinsics& k, const scene::Pose& pose) const;
+    // Records one draw of the prop into `t` and its readback.
+    void record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
+                const gpu::GpuPush& push, const char* label) const;
     Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
                               const char* label);
 

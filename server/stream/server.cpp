@@ -69,7 +69,8 @@ struct Server::Impl {
 
     // Shared between threads under `mutex`.
     mutable std::mutex mutex;
-    scene::Scene scene;  // the scene being served
+    scene::Scene
+        initial_scene;  // read once by the render thread, which then owns the current scene
     std::optional<scene::Scene> pending_scene;
     uint32_t scene_version = 1;
     uint64_t projector_renders = 0;
@@ -353,7 +354,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     if (info.token.empty())
         return make_error(ErrorCode::kInvalidArgument, "the server needs a non-empty token");
     auto impl = std::make_unique<Impl>(device, info);
-    impl->scene = scene;
+    impl->initial_scene = scene;
     try {
         asio::ip::tcp::endpoint ep(asio::ip::make_address(info.host), info.port);
         impl->tcp_acceptor.open(ep.protocol());
@@ -522,7 +523,7 @@ void Server::Impl::render_loop() {
     uint32_t version;
     {
         std::lock_guard lock(mutex);
-        current = scene;
+        current = initial_scene;
         version = scene_version;
     }
     if (!rebuild(current, version)) {
@@ -538,10 +539,8 @@ void Server::Impl::render_loop() {
             next.swap(pending_scene);
         }
         if (next) {
-            scene::Scene s = std::move(*next);
-            if (rebuild(s, version + 1)) {
+            if (rebuild(*next, version + 1)) {
                 std::lock_guard lock(mutex);
-                scene = s;
                 scene_version = ++version;
             }
         }

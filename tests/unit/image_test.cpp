@@ -42,3 +42,30 @@ TEST(Image, UnreadableFilesAreErrors) {
     EXPECT_FALSE(read_png("/nonexistent.png").ok());
     EXPECT_FALSE(write_png("/nonexistent-dir/x.png", ImageRgba8{1, 1, {0, 0, 0, 255}}).ok());
 }
+
+TEST(Image, TableSrgb8IsTheFormulaBitForBit) {
+    // Every float of [0, 1] near each code boundary, and a dense sweep, incl. out of range.
+    size_t checked = 0;
+    for (int i = -1000; i <= 2'001'000; ++i) {
+        float x = float(i) / 2'000'000.0f;
+        ASSERT_EQ(srgb8(x), srgb8_formula(x)) << "x = " << x;
+        ++checked;
+    }
+    for (int k = 1; k <= 255; ++k) {
+        // Bisect to the boundary, then check the 64 floats on each side of it.
+        float lo = 0.0f, hi = 1.0f;
+        for (int it = 0; it < 60; ++it) {
+            float mid = 0.5f * (lo + hi);
+            (srgb8_formula(mid) >= k ? hi : lo) = mid;
+        }
+        float x = hi;
+        for (int s = 0; s < 64; ++s) x = std::nextafter(x, 0.0f);
+        for (int s = 0; s < 128; ++s, x = std::nextafter(x, 2.0f)) {
+            ASSERT_EQ(srgb8(x), srgb8_formula(x)) << "x = " << x << " near code " << k;
+            ++checked;
+        }
+    }
+    for (float x : {-1.0f, 0.0f, 1.0f, 1.5f, 1e30f, INFINITY, -INFINITY})
+        EXPECT_EQ(srgb8(x), srgb8_formula(x)) << x;
+    EXPECT_GT(checked, 2'000'000u);
+}
