@@ -13,6 +13,7 @@ layout(constant_id = HS_SC_ANISOTROPIC) const bool kAnisotropic = false;
 layout(constant_id = HS_SC_MESH_TANGENT) const bool kMeshTangent = false;
 
 layout(constant_id = HS_SC_ALBEDO_TEXTURE) const bool kAlbedoTexture = false;
+layout(constant_id = HS_SC_PROP_SHEEN) const bool kPropSheen = false;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
@@ -56,6 +57,27 @@ void main() {
         }
         sum *= scene.albedo_over_pi.rgb;
         if (kAlbedoTexture) sum *= texture(albedo_texture, in_uv).rgb;  // sRGB decoded by the sampler
+    } else if (kPassKind == 2) {
+        // Capture geometry (docs/OPTICS.md): where this camera pixel meets the projector image,
+        // and how much of a projector pixel's intensity arrives here per unit area.
+        vec3 q = (scene.projector_frame_from_world * vec4(p, 1.0)).xyz;
+        vec3 to_proj = scene.projector_position.xyz - p;
+        float d2 = max(dot(to_proj, to_proj), 1e-12);
+        vec3 l = to_proj * inversesqrt(d2);
+        float cos_in = dot(n, l);
+        float depth = -q.z;  // distance along the projector's axis
+        float lit = (cos_in > 0.0 && depth > 0.0) ? 1.0 : 0.0;
+        vec2 uv_p = depth > 0.0 ? vec2(scene.projector_k.x * q.x / depth + scene.projector_k.z,
+                                       scene.projector_k.w - scene.projector_k.y * q.y / depth)
+                                : vec2(-1e9);
+        float sheen = 0.0;
+        if (kPropSheen) {
+            vec3 v = normalize(pc.eye_position.xyz - p);
+            sheen = lit * hs_phong(n, l, v, scene.sheen_params.x);
+        }
+        // Alpha 0 marks background; covered pixels carry 1 + sheen lobe.
+        out_radiance = vec4(uv_p, lit * cos_in / d2, 1.0 + sheen);
+        return;
     } else {
         // Paper eq. (2), VD: L_e + sum_i L_s(p, l_i, v).
         vec3 v = normalize(pc.eye_position.xyz - p);

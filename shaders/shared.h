@@ -22,7 +22,8 @@ using uint = uint32_t;
 
 // Specialization constant ids (gpu/shared_layout.hpp mirrors them as an enum).
 #define HS_SC_PASS_KIND \
-    0  // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission)
+    0  // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission),
+       // 2: capture geometry (where each camera pixel meets the projector; docs/OPTICS.md)
 #define HS_SC_SPEC_MODEL \
     1  // scene::SpecularModel: 0 none, 1 phong, 2 blinn-phong, 3 ward, 4 kajiya-kay
 #define HS_SC_EMISSION 2        // bool: add the material's emission
@@ -32,6 +33,7 @@ using uint = uint32_t;
 #define HS_SC_ANISOTROPIC 6     // bool: Ward with alpha_x != alpha_y (needs the tangent frame)
 #define HS_SC_MESH_TANGENT 7    // bool: the tangent comes from the mesh, not from tangent_axis
 #define HS_SC_ALBEDO_TEXTURE 8  // bool: albedo = colour * texture(uv)
+#define HS_SC_PROP_SHEEN 9      // bool: capture geometry also writes the prop's sheen lobe
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light;
@@ -46,6 +48,11 @@ struct GpuScene {
     vec4 tangent_axis;    // xyz: unit world axis projected to the tangent plane
     vec4 emission;        // rgb: L_e
     GpuLight lights[HS_MAX_LIGHTS];
+    // Capture geometry pass only (pass kind 2): the projector as a pinhole.
+    mat4 projector_frame_from_world;  // the projector frame (x right, y up, looking along -z)
+    vec4 projector_k;                 // fx, fy, cx, cy in pixels (OpenCV convention)
+    vec4 projector_position;          // xyz: projector centre, metres, world
+    vec4 sheen_params;                // x: Phong exponent of the prop's sheen
 };
 
 struct GpuPush {

@@ -101,7 +101,7 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
     pi.name = fmt::format("pipeline.{}.{}", vd ? "viewer-vd" : "projector-vi",
                           scene::to_string(sp.model));
-    pi.spec.set_int(HS_SC_PASS_KIND, vd ? 1 : 0)
+    pi.spec.set_int(HS_SC_PASS_KIND, int(vd ? PassKind::kVd : PassKind::kVi))
         .set_int(HS_SC_SPEC_MODEL, int(sp.model))
         .set_bool(HS_SC_EMISSION, vd && has_emission(scene_))
         .set_bool(HS_SC_POINT_FALLOFF, falloff)
@@ -114,6 +114,17 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
     HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
     ++pipelines_built_;
 
+    const gpu::GpuScene block = scene_block(sp);
+    HS_ASSIGN_OR_RETURN(v.scene_block,
+                        gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
+                                            pi.name + ".scene"));
+    v.scene_block.write(&block, sizeof(block));
+    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
+    auto [it, inserted] = variants_.emplace(key, std::move(v));
+    return &it->second;
+}
+
+gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
     gpu::GpuScene block{};
     block.albedo_over_pi = glm::vec4(glm::vec3(scene_.material.albedo / glm::pi<double>()), 0);
     block.spec_colour = glm::vec4(glm::vec3(sp.colour), 0);
@@ -129,6 +140,34 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
                                                     ? glm::vec4(glm::vec3(l.position), 1.0f)
                                                     : glm::vec4(glm::vec3(-l.direction), 0.0f);
     }
+    const auto& pk = scene_.projector.intrinsics;
+    block.projector_frame_from_world = glm::mat4(scene::frame_from_world(scene_.projector.pose));
+    block.projector_k = glm::vec4(float(pk.fx), float(pk.fy), float(pk.cx), float(pk.cy));
+    block.projector_position = glm::vec4(glm::vec3(scene_.projector.pose.position), 1.0f);
+    return block;
+}
+
+Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> sheen_exponent) {
+    const std::string key = fmt::format("geometry|{}", sheen_exponent ? *sheen_exponent : -1.0);
+    if (auto it = variants_.find(key); it != variants_.end())
+        return &it->second;
+    Variant v;
+    v.effects = {"capture-geometry"};
+    if (sheen_exponent)
+        v.effects.push_back("prop-sheen");
+    gpu::GraphicsPipelineInfo pi;
+    pi.vertex_spv = kPropVertSpv;
+    pi.fragment_spv = kPropFragSpv;
+    pi.color_format = gpu::ColorFormat::kRgba32Float;
+    pi.push_constant_bytes = sizeof(gpu::GpuPush);
+    pi.name = "pipeline.capture-geometry";
+    pi.spec.set_int(HS_SC_PASS_KIND, int(PassKind::kCaptureGeometry))
+        .set_int(HS_SC_NUM_LIGHTS, 0)
+        .set_bool(HS_SC_PROP_SHEEN, sheen_exponent.has_value());
+    HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
+    ++pipelines_built_;
+    gpu::GpuScene block = scene_block(scene::Specular{});
+    block.sheen_params = glm::vec4(float(sheen_exponent.value_or(1.0)), 0, 0, 0);
     HS_ASSIGN_OR_RETURN(v.scene_block,
                         gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
                                             pi.name + ".scene"));
@@ -139,12 +178,18 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
 }
 
 Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slot) {
-    auto key = std::make_tuple(w, h, slot);
+    return target(w, h, slot, info_.format);
+}
+
+Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slot,
+                                            gpu::ColorFormat format) {
+    auto key = std::make_tuple(w, h, slot, int(format));
     if (auto it = targets_.find(key); it != targets_.end())
         return &it->second;
-    HS_ASSIGN_OR_RETURN(auto t,
-                        gpu::RenderTarget::create(device_, w, h, info_.format,
-                                                  fmt::format("target.{}x{}.{}", w, h, slot)));
+    HS_ASSIGN_OR_RETURN(
+        auto t, gpu::RenderTarget::create(
+                    device_, w, h, format,
+                    fmt::format("target.{}x{}.{}.{}", w, h, slot, gpu::to_string(format))));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
@@ -168,10 +213,14 @@ void Renderer::record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget&
 }
 
 Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
-                                    const char* label) {
+                                    const char* label, const glm::dvec3* eye_override,
+                                    std::optional<gpu::ColorFormat> format) {
     auto t0 = std::chrono::steady_clock::now();
-    HS_ASSIGN_OR_RETURN(gpu::RenderTarget * t, target(k.width, k.height));
-    const gpu::GpuPush push = push_for(k, pose);
+    HS_ASSIGN_OR_RETURN(gpu::RenderTarget * t,
+                        target(k.width, k.height, 0, format.value_or(info_.format)));
+    gpu::GpuPush push = push_for(k, pose);
+    if (eye_override)
+        push.eye_position = glm::vec4(glm::vec3(*eye_override), 1.0f);
     HS_TRY(gpu::execute(device_, label,
                         [&](gpu::CommandList& cl) { record(cl, v, *t, push, label); }));
     RenderResult r;
@@ -246,6 +295,33 @@ Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k,
     HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
     HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, eye, "pass.eye-vi"));
     r.report.pass = "eye-vi";
+    return r;
+}
+
+Result<RenderResult> Renderer::render_projector_vd(const scene::Specular& spec,
+                                                   const glm::dvec3& eye_position) {
+    const auto& k = scene_.projector.intrinsics;
+    RenderResult r;
+    r.report.pass = "projector-vd-baked";
+    if (effects_of(scene_, true, spec).empty()) {
+        r.image = ImageRgba32f::zeros(k.width, k.height);
+        r.report.skipped_because = "the material has no specular term and no emission";
+        return r;
+    }
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));
+    HS_ASSIGN_OR_RETURN(r, draw(*v, k, scene_.projector.pose, "pass.projector-vd-baked",
+                                &eye_position));
+    r.report.pass = "projector-vd-baked";
+    return r;
+}
+
+Result<RenderResult> Renderer::render_capture_geometry(const scene::Intrinsics& k,
+                                                       const scene::Pose& camera,
+                                                       std::optional<double> sheen_exponent) {
+    HS_ASSIGN_OR_RETURN(Variant * v, geometry_variant(sheen_exponent));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, camera, "pass.capture-geometry", nullptr,
+                                             gpu::ColorFormat::kRgba32Float));
+    r.report.pass = "capture-geometry";
     return r;
 }
 

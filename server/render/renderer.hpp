@@ -6,6 +6,7 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -67,6 +68,21 @@ public:
     // sum_i L_d at the prop points the eye sees. For simulation and contact sheets.
     Result<RenderResult> render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye);
 
+    // SAR's projector frame (paper Sec. 5.2): the VD layer for a viewer at `eye_position`,
+    // drawn from the projector, so that VI + this bakes one viewpoint's highlights into the
+    // projector image.
+    Result<RenderResult> render_projector_vd(const scene::Specular& spec,
+                                             const glm::dvec3& eye_position);
+
+    // The capture geometry seen from a camera (docs/OPTICS.md), always in a 32-bit float
+    // target: per pixel (u_p, v_p) the projector pixel that lights it, cos(theta_p) / d_p^2
+    // (m^-2; 0 where the projector cannot reach), and alpha = 1 + the prop's sheen lobe towards
+    // the camera (0 where the prop does not cover the pixel). The sheen term is compiled in only
+    // when `sheen_exponent` is set.
+    Result<RenderResult> render_capture_geometry(const scene::Intrinsics& k,
+                                                 const scene::Pose& camera,
+                                                 std::optional<double> sheen_exponent);
+
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
     const scene::Mesh& mesh() const { return mesh_; }
@@ -80,15 +96,21 @@ private:
     };
     Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
         : device_(device), scene_(scene), info_(info) {}
+    enum class PassKind { kVi = 0, kVd = 1, kCaptureGeometry = 2 };
     Result<Variant*> variant(bool vd, const scene::Specular& spec);
-    // The slot-th target of this size (a batch needs one per eye).
+    Result<Variant*> geometry_variant(std::optional<double> sheen_exponent);
+    // The slot-th target of this size and format (a batch needs one per eye).
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
+    Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot,
+                                      gpu::ColorFormat format);
     gpu::GpuPush push_for(const scene::Intrinsics& k, const scene::Pose& pose) const;
     // Records one draw of the prop into `t` and its readback.
     void record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
                 const gpu::GpuPush& push, const char* label) const;
     Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
-                              const char* label);
+                              const char* label, const glm::dvec3* eye_override = nullptr,
+                              std::optional<gpu::ColorFormat> format = std::nullopt);
+    gpu::GpuScene scene_block(const scene::Specular& spec) const;
 
     gpu::Device& device_;
     scene::Scene scene_;
@@ -97,7 +119,7 @@ private:
     gpu::Buffer positions_, normals_, tangents_, uvs_, indices_;
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
-    std::map<std::tuple<uint32_t, uint32_t, uint32_t>, gpu::RenderTarget> targets_;
+    std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
 };

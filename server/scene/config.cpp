@@ -210,6 +210,58 @@ Specular read_specular(Reader& r, const json& j, const std::string& path) {
     return s;
 }
 
+void read_optics(Reader& r, const json& o, Optics* out) {
+    Optics& op = *out;
+    r.only(o, "optics",
+           {"levels", "prop_albedo", "prop_sheen", "prop_sheen_exponent", "exposure_ms", "bits",
+            "noise_dn", "scene_to_signal", "effects", "compensation", "comment"});
+    if (const json* l = r.member(o, "optics", "levels", false)) {
+        const std::string p = "optics.levels";
+        r.only(*l, p, {"projector_max", "projector_min", "hmd_max", "hmd_min", "environment"});
+        DeviceLevels& d = op.levels;
+        d.projector_max = r.number(*l, p, "projector_max", d.projector_max, 1e-9, 1e12);
+        d.projector_min = r.number(*l, p, "projector_min", d.projector_min, 0.0, 1e12);
+        d.hmd_max = r.number(*l, p, "hmd_max", d.hmd_max, 1e-9, 1e12);
+        d.hmd_min = r.number(*l, p, "hmd_min", d.hmd_min, 0.0, 1e12);
+        d.environment = r.number(*l, p, "environment", d.environment, 0.0, 1e12);
+        if (!r.failed() && d.projector_min >= d.projector_max)
+            r.fail(p + ".projector_min", "must be below projector_max");
+        if (!r.failed() && d.hmd_min >= d.hmd_max)
+            r.fail(p + ".hmd_min", "must be below hmd_max");
+    }
+    op.prop_albedo = r.vec3(o, "optics", "prop_albedo", op.prop_albedo, 0.0, 1.0);
+    op.prop_sheen = r.number(o, "optics", "prop_sheen", op.prop_sheen, 0.0, 1.0);
+    op.prop_sheen_exponent =
+        r.number(o, "optics", "prop_sheen_exponent", op.prop_sheen_exponent, 1.0, 1e5);
+    op.exposure_ms = r.number(o, "optics", "exposure_ms", op.exposure_ms, 0.0, 1e6);
+    op.bits = r.integer(o, "optics", "bits", op.bits, 1, 16);
+    op.noise_dn = r.number(o, "optics", "noise_dn", op.noise_dn, 0.0, 1e6);
+    op.scene_to_signal = r.number(o, "optics", "scene_to_signal", op.scene_to_signal, 0.0, 1e15);
+    if (const json* e = r.member(o, "optics", "effects", false)) {
+        const std::string p = "optics.effects";
+        r.only(*e, p,
+               {"projector_falloff", "black_levels", "environment", "prop_albedo", "prop_sheen",
+                "saturation", "quantisation"});
+        auto& f = op.effects;
+        f.projector_falloff = r.boolean(*e, p, "projector_falloff", f.projector_falloff);
+        f.black_levels = r.boolean(*e, p, "black_levels", f.black_levels);
+        f.environment = r.boolean(*e, p, "environment", f.environment);
+        f.prop_albedo = r.boolean(*e, p, "prop_albedo", f.prop_albedo);
+        f.prop_sheen = r.boolean(*e, p, "prop_sheen", f.prop_sheen);
+        f.saturation = r.boolean(*e, p, "saturation", f.saturation);
+        f.quantisation = r.boolean(*e, p, "quantisation", f.quantisation);
+    }
+    if (const json* c = r.member(o, "optics", "compensation", false)) {
+        const std::string p = "optics.compensation";
+        r.only(*c, p, {"falloff", "albedo", "hmd_alpha", "black_levels"});
+        auto& f = op.compensation;
+        f.falloff = r.boolean(*c, p, "falloff", f.falloff);
+        f.albedo = r.boolean(*c, p, "albedo", f.albedo);
+        f.hmd_alpha = r.boolean(*c, p, "hmd_alpha", f.hmd_alpha);
+        f.black_levels = r.boolean(*c, p, "black_levels", f.black_levels);
+    }
+}
+
 Pose read_pose(Reader& r, const json& j, const std::string& path) {
     r.only(j, path, {"position", "look_at", "up", "orientation_wxyz"});
     glm::dvec3 pos = r.vec3(j, path, "position", std::nullopt);
@@ -255,7 +307,7 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                           fmt::format("{}: expected a JSON object at the top", source));
     r.only(root, "",
            {"schema_version", "name", "prop", "material", "specular_presets", "lights", "projector",
-            "viewers", "viewing", "effects", "comment"});
+            "viewers", "viewing", "effects", "optics", "comment"});
     s.schema_version = int(r.integer(root, "", "schema_version", std::nullopt, 0, 1000));
     if (!r.failed() && s.schema_version != kSchemaVersion) {
         r.fail("schema_version", fmt::format("this build reads schema_version {}, the file has {}",
@@ -452,6 +504,9 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         r.only(*e, "effects", {"point_light_falloff"});
         s.effects.point_light_falloff = r.boolean(*e, "effects", "point_light_falloff", true);
     }
+
+    if (const json* o = r.member(root, "", "optics", false))
+        read_optics(r, *o, &s.optics);
 
     if (r.failed())
         return r.error();

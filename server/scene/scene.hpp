@@ -139,6 +139,46 @@ struct Effects {
     bool point_light_falloff = true;  // 1/d^2 for point lights; off makes them constant irradiance
 };
 
+// Device levels as a user-perspective camera measures them (paper Sec. 4.4): mean camera value
+// of a region of interest at the prop's centre, scaled to a 1 s exposure (camera DN per second).
+struct DeviceLevels {
+    double projector_max = 2053.0;  // P^M: projector white on the prop (reference white albedo)
+    double projector_min = 2053.0 / 61.0;  // P^m: projector black level
+    double hmd_max = 3539.0;               // H^M: headset white, seen through its optics
+    double hmd_min = 3539.0 / 193.0;       // H^m: headset black level
+    double environment = 0.0;              // E: room light reflected by the prop, without the HMD
+};
+
+// The capture simulation (docs/OPTICS.md): what a camera behind the headset records. Every
+// effect is switched here; a switched-off effect is not computed.
+struct Optics {
+    DeviceLevels levels;
+    glm::dvec3 prop_albedo{0.92, 0.90, 0.86};  // the white prop's albedo relative to the white
+                                               // on which projector_max was measured
+    double prop_sheen = 0.0;                   // specular reflectance of the prop (vinyl sheen)
+    double prop_sheen_exponent = 30.0;         // its Phong exponent
+    double exposure_ms = 33.0;                 // camera exposure time
+    uint32_t bits = 8;                         // camera bit depth (linear response)
+    double noise_dn = 0.0;                     // camera read noise, standard deviation in DN
+    double scene_to_signal = 0.0;  // k: camera DN/s per unit scene radiance; 0 picks the largest
+                                   // k the projector can show (docs/OPTICS.md)
+    struct Effects {
+        bool projector_falloff = true;  // cos(theta) / d^2 of the projector's light
+        bool black_levels = true;       // P^m and H^m
+        bool environment = true;        // E (a no-op when levels.environment is 0)
+        bool prop_albedo = true;        // the prop's tint
+        bool prop_sheen = true;         // the sheen (a no-op when prop_sheen is 0)
+        bool saturation = true;         // clipping at the camera's full scale
+        bool quantisation = true;       // integer camera values
+    } effects;
+    struct Compensation {  // what the projector and headset images correct for
+        bool falloff = true;
+        bool albedo = true;
+        bool hmd_alpha = true;  // the VD layer dimmed by alpha to match the see-through view
+        bool black_levels = true;
+    } compensation;
+};
+
 struct Scene {
     int schema_version = 1;
     std::string name;
@@ -150,6 +190,7 @@ struct Scene {
     std::vector<ViewerProfile> viewers;  // at least one
     Viewing viewing;
     Effects effects;
+    Optics optics;
 
     const ViewerProfile* find_viewer(const std::string& name) const;
 };

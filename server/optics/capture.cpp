@@ -1,0 +1,259 @@
+#include "optics/capture.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include <fmt/format.h>
+
+namespace hs::optics {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+
+std::string size_str(const ImageRgba32f& i) { return fmt::format("{}x{}", i.width, i.height); }
+
+// Bilinear sample of RGBA at continuous pixel coordinates (OpenCV: centres at integers);
+// false outside the image.
+bool sample(const ImageRgba32f& img, double u, double v, double out[4]) {
+    if (!(u >= -0.5 && v >= -0.5 && u <= img.width - 0.5 && v <= img.height - 0.5))
+        return false;
+    const double x = std::clamp(u, 0.0, double(img.width - 1));
+    const double y = std::clamp(v, 0.0, double(img.height - 1));
+    const uint32_t x0 = uint32_t(x), y0 = uint32_t(y);
+    const uint32_t x1 = std::min(x0 + 1, img.width - 1), y1 = std::min(y0 + 1, img.height - 1);
+    const double fx = x - x0, fy = y - y0;
+    const float* p00 = &img.pixels[img.index(x0, y0)];
+    const float* p10 = &img.pixels[img.index(x1, y0)];
+    const float* p01 = &img.pixels[img.index(x0, y1)];
+    const float* p11 = &img.pixels[img.index(x1, y1)];
+    for (int c = 0; c < 4; ++c)
+        out[c] = (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
+    return true;
+}
+}  // namespace
+
+Result<double> reference_falloff(const ImageRgba32f& geometry, const scene::Intrinsics& k) {
+    double s[4];
+    if (geometry.width != k.width || geometry.height != k.height)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("projector geometry is {} but the projector is {}x{}",
+                                      size_str(geometry), k.width, k.height));
+    if (!sample(geometry, k.cx, k.cy, s) || !(s[3] > 0.5) || !(s[2] > 0.0))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "the projector's principal ray does not light the prop: the reference "
+                          "point of the projector levels is undefined");
+    return s[2];
+}
+
+scene::DeviceLevels effective_levels(const scene::Optics& o) {
+    scene::DeviceLevels d = o.levels;
+    if (!o.effects.black_levels)
+        d.projector_min = d.hmd_min = 0.0;
+    if (!o.effects.environment)
+        d.environment = 0.0;
+    return d;
+}
+
+ImageRgba32f expose(const scene::Optics& o, const ImageRgba32f& signal,
+                    std::vector<uint8_t>* saturated, uint64_t seed) {
+    ImageRgba32f out = ImageRgba32f::zeros(signal.width, signal.height);
+    const double t = o.exposure_ms / 1000.0;
+    const double full = std::ldexp(1.0, int(o.bits)) - 1.0;
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> noise(0.0, o.noise_dn > 0 ? o.noise_dn : 1.0);
+    if (saturated)
+        saturated->assign(size_t(signal.width) * signal.height, 0);
+    for (size_t i = 0, n = size_t(signal.width) * signal.height; i < n; ++i) {
+        for (int c = 0; c < 3; ++c) {
+            double dn = signal.pixels[i * 4 + c] * t;
+            if (o.noise_dn > 0)
+                dn += noise(rng);
+            dn = std::max(dn, 0.0);
+            if (o.effects.saturation && dn >= full) {
+                dn = full;
+                if (saturated)
+                    (*saturated)[i] = 1;
+            }
+            if (o.effects.quantisation)
+                dn = std::floor(dn + 0.5);
+            out.pixels[i * 4 + c] = float(dn);
+        }
+        out.pixels[i * 4 + 3] = signal.pixels[i * 4 + 3];
+    }
+    return out;
+}
+
+Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const CaptureGeometry& g,
+                                 const DeviceImages& dev, uint64_t seed) {
+    const ImageRgba32f& geo = g.camera;
+    if (geo.empty())
+        return make_error(ErrorCode::kInvalidArgument, "empty capture geometry");
+    if (!dev.hmd.empty() && (dev.hmd.width != geo.width || dev.hmd.height != geo.height))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("the headset image is {} but the camera is {}",
+                                      size_str(dev.hmd), size_str(geo)));
+    if (!(g.g_ref > 0.0) && !dev.projector.empty() && o.effects.projector_falloff)
+        return make_error(ErrorCode::kInvalidArgument, "reference falloff g_ref must be > 0");
+    if (!(alpha >= 0.0 && alpha <= 1.0))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("alpha must lie in [0, 1], got {}", alpha));
+
+    const scene::DeviceLevels d = effective_levels(o);
+    const bool sheen = o.effects.prop_sheen && o.prop_sheen > 0;
+    const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
+    Capture cap;
+    cap.effects.push_back("eq3-composite");
+    if (!dev.projector.empty()) {
+        cap.effects.push_back("projector");
+        if (o.effects.projector_falloff)
+            cap.effects.push_back("projector-falloff");
+        if (o.effects.prop_albedo)
+            cap.effects.push_back("prop-albedo");
+        if (sheen)
+            cap.effects.push_back("prop-sheen");
+    }
+    if (d.projector_min > 0 || d.hmd_min > 0)
+        cap.effects.push_back("black-levels");
+    if (d.environment > 0)
+        cap.effects.push_back("environment");
+    if (!dev.hmd.empty())
+        cap.effects.push_back("hmd");
+
+    cap.signal = ImageRgba32f::zeros(geo.width, geo.height);
+    std::vector<uint8_t> clipped(size_t(geo.width) * geo.height, 0);
+    for (uint32_t y = 0; y < geo.height; ++y) {
+        for (uint32_t x = 0; x < geo.width; ++x) {
+            const size_t i = size_t(y) * geo.width + x;
+            const float* gp = &geo.pixels[i * 4];
+            const bool covered = gp[3] > 0.5f;
+            double s[3] = {0, 0, 0};
+            if (covered) {
+                // Light reaching the prop: projector (drive or black level) and the room.
+                double pd[4] = {0, 0, 0, 0};
+                const bool in_frame = !dev.projector.empty()
+                                          ? sample(dev.projector, gp[0], gp[1], pd)
+                                          : (gp[2] > 0.0f);
+                const bool lit = gp[2] > 0.0f && in_frame;
+                if (lit) {
+                    if (pd[3] > 0.0)
+                        clipped[i] = 1;
+                    const double f = o.effects.projector_falloff ? gp[2] / g.g_ref : 1.0;
+                    const double lobe = sheen ? (gp[3] - 1.0) : 0.0;
+                    for (int c = 0; c < 3; ++c) {
+                        const double level =
+                            d.projector_min + (d.projector_max - d.projector_min) * pd[c];
+                        // Lambert: rho / pi E; Phong sheen: k_s lobe E; so sheen / diffuse =
+                        // pi k_s lobe / rho relative to the white on which P^M was measured.
+                        s[c] += f * level * (rho[c] + kPi * o.prop_sheen * lobe);
+                    }
+                }
+                for (double& c : s) c += d.environment;
+            }
+            for (double& c : s) c *= alpha;
+            // The headset's light, over the whole view.
+            double h[4] = {0, 0, 0, 0};
+            if (!dev.hmd.empty()) {
+                const float* hp = &dev.hmd.pixels[i * 4];
+                h[0] = hp[0], h[1] = hp[1], h[2] = hp[2], h[3] = hp[3];
+                if (h[3] > 0.0 && covered)
+                    clipped[i] = 1;
+            }
+            for (int c = 0; c < 3; ++c) s[c] += d.hmd_min + (d.hmd_max - d.hmd_min) * h[c];
+            float* out = &cap.signal.pixels[i * 4];
+            out[0] = float(s[0]), out[1] = float(s[1]), out[2] = float(s[2]);
+            out[3] = covered ? 1.0f : 0.0f;
+        }
+    }
+    std::vector<uint8_t> saturated;
+    cap.dn = expose(o, cap.signal, &saturated, seed);
+    cap.unusable.resize(clipped.size());
+    for (size_t i = 0; i < clipped.size(); ++i) cap.unusable[i] = clipped[i] | saturated[i];
+    return cap;
+}
+
+double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& vi,
+                            const ImageRgba32f& geo, double g_ref) {
+    const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
+    const double rho_min = std::max(std::min({rho.r, rho.g, rho.b}), 1e-6);
+    std::vector<double> ratios;
+    for (size_t i = 0, n = size_t(vi.width) * vi.height; i < n && i < geo.pixels.size() / 4; ++i) {
+        const double g = geo.pixels[i * 4 + 2];
+        const double l = std::max({vi.pixels[i * 4], vi.pixels[i * 4 + 1], vi.pixels[i * 4 + 2]});
+        if (g > 0 && l > 1e-9 && geo.pixels[i * 4 + 3] > 0.5f) {
+            const double f = o.effects.projector_falloff ? g / g_ref : 1.0;
+            ratios.push_back(rho_min * f * o.levels.projector_max / l);
+        }
+    }
+    if (ratios.empty())
+        return 1.0;
+    const size_t k = ratios.size() / 20;
+    std::nth_element(ratios.begin(), ratios.begin() + k, ratios.end());
+    return 0.95 * ratios[k];
+}
+
+ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
+                             const ImageRgba32f& geo, double g_ref, double hmd_min_through) {
+    const scene::DeviceLevels d = effective_levels(o);
+    const auto& comp = o.compensation;
+    const glm::dvec3 rho =
+        comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
+    ImageRgba32f out = ImageRgba32f::zeros(target.width, target.height);
+    for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
+        const float* t = &target.pixels[i * 4];
+        const float* gp = &geo.pixels[i * 4];
+        const bool lit = gp[3] > 0.5f && gp[2] > 0.0f;
+        const double f = comp.falloff && o.effects.projector_falloff ? gp[2] / g_ref : 1.0;
+        bool clip = false;
+        for (int c = 0; c < 3; ++c) {
+            double p = 0.0;
+            if (lit && f > 0.0) {
+                if (comp.black_levels) {
+                    const double want = t[c] - d.environment - hmd_min_through;
+                    p = (want / (rho[c] * f) - d.projector_min) /
+                        (d.projector_max - d.projector_min);
+                } else {
+                    p = t[c] / (rho[c] * f * o.levels.projector_max);
+                }
+            } else if (t[c] > 0.0f) {
+                clip = true;  // wanted light where the projector cannot reach
+            }
+            if (p < 0.0 || p > 1.0) {
+                clip = true;
+                p = std::clamp(p, 0.0, 1.0);
+            }
+            out.pixels[i * 4 + c] = float(p);
+        }
+        out.pixels[i * 4 + 3] = clip ? 1.0f : 0.0f;
+    }
+    return out;
+}
+
+ImageRgba32f hmd_drive(const scene::Optics& o, const ImageRgba32f& target) {
+    const scene::DeviceLevels d = effective_levels(o);
+    const double span = o.compensation.black_levels ? d.hmd_max - d.hmd_min : o.levels.hmd_max;
+    ImageRgba32f out = ImageRgba32f::zeros(target.width, target.height);
+    for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
+        bool clip = false;
+        for (int c = 0; c < 3; ++c) {
+            double h = target.pixels[i * 4 + c] / span;
+            if (h > 1.0 || h < 0.0) {
+                clip = true;
+                h = std::clamp(h, 0.0, 1.0);
+            }
+            out.pixels[i * 4 + c] = float(h);
+        }
+        out.pixels[i * 4 + 3] = clip ? 1.0f : 0.0f;
+    }
+    return out;
+}
+
+ImageRgba32f scaled(const ImageRgba32f& image, double s) {
+    ImageRgba32f out = image;
+    for (size_t i = 0; i < out.pixels.size(); ++i)
+        if (i % 4 != 3)
+            out.pixels[i] = float(out.pixels[i] * s);
+    return out;
+}
+
+}  // namespace hs::optics

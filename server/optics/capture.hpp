@@ -1,0 +1,82 @@
+// The radiometric model of a user-perspective capture (docs/OPTICS.md): paper eq. (3) with the
+// projector's falloff and black level, the prop's albedo and sheen, the room light, the
+// headset's transparency and black level, and the camera's exposure, saturation and
+// quantisation. Pure CPU, double precision; the geometry comes from the renderer's capture
+// geometry pass (render::Renderer::render_capture_geometry).
+//
+// Units: device levels and signals in camera DN per second (scene::DeviceLevels); drives are
+// what a device is sent, linear in [0, 1]; camera values in DN.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/image.hpp"
+#include "core/result.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::optics {
+
+// The capture geometry: the camera's view (per pixel u_p, v_p, g = cos(theta_p) / d_p^2 and
+// 1 + sheen lobe, alpha 0 off the prop), and g at the reference point where the levels were
+// measured (the prop point on the projector's principal ray).
+struct CaptureGeometry {
+    ImageRgba32f camera;
+    double g_ref = 0;
+};
+
+// g at the projector's principal point, from the geometry pass rendered from the projector
+// itself; an error when the principal ray misses the prop.
+Result<double> reference_falloff(const ImageRgba32f& projector_geometry,
+                                 const scene::Intrinsics& projector);
+
+// What the devices show. An empty image is a device showing black (its black level remains).
+// Alpha of a drive image is 1 where the wanted drive fell outside [0, 1] and was clipped.
+struct DeviceImages {
+    ImageRgba32f projector;  // projector pixels
+    ImageRgba32f hmd;        // camera pixels (the headset's eye is the camera)
+};
+
+struct Capture {
+    ImageRgba32f signal;            // eq. (3) in DN/s, before the camera
+    ImageRgba32f dn;                // camera values
+    std::vector<uint8_t> unusable;  // per pixel: 1 where a device clipped or the camera saturated
+    std::vector<std::string> effects;  // the terms that were computed
+};
+
+// The effective levels: the configured ones with switched-off effects removed.
+scene::DeviceLevels effective_levels(const scene::Optics& optics);
+
+// Simulates the capture. Sizes: geometry.camera and devices.hmd (when set) agree; a mismatch
+// is an error naming both sizes.
+Result<Capture> simulate_capture(const scene::Optics& optics, double alpha,
+                                 const CaptureGeometry& geometry, const DeviceImages& devices,
+                                 uint64_t noise_seed = 1);
+
+// Camera values of a signal (exposure, noise, saturation, quantisation as configured);
+// `saturated` (optional) receives 1 where the camera clipped.
+ImageRgba32f expose(const scene::Optics& optics, const ImageRgba32f& signal,
+                    std::vector<uint8_t>* saturated = nullptr, uint64_t noise_seed = 1);
+
+// --- Compensation: what the devices must be sent so that the capture shows a target. -----
+
+// The largest scene-to-signal scale k (DN/s per unit radiance) for which the projector can show
+// the VI image: 0.95 x the 5th percentile over lit projector pixels of rho f P^M / L_d, so that
+// grazing rims may clip but the body of the prop does not.
+double auto_scene_to_signal(const scene::Optics& optics, const ImageRgba32f& vi_projector,
+                            const ImageRgba32f& projector_geometry, double g_ref);
+
+// Projector drive for a wanted projector signal `target` (DN/s at the camera, without the
+// headset; projector pixels), corrected as optics.compensation says. `hmd_min_through` is the
+// headset's black level divided by alpha, which the black-level compensation also takes off.
+ImageRgba32f projector_drive(const scene::Optics& optics, const ImageRgba32f& target,
+                             const ImageRgba32f& projector_geometry, double g_ref,
+                             double hmd_min_through);
+
+// Headset drive for a wanted headset signal `target` (DN/s; camera pixels).
+ImageRgba32f hmd_drive(const scene::Optics& optics, const ImageRgba32f& target);
+
+// Multiplies the RGB of an image by s (alpha kept).
+ImageRgba32f scaled(const ImageRgba32f& image, double s);
+
+}  // namespace hs::optics
