@@ -9,5 +9,6 @@ namespace hs::cli {
 int run_render(const std::vector<std::string>& args);
 int run_serve(const std::vector<std::string>& args);
 int run_bench(const std::vector<std::string>& args);
+int run_eval(const std::vector<std::string>& args);
 
 }  // namespace hs::cli

@@ -19,6 +19,8 @@ void usage(FILE* f) {
         "  serve    the render server: one projector frame per scene version, VD layers per\n"
         "           headset pose, over the protocol of protocol/PROTOCOL.md (hysar serve --help)\n"
         "  bench    measured costs: hysar bench encoding (hysar bench --help)\n"
+        "  eval     the paper's evaluation: optics (Table 2), resolution, compare (Sec. 5.2 on\n"
+        "           captures), report (everything, simulated) (hysar eval --help)\n"
         "\n"
         "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
         "turns on the Vulkan validation layer.\n");
@@ -38,6 +40,8 @@ int main(int argc, char** argv) {
         return hs::cli::run_serve(args);
     if (cmd == "bench")
         return hs::cli::run_bench(args);
+    if (cmd == "eval")
+        return hs::cli::run_eval(args);
     if (cmd == "--help" || cmd == "-h" || cmd == "help") {
         usage(stdout);
         return 0;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include <fmt/format.h>
@@ -30,6 +31,45 @@ bool sample(const ImageRgba32f& img, double u, double v, double out[4]) {
     for (int c = 0; c < 4; ++c)
         out[c] = (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
     return true;
+}
+}  // namespace
+
+namespace {
+// Extends the drive `rings` pixels beyond the lit prop, each new pixel the mean of its lit
+// 8-neighbours, so that a camera pixel whose bilinear footprint in the projector image straddles
+// the silhouette does not mix in black. The spill lands on whatever is behind the prop.
+void bleed_edges(ImageRgba32f& drive, const ImageRgba32f& geo, int rings) {
+    const uint32_t w = drive.width, h = drive.height;
+    std::vector<uint8_t> have(size_t(w) * h, 0);
+    for (size_t i = 0; i < have.size(); ++i)
+        have[i] = geo.pixels[i * 4 + 3] > 0.5f && geo.pixels[i * 4 + 2] > 0.0f;
+    for (int ring = 0; ring < rings; ++ring) {
+        std::vector<uint8_t> next = have;
+        for (uint32_t y = 0; y < h; ++y)
+            for (uint32_t x = 0; x < w; ++x) {
+                const size_t i = size_t(y) * w + x;
+                if (have[i])
+                    continue;
+                double sum[3] = {0, 0, 0};
+                int n = 0;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int xx = int(x) + dx, yy = int(y) + dy;
+                        if (xx < 0 || yy < 0 || xx >= int(w) || yy >= int(h))
+                            continue;
+                        const size_t j = size_t(yy) * w + xx;
+                        if (!have[j])
+                            continue;
+                        for (int c = 0; c < 3; ++c) sum[c] += drive.pixels[j * 4 + c];
+                        ++n;
+                    }
+                if (n == 0)
+                    continue;
+                for (int c = 0; c < 3; ++c) drive.pixels[i * 4 + c] = float(sum[c] / n);
+                next[i] = 1;
+            }
+        have.swap(next);
+    }
 }
 }  // namespace
 
@@ -104,7 +144,7 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
     const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     Capture cap;
     cap.effects.push_back("eq3-composite");
-    if (!dev.projector.empty()) {
+    if (dev.projector_present) {
         cap.effects.push_back("projector");
         if (o.effects.projector_falloff)
             cap.effects.push_back("projector-falloff");
@@ -134,7 +174,7 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
                 const bool in_frame = !dev.projector.empty()
                                           ? sample(dev.projector, gp[0], gp[1], pd)
                                           : (gp[2] > 0.0f);
-                const bool lit = gp[2] > 0.0f && in_frame;
+                const bool lit = dev.projector_present && gp[2] > 0.0f && in_frame;
                 if (lit) {
                     if (pd[3] > 0.0)
                         clipped[i] = 1;
@@ -172,24 +212,26 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
     return cap;
 }
 
-double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& vi,
+double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
                             const ImageRgba32f& geo, double g_ref) {
     const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     const double rho_min = std::max(std::min({rho.r, rho.g, rho.b}), 1e-6);
-    std::vector<double> ratios;
-    for (size_t i = 0, n = size_t(vi.width) * vi.height; i < n && i < geo.pixels.size() / 4; ++i) {
+    const size_t n = std::min(size_t(image.width) * image.height, geo.pixels.size() / 4);
+    double g_max = 0;
+    for (size_t i = 0; i < n; ++i)
+        if (geo.pixels[i * 4 + 3] > 0.5f)
+            g_max = std::max(g_max, double(geo.pixels[i * 4 + 2]));
+    double k = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < n; ++i) {
         const double g = geo.pixels[i * 4 + 2];
-        const double l = std::max({vi.pixels[i * 4], vi.pixels[i * 4 + 1], vi.pixels[i * 4 + 2]});
-        if (g > 0 && l > 1e-9 && geo.pixels[i * 4 + 3] > 0.5f) {
+        const double l = std::max({image.pixels[i * 4], image.pixels[i * 4 + 1],
+                                   image.pixels[i * 4 + 2]});
+        if (geo.pixels[i * 4 + 3] > 0.5f && g >= 0.25 * g_max && l > 1e-9) {
             const double f = o.effects.projector_falloff ? g / g_ref : 1.0;
-            ratios.push_back(rho_min * f * o.levels.projector_max / l);
+            k = std::min(k, rho_min * f * o.levels.projector_max / l);
         }
     }
-    if (ratios.empty())
-        return 1.0;
-    const size_t k = ratios.size() / 20;
-    std::nth_element(ratios.begin(), ratios.begin() + k, ratios.end());
-    return 0.95 * ratios[k];
+    return std::isfinite(k) ? 0.95 * k : 1.0;
 }
 
 ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
@@ -226,6 +268,7 @@ ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
         }
         out.pixels[i * 4 + 3] = clip ? 1.0f : 0.0f;
     }
+    bleed_edges(out, geo, 2);
     return out;
 }
 

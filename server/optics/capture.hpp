@@ -30,11 +30,13 @@ struct CaptureGeometry {
 Result<double> reference_falloff(const ImageRgba32f& projector_geometry,
                                  const scene::Intrinsics& projector);
 
-// What the devices show. An empty image is a device showing black (its black level remains).
-// Alpha of a drive image is 1 where the wanted drive fell outside [0, 1] and was clipped.
+// What the devices show. An empty image is a device showing black (its black level remains);
+// a projector that is not present adds nothing. Alpha of a drive image is 1 where the wanted
+// drive fell outside [0, 1] and was clipped.
 struct DeviceImages {
     ImageRgba32f projector;  // projector pixels
     ImageRgba32f hmd;        // camera pixels (the headset's eye is the camera)
+    bool projector_present = true;
 };
 
 struct Capture {
@@ -61,9 +63,10 @@ ImageRgba32f expose(const scene::Optics& optics, const ImageRgba32f& signal,
 // --- Compensation: what the devices must be sent so that the capture shows a target. -----
 
 // The largest scene-to-signal scale k (DN/s per unit radiance) for which the projector can show
-// the VI image: 0.95 x the 5th percentile over lit projector pixels of rho f P^M / L_d, so that
-// grazing rims may clip but the body of the prop does not.
-double auto_scene_to_signal(const scene::Optics& optics, const ImageRgba32f& vi_projector,
+// `image` (projector pixels, scene radiance): 0.95 x the minimum of rho f P^M / L over the
+// well-lit prop (f at least a quarter of its largest value), so that grazing rims may clip but
+// the body of the prop does not.
+double auto_scene_to_signal(const scene::Optics& optics, const ImageRgba32f& image,
                             const ImageRgba32f& projector_geometry, double g_ref);
 
 // Projector drive for a wanted projector signal `target` (DN/s at the camera, without the

@@ -1,5 +1,6 @@
 #include "optics/table2.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -145,10 +146,20 @@ namespace {
 // from printed ratios, so agreement within 1.5 % is what the printed precision allows.
 constexpr double kFollowsRelative = 0.015;
 
+// Half a unit in the last digit the paper prints (6 -> 0.5, 2.24 -> 0.005).
+double half_last_digit(double printed) {
+    double unit = 1.0;
+    for (int d = 0; d < 4; ++d, unit /= 10.0)
+        if (std::fabs(printed / unit - std::round(printed / unit)) < 1e-6)
+            break;
+    return 0.5 * unit;
+}
+
 bool agrees(double printed, const Ratio& computed) {
     if (computed.infinite)
         return false;
-    return std::fabs(computed.value - printed) <= kFollowsRelative * std::fabs(printed) + 1e-12;
+    const double tol = std::max(kFollowsRelative * std::fabs(printed), half_last_digit(printed));
+    return std::fabs(computed.value - printed) <= tol + 1e-12;
 }
 
 std::map<std::string, Ratio> table_values(const Table2& t) {

@@ -6,6 +6,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/result.hpp"
@@ -49,6 +50,8 @@ struct PaperOptics {
     double hmd_region_px = 0, hmd_region_deg = 0;
 };
 Result<PaperOptics> load_paper_optics(const std::filesystem::path& path);
+// configs/paper-optics.json, compiled in.
+std::string_view paper_optics_json();
 Result<PaperOptics> parse_paper_optics(const std::string& text, const std::string& source);
 
 // One printed value against the same quantity computed from the paper's parameters.

@@ -157,7 +157,7 @@ struct Optics {
                                                // on which projector_max was measured
     double prop_sheen = 0.0;                   // specular reflectance of the prop (vinyl sheen)
     double prop_sheen_exponent = 30.0;         // its Phong exponent
-    double exposure_ms = 33.0;                 // camera exposure time
+    double exposure_ms = 125.0;                // camera exposure time
     uint32_t bits = 8;                         // camera bit depth (linear response)
     double noise_dn = 0.0;                     // camera read noise, standard deviation in DN
     double scene_to_signal = 0.0;  // k: camera DN/s per unit scene radiance; 0 picks the largest

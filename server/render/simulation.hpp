@@ -1,0 +1,76 @@
+// The simulation pass (docs/OPTICS.md): what a user-perspective camera behind the headset
+// captures in the three display modes of the paper, built from the renderer's passes and the
+// optical model of server/optics/.
+//
+//   HySAR     the projector shows the compensated VI frame, the headset the viewer's VD layer
+//   SAR       the projector shows VI + the VD of one baked viewpoint, the headset shows black
+//   HMD-only  no projector; the headset shows VI + VD
+//
+// The target of every mode is the reference material seen through the same headset and camera:
+// alpha k (L_d + L_s), k the scene-to-signal scale (scene::Optics::scene_to_signal).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "optics/capture.hpp"
+#include "render/renderer.hpp"
+
+namespace hs::render {
+
+enum class DisplayMode { kHySAR, kSAR, kHmdOnly, kDiffuseOnly };
+const char* to_string(DisplayMode mode);
+
+// A camera placed at a viewer's eye, with that eye's intrinsics.
+struct Viewpoint {
+    std::string name;
+    scene::Intrinsics intrinsics;
+    scene::Pose camera;
+};
+
+struct SimulatedView {
+    optics::Capture capture;   // the mode's capture
+    ImageRgba32f target_dn;    // the reference material through the same optics, camera DN
+    ImageRgba32f target_vi_dn; // its VI part alone (the "VI only" reference)
+    std::vector<uint8_t> target_saturated;
+    ImageRgba32f geometry;     // the capture geometry of this viewpoint
+};
+
+class Simulator {
+public:
+    // `viewer` gives alpha; the scene's optics section everything else. The renderer must
+    // belong to the same scene. Unless the scene fixes k, it is the largest the projector can
+    // show: of the VI frame, or, with `fit_sar`, of SAR's frame baked for that viewpoint (so
+    // that SAR is at its best where it was made for, and every mode shares one target).
+    static Result<Simulator> create(Renderer& renderer, const scene::Scene& scene,
+                                    const scene::ViewerProfile& viewer,
+                                    const std::optional<Viewpoint>& fit_sar = std::nullopt);
+
+    // One capture. `baked` is the viewpoint whose highlights SAR bakes into the projector
+    // (default: `view` itself). `optics` overrides the scene's (compensation studies).
+    Result<SimulatedView> capture(DisplayMode mode, const Viewpoint& view,
+                                  const std::optional<Viewpoint>& baked = std::nullopt,
+                                  const std::optional<scene::Optics>& optics = std::nullopt);
+
+    double scene_to_signal() const { return k_; }
+    double g_ref() const { return g_ref_; }
+    double alpha() const { return alpha_; }
+    const scene::Optics& optics() const { return optics_; }
+
+private:
+    Simulator(Renderer& r, const scene::Scene& s) : renderer_(&r), scene_(s) {}
+    Renderer* renderer_;
+    scene::Scene scene_;
+    scene::Optics optics_;
+    double alpha_ = 1.0;
+    ImageRgba32f vi_projector_, projector_geometry_;
+    double g_ref_ = 0, k_ = 0;
+};
+
+// The viewpoint of the scene's viewing section (angle about the target, named or metric
+// height), at the head's centre, with the viewer's eye intrinsics.
+Result<Viewpoint> viewing_viewpoint(const scene::Scene& scene, const scene::ViewerProfile& viewer,
+                                    double angle_deg, const std::string& height);
+
+}  // namespace hs::render
