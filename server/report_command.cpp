@@ -105,13 +105,14 @@ Result<void> run(const Flags& flags) {
     Report rep;
     rep.out = flags.get("--out", "out/report");
     HS_TRY(make_dirs(rep.out));
-    rep.html = "<!doctype html><html><head><meta charset=\"utf-8\"><title>HySAR evaluation</title>"
-               "<style>body{font-family:sans-serif;max-width:1400px;margin:auto}"
-               "img{max-width:100%}pre{background:#f4f4f4;padding:8px}</style></head><body>\n";
-    rep.html += fmt::format("<h1>HySAR evaluation: {}</h1>\n<p>Viewer {} (alpha {}); simulated "
-                            "user-perspective camera: {}-bit, linear. See docs/OPTICS.md.</p>\n",
-                            html_escape(s.name), html_escape(viewer->name), viewer->alpha,
-                            s.optics.bits);
+    rep.html =
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>HySAR evaluation</title>"
+        "<style>body{font-family:sans-serif;max-width:1400px;margin:auto}"
+        "img{max-width:100%}pre{background:#f4f4f4;padding:8px}</style></head><body>\n";
+    rep.html += fmt::format(
+        "<h1>HySAR evaluation: {}</h1>\n<p>Viewer {} (alpha {}); simulated "
+        "user-perspective camera: {}-bit, linear. See docs/OPTICS.md.</p>\n",
+        html_escape(s.name), html_escape(viewer->name), viewer->alpha, s.optics.bits);
 
     // Table 2 from eqs. (5)-(6).
     log::info("[1/6] Table 2 and resolution");
@@ -128,9 +129,8 @@ Result<void> run(const Flags& flags) {
         {"hmd_env", {t2.hmd_env.max_intensity, t2.hmd_env.dynamic_range.value}},
         {"hmd_dark", {t2.hmd_dark.max_intensity, t2.hmd_dark.dynamic_range.value}}};
     for (const auto& c : checks)
-        rep.data["table2_checks"][c.key] = {{"printed", c.printed},
-                                            {"computed", c.computed.value},
-                                            {"follows", c.follows}};
+        rep.data["table2_checks"][c.key] = {
+            {"printed", c.printed}, {"computed", c.computed.value}, {"follows", c.follows}};
 
     HS_ASSIGN_OR_RETURN(auto res, resolution_rows(paper, s, *viewer));
     HS_TRY(write_text(rep.out / "resolution.csv", resolution_csv(res)));
@@ -139,9 +139,9 @@ Result<void> run(const Flags& flags) {
                 "Data: <a href=\"resolution.csv\">resolution.csv</a>.");
     rep.pre(resolution_text(res));
     for (const auto& r : res)
-        rep.data["resolution"].push_back(
-            {{"setup", r.setup}, {"projector", r.projector.px_per_deg()},
-             {"hmd", r.hmd.px_per_deg()}});
+        rep.data["resolution"].push_back({{"setup", r.setup},
+                                          {"projector", r.projector.px_per_deg()},
+                                          {"hmd", r.hmd.px_per_deg()}});
 
     // The simulated installation.
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
@@ -155,9 +155,10 @@ Result<void> run(const Flags& flags) {
     // first viewpoint fit the projector: SAR at its best where it was made for.
     HS_ASSIGN_OR_RETURN(auto sim, render::Simulator::create(*renderer, s, *viewer));
     HS_ASSIGN_OR_RETURN(auto sim_sar, render::Simulator::create(*renderer, s, *viewer, v1));
-    log::info("device: {}; scene-to-signal k = {:.1f} DN/s per unit radiance ({:.1f} with SAR's "
-              "frame fitted)",
-              device->name(), sim.scene_to_signal(), sim_sar.scene_to_signal());
+    log::info(
+        "device: {}; scene-to-signal k = {:.1f} DN/s per unit radiance ({:.1f} with SAR's "
+        "frame fitted)",
+        device->name(), sim.scene_to_signal(), sim_sar.scene_to_signal());
     rep.data["scene_to_signal"] = sim.scene_to_signal();
     rep.data["scene_to_signal_sar_fit"] = sim_sar.scene_to_signal();
 
@@ -206,8 +207,7 @@ Result<void> run(const Flags& flags) {
         HS_ASSIGN_OR_RETURN(auto sv_none, sim.capture(render::DisplayMode::kHySAR, v1, {}, none));
         errs.push_back(composite_error("no compensation", sv_none, usable));
         std::string text = fmt::format("{:<24}{:>10}{:>10}{:>12}{:>12}{:>12}\n", "variant",
-                                       "pixels", "excluded", "RMSE [DN]", "max [DN]",
-                                       "RMSE/peak");
+                                       "pixels", "excluded", "RMSE [DN]", "max [DN]", "RMSE/peak");
         std::string csv = "variant,pixels,excluded,rmse_dn,max_dn,peak_dn\n";
         for (const auto& e : errs) {
             text += fmt::format("{:<24}{:>10}{:>10}{:>12.2f}{:>12.1f}{:>11.2f}%\n", e.variant,
@@ -243,11 +243,12 @@ Result<void> run(const Flags& flags) {
             o.exposure_ms = ms;
             HS_ASSIGN_OR_RETURN(auto hy, sim.capture(render::DisplayMode::kHySAR, v1, {}, o));
             HS_ASSIGN_OR_RETURN(auto sar, sim.capture(render::DisplayMode::kSAR, v1, {}, o));
-            HS_ASSIGN_OR_RETURN(auto dif, sim.capture(render::DisplayMode::kDiffuseOnly, v1, {}, o));
-            HS_ASSIGN_OR_RETURN(auto rh,
-                                optics::specular_residual(hy.capture.dn, dif.capture.dn, kIgnoreBelow));
-            HS_ASSIGN_OR_RETURN(auto rs, optics::specular_residual(sar.capture.dn, dif.capture.dn,
-                                                                   kIgnoreBelow));
+            HS_ASSIGN_OR_RETURN(auto dif,
+                                sim.capture(render::DisplayMode::kDiffuseOnly, v1, {}, o));
+            HS_ASSIGN_OR_RETURN(
+                auto rh, optics::specular_residual(hy.capture.dn, dif.capture.dn, kIgnoreBelow));
+            HS_ASSIGN_OR_RETURN(
+                auto rs, optics::specular_residual(sar.capture.dn, dif.capture.dn, kIgnoreBelow));
             std::vector<ImageRgba8> cells{
                 labelled(optics::to_rgba8(hy.capture.dn), fmt::format("HySAR {} ms", ms), 4),
                 labelled(optics::to_rgba8(rh.image), "HySAR residual", 4),
@@ -288,8 +289,8 @@ Result<void> run(const Flags& flags) {
                     "Captures of HySAR and SAR at 250, 125 and 33 ms, their residuals (capture "
                     "minus the diffuse-only capture) and the per-channel histograms of the "
                     "residuals without the range 0-20.");
-        HS_TRY(rep.figure("fig9.png", vstack(rows),
-                          "Rows: 250, 125, 33 ms. Blue: HySAR, red: SAR.", "fig9.csv"));
+        HS_TRY(rep.figure("fig9.png", vstack(rows), "Rows: 250, 125, 33 ms. Blue: HySAR, red: SAR.",
+                          "fig9.csv"));
     }
 
     // Figs. 11 and 12: VD areas and colour differences at two viewpoints.
@@ -306,8 +307,8 @@ Result<void> run(const Flags& flags) {
             const ImageRgba8 ref_vi = optics::to_rgba8(hy.target_vi_dn);
             captures.push_back(labelled(ref, "reference " + vp->name));
             HS_TRY(write_png(rep.out / fmt::format("reference_{}.png", vp == &v1 ? 1 : 2), ref));
-            HS_TRY(write_png(rep.out / fmt::format("reference_vi_{}.png", vp == &v1 ? 1 : 2),
-                             ref_vi));
+            HS_TRY(
+                write_png(rep.out / fmt::format("reference_vi_{}.png", vp == &v1 ? 1 : 2), ref_vi));
             maps.push_back(labelled(ref_vi, "VI-only reference"));
             struct ModeCase {
                 const char* name;
@@ -318,14 +319,14 @@ Result<void> run(const Flags& flags) {
                                       ModeCase{"HMD-only", render::DisplayMode::kHmdOnly}}) {
                 HS_ASSIGN_OR_RETURN(auto sv, sim_sar.capture(m.mode, *vp, v1));
                 const ImageRgba8 cap = optics::to_rgba8(sv.capture.dn);
-                HS_TRY(write_png(rep.out / fmt::format("capture_{}_{}.png", m.name,
-                                                       vp == &v1 ? 1 : 2),
-                                 cap));
+                HS_TRY(write_png(
+                    rep.out / fmt::format("capture_{}_{}.png", m.name, vp == &v1 ? 1 : 2), cap));
                 CompareRow row;
                 row.name = m.name;
                 HS_ASSIGN_OR_RETURN(row.areas, optics::vd_areas(ref, ref_vi, cap));
-                HS_ASSIGN_OR_RETURN(row.lab, optics::lab_differences(ref, cap, row.areas.reference,
-                                                                     optics::PixelEncoding::kLinear));
+                HS_ASSIGN_OR_RETURN(row.lab,
+                                    optics::lab_differences(ref, cap, row.areas.reference,
+                                                            optics::PixelEncoding::kLinear));
                 captures.push_back(labelled(cap, m.name));
                 maps.push_back(labelled(
                     row.areas.map,
@@ -366,6 +367,9 @@ Result<void> run(const Flags& flags) {
                           "Blue: HySAR, red: SAR, yellow: HMD-only.", "fig11.csv"));
     }
 
+    if (device->validation_enabled() && device->validation_message_count() > 0)
+        return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
+                                                          device->validation_message_count()));
     log::info("[6/6] writing the report");
     const double secs =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();

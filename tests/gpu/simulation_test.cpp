@@ -1,0 +1,178 @@
+// The simulation pass: the capture geometry against exact ray casting, the HySAR composite
+// against its target with and without each compensation, and the display modes.
+#include <cmath>
+
+#include <glm/geometric.hpp>
+
+#include "gpu_fixture.hpp"
+#include "optics/metrics.hpp"
+#include "render/simulation.hpp"
+#include "scene/camera.hpp"
+#include "shading/reference.hpp"
+
+using namespace hs;
+using namespace hs::test;
+
+namespace {
+
+class Simulation : public GpuTest {
+protected:
+    scene::Scene scene_ = scene::default_scene();
+    // The default headset at a quarter of its resolution, at the scene's viewing angle.
+    render::Viewpoint view(double angle_deg) {
+        auto vp = render::viewing_viewpoint(scene_, scene_.viewers.front(), angle_deg,
+                                            scene_.viewing.default_height);
+        EXPECT_TRUE(vp.ok());
+        vp->intrinsics = small_eye(4);
+        return *vp;
+    }
+};
+
+TEST_F(Simulation, CaptureGeometryMatchesExactRayCasting) {
+    auto r = make_renderer(scene_);
+    const render::Viewpoint v = view(20);
+    auto geo = r->render_capture_geometry(v.intrinsics, v.camera, std::nullopt);
+    ASSERT_TRUE(geo.ok()) << geo.error().message;
+    EXPECT_EQ(geo->report.effects, std::vector<std::string>{"capture-geometry"});
+    const auto& pr = scene_.projector;
+    const glm::dmat4 proj_from_world = scene::frame_from_world(pr.pose);
+    double worst_uv = 0, worst_g = 0;
+    int compared = 0;
+    for (uint32_t y = 0; y < v.intrinsics.height; ++y)
+        for (uint32_t x = 0; x < v.intrinsics.width; ++x) {
+            const glm::vec4 g = geo->image.at(x, y);
+            const glm::dvec3 dir = scene::pixel_ray(v.intrinsics, v.camera, x, y);
+            auto hit =
+                shading::intersect_hemisphere(scene_.prop.hemisphere, v.camera.position, dir);
+            // Compare the interior only (the tessellated silhouette differs from the exact one).
+            if (!hit || glm::dot(hit->n, -dir) < 0.3 || !(g.a > 0.5f))
+                continue;
+            const glm::dvec3 q = glm::dvec3(proj_from_world * glm::dvec4(hit->p, 1.0));
+            const double u = pr.intrinsics.fx * q.x / -q.z + pr.intrinsics.cx;
+            const double vv = pr.intrinsics.cy - pr.intrinsics.fy * q.y / -q.z;
+            const glm::dvec3 to_p = pr.pose.position - hit->p;
+            const double cos_in = glm::dot(hit->n, glm::normalize(to_p));
+            const double gexp = cos_in > 0 ? cos_in / glm::dot(to_p, to_p) : 0.0;
+            if (cos_in < 0.3)
+                continue;
+            worst_uv = std::max({worst_uv, std::fabs(g.r - u), std::fabs(g.g - vv)});
+            worst_g = std::max(worst_g, std::fabs(g.b - gexp) / gexp);
+            ++compared;
+        }
+    EXPECT_GT(compared, 5000);
+    // The mesh (256 x 64 facets) departs from the sphere by < 0.1 mm: well under a projector
+    // pixel (~0.6 mm on the prop) and 1 % in falloff.
+    EXPECT_LT(worst_uv, 0.5);
+    EXPECT_LT(worst_g, 0.01);
+}
+
+TEST_F(Simulation, SheenIsComputedOnlyWhenTheSceneAsksForIt) {
+    auto r = make_renderer(scene_);
+    const render::Viewpoint v = view(0);
+    auto with = r->render_capture_geometry(v.intrinsics, v.camera, 30.0);
+    ASSERT_TRUE(with.ok());
+    EXPECT_EQ(with->report.effects, (std::vector<std::string>{"capture-geometry", "prop-sheen"}));
+    float max_lobe = 0;
+    for (size_t i = 3; i < with->image.pixels.size(); i += 4)
+        max_lobe = std::max(max_lobe, with->image.pixels[i] - 1.0f);
+    EXPECT_GT(max_lobe, 0.5f);  // the projector's mirror direction is in view
+    // Off: the lobe is not compiled in and alpha is exactly 1 on the prop.
+    auto without = r->render_capture_geometry(v.intrinsics, v.camera, std::nullopt);
+    ASSERT_TRUE(without.ok());
+    for (size_t i = 3; i < without->image.pixels.size(); i += 4)
+        ASSERT_TRUE(without->image.pixels[i] == 0.0f || without->image.pixels[i] == 1.0f);
+}
+
+struct Err {
+    double rmse = 0, max = 0, peak = 0;
+};
+Err error_over(const render::SimulatedView& sv, const std::vector<uint8_t>& usable) {
+    Err e;
+    double ss = 0;
+    size_t n = 0;
+    for (size_t i = 0; i < usable.size(); ++i) {
+        if (!usable[i] || !(sv.geometry.pixels[i * 4 + 3] > 0.5f))
+            continue;
+        for (int c = 0; c < 3; ++c) {
+            const double d =
+                double(sv.capture.dn.pixels[i * 4 + c]) - sv.target_dn.pixels[i * 4 + c];
+            ss += d * d;
+            e.max = std::max(e.max, std::fabs(d));
+            e.peak = std::max(e.peak, double(sv.target_dn.pixels[i * 4 + c]));
+        }
+        ++n;
+    }
+    e.rmse = std::sqrt(ss / double(3 * std::max<size_t>(n, 1)));
+    return e;
+}
+
+TEST_F(Simulation, HySarReproducesTheTargetAndEachCompensationMatters) {
+    auto r = make_renderer(scene_);
+    auto sim = render::Simulator::create(*r, scene_, scene_.viewers.front());
+    ASSERT_TRUE(sim.ok()) << sim.error().message;
+    EXPECT_GT(sim->scene_to_signal(), 0.0);
+    const render::Viewpoint v = view(0);
+    auto full = sim->capture(render::DisplayMode::kHySAR, v);
+    ASSERT_TRUE(full.ok()) << full.error().message;
+    std::vector<uint8_t> usable(full->capture.unusable.size());
+    size_t covered = 0, kept = 0;
+    for (size_t i = 0; i < usable.size(); ++i) {
+        usable[i] = !full->capture.unusable[i] && !full->target_saturated[i];
+        covered += full->geometry.pixels[i * 4 + 3] > 0.5f;
+        kept += usable[i] && full->geometry.pixels[i * 4 + 3] > 0.5f;
+    }
+    EXPECT_GT(kept, covered * 95 / 100);  // only grazing rims clip
+    const Err e = error_over(*full, usable);
+    EXPECT_GT(e.peak, 30.0);
+    // The stated tolerance (docs/OPTICS.md): RMSE <= 0.5 % of the peak, max <= 5 % of the peak.
+    EXPECT_LE(e.rmse, 0.005 * e.peak);
+    EXPECT_LE(e.max, 0.05 * e.peak);
+    for (auto flag :
+         {&scene::Optics::Compensation::falloff, &scene::Optics::Compensation::albedo,
+          &scene::Optics::Compensation::hmd_alpha, &scene::Optics::Compensation::black_levels}) {
+        scene::Optics o = scene_.optics;
+        o.compensation.*flag = false;
+        auto off = sim->capture(render::DisplayMode::kHySAR, v, std::nullopt, o);
+        ASSERT_TRUE(off.ok());
+        EXPECT_GT(error_over(*off, usable).rmse, 3.0 * e.rmse + 0.2);
+    }
+}
+
+TEST_F(Simulation, SarKeepsTheFirstViewpointsHighlights) {
+    auto r = make_renderer(scene_);
+    const render::Viewpoint v1 = view(0), v2 = view(20);
+    auto sim = render::Simulator::create(*r, scene_, scene_.viewers.front(), v1);
+    ASSERT_TRUE(sim.ok());
+    auto mr1 = [&](render::DisplayMode m, const render::Viewpoint& v) {
+        auto sv = sim->capture(m, v, v1);
+        EXPECT_TRUE(sv.ok());
+        auto a =
+            optics::vd_areas(optics::to_rgba8(sv->target_dn), optics::to_rgba8(sv->target_vi_dn),
+                             optics::to_rgba8(sv->capture.dn));
+        EXPECT_TRUE(a.ok());
+        EXPECT_GT(a->reference_count, 100u);
+        return a->mr1.value_or(0.0);
+    };
+    EXPECT_GT(mr1(render::DisplayMode::kSAR, v1), 0.9);  // where SAR was made for
+    EXPECT_GT(mr1(render::DisplayMode::kHySAR, v2), 0.9);
+    EXPECT_LT(mr1(render::DisplayMode::kSAR, v2), 0.3);
+    EXPECT_GT(mr1(render::DisplayMode::kHmdOnly, v2), 0.9);
+}
+
+TEST_F(Simulation, WithoutHighlightsNothingViewDependentIsRendered) {
+    scene_.material.specular = {};
+    auto r = make_renderer(scene_);
+    auto sim = render::Simulator::create(*r, scene_, scene_.viewers.front());
+    ASSERT_TRUE(sim.ok());
+    auto vd = r->render_projector_vd(scene_.material.specular, glm::dvec3(0, 1, 1));
+    ASSERT_TRUE(vd.ok());
+    EXPECT_FALSE(vd->report.ran);
+    auto sv = sim->capture(render::DisplayMode::kHySAR, view(0));
+    ASSERT_TRUE(sv.ok());
+    // The headset shows black: HySAR equals the diffuse-only capture.
+    auto dif = sim->capture(render::DisplayMode::kDiffuseOnly, view(0));
+    ASSERT_TRUE(dif.ok());
+    EXPECT_EQ(sv->capture.dn.pixels, dif->capture.dn.pixels);
+}
+
+}  // namespace
