@@ -113,13 +113,13 @@ Result<void> make_dirs(const fs::path& dir) {
 }
 
 std::string table2_text(const optics::Table2& t) {
-    std::string s = fmt::format("{:<24}{:>10}{:>10}{:>12}{:>12}{:>12}{:>12}\n", "",
-                                "HySAR", "SAR", "HMD, E>0", "HMD, E=0", "HySAR/SAR",
-                                "HySAR/HMD");
+    std::string s = fmt::format("{:<24}{:>10}{:>10}{:>12}{:>12}{:>12}{:>12}\n", "", "HySAR", "SAR",
+                                "HMD, E>0", "HMD, E=0", "HySAR/SAR", "HySAR/HMD");
     s += fmt::format("{:<24}{:>10.1f}{:>10.1f}{:>12.1f}{:>12.1f}{:>12}{:>12}\n",
                      "max intensity [DN/s]", t.hysar.max_intensity, t.sar.max_intensity,
                      t.hmd_env.max_intensity, t.hmd_dark.max_intensity,
-                     fmt::format("x{:.2f}", t.max_ratio_sar), fmt::format("x{:.2f}", t.max_ratio_hmd));
+                     fmt::format("x{:.2f}", t.max_ratio_sar),
+                     fmt::format("x{:.2f}", t.max_ratio_hmd));
     s += fmt::format("{:<24}{:>10}{:>10}{:>12}{:>12}{:>12}{:>12}\n", "dynamic range",
                      t.hysar.dynamic_range.str(), t.sar.dynamic_range.str(),
                      t.hmd_env.dynamic_range.str(), t.hmd_dark.dynamic_range.str(),
@@ -134,8 +134,7 @@ std::string table2_csv(const optics::Table2& t) {
                      t.max_ratio_sar, t.max_ratio_hmd);
     s += fmt::format("dynamic_range,{},{},{},{},{},{}\n", t.hysar.dynamic_range.str(6),
                      t.sar.dynamic_range.str(6), t.hmd_env.dynamic_range.str(6),
-                     t.hmd_dark.dynamic_range.str(6), t.dr_ratio_sar.str(6),
-                     t.dr_ratio_hmd.str(6));
+                     t.hmd_dark.dynamic_range.str(6), t.dr_ratio_sar.str(6), t.dr_ratio_hmd.str(6));
     return s;
 }
 
@@ -176,8 +175,8 @@ Result<std::vector<ResolutionRow>> resolution_rows(const optics::PaperOptics& pa
                             cam.intrinsics.width));
         HS_ASSIGN_OR_RETURN(auto pd, optics::projector_density(s, mesh, pcam));
         HS_ASSIGN_OR_RETURN(auto hd, optics::hmd_density(hmd, pcam));
-        rows.push_back({fmt::format("paper geometry in this scene (camera {:.3f} m level)", d),
-                        pd, hd});
+        rows.push_back(
+            {fmt::format("paper geometry in this scene (camera {:.3f} m level)", d), pd, hd});
     }
     auto vp = scene::viewing_pose(s.viewing, 0.0, s.viewing.heights_m.at(s.viewing.default_height));
     if (!vp.ok())
@@ -185,16 +184,16 @@ Result<std::vector<ResolutionRow>> resolution_rows(const optics::PaperOptics& pa
     cam.pose = *vp;
     HS_ASSIGN_OR_RETURN(auto pd, optics::projector_density(s, mesh, cam));
     HS_ASSIGN_OR_RETURN(auto hd, optics::hmd_density(viewer, cam));
-    rows.push_back({fmt::format("this scene, {} at 0 deg, height {}", viewer.name,
-                                s.viewing.default_height),
-                    pd, hd});
+    rows.push_back(
+        {fmt::format("this scene, {} at 0 deg, height {}", viewer.name, s.viewing.default_height),
+         pd, hd});
     return rows;
 }
 
 std::string resolution_text(const std::vector<ResolutionRow>& rows) {
-    std::string s = fmt::format("{:<52}{:>10}{:>12}{:>10}{:>10}{:>12}{:>10}{:>9}\n", "setup",
-                                "P_p [px]", "th_p [deg]", "proj/deg", "P_h [px]", "th_h [deg]",
-                                "hmd/deg", "ratio");
+    std::string s =
+        fmt::format("{:<52}{:>10}{:>12}{:>10}{:>10}{:>12}{:>10}{:>9}\n", "setup", "P_p [px]",
+                    "th_p [deg]", "proj/deg", "P_h [px]", "th_h [deg]", "hmd/deg", "ratio");
     for (const auto& r : rows)
         s += fmt::format("{:<52}{:>10.1f}{:>12.2f}{:>10.1f}{:>10.1f}{:>12.2f}{:>10.1f}{:>9}\n",
                          r.setup, r.projector.region_px, r.projector.region_deg,
@@ -205,8 +204,9 @@ std::string resolution_text(const std::vector<ResolutionRow>& rows) {
 }
 
 std::string resolution_csv(const std::vector<ResolutionRow>& rows) {
-    std::string s = "setup,projector_px,projector_deg,projector_px_per_deg,hmd_px,hmd_deg,"
-                    "hmd_px_per_deg,ratio\n";
+    std::string s =
+        "setup,projector_px,projector_deg,projector_px_per_deg,hmd_px,hmd_deg,"
+        "hmd_px_per_deg,ratio\n";
     for (const auto& r : rows)
         s += fmt::format("\"{}\",{},{},{},{},{},{},{}\n", r.setup, r.projector.region_px,
                          r.projector.region_deg, r.projector.px_per_deg(), r.hmd.region_px,
@@ -232,17 +232,18 @@ std::string compare_text(const std::vector<CompareRow>& rows) {
 }
 
 std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& viewpoint) {
-    std::string s = "viewpoint,capture,vd_reference_px,vd_capture_px,matching_px,mr1,mr2,"
-                    "lab_pixels,dL_mean,dL_sd,da_mean,da_sd,db_mean,db_sd,de76_mean,de76_sd,"
-                    "de00_mean,de00_sd\n";
+    std::string s =
+        "viewpoint,capture,vd_reference_px,vd_capture_px,matching_px,mr1,mr2,"
+        "lab_pixels,dL_mean,dL_sd,da_mean,da_sd,db_mean,db_sd,de76_mean,de76_sd,"
+        "de00_mean,de00_sd\n";
     for (const auto& r : rows) {
         const auto& l = r.lab;
         s += fmt::format("\"{}\",\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                          viewpoint, r.name, r.areas.reference_count, r.areas.capture_count,
                          r.areas.matching, r.areas.mr1 ? fmt::format("{}", *r.areas.mr1) : "",
-                         r.areas.mr2 ? fmt::format("{}", *r.areas.mr2) : "", l.pixels,
-                         l.sL.mean, l.sL.stddev, l.sa.mean, l.sa.stddev, l.sb.mean, l.sb.stddev,
-                         l.s76.mean, l.s76.stddev, l.s00.mean, l.s00.stddev);
+                         r.areas.mr2 ? fmt::format("{}", *r.areas.mr2) : "", l.pixels, l.sL.mean,
+                         l.sL.stddev, l.sa.mean, l.sa.stddev, l.sb.mean, l.sb.stddev, l.s76.mean,
+                         l.s76.stddev, l.s00.mean, l.s00.stddev);
     }
     return s;
 }

@@ -62,8 +62,7 @@ struct Frame {
     }
 };
 
-Frame frame(const PlotOptions& o, double xlo, double xhi, double ylo, double yhi,
-            bool x_ticks) {
+Frame frame(const PlotOptions& o, double xlo, double xhi, double ylo, double yhi, bool x_ticks) {
     Frame f{make_canvas(o.width, o.height, 255),
             kLeft,
             kTop,

@@ -12,7 +12,9 @@ namespace hs::optics {
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-std::string size_str(const ImageRgba32f& i) { return fmt::format("{}x{}", i.width, i.height); }
+std::string size_str(const ImageRgba32f& i) {
+    return fmt::format("{}x{}", i.width, i.height);
+}
 
 // Bilinear sample of RGBA at continuous pixel coordinates (OpenCV: centres at integers);
 // false outside the image.
@@ -29,7 +31,8 @@ bool sample(const ImageRgba32f& img, double u, double v, double out[4]) {
     const float* p01 = &img.pixels[img.index(x0, y1)];
     const float* p11 = &img.pixels[img.index(x1, y1)];
     for (int c = 0; c < 4; ++c)
-        out[c] = (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
+        out[c] =
+            (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
     return true;
 }
 }  // namespace
@@ -224,8 +227,8 @@ double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
     double k = std::numeric_limits<double>::infinity();
     for (size_t i = 0; i < n; ++i) {
         const double g = geo.pixels[i * 4 + 2];
-        const double l = std::max({image.pixels[i * 4], image.pixels[i * 4 + 1],
-                                   image.pixels[i * 4 + 2]});
+        const double l =
+            std::max({image.pixels[i * 4], image.pixels[i * 4 + 1], image.pixels[i * 4 + 2]});
         if (geo.pixels[i * 4 + 3] > 0.5f && g >= 0.25 * g_max && l > 1e-9) {
             const double f = o.effects.projector_falloff ? g / g_ref : 1.0;
             k = std::min(k, rho_min * f * o.levels.projector_max / l);
@@ -238,8 +241,7 @@ ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
                              const ImageRgba32f& geo, double g_ref, double hmd_min_through) {
     const scene::DeviceLevels d = effective_levels(o);
     const auto& comp = o.compensation;
-    const glm::dvec3 rho =
-        comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
+    const glm::dvec3 rho = comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     ImageRgba32f out = ImageRgba32f::zeros(target.width, target.height);
     for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
         const float* t = &target.pixels[i * 4];

@@ -17,14 +17,17 @@ double lab_f(double t) {
         return std::cbrt(t);
     return t / (3.0 * kDelta * kDelta) + 4.0 / 29.0;
 }
-double deg(double rad) { return rad * 180.0 / kPi; }
-double rad(double deg) { return deg * kPi / 180.0; }
+double deg(double rad) {
+    return rad * 180.0 / kPi;
+}
+double rad(double deg) {
+    return deg * kPi / 180.0;
+}
 }  // namespace
 
 glm::dvec3 xyz_from_linear_srgb(const glm::dvec3& c) {
     // IEC 61966-2-1 primaries, D65.
-    return {0.4124 * c.r + 0.3576 * c.g + 0.1805 * c.b,
-            0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b,
+    return {0.4124 * c.r + 0.3576 * c.g + 0.1805 * c.b, 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b,
             0.0193 * c.r + 0.1192 * c.g + 0.9505 * c.b};
 }
 
@@ -33,7 +36,9 @@ Lab lab_from_xyz(const glm::dvec3& xyz) {
     return {116.0 * fy - 16.0, 500.0 * (fx - fy), 200.0 * (fy - fz)};
 }
 
-Lab lab_from_linear_srgb(const glm::dvec3& rgb) { return lab_from_xyz(xyz_from_linear_srgb(rgb)); }
+Lab lab_from_linear_srgb(const glm::dvec3& rgb) {
+    return lab_from_xyz(xyz_from_linear_srgb(rgb));
+}
 
 double srgb_eotf(double v) {
     return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);

@@ -22,8 +22,7 @@ Result<VdAreas> vd_areas(const ImageRgba8& ref, const ImageRgba8& vi, const Imag
                          int threshold) {
     HS_TRY(same_size("the reference", ref.width, ref.height, "the VI-only reference", vi.width,
                      vi.height));
-    HS_TRY(same_size("the capture", cap.width, cap.height, "the reference", ref.width,
-                     ref.height));
+    HS_TRY(same_size("the capture", cap.width, cap.height, "the reference", ref.width, ref.height));
     VdAreas a;
     a.width = ref.width;
     a.height = ref.height;
@@ -79,8 +78,7 @@ Stats stats_of(const std::vector<double>& v) {
 
 Result<LabDifferences> lab_differences(const ImageRgba8& ref, const ImageRgba8& cap,
                                        const std::vector<uint8_t>& mask, PixelEncoding enc) {
-    HS_TRY(same_size("the capture", cap.width, cap.height, "the reference", ref.width,
-                     ref.height));
+    HS_TRY(same_size("the capture", cap.width, cap.height, "the reference", ref.width, ref.height));
     const size_t n = size_t(ref.width) * ref.height;
     if (mask.size() != n)
         return make_error(ErrorCode::kInvalidArgument,
@@ -149,7 +147,8 @@ Result<Residual> specular_residual(const ImageRgba32f& cap, const ImageRgba32f& 
     r.image = ImageRgba32f::zeros(cap.width, cap.height);
     for (size_t i = 0, n = size_t(cap.width) * cap.height; i < n; ++i) {
         for (int c = 0; c < 3; ++c) {
-            const double v = std::max(0.0, double(cap.pixels[i * 4 + c]) - diffuse.pixels[i * 4 + c]);
+            const double v =
+                std::max(0.0, double(cap.pixels[i * 4 + c]) - diffuse.pixels[i * 4 + c]);
             r.image.pixels[i * 4 + c] = float(v);
             if (v > ignore_below)
                 r.channel[c].push_back(v);
@@ -160,11 +159,13 @@ Result<Residual> specular_residual(const ImageRgba32f& cap, const ImageRgba32f& 
 }
 
 ImageRgba8 to_rgba8(const ImageRgba32f& dn) {
-    ImageRgba8 out{dn.width, dn.height, std::vector<uint8_t>(size_t(dn.width) * dn.height * 4, 255)};
+    ImageRgba8 out{dn.width, dn.height,
+                   std::vector<uint8_t>(size_t(dn.width) * dn.height * 4, 255)};
     for (size_t i = 0, n = size_t(dn.width) * dn.height; i < n; ++i)
         for (int c = 0; c < 3; ++c) {
             const float v = dn.pixels[i * 4 + c];
-            out.pixels[i * 4 + c] = uint8_t(std::lround(std::isnan(v) ? 0.0f : std::clamp(v, 0.0f, 255.0f)));
+            out.pixels[i * 4 + c] =
+                uint8_t(std::lround(std::isnan(v) ? 0.0f : std::clamp(v, 0.0f, 255.0f)));
         }
     return out;
 }

@@ -57,8 +57,8 @@ Histogram histogram(const std::vector<double>& values, double lo, double hi, siz
 
 // Per-channel values of capture - diffuse capture (camera DN), the paper's specular residual.
 struct Residual {
-    ImageRgba32f image;                    // clamped at 0
-    std::vector<double> channel[3];        // values above `ignore_below`, per channel (R, G, B)
+    ImageRgba32f image;              // clamped at 0
+    std::vector<double> channel[3];  // values above `ignore_below`, per channel (R, G, B)
 };
 Result<Residual> specular_residual(const ImageRgba32f& capture, const ImageRgba32f& diffuse,
                                    double ignore_below);

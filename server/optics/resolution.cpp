@@ -22,8 +22,12 @@ bool project(const scene::Intrinsics& k, const glm::dvec3& q, double* u, double*
     return true;
 }
 // The horizontal and vertical view angles of a pixel coordinate, through the intrinsics.
-double angle_x(const scene::Intrinsics& k, double u) { return std::atan((u - k.cx) / k.fx); }
-double angle_y(const scene::Intrinsics& k, double v) { return std::atan((v - k.cy) / k.fy); }
+double angle_x(const scene::Intrinsics& k, double u) {
+    return std::atan((u - k.cx) / k.fx);
+}
+double angle_y(const scene::Intrinsics& k, double v) {
+    return std::atan((v - k.cy) / k.fy);
+}
 }  // namespace
 
 Result<Density> projector_density(const scene::Scene& s, const scene::Mesh& prop,
@@ -71,9 +75,9 @@ Result<Density> hmd_density(const scene::ViewerProfile& viewer, const CameraView
     const double cv_top = std::max(camera_v(top), -0.5);
     const double cv_bottom = std::min(camera_v(bottom), double(ck.height) - 0.5);
     if (!(cv_bottom > cv_top))
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("the headset '{}' image lies outside the camera's view",
-                                      viewer.name));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("the headset '{}' image lies outside the camera's view", viewer.name));
     // Back to headset rows: the part of the headset image the camera sees.
     auto hmd_v = [&](double cv) {
         const double t = (cv - ck.cy) / ck.fy;  // tan of the angle below the axis

@@ -13,9 +13,9 @@
 namespace hs::optics {
 
 struct Density {
-    std::string device;      // "projector" or "hmd"
-    double region_px = 0;    // device pixels across the region
-    double region_deg = 0;   // the angle the region spans for the camera
+    std::string device;     // "projector" or "hmd"
+    double region_px = 0;   // device pixels across the region
+    double region_deg = 0;  // the angle the region spans for the camera
     double px_per_deg() const { return region_deg > 0 ? region_px / region_deg : 0.0; }
 };
 

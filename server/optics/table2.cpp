@@ -58,8 +58,7 @@ namespace {
 struct Getter {
     std::string source;
     std::optional<Error> error;
-    double number(const json& obj, const std::string& path, const char* key, double lo,
-                  double hi) {
+    double number(const json& obj, const std::string& path, const char* key, double lo, double hi) {
         if (error)
             return 0;
         if (!obj.is_object() || !obj.contains(key)) {
@@ -116,15 +115,16 @@ Result<PaperOptics> parse_paper_optics(const std::string& text, const std::strin
                 return make_error(ErrorCode::kParse,
                                   fmt::format("{}: printed.{}: expected an object", source, row));
             for (auto it = pr[row].begin(); it != pr[row].end(); ++it)
-                p.printed[std::string(row) + "." + it.key()] = g.number(
-                    pr[row], std::string("printed.") + row, it.key().c_str(), 0, 1e15);
+                p.printed[std::string(row) + "." + it.key()] =
+                    g.number(pr[row], std::string("printed.") + row, it.key().c_str(), 0, 1e15);
         }
     }
     if (g.error)
         return *g.error;
     if (p.levels.projector_min >= p.levels.projector_max)
-        return make_error(ErrorCode::kParse,
-                          fmt::format("{}: levels.projector_min must be below projector_max", source));
+        return make_error(
+            ErrorCode::kParse,
+            fmt::format("{}: levels.projector_min must be below projector_max", source));
     if (p.levels.hmd_min >= p.levels.hmd_max)
         return make_error(ErrorCode::kParse,
                           fmt::format("{}: levels.hmd_min must be below hmd_max", source));
@@ -163,18 +163,13 @@ bool agrees(double printed, const Ratio& computed) {
 }
 
 std::map<std::string, Ratio> table_values(const Table2& t) {
-    return {{"max.hysar", {t.hysar.max_intensity}},
-            {"max.sar", {t.sar.max_intensity}},
-            {"max.hmd_env", {t.hmd_env.max_intensity}},
-            {"max.hmd_dark", {t.hmd_dark.max_intensity}},
-            {"max.hysar_over_sar", {t.max_ratio_sar}},
-            {"max.hysar_over_hmd", {t.max_ratio_hmd}},
-            {"dr.hysar", t.hysar.dynamic_range},
-            {"dr.sar", t.sar.dynamic_range},
-            {"dr.hmd_env", t.hmd_env.dynamic_range},
-            {"dr.hmd_dark", t.hmd_dark.dynamic_range},
-            {"dr.hysar_over_sar", t.dr_ratio_sar},
-            {"dr.hysar_over_hmd", t.dr_ratio_hmd}};
+    return {
+        {"max.hysar", {t.hysar.max_intensity}},     {"max.sar", {t.sar.max_intensity}},
+        {"max.hmd_env", {t.hmd_env.max_intensity}}, {"max.hmd_dark", {t.hmd_dark.max_intensity}},
+        {"max.hysar_over_sar", {t.max_ratio_sar}},  {"max.hysar_over_hmd", {t.max_ratio_hmd}},
+        {"dr.hysar", t.hysar.dynamic_range},        {"dr.sar", t.sar.dynamic_range},
+        {"dr.hmd_env", t.hmd_env.dynamic_range},    {"dr.hmd_dark", t.hmd_dark.dynamic_range},
+        {"dr.hysar_over_sar", t.dr_ratio_sar},      {"dr.hysar_over_hmd", t.dr_ratio_hmd}};
 }
 }  // namespace
 
@@ -222,8 +217,9 @@ std::vector<Check> check_table2(const PaperOptics& p) {
                     "room light E without the headset's alpha (I = H + E)",
                     it->second.str(2));
             else
-                c.note = "does not follow from eqs. (5)-(6), and no reading of them found "
-                         "reproduces it";
+                c.note =
+                    "does not follow from eqs. (5)-(6), and no reading of them found "
+                    "reproduces it";
         }
         out.push_back(c);
     }

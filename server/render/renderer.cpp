@@ -186,10 +186,10 @@ Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slo
     auto key = std::make_tuple(w, h, slot, int(format));
     if (auto it = targets_.find(key); it != targets_.end())
         return &it->second;
-    HS_ASSIGN_OR_RETURN(
-        auto t, gpu::RenderTarget::create(
-                    device_, w, h, format,
-                    fmt::format("target.{}x{}.{}.{}", w, h, slot, gpu::to_string(format))));
+    HS_ASSIGN_OR_RETURN(auto t,
+                        gpu::RenderTarget::create(
+                            device_, w, h, format,
+                            fmt::format("target.{}x{}.{}.{}", w, h, slot, gpu::to_string(format))));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
@@ -309,8 +309,8 @@ Result<RenderResult> Renderer::render_projector_vd(const scene::Specular& spec,
         return r;
     }
     HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));
-    HS_ASSIGN_OR_RETURN(r, draw(*v, k, scene_.projector.pose, "pass.projector-vd-baked",
-                                &eye_position));
+    HS_ASSIGN_OR_RETURN(
+        r, draw(*v, k, scene_.projector.pose, "pass.projector-vd-baked", &eye_position));
     r.report.pass = "projector-vd-baked";
     return r;
 }

@@ -8,10 +8,14 @@ namespace hs::render {
 
 const char* to_string(DisplayMode m) {
     switch (m) {
-        case DisplayMode::kHySAR: return "hysar";
-        case DisplayMode::kSAR: return "sar";
-        case DisplayMode::kHmdOnly: return "hmd-only";
-        case DisplayMode::kDiffuseOnly: return "diffuse-only";
+        case DisplayMode::kHySAR:
+            return "hysar";
+        case DisplayMode::kSAR:
+            return "sar";
+        case DisplayMode::kHmdOnly:
+            return "hmd-only";
+        case DisplayMode::kDiffuseOnly:
+            return "diffuse-only";
     }
     return "?";
 }
@@ -46,8 +50,9 @@ Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
     sim.alpha_ = viewer.alpha;
     HS_ASSIGN_OR_RETURN(RenderResult vi, r.render_projector());
     sim.vi_projector_ = std::move(vi.image);
-    HS_ASSIGN_OR_RETURN(RenderResult geo, r.render_capture_geometry(s.projector.intrinsics,
-                                                                    s.projector.pose, std::nullopt));
+    HS_ASSIGN_OR_RETURN(
+        RenderResult geo,
+        r.render_capture_geometry(s.projector.intrinsics, s.projector.pose, std::nullopt));
     sim.projector_geometry_ = std::move(geo.image);
     HS_ASSIGN_OR_RETURN(sim.g_ref_,
                         optics::reference_falloff(sim.projector_geometry_, s.projector.intrinsics));
@@ -77,7 +82,8 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
                             view.intrinsics, view.camera,
                             sheen ? std::optional<double>(o.prop_sheen_exponent) : std::nullopt));
     out.geometry = std::move(geo.image);
-    HS_ASSIGN_OR_RETURN(RenderResult ld, renderer_->render_eye_diffuse(view.intrinsics, view.camera));
+    HS_ASSIGN_OR_RETURN(RenderResult ld,
+                        renderer_->render_eye_diffuse(view.intrinsics, view.camera));
     HS_ASSIGN_OR_RETURN(RenderResult ls, renderer_->render_eye(spec, view.intrinsics, view.camera));
 
     // The target: the reference material through the same headset (alpha) and camera.
@@ -111,9 +117,9 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
             dev.hmd = optics::hmd_drive(o, optics::scaled(sum(ld.image, ls.image), alpha_c * k_));
             break;
     }
-    HS_ASSIGN_OR_RETURN(out.capture, optics::simulate_capture(
-                                         o, alpha_, optics::CaptureGeometry{out.geometry, g_ref_},
-                                         dev));
+    HS_ASSIGN_OR_RETURN(
+        out.capture,
+        optics::simulate_capture(o, alpha_, optics::CaptureGeometry{out.geometry, g_ref_}, dev));
     return out;
 }
 

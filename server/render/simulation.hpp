@@ -30,11 +30,11 @@ struct Viewpoint {
 };
 
 struct SimulatedView {
-    optics::Capture capture;   // the mode's capture
-    ImageRgba32f target_dn;    // the reference material through the same optics, camera DN
-    ImageRgba32f target_vi_dn; // its VI part alone (the "VI only" reference)
+    optics::Capture capture;    // the mode's capture
+    ImageRgba32f target_dn;     // the reference material through the same optics, camera DN
+    ImageRgba32f target_vi_dn;  // its VI part alone (the "VI only" reference)
     std::vector<uint8_t> target_saturated;
-    ImageRgba32f geometry;     // the capture geometry of this viewpoint
+    ImageRgba32f geometry;  // the capture geometry of this viewpoint
 };
 
 class Simulator {

@@ -122,9 +122,9 @@ TEST(Table2, SaysWhichPrintedValuesDoNotFollowFromTheEquations) {
     std::map<std::string, Check> by_key;
     for (const auto& c : check_table2(paper())) by_key[c.key] = c;
     ASSERT_EQ(by_key.size(), 18u);
-    for (const char* k : {"max.hysar", "max.sar", "max.hmd_dark", "max.hysar_over_sar",
-                          "dr.hysar", "dr.sar", "dr.hmd_dark", "dr.hysar_over_sar",
-                          "resolution.sar", "resolution.hysar", "resolution.hysar_over_sar"})
+    for (const char* k : {"max.hysar", "max.sar", "max.hmd_dark", "max.hysar_over_sar", "dr.hysar",
+                          "dr.sar", "dr.hmd_dark", "dr.hysar_over_sar", "resolution.sar",
+                          "resolution.hysar", "resolution.hysar_over_sar"})
         EXPECT_TRUE(by_key[k].follows) << k;
     // ... while the paper printed H + E: 4175 and 6, and the ratios built on them.
     for (const char* k : {"max.hmd_env", "dr.hmd_env", "max.hysar_over_hmd", "dr.hysar_over_hmd"}) {
@@ -215,9 +215,9 @@ TEST(Resolution, ThePaperGeometryGives22_6And61_5PixelsPerDegree) {
 TEST(Metrics, VdAreasMatchingRatiosAndMap) {
     ImageRgba8 vi{4, 1, std::vector<uint8_t>(16, 10)}, ref = vi, cap = vi;
     for (int c = 0; c < 3; ++c) {
-        ref.pixels[0 * 4 + c] = 60;  // VD in both
-        cap.pixels[0 * 4 + c] = 31;  // exactly 21 above: counts
-        ref.pixels[1 * 4 + c] = 60;  // VD only in the reference: insufficient
+        ref.pixels[0 * 4 + c] = 60;   // VD in both
+        cap.pixels[0 * 4 + c] = 31;   // exactly 21 above: counts
+        ref.pixels[1 * 4 + c] = 60;   // VD only in the reference: insufficient
         cap.pixels[2 * 4 + c] = 200;  // VD only in the capture: extra
     }
     cap.pixels[3 * 4 + 0] = 255;  // one channel only: not VD
@@ -228,8 +228,8 @@ TEST(Metrics, VdAreasMatchingRatiosAndMap) {
     EXPECT_EQ(a->matching, 1u);
     EXPECT_DOUBLE_EQ(*a->mr1, 0.5);
     EXPECT_DOUBLE_EQ(*a->mr2, 0.5);
-    EXPECT_EQ(a->map.pixels[1], 200);  // green
-    EXPECT_EQ(a->map.pixels[4], 220);  // red
+    EXPECT_EQ(a->map.pixels[1], 200);   // green
+    EXPECT_EQ(a->map.pixels[4], 220);   // red
     EXPECT_EQ(a->map.pixels[10], 255);  // blue
     // No VD anywhere: the ratios are absent, not NaN.
     auto none = vd_areas(vi, vi, vi);
