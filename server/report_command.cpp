@@ -305,11 +305,11 @@ Result<void> run(const Flags& flags) {
             HS_ASSIGN_OR_RETURN(auto hy, sim_sar.capture(render::DisplayMode::kHySAR, *vp));
             const ImageRgba8 ref = optics::to_rgba8(hy.target_dn);
             const ImageRgba8 ref_vi = optics::to_rgba8(hy.target_vi_dn);
-            captures.push_back(labelled(ref, "reference " + vp->name));
+            captures.push_back(labelled(ref, "reference " + vp->name, 3));
             HS_TRY(write_png(rep.out / fmt::format("reference_{}.png", vp == &v1 ? 1 : 2), ref));
             HS_TRY(
                 write_png(rep.out / fmt::format("reference_vi_{}.png", vp == &v1 ? 1 : 2), ref_vi));
-            maps.push_back(labelled(ref_vi, "VI-only reference"));
+            maps.push_back(labelled(ref_vi, "VI-only reference", 3));
             struct ModeCase {
                 const char* name;
                 render::DisplayMode mode;
@@ -327,11 +327,12 @@ Result<void> run(const Flags& flags) {
                 HS_ASSIGN_OR_RETURN(row.lab,
                                     optics::lab_differences(ref, cap, row.areas.reference,
                                                             optics::PixelEncoding::kLinear));
-                captures.push_back(labelled(cap, m.name));
+                captures.push_back(labelled(cap, m.name, 3));
                 maps.push_back(labelled(
                     row.areas.map,
                     fmt::format("MR1 {:.1f}%  MR2 {:.1f}%", 100 * row.areas.mr1.value_or(0),
-                                100 * row.areas.mr2.value_or(0))));
+                                100 * row.areas.mr2.value_or(0)),
+                    3));
                 rep.data["fig11"][vp == &v1 ? "viewpoint1" : "viewpoint2"][m.name] = {
                     {"mr1", row.areas.mr1.value_or(-1)},
                     {"mr2", row.areas.mr2.value_or(-1)},
