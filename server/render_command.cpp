@@ -15,6 +15,7 @@
 #include "core/draw.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "eval_common.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
@@ -75,18 +76,6 @@ std::vector<std::string> split(const std::string& s) {
     return out;
 }
 
-Result<double> parse_number(const std::string& flag, const std::string& s) {
-    try {
-        size_t used = 0;
-        double v = std::stod(s, &used);
-        if (used == s.size() && std::isfinite(v))
-            return v;
-    } catch (...) {
-    }
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("{}: '{}' is not a number", flag, s));
-}
-
 Result<Options> parse(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -105,7 +94,7 @@ Result<Options> parse(const std::vector<std::string>& args) {
         } else if (a == "--angles") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             for (const auto& x : split(v)) {
-                HS_ASSIGN_OR_RETURN(double d, parse_number(a, x));
+                HS_ASSIGN_OR_RETURN(double d, parse_double(a, x));
                 o.angles.push_back(d);
             }
             if (o.angles.empty())
@@ -144,7 +133,7 @@ Result<Options> parse(const std::vector<std::string>& args) {
                                   fmt::format("--device: '{}' is not auto, cpu or gpu", v));
         } else if (a == "--white") {
             HS_ASSIGN_OR_RETURN(auto v, value());
-            HS_ASSIGN_OR_RETURN(double w, parse_number(a, v));
+            HS_ASSIGN_OR_RETURN(double w, parse_double(a, v));
             if (!(w > 0))
                 return make_error(ErrorCode::kInvalidArgument, "--white must be > 0");
             o.white = float(w);
@@ -242,7 +231,7 @@ Result<void> run(const Options& o) {
         if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end())
             heights.push_back(*it);
         else {
-            HS_ASSIGN_OR_RETURN(double m, parse_number("--heights", h));
+            HS_ASSIGN_OR_RETURN(double m, parse_double("--heights", h));
             heights.push_back({fmt::format("{:.2f}m", m), m});
         }
     }

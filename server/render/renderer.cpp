@@ -111,10 +111,14 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
         .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr);
+    return build_variant(key, std::move(v), pi, scene_block(sp));
+}
+
+Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Variant v,
+                                                   const gpu::GraphicsPipelineInfo& pi,
+                                                   const gpu::GpuScene& block) {
     HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
     ++pipelines_built_;
-
-    const gpu::GpuScene block = scene_block(sp);
     HS_ASSIGN_OR_RETURN(v.scene_block,
                         gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
                                             pi.name + ".scene"));
@@ -164,17 +168,9 @@ Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> shee
     pi.spec.set_int(HS_SC_PASS_KIND, int(PassKind::kCaptureGeometry))
         .set_int(HS_SC_NUM_LIGHTS, 0)
         .set_bool(HS_SC_PROP_SHEEN, sheen_exponent.has_value());
-    HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
-    ++pipelines_built_;
     gpu::GpuScene block = scene_block(scene::Specular{});
     block.sheen_params = glm::vec4(float(sheen_exponent.value_or(1.0)), 0, 0, 0);
-    HS_ASSIGN_OR_RETURN(v.scene_block,
-                        gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
-                                            pi.name + ".scene"));
-    v.scene_block.write(&block, sizeof(block));
-    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
-    auto [it, inserted] = variants_.emplace(key, std::move(v));
-    return &it->second;
+    return build_variant(key, std::move(v), pi, block);
 }
 
 Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slot) {

@@ -99,6 +99,9 @@ private:
     enum class PassKind { kVi = 0, kVd = 1, kCaptureGeometry = 2 };
     Result<Variant*> variant(bool vd, const scene::Specular& spec);
     Result<Variant*> geometry_variant(std::optional<double> sheen_exponent);
+    // Builds the pipeline and its scene block, and keeps the variant under `key`.
+    Result<Variant*> build_variant(const std::string& key, Variant v,
+                                   const gpu::GraphicsPipelineInfo& pi, const gpu::GpuScene& block);
     // The slot-th target of this size and format (a batch needs one per eye).
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot,
