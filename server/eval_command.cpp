@@ -60,6 +60,20 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
     return f;
 }
 
+int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                   const std::function<Result<void>(const Flags&)>& body) {
+    auto flags = parse_flags(args, with_value);
+    if (!flags.ok()) {
+        log::error("{}", flags.error().message);
+        return 2;
+    }
+    if (auto r = body(*flags); !r.ok()) {
+        log::error("{}", r.error().message);
+        return 1;
+    }
+    return 0;
+}
+
 Result<double> parse_double(const std::string& flag, const std::string& s) {
     try {
         size_t used = 0;
@@ -297,115 +311,74 @@ const char* kEvalHelp =
     "  report      [--scene FILE] [--params FILE] [--viewer NAME] [--out DIR]\n"
     "              all of the above on the simulated installation: out/report/index.html\n";
 
-int eval_optics(const std::vector<std::string>& args) {
-    auto flags = parse_flags(args, {"--params", "--out"});
-    if (!flags.ok()) {
-        log::error("{}", flags.error().message);
-        return 2;
-    }
-    auto paper = load_params(*flags);
-    if (!paper.ok()) {
-        log::error("{}", paper.error().message);
-        return 1;
-    }
-    const auto t = optics::compute_table2(paper->levels, paper->alpha, paper->environment);
+Result<void> eval_optics(const Flags& flags) {
+    HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
+    const auto t = optics::compute_table2(paper.levels, paper.alpha, paper.environment);
     std::printf("Table 2 from eqs. (5)-(6): P^M %g, P^m %g, H^M %g, H^m %g, alpha %g, E %g\n\n%s\n",
-                paper->levels.projector_max, paper->levels.projector_min, paper->levels.hmd_max,
-                paper->levels.hmd_min, paper->alpha, paper->environment, table2_text(t).c_str());
-    const auto checks = optics::check_table2(*paper);
+                paper.levels.projector_max, paper.levels.projector_min, paper.levels.hmd_max,
+                paper.levels.hmd_min, paper.alpha, paper.environment, table2_text(t).c_str());
+    const auto checks = optics::check_table2(paper);
     if (!checks.empty())
         std::printf("the paper's printed values:\n%s", checks_text(checks).c_str());
-    if (flags->has("--out")) {
-        const fs::path out = flags->get("--out", "");
-        if (auto r = make_dirs(out); !r.ok()) {
-            log::error("{}", r.error().message);
-            return 1;
-        }
-        if (auto r = write_text(out / "table2.csv", table2_csv(t)); !r.ok()) {
-            log::error("{}", r.error().message);
-            return 1;
-        }
-    }
-    return 0;
-}
-
-int eval_resolution(const std::vector<std::string>& args) {
-    auto flags = parse_flags(args, {"--params", "--scene", "--viewer", "--out"});
-    if (!flags.ok()) {
-        log::error("{}", flags.error().message);
-        return 2;
-    }
-    auto run = [&]() -> Result<void> {
-        HS_ASSIGN_OR_RETURN(auto paper, load_params(*flags));
-        HS_ASSIGN_OR_RETURN(auto s, load_scene(*flags));
-        HS_ASSIGN_OR_RETURN(auto viewer, pick_viewer(s, *flags));
-        HS_ASSIGN_OR_RETURN(auto rows, resolution_rows(paper, s, *viewer));
-        std::printf("%s", resolution_text(rows).c_str());
-        if (flags->has("--out")) {
-            HS_TRY(make_dirs(flags->get("--out", "")));
-            HS_TRY(write_text(fs::path(flags->get("--out", "")) / "resolution.csv",
-                              resolution_csv(rows)));
-        }
-        return {};
-    };
-    if (auto r = run(); !r.ok()) {
-        log::error("{}", r.error().message);
-        return 1;
-    }
-    return 0;
-}
-
-int eval_compare(const std::vector<std::string>& args) {
-    auto flags = parse_flags(args, {"--reference", "--reference-vi", "--capture", "--name",
-                                    "--encoding", "--threshold", "--out"});
-    if (!flags.ok()) {
-        log::error("{}", flags.error().message);
-        return 2;
-    }
-    auto run = [&]() -> Result<void> {
-        const Flags& f = *flags;
-        if (!f.has("--reference") || !f.has("--reference-vi") || !f.has("--capture"))
-            return make_error(ErrorCode::kInvalidArgument,
-                              "compare needs --reference, --reference-vi and --capture");
-        const std::string enc = f.get("--encoding", "linear");
-        if (enc != "linear" && enc != "srgb")
-            return make_error(ErrorCode::kInvalidArgument,
-                              fmt::format("--encoding: '{}' is not linear or srgb", enc));
-        HS_ASSIGN_OR_RETURN(double thr, parse_double("--threshold", f.get("--threshold", "20")));
-        HS_ASSIGN_OR_RETURN(auto ref, read_png(f.get("--reference", "")));
-        HS_ASSIGN_OR_RETURN(auto ref_vi, read_png(f.get("--reference-vi", "")));
-        const fs::path out = f.get("--out", "out/compare");
+    if (flags.has("--out")) {
+        const fs::path out = flags.get("--out", "");
         HS_TRY(make_dirs(out));
-        std::vector<CompareRow> rows;
-        const auto& caps = f.all("--capture");
-        const auto& names = f.all("--name");
-        for (size_t i = 0; i < caps.size(); ++i) {
-            HS_ASSIGN_OR_RETURN(auto cap, read_png(caps[i]));
-            CompareRow row;
-            row.name = i < names.size() ? names[i] : fs::path(caps[i]).stem().string();
-            auto areas = optics::vd_areas(ref, ref_vi, cap, int(std::lround(thr)));
-            if (!areas.ok())
-                return make_error(areas.error().code,
-                                  fmt::format("{}: {}", caps[i], areas.error().message));
-            row.areas = std::move(*areas);
-            HS_ASSIGN_OR_RETURN(
-                row.lab, optics::lab_differences(ref, cap, row.areas.reference,
-                                                 enc == "srgb" ? optics::PixelEncoding::kSrgb
-                                                               : optics::PixelEncoding::kLinear));
-            HS_TRY(write_png(out / fmt::format("map_{}.png", row.name), row.areas.map));
-            rows.push_back(std::move(row));
-        }
-        std::printf("%s", compare_text(rows).c_str());
-        HS_TRY(write_text(out / "compare.csv", compare_csv(rows, "")));
-        HS_TRY(write_png(out / "lab.png", fig12_plot(rows)));
-        std::printf("wrote %s/compare.csv, lab.png and map_<name>.png\n", out.string().c_str());
-        return {};
-    };
-    if (auto r = run(); !r.ok()) {
-        log::error("{}", r.error().message);
-        return 1;
+        HS_TRY(write_text(out / "table2.csv", table2_csv(t)));
     }
-    return 0;
+    return {};
+}
+
+Result<void> eval_resolution(const Flags& flags) {
+    HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
+    HS_ASSIGN_OR_RETURN(auto s, load_scene(flags));
+    HS_ASSIGN_OR_RETURN(auto viewer, pick_viewer(s, flags));
+    HS_ASSIGN_OR_RETURN(auto rows, resolution_rows(paper, s, *viewer));
+    std::printf("%s", resolution_text(rows).c_str());
+    if (flags.has("--out")) {
+        HS_TRY(make_dirs(flags.get("--out", "")));
+        HS_TRY(
+            write_text(fs::path(flags.get("--out", "")) / "resolution.csv", resolution_csv(rows)));
+    }
+    return {};
+}
+
+Result<void> eval_compare(const Flags& f) {
+    if (!f.has("--reference") || !f.has("--reference-vi") || !f.has("--capture"))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "compare needs --reference, --reference-vi and --capture");
+    const std::string enc = f.get("--encoding", "linear");
+    if (enc != "linear" && enc != "srgb")
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("--encoding: '{}' is not linear or srgb", enc));
+    HS_ASSIGN_OR_RETURN(double thr, parse_double("--threshold", f.get("--threshold", "20")));
+    HS_ASSIGN_OR_RETURN(auto ref, read_png(f.get("--reference", "")));
+    HS_ASSIGN_OR_RETURN(auto ref_vi, read_png(f.get("--reference-vi", "")));
+    const fs::path out = f.get("--out", "out/compare");
+    HS_TRY(make_dirs(out));
+    std::vector<CompareRow> rows;
+    const auto& caps = f.all("--capture");
+    const auto& names = f.all("--name");
+    for (size_t i = 0; i < caps.size(); ++i) {
+        HS_ASSIGN_OR_RETURN(auto cap, read_png(caps[i]));
+        CompareRow row;
+        row.name = i < names.size() ? names[i] : fs::path(caps[i]).stem().string();
+        auto areas = optics::vd_areas(ref, ref_vi, cap, int(std::lround(thr)));
+        if (!areas.ok())
+            return make_error(areas.error().code,
+                              fmt::format("{}: {}", caps[i], areas.error().message));
+        row.areas = std::move(*areas);
+        HS_ASSIGN_OR_RETURN(
+            row.lab, optics::lab_differences(ref, cap, row.areas.reference,
+                                             enc == "srgb" ? optics::PixelEncoding::kSrgb
+                                                           : optics::PixelEncoding::kLinear));
+        HS_TRY(write_png(out / fmt::format("map_{}.png", row.name), row.areas.map));
+        rows.push_back(std::move(row));
+    }
+    std::printf("%s", compare_text(rows).c_str());
+    HS_TRY(write_text(out / "compare.csv", compare_csv(rows, "")));
+    HS_TRY(write_png(out / "lab.png", fig12_plot(rows)));
+    std::printf("wrote %s/compare.csv, lab.png and map_<name>.png\n", out.string().c_str());
+    return {};
 }
 
 }  // namespace
@@ -417,13 +390,16 @@ int run_eval(const std::vector<std::string>& args) {
     }
     const std::vector<std::string> rest(args.begin() + 1, args.end());
     if (args[0] == "optics")
-        return eval_optics(rest);
+        return run_subcommand(rest, {"--params", "--out"}, eval_optics);
     if (args[0] == "resolution")
-        return eval_resolution(rest);
+        return run_subcommand(rest, {"--params", "--scene", "--viewer", "--out"}, eval_resolution);
     if (args[0] == "compare")
-        return eval_compare(rest);
+        return run_subcommand(rest,
+                              {"--reference", "--reference-vi", "--capture", "--name", "--encoding",
+                               "--threshold", "--out"},
+                              eval_compare);
     if (args[0] == "report")
-        return run_eval_report(rest);
+        return run_subcommand(rest, {"--scene", "--params", "--viewer", "--out"}, eval_report);
     std::fprintf(stderr, "hysar eval: unknown subcommand '%s'\n\n%s", args[0].c_str(), kEvalHelp);
     return 2;
 }

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -26,6 +27,9 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
                           const std::vector<std::string>& with_value,
                           const std::vector<std::string>& switches = {});
 Result<double> parse_double(const std::string& flag, const std::string& text);
+// Parses the flags (exit code 2 on a bad one), runs `body`, logs its error (exit code 1).
+int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                   const std::function<Result<void>(const Flags&)>& body);
 
 Result<optics::PaperOptics> load_params(const Flags& flags);
 Result<scene::Scene> load_scene(const Flags& flags);
@@ -62,6 +66,7 @@ std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& 
 // Fig. 12: mean +- sd of dL, da, db per method, and Delta E 2000 histograms.
 ImageRgba8 fig12_plot(const std::vector<CompareRow>& rows);
 
-int run_eval_report(const std::vector<std::string>& args);
+// `hysar eval report` (server/report_command.cpp).
+Result<void> eval_report(const Flags& flags);
 
 }  // namespace hs::cli

@@ -198,14 +198,6 @@ json stats_json(const shading::ErrorStats& e) {
                 {"non_finite", e.non_finite}};
 }
 
-ImageRgba32f add_images(const ImageRgba32f& a, const ImageRgba32f& b) {
-    ImageRgba32f r = a;
-    for (size_t i = 0; i < r.pixels.size(); ++i)
-        if (i % 4 != 3)
-            r.pixels[i] += b.pixels[i];
-    return r;
-}
-
 // The interior of a comparison excludes silhouette pixels, where the tessellated mesh and the
 // exact hemisphere cover different pixels.
 constexpr double kInteriorMinNdotV = 0.1;
@@ -367,7 +359,7 @@ Result<void> run(const Options& o) {
                     if (e == 1) {
                         const int y = row0 + int(mi + 1) * (cell_h + gap);
                         blit(sheet,
-                             downscale(tonemap_srgb8(add_images(vi_eye.image, vd.image), o.white),
+                             downscale(tonemap_srgb8(added(vi_eye.image, vd.image), o.white),
                                        factor),
                              x, y);
                     }

@@ -32,38 +32,6 @@ ImageRgba8 labelled(const ImageRgba8& img, const std::string& label, uint32_t fa
     return out;
 }
 
-// Composite error against the target over usable prop pixels (docs/OPTICS.md).
-struct CompositeError {
-    std::string variant;
-    uint64_t pixels = 0, excluded = 0;
-    double rmse_dn = 0, max_dn = 0, peak_dn = 0;
-};
-
-CompositeError composite_error(const std::string& variant, const render::SimulatedView& v,
-                               const std::vector<uint8_t>& usable) {
-    CompositeError e;
-    e.variant = variant;
-    double ss = 0;
-    const auto& geo = v.geometry;
-    for (size_t i = 0, n = size_t(geo.width) * geo.height; i < n; ++i) {
-        if (!(geo.pixels[i * 4 + 3] > 0.5f))
-            continue;
-        if (!usable[i]) {
-            ++e.excluded;
-            continue;
-        }
-        for (int c = 0; c < 3; ++c) {
-            const double d = double(v.capture.dn.pixels[i * 4 + c]) - v.target_dn.pixels[i * 4 + c];
-            ss += d * d;
-            e.max_dn = std::max(e.max_dn, std::fabs(d));
-            e.peak_dn = std::max(e.peak_dn, double(v.target_dn.pixels[i * 4 + c]));
-        }
-        ++e.pixels;
-    }
-    e.rmse_dn = e.pixels ? std::sqrt(ss / double(3 * e.pixels)) : 0.0;
-    return e;
-}
-
 std::string html_escape(const std::string& s) {
     std::string o;
     for (char c : s) {
@@ -97,7 +65,9 @@ struct Report {
     }
 };
 
-Result<void> run(const Flags& flags) {
+}  // namespace
+
+Result<void> eval_report(const Flags& flags) {
     const auto t_start = std::chrono::steady_clock::now();
     HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
     HS_ASSIGN_OR_RETURN(auto s, load_scene(flags));
@@ -184,10 +154,9 @@ Result<void> run(const Flags& flags) {
     log::info("[3/6] composite and compensations");
     {
         HS_ASSIGN_OR_RETURN(auto full, sim.capture(render::DisplayMode::kHySAR, v1));
-        std::vector<uint8_t> usable(full.capture.unusable.size());
-        for (size_t i = 0; i < usable.size(); ++i)
-            usable[i] = !full.capture.unusable[i] && !full.target_saturated[i];
-        std::vector<CompositeError> errs{composite_error("all compensations", full, usable)};
+        const std::vector<uint8_t> usable = render::usable_pixels(full);
+        std::vector<std::pair<std::string, render::CompositeError>> errs{
+            {"all compensations", render::composite_error(full, usable)}};
         struct Off {
             const char* name;
             bool scene::Optics::Compensation::*flag;
@@ -200,25 +169,25 @@ Result<void> run(const Flags& flags) {
             scene::Optics o = s.optics;
             o.compensation.*(off.flag) = false;
             HS_ASSIGN_OR_RETURN(auto sv, sim.capture(render::DisplayMode::kHySAR, v1, {}, o));
-            errs.push_back(composite_error(off.name, sv, usable));
+            errs.push_back({off.name, render::composite_error(sv, usable)});
         }
         scene::Optics none = s.optics;
         none.compensation = {false, false, false, false};
         HS_ASSIGN_OR_RETURN(auto sv_none, sim.capture(render::DisplayMode::kHySAR, v1, {}, none));
-        errs.push_back(composite_error("no compensation", sv_none, usable));
+        errs.push_back({"no compensation", render::composite_error(sv_none, usable)});
         std::string text = fmt::format("{:<24}{:>10}{:>10}{:>12}{:>12}{:>12}\n", "variant",
                                        "pixels", "excluded", "RMSE [DN]", "max [DN]", "RMSE/peak");
         std::string csv = "variant,pixels,excluded,rmse_dn,max_dn,peak_dn\n";
-        for (const auto& e : errs) {
-            text += fmt::format("{:<24}{:>10}{:>10}{:>12.2f}{:>12.1f}{:>11.2f}%\n", e.variant,
+        for (const auto& [variant, e] : errs) {
+            text += fmt::format("{:<24}{:>10}{:>10}{:>12.2f}{:>12.1f}{:>11.2f}%\n", variant,
                                 e.pixels, e.excluded, e.rmse_dn, e.max_dn,
                                 e.peak_dn > 0 ? 100.0 * e.rmse_dn / e.peak_dn : 0.0);
-            csv += fmt::format("\"{}\",{},{},{},{},{}\n", e.variant, e.pixels, e.excluded,
-                               e.rmse_dn, e.max_dn, e.peak_dn);
-            rep.data["composite"][e.variant] = {{"rmse_dn", e.rmse_dn},
-                                                {"max_dn", e.max_dn},
-                                                {"pixels", e.pixels},
-                                                {"peak_dn", e.peak_dn}};
+            csv += fmt::format("\"{}\",{},{},{},{},{}\n", variant, e.pixels, e.excluded, e.rmse_dn,
+                               e.max_dn, e.peak_dn);
+            rep.data["composite"][variant] = {{"rmse_dn", e.rmse_dn},
+                                              {"max_dn", e.max_dn},
+                                              {"pixels", e.pixels},
+                                              {"peak_dn", e.peak_dn}};
         }
         HS_TRY(write_text(rep.out / "composite.csv", csv));
         rep.section("HySAR composite against the target",
@@ -380,21 +349,6 @@ Result<void> run(const Flags& flags) {
     HS_TRY(write_text(rep.out / "report.json", rep.data.dump(2)));
     std::printf("wrote %s/index.html (%.1f s)\n", rep.out.string().c_str(), secs);
     return {};
-}
-
-}  // namespace
-
-int run_eval_report(const std::vector<std::string>& args) {
-    auto flags = parse_flags(args, {"--scene", "--params", "--viewer", "--out"});
-    if (!flags.ok()) {
-        log::error("{}", flags.error().message);
-        return 2;
-    }
-    if (auto r = run(*flags); !r.ok()) {
-        log::error("{}", r.error().message);
-        return 1;
-    }
-    return 0;
 }
 
 }  // namespace hs::cli

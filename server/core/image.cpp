@@ -16,6 +16,8 @@
 #include <ImfInputFile.h>
 #include <ImfOutputFile.h>
 
+#include "core/check.hpp"
+
 namespace hs {
 
 float srgb_oetf(float x) {
@@ -196,6 +198,23 @@ Result<ImageRgba32f> read_exr(const std::filesystem::path& path) {
         return make_error(ErrorCode::kIo,
                           fmt::format("{}: could not read EXR: {}", path.string(), e.what()));
     }
+}
+
+ImageRgba32f added(const ImageRgba32f& a, const ImageRgba32f& b) {
+    HS_CHECK(a.width == b.width && a.height == b.height, "added: images of different sizes");
+    ImageRgba32f out = a;
+    for (size_t i = 0; i < out.pixels.size(); ++i)
+        if (i % 4 != 3)
+            out.pixels[i] += b.pixels[i];
+    return out;
+}
+
+ImageRgba32f scaled(const ImageRgba32f& image, double s) {
+    ImageRgba32f out = image;
+    for (size_t i = 0; i < out.pixels.size(); ++i)
+        if (i % 4 != 3)
+            out.pixels[i] = float(out.pixels[i] * s);
+    return out;
 }
 
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x0, int y0) {

@@ -63,6 +63,11 @@ Result<ImageRgba8> read_png(const std::filesystem::path& path);
 Result<void> write_exr(const std::filesystem::path& path, const ImageRgba32f& image);
 Result<ImageRgba32f> read_exr(const std::filesystem::path& path);
 
+// RGB of a + b, and RGB of `image` times s; alpha is kept from the first argument. The sizes
+// must agree (a broken contract otherwise).
+ImageRgba32f added(const ImageRgba32f& a, const ImageRgba32f& b);
+ImageRgba32f scaled(const ImageRgba32f& image, double s);
+
 // Copies `tile` into `canvas` with its top-left corner at (x, y), clipped to the canvas.
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x, int y);
 

@@ -7,6 +7,8 @@
 
 #include <fmt/format.h>
 
+#include "core/check.hpp"
+
 namespace hs::optics {
 
 namespace {
@@ -35,9 +37,7 @@ bool sample(const ImageRgba32f& img, double u, double v, double out[4]) {
             (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
     return true;
 }
-}  // namespace
 
-namespace {
 // Extends the drive `rings` pixels beyond the lit prop, each new pixel the mean of its lit
 // 8-neighbours, so that a camera pixel whose bilinear footprint in the projector image straddles
 // the silhouette does not mix in black. The spill lands on whatever is behind the prop.
@@ -136,7 +136,7 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("the headset image is {} but the camera is {}",
                                       size_str(dev.hmd), size_str(geo)));
-    if (!(g.g_ref > 0.0) && !dev.projector.empty() && o.effects.projector_falloff)
+    if (!(g.g_ref > 0.0) && dev.projector_present && o.effects.projector_falloff)
         return make_error(ErrorCode::kInvalidArgument, "reference falloff g_ref must be > 0");
     if (!(alpha >= 0.0 && alpha <= 1.0))
         return make_error(ErrorCode::kInvalidArgument,
@@ -219,7 +219,9 @@ double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
                             const ImageRgba32f& geo, double g_ref) {
     const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     const double rho_min = std::max(std::min({rho.r, rho.g, rho.b}), 1e-6);
-    const size_t n = std::min(size_t(image.width) * image.height, geo.pixels.size() / 4);
+    HS_CHECK(geo.width == image.width && geo.height == image.height,
+             "auto_scene_to_signal: the image and the projector geometry differ in size");
+    const size_t n = size_t(image.width) * image.height;
     double g_max = 0;
     for (size_t i = 0; i < n; ++i)
         if (geo.pixels[i * 4 + 3] > 0.5f)
@@ -239,6 +241,8 @@ double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
 
 ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
                              const ImageRgba32f& geo, double g_ref, double hmd_min_through) {
+    HS_CHECK(geo.width == target.width && geo.height == target.height,
+             "projector_drive: the target and the projector geometry differ in size");
     const scene::DeviceLevels d = effective_levels(o);
     const auto& comp = o.compensation;
     const glm::dvec3 rho = comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
@@ -290,14 +294,6 @@ ImageRgba32f hmd_drive(const scene::Optics& o, const ImageRgba32f& target) {
         }
         out.pixels[i * 4 + 3] = clip ? 1.0f : 0.0f;
     }
-    return out;
-}
-
-ImageRgba32f scaled(const ImageRgba32f& image, double s) {
-    ImageRgba32f out = image;
-    for (size_t i = 0; i < out.pixels.size(); ++i)
-        if (i % 4 != 3)
-            out.pixels[i] = float(out.pixels[i] * s);
     return out;
 }
 

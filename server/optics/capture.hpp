@@ -79,7 +79,4 @@ ImageRgba32f projector_drive(const scene::Optics& optics, const ImageRgba32f& ta
 // Headset drive for a wanted headset signal `target` (DN/s; camera pixels).
 ImageRgba32f hmd_drive(const scene::Optics& optics, const ImageRgba32f& target);
 
-// Multiplies the RGB of an image by s (alpha kept).
-ImageRgba32f scaled(const ImageRgba32f& image, double s);
-
 }  // namespace hs::optics

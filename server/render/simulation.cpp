@@ -1,24 +1,15 @@
 #include "render/simulation.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 #include <fmt/format.h>
+
+#include "core/check.hpp"
 
 #include "scene/camera.hpp"
 
 namespace hs::render {
-
-const char* to_string(DisplayMode m) {
-    switch (m) {
-        case DisplayMode::kHySAR:
-            return "hysar";
-        case DisplayMode::kSAR:
-            return "sar";
-        case DisplayMode::kHmdOnly:
-            return "hmd-only";
-        case DisplayMode::kDiffuseOnly:
-            return "diffuse-only";
-    }
-    return "?";
-}
 
 Result<Viewpoint> viewing_viewpoint(const scene::Scene& s, const scene::ViewerProfile& viewer,
                                     double angle_deg, const std::string& height) {
@@ -30,17 +21,6 @@ Result<Viewpoint> viewing_viewpoint(const scene::Scene& s, const scene::ViewerPr
     return Viewpoint{fmt::format("{:+.0f}deg {}", angle_deg, height), scene::eye_intrinsics(viewer),
                      pose};
 }
-
-namespace {
-// RGB a + b (alpha of a).
-ImageRgba32f sum(const ImageRgba32f& a, const ImageRgba32f& b) {
-    ImageRgba32f out = a;
-    for (size_t i = 0; i < out.pixels.size(); ++i)
-        if (i % 4 != 3)
-            out.pixels[i] += b.pixels[i];
-    return out;
-}
-}  // namespace
 
 Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
                                     const scene::ViewerProfile& viewer,
@@ -63,7 +43,7 @@ Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
         if (fit_sar) {
             HS_ASSIGN_OR_RETURN(RenderResult vd, r.render_projector_vd(s.material.specular,
                                                                        fit_sar->camera.position));
-            fit = sum(fit, vd.image);
+            fit = added(fit, vd.image);
         }
         sim.k_ = optics::auto_scene_to_signal(s.optics, fit, sim.projector_geometry_, sim.g_ref_);
     }
@@ -87,40 +67,82 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
     HS_ASSIGN_OR_RETURN(RenderResult ls, renderer_->render_eye(spec, view.intrinsics, view.camera));
 
     // The target: the reference material through the same headset (alpha) and camera.
-    const ImageRgba32f target_vi = optics::scaled(ld.image, alpha_ * k_);
-    const ImageRgba32f target = sum(target_vi, optics::scaled(ls.image, alpha_ * k_));
+    const ImageRgba32f target_vi = scaled(ld.image, alpha_ * k_);
+    const ImageRgba32f target = added(target_vi, scaled(ls.image, alpha_ * k_));
     out.target_dn = optics::expose(o, target, &out.target_saturated);
     out.target_vi_dn = optics::expose(o, target_vi);
 
     const scene::DeviceLevels lv = optics::effective_levels(o);
     const double hmd_min_through = alpha_ > 0 ? lv.hmd_min / alpha_ : 0.0;
+    // The VI frame's drive depends only on the optics: computed once for the scene's own.
+    auto vi_drive = [&]() -> const ImageRgba32f& {
+        if (override_optics) {
+            override_drive_ = optics::projector_drive(o, scaled(vi_projector_, k_),
+                                                      projector_geometry_, g_ref_, hmd_min_through);
+            return override_drive_;
+        }
+        if (vi_drive_.empty())
+            vi_drive_ = optics::projector_drive(o, scaled(vi_projector_, k_), projector_geometry_,
+                                                g_ref_, hmd_min_through);
+        return vi_drive_;
+    };
     const double alpha_c = o.compensation.hmd_alpha ? alpha_ : 1.0;
     optics::DeviceImages dev;
     switch (mode) {
         case DisplayMode::kHySAR:
         case DisplayMode::kDiffuseOnly:
-            dev.projector = optics::projector_drive(o, optics::scaled(vi_projector_, k_),
-                                                    projector_geometry_, g_ref_, hmd_min_through);
+            dev.projector = vi_drive();
             if (mode == DisplayMode::kHySAR)
-                dev.hmd = optics::hmd_drive(o, optics::scaled(ls.image, alpha_c * k_));
+                dev.hmd = optics::hmd_drive(o, scaled(ls.image, alpha_c * k_));
             break;
         case DisplayMode::kSAR: {
             const glm::dvec3 eye = (baked ? *baked : view).camera.position;
             HS_ASSIGN_OR_RETURN(RenderResult vd, renderer_->render_projector_vd(spec, eye));
-            dev.projector =
-                optics::projector_drive(o, optics::scaled(sum(vi_projector_, vd.image), k_),
-                                        projector_geometry_, g_ref_, hmd_min_through);
+            dev.projector = optics::projector_drive(o, scaled(added(vi_projector_, vd.image), k_),
+                                                    projector_geometry_, g_ref_, hmd_min_through);
             break;
         }
         case DisplayMode::kHmdOnly:
             dev.projector_present = false;
-            dev.hmd = optics::hmd_drive(o, optics::scaled(sum(ld.image, ls.image), alpha_c * k_));
+            dev.hmd = optics::hmd_drive(o, scaled(added(ld.image, ls.image), alpha_c * k_));
             break;
     }
     HS_ASSIGN_OR_RETURN(
         out.capture,
         optics::simulate_capture(o, alpha_, optics::CaptureGeometry{out.geometry, g_ref_}, dev));
     return out;
+}
+
+std::vector<uint8_t> usable_pixels(const SimulatedView& v) {
+    std::vector<uint8_t> usable(v.capture.unusable.size());
+    for (size_t i = 0; i < usable.size(); ++i)
+        usable[i] =
+            v.geometry.pixels[i * 4 + 3] > 0.5f && !v.capture.unusable[i] && !v.target_saturated[i];
+    return usable;
+}
+
+CompositeError composite_error(const SimulatedView& v, const std::vector<uint8_t>& usable) {
+    HS_CHECK(usable.size() == size_t(v.geometry.width) * v.geometry.height,
+             "composite_error: the mask and the view differ in size");
+    CompositeError e;
+    double ss = 0;
+    for (size_t i = 0; i < usable.size(); ++i) {
+        if (!(v.geometry.pixels[i * 4 + 3] > 0.5f))
+            continue;
+        if (!usable[i]) {
+            ++e.excluded;
+            continue;
+        }
+        for (int c = 0; c < 3; ++c) {
+            const double d = double(v.capture.dn.pixels[i * 4 + c]) - v.target_dn.pixels[i * 4 + c];
+            ss += d * d;
+            e.max_dn = std::max(e.max_dn, std::fabs(d));
+            e.peak_dn = std::max(e.peak_dn, double(v.target_dn.pixels[i * 4 + c]));
+        }
+        ++e.pixels;
+    }
+    e.rmse_dn = e.pixels ? std::sqrt(ss / double(3 * e.pixels)) : 0.0;
+    return e;
 }
 
 }  // namespace hs::render

@@ -20,7 +20,6 @@
 namespace hs::render {
 
 enum class DisplayMode { kHySAR, kSAR, kHmdOnly, kDiffuseOnly };
-const char* to_string(DisplayMode mode);
 
 // A camera placed at a viewer's eye, with that eye's intrinsics.
 struct Viewpoint {
@@ -65,8 +64,20 @@ private:
     scene::Optics optics_;
     double alpha_ = 1.0;
     ImageRgba32f vi_projector_, projector_geometry_;
+    ImageRgba32f vi_drive_;        // the VI frame's drive under the scene's optics, once made
+    ImageRgba32f override_drive_;  // the same under the last overriding optics
     double g_ref_ = 0, k_ = 0;
 };
+
+// The capture against its target (docs/OPTICS.md): over prop pixels that `usable` keeps, in
+// camera values; prop pixels it drops are counted as excluded.
+struct CompositeError {
+    uint64_t pixels = 0, excluded = 0;
+    double rmse_dn = 0, max_dn = 0, peak_dn = 0;
+};
+// Prop pixels where neither device clipped and neither the capture nor the target saturated.
+std::vector<uint8_t> usable_pixels(const SimulatedView& view);
+CompositeError composite_error(const SimulatedView& view, const std::vector<uint8_t>& usable);
 
 // The viewpoint of the scene's viewing section (angle about the target, named or metric
 // height), at the head's centre, with the viewer's eye intrinsics.

@@ -202,14 +202,14 @@ TEST(Resolution, ThePaperGeometryGives22_6And61_5PixelsPerDegree) {
     ASSERT_TRUE(q.ok()) << q.error().message;
     EXPECT_NEAR(q->px_per_deg(), 61.5, 0.1);
     EXPECT_NEAR(q->px_per_deg() / p->px_per_deg(), 2.72, 0.02);
-    // A camera that sees only half the headset's rows counts only those.
+    // A camera that sees only half the headset's rows counts only those, over its own view.
     CameraView narrow = cam;
-    narrow.intrinsics = scene::intrinsics_from_fov(1280, 720, 20 * M_PI / 180,
-                                                   2 * std::atan(std::tan(5.85 * M_PI / 180) / 2));
+    const double narrow_fov = 2 * std::atan(std::tan(5.85 * M_PI / 180) / 2);
+    narrow.intrinsics = scene::intrinsics_from_fov(1280, 720, 20 * M_PI / 180, narrow_fov);
     auto r = hmd_density(hmd, narrow);
     ASSERT_TRUE(r.ok());
     EXPECT_NEAR(r->region_px, 360, 1.0);
-    EXPECT_NEAR(r->px_per_deg(), 720 / 11.7 * (11.7 / 2) / r->region_deg, 0.5);
+    EXPECT_NEAR(r->region_deg, narrow_fov * 180 / M_PI, 1e-6);
 }
 
 TEST(Metrics, VdAreasMatchingRatiosAndMap) {
