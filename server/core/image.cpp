@@ -217,6 +217,56 @@ ImageRgba32f scaled(const ImageRgba32f& image, double s) {
     return out;
 }
 
+bool sample_bilinear(const ImageRgba32f& img, double u, double v, double out[4]) {
+    if (img.empty() || !(u >= -0.5 && v >= -0.5 && u <= img.width - 0.5 && v <= img.height - 0.5))
+        return false;
+    const double x = std::clamp(u, 0.0, double(img.width - 1));
+    const double y = std::clamp(v, 0.0, double(img.height - 1));
+    const uint32_t x0 = uint32_t(x), y0 = uint32_t(y);
+    const uint32_t x1 = std::min(x0 + 1, img.width - 1), y1 = std::min(y0 + 1, img.height - 1);
+    const double fx = x - x0, fy = y - y0;
+    const float* p00 = &img.pixels[img.index(x0, y0)];
+    const float* p10 = &img.pixels[img.index(x1, y0)];
+    const float* p01 = &img.pixels[img.index(x0, y1)];
+    const float* p11 = &img.pixels[img.index(x1, y1)];
+    for (int c = 0; c < 4; ++c)
+        out[c] =
+            (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
+    return true;
+}
+
+void bleed_into(ImageRgba32f& image, std::vector<uint8_t> have, int rings) {
+    const uint32_t w = image.width, h = image.height;
+    HS_CHECK(have.size() == size_t(w) * h, "bleed_into: the mask and the image differ in size");
+    for (int ring = 0; ring < rings; ++ring) {
+        std::vector<uint8_t> next = have;
+        for (uint32_t y = 0; y < h; ++y)
+            for (uint32_t x = 0; x < w; ++x) {
+                const size_t i = size_t(y) * w + x;
+                if (have[i])
+                    continue;
+                double sum[3] = {0, 0, 0};
+                int n = 0;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int xx = int(x) + dx, yy = int(y) + dy;
+                        if (xx < 0 || yy < 0 || xx >= int(w) || yy >= int(h))
+                            continue;
+                        const size_t j = size_t(yy) * w + xx;
+                        if (!have[j])
+                            continue;
+                        for (int c = 0; c < 3; ++c) sum[c] += image.pixels[j * 4 + c];
+                        ++n;
+                    }
+                if (n == 0)
+                    continue;
+                for (int c = 0; c < 3; ++c) image.pixels[i * 4 + c] = float(sum[c] / n);
+                next[i] = 1;
+            }
+        have.swap(next);
+    }
+}
+
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x0, int y0) {
     for (uint32_t y = 0; y < tile.height; ++y) {
         int cy = y0 + int(y);

@@ -68,6 +68,14 @@ Result<ImageRgba32f> read_exr(const std::filesystem::path& path);
 ImageRgba32f added(const ImageRgba32f& a, const ImageRgba32f& b);
 ImageRgba32f scaled(const ImageRgba32f& image, double s);
 
+// Bilinear sample of RGBA at continuous pixel coordinates (pixel centres at integers, the
+// OpenCV convention), clamped to the edge pixels within half a pixel; false farther outside.
+bool sample_bilinear(const ImageRgba32f& image, double u, double v, double out[4]);
+
+// Extends `image` `rings` pixels beyond the pixels marked in `have` (one per pixel): each new
+// pixel's RGB is the mean of its marked 8-neighbours, and is marked for the next ring.
+void bleed_into(ImageRgba32f& image, std::vector<uint8_t> have, int rings);
+
 // Copies `tile` into `canvas` with its top-left corner at (x, y), clipped to the canvas.
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x, int y);
 

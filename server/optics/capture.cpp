@@ -18,62 +18,6 @@ std::string size_str(const ImageRgba32f& i) {
     return fmt::format("{}x{}", i.width, i.height);
 }
 
-// Bilinear sample of RGBA at continuous pixel coordinates (OpenCV: centres at integers);
-// false outside the image.
-bool sample(const ImageRgba32f& img, double u, double v, double out[4]) {
-    if (!(u >= -0.5 && v >= -0.5 && u <= img.width - 0.5 && v <= img.height - 0.5))
-        return false;
-    const double x = std::clamp(u, 0.0, double(img.width - 1));
-    const double y = std::clamp(v, 0.0, double(img.height - 1));
-    const uint32_t x0 = uint32_t(x), y0 = uint32_t(y);
-    const uint32_t x1 = std::min(x0 + 1, img.width - 1), y1 = std::min(y0 + 1, img.height - 1);
-    const double fx = x - x0, fy = y - y0;
-    const float* p00 = &img.pixels[img.index(x0, y0)];
-    const float* p10 = &img.pixels[img.index(x1, y0)];
-    const float* p01 = &img.pixels[img.index(x0, y1)];
-    const float* p11 = &img.pixels[img.index(x1, y1)];
-    for (int c = 0; c < 4; ++c)
-        out[c] =
-            (1 - fy) * ((1 - fx) * p00[c] + fx * p10[c]) + fy * ((1 - fx) * p01[c] + fx * p11[c]);
-    return true;
-}
-
-// Extends the drive `rings` pixels beyond the lit prop, each new pixel the mean of its lit
-// 8-neighbours, so that a camera pixel whose bilinear footprint in the projector image straddles
-// the silhouette does not mix in black. The spill lands on whatever is behind the prop.
-void bleed_edges(ImageRgba32f& drive, const ImageRgba32f& geo, int rings) {
-    const uint32_t w = drive.width, h = drive.height;
-    std::vector<uint8_t> have(size_t(w) * h, 0);
-    for (size_t i = 0; i < have.size(); ++i)
-        have[i] = geo.pixels[i * 4 + 3] > 0.5f && geo.pixels[i * 4 + 2] > 0.0f;
-    for (int ring = 0; ring < rings; ++ring) {
-        std::vector<uint8_t> next = have;
-        for (uint32_t y = 0; y < h; ++y)
-            for (uint32_t x = 0; x < w; ++x) {
-                const size_t i = size_t(y) * w + x;
-                if (have[i])
-                    continue;
-                double sum[3] = {0, 0, 0};
-                int n = 0;
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const int xx = int(x) + dx, yy = int(y) + dy;
-                        if (xx < 0 || yy < 0 || xx >= int(w) || yy >= int(h))
-                            continue;
-                        const size_t j = size_t(yy) * w + xx;
-                        if (!have[j])
-                            continue;
-                        for (int c = 0; c < 3; ++c) sum[c] += drive.pixels[j * 4 + c];
-                        ++n;
-                    }
-                if (n == 0)
-                    continue;
-                for (int c = 0; c < 3; ++c) drive.pixels[i * 4 + c] = float(sum[c] / n);
-                next[i] = 1;
-            }
-        have.swap(next);
-    }
-}
 }  // namespace
 
 Result<double> reference_falloff(const ImageRgba32f& geometry, const scene::Intrinsics& k) {
@@ -82,7 +26,7 @@ Result<double> reference_falloff(const ImageRgba32f& geometry, const scene::Intr
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("projector geometry is {} but the projector is {}x{}",
                                       size_str(geometry), k.width, k.height));
-    if (!sample(geometry, k.cx, k.cy, s) || !(s[3] > 0.5) || !(s[2] > 0.0))
+    if (!sample_bilinear(geometry, k.cx, k.cy, s) || !(s[3] > 0.5) || !(s[2] > 0.0))
         return make_error(ErrorCode::kInvalidArgument,
                           "the projector's principal ray does not light the prop: the reference "
                           "point of the projector levels is undefined");
@@ -175,7 +119,7 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
                 // Light reaching the prop: projector (drive or black level) and the room.
                 double pd[4] = {0, 0, 0, 0};
                 const bool in_frame = !dev.projector.empty()
-                                          ? sample(dev.projector, gp[0], gp[1], pd)
+                                          ? sample_bilinear(dev.projector, gp[0], gp[1], pd)
                                           : (gp[2] > 0.0f);
                 const bool lit = dev.projector_present && gp[2] > 0.0f && in_frame;
                 if (lit) {
@@ -274,7 +218,12 @@ ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
         }
         out.pixels[i * 4 + 3] = clip ? 1.0f : 0.0f;
     }
-    bleed_edges(out, geo, 2);
+    // Two rings beyond the lit prop, so that a camera pixel whose bilinear footprint straddles
+    // the silhouette does not mix in black (the spill lands on whatever is behind the prop).
+    std::vector<uint8_t> lit(size_t(geo.width) * geo.height);
+    for (size_t i = 0; i < lit.size(); ++i)
+        lit[i] = geo.pixels[i * 4 + 3] > 0.5f && geo.pixels[i * 4 + 2] > 0.0f;
+    bleed_into(out, std::move(lit), 2);
     return out;
 }
 
