@@ -267,6 +267,10 @@ void bleed_into(ImageRgba32f& image, std::vector<uint8_t> have, int rings) {
     }
 }
 
+double srgb_eotf(double v) {
+    return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
+}
+
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x0, int y0) {
     for (uint32_t y = 0; y < tile.height; ++y) {
         int cy = y0 + int(y);

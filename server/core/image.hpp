@@ -49,6 +49,8 @@ ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white);
 
 // sRGB opto-electronic transfer function (IEC 61966-2-1) of a value in [0, 1].
 float srgb_oetf(float linear);
+// Its inverse: IEC 61966-2-1 decoding of an sRGB-encoded value in [0, 1].
+double srgb_eotf(double encoded);
 
 // The 8-bit code of a linear value: lround(srgb_oetf(clamp(linear, 0, 1)) * 255).
 // srgb8_formula evaluates that with pow; srgb8 gives the same code bit for bit from a table of

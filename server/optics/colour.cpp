@@ -40,10 +40,6 @@ Lab lab_from_linear_srgb(const glm::dvec3& rgb) {
     return lab_from_xyz(xyz_from_linear_srgb(rgb));
 }
 
-double srgb_eotf(double v) {
-    return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
-}
-
 double delta_e_1976(const Lab& x, const Lab& y) {
     return std::sqrt((x.L - y.L) * (x.L - y.L) + (x.a - y.a) * (x.a - y.a) +
                      (x.b - y.b) * (x.b - y.b));

@@ -15,8 +15,6 @@ struct Lab {
 glm::dvec3 xyz_from_linear_srgb(const glm::dvec3& rgb);
 Lab lab_from_xyz(const glm::dvec3& xyz);  // D65 reference white, Y_n = 1
 Lab lab_from_linear_srgb(const glm::dvec3& rgb);
-// IEC 61966-2-1 decoding of an sRGB-encoded value in [0, 1].
-double srgb_eotf(double encoded);
 
 double delta_e_1976(const Lab& x, const Lab& y);
 // Sharma, Wu and Dalal, "The CIEDE2000 color-difference formula: implementation notes,

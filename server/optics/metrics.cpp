@@ -87,7 +87,7 @@ Result<LabDifferences> lab_differences(const ImageRgba8& ref, const ImageRgba8& 
         glm::dvec3 rgb;
         for (int c = 0; c < 3; ++c) {
             const double v = img.pixels[i * 4 + c] / 255.0;
-            rgb[c] = enc == PixelEncoding::kSrgb ? srgb_eotf(v) : v;
+            rgb[c] = enc == PixelEncoding::kSrgb ? hs::srgb_eotf(v) : v;
         }
         return lab_from_linear_srgb(rgb);
     };

@@ -123,4 +123,11 @@ Result<Pose> viewing_pose(const Viewing& viewing, double angle_deg, double heigh
     return look_at(eye, viewing.target);
 }
 
+bool pose_within(const Pose& a, const Pose& b, double metres, double degrees) {
+    if (!(glm::length(a.position - b.position) <= metres))
+        return false;
+    const double d = std::min(1.0, std::fabs(glm::dot(a.orientation, b.orientation)));
+    return 2.0 * std::acos(d) <= glm::radians(degrees);
+}
+
 }  // namespace hs::scene

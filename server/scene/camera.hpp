@@ -14,6 +14,9 @@ namespace hs::scene {
 // norm below 1e-6 or with a non-finite component is an error (it names no rotation).
 Result<Pose> make_pose(glm::dvec3 position, glm::dquat orientation);
 
+// Whether two poses are within `metres` of each other and their orientations within `degrees`.
+bool pose_within(const Pose& a, const Pose& b, double metres, double degrees);
+
 // A pose at `eye` looking at `target`. When the look direction is (nearly) parallel to `up`,
 // a fixed perpendicular up is chosen so the pose stays well defined. eye == target is an error.
 Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up = {0, 1, 0});

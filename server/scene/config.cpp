@@ -307,7 +307,7 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                           fmt::format("{}: expected a JSON object at the top", source));
     r.only(root, "",
            {"schema_version", "name", "prop", "material", "specular_presets", "lights", "projector",
-            "viewers", "viewing", "effects", "optics", "comment"});
+            "viewers", "viewing", "effects", "optics", "captured_material", "comment"});
     s.schema_version = int(r.integer(root, "", "schema_version", std::nullopt, 0, 1000));
     if (!r.failed() && s.schema_version != kSchemaVersion) {
         r.fail("schema_version", fmt::format("this build reads schema_version {}, the file has {}",
@@ -507,6 +507,47 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
 
     if (const json* o = r.member(root, "", "optics", false))
         read_optics(r, *o, &s.optics);
+
+    if (const json* c = r.member(root, "", "captured_material", false)) {
+        const char* p = "captured_material";
+        r.only(*c, p,
+               {"projector_image", "viewer_image", "capture_head", "position_tolerance_m",
+                "angle_tolerance_deg", "comment"});
+        CapturedMaterial m;
+        auto image = [&](const char* key, std::string* path) -> std::shared_ptr<const ImageRgba32f> {
+            std::filesystem::path f = r.string(*c, p, key, std::nullopt);
+            if (r.failed())
+                return nullptr;
+            *path = (f.is_absolute() ? f : base_dir / f).string();
+            auto img = read_exr(*path);
+            if (!img) {
+                r.fail(Reader::join(p, key), img.error().message);
+                return nullptr;
+            }
+            for (float v : img->pixels)
+                if (!std::isfinite(v)) {
+                    r.fail(Reader::join(p, key), *path + ": has a non-finite value");
+                    return nullptr;
+                }
+            return std::make_shared<const ImageRgba32f>(std::move(img).value());
+        };
+        m.projector_image = image("projector_image", &m.projector_image_path);
+        m.viewer_image = image("viewer_image", &m.viewer_image_path);
+        if (const json* h = r.member(*c, p, "capture_head", true))
+            m.capture_head = read_pose(r, *h, "captured_material.capture_head");
+        m.position_tolerance_m =
+            r.number(*c, p, "position_tolerance_m", m.position_tolerance_m, 0.0, 100.0);
+        m.angle_tolerance_deg =
+            r.number(*c, p, "angle_tolerance_deg", m.angle_tolerance_deg, 0.0, 180.0);
+        if (m.projector_image && !r.failed() &&
+            (m.projector_image->width != s.projector.intrinsics.width ||
+             m.projector_image->height != s.projector.intrinsics.height))
+            r.fail("captured_material.projector_image",
+                   fmt::format("{} is {}x{}, the projector is {}x{}", m.projector_image_path,
+                               m.projector_image->width, m.projector_image->height,
+                               s.projector.intrinsics.width, s.projector.intrinsics.height));
+        s.captured_material = std::move(m);
+    }
 
     if (r.failed())
         return r.error();

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -179,6 +180,19 @@ struct Optics {
     } compensation;
 };
 
+// A material captured from a real object (docs/CALIBRATION.md): instead of rendering, the
+// projector shows a calibrated "VI" image and a headset near the capture pose gets the
+// calibrated "VD" image (both eyes: the capture is monocular). Both images are device drives
+// in [0, 1] (what the device is sent), at the projector's and the headset display's size.
+struct CapturedMaterial {
+    std::string projector_image_path;  // OpenEXR, projector size
+    std::string viewer_image_path;     // OpenEXR, the headset display's size
+    std::shared_ptr<const ImageRgba32f> projector_image, viewer_image;
+    Pose capture_head;  // the head pose the VD image was made for
+    double position_tolerance_m = 0.05;
+    double angle_tolerance_deg = 5.0;
+};
+
 struct Scene {
     int schema_version = 1;
     std::string name;
@@ -191,6 +205,7 @@ struct Scene {
     Viewing viewing;
     Effects effects;
     Optics optics;
+    std::optional<CapturedMaterial> captured_material;
 
     const ViewerProfile* find_viewer(const std::string& name) const;
 };

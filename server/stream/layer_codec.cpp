@@ -64,4 +64,19 @@ ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32
     return img;
 }
 
+ImageRgba32f drive_as_layer(const ImageRgba32f& drive) {
+    ImageRgba32f out = drive;
+    for (size_t i = 0; i < out.pixels.size(); i += 4)
+        for (int c = 0; c < 3; ++c)
+            out.pixels[i + c] = float(srgb_eotf(std::clamp(double(drive.pixels[i + c]), 0.0, 1.0)));
+    return out;
+}
+
+ImageRgba32f drive_from_layer(const ImageRgba32f& radiance) {
+    ImageRgba32f out = radiance;
+    for (size_t i = 0; i < out.pixels.size(); i += 4)
+        for (int c = 0; c < 3; ++c) out.pixels[i + c] = srgb_oetf(radiance.pixels[i + c]);
+    return out;
+}
+
 }  // namespace hs::stream

@@ -37,4 +37,11 @@ constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat f) {
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t width, uint32_t height,
                            protocol::PixelFormat format);
 
+// Captured materials send device drives (the code a display is sent, [0, 1]) rather than
+// radiance. A client shows layers through the sRGB transfer function, so the drive travels as
+// the radiance srgb_eotf(drive): an RGBA8 layer then carries exactly round(255 drive).
+ImageRgba32f drive_as_layer(const ImageRgba32f& drive);
+// The drive a client's panel receives from decoded layer radiance (srgb_oetf per channel).
+ImageRgba32f drive_from_layer(const ImageRgba32f& radiance);
+
 }  // namespace hs::stream

@@ -496,24 +496,34 @@ void Server::Impl::render_loop() {
         renderer = std::move(r).value();
         current = s;
         auto t0 = Clock::now();
-        auto proj = renderer->render_projector();
-        if (!proj) {
-            log::error("render: projector pass failed: {}", proj.error().message);
-            return true;
+        ImageRgba32f frame;
+        nlohmann::json report;
+        if (s.captured_material) {
+            // A captured material: the calibrated VI image is the frame; nothing is rendered.
+            frame = drive_as_layer(*s.captured_material->projector_image);
+            report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
+        } else {
+            auto proj = renderer->render_projector();
+            if (!proj) {
+                log::error("render: projector pass failed: {}", proj.error().message);
+                return true;
+            }
+            frame = std::move(proj->image);
+            report = {{"pass", proj->report.pass},
+                      {"effects", proj->report.effects},
+                      {"render_ms", proj->report.render_ms}};
         }
         proto::ProjectorFrame pf;
-        pf.width = proj->image.width;
-        pf.height = proj->image.height;
+        pf.width = frame.width;
+        pf.height = frame.height;
         pf.format = proto::PixelFormat::kRgba8;
-        pf.data = encode_pixels(proj->image, pf.format);
+        pf.data = encode_pixels(frame, pf.format);
         {
             std::lock_guard lock(mutex);
             ++projector_renders;
             projector_ms_total +=
                 std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-            last_projector_report = {{"pass", proj->report.pass},
-                                     {"effects", proj->report.effects},
-                                     {"render_ms", proj->report.render_ms}};
+            last_projector_report = std::move(report);
         }
         pf.scene_version = version;
         auto bytes = std::make_shared<const std::vector<uint8_t>>(proto::encode(pf));
@@ -546,41 +556,81 @@ void Server::Impl::render_loop() {
         }
         if (batch.empty())
             continue;
-        // Every eye of every ready headset in one submission.
+        // Every eye of every ready headset in one submission (a captured material renders
+        // nothing: a headset near the capture pose gets its VD image, any other black).
+        const scene::CapturedMaterial* captured =
+            current.captured_material ? &*current.captured_material : nullptr;
         std::vector<render::Renderer::EyeRequest> eyes;
-        std::vector<bool> valid(batch.size(), true);
+        std::vector<scene::Pose> heads(batch.size());
+        struct Refusal {
+            proto::ErrorCode code = proto::ErrorCode::kInternal;
+            std::string why;  // empty: the job is served
+        };
+        std::vector<Refusal> invalid(batch.size());
         for (size_t j = 0; j < batch.size(); ++j) {
             const auto& d = batch[j].display;
             const auto& q = batch[j].pose.orientation_wxyz;
             auto head = scene::make_pose({batch[j].pose.position_m[0], batch[j].pose.position_m[1],
                                           batch[j].pose.position_m[2]},
                                          glm::dquat(q[0], q[1], q[2], q[3]));
-            valid[j] = head.ok();
+            if (!head.ok())
+                invalid[j] = {proto::ErrorCode::kInternal, "rendering this frame failed"};
+            else
+                heads[j] = head.value();
+            if (captured && invalid[j].why.empty() &&
+                (d.eye_width != captured->viewer_image->width ||
+                 d.eye_height != captured->viewer_image->height))
+                invalid[j] = {proto::ErrorCode::kInvalidDisplay,
+                              fmt::format("the captured material's VD image is {}x{}, this "
+                                          "headset's display is {}x{}",
+                                          captured->viewer_image->width,
+                                          captured->viewer_image->height, d.eye_width,
+                                          d.eye_height)};
+            if (captured)
+                continue;
             scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
-            scene::Pose p = head.ok() ? head.value() : scene::Pose{};
-            for (const auto& e : scene::eye_poses(p, d.ipd_m))
+            for (const auto& e : scene::eye_poses(heads[j], d.ipd_m))
                 eyes.push_back({current.material.specular, k, e});
         }
-        auto rendered = renderer->render_eyes(eyes);
-        if (!rendered)
-            log::error("render: batch of {} eye(s) failed: {}", eyes.size(),
-                       rendered.error().message);
+        Result<std::vector<render::RenderResult>> rendered = std::vector<render::RenderResult>{};
+        if (!captured) {
+            rendered = renderer->render_eyes(eyes);
+            if (!rendered)
+                log::error("render: batch of {} eye(s) failed: {}", eyes.size(),
+                           rendered.error().message);
+        }
         for (size_t j = 0; j < batch.size(); ++j) {
             const ViewerJob& job = batch[j];
             const auto& d = job.display;
-            if (!rendered || !valid[j]) {
-                asio::post(io, [this, id = job.session_id] {
+            if (!rendered || !invalid[j].why.empty()) {
+                const Refusal r = rendered ? invalid[j]
+                                           : Refusal{proto::ErrorCode::kInternal,
+                                                     "rendering this frame failed"};
+                asio::post(io, [this, id = job.session_id, r] {
                     auto it = sessions.find(id);
                     if (it != sessions.end())
-                        it->second->send(proto::encode(proto::Error{
-                            proto::ErrorCode::kInternal, "rendering this frame failed"}));
+                        it->second->send(proto::encode(proto::Error{r.code, r.why}));
                     scheduler.complete(id, 0, 0.0);
                 });
                 continue;
             }
+            // The captured VD image, for a head within tolerance of the capture pose.
+            ImageRgba32f captured_layer;
+            nlohmann::json captured_report;
+            if (captured) {
+                const bool near = scene::pose_within(heads[j], captured->capture_head,
+                                                     captured->position_tolerance_m,
+                                                     captured->angle_tolerance_deg);
+                captured_layer = near ? drive_as_layer(*captured->viewer_image)
+                                      : ImageRgba32f::zeros(d.eye_width, d.eye_height);
+                captured_report = {{"pass", "captured-vd"},
+                                   {"ran", near},
+                                   {"effects", {"captured"}}};
+            }
             std::vector<std::vector<uint8_t>> frames;
             for (uint8_t e = 0; e < 2; ++e) {
-                const render::RenderResult& out = rendered.value()[2 * j + e];
+                const ImageRgba32f& image =
+                    captured ? captured_layer : rendered.value()[2 * j + e].image;
                 auto t0 = Clock::now();
                 proto::VdLayer layer;
                 layer.frame_id = job.frame_id;
@@ -590,18 +640,23 @@ void Server::Impl::render_loop() {
                 layer.encoding = d.encoding;
                 layer.width = d.eye_width;
                 layer.height = d.eye_height;
-                layer.data =
-                    encode_layer(encode_pixels(out.image, d.format), d.eye_width, d.eye_height,
-                                 d.format, d.encoding, default_tile_codec(d.format));
+                layer.data = encode_layer(encode_pixels(image, d.format), d.eye_width,
+                                          d.eye_height, d.format, d.encoding,
+                                          default_tile_codec(d.format));
                 frames.push_back(proto::encode(layer));
                 std::lock_guard lock(mutex);
-                vd_render_ms_total += out.report.render_ms;
                 vd_encode_ms_total +=
                     std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
                 ++vd_layers;
-                last_vd_report = {{"pass", out.report.pass},
-                                  {"ran", out.report.ran},
-                                  {"effects", out.report.effects}};
+                if (captured) {
+                    last_vd_report = captured_report;
+                } else {
+                    const render::RenderResult& out = rendered.value()[2 * j + e];
+                    vd_render_ms_total += out.report.render_ms;
+                    last_vd_report = {{"pass", out.report.pass},
+                                      {"ran", out.report.ran},
+                                      {"effects", out.report.effects}};
+                }
             }
             asio::post(io,
                        [this, id = job.session_id, frames = std::move(frames),
