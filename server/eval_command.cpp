@@ -61,8 +61,9 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
 }
 
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                   const std::function<Result<void>(const Flags&)>& body) {
-    auto flags = parse_flags(args, with_value);
+                   const std::function<Result<void>(const Flags&)>& body,
+                   const std::vector<std::string>& switches) {
+    auto flags = parse_flags(args, with_value, switches);
     if (!flags.ok()) {
         log::error("{}", flags.error().message);
         return 2;

@@ -29,7 +29,8 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
 Result<double> parse_double(const std::string& flag, const std::string& text);
 // Parses the flags (exit code 2 on a bad one), runs `body`, logs its error (exit code 1).
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                   const std::function<Result<void>(const Flags&)>& body);
+                   const std::function<Result<void>(const Flags&)>& body,
+                   const std::vector<std::string>& switches = {});
 
 Result<optics::PaperOptics> load_params(const Flags& flags);
 Result<scene::Scene> load_scene(const Flags& flags);

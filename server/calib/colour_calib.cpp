@@ -111,6 +111,33 @@ double ColourCalibration::delta_e00(const glm::dvec3& a, const glm::dvec3& b) co
                                 optics::lab_from_linear_srgb(b / w));
 }
 
+std::vector<uint32_t> patch_region(const DeviceLut& lut) {
+    double cx = 0, cy = 0;
+    for (size_t i = 0; i < lut.state.size(); ++i)
+        if (lut.is_valid(i))
+            cx += double(i % lut.camera_width), cy += double(i / lut.camera_width);
+    std::vector<uint32_t> roi;
+    if (lut.valid == 0)
+        return roi;
+    cx /= double(lut.valid);
+    cy /= double(lut.valid);
+    const double r = std::max(3.0, 0.03 * lut.camera_width);
+    for (size_t i = 0; i < lut.state.size(); ++i) {
+        const double dx = double(i % lut.camera_width) - cx, dy = double(i / lut.camera_width) - cy;
+        if (lut.is_valid(i) && dx * dx + dy * dy <= r * r)
+            roi.push_back(uint32_t(i));
+    }
+    return roi;
+}
+
+glm::dvec3 region_mean(const ImageRgba32f& img, const std::vector<uint32_t>& roi) {
+    glm::dvec3 s(0.0);
+    for (uint32_t i : roi)
+        s += glm::dvec3(img.pixels[size_t(i) * 4], img.pixels[size_t(i) * 4 + 1],
+                        img.pixels[size_t(i) * 4 + 2]);
+    return s / double(std::max<size_t>(roi.size(), 1));
+}
+
 Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, ColourModel model) {
     if (samples.size() < 4)
         return make_error(ErrorCode::kInvalidArgument,
@@ -216,7 +243,7 @@ Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, C
         cal.mean_de00 += de;
         cal.max_de00 = std::max(cal.max_de00, de);
     }
-    cal.rmse_dn = std::sqrt(se / (3.0 * n));
+    cal.rmse = std::sqrt(se / (3.0 * n));
     cal.mean_de00 /= n;
     return cal;
 }

@@ -19,6 +19,8 @@
 #include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
 
+#include "calib/graycode.hpp"
+#include "core/image.hpp"
 #include "core/result.hpp"
 
 namespace hs::calib {
@@ -43,7 +45,8 @@ struct ColourCalibration {
     // kCurve: per channel, knots (drive, response) from (0, 0) to (1, 1), non-decreasing.
     std::array<std::vector<std::pair<double, double>>, 3> response;
     double condition = 0;  // of the least-squares design
-    double rmse_dn = 0, mean_de00 = 0, max_de00 = 0;  // over the fitted samples
+    double rmse = 0;  // over the fitted samples, in their units (camera DN/s)
+    double mean_de00 = 0, max_de00 = 0;
     uint64_t samples = 0;
 
     glm::dvec3 linearise(const glm::dvec3& drive) const;  // r(drive)
@@ -56,6 +59,12 @@ struct ColourCalibration {
     // balanced to the device's white) and read as linear sRGB.
     double delta_e00(const glm::dvec3& a, const glm::dvec3& b) const;
 };
+
+// Where patches are read: valid look-up-table pixels within a small disc (3 % of the camera
+// width, at least 3 px) about their centroid, as camera pixel indices.
+std::vector<uint32_t> patch_region(const DeviceLut& lut);
+// The mean RGB of `image` over `region`.
+glm::dvec3 region_mean(const ImageRgba32f& image, const std::vector<uint32_t>& region);
 
 Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, ColourModel model);
 

@@ -185,7 +185,7 @@ Result<void> save_colour(const fs::path& file, const ColourCalibration& c) {
                              {"offset", {c.offset.r, c.offset.g, c.offset.b}},
                              {"response", response},
                              {"condition", c.condition},
-                             {"rmse_dn", c.rmse_dn},
+                             {"rmse_dn_per_s", c.rmse},
                              {"mean_de00", c.mean_de00},
                              {"max_de00", c.max_de00},
                              {"samples", c.samples}});
@@ -210,7 +210,7 @@ Result<ColourCalibration> load_colour(const fs::path& file) {
                                                       file.string(), ch));
                 }
             c.condition = j.value("condition", 0.0);
-            c.rmse_dn = j.value("rmse_dn", 0.0);
+            c.rmse = j.value("rmse_dn_per_s", 0.0);
             c.mean_de00 = j.value("mean_de00", 0.0);
             c.max_de00 = j.value("max_de00", 0.0);
             c.samples = j.value("samples", uint64_t(0));
