@@ -10,9 +10,9 @@
 #include <nlohmann/json.hpp>
 
 #include "calib/files.hpp"
+#include "calibrate_common.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
-#include "calibrate_common.hpp"
 #include "eval_common.hpp"
 #include "gpu/device.hpp"
 #include "installation/chain.hpp"
@@ -55,8 +55,7 @@ const char* kHelp =
 Result<std::pair<uint32_t, uint32_t>> parse_size(const std::string& flag, const std::string& s) {
     unsigned w = 0, h = 0;
     char x = 0, extra = 0;
-    if (std::sscanf(s.c_str(), "%u%c%u%c", &w, &x, &h, &extra) != 3 || x != 'x' || w == 0 ||
-        h == 0)
+    if (std::sscanf(s.c_str(), "%u%c%u%c", &w, &x, &h, &extra) != 3 || x != 'x' || w == 0 || h == 0)
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("{}: '{}' is not WIDTHxHEIGHT", flag, s));
     return std::pair{uint32_t(w), uint32_t(h)};
@@ -142,17 +141,17 @@ Result<void> cmd_patterns(const Flags& f) {
         HS_TRY(write_png(out / name, uniform8(wh.first, wh.second, code)));
         colour.push_back({{"file", name}, {"drive", {code.r, code.g, code.b}}});
     }
-    HS_TRY(write_text(out / "patterns.json",
-                      json{{"kind", "hysar-patterns"},
-                           {"device", {wh.first, wh.second}},
-                           {"gray", gray},
-                           {"gray_patterns", set.pattern_count},
-                           {"colour", colour}}
-                              .dump(2)));
-    std::printf("%zu gray-code images (%u patterns, white, black) and %zu colour patches for a "
-                "%ux%u device in %s\n",
-                set.images.size(), set.pattern_count, drives.size(), wh.first, wh.second,
-                out.string().c_str());
+    HS_TRY(write_text(out / "patterns.json", json{{"kind", "hysar-patterns"},
+                                                  {"device", {wh.first, wh.second}},
+                                                  {"gray", gray},
+                                                  {"gray_patterns", set.pattern_count},
+                                                  {"colour", colour}}
+                                                 .dump(2)));
+    std::printf(
+        "%zu gray-code images (%u patterns, white, black) and %zu colour patches for a "
+        "%ux%u device in %s\n",
+        set.images.size(), set.pattern_count, drives.size(), wh.first, wh.second,
+        out.string().c_str());
     return {};
 }
 
@@ -175,8 +174,9 @@ Result<void> cmd_decode(const Flags& f) {
         if ((i + 1) % 10 == 0 || i + 1 == gray.size())
             progress_line("read captures", i + 1, gray.size());
     }
-    HS_ASSIGN_OR_RETURN(calib::DeviceLut lut,
-                        calib::decode_gray_code(m.at("device").at(0), m.at("device").at(1), caps, o));
+    HS_ASSIGN_OR_RETURN(
+        calib::DeviceLut lut,
+        calib::decode_gray_code(m.at("device").at(0), m.at("device").at(1), caps, o));
     const fs::path out = out_s;
     HS_TRY(make_dirs(out));
     HS_TRY(calib::save_lut(out, lut, o));
@@ -213,8 +213,7 @@ Result<void> cmd_invert(const Flags& f) {
     HS_ASSIGN_OR_RETURN(o.bandwidth, parse_double("--bandwidth", f.get("--bandwidth", "0")));
     HS_ASSIGN_OR_RETURN(o.max_gap, parse_double("--max-gap", f.get("--max-gap", "2")));
     HS_ASSIGN_OR_RETURN(calib::DeviceLut lut, calib::load_lut(dir));
-    HS_ASSIGN_OR_RETURN(calib::InverseMap m,
-                        calib::invert_lut(lut, o, [](uint64_t d, uint64_t t) {
+    HS_ASSIGN_OR_RETURN(calib::InverseMap m, calib::invert_lut(lut, o, [](uint64_t d, uint64_t t) {
                             if (d == t || d % 256 < 64)
                                 progress_line("inverse map rows", d, t);
                         }));
@@ -223,10 +222,11 @@ Result<void> cmd_invert(const Flags& f) {
                     s.rmse_px);
     HS_TRY(calib::save_inverse(dir, m));
     HS_TRY(write_png(dir / "inverse.png", validity_picture(m)));
-    std::printf("inverse map (bandwidth %.2f px%s): %llu device pixels estimated, %llu holes "
-                "inside the sampled area, %.0f ms\n",
-                m.bandwidth, m.cv.empty() ? "" : ", cross-validated",
-                (unsigned long long)m.estimated, (unsigned long long)m.holes_inside, m.ms);
+    std::printf(
+        "inverse map (bandwidth %.2f px%s): %llu device pixels estimated, %llu holes "
+        "inside the sampled area, %.0f ms\n",
+        m.bandwidth, m.cv.empty() ? "" : ", cross-validated", (unsigned long long)m.estimated,
+        (unsigned long long)m.holes_inside, m.ms);
     return {};
 }
 
@@ -251,10 +251,11 @@ Result<void> cmd_colour(const Flags& f) {
     }
     HS_ASSIGN_OR_RETURN(calib::ColourCalibration cal, calib::fit_colour(samples, model));
     HS_TRY(calib::save_colour(fs::path(dir_s) / "colour.json", cal));
-    std::printf("%s model from %zu patches over %zu camera pixels: residual %.2f DN, mean dE00 "
-                "%.2f, max %.2f (condition %.1f)\n",
-                calib::to_string(model), samples.size(), region.size(), cal.rmse,
-                cal.mean_de00, cal.max_de00, cal.condition);
+    std::printf(
+        "%s model from %zu patches over %zu camera pixels: residual %.2f DN/s, mean dE00 "
+        "%.2f, max %.2f (condition %.1f)\n",
+        calib::to_string(model), samples.size(), region.size(), cal.rmse, cal.mean_de00,
+        cal.max_de00, cal.condition);
     return {};
 }
 
@@ -280,10 +281,11 @@ Result<void> cmd_capture(const Flags& f) {
                                                                calib::TargetKind::kIncrement, &hs));
     HS_ASSIGN_OR_RETURN(std::string sj, captured_scene_json(f, head));
     HS_TRY(write_material(out_s, pimg, himg, vd, sj));
-    std::printf("captured material in %s: projector %llu pixels (%llu clipped), headset %llu "
-                "pixels (%llu clipped); serve it with: hysar serve --scene %s/scene.json\n",
-                out_s.c_str(), (unsigned long long)ps.pixels, (unsigned long long)ps.clipped,
-                (unsigned long long)hs.pixels, (unsigned long long)hs.clipped, out_s.c_str());
+    std::printf(
+        "captured material in %s: projector %llu pixels (%llu clipped), headset %llu "
+        "pixels (%llu clipped); serve it with: hysar serve --scene %s/scene.json\n",
+        out_s.c_str(), (unsigned long long)ps.pixels, (unsigned long long)ps.clipped,
+        (unsigned long long)hs.pixels, (unsigned long long)hs.clipped, out_s.c_str());
     return {};
 }
 
@@ -331,7 +333,6 @@ Result<void> write_material(const fs::path& out, const ImageRgba32f& projector,
     return {};
 }
 
-
 int run_calibrate(const std::vector<std::string>& args) {
     if (args.empty() || args[0] == "--help" || args[0] == "-h") {
         std::fputs(kHelp, args.empty() ? stderr : stdout);
@@ -342,18 +343,16 @@ int run_calibrate(const std::vector<std::string>& args) {
     if (step == "patterns")
         return run_subcommand(rest, {"--size", "--out", "--ramp", "--grid"}, cmd_patterns);
     if (step == "decode")
-        return run_subcommand(
-            rest,
-            {"--patterns", "--captures", "--out", "--exposure-ms", "--black-threshold",
-             "--white-threshold"},
-            cmd_decode);
+        return run_subcommand(rest,
+                              {"--patterns", "--captures", "--out", "--exposure-ms",
+                               "--black-threshold", "--white-threshold"},
+                              cmd_decode);
     if (step == "invert")
         return run_subcommand(rest, {"--calibration", "--bandwidth", "--max-gap"}, cmd_invert);
     if (step == "colour")
-        return run_subcommand(rest,
-                              {"--patterns", "--captures", "--calibration", "--exposure-ms",
-                               "--model"},
-                              cmd_colour);
+        return run_subcommand(
+            rest, {"--patterns", "--captures", "--calibration", "--exposure-ms", "--model"},
+            cmd_colour);
     if (step == "capture")
         return run_subcommand(rest,
                               {"--projector", "--hmd", "--vi", "--vivd", "--exposure-ms", "--out",

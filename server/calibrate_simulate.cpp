@@ -18,8 +18,8 @@ namespace hs::cli {
 namespace {
 
 namespace fs = std::filesystem;
-using nlohmann::json;
 using installation::Device;
+using nlohmann::json;
 
 // The done-when targets.
 constexpr double kLutMedianPx = 0.5, kLutP95Px = 1.0, kColourDe00 = 1.0, kMr1 = 0.90;
@@ -75,18 +75,17 @@ Result<void> calibrate_simulate(const Flags& f) {
 
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
     HS_ASSIGN_OR_RETURN(auto inst, installation::VirtualInstallation::create(*device, s, io));
-    log::info("virtual installation: projector {}x{}, headset '{}' {}x{}, camera {}x{} at {}; "
-              "exposure {:.1f} ms (projector calibration {:.1f} ms, headset {:.1f} ms)",
-              inst->device_width(Device::kProjector), inst->device_height(Device::kProjector),
-              inst->viewer().name, inst->device_width(Device::kHmd),
-              inst->device_height(Device::kHmd), inst->camera_width(), inst->camera_height(),
-              inst->viewpoint().name, inst->exposure_ms(),
-              inst->calibration_exposure_ms(Device::kProjector),
-              inst->calibration_exposure_ms(Device::kHmd));
-    HS_ASSIGN_OR_RETURN(installation::ChainReport rep,
-                        installation::run_chain(*inst, co, [](const std::string& line) {
-                            log::info("{}", line);
-                        }));
+    log::info(
+        "virtual installation: projector {}x{}, headset '{}' {}x{}, camera {}x{} at {}; "
+        "exposure {:.1f} ms (projector calibration {:.1f} ms, headset {:.1f} ms)",
+        inst->device_width(Device::kProjector), inst->device_height(Device::kProjector),
+        inst->viewer().name, inst->device_width(Device::kHmd), inst->device_height(Device::kHmd),
+        inst->camera_width(), inst->camera_height(), inst->viewpoint().name, inst->exposure_ms(),
+        inst->calibration_exposure_ms(Device::kProjector),
+        inst->calibration_exposure_ms(Device::kHmd));
+    HS_ASSIGN_OR_RETURN(
+        installation::ChainReport rep,
+        installation::run_chain(*inst, co, [](const std::string& line) { log::info("{}", line); }));
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
                                                           device->validation_message_count()));
@@ -111,8 +110,8 @@ Result<void> calibrate_simulate(const Flags& f) {
     t += fmt::format("\n{:<28}{:>10}{:>10}{:>10}{:>10}   {}\n", "colour (dE00, held out)",
                      "predict", "max", "applied", "max", "target: chosen model's mean <= 1");
     for (const auto* d : {&rep.projector, &rep.hmd})
-        for (auto [cal, chk] : {std::pair{&d->linear, &d->linear_check},
-                                std::pair{&d->curve, &d->curve_check}}) {
+        for (auto [cal, chk] :
+             {std::pair{&d->linear, &d->linear_check}, std::pair{&d->curve, &d->curve_check}}) {
             const bool chosen = cal->model == co.model;
             const bool ok = chk->predict_mean_de00 <= kColourDe00;
             const std::string name = fmt::format("{} {}", installation::to_string(d->device),
@@ -127,10 +126,11 @@ Result<void> calibrate_simulate(const Flags& f) {
     const double mr1 = trip.areas.mr1.value_or(0.0);
     if (!(mr1 >= kMr1))
         missed.push_back("round-trip MR1");
-    t += fmt::format("\nround trip: MR1 {:.1f} % (target >= 90 %: {}), MR2 {:.1f} %, RMSE {:.2f} DN "
-                     "over {} prop pixels, VD area mean dE00 {:.2f}\n",
-                     100 * mr1, verdict(mr1 >= kMr1), 100 * trip.areas.mr2.value_or(0.0),
-                     trip.rmse_dn, trip.prop_pixels, trip.vd_mean_de00);
+    t += fmt::format(
+        "\nround trip: MR1 {:.1f} % (target >= 90 %: {}), MR2 {:.1f} %, RMSE {:.2f} DN "
+        "over {} prop pixels, VD area mean dE00 {:.2f}\n",
+        100 * mr1, verdict(mr1 >= kMr1), 100 * trip.areas.mr2.value_or(0.0), trip.rmse_dn,
+        trip.prop_pixels, trip.vd_mean_de00);
     t += "time:";
     for (const auto& [stage, sec] : rep.seconds) t += fmt::format(" {} {:.1f} s,", stage, sec);
     t.back() = '\n';
@@ -141,17 +141,18 @@ Result<void> calibrate_simulate(const Flags& f) {
         HS_TRY(make_dirs(out));
         HS_TRY(save_device(out / "projector", rep.projector, co.decode));
         HS_TRY(save_device(out / "hmd", rep.hmd, co.decode));
-        json j = {{"installation",
-                   {{"projector", {inst->device_width(Device::kProjector),
-                                   inst->device_height(Device::kProjector)}},
-                    {"hmd", {inst->device_width(Device::kHmd), inst->device_height(Device::kHmd)}},
-                    {"camera", {inst->camera_width(), inst->camera_height()}},
-                    {"viewpoint", inst->viewpoint().name},
-                    {"noise_dn", io.noise_dn},
-                    {"exposure_ms", inst->exposure_ms()},
-                    {"scale", io.scale}}},
-                  {"model", calib::to_string(co.model)},
-                  {"missed", missed}};
+        json j = {
+            {"installation",
+             {{"projector",
+               {inst->device_width(Device::kProjector), inst->device_height(Device::kProjector)}},
+              {"hmd", {inst->device_width(Device::kHmd), inst->device_height(Device::kHmd)}},
+              {"camera", {inst->camera_width(), inst->camera_height()}},
+              {"viewpoint", inst->viewpoint().name},
+              {"noise_dn", io.noise_dn},
+              {"exposure_ms", inst->exposure_ms()},
+              {"scale", io.scale}}},
+            {"model", calib::to_string(co.model)},
+            {"missed", missed}};
         for (const auto* d : {&rep.projector, &rep.hmd})
             j[installation::to_string(d->device)] = {
                 {"lut", map_json(d->lut_error)},
@@ -173,10 +174,9 @@ Result<void> calibrate_simulate(const Flags& f) {
         // Reference | re-capture | VD areas (green match, red missing, blue extra).
         HS_TRY(write_png(out / "roundtrip.png",
                          hstack({optics::to_rgba8(trip.reference_vi_vd),
-                                       optics::to_rgba8(trip.recapture), trip.areas.map})));
+                                 optics::to_rgba8(trip.recapture), trip.areas.map})));
         if (io.scale == 1.0) {
-            HS_ASSIGN_OR_RETURN(std::string sj,
-                                captured_scene_json(f, inst->viewpoint().camera));
+            HS_ASSIGN_OR_RETURN(std::string sj, captured_scene_json(f, inst->viewpoint().camera));
             HS_TRY(write_material(out / "material", trip.projector, trip.hmd, trip.vd, sj));
             std::printf("captured material: hysar serve --scene %s\n",
                         (out / "material" / "scene.json").string().c_str());

@@ -12,8 +12,8 @@
 #pragma once
 
 #include <array>
-#include <string>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <glm/mat3x3.hpp>
@@ -45,7 +45,7 @@ struct ColourCalibration {
     // kCurve: per channel, knots (drive, response) from (0, 0) to (1, 1), non-decreasing.
     std::array<std::vector<std::pair<double, double>>, 3> response;
     double condition = 0;  // of the least-squares design
-    double rmse = 0;  // over the fitted samples, in their units (camera DN/s)
+    double rmse = 0;       // over the fitted samples, in their units (camera DN/s)
     double mean_de00 = 0, max_de00 = 0;
     uint64_t samples = 0;
 

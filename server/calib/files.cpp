@@ -27,8 +27,8 @@ Result<json> read_json(const fs::path& file) {
     try {
         return json::parse(text);
     } catch (const json::exception& e) {
-        return make_error(ErrorCode::kParse, fmt::format("{}: not JSON: {}", file.string(),
-                                                         e.what()));
+        return make_error(ErrorCode::kParse,
+                          fmt::format("{}: not JSON: {}", file.string(), e.what()));
     }
 }
 
@@ -87,15 +87,16 @@ Result<void> save_lut(const fs::path& dir, const DeviceLut& lut, const DecodeOpt
 }
 
 Result<DeviceLut> load_lut(const fs::path& dir) {
-    HS_ASSIGN_OR_RETURN(DeviceLut lut, (from_json<DeviceLut>(dir / "lut.json", "hysar-lut",
-                                                             [](const json& j) -> DeviceLut {
-                                                                 DeviceLut l;
-                                                                 l.camera_width = j.at("camera").at(0);
-                                                                 l.camera_height = j.at("camera").at(1);
-                                                                 l.device_width = j.at("device").at(0);
-                                                                 l.device_height = j.at("device").at(1);
-                                                                 return l;
-                                                             })));
+    HS_ASSIGN_OR_RETURN(
+        DeviceLut lut,
+        (from_json<DeviceLut>(dir / "lut.json", "hysar-lut", [](const json& j) -> DeviceLut {
+            DeviceLut l;
+            l.camera_width = j.at("camera").at(0);
+            l.camera_height = j.at("camera").at(1);
+            l.device_width = j.at("device").at(0);
+            l.device_height = j.at("device").at(1);
+            return l;
+        })));
     HS_ASSIGN_OR_RETURN(ImageRgba32f img, read_exr(dir / "lut.exr"));
     HS_TRY(check_map_image(dir / "lut.exr", img, lut.camera_width, lut.camera_height));
     const size_t n = size_t(img.width) * img.height;
@@ -110,9 +111,8 @@ Result<DeviceLut> load_lut(const fs::path& dir) {
             return make_error(ErrorCode::kParse,
                               fmt::format("{}: camera pixel ({}, {}) maps to device ({}, {}), "
                                           "outside the {}x{} device",
-                                          (dir / "lut.exr").string(), i % img.width,
-                                          i / img.width, x, y, lut.device_width,
-                                          lut.device_height));
+                                          (dir / "lut.exr").string(), i % img.width, i / img.width,
+                                          x, y, lut.device_width, lut.device_height));
         lut.x[i] = lut.state[i] == DeviceLut::kValid ? x : NAN;
         lut.y[i] = lut.state[i] == DeviceLut::kValid ? y : NAN;
         lut.lit += lut.state[i] != DeviceLut::kShadow;
@@ -146,17 +146,17 @@ Result<void> save_inverse(const fs::path& dir, const InverseMap& m) {
 }
 
 Result<InverseMap> load_inverse(const fs::path& dir) {
-    HS_ASSIGN_OR_RETURN(InverseMap m, (from_json<InverseMap>(
-                                          dir / "inverse.json", "hysar-inverse",
-                                          [](const json& j) -> InverseMap {
-                                              InverseMap r;
-                                              r.camera_width = j.at("camera").at(0);
-                                              r.camera_height = j.at("camera").at(1);
-                                              r.device_width = j.at("device").at(0);
-                                              r.device_height = j.at("device").at(1);
-                                              r.bandwidth = j.at("bandwidth");
-                                              return r;
-                                          })));
+    HS_ASSIGN_OR_RETURN(InverseMap m,
+                        (from_json<InverseMap>(dir / "inverse.json", "hysar-inverse",
+                                               [](const json& j) -> InverseMap {
+                                                   InverseMap r;
+                                                   r.camera_width = j.at("camera").at(0);
+                                                   r.camera_height = j.at("camera").at(1);
+                                                   r.device_width = j.at("device").at(0);
+                                                   r.device_height = j.at("device").at(1);
+                                                   r.bandwidth = j.at("bandwidth");
+                                                   return r;
+                                               })));
     HS_ASSIGN_OR_RETURN(ImageRgba32f img, read_exr(dir / "inverse.exr"));
     HS_TRY(check_map_image(dir / "inverse.exr", img, m.device_width, m.device_height));
     const size_t n = size_t(img.width) * img.height;
@@ -235,9 +235,9 @@ Result<ImageRgba32f> read_camera_image(const fs::path& file) {
     if (ext == ".exr")
         return read_exr(file);
     if (ext != ".png")
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("{}: camera images are .exr (DN) or 8-bit .png",
-                                      file.string()));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("{}: camera images are .exr (DN) or 8-bit .png", file.string()));
     HS_ASSIGN_OR_RETURN(ImageRgba8 png, read_png(file));
     ImageRgba32f out = ImageRgba32f::zeros(png.width, png.height);
     for (size_t i = 0; i < png.pixels.size(); ++i)

@@ -166,12 +166,24 @@ ImageRgba8 lut_picture(const DeviceLut& lut) {
         double rgb[3];
         const double q = 1 - f, t = f;
         switch (sector) {
-            case 0: rgb[0] = 1, rgb[1] = t, rgb[2] = 0; break;
-            case 1: rgb[0] = q, rgb[1] = 1, rgb[2] = 0; break;
-            case 2: rgb[0] = 0, rgb[1] = 1, rgb[2] = t; break;
-            case 3: rgb[0] = 0, rgb[1] = q, rgb[2] = 1; break;
-            case 4: rgb[0] = t, rgb[1] = 0, rgb[2] = 1; break;
-            default: rgb[0] = 1, rgb[1] = 0, rgb[2] = q; break;
+            case 0:
+                rgb[0] = 1, rgb[1] = t, rgb[2] = 0;
+                break;
+            case 1:
+                rgb[0] = q, rgb[1] = 1, rgb[2] = 0;
+                break;
+            case 2:
+                rgb[0] = 0, rgb[1] = 1, rgb[2] = t;
+                break;
+            case 3:
+                rgb[0] = 0, rgb[1] = q, rgb[2] = 1;
+                break;
+            case 4:
+                rgb[0] = t, rgb[1] = 0, rgb[2] = 1;
+                break;
+            default:
+                rgb[0] = 1, rgb[1] = 0, rgb[2] = q;
+                break;
         }
         for (int c = 0; c < 3; ++c) p[c] = uint8_t(std::lround(255 * v * rgb[c]));
     }

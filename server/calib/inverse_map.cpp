@@ -62,9 +62,9 @@ Result<KernelRegression> KernelRegression::create(const std::vector<Corresponden
     kr.cell_ = std::clamp(std::sqrt(4.0 * area / double(kr.points_.size())), 0.5, 64.0);
     kr.cols_ = uint32_t(std::min(4096.0, std::floor((max_x - kr.min_x_) / kr.cell_) + 1));
     kr.rows_ = uint32_t(std::min(4096.0, std::floor((max_y - kr.min_y_) / kr.cell_) + 1));
-    kr.cell_ = std::max(kr.cell_, std::max((max_x - kr.min_x_) / kr.cols_,
-                                           (max_y - kr.min_y_) / kr.rows_) *
-                                      1.000001);
+    kr.cell_ = std::max(
+        kr.cell_,
+        std::max((max_x - kr.min_x_) / kr.cols_, (max_y - kr.min_y_) / kr.rows_) * 1.000001);
     auto cell_of = [&](const Correspondence& p) {
         const uint32_t cx = std::min(kr.cols_ - 1, uint32_t((p.device_x - kr.min_x_) / kr.cell_));
         const uint32_t cy = std::min(kr.rows_ - 1, uint32_t((p.device_y - kr.min_y_) / kr.cell_));
@@ -148,11 +148,10 @@ KernelRegression::Estimate KernelRegression::query(double qx, double qy, double 
 }
 
 Result<std::vector<CvScore>> cross_validate(const KernelRegression& kr,
-                                            const std::vector<double>& candidates,
-                                            double max_gap, uint32_t count, uint64_t seed) {
+                                            const std::vector<double>& candidates, double max_gap,
+                                            uint32_t count, uint64_t seed) {
     if (candidates.empty())
-        return make_error(ErrorCode::kInvalidArgument,
-                          "cross-validation: no candidate bandwidths");
+        return make_error(ErrorCode::kInvalidArgument, "cross-validation: no candidate bandwidths");
     for (double h : candidates)
         if (!(h > 0) || !std::isfinite(h))
             return make_error(ErrorCode::kInvalidArgument,
@@ -177,8 +176,8 @@ Result<std::vector<CvScore>> cross_validate(const KernelRegression& kr,
         for (double v : se)
             if (v >= 0)
                 sum += v, ++s.scored;
-        s.rmse_px = s.scored ? std::sqrt(sum / double(s.scored))
-                             : std::numeric_limits<double>::infinity();
+        s.rmse_px =
+            s.scored ? std::sqrt(sum / double(s.scored)) : std::numeric_limits<double>::infinity();
         scores.push_back(s);
     }
     return scores;
@@ -215,8 +214,8 @@ Result<InverseMap> invert_lut(const DeviceLut& lut, const InverseMapOptions& o,
     m.merged = kr.size();
     m.bandwidth = o.bandwidth;
     if (m.bandwidth == 0) {
-        HS_ASSIGN_OR_RETURN(m.cv, cross_validate(kr, o.cv_bandwidths, o.max_gap + 1.0,
-                                                 o.cv_samples, o.seed));
+        HS_ASSIGN_OR_RETURN(
+            m.cv, cross_validate(kr, o.cv_bandwidths, o.max_gap + 1.0, o.cv_samples, o.seed));
         m.bandwidth = std::min_element(m.cv.begin(), m.cv.end(), [](const auto& a, const auto& b) {
                           return a.rmse_px < b.rmse_px;
                       })->bandwidth;
@@ -272,7 +271,8 @@ bool sample_map(const std::vector<float>& mx, const std::vector<float>& my, uint
         if (std::isnan(mx[i]) || std::isnan(my[i]))
             return false;
     auto lerp2 = [&](const std::vector<float>& m) {
-        return (1 - fy) * ((1 - fx) * m[i00] + fx * m[i10]) + fy * ((1 - fx) * m[i01] + fx * m[i11]);
+        return (1 - fy) * ((1 - fx) * m[i00] + fx * m[i10]) +
+               fy * ((1 - fx) * m[i01] + fx * m[i11]);
     };
     ox = lerp2(mx);
     oy = lerp2(my);

@@ -34,9 +34,9 @@ public:
 
     struct Estimate {
         bool hole = true;
-        double x = 0, y = 0;                // camera pixel
-        double nearest = 0;                 // device distance to the nearest sample
-        uint32_t used = 0;                  // samples summed
+        double x = 0, y = 0;  // camera pixel
+        double nearest = 0;   // device distance to the nearest sample
+        uint32_t used = 0;    // samples summed
     };
     // `bandwidth` > 0 (device pixels). `exclude`: a merged sample left out (cross-validation).
     Estimate query(double qx, double qy, double bandwidth, double max_gap,
@@ -84,8 +84,8 @@ Result<InverseMap> invert_lut(const DeviceLut& lut, const InverseMapOptions& opt
 
 // The bandwidth with the least leave-one-out error among `candidates`.
 Result<std::vector<CvScore>> cross_validate(const KernelRegression& kr,
-                                            const std::vector<double>& candidates,
-                                            double max_gap, uint32_t count, uint64_t seed);
+                                            const std::vector<double>& candidates, double max_gap,
+                                            uint32_t count, uint64_t seed);
 
 // Bilinear lookup of a camera-pixel position in a map (camera_width x camera_height of x, y);
 // false outside or where any of the four neighbours is NaN.

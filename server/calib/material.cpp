@@ -16,11 +16,11 @@ double luma(const glm::dvec3& v) {
 
 Result<ImageRgba32f> vd_only(const ImageRgba32f& vi, const ImageRgba32f& vi_vd, double floor) {
     HS_TRY(optics::same_size("the \"VI only\" capture", vi.width, vi.height,
-                                         "the \"VI and VD\" capture", vi_vd.width, vi_vd.height));
+                             "the \"VI and VD\" capture", vi_vd.width, vi_vd.height));
     if (!(floor >= 0) || !std::isfinite(floor))
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("VD extraction: noise floor {} is not a non-negative number",
-                                      floor));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("VD extraction: noise floor {} is not a non-negative number", floor));
     ImageRgba32f out = ImageRgba32f::zeros(vi.width, vi.height);
     for (size_t i = 0; i < out.pixels.size(); i += 4) {
         for (int c = 0; c < 3; ++c) {
@@ -36,14 +36,11 @@ Result<ImageRgba32f> device_image(const ImageRgba32f& target, const DeviceCalibr
                                   TargetKind kind, DeviceImageStats* stats, int bleed_rings) {
     const InverseMap& inv = dev.inverse;
     HS_TRY(optics::same_size("the camera image", target.width, target.height,
-                                         "the calibration's camera", inv.camera_width,
-                                         inv.camera_height));
+                             "the calibration's camera", inv.camera_width, inv.camera_height));
     HS_TRY(optics::same_size("the white capture", dev.white.width, dev.white.height,
-                                         "the calibration's camera", inv.camera_width,
-                                         inv.camera_height));
+                             "the calibration's camera", inv.camera_width, inv.camera_height));
     HS_TRY(optics::same_size("the black capture", dev.black.width, dev.black.height,
-                                         "the calibration's camera", inv.camera_width,
-                                         inv.camera_height));
+                             "the calibration's camera", inv.camera_width, inv.camera_height));
     const glm::dvec3 span = dev.colour.white() - dev.colour.offset;
     const double span_l = luma(span);
     if (!(span_l > 0))

@@ -128,7 +128,8 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
             }
         r.inverse_error = map_error(std::move(d), untrue);
     }
-    say(fmt::format("inverse map: bandwidth {:.2f} px, {} device pixels in {:.0f} ms; error median "
+    say(
+        fmt::format("inverse map: bandwidth {:.2f} px, {} device pixels in {:.0f} ms; error median "
                     "{:.3f} px, p95 {:.3f} px",
                     r.inverse.bandwidth, r.inverse.estimated, r.inverse.ms,
                     r.inverse_error.median_px, r.inverse_error.p95_px));
@@ -137,14 +138,14 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
     const std::vector<uint32_t> roi = calib::patch_region(r.lut);
     r.roi_pixels = uint32_t(roi.size());
     if (roi.empty())
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("{}: no decoded camera pixel to read colour patches over",
-                                      to_string(dev)));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("{}: no decoded camera pixel to read colour patches over", to_string(dev)));
     std::vector<calib::ColourSample> samples;
     const auto drives = calib::colour_patch_drives(o.ramp_steps, o.grid);
     for (size_t i = 0; i < drives.size(); ++i) {
-        HS_ASSIGN_OR_RETURN(ImageRgba32f c, show(inst, dev, uniform(dw, dh, drives[i]),
-                                                 o.seed * 7919 + i));
+        HS_ASSIGN_OR_RETURN(ImageRgba32f c,
+                            show(inst, dev, uniform(dw, dh, drives[i]), o.seed * 7919 + i));
         samples.push_back({drives[i], calib::region_mean(c, roi) * per_second});
     }
     HS_ASSIGN_OR_RETURN(r.linear, calib::fit_colour(samples, calib::ColourModel::kLinear));
@@ -156,8 +157,8 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
         const glm::dvec3 d(u(rng), u(rng), u(rng));
         HS_ASSIGN_OR_RETURN(ImageRgba32f c, show(inst, dev, uniform(dw, dh, d), 0, true));
         const glm::dvec3 truth = calib::region_mean(c, roi) * per_second;
-        for (auto [cal, chk] : {std::pair{&r.linear, &r.linear_check},
-                                std::pair{&r.curve, &r.curve_check}}) {
+        for (auto [cal, chk] :
+             {std::pair{&r.linear, &r.linear_check}, std::pair{&r.curve, &r.curve_check}}) {
             const double p = cal->delta_e00(cal->predict(d), truth);
             chk->predict_mean_de00 += p / o.check_colours;
             chk->predict_max_de00 = std::max(chk->predict_max_de00, p);
@@ -169,7 +170,8 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
             chk->apply_max_de00 = std::max(chk->apply_max_de00, q);
         }
     }
-    say(fmt::format("colour: linear model mean dE00 {:.2f} (fit {:.2f}), curve model {:.2f} (fit "
+    say(
+        fmt::format("colour: linear model mean dE00 {:.2f} (fit {:.2f}), curve model {:.2f} (fit "
                     "{:.2f}) on {} colours it was not fitted to",
                     r.linear_check.predict_mean_de00, r.linear.mean_de00,
                     r.curve_check.predict_mean_de00, r.curve.mean_de00, o.check_colours));
@@ -186,10 +188,10 @@ Result<RoundTrip> round_trip(const VirtualInstallation& inst, const DeviceResult
     t.reference_vi_vd = std::move(ref.vi_vd);
     HS_ASSIGN_OR_RETURN(t.vd, calib::vd_only(t.reference_vi, t.reference_vi_vd, o.noise_floor_dn));
     const double per_second = 1000.0 / inst.exposure_ms();
-    HS_ASSIGN_OR_RETURN(ImageRgba32f pd, calib::device_image(scaled(t.reference_vi, per_second),
-                                                             projector.calibration,
-                                                             calib::TargetKind::kAbsolute,
-                                                             &t.projector_stats));
+    HS_ASSIGN_OR_RETURN(
+        ImageRgba32f pd,
+        calib::device_image(scaled(t.reference_vi, per_second), projector.calibration,
+                            calib::TargetKind::kAbsolute, &t.projector_stats));
     HS_ASSIGN_OR_RETURN(ImageRgba32f hd,
                         calib::device_image(scaled(t.vd, per_second), hmd.calibration,
                                             calib::TargetKind::kIncrement, &t.hmd_stats));
@@ -197,16 +199,16 @@ Result<RoundTrip> round_trip(const VirtualInstallation& inst, const DeviceResult
     // client's panel receives it.
     auto served = [](const ImageRgba32f& drive) {
         const auto fmt8 = protocol::PixelFormat::kRgba8;
-        return stream::drive_from_layer(stream::decode_pixels(
-            stream::encode_pixels(stream::drive_as_layer(drive), fmt8), drive.width,
-            drive.height, fmt8));
+        return stream::drive_from_layer(
+            stream::decode_pixels(stream::encode_pixels(stream::drive_as_layer(drive), fmt8),
+                                  drive.width, drive.height, fmt8));
     };
     t.projector = served(pd);
     t.hmd = served(hd);
     HS_ASSIGN_OR_RETURN(t.recapture, inst.capture(t.projector, t.hmd, o.seed * 37));
-    HS_ASSIGN_OR_RETURN(t.areas, optics::vd_areas(optics::to_rgba8(t.reference_vi_vd),
-                                                  optics::to_rgba8(t.reference_vi),
-                                                  optics::to_rgba8(t.recapture)));
+    HS_ASSIGN_OR_RETURN(
+        t.areas, optics::vd_areas(optics::to_rgba8(t.reference_vi_vd),
+                                  optics::to_rgba8(t.reference_vi), optics::to_rgba8(t.recapture)));
     const auto& prop = inst.truth_x(Device::kProjector);
     double se = 0;
     for (size_t i = 0; i < prop.size(); ++i) {
@@ -214,16 +216,17 @@ Result<RoundTrip> round_trip(const VirtualInstallation& inst, const DeviceResult
             continue;
         ++t.prop_pixels;
         for (int c = 0; c < 3; ++c) {
-            const double d = double(t.recapture.pixels[i * 4 + c]) - t.reference_vi_vd.pixels[i * 4 + c];
+            const double d =
+                double(t.recapture.pixels[i * 4 + c]) - t.reference_vi_vd.pixels[i * 4 + c];
             se += d * d;
         }
     }
     t.rmse_dn = t.prop_pixels ? std::sqrt(se / (3.0 * t.prop_pixels)) : 0.0;
     if (t.areas.reference_count) {
-        HS_ASSIGN_OR_RETURN(auto lab, optics::lab_differences(
-                                          optics::to_rgba8(t.reference_vi_vd),
-                                          optics::to_rgba8(t.recapture), t.areas.reference,
-                                          optics::PixelEncoding::kLinear));
+        HS_ASSIGN_OR_RETURN(
+            auto lab, optics::lab_differences(optics::to_rgba8(t.reference_vi_vd),
+                                              optics::to_rgba8(t.recapture), t.areas.reference,
+                                              optics::PixelEncoding::kLinear));
         t.vd_mean_de00 = lab.s00.mean;
     }
     return t;
@@ -242,7 +245,8 @@ Result<ChainReport> run_chain(const VirtualInstallation& inst, const ChainOption
     HS_ASSIGN_OR_RETURN(rep.trip, round_trip(inst, rep.projector, rep.hmd, o));
     rep.seconds.push_back({"round trip", seconds_since(t0)});
     if (log)
-        log(fmt::format("round trip: MR1 {:.1f} %, MR2 {:.1f} %, RMSE {:.2f} DN over the prop, "
+        log(
+            fmt::format("round trip: MR1 {:.1f} %, MR2 {:.1f} %, RMSE {:.2f} DN over the prop, "
                         "VD area mean dE00 {:.2f}",
                         100 * rep.trip.areas.mr1.value_or(0), 100 * rep.trip.areas.mr2.value_or(0),
                         rep.trip.rmse_dn, rep.trip.vd_mean_de00));

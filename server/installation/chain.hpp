@@ -21,8 +21,8 @@ namespace hs::installation {
 
 // Distances in pixels over the pixels compared.
 struct MapError {
-    uint64_t pixels = 0;    // compared
-    uint64_t untrue = 0;    // estimated where the truth has nothing (or not comparable)
+    uint64_t pixels = 0;  // compared
+    uint64_t untrue = 0;  // estimated where the truth has nothing (or not comparable)
     double median_px = 0, p95_px = 0, max_px = 0;
 };
 MapError map_error(std::vector<double> distances, uint64_t untrue);
@@ -30,14 +30,14 @@ MapError map_error(std::vector<double> distances, uint64_t untrue);
 // A colour model against the device's known transform, on drives it was not fitted to.
 struct ColourCheck {
     double predict_mean_de00 = 0, predict_max_de00 = 0;  // model(d) vs the noiseless camera
-    double apply_mean_de00 = 0, apply_max_de00 = 0;  // camera of drive_for(target) vs target
+    double apply_mean_de00 = 0, apply_max_de00 = 0;      // camera of drive_for(target) vs target
     uint32_t colours = 0;
 };
 
 struct DeviceResult {
     Device device = Device::kProjector;
     calib::DeviceLut lut;
-    MapError lut_error;      // decoded device pixel vs the true one (device pixels)
+    MapError lut_error;  // decoded device pixel vs the true one (device pixels)
     calib::InverseMap inverse;
     MapError inverse_error;  // |truth(inverse(q)) - q| (device pixels)
     calib::ColourCalibration linear, curve;
@@ -60,10 +60,10 @@ struct RoundTrip {
     ImageRgba32f reference_vi, reference_vi_vd, vd;  // camera DN
     ImageRgba32f projector, hmd;                     // the drives the server sends (decoded)
     calib::DeviceImageStats projector_stats, hmd_stats;
-    ImageRgba32f recapture;                          // camera DN
+    ImageRgba32f recapture;  // camera DN
     optics::VdAreas areas;
-    double rmse_dn = 0;          // recapture vs "VI and VD" over the prop
-    double vd_mean_de00 = 0;     // over the reference's VD area
+    double rmse_dn = 0;       // recapture vs "VI and VD" over the prop
+    double vd_mean_de00 = 0;  // over the reference's VD area
     uint64_t prop_pixels = 0;
 };
 

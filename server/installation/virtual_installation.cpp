@@ -69,11 +69,13 @@ DeviceFlaws default_hmd_flaws() {
     return f;
 }
 
-Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(
-    gpu::Device& device, const scene::Scene& in, const Options& o) {
+Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::Device& device,
+                                                                         const scene::Scene& in,
+                                                                         const Options& o) {
     if (!(o.scale >= 0.05 && o.scale <= 4.0))
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("virtual installation: scale {} is outside 0.05..4", o.scale));
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("virtual installation: scale {} is outside 0.05..4", o.scale));
     if (!(o.noise_dn >= 0) || !std::isfinite(o.noise_dn))
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("virtual installation: noise {} DN is not a non-negative "
@@ -87,8 +89,9 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(
     s.projector.intrinsics = scaled_k(s.projector.intrinsics, o.scale);
     const scene::ViewerProfile* v = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
     if (!v)
-        return make_error(ErrorCode::kNotFound,
-                          fmt::format("virtual installation: no viewer '{}' in the scene", o.viewer));
+        return make_error(
+            ErrorCode::kNotFound,
+            fmt::format("virtual installation: no viewer '{}' in the scene", o.viewer));
     vi->viewer_ = *v;
     scene::ViewerProfile& viewer = vi->viewer_;
     const scene::Intrinsics eye = scaled_k(scene::eye_intrinsics(viewer), o.scale);
@@ -103,19 +106,18 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(
     vi->hmd_k_ = eye;
 
     HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(device, s, {}));
-    HS_ASSIGN_OR_RETURN(
-        vi->camera_,
-        render::viewing_viewpoint(s, viewer, o.angle_deg,
-                                  o.height.empty() ? s.viewing.default_height : o.height));
+    HS_ASSIGN_OR_RETURN(vi->camera_, render::viewing_viewpoint(
+                                         s, viewer, o.angle_deg,
+                                         o.height.empty() ? s.viewing.default_height : o.height));
     HS_ASSIGN_OR_RETURN(render::Simulator sim, render::Simulator::create(*renderer, s, viewer));
     vi->g_ref_ = sim.g_ref();
     const bool sheen = s.optics.effects.prop_sheen && s.optics.prop_sheen > 0;
     const auto& cam = vi->camera_;
-    HS_ASSIGN_OR_RETURN(render::RenderResult geo,
-                        renderer->render_capture_geometry(
-                            cam.intrinsics, cam.camera,
-                            sheen ? std::optional<double>(s.optics.prop_sheen_exponent)
-                                  : std::nullopt));
+    HS_ASSIGN_OR_RETURN(
+        render::RenderResult geo,
+        renderer->render_capture_geometry(
+            cam.intrinsics, cam.camera,
+            sheen ? std::optional<double>(s.optics.prop_sheen_exponent) : std::nullopt));
     vi->geometry_ = std::move(geo.image);
     if (o.exposure_ms > 0)
         s.optics.exposure_ms = o.exposure_ms;
@@ -162,8 +164,8 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(
             const double xr = o.hmd_zoom * (std::cos(roll) * xn - std::sin(roll) * yn);
             const double yr = o.hmd_zoom * (std::sin(roll) * xn + std::cos(roll) * yn);
             double du, dv;
-            distort(hk, o.hmd, hk.cx + hk.fx * xr + o.hmd_shift_x, hk.cy + hk.fy * yr + o.hmd_shift_y,
-                    du, dv);
+            distort(hk, o.hmd, hk.cx + hk.fx * xr + o.hmd_shift_x,
+                    hk.cy + hk.fy * yr + o.hmd_shift_y, du, dv);
             if (inside(du, dv, hk.width, hk.height)) {
                 vi->hmd_x_[size_t(y) * cw + x] = float(du);
                 vi->hmd_y_[size_t(y) * cw + x] = float(dv);

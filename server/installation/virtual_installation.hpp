@@ -39,11 +39,11 @@ DeviceFlaws default_projector_flaws();
 DeviceFlaws default_hmd_flaws();
 
 struct Options {
-    std::string viewer;       // the headset profile; empty: the scene's first
-    double angle_deg = 0;     // the capture viewpoint, about the viewing target
-    std::string height;       // a key of viewing.heights_m; empty: the default
-    double scale = 1.0;       // resolution of projector, headset and camera (quick runs: 0.5)
-    double noise_dn = 0.7;    // camera read noise (standard deviation, DN)
+    std::string viewer;     // the headset profile; empty: the scene's first
+    double angle_deg = 0;   // the capture viewpoint, about the viewing target
+    std::string height;     // a key of viewing.heights_m; empty: the default
+    double scale = 1.0;     // resolution of projector, headset and camera (quick runs: 0.5)
+    double noise_dn = 0.7;  // camera read noise (standard deviation, DN)
     // Camera exposure of the reference captures and the re-capture; 0: the scene's optics.
     double exposure_ms = 0;
     DeviceFlaws projector = default_projector_flaws();
@@ -68,7 +68,9 @@ public:
     // The exposure a careful operator calibrates device `d` at: its full white (over the other
     // device's black) at 85 % of the camera's full scale, so that no calibration image
     // saturates.
-    double calibration_exposure_ms(Device d) const { return cal_exposure_ms_[d == Device::kProjector ? 0 : 1]; }
+    double calibration_exposure_ms(Device d) const {
+        return cal_exposure_ms_[d == Device::kProjector ? 0 : 1];
+    }
 
     // The light a device emits for a drive image (its gamma and cross-talk).
     ImageRgba32f emit(Device d, const ImageRgba32f& drive) const;
@@ -82,7 +84,9 @@ public:
     struct Reference {
         ImageRgba32f vi, vi_vd;
     };
-    Reference reference(uint64_t seed) const { return {expose_ref(ref_vi_, seed), expose_ref(ref_vivd_, seed + 1)}; }
+    Reference reference(uint64_t seed) const {
+        return {expose_ref(ref_vi_, seed), expose_ref(ref_vivd_, seed + 1)};
+    }
 
     uint32_t device_width(Device d) const;
     uint32_t device_height(Device d) const;

@@ -514,7 +514,8 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                {"projector_image", "viewer_image", "capture_head", "position_tolerance_m",
                 "angle_tolerance_deg", "comment"});
         CapturedMaterial m;
-        auto image = [&](const char* key, std::string* path) -> std::shared_ptr<const ImageRgba32f> {
+        auto image = [&](const char* key,
+                         std::string* path) -> std::shared_ptr<const ImageRgba32f> {
             std::filesystem::path f = r.string(*c, p, key, std::nullopt);
             if (r.failed())
                 return nullptr;

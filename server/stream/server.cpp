@@ -580,12 +580,12 @@ void Server::Impl::render_loop() {
             if (captured && invalid[j].why.empty() &&
                 (d.eye_width != captured->viewer_image->width ||
                  d.eye_height != captured->viewer_image->height))
-                invalid[j] = {proto::ErrorCode::kInvalidDisplay,
-                              fmt::format("the captured material's VD image is {}x{}, this "
-                                          "headset's display is {}x{}",
-                                          captured->viewer_image->width,
-                                          captured->viewer_image->height, d.eye_width,
-                                          d.eye_height)};
+                invalid[j] = {
+                    proto::ErrorCode::kInvalidDisplay,
+                    fmt::format("the captured material's VD image is {}x{}, this "
+                                "headset's display is {}x{}",
+                                captured->viewer_image->width, captured->viewer_image->height,
+                                d.eye_width, d.eye_height)};
             if (captured)
                 continue;
             scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
@@ -603,9 +603,9 @@ void Server::Impl::render_loop() {
             const ViewerJob& job = batch[j];
             const auto& d = job.display;
             if (!rendered || !invalid[j].why.empty()) {
-                const Refusal r = rendered ? invalid[j]
-                                           : Refusal{proto::ErrorCode::kInternal,
-                                                     "rendering this frame failed"};
+                const Refusal r =
+                    rendered ? invalid[j]
+                             : Refusal{proto::ErrorCode::kInternal, "rendering this frame failed"};
                 asio::post(io, [this, id = job.session_id, r] {
                     auto it = sessions.find(id);
                     if (it != sessions.end())
@@ -623,9 +623,8 @@ void Server::Impl::render_loop() {
                                                      captured->angle_tolerance_deg);
                 captured_layer = near ? drive_as_layer(*captured->viewer_image)
                                       : ImageRgba32f::zeros(d.eye_width, d.eye_height);
-                captured_report = {{"pass", "captured-vd"},
-                                   {"ran", near},
-                                   {"effects", {"captured"}}};
+                captured_report = {
+                    {"pass", "captured-vd"}, {"ran", near}, {"effects", {"captured"}}};
             }
             std::vector<std::vector<uint8_t>> frames;
             for (uint8_t e = 0; e < 2; ++e) {
@@ -640,9 +639,8 @@ void Server::Impl::render_loop() {
                 layer.encoding = d.encoding;
                 layer.width = d.eye_width;
                 layer.height = d.eye_height;
-                layer.data = encode_layer(encode_pixels(image, d.format), d.eye_width,
-                                          d.eye_height, d.format, d.encoding,
-                                          default_tile_codec(d.format));
+                layer.data = encode_layer(encode_pixels(image, d.format), d.eye_width, d.eye_height,
+                                          d.format, d.encoding, default_tile_codec(d.format));
                 frames.push_back(proto::encode(layer));
                 std::lock_guard lock(mutex);
                 vd_encode_ms_total +=

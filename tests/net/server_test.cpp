@@ -53,12 +53,13 @@ size_t rss_kib() {
 
 class ServerTest : public ::testing::Test {
 protected:
+    virtual scene::Scene make_scene() { return test_scene(); }
     void SetUp() override {
         messages_before_ = device().validation_message_count();
         stream::ServerCreateInfo info;
         info.port = 0;
         info.token = kToken;
-        auto s = stream::Server::create(device(), test_scene(), info);
+        auto s = stream::Server::create(device(), make_scene(), info);
         ASSERT_TRUE(s.ok()) << s.error().message;
         server_ = std::move(s).value();
         thread_ = std::thread([this] { server_->run(); });
@@ -227,6 +228,86 @@ TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Loopback, HeadsetCount, ::testing::Values(1, 4, 16));
+
+// A captured material (docs/CALIBRATION.md): the projector gets the calibrated VI image, a
+// headset at the capture pose the VD image, any other pose black; nothing is rendered.
+class CapturedMaterialServer : public ServerTest {
+protected:
+    static ImageRgba32f ramp(uint32_t w, uint32_t h, int salt) {
+        ImageRgba32f img = ImageRgba32f::zeros(w, h);
+        for (uint32_t y = 0; y < h; ++y)
+            for (uint32_t x = 0; x < w; ++x)
+                img.set(x, y,
+                        {float((x * 7 + salt) % 256) / 255.0f, float((y * 5) % 256) / 255.0f,
+                         float((x + y + salt) % 256) / 255.0f, 0.0f});
+        return img;
+    }
+    scene::Scene make_scene() override {
+        scene::Scene s = test_scene();
+        scene::CapturedMaterial m;
+        const auto d = small_display();
+        m.projector_image = std::make_shared<const ImageRgba32f>(ramp(480, 300, 3));
+        m.viewer_image = std::make_shared<const ImageRgba32f>(ramp(d.eye_width, d.eye_height, 11));
+        m.capture_head = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
+        s.captured_material = m;
+        captured_ = m;
+        return s;
+    }
+    // The RGBA8 bytes a drive image must arrive as: round(255 drive).
+    static std::vector<uint8_t> codes(const ImageRgba32f& drive) {
+        std::vector<uint8_t> out;
+        for (size_t i = 0; i < drive.pixels.size(); i += 4) {
+            uint8_t c[3];
+            for (int k = 0; k < 3; ++k) c[k] = uint8_t(std::lround(255 * drive.pixels[i + k]));
+            out.insert(out.end(), {c[0], c[1], c[2], uint8_t((c[0] | c[1] | c[2]) ? 255 : 0)});
+        }
+        return out;
+    }
+    scene::CapturedMaterial captured_;
+};
+
+TEST_F(CapturedMaterialServer, ServesTheCapturedImagesAsTheirDriveCodes) {
+    auto p = connect();
+    ASSERT_FALSE(p->hello(proto::Role::kProjector, kToken, "projector"));
+    auto frame = receive_a<proto::ProjectorFrame>(*p);
+    ASSERT_TRUE(frame);
+    EXPECT_EQ(frame->data, codes(*captured_.projector_image));
+
+    const auto display = small_display(proto::PixelFormat::kRgba8);
+    auto near = headset(display, "at-capture");
+    auto far = headset(display, "elsewhere");
+    ASSERT_TRUE(near->send(pose_at(0.0, 7)));
+    ASSERT_TRUE(near->send(proto::FrameRequest{}));
+    ASSERT_TRUE(far->send(pose_at(30.0, 8)));
+    ASSERT_TRUE(far->send(proto::FrameRequest{}));
+    auto got = frame_for(*near, 7);
+    ASSERT_EQ(got.size(), 2u);
+    for (const auto& l : got) EXPECT_EQ(l.data, codes(*captured_.viewer_image)) << int(l.eye);
+    auto other = frame_for(*far, 8);
+    ASSERT_EQ(other.size(), 2u);
+    for (const auto& l : other)
+        EXPECT_EQ(l.data, std::vector<uint8_t>(l.data.size(), 0)) << "VD away from the capture";
+    auto st = server_->stats();
+    EXPECT_EQ(st["passes"]["projector"]["pass"], "captured-vi");
+    EXPECT_EQ(st["passes"]["viewer"]["pass"], "captured-vd");
+}
+
+TEST_F(CapturedMaterialServer, AHeadsetOfAnotherSizeGetsAClearErrorOthersAreServed) {
+    auto display = small_display(proto::PixelFormat::kRgba8);
+    auto good = headset(display, "right-size");
+    display.eye_width -= 2;
+    display.cx -= 1;
+    auto bad = headset(display, "wrong-size");
+    ASSERT_TRUE(bad->send(pose_at(0.0, 5)));
+    ASSERT_TRUE(bad->send(proto::FrameRequest{}));
+    auto e = receive_a<proto::Error>(*bad, 10000);
+    ASSERT_TRUE(e);
+    EXPECT_EQ(int(e->code), int(proto::ErrorCode::kInvalidDisplay));
+    EXPECT_NE(e->message.find("captured material's VD image"), std::string::npos) << e->message;
+    ASSERT_TRUE(good->send(pose_at(0.0, 6)));
+    ASSERT_TRUE(good->send(proto::FrameRequest{}));
+    EXPECT_EQ(frame_for(*good, 6).size(), 2u);
+}
 
 TEST_F(ServerTest, SparseLayersEqualRawLayers) {
     auto raw_display = small_display(proto::PixelFormat::kRgba8);

@@ -134,7 +134,8 @@ TEST(KernelRegression, VeryLargeBandwidthGivesTheWeightedMean) {
     auto kr = KernelRegression::create(s);
     ASSERT_TRUE(kr.ok());
     double sw = 0, sx = 0, sy = 0;
-    for (const auto& c : s) sw += c.weight, sx += c.weight * c.camera_x, sy += c.weight * c.camera_y;
+    for (const auto& c : s)
+        sw += c.weight, sx += c.weight * c.camera_x, sy += c.weight * c.camera_y;
     for (double h : {1e6, 1e12, 1e150}) {
         auto e = kr->query(2.2, 1.7, h, 2.0);
         ASSERT_FALSE(e.hole);

@@ -170,3 +170,33 @@ TEST(Config, MissingAlbedoTextureNamesTheFile) {
     EXPECT_NE(s.error().message.find("/nonexistent/brass.png"), std::string::npos)
         << s.error().message;
 }
+
+TEST(Config, CapturedMaterialImagesAreLoadedAndChecked) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / "hysar_captured_material_test";
+    fs::create_directories(dir);
+    ASSERT_TRUE(write_exr(dir / "proj.exr", ImageRgba32f::zeros(1920, 1200)).ok());
+    ASSERT_TRUE(write_exr(dir / "small.exr", ImageRgba32f::zeros(4, 4)).ok());
+    auto with = [&](const std::string& projector_image) {
+        auto j = nlohmann::json::parse(default_text());
+        j["captured_material"] = {
+            {"projector_image", projector_image},
+            {"viewer_image", "small.exr"},
+            {"capture_head", {{"position", {0, 1.1, 0.8}}, {"look_at", {0, 0.745, 0}}}}};
+        return parse_scene(j.dump(), "captured.json", dir);
+    };
+    auto ok = with("proj.exr");
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    ASSERT_TRUE(ok->captured_material.has_value());
+    EXPECT_EQ(ok->captured_material->viewer_image->width, 4u);
+    EXPECT_NEAR(ok->captured_material->capture_head.position.z, 0.8, 1e-12);
+    auto missing = with("nowhere.exr");
+    ASSERT_FALSE(missing.ok());
+    EXPECT_NE(missing.error().message.find("captured_material.projector_image"), std::string::npos)
+        << missing.error().message;
+    auto wrong = with("small.exr");
+    ASSERT_FALSE(wrong.ok());
+    EXPECT_NE(wrong.error().message.find("is 4x4, the projector is 1920x1200"), std::string::npos)
+        << wrong.error().message;
+    fs::remove_all(dir);
+}
