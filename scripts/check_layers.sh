@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
-# no tinygltf outside server/scene/, no socket outside server/stream/ and clients/.
+# no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
+# outside server/calib/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -10,5 +11,7 @@ gl=$(grep -rn 'tiny_gltf' server clients tests --include='*.cpp' --include='*.hp
 if [[ -n "$gl" ]]; then echo "layers: tinygltf outside server/scene/:"; echo "$gl"; fail=1; fi
 so=$(grep -rnE '#include <(sys/socket|netinet/in|asio)' server --include='*.cpp' --include='*.hpp' | grep -v '^server/stream/' || true)
 if [[ -n "$so" ]]; then echo "layers: sockets outside server/stream/:"; echo "$so"; fail=1; fi
+cv=$(grep -rn '#include <opencv2' server clients --include='*.cpp' --include='*.hpp' | grep -v '^server/calib/' || true)
+if [[ -n "$cv" ]]; then echo "layers: OpenCV outside server/calib/:"; echo "$cv"; fail=1; fi
 if [[ $fail -ne 0 ]]; then exit 1; fi
 echo "layers: module boundaries hold"
