@@ -113,26 +113,21 @@ KernelRegression::Estimate KernelRegression::query(double qx, double qy, double 
     const double radius = e.nearest + 4.0 * h;
     const double r2 = radius * radius;
     const double two_h2 = 2.0 * h * h;
-    // Log weights relative to the nearest sample, then relative to the largest.
-    double max_a = -std::numeric_limits<double>::infinity();
-    cells(radius, [&](uint32_t i) {
+    // Log weights relative to the nearest sample (-inf beyond the radius, and where 2h^2
+    // underflows), then relative to the largest.
+    auto log_weight = [&](uint32_t i) {
         const double dx = points_[i].device_x - qx, dy = points_[i].device_y - qy;
         const double d2 = dx * dx + dy * dy;
         if (d2 > r2)
-            return;
+            return -std::numeric_limits<double>::infinity();
         const double diff = d2 - nn2;
-        const double t = diff <= 0 ? 0.0 : diff / two_h2;  // inf when 2h^2 underflows
-        max_a = std::max(max_a, std::log(points_[i].weight) - t);
-    });
+        return std::log(points_[i].weight) - (diff <= 0 ? 0.0 : diff / two_h2);
+    };
+    double max_a = -std::numeric_limits<double>::infinity();
+    cells(radius, [&](uint32_t i) { max_a = std::max(max_a, log_weight(i)); });
     double sw = 0, sx = 0, sy = 0;
     cells(radius, [&](uint32_t i) {
-        const double dx = points_[i].device_x - qx, dy = points_[i].device_y - qy;
-        const double d2 = dx * dx + dy * dy;
-        if (d2 > r2)
-            return;
-        const double diff = d2 - nn2;
-        const double t = diff <= 0 ? 0.0 : diff / two_h2;
-        const double w = std::exp(std::log(points_[i].weight) - t - max_a);
+        const double w = std::exp(log_weight(i) - max_a);
         if (w > 0) {
             sw += w;
             sx += w * points_[i].camera_x;
