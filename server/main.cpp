@@ -21,9 +21,9 @@ void usage(FILE* f) {
         "  bench    measured costs: hysar bench encoding (hysar bench --help)\n"
         "  eval     the paper's evaluation: optics (Table 2), resolution, compare (Sec. 5.2 on\n"
         "           captures), report (everything, simulated) (hysar eval --help)\n"
-        "  calibrate  calibration of a real installation and captured materials: patterns, decode,\n"
-        "           invert, colour, capture; simulate runs the chain on a virtual installation\n"
-        "           (hysar calibrate --help)\n"
+        "  calibrate  calibration of a real installation and captured materials: patterns,\n"
+        "           decode, invert, colour, capture; simulate runs the whole chain on a virtual\n"
+        "           installation (hysar calibrate --help)\n"
         "\n"
         "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
         "turns on the Vulkan validation layer.\n");
