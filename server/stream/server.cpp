@@ -486,6 +486,7 @@ void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames
 void Server::Impl::render_loop() {
     std::unique_ptr<render::Renderer> renderer;
     scene::Scene current;
+    ImageRgba32f captured_vd;  // a captured material's VD image as layer radiance, made once
     // Builds the renderer for `s` and publishes its projector frame as scene `version`.
     auto rebuild = [&](const scene::Scene& s, uint32_t version) -> bool {
         auto r = render::Renderer::create(device, s, info.renderer);
@@ -495,6 +496,8 @@ void Server::Impl::render_loop() {
         }
         renderer = std::move(r).value();
         current = s;
+        captured_vd = s.captured_material ? drive_as_layer(*s.captured_material->viewer_image)
+                                          : ImageRgba32f{};
         auto t0 = Clock::now();
         ImageRgba32f frame;
         nlohmann::json report;
@@ -615,21 +618,23 @@ void Server::Impl::render_loop() {
                 continue;
             }
             // The captured VD image, for a head within tolerance of the capture pose.
-            ImageRgba32f captured_layer;
+            const ImageRgba32f* captured_layer = nullptr;
+            ImageRgba32f black;
             nlohmann::json captured_report;
             if (captured) {
                 const bool near = scene::pose_within(heads[j], captured->capture_head,
                                                      captured->position_tolerance_m,
                                                      captured->angle_tolerance_deg);
-                captured_layer = near ? drive_as_layer(*captured->viewer_image)
-                                      : ImageRgba32f::zeros(d.eye_width, d.eye_height);
+                if (!near)
+                    black = ImageRgba32f::zeros(d.eye_width, d.eye_height);
+                captured_layer = near ? &captured_vd : &black;
                 captured_report = {
                     {"pass", "captured-vd"}, {"ran", near}, {"effects", {"captured"}}};
             }
             std::vector<std::vector<uint8_t>> frames;
             for (uint8_t e = 0; e < 2; ++e) {
                 const ImageRgba32f& image =
-                    captured ? captured_layer : rendered.value()[2 * j + e].image;
+                    captured ? *captured_layer : rendered.value()[2 * j + e].image;
                 auto t0 = Clock::now();
                 proto::VdLayer layer;
                 layer.frame_id = job.frame_id;
