@@ -14,6 +14,7 @@ layout(constant_id = HS_SC_MESH_TANGENT) const bool kMeshTangent = false;
 
 layout(constant_id = HS_SC_ALBEDO_TEXTURE) const bool kAlbedoTexture = false;
 layout(constant_id = HS_SC_PROP_SHEEN) const bool kPropSheen = false;
+layout(constant_id = HS_SC_AREA_SAMPLES) const int kAreaSamples = 0;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
@@ -44,17 +45,57 @@ void light_at(int i, vec3 p, vec3 n, out vec3 l, out vec3 E) {
     }
 }
 
+// Area lights (docs/SHADING.md, "Area lights"): kAreaSamples points of a rank-1 lattice (the R2
+// sequence) on the panel, shifted per pixel by a hash of the pixel (Cranley-Patterson rotation)
+// so that the error is noise rather than kAreaSamples ghost highlights.
+vec2 g_area_shift = vec2(0.0);
+
+// pcg2d, Jarzynski and Olano 2020, "Hash Functions for GPU Rendering".
+uvec2 pcg2d(uvec2 v) {
+    v = v * 1664525u + 1013904223u;
+    v.x += v.y * 1664525u;
+    v.y += v.x * 1664525u;
+    v = v ^ (v >> 16u);
+    v.x += v.y * 1664525u;
+    v.y += v.x * 1664525u;
+    return v ^ (v >> 16u);
+}
+
+bool is_rect(int i) { return kAreaSamples > 0 && scene.lights[i].position_or_direction.w == 2.0; }
+int samples_of(int i) { return is_rect(i) ? kAreaSamples : 1; }
+
+// Sample j of light i: a point or directional light is its own single sample; a rect light's
+// sample j is a point on the panel carrying 1/kAreaSamples of its Lambertian emission.
+void light_sample(int i, int j, vec3 p, vec3 n, out vec3 l, out vec3 E) {
+    if (!is_rect(i)) {
+        light_at(i, p, n, l, E);
+        return;
+    }
+    GpuLight light = scene.lights[i];
+    vec2 st = fract(vec2(0.5) + float(j) * vec2(0.7548776662, 0.5698402910) + g_area_shift);
+    vec3 eu = light.edge_u.xyz, ev = light.edge_v.xyz;
+    vec3 q = light.position_or_direction.xyz + (st.x - 0.5) * eu + (st.y - 0.5) * ev;
+    vec3 d = q - p;
+    float dist = length(d);
+    l = dist > 1e-9 ? d / dist : n;
+    float cos_e = max(-dot(normalize(cross(eu, ev)), l), 0.0);
+    float dc = max(dist, scene.spec_params.w);
+    E = light.irradiance.rgb * (cos_e / (float(kAreaSamples) * dc * dc));
+}
+
 void main() {
+    if (kAreaSamples > 0) g_area_shift = vec2(pcg2d(uvec2(gl_FragCoord.xy))) * (1.0 / 4294967296.0);
     vec3 n = in_normal * inversesqrt(max(dot(in_normal, in_normal), 1e-30));
     vec3 p = in_position;
     vec3 sum = vec3(0.0);
     if (kPassKind == 0) {
         // Paper eq. (2), VI: sum_i L_d(p, l_i).
-        for (int i = 0; i < kNumLights; ++i) {
-            vec3 l, E;
-            light_at(i, p, n, l, E);
-            sum += E * max(dot(n, l), 0.0);
-        }
+        for (int i = 0; i < kNumLights; ++i)
+            for (int j = 0; j < samples_of(i); ++j) {
+                vec3 l, E;
+                light_sample(i, j, p, n, l, E);
+                sum += E * max(dot(n, l), 0.0);
+            }
         sum *= scene.albedo_over_pi.rgb;
         if (kAlbedoTexture) sum *= texture(albedo_texture, in_uv).rgb;  // sRGB decoded by the sampler
     } else if (kPassKind == 2) {
@@ -83,13 +124,14 @@ void main() {
         vec3 v = normalize(pc.eye_position.xyz - p);
         if (kSpecModel != 0) {
             vec3 s = vec3(0.0);
-            for (int i = 0; i < kNumLights; ++i) {
-                vec3 l, E;
-                light_at(i, p, n, l, E);
-                s += E * hs_specular_factor(kSpecModel, kAnisotropic, n, l, v,
-                                            kMeshTangent ? in_tangent : scene.tangent_axis.xyz,
-                                            scene.spec_params.xyz);
-            }
+            for (int i = 0; i < kNumLights; ++i)
+                for (int j = 0; j < samples_of(i); ++j) {
+                    vec3 l, E;
+                    light_sample(i, j, p, n, l, E);
+                    s += E * hs_specular_factor(kSpecModel, kAnisotropic, n, l, v,
+                                                kMeshTangent ? in_tangent : scene.tangent_axis.xyz,
+                                                scene.spec_params.xyz);
+                }
             sum += scene.spec_colour.rgb * s;
         }
         if (kEmission) sum += scene.emission.rgb;

@@ -34,11 +34,15 @@ using uint = uint32_t;
 #define HS_SC_MESH_TANGENT 7    // bool: the tangent comes from the mesh, not from tangent_axis
 #define HS_SC_ALBEDO_TEXTURE 8  // bool: albedo = colour * texture(uv)
 #define HS_SC_PROP_SHEEN 9      // bool: capture geometry also writes the prop's sheen lobe
+#define HS_SC_AREA_SAMPLES 10   // int: samples per rect light per pixel; 0: the scene has none
 
 struct GpuLight {
-    vec4 position_or_direction;  // xyz: point position (m, world) or unit direction TO the light;
-                                 // w: 1 point, 0 directional
-    vec4 irradiance;  // rgb: colour * intensity (W/m^2 at normal incidence, or W/sr for points)
+    vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit
+                                 // direction TO the light; w: 1 point, 0 directional, 2 rect
+    vec4 irradiance;  // rgb: colour * intensity (W/m^2 at normal incidence, or W/sr for points
+                      // and along a rect's normal)
+    vec4 edge_u;      // rect: xyz the first edge (m, world)
+    vec4 edge_v;      // rect: xyz the second edge; the panel emits towards edge_u x edge_v
 };
 
 struct GpuScene {

@@ -18,23 +18,28 @@ namespace {
 bool has_emission(const scene::Scene& s) {
     return s.material.emission.r > 0 || s.material.emission.g > 0 || s.material.emission.b > 0;
 }
-bool has_point_lights(const scene::Scene& s) {
+bool has_light(const scene::Scene& s, scene::LightType type) {
     for (const auto& l : s.lights)
-        if (l.type == scene::LightType::kPoint)
+        if (l.type == type)
             return true;
     return false;
 }
 }  // namespace
 
-std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene::Specular& spec) {
+std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene::Specular& spec,
+                                    uint32_t area_light_samples) {
     std::vector<std::string> e;
-    const bool falloff = s.effects.point_light_falloff && has_point_lights(s);
+    const bool falloff = s.effects.point_light_falloff && has_light(s, scene::LightType::kPoint);
+    const bool area = has_light(s, scene::LightType::kRect);
+    const std::string area_effect = fmt::format("area-lights:{}spp", area_light_samples);
     if (!vd) {
         e.push_back("diffuse");
         if (s.material.albedo_texture)
             e.push_back("albedo-texture");
         if (falloff)
             e.push_back("point-light-falloff");
+        if (area)
+            e.push_back(area_effect);
         return e;
     }
     if (spec.model != scene::SpecularModel::kNone) {
@@ -45,6 +50,8 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
             e.push_back("mesh-tangents");
         if (falloff)
             e.push_back("point-light-falloff");
+        if (area)
+            e.push_back(area_effect);
     }
     if (has_emission(s))
         e.push_back("emission");
@@ -92,7 +99,8 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
         return &it->second;
 
     Variant v;
-    v.effects = effects_of(scene_, vd, sp);
+    v.effects = effects_of(scene_, vd, sp, info_.area_light_samples);
+    const bool area = has_light(scene_, scene::LightType::kRect);
     const bool falloff = scene_.effects.point_light_falloff;
     gpu::GraphicsPipelineInfo pi;
     pi.vertex_spv = kPropVertSpv;
@@ -110,7 +118,8 @@ Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spe
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
-        .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr);
+        .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr)
+        .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0);
     return build_variant(key, std::move(v), pi, scene_block(sp));
 }
 
@@ -140,9 +149,19 @@ gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
         const auto& l = scene_.lights[i];
         glm::dvec3 E = l.colour * l.intensity;
         block.lights[i].irradiance = glm::vec4(glm::vec3(E), 0);
-        block.lights[i].position_or_direction = l.type == scene::LightType::kPoint
-                                                    ? glm::vec4(glm::vec3(l.position), 1.0f)
-                                                    : glm::vec4(glm::vec3(-l.direction), 0.0f);
+        switch (l.type) {
+            case scene::LightType::kDirectional:
+                block.lights[i].position_or_direction = glm::vec4(glm::vec3(-l.direction), 0.0f);
+                break;
+            case scene::LightType::kPoint:
+                block.lights[i].position_or_direction = glm::vec4(glm::vec3(l.position), 1.0f);
+                break;
+            case scene::LightType::kRect:
+                block.lights[i].position_or_direction = glm::vec4(glm::vec3(l.position), 2.0f);
+                block.lights[i].edge_u = glm::vec4(glm::vec3(l.edge_u), 0.0f);
+                block.lights[i].edge_v = glm::vec4(glm::vec3(l.edge_v), 0.0f);
+                break;
+        }
     }
     const auto& pk = scene_.projector.intrinsics;
     block.projector_frame_from_world = glm::mat4(scene::frame_from_world(scene_.projector.pose));

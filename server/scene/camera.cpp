@@ -51,6 +51,22 @@ Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up) {
     return make_pose(eye, glm::quat_cast(r));
 }
 
+Result<Light> rect_light_facing(glm::dvec3 centre, glm::dvec3 target, double width_m,
+                                double height_m, double intensity) {
+    if (!(width_m > 0) || !(height_m > 0))
+        return make_error(ErrorCode::kInvalidArgument, "a rect light needs a positive size");
+    HS_ASSIGN_OR_RETURN(Pose pose, look_at(centre, target));
+    const glm::dmat4 m = world_from_frame(pose);
+    Light l;
+    l.type = LightType::kRect;
+    l.position = centre;
+    l.intensity = intensity;
+    // The frame looks along -z: edge_u = y, edge_v = x gives edge_u x edge_v = -z, towards target.
+    l.edge_u = height_m * glm::dvec3(m[1]);
+    l.edge_v = width_m * glm::dvec3(m[0]);
+    return l;
+}
+
 Intrinsics intrinsics_from_fov(uint32_t w, uint32_t h, double fov_x, double fov_y) {
     Intrinsics k;
     k.width = w;

@@ -21,6 +21,11 @@ bool pose_within(const Pose& a, const Pose& b, double metres, double degrees);
 // a fixed perpendicular up is chosen so the pose stays well defined. eye == target is an error.
 Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up = {0, 1, 0});
 
+// A rect light of width_m x height_m centred at `centre` and facing `target` (it emits towards
+// it), its width horizontal where the facing direction allows.
+Result<Light> rect_light_facing(glm::dvec3 centre, glm::dvec3 target, double width_m,
+                                double height_m, double intensity);
+
 // Symmetric intrinsics from full fields of view (radians).
 Intrinsics intrinsics_from_fov(uint32_t width, uint32_t height, double fov_x_rad, double fov_y_rad);
 

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include <fmt/format.h>
+#include <glm/geometric.hpp>
 #include <glm/trigonometric.hpp>
 #include <nlohmann/json.hpp>
 
@@ -382,7 +383,9 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
             for (size_t i = 0; i < ls->size(); ++i) {
                 const json& lj = (*ls)[i];
                 std::string path = fmt::format("lights[{}]", i);
-                r.only(lj, path, {"type", "colour", "intensity", "direction", "position", "name"});
+                r.only(lj, path,
+                       {"type", "colour", "intensity", "direction", "position", "edge_u", "edge_v",
+                        "name"});
                 Light l;
                 std::string type = r.string(lj, path, "type", std::nullopt);
                 l.colour = r.vec3(lj, path, "colour", glm::dvec3(1.0), 0.0, 1e6);
@@ -397,9 +400,20 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                 } else if (type == "point") {
                     l.type = LightType::kPoint;
                     l.position = r.vec3(lj, path, "position", std::nullopt);
+                } else if (type == "rect") {
+                    l.type = LightType::kRect;
+                    l.position = r.vec3(lj, path, "position", std::nullopt);
+                    l.edge_u = r.vec3(lj, path, "edge_u", std::nullopt);
+                    l.edge_v = r.vec3(lj, path, "edge_v", std::nullopt);
+                    if (!r.failed() && !(glm::length(glm::cross(l.edge_u, l.edge_v)) > 1e-8))
+                        r.fail(path + ".edge_u",
+                               "edge_u and edge_v must span a rectangle of at least 1e-8 m^2 "
+                               "(they are zero or parallel)");
                 } else if (!r.failed()) {
-                    r.fail(path + ".type",
-                           fmt::format("expected \"directional\" or \"point\", got \"{}\"", type));
+                    r.fail(
+                        path + ".type",
+                        fmt::format("expected \"directional\", \"point\" or \"rect\", got \"{}\"",
+                                    type));
                 }
                 s.lights.push_back(l);
             }

@@ -66,15 +66,19 @@ struct Material {
     glm::dvec3 emission{0.0};  // L_e, radiance added to the VD layer, linear RGB
 };
 
-enum class LightType { kDirectional, kPoint };
+enum class LightType { kDirectional, kPoint, kRect };
 
 struct Light {
     LightType type = LightType::kDirectional;
     glm::dvec3 colour{1.0};          // linear RGB, multiplies intensity
     double intensity = 1.0;          // directional: irradiance W/m^2 at normal incidence;
-                                     // point: radiant intensity W/sr
+                                     // point: radiant intensity W/sr; rect: radiant intensity
+                                     // W/sr along the panel's normal (a Lambertian emitter)
     glm::dvec3 direction{0, -1, 0};  // directional: unit direction the light travels, world
-    glm::dvec3 position{0.0};        // point: metres, world
+    glm::dvec3 position{0.0};        // point: metres, world; rect: the panel's centre
+    // rect: the panel's two edges (metres, world). It emits from the side edge_u x edge_v
+    // points to, with radiance intensity / area (docs/SHADING.md, "Area lights").
+    glm::dvec3 edge_u{0.0}, edge_v{0.0};
 };
 
 // Where the point-light falloff 1/d^2 is evaluated with d clamped from below (docs/SHADING.md).

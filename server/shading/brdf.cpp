@@ -80,6 +80,28 @@ LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, boo
     return {l, c / (dc * dc)};
 }
 
+void for_each_light_sample(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff,
+                           int rect_grid, const std::function<void(const LightAtPoint&)>& f) {
+    if (light.type != scene::LightType::kRect) {
+        f(light_at(light, p, n, falloff));
+        return;
+    }
+    const int m = std::max(rect_grid, 1);
+    const glm::dvec3 ne = glm::normalize(glm::cross(light.edge_u, light.edge_v));
+    const glm::dvec3 c = light.colour * light.intensity / double(m * m);
+    for (int j = 0; j < m; ++j)
+        for (int i = 0; i < m; ++i) {
+            glm::dvec3 q = light.position + ((i + 0.5) / m - 0.5) * light.edge_u +
+                           ((j + 0.5) / m - 0.5) * light.edge_v;
+            glm::dvec3 d = q - p;
+            double dist = glm::length(d);
+            glm::dvec3 l = dist > 1e-9 ? d / dist : n;
+            double cos_e = std::max(-glm::dot(ne, l), 0.0);
+            double dc = std::max(dist, scene::kMinLightDistance);
+            f({l, c * (cos_e / (dc * dc))});
+        }
+}
+
 glm::dvec3 sample_albedo_texture(const ImageRgba8& tex, glm::dvec2 uv) {
     auto decode = [](uint8_t c) {  // IEC 61966-2-1 sRGB EOTF
         double x = c / 255.0;
@@ -98,12 +120,13 @@ glm::dvec3 sample_albedo_texture(const ImageRgba8& tex, glm::dvec2 uv) {
            fy * ((1 - fx) * texel(ix, iy + 1) + fx * texel(ix + 1, iy + 1));
 }
 
-glm::dvec3 diffuse_radiance(const scene::Scene& s, glm::dvec3 p, glm::dvec3 n, glm::dvec2 uv) {
+glm::dvec3 diffuse_radiance(const scene::Scene& s, glm::dvec3 p, glm::dvec3 n, glm::dvec2 uv,
+                            int rect_grid) {
     glm::dvec3 sum(0.0);
-    for (const auto& light : s.lights) {
-        LightAtPoint la = light_at(light, p, n, s.effects.point_light_falloff);
-        sum += la.E * std::max(glm::dot(n, la.l), 0.0);
-    }
+    for (const auto& light : s.lights)
+        for_each_light_sample(
+            light, p, n, s.effects.point_light_falloff, rect_grid,
+            [&](const LightAtPoint& la) { sum += la.E * std::max(glm::dot(n, la.l), 0.0); });
     glm::dvec3 albedo = s.material.albedo;
     if (s.material.albedo_texture)
         albedo *= sample_albedo_texture(*s.material.albedo_texture, uv);
@@ -135,14 +158,16 @@ double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, 
 }
 
 glm::dvec3 specular_radiance(const scene::Scene& s, const scene::Specular& spec, glm::dvec3 p,
-                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent) {
+                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent,
+                             int rect_grid) {
     glm::dvec3 sum = s.material.emission;
     if (spec.model == scene::SpecularModel::kNone)
         return sum;
-    for (const auto& light : s.lights) {
-        LightAtPoint la = light_at(light, p, n, s.effects.point_light_falloff);
-        sum += spec.colour * la.E * specular_factor(spec, n, la.l, v, surface_tangent);
-    }
+    for (const auto& light : s.lights)
+        for_each_light_sample(
+            light, p, n, s.effects.point_light_falloff, rect_grid, [&](const LightAtPoint& la) {
+                sum += spec.colour * la.E * specular_factor(spec, n, la.l, v, surface_tangent);
+            });
     return sum;
 }
 

@@ -10,6 +10,7 @@
 // Every specular term is zero unless n.l > 0 and n.v > 0 (light and viewer above the surface).
 #pragma once
 
+#include <functional>
 #include <optional>
 
 #include <glm/vec3.hpp>
@@ -47,11 +48,22 @@ struct LightAtPoint {
     glm::dvec3 l;  // unit, towards the light; a point light at p itself gives l = n
     glm::dvec3 E;  // linear RGB
 };
+// Directional and point lights only (a rect light is a sum of samples: for_each_light_sample).
 LightAtPoint light_at(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff);
+
+// Grid of the reference's midpoint rule over a rect light: rect_grid x rect_grid cells.
+inline constexpr int kRectReferenceGrid = 32;
+
+// The samples of one light at p, each passed to f(const LightAtPoint&): a directional or point
+// light is one sample; a rect light is the midpoint rule on rect_grid x rect_grid cells of the
+// panel, each cell a point with 1/rect_grid^2 of the Lambertian emission intensity cos(theta_e)
+// and the 1/max(d, d_min)^2 falloff.
+void for_each_light_sample(const scene::Light& light, glm::dvec3 p, glm::dvec3 n, bool falloff,
+                           int rect_grid, const std::function<void(const LightAtPoint&)>& f);
 
 // Paper eq. (2), VI part: sum_i L_d(p, l_i), with the albedo texture (if any) at `uv`.
 glm::dvec3 diffuse_radiance(const scene::Scene& scene, glm::dvec3 p, glm::dvec3 n,
-                            glm::dvec2 uv = {0, 0});
+                            glm::dvec2 uv = {0, 0}, int rect_grid = kRectReferenceGrid);
 
 // The albedo texture's linear value at uv, as a Vulkan sampler computes it: texels decoded
 // from sRGB, then bilinear filtering, repeating in u, clamped to the edge in v.
@@ -59,7 +71,8 @@ glm::dvec3 sample_albedo_texture(const ImageRgba8& texture, glm::dvec2 uv);
 
 // Paper eq. (2), VD part: L_e + sum_i L_s(p, l_i, v), with `spec` the specular model in use.
 glm::dvec3 specular_radiance(const scene::Scene& scene, const scene::Specular& spec, glm::dvec3 p,
-                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent = {1, 0, 0});
+                             glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent = {1, 0, 0},
+                             int rect_grid = kRectReferenceGrid);
 
 // The specular factor (S or W above) of one model for one light direction. `surface_tangent`
 // is the mesh's tangent at the point, used when spec.tangent_source is kMesh.

@@ -4,6 +4,7 @@
 
 #include <glm/geometric.hpp>
 
+#include "core/parallel.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
 #include "shading/brdf.hpp"
@@ -62,24 +63,41 @@ Result<ImageRgba32f> reference_projector(const scene::Scene& s) {
 
 Result<ImageRgba32f> reference_viewer(const scene::Scene& s, const scene::Specular& spec,
                                       const scene::Intrinsics& k, const scene::Pose& eye,
-                                      std::vector<float>* ndv) {
+                                      std::vector<float>* ndv, const ReferenceOptions& o) {
     HS_TRY(require_hemisphere(s));
+    if (o.pixel_grid < 1 || o.rect_grid < 1)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "reference_viewer: pixel_grid and rect_grid must be at least 1");
     ImageRgba32f img = ImageRgba32f::zeros(k.width, k.height);
     if (ndv)
         ndv->assign(size_t(k.width) * k.height, 0.0f);
-    for (uint32_t y = 0; y < k.height; ++y) {
+    const uint32_t g = o.pixel_grid;
+    parallel_rows(k.height, [&](uint32_t y) {
         for (uint32_t x = 0; x < k.width; ++x) {
-            glm::dvec3 d = scene::pixel_ray(k, eye, x, y);
-            auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d);
-            if (!hit)
+            glm::dvec3 sum(0.0);
+            uint32_t hits = 0;
+            for (uint32_t sy = 0; sy < g; ++sy)
+                for (uint32_t sx = 0; sx < g; ++sx) {
+                    const double u = x + (sx + 0.5) / g - 0.5, v = y + (sy + 0.5) / g - 0.5;
+                    glm::dvec3 d = scene::pixel_ray(k, eye, u, v);
+                    auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d);
+                    if (!hit)
+                        continue;
+                    ++hits;
+                    sum += specular_radiance(s, spec, hit->p, hit->n, -d,
+                                             scene::hemisphere_tangent(hit->n), o.rect_grid);
+                }
+            if (hits == 0)
                 continue;
-            glm::dvec3 L =
-                specular_radiance(s, spec, hit->p, hit->n, -d, scene::hemisphere_tangent(hit->n));
-            img.set(x, y, glm::vec4(glm::vec3(L), 1.0f));
-            if (ndv)
-                (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
+            const double n = double(g) * g;
+            img.set(x, y, glm::vec4(glm::vec3(sum / n), float(hits / n)));
+            if (ndv) {
+                glm::dvec3 d = scene::pixel_ray(k, eye, x, y);
+                if (auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d))
+                    (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
+            }
         }
-    }
+    });
     return img;
 }
 

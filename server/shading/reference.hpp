@@ -6,6 +6,7 @@
 #include "core/image.hpp"
 #include "core/result.hpp"
 #include "scene/scene.hpp"
+#include "shading/brdf.hpp"
 
 namespace hs::shading {
 
@@ -23,10 +24,19 @@ std::optional<Hit> intersect_hemisphere(const scene::Hemisphere& h, glm::dvec3 o
 // point it lights; alpha = 1 where the prop is hit. Hemisphere props only.
 Result<ImageRgba32f> reference_projector(const scene::Scene& scene);
 
-// One eye's VD layer: specular radiance plus emission; alpha = 1 where the prop is hit.
-// `n_dot_v_out`, when given, receives n.v per pixel (0 where missed) for masking silhouettes.
+struct ReferenceOptions {
+    // pixel_grid x pixel_grid rays per pixel on a regular grid, averaged (a box filter over the
+    // pixel: what supersampling converges to); 1 = the pixel centre only.
+    uint32_t pixel_grid = 1;
+    int rect_grid = kRectReferenceGrid;  // rect lights: cells of the midpoint rule per side
+};
+
+// One eye's VD layer: specular radiance plus emission; alpha = the fraction of the pixel's rays
+// that hit the prop (1 or 0 at the pixel centre). `n_dot_v_out`, when given, receives n.v per
+// pixel (of the centre ray; 0 where missed) for masking silhouettes. Rows run in parallel.
 Result<ImageRgba32f> reference_viewer(const scene::Scene& scene, const scene::Specular& spec,
                                       const scene::Intrinsics& k, const scene::Pose& eye,
-                                      std::vector<float>* n_dot_v_out = nullptr);
+                                      std::vector<float>* n_dot_v_out = nullptr,
+                                      const ReferenceOptions& options = {});
 
 }  // namespace hs::shading

@@ -200,3 +200,28 @@ TEST(Config, CapturedMaterialImagesAreLoadedAndChecked) {
         << wrong.error().message;
     fs::remove_all(dir);
 }
+
+TEST(Config, RectLightIsReadAndItsEdgesChecked) {
+    auto s = parse_edited([](auto& j) {
+        j["lights"].push_back({{"type", "rect"},
+                               {"position", {0.3, 1.3, 0.5}},
+                               {"edge_u", {0, 0.3, 0}},
+                               {"edge_v", {0.3, 0, 0}},
+                               {"intensity", 2.0}});
+    });
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    const auto& l = s->lights.back();
+    EXPECT_EQ(l.type, LightType::kRect);
+    EXPECT_EQ(l.edge_v, glm::dvec3(0.3, 0, 0));
+    auto bad = parse_edited([](auto& j) {
+        j["lights"].push_back({{"type", "rect"},
+                               {"position", {0.3, 1.3, 0.5}},
+                               {"edge_u", {0, 0.3, 0}},
+                               {"edge_v", {0, 0.6, 0}},
+                               {"intensity", 2.0}});
+    });
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("lights[3].edge_u"), std::string::npos)
+        << bad.error().message;
+    EXPECT_NE(bad.error().message.find("parallel"), std::string::npos);
+}
