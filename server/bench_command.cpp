@@ -1,13 +1,16 @@
 // `hysar bench`: measured costs, as medians over repeated runs in one process.
 //   hysar bench encoding: bytes, encode and decode time of VD layers per encoding and codec.
+//   hysar bench accuracy: error against cost of every quality knob (server/bench/accuracy.hpp).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "bench/accuracy.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
 #include "protocol/tiles.hpp"
@@ -22,7 +25,13 @@ namespace {
 
 const char* kBenchHelp =
     "usage: hysar bench encoding [--repeats N] [--json FILE]\n"
+    "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "\n"
+    "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
+    "             pixel, point against area lights, HDR format, layer encoding) against the\n"
+    "             double-precision reference: RMSE, mean CIEDE2000, render and encode ms, bytes;\n"
+    "             writes DIR/accuracy.csv and DIR/accuracy.png (default DIR: accuracy-out) and\n"
+    "             prints the table. --quick: a quarter of the resolution, fewer settings\n"
     "  encoding   VD layers of the default scene (HoloLens resolution, every Fig. 7 model and\n"
     "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
     "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n";
@@ -123,6 +132,57 @@ int bench_encoding(int repeats, const std::string& json_path) {
     return 0;
 }
 
+int bench_accuracy(const std::string& scene_path, const std::string& out_dir, bool quick,
+                   int repeats) {
+    scene::Scene s = scene::default_scene();
+    if (!scene_path.empty()) {
+        auto loaded = scene::load_scene_file(scene_path);
+        if (!loaded) {
+            std::fprintf(stderr, "hysar bench: %s\n", loaded.error().message.c_str());
+            return 1;
+        }
+        s = std::move(loaded.value());
+    }
+    std::error_code ec;
+    std::filesystem::create_directories(out_dir, ec);
+    if (ec) {
+        std::fprintf(stderr, "hysar bench: cannot create %s: %s\n", out_dir.c_str(),
+                     ec.message().c_str());
+        return 1;
+    }
+    auto device = gpu::Device::create(gpu::device_info_from_environment());
+    if (!device) {
+        std::fprintf(stderr, "hysar bench: %s\n", device.error().message.c_str());
+        return 1;
+    }
+    bench::AccuracyOptions o;
+    o.quick = quick;
+    o.repeats = repeats;
+    o.progress = [](const std::string& line) {
+        std::fprintf(stderr, "%s\n", line.c_str());
+        std::fflush(stderr);
+    };
+    auto rep = bench::run_accuracy(*device.value(), s, o);
+    if (!rep) {
+        std::fprintf(stderr, "hysar bench: %s\n", rep.error().message.c_str());
+        return 1;
+    }
+    const std::filesystem::path dir(out_dir);
+    std::ofstream csv(dir / "accuracy.csv");
+    csv << bench::accuracy_csv(rep.value());
+    if (!csv) {
+        std::fprintf(stderr, "hysar bench: cannot write %s\n", (dir / "accuracy.csv").c_str());
+        return 1;
+    }
+    if (auto w = write_png(dir / "accuracy.png", bench::accuracy_plot(rep.value())); !w) {
+        std::fprintf(stderr, "hysar bench: %s\n", w.error().message.c_str());
+        return 1;
+    }
+    std::printf("%s\nwrote %s and %s\n", bench::accuracy_table(rep.value()).c_str(),
+                (dir / "accuracy.csv").c_str(), (dir / "accuracy.png").c_str());
+    return 0;
+}
+
 }  // namespace
 
 int run_bench(const std::vector<std::string>& args) {
@@ -130,13 +190,25 @@ int run_bench(const std::vector<std::string>& args) {
         std::fputs(kBenchHelp, args.empty() ? stderr : stdout);
         return args.empty() ? 2 : 0;
     }
-    int repeats = 5;
-    std::string json;
+    int repeats = args[0] == "accuracy" ? 7 : 5;
+    bool quick = false;
+    std::string json, scene_path, out_dir = "accuracy-out";
     for (size_t i = 1; i < args.size(); ++i) {
         if (args[i] == "--repeats" && i + 1 < args.size()) {
-            repeats = std::max(1, std::atoi(args[++i].c_str()));
-        } else if (args[i] == "--json" && i + 1 < args.size()) {
+            repeats = std::atoi(args[++i].c_str());
+            if (repeats < 1 || repeats > 1000) {
+                std::fprintf(stderr, "hysar bench: --repeats wants 1..1000, got '%s'\n",
+                             args[i].c_str());
+                return 2;
+            }
+        } else if (args[i] == "--json" && i + 1 < args.size() && args[0] == "encoding") {
             json = args[++i];
+        } else if (args[i] == "--scene" && i + 1 < args.size() && args[0] == "accuracy") {
+            scene_path = args[++i];
+        } else if (args[i] == "--out" && i + 1 < args.size() && args[0] == "accuracy") {
+            out_dir = args[++i];
+        } else if (args[i] == "--quick" && args[0] == "accuracy") {
+            quick = true;
         } else {
             std::fprintf(stderr, "hysar bench: unknown option '%s'\n\n%s", args[i].c_str(),
                          kBenchHelp);
@@ -145,6 +217,8 @@ int run_bench(const std::vector<std::string>& args) {
     }
     if (args[0] == "encoding")
         return bench_encoding(repeats, json);
+    if (args[0] == "accuracy")
+        return bench_accuracy(scene_path, out_dir, quick, repeats);
     std::fprintf(stderr, "hysar bench: unknown benchmark '%s'\n\n%s", args[0].c_str(), kBenchHelp);
     return 2;
 }

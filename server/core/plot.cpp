@@ -11,7 +11,7 @@
 namespace hs {
 
 namespace {
-constexpr int kLeft = 64, kRight = 16, kTop = 28, kBottom = 44;
+constexpr int kLeft = 64, kRight = 16, kTop = 38, kBottom = 44;
 
 void put(ImageRgba8& img, int x, int y, Rgb c) {
     if (x < 0 || y < 0 || x >= int(img.width) || y >= int(img.height))
@@ -54,8 +54,11 @@ struct Frame {
     ImageRgba8 img;
     int x0, y0, w, h;  // plot area
     double xlo, xhi, ylo, yhi;
-    bool log_y;
-    int px(double x) const { return x0 + int(std::lround((x - xlo) / (xhi - xlo) * (w - 1))); }
+    bool log_y, log_x;
+    int px(double x) const {
+        const double t = log_x ? std::log10(x) : x;
+        return x0 + int(std::lround((t - xlo) / (xhi - xlo) * (w - 1)));
+    }
     int py(double y) const {
         const double t = log_y ? std::log10(y) : y;
         return y0 + h - 1 - int(std::lround((t - ylo) / (yhi - ylo) * (h - 1)));
@@ -72,7 +75,8 @@ Frame frame(const PlotOptions& o, double xlo, double xhi, double ylo, double yhi
             xhi,
             ylo,
             yhi,
-            o.log_y};
+            o.log_y,
+            o.log_x};
     if (!(f.xhi > f.xlo))
         f.xhi = f.xlo + 1;
     if (!(f.yhi > f.ylo))
@@ -89,7 +93,8 @@ Frame frame(const PlotOptions& o, double xlo, double xhi, double ylo, double yhi
         for (int i = 0; i <= 4; ++i) {
             const double t = f.xlo + (f.xhi - f.xlo) * i / 4.0;
             const int x = f.x0 + int(std::lround(double(f.w - 1) * i / 4.0));
-            draw_text(f.img, x - 8, f.y0 + f.h + 4, tick(t), 1, 60, 60, 60);
+            draw_text(f.img, x - 8, f.y0 + f.h + 4, tick(f.log_x ? std::pow(10.0, t) : t), 1, 60,
+                      60, 60);
         }
     line(f.img, f.x0, f.y0, f.x0, f.y0 + f.h - 1, axis);
     line(f.img, f.x0, f.y0 + f.h - 1, f.x0 + f.w - 1, f.y0 + f.h - 1, axis);
@@ -119,13 +124,17 @@ ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
         xlo = std::numeric_limits<double>::infinity(), xhi = -xlo;
     if (auto_y)
         ylo = std::numeric_limits<double>::infinity(), yhi = -ylo;
+    auto drawable = [&](double x, double y) {
+        return std::isfinite(x) && std::isfinite(y) && !(o.log_y && y <= 0) && !(o.log_x && x <= 0);
+    };
     for (const auto& s : series)
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-            if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i]) || (o.log_y && s.y[i] <= 0))
+            if (!drawable(s.x[i], s.y[i]))
                 continue;
             const double y = o.log_y ? std::log10(s.y[i]) : s.y[i];
+            const double x = o.log_x ? std::log10(s.x[i]) : s.x[i];
             if (auto_x)
-                xlo = std::min(xlo, s.x[i]), xhi = std::max(xhi, s.x[i]);
+                xlo = std::min(xlo, x), xhi = std::max(xhi, x);
             if (auto_y)
                 ylo = std::min(ylo, y), yhi = std::max(yhi, y);
         }
@@ -135,6 +144,12 @@ ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
         ylo = 0, yhi = 1;
     if (!auto_y && o.log_y)
         ylo = std::log10(std::max(ylo, 1e-300)), yhi = std::log10(std::max(yhi, 1e-300));
+    if (!auto_x && o.log_x)
+        xlo = std::log10(std::max(xlo, 1e-300)), xhi = std::log10(std::max(xhi, 1e-300));
+    if (auto_x && o.log_x && xhi > xlo) {  // a margin so that end labels stay inside
+        const double m = 0.05 * (xhi - xlo);
+        xlo -= m, xhi += m;
+    }
     if (auto_y && !o.log_y)
         ylo = std::min(ylo, 0.0);
     Frame f = frame(o, xlo, xhi, ylo, yhi, true);
@@ -144,16 +159,22 @@ ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
         bool have = false;
         int lx = 0, ly = 0;
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-            if (!std::isfinite(s.x[i]) || !std::isfinite(s.y[i]) || (o.log_y && s.y[i] <= 0)) {
+            if (!drawable(s.x[i], s.y[i])) {
                 have = false;
                 continue;
             }
             const int x = std::clamp(f.px(s.x[i]), f.x0, f.x0 + f.w - 1);
             const int y = std::clamp(f.py(s.y[i]), f.y0, f.y0 + f.h - 1);
-            if (have)
+            if (have && s.lines)
                 line(f.img, lx, ly, x, y, s.colour);
             if (s.markers)
                 fill_rect(f.img, x - 2, y - 2, 5, 5, s.colour.r, s.colour.g, s.colour.b);
+            if (i < s.labels.size() && !s.labels[i].empty()) {
+                const int tw = int(s.labels[i].size()) * 6;  // the font's advance at scale 1
+                const int tx = x + 5 + tw <= f.x0 + f.w ? x + 5 : x - 5 - tw;
+                draw_text(f.img, tx, y - 10 < f.y0 ? y + 4 : y - 10, s.labels[i], 1, s.colour.r / 2,
+                          s.colour.g / 2, s.colour.b / 2);
+            }
             lx = x, ly = y, have = true;
         }
     }

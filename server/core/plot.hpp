@@ -18,13 +18,16 @@ struct Series {
     std::string name;
     std::vector<double> x, y;
     Rgb colour;
-    bool markers = false;  // draw a small square at each point
+    bool markers = false;             // draw a small square at each point
+    bool lines = true;                // join consecutive points
+    std::vector<std::string> labels;  // drawn beside each point's marker where given
 };
 
 struct PlotOptions {
     std::string title, x_label, y_label;
     uint32_t width = 560, height = 360;
     bool log_y = false;  // log10 axis; values <= 0 are left out
+    bool log_x = false;
     // Axis ranges; when lo >= hi the range is taken from the data.
     double x_lo = 0, x_hi = 0, y_lo = 0, y_hi = 0;
 };

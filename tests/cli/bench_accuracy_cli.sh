@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# `hysar bench accuracy --quick`: writes a CSV with a row per setting and a PNG, prints the
+# table; a missing scene and a bad option are refused with a message naming them.
+set -euo pipefail
+hysar="$1/hysar"
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+HYSAR_VALIDATION=1 "$hysar" bench accuracy --quick --repeats 1 --out "$out/acc" > "$out/table.txt" 2> "$out/progress.txt"
+csv="$out/acc/accuracy.csv"
+head -1 "$csv" | grep -q '^knob,setting,reference,default,geometric_error_mm,rmse,mean_de00,render_ms,encode_ms,bytes,pareto$'
+rows=$(($(wc -l < "$csv") - 1))
+[[ $rows -ge 25 ]] || { echo "only $rows rows"; exit 1; }
+for knob in tessellation render-scale samples-per-pixel lights format encoding format+encoding; do
+    grep -q "^$knob," "$csv" || { echo "no $knob rows"; exit 1; }
+done
+# Every rmse, render and encode figure is a finite number.
+awk -F, 'NR > 1 && !($6 ~ /^[0-9.e+-]+$/ && $8 ~ /^[0-9.]+$/ && $9 ~ /^[0-9.]+$/) { print "bad row: " $0; bad = 1 } END { exit bad }' "$csv"
+grep -q 'pareto' "$out/table.txt"
+[[ $(head -c 8 "$out/acc/accuracy.png" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]
+grep -q 'reference: exact hemisphere' "$out/progress.txt"
+if "$hysar" bench accuracy --quick --scene /nonexistent.json --out "$out/x" 2> "$out/err.txt"; then
+    echo "a missing scene was accepted"; exit 1
+fi
+grep -q '/nonexistent.json' "$out/err.txt"
+if "$hysar" bench accuracy --repeats 0 2> "$out/err.txt"; then echo "--repeats 0 accepted"; exit 1; fi
+grep -q -- '--repeats' "$out/err.txt"
+echo "bench accuracy: $rows rows, files and errors as documented"
