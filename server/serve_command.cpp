@@ -164,6 +164,15 @@ int run_serve(const std::vector<std::string>& args) {
         std::ofstream(*stats_file) << stats.dump(2) << "\n";
     std::printf("stopped: %llu projector render(s)\n",
                 (unsigned long long)stats["projector_renders"].get<uint64_t>());
+    for (const char* pass : {"projector", "viewer_vd"}) {
+        const auto& c = stats["cost_ms"][pass];
+        if (c["frames"].get<uint64_t>() == 0)
+            continue;
+        const auto& m = c["mean"];
+        std::printf("  %-10s %llu frame(s), mean ms: pass %.2f  readback %.2f  encode %.2f\n", pass,
+                    (unsigned long long)c["frames"].get<uint64_t>(), m["pass"].get<double>(),
+                    m["readback"].get<double>(), m["encode"].get<double>());
+    }
     return 0;
 }
 

@@ -238,12 +238,15 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
         push.eye_position = glm::vec4(glm::vec3(*eye_override), 1.0f);
     HS_TRY(gpu::execute(device_, label,
                         [&](gpu::CommandList& cl) { record(cl, v, *t, push, label); }));
+    const auto t1 = std::chrono::steady_clock::now();
     RenderResult r;
     r.image = t->read();
     r.report.ran = true;
     r.report.effects = v.effects;
-    r.report.render_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    const auto t2 = std::chrono::steady_clock::now();
+    r.report.gpu_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
+    r.report.readback_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
+    r.report.render_ms = r.report.gpu_ms + r.report.readback_ms;
     return r;
 }
 
@@ -278,6 +281,7 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
                     record(cl, *it.variant, *it.target, it.push, "pass.viewer-vd");
         }));
     }
+    const auto t1 = std::chrono::steady_clock::now();
     std::vector<RenderResult> out(reqs.size());
     for (size_t i = 0; i < reqs.size(); ++i) {
         out[i].report.pass = "viewer-vd";
@@ -290,9 +294,13 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         out[i].report.ran = true;
         out[i].report.effects = items[i].variant->effects;
     }
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    for (auto& r : out) r.report.render_ms = ms / double(out.size());
+    const auto t2 = std::chrono::steady_clock::now();
+    const double n = double(out.size());
+    for (auto& r : out) {
+        r.report.gpu_ms = std::chrono::duration<double, std::milli>(t1 - t0).count() / n;
+        r.report.readback_ms = std::chrono::duration<double, std::milli>(t2 - t1).count() / n;
+        r.report.render_ms = r.report.gpu_ms + r.report.readback_ms;
+    }
     return out;
 }
 

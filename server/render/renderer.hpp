@@ -35,6 +35,8 @@ struct PassReport {
     std::string skipped_because;       // when !ran
     std::vector<std::string> effects;  // the terms compiled into the pipeline
     double render_ms = 0;              // record + submit + wait + readback, wall clock
+    double gpu_ms = 0;                 // of which record + submit + wait for the GPU
+    double readback_ms = 0;            // of which converting the mapped target to float RGBA
 };
 
 struct RenderResult {

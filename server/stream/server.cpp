@@ -51,6 +51,27 @@ double percentile(std::vector<double> v, double p) {
 class Session;
 }  // namespace
 
+// Per-frame cost accounting of one pass: the GPU work, the readback and the encoding, as the
+// last frame's figures and the means since start (stats "cost_ms").
+struct PassCost {
+    uint64_t frames = 0;
+    double gpu = 0, readback = 0, encode = 0;  // the last frame's, ms
+    double gpu_sum = 0, readback_sum = 0, encode_sum = 0;
+    void add(double gpu_ms, double readback_ms, double encode_ms) {
+        ++frames;
+        gpu = gpu_ms, readback = readback_ms, encode = encode_ms;
+        gpu_sum += gpu_ms, readback_sum += readback_ms, encode_sum += encode_ms;
+    }
+    nlohmann::json json() const {
+        const double n = double(std::max<uint64_t>(frames, 1));
+        return {
+            {"frames", frames},
+            {"last", {{"pass", gpu}, {"readback", readback}, {"encode", encode}}},
+            {"mean",
+             {{"pass", gpu_sum / n}, {"readback", readback_sum / n}, {"encode", encode_sum / n}}}};
+    }
+};
+
 struct Server::Impl {
     gpu::Device& device;
     ServerCreateInfo info;
@@ -77,6 +98,7 @@ struct Server::Impl {
     nlohmann::json last_projector_report, last_vd_report;
     double vd_render_ms_total = 0, vd_encode_ms_total = 0, projector_ms_total = 0;
     uint64_t vd_layers = 0;
+    PassCost projector_cost, vd_cost;  // per frame (projector) and per layer (VD)
     uint64_t batches = 0, batched_eyes = 0,
              max_batch_eyes = 0;  // viewer-pass submissions and their eyes
     std::map<uint32_t, std::pair<std::string, proto::Role>> session_info;
@@ -501,6 +523,7 @@ void Server::Impl::render_loop() {
         auto t0 = Clock::now();
         ImageRgba32f frame;
         nlohmann::json report;
+        double pass_ms = 0, readback_ms = 0;
         if (s.captured_material) {
             // A captured material: the calibrated VI image is the frame; nothing is rendered.
             frame = drive_as_layer(*s.captured_material->projector_image);
@@ -512,6 +535,7 @@ void Server::Impl::render_loop() {
                 return true;
             }
             frame = std::move(proj->image);
+            pass_ms = proj->report.gpu_ms, readback_ms = proj->report.readback_ms;
             report = {{"pass", proj->report.pass},
                       {"effects", proj->report.effects},
                       {"render_ms", proj->report.render_ms}};
@@ -520,10 +544,14 @@ void Server::Impl::render_loop() {
         pf.width = frame.width;
         pf.height = frame.height;
         pf.format = proto::PixelFormat::kRgba8;
+        const auto t_encode = Clock::now();
         pf.data = encode_pixels(frame, pf.format);
+        const double encode_ms =
+            std::chrono::duration<double, std::milli>(Clock::now() - t_encode).count();
         {
             std::lock_guard lock(mutex);
             ++projector_renders;
+            projector_cost.add(pass_ms, readback_ms, encode_ms);
             projector_ms_total +=
                 std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
             last_projector_report = std::move(report);
@@ -647,14 +675,17 @@ void Server::Impl::render_loop() {
                 layer.data = encode_layer(encode_pixels(image, d.format), d.eye_width, d.eye_height,
                                           d.format, d.encoding, default_tile_codec(d.format));
                 frames.push_back(proto::encode(layer));
-                std::lock_guard lock(mutex);
-                vd_encode_ms_total +=
+                const double encode_ms =
                     std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+                std::lock_guard lock(mutex);
+                vd_encode_ms_total += encode_ms;
                 ++vd_layers;
                 if (captured) {
                     last_vd_report = captured_report;
+                    vd_cost.add(0.0, 0.0, encode_ms);
                 } else {
                     const render::RenderResult& out = rendered.value()[2 * j + e];
+                    vd_cost.add(out.report.gpu_ms, out.report.readback_ms, encode_ms);
                     vd_render_ms_total += out.report.render_ms;
                     last_vd_report = {{"pass", out.report.pass},
                                       {"ran", out.report.ran},
@@ -704,6 +735,7 @@ nlohmann::json Server::Impl::stats() const {
               {"vd_encode_mean", vd_encode_ms_total / n},
               {"projector_total", projector_ms_total},
               {"vd_layers", vd_layers}}},
+            {"cost_ms", {{"projector", projector_cost.json()}, {"viewer_vd", vd_cost.json()}}},
             {"batches",
              {{"submissions", batches},
               {"eyes", batched_eyes},

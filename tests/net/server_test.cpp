@@ -221,6 +221,18 @@ TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
     auto st = server_->stats();
     EXPECT_EQ(st["projector_renders"].get<uint64_t>(), 1u);
     EXPECT_EQ(st["viewers"].size(), size_t(n));
+    // Per-frame cost accounting: each pass, its readback and its encoding.
+    const auto& cost = st["cost_ms"];
+    EXPECT_EQ(cost["projector"]["frames"].get<uint64_t>(), 1u) << cost.dump();
+    EXPECT_EQ(cost["viewer_vd"]["frames"].get<uint64_t>(),
+              st["timing_ms"]["vd_layers"].get<uint64_t>());
+    for (const char* pass : {"projector", "viewer_vd"})
+        for (const char* which : {"last", "mean"}) {
+            const auto& c = cost[pass][which];
+            EXPECT_GT(c["pass"].get<double>(), 0.0) << pass << " " << which;
+            EXPECT_GT(c["readback"].get<double>(), 0.0) << pass << " " << which;
+            EXPECT_GT(c["encode"].get<double>(), 0.0) << pass << " " << which;
+        }
     if (n == 16) {
         // Headsets that became ready together were rendered in one submission.
         EXPECT_GE(st["batches"]["max_eyes"].get<uint64_t>(), 4u) << st["batches"].dump();
