@@ -1,0 +1,185 @@
+// Google Benchmark suite of the hot paths (built by default, run on request; not part of the
+// test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding,
+// the calibration's kernel regression and CIEDE2000 over an image.
+//   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
+#include <cmath>
+#include <random>
+
+#include <benchmark/benchmark.h>
+
+#include "calib/inverse_map.hpp"
+#include "gpu/device.hpp"
+#include "optics/colour.hpp"
+#include "render/renderer.hpp"
+#include "scene/camera.hpp"
+#include "scene/config.hpp"
+#include "stream/layer_codec.hpp"
+
+using namespace hs;
+
+namespace {
+
+struct Gpu {
+    scene::Scene scene = scene::default_scene();
+    std::unique_ptr<gpu::Device> device;
+    std::unique_ptr<render::Renderer> renderer;
+    scene::Intrinsics eye_k;
+    std::vector<scene::Pose> heads;
+    static Gpu& get() {
+        static Gpu g;
+        return g;
+    }
+
+private:
+    Gpu() {
+        auto d = gpu::Device::create(gpu::device_info_from_environment());
+        if (!d)
+            throw std::runtime_error(d.error().message);
+        device = std::move(d.value());
+        auto r = render::Renderer::create(*device, scene, {});
+        if (!r)
+            throw std::runtime_error(r.error().message);
+        renderer = std::move(r.value());
+        eye_k = scene::eye_intrinsics(scene.viewers.front());
+        for (int i = 0; i < 32; ++i)
+            heads.push_back(
+                scene::viewing_pose(scene.viewing, -40.0 + 80.0 * i / 31.0, 1.1).value());
+    }
+};
+
+// Both eyes of `state.range(0)` viewers in one submission, as the server batches them.
+void BM_VdPass(benchmark::State& state) {
+    auto& g = Gpu::get();
+    std::vector<render::Renderer::EyeRequest> reqs;
+    for (int v = 0; v < state.range(0); ++v)
+        for (const auto& eye : scene::eye_poses(g.heads[v % g.heads.size()], 0.063))
+            reqs.push_back({g.scene.material.specular, g.eye_k, eye});
+    for (auto _ : state) {
+        auto out = g.renderer->render_eyes(reqs);
+        if (!out)
+            state.SkipWithError(out.error().message.c_str());
+        benchmark::DoNotOptimize(out);
+    }
+    state.counters["layers/s"] =
+        benchmark::Counter(double(reqs.size()), benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_VdPass)->Arg(1)->Arg(4)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_ProjectorPass(benchmark::State& state) {
+    auto& g = Gpu::get();
+    for (auto _ : state) {
+        auto out = g.renderer->render_projector();
+        if (!out)
+            state.SkipWithError(out.error().message.c_str());
+        benchmark::DoNotOptimize(out);
+    }
+}
+BENCHMARK(BM_ProjectorPass)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+const ImageRgba32f& vd_layer() {
+    static ImageRgba32f img = [] {
+        auto& g = Gpu::get();
+        return g.renderer
+            ->render_eye(g.scene.material.specular, g.eye_k,
+                         scene::eye_poses(g.heads[20], 0.063)[1])
+            ->image;
+    }();
+    return img;
+}
+
+// range(0): 0 = f16 sparse tiles + LZ4 (lossless), 1 = sRGB8 sparse tiles + zstd (lossy).
+protocol::PixelFormat format_of(int64_t v) {
+    return v == 0 ? protocol::PixelFormat::kRgba16f : protocol::PixelFormat::kRgba8;
+}
+
+void BM_EncodeLayer(benchmark::State& state) {
+    const auto& img = vd_layer();
+    const auto f = format_of(state.range(0));
+    size_t bytes = 0;
+    for (auto _ : state) {
+        auto data =
+            stream::encode_layer(stream::encode_pixels(img, f), img.width, img.height, f,
+                                 protocol::Encoding::kSparseTiles, stream::default_tile_codec(f));
+        bytes = data.size();
+        benchmark::DoNotOptimize(data);
+    }
+    state.counters["bytes"] = double(bytes);
+    state.SetLabel(state.range(0) == 0 ? "f16 tiles+lz4" : "srgb8 tiles+zstd");
+}
+BENCHMARK(BM_EncodeLayer)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+void BM_DecodeLayer(benchmark::State& state) {
+    const auto& img = vd_layer();
+    const auto f = format_of(state.range(0));
+    const uint32_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
+    const auto data =
+        stream::encode_layer(stream::encode_pixels(img, f), img.width, img.height, f,
+                             protocol::Encoding::kSparseTiles, stream::default_tile_codec(f));
+    for (auto _ : state) {
+        auto px = protocol::decode_tiles(data, img.width, img.height, bpp);
+        if (!std::holds_alternative<std::vector<uint8_t>>(px))
+            state.SkipWithError("the layer did not decode");
+        auto out =
+            stream::decode_pixels(std::get<std::vector<uint8_t>>(px), img.width, img.height, f);
+        benchmark::DoNotOptimize(out);
+    }
+    state.SetLabel(state.range(0) == 0 ? "f16 tiles+lz4" : "srgb8 tiles+zstd");
+}
+BENCHMARK(BM_DecodeLayer)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The inverse map of a camera-to-projector LUT (a mild perspective warp with read noise):
+// camera 640x360 at range(0) = 1 or the headset camera 1268x720 at 2, projector 1920x1200.
+void BM_KernelRegression(benchmark::State& state) {
+    calib::DeviceLut lut;
+    lut.camera_width = state.range(0) == 1 ? 640 : 1268;
+    lut.camera_height = state.range(0) == 1 ? 360 : 720;
+    lut.device_width = 1920, lut.device_height = 1200;
+    const size_t n = size_t(lut.camera_width) * lut.camera_height;
+    lut.x.resize(n), lut.y.resize(n), lut.state.assign(n, calib::DeviceLut::kValid);
+    std::mt19937 rng(1);
+    std::normal_distribution<float> noise(0.0f, 0.3f);
+    for (uint32_t v = 0; v < lut.camera_height; ++v)
+        for (uint32_t u = 0; u < lut.camera_width; ++u) {
+            const double s = double(u) / lut.camera_width, t = double(v) / lut.camera_height;
+            const double w = 1.0 + 0.1 * s;
+            const size_t i = size_t(v) * lut.camera_width + u;
+            lut.x[i] = float((150 + 1500 * s) / w) + noise(rng);
+            lut.y[i] = float((100 + 950 * t + 30 * s) / w) + noise(rng);
+        }
+    lut.lit = lut.valid = n;
+    calib::InverseMapOptions o;
+    o.bandwidth = 1.0;  // fixed: the regression itself, not the cross-validation
+    for (auto _ : state) {
+        auto inv = calib::invert_lut(lut, o);
+        if (!inv)
+            state.SkipWithError(inv.error().message.c_str());
+        benchmark::DoNotOptimize(inv);
+    }
+}
+BENCHMARK(BM_KernelRegression)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// CIEDE2000 between two headset-sized images (linear RGB to Lab to Delta E per pixel).
+void BM_Ciede2000Image(benchmark::State& state) {
+    const uint32_t w = 1268, h = 720;
+    std::vector<glm::dvec3> a(size_t(w) * h), b(a.size());
+    std::mt19937 rng(2);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    for (size_t i = 0; i < a.size(); ++i) {
+        a[i] = {u(rng), u(rng), u(rng)};
+        b[i] = a[i] * (0.95 + 0.1 * u(rng));
+    }
+    for (auto _ : state) {
+        double sum = 0;
+        for (size_t i = 0; i < a.size(); ++i)
+            sum += optics::delta_e_2000(optics::lab_from_linear_srgb(a[i]),
+                                        optics::lab_from_linear_srgb(b[i]));
+        benchmark::DoNotOptimize(sum);
+    }
+    state.counters["pixels/s"] =
+        benchmark::Counter(double(a.size()), benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_Ciede2000Image)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
