@@ -315,9 +315,21 @@ Result<void> Sweep::lights(std::vector<AccuracyRow>& rows) {
             rect.colour = l.colour;
             l = rect;
         }
+    const auto panels = size_t(std::count_if(area.lights.begin(), area.lights.end(), [](auto& l) {
+        return l.type == scene::LightType::kRect;
+    }));
+    if (panels == 0) {
+        say("lights: the scene has no point light to widen into a softbox; knob left out");
+        return {};
+    }
     say("reference: the area lights' integral, 32 x 32 cells per panel");
     HS_ASSIGN_OR_RETURN(auto ref_area, shading::reference_viewer(area, spec_, k_, eye_));
     for (int n : o_.quick ? std::vector<int>{1, 2, 3} : std::vector<int>{1, 2, 3, 4, 5}) {
+        if (area.lights.size() + panels * (n * n - 1) > scene::kMaxLights) {
+            say(fmt::format("lights: {} points per panel exceed {} lights; left out", n * n,
+                            scene::kMaxLights));
+            continue;
+        }
         scene::Scene pts = area;
         pts.lights.clear();
         for (const auto& l : area.lights) {

@@ -60,6 +60,10 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
 
 Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const scene::Scene& scene,
                                                    const RendererCreateInfo& info) {
+    if (scene.lights.size() > HS_MAX_LIGHTS)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("the scene has {} lights; the renderer takes at most {}",
+                                      scene.lights.size(), HS_MAX_LIGHTS));
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
     HS_ASSIGN_OR_RETURN(r->mesh_, scene::build_prop_mesh(scene.prop));
     const auto& m = r->mesh_;
