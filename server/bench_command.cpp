@@ -36,11 +36,6 @@ const char* kBenchHelp =
     "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
     "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n";
 
-double median(std::vector<double> v) {
-    std::sort(v.begin(), v.end());
-    return v.empty() ? 0.0 : v[v.size() / 2];
-}
-
 template <typename F>
 double time_ms(F&& f) {
     auto t0 = std::chrono::steady_clock::now();
@@ -112,17 +107,17 @@ int bench_encoding(int repeats, const std::string& json_path) {
                         }
                     }));
                 }
-            const double b = median(bytes), ratio = double(raw.front().size()) / b;
+            const double b = bench::median(bytes), ratio = double(raw.front().size()) / b;
             const char* fname = fmt == protocol::PixelFormat::kRgba8 ? "rgba8" : "rgba16f";
             std::printf("%-8s %-14s %12.0f %9.1fx %12.3f %12.3f\n", fname, var.name, b, ratio,
-                        median(enc_ms), median(dec_ms));
+                        bench::median(enc_ms), bench::median(dec_ms));
             rows.push_back({{"format", fname},
                             {"encoding", var.name},
                             {"bytes_per_layer_median", b},
                             {"compression_ratio", ratio},
-                            {"encode_ms_median", median(enc_ms)},
-                            {"decode_ms_median", median(dec_ms)},
-                            {"pixel_conversion_ms_median", median(pixel_ms)}});
+                            {"encode_ms_median", bench::median(enc_ms)},
+                            {"decode_ms_median", bench::median(dec_ms)},
+                            {"pixel_conversion_ms_median", bench::median(pixel_ms)}});
         }
     }
     if (!json_path.empty())

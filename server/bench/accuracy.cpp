@@ -23,14 +23,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double median(std::vector<double> v) {
-    if (v.empty())
-        return 0.0;
-    std::sort(v.begin(), v.end());
-    const size_t n = v.size();
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
 double ms_since(Clock::time_point t0) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
@@ -199,9 +191,9 @@ private:
         if (o_.progress)
             o_.progress(line);
     }
-    Result<std::unique_ptr<render::Renderer>> renderer(const scene::Scene& s,
-                                                       gpu::ColorFormat format,
-                                                       uint32_t area_samples = 16) {
+    Result<std::unique_ptr<render::Renderer>> renderer(
+        const scene::Scene& s, gpu::ColorFormat format,
+        uint32_t area_samples = render::kDefaultAreaLightSamples) {
         render::RendererCreateInfo info;
         info.format = format;
         info.area_light_samples = area_samples;
@@ -348,7 +340,8 @@ Result<void> Sweep::lights(std::vector<AccuracyRow>& rows) {
          o_.quick ? std::vector<uint32_t>{1, 4, 16} : std::vector<uint32_t>{1, 4, 16, 64, 256}) {
         HS_ASSIGN_OR_RETURN(auto r, renderer(area, gpu::ColorFormat::kRgba16Float, k));
         HS_ASSIGN_OR_RETURN(auto m, render_layer(*r, 1.0));
-        rows.push_back(row("lights", fmt::format("area K={}", k), "area", k == 16, m, ref_area));
+        rows.push_back(row("lights", fmt::format("area K={}", k), "area",
+                           k == render::kDefaultAreaLightSamples, m, ref_area));
     }
     return {};
 }
@@ -447,6 +440,14 @@ Result<AccuracyReport> Sweep::run() {
 }
 
 }  // namespace
+
+double median(std::vector<double> v) {
+    if (v.empty())
+        return 0.0;
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
 
 Result<AccuracyReport> run_accuracy(gpu::Device& device, const scene::Scene& scene,
                                     const AccuracyOptions& options) {

@@ -51,6 +51,9 @@ struct AccuracyReport {
 Result<AccuracyReport> run_accuracy(gpu::Device& device, const scene::Scene& scene,
                                     const AccuracyOptions& options);
 
+// The median of `v` (the mean of the middle two for an even count; 0 when empty).
+double median(std::vector<double> v);
+
 // Marks, per knob, the settings no other setting of the same knob dominates in (cost_ms, rmse).
 void mark_pareto(std::vector<AccuracyRow>& rows);
 

@@ -64,6 +64,10 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("the scene has {} lights; the renderer takes at most {}",
                                       scene.lights.size(), HS_MAX_LIGHTS));
+    if (info.area_light_samples < 1 || info.area_light_samples > kMaxAreaLightSamples)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("area_light_samples must be in 1..{}, got {}",
+                                      kMaxAreaLightSamples, info.area_light_samples));
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
     HS_ASSIGN_OR_RETURN(r->mesh_, scene::build_prop_mesh(scene.prop));
     const auto& m = r->mesh_;

@@ -20,12 +20,17 @@
 
 namespace hs::render {
 
+// Samples per pixel of each rect light unless RendererCreateInfo says otherwise; chosen in
+// docs/ACCURACY.md. At most kMaxAreaLightSamples.
+inline constexpr uint32_t kDefaultAreaLightSamples = 16;
+inline constexpr uint32_t kMaxAreaLightSamples = 4096;
+
 struct RendererCreateInfo {
     gpu::ColorFormat format = gpu::ColorFormat::kRgba16Float;  // HDR target of both passes
     double near_m = 0.01;  // depth range of every camera, metres
     double far_m = 100.0;
     // Samples per pixel of each rect (area) light; compiled out when the scene has none.
-    uint32_t area_light_samples = 16;
+    uint32_t area_light_samples = kDefaultAreaLightSamples;
 };
 
 // What one pass did: whether it was recorded, the effects compiled in, and its wall time.
@@ -133,6 +138,6 @@ private:
 
 // Effects and specialisation key of a pass, as the renderer decides them from the scene.
 std::vector<std::string> effects_of(const scene::Scene& scene, bool vd, const scene::Specular& spec,
-                                    uint32_t area_light_samples = 16);
+                                    uint32_t area_light_samples = kDefaultAreaLightSamples);
 
 }  // namespace hs::render

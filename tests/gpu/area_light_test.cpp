@@ -127,3 +127,13 @@ TEST_F(AreaLight, ViPassMatchesTheDiffuseIntegral) {
     ASSERT_GT(peak, 0.0);
     EXPECT_LE(worst, 0.01 * peak) << "peak " << peak;
 }
+
+TEST_F(AreaLight, ZeroSamplesIsRefusedNotTreatedAsAPointLight) {
+    for (uint32_t k : {0u, render::kMaxAreaLightSamples + 1}) {
+        render::RendererCreateInfo info;
+        info.area_light_samples = k;
+        auto r = render::Renderer::create(device(), s_, info);
+        ASSERT_FALSE(r.ok()) << k;
+        EXPECT_NE(r.error().message.find("area_light_samples"), std::string::npos);
+    }
+}
