@@ -1,18 +1,129 @@
-// A small option reader shared by the client programs: --key value pairs and --flags.
+// The option reader shared by the client programs: --key value pairs and --flags, strict number
+// parsing, the token, and the guard around main. Expected bad input ends the program with one
+// line on stderr that names the option and the value, and exit status 2; nothing here lets an
+// exception escape to std::terminate.
 #pragma once
 
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <set>
+#include <stdexcept>
 #include <string>
+#include <string_view>
+#include <system_error>
+#include <variant>
+#include <vector>
 
 namespace hs::client {
 
+// A usage error: thrown by Args::fail, reported by run_main as "PROGRAM: message", exit 2.
+class UsageError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// "%g" of `v`: a range bound as a person writes it (0.01, 1e+06).
+inline std::string format_number(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%g", v);
+    return b;
+}
+
+// Parses all of `text` as a finite decimal number in [lo, hi] (an optional leading '+'; no
+// spaces, no "nan" or "inf", no trailing characters). Returns the value or a sentence saying what
+// is wrong with it; locale-independent.
+inline std::variant<double, std::string> parse_number(std::string_view text, double lo, double hi) {
+    const std::string quoted = "'" + std::string(text) + "'";
+    std::string_view s = text;
+    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
+        s.remove_prefix(1);
+    if (s.empty())
+        return text.empty() ? std::string("an empty value is not a number")
+                            : quoted + " is not a number";
+    double v = 0;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec == std::errc::result_out_of_range)
+        return quoted + " is too large or too small to be a number";
+    if (ec != std::errc() || end != s.data() + s.size())
+        return quoted + " is not a number";
+    if (!std::isfinite(v))
+        return quoted + " is not a finite number";
+    if (v < lo || v > hi)
+        return quoted + " is outside [" + format_number(lo) + ", " + format_number(hi) + "]";
+    return v;
+}
+
+// Parses all of `text` as a whole number in [lo, hi].
+inline std::variant<int64_t, std::string> parse_integer(std::string_view text, int64_t lo,
+                                                        int64_t hi) {
+    const std::string quoted = "'" + std::string(text) + "'";
+    std::string_view s = text;
+    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
+        s.remove_prefix(1);
+    if (s.empty())
+        return text.empty() ? std::string("an empty value is not a whole number")
+                            : quoted + " is not a whole number";
+    int64_t v = 0;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec == std::errc::result_out_of_range)
+        return quoted + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+    if (ec != std::errc() || end != s.data() + s.size())
+        return quoted + " is not a whole number";
+    if (v < lo || v > hi)
+        return quoted + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+    return v;
+}
+
+// Parses a comma-separated list of `min_items`..`max_items` numbers, each as parse_number does.
+// An empty item (",," or a trailing comma) is an error.
+inline std::variant<std::vector<double>, std::string> parse_number_list(std::string_view text,
+                                                                        double lo, double hi,
+                                                                        size_t min_items,
+                                                                        size_t max_items) {
+    std::vector<double> out;
+    if (!text.empty()) {
+        size_t start = 0;
+        for (;;) {
+            const size_t comma = text.find(',', start);
+            const std::string_view item =
+                text.substr(start, comma == std::string_view::npos ? comma : comma - start);
+            auto v = parse_number(item, lo, hi);
+            if (auto* e = std::get_if<std::string>(&v))
+                return "item " + std::to_string(out.size() + 1) + ": " + *e;
+            out.push_back(std::get<double>(v));
+            if (comma == std::string_view::npos)
+                break;
+            start = comma + 1;
+        }
+    }
+    if (out.size() < min_items || out.size() > max_items) {
+        const std::string want =
+            min_items == max_items ? std::to_string(min_items)
+                                   : std::to_string(min_items) + " to " + std::to_string(max_items);
+        return "expected " + want + " comma-separated numbers, got " + std::to_string(out.size());
+    }
+    return out;
+}
+
+// `s` without trailing spaces, tabs, CR and LF.
+inline std::string strip_trailing_space(std::string s) {
+    while (!s.empty() && std::strchr(" \t\r\n\v\f", s.back()) != nullptr) s.pop_back();
+    return s;
+}
+
 class Args {
 public:
-    // `with_value`: options that take a value; `flags`: options that do not.
+    // `with_value`: options that take a value; `flags`: options that do not. --help (or -h)
+    // prints `usage` to stdout and exits 0; anything else unknown is a usage error.
     Args(int argc, char** argv, std::set<std::string> with_value, std::set<std::string> flags,
          const char* usage)
         : usage_(usage) {
@@ -26,53 +137,154 @@ public:
                 values_[a] = "1";
             } else if (with_value.count(a)) {
                 if (i + 1 >= argc)
-                    fail(a + " needs a value");
+                    fail(a + " needs a value (see --help)");
                 values_[a] = argv[++i];
+            } else if (a.rfind("-", 0) == 0) {
+                fail("unknown option '" + a + "' (see --help)");
             } else {
-                fail("unknown option '" + a + "'");
+                fail("unexpected argument '" + a + "' (options are --key value; see --help)");
             }
         }
     }
-    [[noreturn]] void fail(const std::string& msg) const {
-        std::fprintf(stderr, "%s\n\n%s", msg.c_str(), usage_);
-        std::exit(2);
-    }
+    [[noreturn]] void fail(const std::string& msg) const { throw UsageError(msg); }
+    const char* usage() const { return usage_; }
+
     bool has(const std::string& k) const { return values_.count(k) > 0; }
     std::string get(const std::string& k, const std::string& def) const {
         auto it = values_.find(k);
         return it == values_.end() ? def : it->second;
     }
+    // The option's value as a finite number in [lo, hi]; `def` when it is absent.
     double number(const std::string& k, double def, double lo, double hi) const {
         if (!has(k))
             return def;
-        try {
-            size_t used = 0;
-            double v = std::stod(get(k, ""), &used);
-            if (used == get(k, "").size() && v >= lo && v <= hi)
-                return v;
-        } catch (...) {
-        }
-        fail(k + ": expected a number in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-             "], got '" + get(k, "") + "'");
+        auto v = parse_number(get(k, ""), lo, hi);
+        if (auto* e = std::get_if<std::string>(&v))
+            fail(k + ": " + *e);
+        return std::get<double>(v);
     }
-    // --token, or the first line of --token-file.
-    std::string token() const {
-        if (has("--token"))
-            return get("--token", "");
-        if (has("--token-file")) {
-            std::ifstream in(get("--token-file", ""));
-            std::string t;
-            std::getline(in, t);
-            if (t.empty())
-                fail(get("--token-file", "") + ": cannot read a token from its first line");
-            return t;
+    // The option's value as a whole number in [lo, hi]; `def` when it is absent.
+    int64_t integer(const std::string& k, int64_t def, int64_t lo, int64_t hi) const {
+        if (!has(k))
+            return def;
+        auto v = parse_integer(get(k, ""), lo, hi);
+        if (auto* e = std::get_if<std::string>(&v))
+            fail(k + ": " + *e);
+        return std::get<int64_t>(v);
+    }
+    // The option's value (or `def`) as a list of numbers, each in [lo, hi].
+    std::vector<double> numbers(const std::string& k, const std::string& def, double lo, double hi,
+                                size_t min_items, size_t max_items) const {
+        const std::string text = get(k, def);
+        auto v = parse_number_list(text, lo, hi, min_items, max_items);
+        if (auto* e = std::get_if<std::string>(&v))
+            fail(k + " '" + text + "': " + *e);
+        return std::get<std::vector<double>>(v);
+    }
+    // The option's value (or `def`), which must be one of `allowed`.
+    std::string choice(const std::string& k, const std::string& def,
+                       const std::vector<std::string>& allowed) const {
+        const std::string v = get(k, def);
+        std::string list;
+        for (const auto& a : allowed) {
+            if (a == v)
+                return v;
+            list += (list.empty() ? "" : ", ") + a;
         }
-        fail("give the installation's token with --token or --token-file (hysar serve prints it)");
+        fail(k + ": expected one of " + list + ", got '" + v + "'");
+    }
+    // The option's value (or `def`): 1..max_bytes bytes, no control characters.
+    std::string text(const std::string& k, const std::string& def, size_t max_bytes) const {
+        const std::string v = get(k, def);
+        if (v.empty())
+            fail(k + ": the value is empty");
+        if (v.size() > max_bytes)
+            fail(k + " '" + v + "': " + std::to_string(v.size()) + " bytes, at most " +
+                 std::to_string(max_bytes));
+        for (unsigned char ch : v)
+            if (ch < 0x20 || ch == 0x7f)
+                fail(k + ": the value contains a control character");
+        return v;
+    }
+    // An output file's path (or `def`), whose folder must exist. Nothing is created.
+    std::string output_path(const std::string& k, const std::string& def) const {
+        const std::string v = get(k, def);
+        if (v.empty())
+            fail(k + ": the value is empty");
+        std::error_code ec;
+        const std::filesystem::path p(v);
+        if (std::filesystem::is_directory(p, ec))
+            fail(k + " '" + v + "': is a folder, expected a file name");
+        const auto parent = p.parent_path();
+        if (!parent.empty() && !std::filesystem::is_directory(parent, ec))
+            fail(k + " '" + v + "': the folder '" + parent.string() + "' does not exist");
+        return v;
+    }
+    // The installation's token: --token, or the first line of --token-file without its trailing
+    // whitespace (a CRLF file gives the same token as an LF one). 1..`max_bytes` bytes.
+    std::string token(size_t max_bytes) const {
+        return read_token("--token", "--token-file", max_bytes, true);
+    }
+    // The same from another pair of options (e.g. --admin-token, --admin-token-file); when
+    // `required` is false and neither is given, returns "".
+    std::string read_token(const std::string& value_key, const std::string& file_key,
+                           size_t max_bytes, bool required) const {
+        if (has(value_key) && has(file_key))
+            fail("give " + value_key + " or " + file_key + ", not both");
+        std::string t, where;
+        if (has(value_key)) {
+            t = get(value_key, "");
+            where = value_key;
+            if (t.empty())
+                fail(value_key + ": the token is empty");
+        } else if (has(file_key)) {
+            const std::string path = get(file_key, "");
+            where = file_key + " '" + path + "'";
+            std::error_code ec;
+            if (std::filesystem::is_directory(path, ec))
+                fail(where + ": is a folder, expected a file holding the token");
+            std::ifstream in(path, std::ios::binary);
+            if (!in)
+                fail(where + ": cannot open: " + std::strerror(errno));
+            std::getline(in, t);
+            t = strip_trailing_space(t);
+            if (t.empty())
+                fail(where + ": no token on its first line (the file is empty or blank)");
+        } else if (required) {
+            fail("give the installation's token with " + value_key + " or " + file_key +
+                 " (hysar serve prints it)");
+        } else {
+            return "";
+        }
+        if (t.size() > max_bytes)
+            fail(where + ": the token is " + std::to_string(t.size()) + " bytes, at most " +
+                 std::to_string(max_bytes));
+        for (unsigned char ch : t)
+            if (ch < 0x20 || ch == 0x7f)
+                fail(where + ": the token contains a control character");
+        return t;
     }
 
 private:
     const char* usage_;
     std::map<std::string, std::string> values_;
 };
+
+// Runs `body`; a UsageError becomes "PROGRAM: message" and exit 2, any other exception (a bug,
+// or a failure nothing expected) "PROGRAM: internal error: what" and exit 1, never an abort.
+inline int run_main(const char* program, int argc, char** argv, int (*body)(int, char**)) {
+    try {
+        return body(argc, argv);
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "%s: %s\n", program, e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "%s: internal error: %s\n", program, e.what());
+        return 1;
+    } catch (...) {
+        std::fprintf(stderr, "%s: internal error: an unknown exception\n", program);
+        return 1;
+    }
+}
 
 }  // namespace hs::client

@@ -1,59 +1,170 @@
 #include "clients/common.hpp"
 
+#include "clients/args.hpp"
 #include "protocol/tiles.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
-#include <sstream>
 
 #include <stb_image_write.h>
 #include <nlohmann/json.hpp>
 
 namespace hs::client {
 
+namespace {
+
+// A profile field that is missing or not a finite number.
+struct ProfileError {
+    std::string message;
+};
+
+double finite_field(const nlohmann::json& j, const char* key) {
+    if (!j.contains(key))
+        throw ProfileError{std::string("'") + key + "' is missing"};
+    const auto& v = j[key];
+    if (!v.is_number())
+        throw ProfileError{std::string("'") + key + "' must be a number, not " + v.dump()};
+    const double x = v.get<double>();
+    if (!std::isfinite(x))
+        throw ProfileError{std::string("'") + key + "' must be finite"};
+    return x;
+}
+
+double finite_field(const nlohmann::json& j, const char* key, double def) {
+    return j.contains(key) ? finite_field(j, key) : def;
+}
+
+// A pixel count from the profile times `scale`, checked before it is converted.
+uint32_t scaled_pixels(const nlohmann::json& j, const char* key, double scale) {
+    const double v = finite_field(j, key) * scale;
+    if (!(v >= 0.5 && v < protocol::kMaxEyePixels + 0.5))
+        throw ProfileError{std::string("'") + key + "' x scale = " + std::to_string(v) +
+                           " is outside 1.." + std::to_string(protocol::kMaxEyePixels)};
+    return uint32_t(std::lround(v));
+}
+
+// A field of view in degrees, in (0, 180).
+double fov_deg(const nlohmann::json& j, const char* key) {
+    const double v = finite_field(j, key);
+    if (!(v > 0 && v < 180))
+        throw ProfileError{std::string("'") + key + "' must lie in (0, 180) degrees"};
+    return v;
+}
+
+}  // namespace
+
 std::optional<std::string> load_profile(const std::string& path, double scale,
                                         protocol::RegisterDisplay* d) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+        return "'" + path + "' is a folder, expected a headset profile file";
     std::ifstream in(path);
     if (!in)
-        return path + ": cannot open the headset profile";
-    nlohmann::json j;
+        return "'" + path + "': cannot open the headset profile: " + std::strerror(errno);
     try {
-        j = nlohmann::json::parse(in);
+        const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+        if (j.is_discarded())
+            return "'" + path + "': not valid JSON";
+        if (!j.is_object())
+            return "'" + path + "': expected a JSON object";
         const double deg = M_PI / 180.0;
-        d->eye_width = uint32_t(std::lround(j.at("eye_width").get<double>() * scale));
-        d->eye_height = uint32_t(std::lround(j.at("eye_height").get<double>() * scale));
-        d->ipd_m = j.value("ipd_m", 0.063);
+        d->eye_width = scaled_pixels(j, "eye_width", scale);
+        d->eye_height = scaled_pixels(j, "eye_height", scale);
+        d->ipd_m = finite_field(j, "ipd_m", 0.063);
         if (j.contains("fx")) {
-            d->fx = j["fx"].get<double>() * scale;
-            d->fy = j.value("fy", j["fx"].get<double>()) * scale;
-            d->cx = j.contains("cx") ? (j["cx"].get<double>() + 0.5) * scale - 0.5
+            const double fx = finite_field(j, "fx");
+            d->fx = fx * scale;
+            d->fy = finite_field(j, "fy", fx) * scale;
+            d->cx = j.contains("cx") ? (finite_field(j, "cx") + 0.5) * scale - 0.5
                                      : 0.5 * (d->eye_width - 1.0);
-            d->cy = j.contains("cy") ? (j["cy"].get<double>() + 0.5) * scale - 0.5
+            d->cy = j.contains("cy") ? (finite_field(j, "cy") + 0.5) * scale - 0.5
                                      : 0.5 * (d->eye_height - 1.0);
         } else {
             double fx_deg, fy_deg;
             if (j.contains("fov_diagonal_deg")) {
-                double w = j["eye_width"].get<double>(), h = j["eye_height"].get<double>();
-                double t =
-                    std::tan(0.5 * j["fov_diagonal_deg"].get<double>() * deg) / std::hypot(w, h);
+                double w = finite_field(j, "eye_width"), h = finite_field(j, "eye_height");
+                double t = std::tan(0.5 * fov_deg(j, "fov_diagonal_deg") * deg) / std::hypot(w, h);
                 fx_deg = 2 * std::atan(t * w) / deg;
                 fy_deg = 2 * std::atan(t * h) / deg;
             } else {
-                fx_deg = j.at("fov_x_deg").get<double>();
-                fy_deg = j.at("fov_y_deg").get<double>();
+                fx_deg = fov_deg(j, "fov_x_deg");
+                fy_deg = fov_deg(j, "fov_y_deg");
             }
             d->fx = 0.5 * d->eye_width / std::tan(0.5 * fx_deg * deg);
             d->fy = 0.5 * d->eye_height / std::tan(0.5 * fy_deg * deg);
             d->cx = 0.5 * (d->eye_width - 1.0);
             d->cy = 0.5 * (d->eye_height - 1.0);
         }
+    } catch (const ProfileError& e) {
+        return "'" + path + "': " + e.message;
     } catch (const std::exception& e) {
-        return path + ": " + e.what();
+        return "'" + path + "': " + e.what();
     }
     if (auto bad = protocol::validate_display(*d))
-        return path + ": " + *bad;
+        return "'" + path + "': " + *bad;
+    return std::nullopt;
+}
+
+std::variant<std::vector<TimedPose>, std::string> load_pose_csv(const std::string& path) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+        return "'" + path + "' is a folder, expected a pose file";
+    std::ifstream in(path);
+    if (!in)
+        return "'" + path + "': cannot open: " + std::strerror(errno);
+    std::vector<TimedPose> out;
+    std::string line;
+    int n = 0;
+    bool seen_content = false;
+    while (std::getline(in, line)) {
+        ++n;
+        const std::string row = strip_trailing_space(line);
+        const size_t first = row.find_first_not_of(" \t");
+        if (first == std::string::npos || row[first] == '#')
+            continue;
+        // A header names the columns: letters, no digit ("t_s,x,y,z,qw,qx,qy,qz").
+        const bool header = !seen_content && std::none_of(row.begin(), row.end(), [](char c) {
+            return std::isdigit(uint8_t(c));
+        });
+        seen_content = true;
+        if (header)
+            continue;
+        const std::string where = "'" + path + "' line " + std::to_string(n) + ": ";
+        auto v = parse_number_list(std::string_view(row).substr(first), -1e9, 1e9, 8, 8);
+        if (auto* e = std::get_if<std::string>(&v))
+            return where + *e + " (expected t_s,x,y,z,qw,qx,qy,qz)";
+        const auto& x = std::get<std::vector<double>>(v);
+        if (x[0] < 0)
+            return where + "t_s " + format_number(x[0]) + " is negative";
+        if (!out.empty() && x[0] < out.back().t_s)
+            return where + "t_s " + format_number(x[0]) + " is before the previous line's " +
+                   format_number(out.back().t_s);
+        TimedPose p{x[0], protocol::Pose{0, {x[1], x[2], x[3]}, {x[4], x[5], x[6], x[7]}}, n};
+        if (auto bad = protocol::validate_pose(p.pose))
+            return where + *bad;
+        out.push_back(p);
+    }
+    if (in.bad())
+        return "'" + path + "': read error";
+    if (out.empty())
+        return "'" + path + "': no pose in the file";
+    return out;
+}
+
+std::optional<std::string> make_output_dir(const std::string& dir) {
+    if (dir.empty())
+        return std::string("the folder name is empty");
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec)
+        return "'" + dir + "': cannot create the folder: " + ec.message();
+    if (!std::filesystem::is_directory(dir, ec))
+        return "'" + dir + "' exists and is not a folder";
     return std::nullopt;
 }
 
@@ -159,16 +270,6 @@ bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::
     for (size_t i = 3; i < rgba8.size(); i += 4)
         rgba8[i] = 255;  // PNGs are shown opaque: black is black
     return stbi_write_png(path.c_str(), int(w), int(h), 4, rgba8.data(), int(w * 4)) != 0;
-}
-
-std::vector<double> parse_list(const std::string& s) {
-    std::vector<double> out;
-    std::stringstream ss(s);
-    std::string item;
-    while (std::getline(ss, item, ','))
-        if (!item.empty())
-            out.push_back(std::stod(item));
-    return out;
 }
 
 }  // namespace hs::client

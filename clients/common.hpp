@@ -13,8 +13,25 @@ namespace hs::client {
 
 // A headset profile file (configs/devices/*.json): eye_width, eye_height, and fov_x_deg +
 // fov_y_deg, or fov_diagonal_deg, or fx (+ fy, cx, cy); ipd_m. `scale` multiplies the resolution.
+// Returns an error sentence (starting with the path) when the file cannot be read, a field is
+// missing or not a finite number, or the display it gives is not valid.
 std::optional<std::string> load_profile(const std::string& path, double scale,
                                         protocol::RegisterDisplay* out);
+
+// One pose of a recorded trajectory: seconds from the start, and the pose (client_time_ns 0).
+struct TimedPose {
+    double t_s = 0;
+    protocol::Pose pose;
+    int line = 0;  // line number in the file
+};
+// A pose file: lines "t_s,x,y,z,qw,qx,qy,qz" (finite numbers, t_s >= 0 and non-decreasing,
+// a valid pose); blank lines, lines starting with '#' and a header line (a first line
+// without digits) are skipped; CRLF line ends are accepted. Returns the poses, or an
+// error sentence "PATH:LINE: what is wrong".
+std::variant<std::vector<TimedPose>, std::string> load_pose_csv(const std::string& path);
+
+// Creates the output folder `dir` (and its parents); an error sentence when it cannot.
+std::optional<std::string> make_output_dir(const std::string& dir);
 
 // A pose at `eye` looking at `target` (world frame, +y up), stamped `t_ns`.
 protocol::Pose look_at_pose(std::array<double, 3> eye, std::array<double, 3> target, uint64_t t_ns);
@@ -35,7 +52,5 @@ std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t width, uint3
 // Writes raw RGBA8 pixels as PNG; RGBA16F ones are tone-mapped (white = 1, sRGB) first.
 bool write_layer_png(const std::string& path, uint32_t width, uint32_t height,
                      protocol::PixelFormat format, const std::vector<uint8_t>& raw);
-
-std::vector<double> parse_list(const std::string& s);
 
 }  // namespace hs::client

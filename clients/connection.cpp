@@ -1,6 +1,7 @@
 #include "clients/connection.hpp"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -13,6 +14,8 @@
 #include <chrono>
 #include <cstring>
 
+#include "clients/args.hpp"
+
 namespace hs::client {
 
 uint64_t now_ns() {
@@ -21,15 +24,133 @@ uint64_t now_ns() {
                         .count());
 }
 
-std::variant<std::unique_ptr<Connection>, std::string> Connection::open(
-    const std::string& address) {
-    if (address.rfind("unix:", 0) == 0) {
-        std::string path = address.substr(5);
+const char* error_code_name(protocol::ErrorCode code) {
+    using E = protocol::ErrorCode;
+    switch (code) {
+        case E::kBadMagic:
+            return "bad magic";
+        case E::kBadVersion:
+            return "bad version";
+        case E::kUnknownType:
+            return "unknown message type";
+        case E::kTooLarge:
+            return "too large";
+        case E::kMalformed:
+            return "malformed";
+        case E::kUnauthorized:
+            return "unauthorized";
+        case E::kForbidden:
+            return "forbidden";
+        case E::kOutOfOrder:
+            return "out of order";
+        case E::kInvalidPose:
+            return "invalid pose";
+        case E::kInvalidDisplay:
+            return "invalid display";
+        case E::kSceneRejected:
+            return "scene rejected";
+        case E::kServerBusy:
+            return "server busy";
+        case E::kInternal:
+            return "internal server error";
+        case E::kInvalidUtf8:
+            return "invalid UTF-8";
+        case E::kTimeout:
+            return "timeout";
+    }
+    return nullptr;
+}
+
+std::string describe(const protocol::Error& error) {
+    const char* name = error_code_name(error.code);
+    std::string s =
+        std::string(name ? name : "error") + " (" + std::to_string(unsigned(error.code)) + ")";
+    return error.message.empty() ? s : s + ": " + protocol::sanitize_utf8(error.message);
+}
+
+std::variant<Address, std::string> parse_address(const std::string& text) {
+    Address a;
+    if (text.rfind("unix:", 0) == 0) {
+        a.unix_socket = true;
+        a.path = text.substr(5);
+        if (a.path.empty())
+            return std::string("expected a socket path after 'unix:'");
+        if (a.path.size() >= sizeof(sockaddr_un::sun_path))
+            return "the Unix socket path is " + std::to_string(a.path.size()) + " bytes, at most " +
+                   std::to_string(sizeof(sockaddr_un::sun_path) - 1);
+        return a;
+    }
+    const auto colon = text.rfind(':');
+    if (colon == std::string::npos)
+        return std::string("no port (expected HOST:PORT or unix:PATH)");
+    a.host = text.substr(0, colon);
+    a.port = text.substr(colon + 1);
+    if (a.host.size() >= 2 && a.host.front() == '[' && a.host.back() == ']')
+        a.host = a.host.substr(1, a.host.size() - 2);
+    else if (a.host.find(':') != std::string::npos)
+        return std::string("an IPv6 address goes in brackets: [ADDRESS]:PORT");
+    if (a.host.empty())
+        return std::string("no host before the port (expected HOST:PORT or unix:PATH)");
+    if (a.port.empty())
+        return std::string("no port after ':' (expected HOST:PORT or unix:PATH)");
+    auto port = parse_integer(a.port, 1, 65535);
+    if (auto* e = std::get_if<std::string>(&port))
+        return "port " + *e;
+    return a;
+}
+
+namespace {
+
+// connect() that gives up after `timeout_ms`; an error sentence on failure.
+std::optional<std::string> connect_within(int fd, const sockaddr* sa, socklen_t len,
+                                          int timeout_ms) {
+    const int flags = ::fcntl(fd, F_GETFL, 0);
+    if (flags < 0 || ::fcntl(fd, F_SETFL, flags | O_NONBLOCK) != 0)
+        return std::string("fcntl: ") + std::strerror(errno);
+    if (::connect(fd, sa, len) != 0) {
+        if (errno != EINPROGRESS)
+            return std::string(std::strerror(errno));
+        const auto deadline =
+            std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+        for (;;) {
+            const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                     deadline - std::chrono::steady_clock::now())
+                                     .count());
+            if (left <= 0)
+                return "no answer within " + format_number(timeout_ms / 1000.0) + " s";
+            pollfd pfd{fd, POLLOUT, 0};
+            const int rc = ::poll(&pfd, 1, left);
+            if (rc < 0 && errno == EINTR)
+                continue;
+            if (rc < 0)
+                return std::string("poll: ") + std::strerror(errno);
+            if (rc > 0)
+                break;
+        }
+        int err = 0;
+        socklen_t err_len = sizeof err;
+        if (::getsockopt(fd, SOL_SOCKET, SO_ERROR, &err, &err_len) != 0)
+            return std::string("getsockopt: ") + std::strerror(errno);
+        if (err != 0)
+            return std::string(std::strerror(err));
+    }
+    if (::fcntl(fd, F_SETFL, flags) != 0)
+        return std::string("fcntl: ") + std::strerror(errno);
+    return std::nullopt;
+}
+
+}  // namespace
+
+std::variant<std::unique_ptr<Connection>, std::string> Connection::open(const std::string& address,
+                                                                        int timeout_ms) {
+    auto parsed = parse_address(address);
+    if (auto* e = std::get_if<std::string>(&parsed))
+        return "'" + address + "': " + *e;
+    const Address& a = std::get<Address>(parsed);
+    if (a.unix_socket) {
         sockaddr_un sa{};
-        if (path.size() >= sizeof(sa.sun_path))
-            return "unix socket path too long: " + path;
         sa.sun_family = AF_UNIX;
-        std::memcpy(sa.sun_path, path.c_str(), path.size() + 1);
+        std::memcpy(sa.sun_path, a.path.c_str(), a.path.size() + 1);
         int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
         if (fd < 0)
             return std::string("socket: ") + std::strerror(errno);
@@ -40,26 +161,26 @@ std::variant<std::unique_ptr<Connection>, std::string> Connection::open(
         }
         return std::unique_ptr<Connection>(new Connection(fd));
     }
-    auto colon = address.rfind(':');
-    if (colon == std::string::npos)
-        return "expected HOST:PORT or unix:PATH, got '" + address + "'";
-    std::string host = address.substr(0, colon), port = address.substr(colon + 1);
     addrinfo hints{}, *res = nullptr;
     hints.ai_socktype = SOCK_STREAM;
-    if (int rc = ::getaddrinfo(host.c_str(), port.c_str(), &hints, &res); rc != 0)
-        return "cannot resolve " + address + ": " + gai_strerror(rc);
+    hints.ai_flags = AI_NUMERICSERV;
+    if (int rc = ::getaddrinfo(a.host.c_str(), a.port.c_str(), &hints, &res); rc != 0)
+        return "cannot resolve '" + a.host + "': " + gai_strerror(rc);
     std::string last = "no address";
-    for (addrinfo* a = res; a; a = a->ai_next) {
-        int fd = ::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
-        if (fd < 0)
+    for (addrinfo* ai = res; ai; ai = ai->ai_next) {
+        int fd = ::socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC, ai->ai_protocol);
+        if (fd < 0) {
+            last = std::string("socket: ") + std::strerror(errno);
             continue;
-        if (::connect(fd, a->ai_addr, a->ai_addrlen) == 0) {
+        }
+        auto err = connect_within(fd, ai->ai_addr, ai->ai_addrlen, timeout_ms);
+        if (!err) {
             ::freeaddrinfo(res);
             int one = 1;
             ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
             return std::unique_ptr<Connection>(new Connection(fd));
         }
-        last = std::strerror(errno);
+        last = *err;
         ::close(fd);
     }
     ::freeaddrinfo(res);
@@ -78,22 +199,33 @@ void Connection::close() {
 
 bool Connection::send_bytes(const void* data, size_t n) {
     const uint8_t* p = static_cast<const uint8_t*>(data);
-    while (n > 0 && fd_ >= 0) {
+    if (fd_ < 0) {
+        last_error_ = "the connection is closed";
+        return false;
+    }
+    while (n > 0) {
         ssize_t w = ::send(fd_, p, n, MSG_NOSIGNAL);
         if (w < 0) {
             if (errno == EINTR)
                 continue;
+            last_error_ = std::string("the connection was lost: ") + std::strerror(errno);
             return false;
         }
         p += w;
         n -= size_t(w);
     }
-    return n == 0;
+    return true;
 }
 
 bool Connection::send(const protocol::Message& m, uint32_t sequence) {
-    auto bytes = protocol::encode(m, sequence);
-    return send_bytes(bytes.data(), bytes.size());
+    auto bytes = protocol::encode(m, protocol::Side::kClient, sequence);
+    if (auto* e = std::get_if<protocol::EncodeError>(&bytes)) {
+        last_error_ =
+            std::string(protocol::to_string(protocol::type_of(m))) + " not sent: " + e->message;
+        return false;
+    }
+    const auto& b = std::get<std::vector<uint8_t>>(bytes);
+    return send_bytes(b.data(), b.size());
 }
 
 bool Connection::read_exact(uint8_t* p, size_t n, int timeout_ms) {
@@ -125,25 +257,30 @@ bool Connection::read_exact(uint8_t* p, size_t n, int timeout_ms) {
 
 std::variant<std::monostate, protocol::Message, std::string> Connection::receive(int timeout_ms) {
     if (fd_ < 0)
-        return std::string("connection closed");
+        return std::string("the connection is closed");
     uint8_t hdr[protocol::kHeaderBytes];
     if (!read_exact(hdr, sizeof hdr, timeout_ms)) {
         if (fd_ < 0)
-            return std::string("connection closed by the server");
+            return std::string("the server closed the connection");
         return std::monostate{};
     }
-    auto h = protocol::decode_header(hdr);
-    if (auto* e = std::get_if<protocol::DecodeError>(&h))
-        return "bad header from the server: " + e->message;
+    auto h = protocol::decode_header(hdr, protocol::Side::kServer);
+    if (auto* e = std::get_if<protocol::DecodeError>(&h)) {
+        close();  // the stream is out of step: nothing after this can be framed
+        return "bad header from the server: " + describe(protocol::Error{e->code, e->message});
+    }
     const auto& header = std::get<protocol::Header>(h);
     std::vector<uint8_t> payload(header.payload_bytes);
     // The header arrived: the payload follows without waiting for the sender's next event.
     if (!payload.empty() &&
-        !read_exact(payload.data(), payload.size(), std::max(timeout_ms, 30000)))
-        return std::string("connection closed inside a frame");
+        !read_exact(payload.data(), payload.size(), std::max(timeout_ms, 30000))) {
+        close();
+        return std::string("the connection closed inside a frame");
+    }
     auto m = protocol::decode_payload(header, payload);
     if (auto* e = std::get_if<protocol::DecodeError>(&m))
-        return "bad payload from the server: " + e->message;
+        return "bad " + std::string(protocol::to_string(protocol::MessageType(header.type))) +
+               " from the server: " + describe(protocol::Error{e->code, e->message});
     return std::get<protocol::Message>(m);
 }
 
@@ -151,15 +288,15 @@ std::optional<std::string> Connection::hello(protocol::Role role, const std::str
                                              const std::string& name, protocol::Welcome* welcome,
                                              int timeout_ms) {
     if (!send(protocol::Hello{role, token, name}, 1))
-        return "cannot send Hello";
+        return "cannot send Hello: " + last_error_;
     auto r = receive(timeout_ms);
     if (auto* e = std::get_if<std::string>(&r))
-        return *e;
+        return "no answer to Hello: " + *e;
     if (std::holds_alternative<std::monostate>(r))
-        return "no answer to Hello";
+        return "no answer to Hello within " + format_number(timeout_ms / 1000.0) + " s";
     const auto& m = std::get<protocol::Message>(r);
     if (auto* err = std::get_if<protocol::Error>(&m))
-        return "server refused: " + err->message;
+        return "the server refused the session: " + describe(*err);
     if (auto* w = std::get_if<protocol::Welcome>(&m)) {
         if (welcome)
             *welcome = *w;

@@ -11,23 +11,46 @@
 
 namespace hs::client {
 
+// Where the server listens: "HOST:PORT" (an IPv6 host in brackets, "[::1]:7700"; PORT
+// 1..65535) or "unix:PATH".
+struct Address {
+    bool unix_socket = false;
+    std::string host;  // TCP: the host name or address, without brackets
+    std::string port;  // TCP: the port, digits only
+    std::string path;  // Unix socket: the path
+};
+// Parses an address; an error sentence (no port, port out of range, ...) when it is not one.
+std::variant<Address, std::string> parse_address(const std::string& text);
+
+// A readable name of an error code ("unauthorized"), or nullptr for a code this client does
+// not know.
+const char* error_code_name(protocol::ErrorCode code);
+// "unauthorized (6): wrong token": an Error message for a person.
+std::string describe(const protocol::Error& error);
+
 class Connection {
 public:
-    // "HOST:PORT", or "unix:PATH". Returns an error sentence on failure.
-    static std::variant<std::unique_ptr<Connection>, std::string> open(const std::string& address);
+    // "HOST:PORT", or "unix:PATH". Gives up connecting after `timeout_ms`. Returns an error
+    // sentence on failure.
+    static std::variant<std::unique_ptr<Connection>, std::string> open(const std::string& address,
+                                                                       int timeout_ms = 10000);
     ~Connection();
     Connection(const Connection&) = delete;
     Connection& operator=(const Connection&) = delete;
 
-    // Sends one message; false when the socket is closed.
+    // Sends one message as the client. False when the message may not be encoded (a field over
+    // its limit, a server-only type) or the socket is closed; last_error() says which.
     bool send(const protocol::Message& m, uint32_t sequence = 0);
     // Sends raw bytes (tests of malformed input).
     bool send_bytes(const void* data, size_t n);
-    // Waits up to `timeout_ms` for one whole message. nullopt on timeout; an error sentence when
-    // the connection closed or the bytes do not decode.
+    // Why the last send() failed.
+    const std::string& last_error() const { return last_error_; }
+    // Waits up to `timeout_ms` for one whole message. monostate on timeout; an error sentence
+    // when the connection closed or the bytes do not decode.
     std::variant<std::monostate, protocol::Message, std::string> receive(int timeout_ms);
 
-    // Hello with the token, then Welcome. Returns an error sentence on failure.
+    // Hello with the token, then Welcome. Returns an error sentence on failure: no answer, the
+    // connection closed, or the server's Error (wrong token, ...).
     std::optional<std::string> hello(protocol::Role role, const std::string& token,
                                      const std::string& name, protocol::Welcome* welcome = nullptr,
                                      int timeout_ms = 10000);
@@ -38,6 +61,7 @@ private:
     explicit Connection(int fd) : fd_(fd) {}
     bool read_exact(uint8_t* p, size_t n, int timeout_ms);
     int fd_ = -1;
+    std::string last_error_;
 };
 
 // The client's clock (steady), in nanoseconds; the server stamps layers with the pose's value.

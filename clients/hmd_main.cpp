@@ -1,11 +1,12 @@
 // hysar-hmd: a headset client. Registers a display profile, plays a pose trajectory (the
 // paper's view angles, an orbit, or a CSV of timestamped poses), writes the received layers.
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -33,111 +34,116 @@ static const char* kUsage =
     "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous mode)\n"
     "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
     "  --out DIR        where layers are written as PNG (default out/hmd)\n"
-    "  --window         show the latest layers in a window, left and right eye side by side\n";
+    "  --window         show the latest layers in a window, left and right eye side by side\n"
+    "  --summary FILE   also write the run's figures as JSON\n"
+    "\n"
+    "Exit status: 0 ok; 1 the run failed (an Error from the server, a lost connection, no\n"
+    "layers); 2 bad arguments or no session (server unreachable, closed, or refused the token).\n"
+    "Example: hysar-hmd --connect 127.0.0.1:7700 --token-file token --angles -40,0,40\n";
 
-int main(int argc, char** argv) {
+namespace {
+
+// The trajectory: (seconds from start, pose, label).
+struct Step {
+    double t_s;
+    proto::Pose pose;
+    std::string label;
+};
+
+int hmd_main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles",
                "--orbit", "--csv", "--distance", "--height", "--target", "--format", "--encoding",
                "--name", "--out", "--summary"},
               {"--window"}, kUsage);
+    // Everything on the command line is checked before the network is touched.
+    const std::string address = args.get("--connect", "127.0.0.1:7700");
+    if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
+        args.fail("--connect '" + address + "': " + *bad);
+    const std::string token = args.token(proto::kMaxTokenBytes);
     proto::RegisterDisplay display;
+    const double scale = args.number("--scale", 1.0, 0.01, 8.0);
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
-                                args.number("--scale", 1.0, 0.01, 8.0), &display)) {
-        std::fprintf(stderr, "hysar-hmd: %s\n", err->c_str());
-        return 1;
-    }
-    const std::string fmt = args.get("--format", "rgba8");
-    if (fmt != "rgba8" && fmt != "rgba16f")
-        args.fail("--format: expected rgba8 or rgba16f");
+                                scale, &display))
+        args.fail("--profile " + *err);
+    const std::string fmt = args.choice("--format", "rgba8", {"rgba8", "rgba16f"});
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
-    const std::string enc = args.get("--encoding", "sparse");
-    if (enc != "raw" && enc != "sparse")
-        args.fail("--encoding: expected raw or sparse");
+    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse"});
     display.encoding = enc == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
-    const std::string name = args.get("--name", "hmd");
-    const std::filesystem::path out = args.get("--out", "out/hmd");
+    const std::string name = args.text("--name", "hmd", proto::kMaxNameBytes);
+    if (name.find('/') != std::string::npos)
+        args.fail("--name '" + name + "': no '/' (the name is part of the PNG file names)");
     const double distance = args.number("--distance", 0.8, 0.01, 100),
                  height = args.number("--height", 1.10, -100, 100);
     std::array<double, 3> target{0.0, 0.745, 0.0};
     if (args.has("--target")) {
-        auto t = parse_list(args.get("--target", ""));
-        if (t.size() != 3)
-            args.fail("--target: expected X,Y,Z");
+        auto t = args.numbers("--target", "", -1000, 1000, 3, 3);
         target = {t[0], t[1], t[2]};
     }
-    // The trajectory: (seconds from start, pose, label).
-    struct Step {
-        double t_s;
-        proto::Pose pose;
-        std::string label;
-    };
+    if (int(args.has("--angles")) + int(args.has("--orbit")) + int(args.has("--csv")) > 1)
+        args.fail("give one of --angles, --orbit and --csv");
     std::vector<Step> steps;
     if (args.has("--csv")) {
-        std::ifstream in(args.get("--csv", ""));
-        if (!in)
-            args.fail(args.get("--csv", "") + ": cannot open");
-        std::string line;
-        int n = 0;
-        while (std::getline(in, line)) {
-            ++n;
-            if (line.empty() || line[0] == '#' || !std::isdigit(uint8_t(line[0])))
-                continue;
-            std::vector<double> v;
-            try {
-                v = parse_list(line);
-            } catch (...) {
-            }
-            if (v.size() != 8) {
-                std::fprintf(stderr, "hysar-hmd: %s:%d: expected t_s,x,y,z,qw,qx,qy,qz\n",
-                             args.get("--csv", "").c_str(), n);
-                return 1;
-            }
-            steps.push_back({v[0], proto::Pose{0, {v[1], v[2], v[3]}, {v[4], v[5], v[6], v[7]}},
-                             "csv" + std::to_string(n)});
-        }
+        auto poses = load_pose_csv(args.get("--csv", ""));
+        if (auto* e = std::get_if<std::string>(&poses))
+            args.fail("--csv " + *e);
+        for (const auto& p : std::get<std::vector<TimedPose>>(poses))
+            steps.push_back({p.t_s, p.pose, "csv" + std::to_string(p.line)});
     } else if (args.has("--orbit")) {
         const double secs = args.number("--orbit", 10, 0.1, 3600);
         for (double t = 0; t < secs; t += 0.05)
             steps.push_back({t, orbit_pose(360.0 * t / secs, distance, height, target, 0), ""});
     } else {
-        for (double a : parse_list(args.get("--angles", "-40,-20,0,20,40"))) {
+        for (double a : args.numbers("--angles", "-40,-20,0,20,40", -360, 360, 1, 3600)) {
             char label[32];
             std::snprintf(label, sizeof label, "%s%03d", a < 0 ? "m" : "p",
                           int(std::lround(std::abs(a))));
             steps.push_back({0.0, orbit_pose(a, distance, height, target, 0), label});
         }
     }
-    if (steps.empty())
-        args.fail("the trajectory has no pose");
     for (const auto& s : steps)
-        if (auto bad = proto::validate_pose(s.pose)) {
-            std::fprintf(stderr, "hysar-hmd: trajectory pose '%s': %s\n", s.label.c_str(),
-                         bad->c_str());
-            return 1;
-        }
-    auto c = Connection::open(args.get("--connect", "127.0.0.1:7700"));
+        if (auto bad = proto::validate_pose(s.pose))
+            args.fail(
+                "the pose at " +
+                (s.label.empty() ? "t = " + std::to_string(s.t_s) + " s" : "'" + s.label + "'") +
+                " from --distance, --height and --target: " + *bad);
+    const std::filesystem::path out = args.get("--out", "out/hmd");
+    if (auto err = make_output_dir(out.string()))
+        args.fail("--out " + *err);
+    std::ofstream summary_file;
+    if (args.has("--summary")) {
+        const std::string path = args.output_path("--summary", "");
+        summary_file.open(path);
+        if (!summary_file)
+            args.fail("--summary '" + path + "': cannot write: " + std::strerror(errno));
+    }
+
+    auto c = Connection::open(address);
     if (auto* e = std::get_if<std::string>(&c)) {
-        std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
-        return 1;
+        std::fprintf(stderr, "hysar-hmd: --connect: %s\n", e->c_str());
+        return 2;
     }
     auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-    if (auto err = conn.hello(proto::Role::kHmd, args.token(), name)) {
-        std::fprintf(stderr, "hysar-hmd: %s\n", err->c_str());
-        return 1;
+    if (auto err = conn.hello(proto::Role::kHmd, token, name)) {
+        std::fprintf(stderr, "hysar-hmd: %s: %s\n", address.c_str(), err->c_str());
+        return 2;
     }
     const bool stills = !args.has("--orbit") && !args.has("--csv");
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
-    conn.send(display);
-    std::filesystem::create_directories(out);
+    auto lost = [&]() {
+        std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
+        return 1;
+    };
+    if (!conn.send(display))
+        return lost();
     std::unique_ptr<ImageWindow> window;
     std::vector<uint8_t> side_by_side;
     if (args.has("--window")) {
         auto w =
             ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
         if (auto* e = std::get_if<std::string>(&w)) {
-            std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
-            return 1;
+            std::fprintf(stderr, "hysar-hmd: --window: %s\n", e->c_str());
+            return 2;
         }
         window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
         side_by_side.assign(size_t(display.eye_width) * 2 * display.eye_height * 4, 0);
@@ -146,7 +152,7 @@ int main(int argc, char** argv) {
     uint64_t bytes = 0, layers = 0, errors = 0;
     auto handle = [&](const proto::Message& m, const std::string& label) {
         if (auto* l = std::get_if<proto::VdLayer>(&m)) {
-            if (window && l->format == proto::PixelFormat::kRgba8 &&
+            if (window && l->eye <= 1 && l->format == proto::PixelFormat::kRgba8 &&
                 l->width == display.eye_width && l->height == display.eye_height) {
                 auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
                 if (auto* px = std::get_if<std::vector<uint8_t>>(&raw)) {
@@ -163,7 +169,7 @@ int main(int argc, char** argv) {
             ++layers;
             bytes += l->data.size();
             if (l->eye == 1)
-                latency_ms.push_back((now_ns() - l->pose_time_ns) * 1e-6);
+                latency_ms.push_back(double(int64_t(now_ns() - l->pose_time_ns)) * 1e-6);
             if (!label.empty() || stills) {
                 std::string file =
                     (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
@@ -176,12 +182,12 @@ int main(int argc, char** argv) {
                 } else if (!write_layer_png(file, l->width, l->height, l->format,
                                             std::get<std::vector<uint8_t>>(raw))) {
                     ++errors;
+                    std::fprintf(stderr, "hysar-hmd: cannot write %s\n", file.c_str());
                 }
             }
         } else if (auto* e = std::get_if<proto::Error>(&m)) {
             ++errors;
-            std::fprintf(stderr, "hysar-hmd: server error %d: %s\n", int(e->code),
-                         e->message.c_str());
+            std::fprintf(stderr, "hysar-hmd: server error: %s\n", describe(*e).c_str());
         }
     };
     const auto start = std::chrono::steady_clock::now();
@@ -191,6 +197,10 @@ int main(int argc, char** argv) {
             // Drain whatever arrived meanwhile.
             for (;;) {
                 auto r = conn.receive(0);
+                if (auto* e = std::get_if<std::string>(&r)) {
+                    std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+                    return 1;
+                }
                 if (auto* m = std::get_if<proto::Message>(&r))
                     handle(*m, s.label);
                 else
@@ -198,10 +208,12 @@ int main(int argc, char** argv) {
             }
         }
         s.pose.client_time_ns = now_ns();
-        conn.send(s.pose);
+        if (!conn.send(s.pose))
+            return lost();
         if (!stills)
             continue;
-        conn.send(proto::FrameRequest{});
+        if (!conn.send(proto::FrameRequest{}))
+            return lost();
         int eyes = 0;
         while (eyes < 2) {
             auto r = conn.receive(30000);
@@ -219,6 +231,11 @@ int main(int argc, char** argv) {
                 l && l->pose_time_ns == s.pose.client_time_ns)
                 ++eyes;
             handle(m, s.label);
+            // No layer follows a refused display or pose: do not wait 30 s for one.
+            if (std::holds_alternative<proto::Error>(m)) {
+                std::fprintf(stderr, "hysar-hmd: pose '%s' got no layers\n", s.label.c_str());
+                return 1;
+            }
         }
     }
     conn.send(proto::Bye{0});
@@ -229,10 +246,23 @@ int main(int argc, char** argv) {
                            {"latency_ms_p50", percentile(latency_ms, 0.5)},
                            {"latency_ms_p95", percentile(latency_ms, 0.95)},
                            {"errors", errors}};
-    if (args.has("--summary"))
-        std::ofstream(args.get("--summary", "")) << summary.dump(2) << "\n";
+    if (summary_file.is_open()) {
+        summary_file << summary.dump(2) << "\n";
+        summary_file.close();
+        if (!summary_file) {
+            std::fprintf(stderr, "hysar-hmd: --summary '%s': write failed\n",
+                         args.get("--summary", "").c_str());
+            return 1;
+        }
+    }
     std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %llu errors\n", name.c_str(),
                 (unsigned long long)(layers / 2), percentile(latency_ms, 0.5), bytes / 1e6,
                 (unsigned long long)errors);
     return errors ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    return run_main("hysar-hmd", argc, argv, hmd_main);
 }

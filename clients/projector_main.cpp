@@ -20,45 +20,66 @@ static const char* kUsage =
     "  --out DIR       where frames are written as projector_v<scene version>.png (default "
     "out/projector)\n"
     "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n"
+    "  --timeout S     give up when no frame arrives for S seconds (default 60)\n"
     "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on "
     "monitor N\n"
-    "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n";
+    "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n"
+    "\n"
+    "Exit status: 0 ok; 1 the run failed (no frame in time, a lost connection, a bad frame, an\n"
+    "Error from the server);\n"
+    "2 bad arguments or no session (server unreachable, closed, or refused the token).\n"
+    "Example: hysar-projector --connect 127.0.0.1:7700 --token-file token --frames 0\n";
 
-int main(int argc, char** argv) {
+namespace {
+
+int projector_main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name",
                "--monitor", "--screenshot"},
               {"--window"}, kUsage);
+    // Everything on the command line is checked before the network is touched.
+    const std::string address = args.get("--connect", "127.0.0.1:7700");
+    if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
+        args.fail("--connect '" + address + "': " + *bad);
+    const std::string token = args.token(proto::kMaxTokenBytes);
+    const std::string name = args.text("--name", "projector", proto::kMaxNameBytes);
+    const int64_t frames_wanted = args.integer("--frames", 1, 0, 1000000000);
+    const int timeout_ms = int(args.number("--timeout", 60, 0.1, 1e6) * 1000);
+    if (!args.has("--window") && (args.has("--monitor") || args.has("--screenshot")))
+        args.fail(std::string(args.has("--monitor") ? "--monitor" : "--screenshot") +
+                  " needs --window");
+    const int monitor = int(args.integer("--monitor", -1, -1, 64));
+    const std::string screenshot =
+        args.has("--screenshot") ? args.output_path("--screenshot", "") : "";
+    const std::filesystem::path out = args.get("--out", "out/projector");
+    if (auto err = make_output_dir(out.string()))
+        args.fail("--out " + *err);
+
     std::unique_ptr<ImageWindow> window;
     if (args.has("--window")) {
-        auto w = ImageWindow::open("hysar-projector", 960, 600,
-                                   int(args.number("--monitor", -1, -1, 64)));
+        auto w = ImageWindow::open("hysar-projector", 960, 600, monitor);
         if (auto* e = std::get_if<std::string>(&w)) {
-            std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
-            return 1;
+            std::fprintf(stderr, "hysar-projector: --window: %s\n", e->c_str());
+            return 2;
         }
         window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
     }
-    const int frames_wanted = int(args.number("--frames", 1, 0, 1e9));
-    const int timeout_ms = int(args.number("--timeout", 60, 0.1, 1e6) * 1000);
-    const std::filesystem::path out = args.get("--out", "out/projector");
-    auto c = Connection::open(args.get("--connect", "127.0.0.1:7700"));
+    auto c = Connection::open(address);
     if (auto* e = std::get_if<std::string>(&c)) {
-        std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
-        return 1;
+        std::fprintf(stderr, "hysar-projector: --connect: %s\n", e->c_str());
+        return 2;
     }
     auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-    if (auto err =
-            conn.hello(proto::Role::kProjector, args.token(), args.get("--name", "projector"))) {
-        std::fprintf(stderr, "hysar-projector: %s\n", err->c_str());
-        return 1;
+    if (auto err = conn.hello(proto::Role::kProjector, token, name)) {
+        std::fprintf(stderr, "hysar-projector: %s: %s\n", address.c_str(), err->c_str());
+        return 2;
     }
-    std::filesystem::create_directories(out);
-    int frames = 0;
+    int64_t frames = 0, server_errors = 0;
     while (frames_wanted == 0 || frames < frames_wanted) {
         auto r = conn.receive(timeout_ms);
         if (std::holds_alternative<std::monostate>(r)) {
-            std::fprintf(stderr, "hysar-projector: no frame within the timeout\n");
+            std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
+                         format_number(timeout_ms / 1000.0).c_str());
             return 1;
         }
         if (auto* e = std::get_if<std::string>(&r)) {
@@ -70,6 +91,10 @@ int main(int argc, char** argv) {
         const auto& m = std::get<proto::Message>(r);
         if (std::holds_alternative<proto::Bye>(m))
             break;
+        if (auto* e = std::get_if<proto::Error>(&m)) {
+            ++server_errors;  // reported, and the exit status says so; frames may still come
+            std::fprintf(stderr, "hysar-projector: server error: %s\n", describe(*e).c_str());
+        }
         if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
             std::string file =
                 (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
@@ -98,14 +123,21 @@ int main(int argc, char** argv) {
             ++frames;
         }
     }
-    if (window && args.has("--screenshot")) {
+    if (window && !screenshot.empty()) {
         uint32_t w = 0, h = 0;
         auto px = window->read_back(&w, &h);
-        if (!write_layer_png(args.get("--screenshot", ""), w, h, proto::PixelFormat::kRgba8, px)) {
-            std::fprintf(stderr, "hysar-projector: cannot write the screenshot\n");
+        if (!write_layer_png(screenshot, w, h, proto::PixelFormat::kRgba8, px)) {
+            std::fprintf(stderr, "hysar-projector: --screenshot '%s': cannot write it\n",
+                         screenshot.c_str());
             return 1;
         }
     }
     conn.send(proto::Bye{0});
-    return 0;
+    return server_errors ? 1 : 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    return run_main("hysar-projector", argc, argv, projector_main);
 }
