@@ -1,6 +1,7 @@
 #include "scene/config.hpp"
 
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <optional>
 #include <set>
@@ -12,7 +13,10 @@
 #include <nlohmann/json.hpp>
 
 #include "core/check.hpp"
+#include "scene/assets.hpp"
 #include "scene/camera.hpp"
+#include "scene/json_limits.hpp"
+#include "scene/mesh.hpp"
 
 namespace hs::scene {
 
@@ -126,7 +130,7 @@ public:
         if (!v->is_number_integer() || v->get<int64_t>() < int64_t(lo) ||
             v->get<int64_t>() > int64_t(hi)) {
             fail(join(path, key),
-                 fmt::format("expected an integer in [{}, {}], got {}", lo, hi, v->dump()));
+                 fmt::format("expected an integer in [{}, {}], got {}", lo, hi, brief_json(*v)));
             return def.value_or(lo);
         }
         return uint32_t(v->get<int64_t>());
@@ -139,7 +143,8 @@ public:
             return def.value_or(glm::dvec3(0.0));
         if (!v->is_array() || v->size() != 3 || !(*v)[0].is_number() || !(*v)[1].is_number() ||
             !(*v)[2].is_number()) {
-            fail(join(path, key), fmt::format("expected an array of 3 numbers, got {}", v->dump()));
+            fail(join(path, key),
+                 fmt::format("expected an array of 3 numbers, got {}", brief_json(*v)));
             return def.value_or(glm::dvec3(0.0));
         }
         glm::dvec3 r((*v)[0].get<double>(), (*v)[1].get<double>(), (*v)[2].get<double>());
@@ -169,7 +174,7 @@ public:
         if (!v)
             return def;
         if (!v->is_boolean()) {
-            fail(join(path, key), fmt::format("expected true or false, got {}", v->dump()));
+            fail(join(path, key), fmt::format("expected true or false, got {}", brief_json(*v)));
             return def;
         }
         return v->get<bool>();
@@ -268,7 +273,8 @@ Pose read_pose(Reader& r, const json& j, const std::string& path) {
     glm::dvec3 pos = r.vec3(j, path, "position", std::nullopt);
     if (j.is_object() && j.contains("orientation_wxyz")) {
         const json& q = j["orientation_wxyz"];
-        if (!q.is_array() || q.size() != 4) {
+        if (!q.is_array() || q.size() != 4 || !q[0].is_number() || !q[1].is_number() ||
+            !q[2].is_number() || !q[3].is_number()) {
             r.fail(Reader::join(path, "orientation_wxyz"),
                    "expected an array of 4 numbers (w, x, y, z)");
             return {};
@@ -290,18 +296,107 @@ Pose read_pose(Reader& r, const json& j, const std::string& path) {
     return p ? p.value() : Pose{};
 }
 
-}  // namespace
+// `message` with the resolved path `real` shown as the scene wrote it, so that an error does not
+// print where the asset root lies on the server.
+std::string as_written(std::string message, const std::string& real, std::string_view written) {
+    const std::string shown = quote_text(written);
+    for (size_t at = message.find(real); !real.empty() && at != std::string::npos;
+         at = message.find(real, at + shown.size()))
+        message.replace(at, real.size(), shown);
+    return message;
+}
 
-Result<Scene> parse_scene(std::string_view text, const std::string& source,
-                          const std::filesystem::path& base_dir) {
-    json root;
-    try {
-        root = json::parse(text);
-    } catch (const json::parse_error& e) {
-        return make_error(ErrorCode::kParse,
-                          fmt::format("{}: malformed JSON: {}", source, e.what()));
+struct ImageSize {
+    uint64_t width = 0, height = 0;  // pixels
+};
+
+// The size in a PNG's IHDR chunk, read before decoding so that a huge image is refused before
+// its pixels are allocated.
+Result<ImageSize> png_size(const std::filesystem::path& file) {
+    unsigned char h[24] = {};
+    std::ifstream in(file, std::ios::binary);
+    in.read(reinterpret_cast<char*>(h), sizeof h);
+    static const unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    if (!in || std::memcmp(h, kSignature, 8) != 0 || std::memcmp(h + 12, "IHDR", 4) != 0)
+        return make_error(ErrorCode::kParse, "is not a PNG file");
+    auto be32 = [](const unsigned char* p) {
+        return uint64_t(p[0]) << 24 | uint64_t(p[1]) << 16 | uint64_t(p[2]) << 8 | p[3];
+    };
+    return ImageSize{be32(h + 16), be32(h + 20)};
+}
+
+// The size in an OpenEXR header's dataWindow attribute (of the first part), read before
+// decoding. The header is a list of (name NUL, type NUL, int32 size, value), ended by a NUL.
+Result<ImageSize> exr_size(const std::filesystem::path& file) {
+    std::vector<char> h(64 * 1024);
+    std::ifstream in(file, std::ios::binary);
+    in.read(h.data(), std::streamsize(h.size()));
+    h.resize(size_t(in.gcount()));
+    auto le32 = [&](size_t at) {
+        uint32_t v;
+        std::memcpy(&v, h.data() + at, 4);
+        return v;
+    };
+    if (h.size() < 8 || le32(0) != 20000630u)  // the OpenEXR magic number
+        return make_error(ErrorCode::kParse, "is not an OpenEXR file");
+    size_t at = 8;
+    auto cstring = [&](std::string* out) {
+        size_t end = at;
+        while (end < h.size() && h[end] != '\0') ++end;
+        if (end >= h.size())
+            return false;
+        out->assign(h.data() + at, end - at);
+        at = end + 1;
+        return true;
+    };
+    std::string name, type;
+    while (cstring(&name) && !name.empty() && cstring(&type)) {
+        if (at + 4 > h.size())
+            break;
+        const uint32_t size = le32(at);
+        at += 4;
+        if (size > h.size() - at)
+            break;
+        if (name == "dataWindow" && type == "box2i" && size == 16) {
+            const int64_t x0 = int32_t(le32(at)), y0 = int32_t(le32(at + 4));
+            const int64_t x1 = int32_t(le32(at + 8)), y1 = int32_t(le32(at + 12));
+            if (x1 < x0 || y1 < y0)
+                return make_error(ErrorCode::kParse, "has an empty dataWindow");
+            return ImageSize{uint64_t(x1 - x0 + 1), uint64_t(y1 - y0 + 1)};
+        }
+        at += size;
     }
+    return make_error(ErrorCode::kParse, "has no readable dataWindow in its header");
+}
+
+JsonLimits scene_json_limits() {
+    JsonLimits l;
+    l.max_bytes = kMaxSceneJsonBytes;
+    l.max_depth = kMaxJsonDepth;
+    l.max_elements = kMaxJsonElements;
+    l.max_string_bytes = kMaxJsonStringBytes;
+    return l;
+}
+
+uint64_t hemisphere_triangles(uint64_t segments, uint64_t rings) {
+    return rings == 0 ? 0 : segments * (2 * rings - 1);  // a fan at the pole, quads below
+}
+
+Result<Scene> parse_scene_tree(const json& root, const std::string& source,
+                               const std::filesystem::path& base_dir,
+                               const std::filesystem::path& asset_root, const SceneLimits& limits) {
     Reader r(source);
+    // Resolves a file the scene names; on failure records the error under `key` and returns
+    // nothing. The message never tells a path outside the root from a missing file.
+    auto asset = [&](const std::string& key,
+                     const std::string& written) -> std::optional<std::filesystem::path> {
+        auto real = resolve_asset(written, base_dir, asset_root);
+        if (!real) {
+            r.fail(key, real.error().message);
+            return std::nullopt;
+        }
+        return real.value();
+    };
     Scene s;
     if (!root.is_object())
         return make_error(ErrorCode::kParse,
@@ -327,12 +422,34 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
             s.prop.hemisphere.radius = r.number(*p, "prop", "radius_m", 0.15, 1e-3, 100.0);
             s.prop.hemisphere.segments = r.integer(*p, "prop", "segments", 256, 3, 8192);
             s.prop.hemisphere.rings = r.integer(*p, "prop", "rings", 64, 1, 4096);
+            const uint64_t triangles =
+                hemisphere_triangles(s.prop.hemisphere.segments, s.prop.hemisphere.rings);
+            if (!r.failed() && triangles > limits.max_triangles)
+                r.fail("prop.segments",
+                       fmt::format("segments {} x rings {} make {} triangles (segments x (2 rings "
+                                   "- 1)), more than the limit of {} (max_triangles)",
+                                   s.prop.hemisphere.segments, s.prop.hemisphere.rings, triangles,
+                                   limits.max_triangles));
         } else if (kind == "gltf") {
             s.prop.kind = Prop::Kind::kGltf;
-            std::filesystem::path g = r.string(*p, "prop", "gltf", std::nullopt);
-            s.prop.gltf_path = (g.is_absolute() ? g : base_dir / g).string();
+            const std::string g = r.string(*p, "prop", "gltf", std::nullopt);
             s.prop.gltf_translation = r.vec3(*p, "prop", "translation", glm::dvec3(0.0));
             s.prop.gltf_scale = r.number(*p, "prop", "scale", 1.0, 1e-6, 1e6);
+            if (!r.failed()) {
+                if (auto real = asset("prop.gltf", g)) {
+                    s.prop.gltf_path = real->string();
+                    GltfLoadInfo info;
+                    info.scale = s.prop.gltf_scale;
+                    info.translation = s.prop.gltf_translation;
+                    info.asset_root = asset_root.empty() ? base_dir : asset_root;
+                    info.max_triangles = limits.max_triangles;
+                    auto mesh = load_gltf_mesh(s.prop.gltf_path, info);
+                    if (!mesh)
+                        r.fail("prop.gltf", as_written(mesh.error().message, s.prop.gltf_path, g));
+                    else
+                        s.prop.gltf_mesh = std::make_shared<const Mesh>(std::move(mesh).value());
+                }
+            }
         } else if (!r.failed()) {
             r.fail("prop.kind",
                    fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
@@ -344,18 +461,26 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         r.only(*m, "material", {"albedo", "albedo_texture", "specular", "emission"});
         s.material.albedo = r.vec3(*m, "material", "albedo", std::nullopt, 0.0, 1.0);
         if (m->is_object() && m->contains("albedo_texture")) {
-            std::filesystem::path t = r.string(*m, "material", "albedo_texture", std::nullopt);
-            if (!r.failed()) {
-                s.material.albedo_texture_path = (t.is_absolute() ? t : base_dir / t).string();
-                auto img = read_png(s.material.albedo_texture_path);
-                if (!img)
-                    r.fail("material.albedo_texture", img.error().message);
-                else if (img->width > 8192 || img->height > 8192)
-                    r.fail("material.albedo_texture",
-                           fmt::format("{}x{} exceeds 8192x8192", img->width, img->height));
-                else
+            const std::string t = r.string(*m, "material", "albedo_texture", std::nullopt);
+            const char* key = "material.albedo_texture";
+            std::optional<std::filesystem::path> real;
+            if (!r.failed())
+                real = asset(key, t);
+            if (real) {
+                s.material.albedo_texture_path = real->string();
+                auto size = png_size(*real);
+                if (!size) {
+                    r.fail(key, fmt::format("{} {}", quote_text(t), size.error().message));
+                } else if (size->width > kMaxTextureSide || size->height > kMaxTextureSide) {
+                    r.fail(key, fmt::format("{} is {}x{}, more than the limit of {}x{}",
+                                            quote_text(t), size->width, size->height,
+                                            kMaxTextureSide, kMaxTextureSide));
+                } else if (auto img = read_png(*real); !img) {
+                    r.fail(key, as_written(img.error().message, real->string(), t));
+                } else {
                     s.material.albedo_texture =
                         std::make_shared<const ImageRgba8>(std::move(img).value());
+                }
             }
         }
         if (const json* sp = r.member(*m, "material", "specular", false)) {
@@ -424,8 +549,14 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         r.only(*pj, "projector", {"name", "width", "height", "fx", "fy", "cx", "cy", "pose"});
         Intrinsics& k = s.projector.intrinsics;
         s.projector.name = r.string(*pj, "projector", "name", "projector");
-        k.width = r.integer(*pj, "projector", "width", std::nullopt, 1, 16384);
-        k.height = r.integer(*pj, "projector", "height", std::nullopt, 1, 16384);
+        k.width = r.integer(*pj, "projector", "width", std::nullopt, 1, kMaxImageSide);
+        k.height = r.integer(*pj, "projector", "height", std::nullopt, 1, kMaxImageSide);
+        const uint64_t pixels = uint64_t(k.width) * k.height;
+        if (!r.failed() && pixels > limits.max_projector_pixels)
+            r.fail("projector.width",
+                   fmt::format("width {} x height {} = {} pixels, more than the limit of {} "
+                               "(max_projector_pixels)",
+                               k.width, k.height, pixels, limits.max_projector_pixels));
         k.fx = r.number(*pj, "projector", "fx", std::nullopt, 1e-3, 1e7);
         k.fy = r.number(*pj, "projector", "fy", k.fx, 1e-3, 1e7);
         k.cx = r.number(*pj, "projector", "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
@@ -448,8 +579,8 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
                         "fov_diagonal_deg", "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
                 ViewerProfile v;
                 v.name = r.string(vj, path, "name", std::nullopt);
-                v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, 16384);
-                v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, 16384);
+                v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, kMaxImageSide);
+                v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, kMaxImageSide);
                 if (vj.is_object() && vj.contains("fx")) {
                     Intrinsics& k = v.intrinsics;
                     v.has_intrinsics = true;
@@ -530,18 +661,35 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
         CapturedMaterial m;
         auto image = [&](const char* key,
                          std::string* path) -> std::shared_ptr<const ImageRgba32f> {
-            std::filesystem::path f = r.string(*c, p, key, std::nullopt);
+            const std::string f = r.string(*c, p, key, std::nullopt);
+            const std::string where = Reader::join(p, key);
             if (r.failed())
                 return nullptr;
-            *path = (f.is_absolute() ? f : base_dir / f).string();
-            auto img = read_exr(*path);
+            auto real = asset(where, f);
+            if (!real)
+                return nullptr;
+            *path = real->string();
+            auto size = exr_size(*real);
+            if (!size) {
+                r.fail(where, fmt::format("{} {}", quote_text(f), size.error().message));
+                return nullptr;
+            }
+            if (size->width > kMaxImageSide || size->height > kMaxImageSide ||
+                size->width * size->height > kMaxCapturedImagePixels) {
+                r.fail(where, fmt::format("{} is {}x{}, more than the limit of {} pixels a side "
+                                          "and {} pixels",
+                                          quote_text(f), size->width, size->height, kMaxImageSide,
+                                          kMaxCapturedImagePixels));
+                return nullptr;
+            }
+            auto img = read_exr(*real);
             if (!img) {
-                r.fail(Reader::join(p, key), img.error().message);
+                r.fail(where, as_written(img.error().message, *path, f));
                 return nullptr;
             }
             for (float v : img->pixels)
                 if (!std::isfinite(v)) {
-                    r.fail(Reader::join(p, key), *path + ": has a non-finite value");
+                    r.fail(where, quote_text(f) + " has a non-finite value");
                     return nullptr;
                 }
             return std::make_shared<const ImageRgba32f>(std::move(img).value());
@@ -558,7 +706,8 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
             (m.projector_image->width != s.projector.intrinsics.width ||
              m.projector_image->height != s.projector.intrinsics.height))
             r.fail("captured_material.projector_image",
-                   fmt::format("{} is {}x{}, the projector is {}x{}", m.projector_image_path,
+                   fmt::format("{} is {}x{}, the projector is {}x{}",
+                               quote_text(r.string(*c, p, "projector_image", std::nullopt)),
                                m.projector_image->width, m.projector_image->height,
                                s.projector.intrinsics.width, s.projector.intrinsics.height));
         s.captured_material = std::move(m);
@@ -569,14 +718,76 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
     return s;
 }
 
-Result<Scene> load_scene_file(const std::filesystem::path& path) {
+}  // namespace
+
+Result<Scene> parse_scene(std::string_view text, const std::string& source,
+                          const std::filesystem::path& base_dir,
+                          const std::filesystem::path& asset_root, const SceneLimits& limits) {
+    HS_ASSIGN_OR_RETURN(json root, parse_json_limited(text, source, scene_json_limits()));
+    // The readers check every type before reading it; this catch keeps a missed check (or an
+    // allocation failure) an error of this scene rather than of the process.
+    try {
+        return parse_scene_tree(root, source, base_dir, asset_root, limits);
+    } catch (const std::exception& e) {
+        return make_error(ErrorCode::kParse,
+                          fmt::format("{}: could not read the scene: {}", source, e.what()));
+    }
+}
+
+Result<Scene> load_scene_file(const std::filesystem::path& path,
+                              const std::filesystem::path& asset_root, const SceneLimits& limits) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path, ec);
+    if (!ec && size > kMaxSceneJsonBytes)
+        return make_error(ErrorCode::kParse,
+                          fmt::format("{}: the file is {} bytes, more than the limit of {} bytes",
+                                      path.string(), size, kMaxSceneJsonBytes));
     std::ifstream in(path, std::ios::binary);
     if (!in)
         return make_error(ErrorCode::kNotFound,
                           fmt::format("{}: cannot open scene file", path.string()));
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return parse_scene(ss.str(), path.string(), path.parent_path());
+    std::string text;
+    try {
+        std::stringstream ss;
+        ss << in.rdbuf();
+        text = std::move(ss).str();
+    } catch (const std::exception& e) {
+        return make_error(ErrorCode::kIo,
+                          fmt::format("{}: could not read the file: {}", path.string(), e.what()));
+    }
+    const std::filesystem::path dir =
+        path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path();
+    return parse_scene(text, path.string(), dir, asset_root.empty() ? dir : asset_root, limits);
+}
+
+uint64_t prop_triangle_count(const Prop& prop) {
+    if (prop.kind == Prop::Kind::kHemisphere)
+        return hemisphere_triangles(prop.hemisphere.segments, prop.hemisphere.rings);
+    return prop.gltf_mesh ? prop.gltf_mesh->indices.size() / 3 : 0;
+}
+
+Result<void> check_scene_limits(const Scene& scene, const SceneLimits& limits) {
+    const uint64_t triangles = prop_triangle_count(scene.prop);
+    if (triangles > limits.max_triangles) {
+        const std::string what =
+            scene.prop.kind == Prop::Kind::kHemisphere
+                ? fmt::format("prop.segments x prop.rings ({} x {})",
+                              scene.prop.hemisphere.segments, scene.prop.hemisphere.rings)
+                : std::string("prop.gltf");
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("scene '{}': {} makes {} triangles, more than the limit of "
+                                      "{} (max_triangles)",
+                                      scene.name, what, triangles, limits.max_triangles));
+    }
+    const Intrinsics& k = scene.projector.intrinsics;
+    const uint64_t pixels = uint64_t(k.width) * k.height;
+    if (pixels > limits.max_projector_pixels)
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("scene '{}': projector width {} x height {} = {} pixels, "
+                        "more than the limit of {} (max_projector_pixels)",
+                        scene.name, k.width, k.height, pixels, limits.max_projector_pixels));
+    return {};
 }
 
 }  // namespace hs::scene

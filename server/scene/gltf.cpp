@@ -1,18 +1,31 @@
 // The only file that sees tinygltf. Every accessor is bounds-checked before it is read, so a
 // malformed file is an error naming the file and the problem, never a crash.
+#include <cctype>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <optional>
 
 #include <fmt/format.h>
 #include <tiny_gltf.h>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtc/type_ptr.hpp>
 
+#include "scene/assets.hpp"
+#include "scene/json_limits.hpp"
 #include "scene/mesh.hpp"
 
 namespace hs::scene {
 
 namespace {
+
+namespace fs = std::filesystem;
+
+// Nodes visited while walking the scene graph: a node may be the child of many, so a small file
+// can name exponentially many instances.
+constexpr uint64_t kMaxNodeVisits = 65'536;
 
 Error gltf_error(const std::string& path, const std::string& what) {
     return make_error(ErrorCode::kParse, fmt::format("{}: {}", path, what));
@@ -184,39 +197,221 @@ Result<void> visit(const tinygltf::Model& model, int node, const glm::dmat4& par
     return {};
 }
 
+// Where tinygltf may read external buffers and images from: inside the asset root only.
+struct FsContext {
+    fs::path asset_root;
+    std::string base_dir;          // the glTF's folder, as tinygltf joins it before a URI
+    std::optional<Error> refused;  // the first external file refused, in the glTF's words
+};
+
+// Says yes to every path, so that fs_read is what decides and words the refusal.
+bool fs_exists(const std::string& abs_filename, void*) {
+    return !abs_filename.empty();
+}
+
+std::string fs_expand(const std::string& path, void*) {
+    return path;  // no "~" or environment expansion: a file names itself
+}
+
+bool fs_read(std::vector<unsigned char>* out, std::string* err, const std::string& filepath,
+             void* user) {
+    auto* ctx = static_cast<FsContext*>(user);
+    auto real = resolve_asset(filepath, {}, ctx->asset_root);
+    if (!real) {
+        // Say it with the URI as the glTF wrote it (tinygltf prefixes the glTF's folder).
+        std::string_view uri = filepath;
+        if (uri.starts_with(ctx->base_dir + "/"))
+            uri.remove_prefix(ctx->base_dir.size() + 1);
+        if (!ctx->refused)
+            ctx->refused = resolve_asset(uri, ctx->base_dir, ctx->asset_root).error();
+        if (err)
+            *err += "refused\n";
+        return false;
+    }
+    std::ifstream in(*real, std::ios::binary);
+    out->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    if (!in.good() && !in.eof()) {
+        if (err)
+            *err += fmt::format("{}: read error\n", quote_text(filepath));
+        return false;
+    }
+    return true;
+}
+
+bool fs_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+    if (err)
+        *err += "writing files is not allowed\n";
+    return false;
+}
+
+// Images are not used (the albedo texture comes from the scene): skip decoding them.
+bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int,
+                const unsigned char*, int, void*) {
+    return true;
+}
+
+// Counts what the build pass would produce, without reading any vertex, and refuses a file
+// over the limits before anything large is allocated.
+struct Budget {
+    uint64_t max_triangles = 0;
+    uint64_t triangles = 0;
+    uint64_t vertices = 0;
+    uint64_t visits = 0;
+};
+
+Result<void> count_mesh(const tinygltf::Model& model, int mesh_index, const std::string& path,
+                        Budget& b) {
+    if (mesh_index < 0 || size_t(mesh_index) >= model.meshes.size())
+        return {};  // reported by the build pass
+    for (const auto& prim : model.meshes[mesh_index].primitives) {
+        if (prim.mode != TINYGLTF_MODE_TRIANGLES && prim.mode != -1)
+            continue;
+        auto pos = prim.attributes.find("POSITION");
+        if (pos == prim.attributes.end() || pos->second < 0 ||
+            size_t(pos->second) >= model.accessors.size())
+            continue;
+        const uint64_t nv = model.accessors[pos->second].count;
+        uint64_t ni = nv;
+        if (prim.indices >= 0 && size_t(prim.indices) < model.accessors.size())
+            ni = model.accessors[prim.indices].count;
+        b.vertices += nv;
+        b.triangles += ni / 3;
+        if (b.triangles > b.max_triangles)
+            return gltf_error(
+                path, fmt::format("more than {} triangles (the triangle limit)", b.max_triangles));
+        if (b.vertices > 3 * b.max_triangles + 3)
+            return gltf_error(path, fmt::format("more than {} vertices (3 x the triangle limit)",
+                                                3 * b.max_triangles + 3));
+    }
+    return {};
+}
+
+Result<void> count_visit(const tinygltf::Model& model, int node, const std::string& path, int depth,
+                         Budget& b) {
+    if (node < 0 || size_t(node) >= model.nodes.size() || depth > 64)
+        return {};  // reported by the build pass
+    if (++b.visits > kMaxNodeVisits)
+        return gltf_error(path, fmt::format("the node hierarchy names more than {} node "
+                                            "instances",
+                                            kMaxNodeVisits));
+    const auto& n = model.nodes[node];
+    if (n.mesh >= 0)
+        HS_TRY(count_mesh(model, n.mesh, path, b));
+    for (int c : n.children) HS_TRY(count_visit(model, c, path, depth + 1, b));
+    return {};
+}
+
+// The JSON part of a .gltf, or of a .glb's first chunk; empty when the container is malformed
+// (tinygltf then says what is wrong).
+std::string_view json_part(const std::vector<unsigned char>& bytes, bool binary) {
+    const char* data = reinterpret_cast<const char*>(bytes.data());
+    if (!binary)
+        return {data, bytes.size()};
+    if (bytes.size() < 20)
+        return {};
+    uint32_t length = 0, type = 0;
+    std::memcpy(&length, data + 12, 4);
+    std::memcpy(&type, data + 16, 4);
+    if (type != 0x4E4F534Au || length > bytes.size() - 20)
+        return {};
+    return {data + 20, length};
+}
+
 }  // namespace
 
-Result<Mesh> load_gltf_mesh(const std::string& path, double scale, glm::dvec3 translation) {
-    if (!std::filesystem::exists(path))
+Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info) {
+    std::error_code ec;
+    if (!fs::exists(path, ec))
         return make_error(ErrorCode::kNotFound, fmt::format("{}: glTF file does not exist", path));
+    const fs::path folder =
+        fs::path(path).parent_path().empty() ? fs::path(".") : fs::path(path).parent_path();
+    FsContext ctx{info.asset_root.empty() ? folder : info.asset_root, {}, std::nullopt};
+    // The file itself obeys the same rule as its buffers.
+    auto real = resolve_asset(path, {}, ctx.asset_root);
+    if (!real)
+        return gltf_error(path, real.error().message);
+    std::vector<unsigned char> bytes;
+    {
+        std::ifstream in(*real, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+        if (!in.good() && !in.eof())
+            return make_error(ErrorCode::kIo, fmt::format("{}: read error", path));
+    }
+    const bool binary = bytes.size() >= 4 && std::memcmp(bytes.data(), "glTF", 4) == 0;
+    // tinygltf turns JSON into its own values recursively (extras, extensions): refuse deep or
+    // huge JSON before it sees it. Data URIs make long strings legitimate.
+    JsonLimits limits;
+    limits.max_bytes = kMaxAssetBytes;
+    limits.max_elements = 1u << 20;
+    limits.max_string_bytes = kMaxAssetBytes;
+    if (std::string_view j = json_part(bytes, binary); !j.empty())
+        if (auto checked = check_json_text(j, path, limits); !checked)
+            return make_error(ErrorCode::kParse,
+                              fmt::format("malformed glTF: {}", checked.error().message));
+
     tinygltf::TinyGLTF loader;
+    loader.SetFsCallbacks(tinygltf::FsCallbacks{&fs_exists, &fs_expand, &fs_read, &fs_write, &ctx});
+    loader.SetImageLoader(&skip_image, nullptr);
     tinygltf::Model model;
     std::string err, warn;
     bool ok = false;
+    const std::string base_dir = real->parent_path().string();
+    ctx.base_dir = base_dir;
     try {
-        ok = path.ends_with(".glb") ? loader.LoadBinaryFromFile(&model, &err, &warn, path)
-                                    : loader.LoadASCIIFromFile(&model, &err, &warn, path);
+        if (bytes.size() > std::numeric_limits<unsigned int>::max())
+            return gltf_error(path, "the file is too large");
+        ok = binary ? loader.LoadBinaryFromMemory(&model, &err, &warn, bytes.data(),
+                                                  static_cast<unsigned int>(bytes.size()), base_dir)
+                    : loader.LoadASCIIFromString(&model, &err, &warn,
+                                                 reinterpret_cast<const char*>(bytes.data()),
+                                                 static_cast<unsigned int>(bytes.size()), base_dir);
     } catch (const std::exception& e) {
         return gltf_error(path, fmt::format("malformed glTF: {}", e.what()));
     }
-    if (!ok)
+    if (ctx.refused)
+        return gltf_error(path, fmt::format("external file {}", ctx.refused->message));
+    if (!ok) {
+        while (!err.empty() && std::isspace(static_cast<unsigned char>(err.back()))) err.pop_back();
         return gltf_error(path,
                           fmt::format("malformed glTF: {}", err.empty() ? "unknown error" : err));
-    glm::dmat4 root = glm::translate(glm::dmat4(1.0), translation) *
-                      glm::scale(glm::dmat4(1.0), glm::dvec3(scale));
-    Mesh out;
+    }
+    glm::dmat4 root = glm::translate(glm::dmat4(1.0), info.translation) *
+                      glm::scale(glm::dmat4(1.0), glm::dvec3(info.scale));
+    Budget budget;
+    budget.max_triangles = info.max_triangles;
+    int scene_index = -1;
     if (!model.scenes.empty()) {
-        int si = model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size()
-                     ? model.defaultScene
-                     : 0;
-        for (int n : model.scenes[si].nodes) HS_TRY(visit(model, n, root, path, out, 0));
+        scene_index = model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size()
+                          ? model.defaultScene
+                          : 0;
+        for (int n : model.scenes[scene_index].nodes)
+            HS_TRY(count_visit(model, n, path, 0, budget));
     } else {
         for (size_t m = 0; m < model.meshes.size(); ++m)
-            HS_TRY(append_mesh(model, int(m), root, path, out));
+            HS_TRY(count_mesh(model, int(m), path, budget));
+    }
+    Mesh out;
+    try {
+        if (scene_index >= 0) {
+            for (int n : model.scenes[scene_index].nodes)
+                HS_TRY(visit(model, n, root, path, out, 0));
+        } else {
+            for (size_t m = 0; m < model.meshes.size(); ++m)
+                HS_TRY(append_mesh(model, int(m), root, path, out));
+        }
+    } catch (const std::exception& e) {  // std::bad_alloc
+        return gltf_error(path, fmt::format("could not build the mesh: {}", e.what()));
     }
     if (out.positions.empty())
         return gltf_error(path, "the file holds no triangle mesh");
     return out;
+}
+
+Result<Mesh> load_gltf_mesh(const std::string& path, double scale, glm::dvec3 translation) {
+    GltfLoadInfo info;
+    info.scale = scale;
+    info.translation = translation;
+    return load_gltf_mesh(path, info);
 }
 
 }  // namespace hs::scene

@@ -128,8 +128,12 @@ Result<Mesh> build_prop_mesh(const Prop& prop) {
     if (prop.kind == Prop::Kind::kHemisphere) {
         m = tessellate_hemisphere(prop.hemisphere);
     } else {
-        HS_ASSIGN_OR_RETURN(m,
-                            load_gltf_mesh(prop.gltf_path, prop.gltf_scale, prop.gltf_translation));
+        if (prop.gltf_mesh) {
+            m = *prop.gltf_mesh;  // loaded and checked when the scene was parsed
+        } else {
+            HS_ASSIGN_OR_RETURN(
+                m, load_gltf_mesh(prop.gltf_path, prop.gltf_scale, prop.gltf_translation));
+        }
     }
     clean_mesh(m);
     if (m.dropped_triangles > 0) {

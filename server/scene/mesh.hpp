@@ -1,6 +1,9 @@
 // Prop geometry: the tessellated hemisphere and glTF meshes, cleaned for rendering.
 #pragma once
 
+#include <cstdint>
+#include <filesystem>
+
 #include "core/result.hpp"
 #include "scene/scene.hpp"
 
@@ -20,8 +23,22 @@ glm::dvec3 hemisphere_tangent(glm::dvec3 n);
 // -z), v = polar angle / (pi / 2) (0 at the pole, 1 at the base), as tessellate_hemisphere.
 glm::dvec2 hemisphere_uv(glm::dvec3 n);
 
-// Loads every triangle primitive of a .gltf/.glb file, applying node transforms, then
-// `scale` and `translation`. Malformed files give an error naming the file and the problem.
+struct GltfLoadInfo {
+    double scale = 1.0;           // applied after the file's own node transforms
+    glm::dvec3 translation{0.0};  // metres, applied after `scale`
+    // The glTF file and every external buffer or image it names must lie inside this folder
+    // (scene/assets.hpp); empty: the glTF file's own folder.
+    std::filesystem::path asset_root;
+    // Refused above this, counted from the accessors before any vertex is read. Vertices are
+    // limited to 3 x this.
+    uint64_t max_triangles = 1u << 24;
+};
+
+// Loads every triangle primitive of a .gltf/.glb file (told apart by the .glb magic), applying
+// node transforms, then `scale` and `translation`. Malformed files, files over the limits and
+// external files outside the asset root give an error naming the file and the problem. The
+// glTF's JSON is held to JsonLimits (depth 64) before tinygltf parses it; images are not decoded.
+Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info);
 Result<Mesh> load_gltf_mesh(const std::string& path, double scale, glm::dvec3 translation);
 
 // Drops triangles whose area is below `min_area_m2` (and ones with out-of-range indices),

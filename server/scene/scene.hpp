@@ -108,6 +108,9 @@ struct Prop {
     std::string gltf_path;  // kind == kGltf: absolute, or resolved against the scene file
     glm::dvec3 gltf_translation{0.0};  // metres, applied after the glTF's own node transforms
     double gltf_scale = 1.0;
+    // kind == kGltf: the mesh as parse_scene loaded it (transformed, not yet cleaned), so the
+    // file is read and checked once, at parse time. Null: build_prop_mesh loads gltf_path.
+    std::shared_ptr<const Mesh> gltf_mesh;
 };
 
 struct Projector {
