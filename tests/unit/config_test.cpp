@@ -169,6 +169,9 @@ TEST(Config, MissingAlbedoTextureNamesTheFile) {
         << s.error().message;
     EXPECT_NE(s.error().message.find("/nonexistent/brass.png"), std::string::npos)
         << s.error().message;
+    EXPECT_NE(s.error().message.find("is not a readable asset inside the asset root"),
+              std::string::npos)
+        << s.error().message;
 }
 
 TEST(Config, CapturedMaterialImagesAreLoadedAndChecked) {
