@@ -12,10 +12,11 @@ namespace {
 // bitmask (one bit per tile, row-major, LSB first), then u32 compressed bytes and the payload.
 constexpr size_t kFixedHeader = 8;
 
+// Appends by resize and memcpy: GCC 12 at -O3 reports false stringop-overflow errors for
+// vector::insert of a few bytes after push_back.
 void put32(std::vector<uint8_t>& out, uint32_t v) {
-    uint8_t b[4];
-    std::memcpy(b, &v, 4);
-    out.insert(out.end(), b, b + 4);
+    out.resize(out.size() + 4);
+    std::memcpy(out.data() + out.size() - 4, &v, 4);
 }
 }  // namespace
 
@@ -50,13 +51,14 @@ std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint
                 std::memcpy(&packed[base + size_t(y) * ts * bpp],
                             raw.data() + (size_t(y0 + y) * w + x0) * bpp, size_t(cw) * bpp);
         }
-    std::vector<uint8_t> out;
-    out.push_back(uint8_t(ts & 0xff));
-    out.push_back(uint8_t(ts >> 8));
-    out.push_back(uint8_t(codec));
-    out.push_back(0);
-    put32(out, present);
-    out.insert(out.end(), mask.begin(), mask.end());
+    std::vector<uint8_t> out(kFixedHeader + mask.size());
+    out[0] = uint8_t(ts & 0xff);
+    out[1] = uint8_t(ts >> 8);
+    out[2] = uint8_t(codec);
+    out[3] = 0;
+    std::memcpy(out.data() + 4, &present, 4);
+    if (!mask.empty())
+        std::memcpy(out.data() + kFixedHeader, mask.data(), mask.size());
     std::vector<uint8_t> comp;
     switch (codec) {
         case TileCodec::kNone:
