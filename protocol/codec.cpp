@@ -1,18 +1,23 @@
+// The frame codec. Every message is encoded, decoded and checked by walking its field
+// descriptors (schema.hpp, from messages.def); nothing here names a message's fields.
 #include <bit>
 #include <cmath>
 #include <cstring>
 #include <type_traits>
 
 #include "protocol/protocol.hpp"
+#include "protocol/schema.hpp"
 
 static_assert(std::endian::native == std::endian::little, "the codec assumes a little-endian host");
 
 namespace hs::protocol {
 
+using schema::Info;
+
 const char* to_string(MessageType t) {
     switch (t) {
-#define HS_MESSAGE(name, id, max, dir) \
-    case MessageType::k##name:         \
+#define HS_MESSAGE(name, ...)  \
+    case MessageType::k##name: \
         return #name;
 #include "protocol/messages.def"
 #undef HS_MESSAGE
@@ -20,34 +25,190 @@ const char* to_string(MessageType t) {
     return "unknown";
 }
 
+const char* to_string(Side s) {
+    return s == Side::kClient ? "client" : "server";
+}
+
 std::optional<uint32_t> max_payload(uint16_t type) {
     switch (type) {
-#define HS_MESSAGE(name, id, max, dir) \
+#define HS_MESSAGE(name, id, max, ...) \
     case id:                           \
-        return uint32_t(max);
+        return Info<name>::max_payload;
 #include "protocol/messages.def"
 #undef HS_MESSAGE
     }
     return std::nullopt;
 }
 
-MessageType type_of(const Message& m) {
-    return std::visit(
-        [](const auto& v) -> MessageType {
-            using T = std::decay_t<decltype(v)>;
-#define HS_MESSAGE(name, id, max, dir)     \
-    if constexpr (std::is_same_v<T, name>) \
-        return MessageType::k##name;
+bool may_send(MessageType t, Side sender) {
+    switch (t) {
+#define HS_MESSAGE(name, ...)  \
+    case MessageType::k##name: \
+        return (uint8_t(Info<name>::senders) & uint8_t(sender)) != 0;
 #include "protocol/messages.def"
 #undef HS_MESSAGE
-        },
-        m);
+    }
+    return false;
 }
+
+MessageType type_of(const Message& m) {
+    return std::visit([](const auto& v) { return Info<std::decay_t<decltype(v)>>::type; }, m);
+}
+
+// ---- UTF-8 -------------------------------------------------------------------------------------
 
 namespace {
 
+// The length of the well-formed UTF-8 sequence at s[i] (RFC 3629, table 3-7 of the Unicode
+// standard), or 0 when it is ill-formed; then `bad` is the length of its maximal subpart (the
+// lead byte and the continuation bytes that were still acceptable), which is what one U+FFFD
+// replaces (Unicode 15, section 3.9, "U+FFFD Substitution of Maximal Subparts").
+size_t utf8_sequence(std::string_view s, size_t i, size_t& bad) {
+    const auto b = uint8_t(s[i]);
+    if (b < 0x80)
+        return 1;
+    size_t need = 0;
+    uint8_t lo = 0x80, hi = 0xbf;  // the range of the first continuation byte
+    if (b >= 0xc2 && b <= 0xdf) {
+        need = 1;
+    } else if (b == 0xe0) {
+        need = 2, lo = 0xa0;  // below: overlong
+    } else if ((b >= 0xe1 && b <= 0xec) || b == 0xee || b == 0xef) {
+        need = 2;
+    } else if (b == 0xed) {
+        need = 2, hi = 0x9f;  // above: surrogates U+D800..U+DFFF
+    } else if (b == 0xf0) {
+        need = 3, lo = 0x90;  // below: overlong
+    } else if (b >= 0xf1 && b <= 0xf3) {
+        need = 3;
+    } else if (b == 0xf4) {
+        need = 3, hi = 0x8f;  // above: beyond U+10FFFF
+    } else {
+        bad = 1;  // a continuation byte, C0/C1 (always overlong) or F5..FF
+        return 0;
+    }
+    for (size_t k = 1; k <= need; ++k) {
+        if (i + k >= s.size() || uint8_t(s[i + k]) < lo || uint8_t(s[i + k]) > hi) {
+            bad = k;
+            return 0;
+        }
+        lo = 0x80, hi = 0xbf;
+    }
+    return need + 1;
+}
+
+constexpr std::string_view kReplacement = "\xEF\xBF\xBD";  // U+FFFD
+
+}  // namespace
+
+bool is_valid_utf8(std::string_view s) {
+    size_t i = 0;
+    while (i < s.size()) {
+        // Eight ASCII bytes at a time: JSON is mostly ASCII.
+        uint64_t w;
+        if (s.size() - i >= 8 &&
+            (std::memcpy(&w, s.data() + i, 8), (w & 0x8080808080808080) == 0)) {
+            i += 8;
+            continue;
+        }
+        size_t bad = 0;
+        const size_t n = utf8_sequence(s, i, bad);
+        if (n == 0)
+            return false;
+        i += n;
+    }
+    return true;
+}
+
+std::string sanitize_utf8(std::string_view s) {
+    std::string out;
+    out.reserve(s.size());
+    size_t i = 0;
+    while (i < s.size()) {
+        size_t bad = 0;
+        if (const size_t n = utf8_sequence(s, i, bad)) {
+            out.append(s.substr(i, n));
+            i += n;
+        } else {
+            out.append(kReplacement);
+            i += bad;
+        }
+    }
+    return out;
+}
+
+std::string truncate_utf8(std::string_view s, size_t max_bytes) {
+    if (s.size() <= max_bytes)
+        return std::string(s);
+    size_t n = max_bytes;
+    // Back off over continuation bytes to the start of the sequence s[n] belongs to; a lead byte
+    // there begins the first character left out.
+    while (n > 0 && (uint8_t(s[n]) & 0xc0) == 0x80 && max_bytes - n < 3) --n;
+    return std::string(s.substr(0, n));
+}
+
+Error make_error(ErrorCode code, std::string_view text) {
+    return Error{code, truncate_utf8(sanitize_utf8(text), kMaxErrorMessageBytes)};
+}
+
+// ---- Field codecs
+// --------------------------------------------------------------------------------
+
+namespace {
+
+using schema::Bytes;
+using schema::Enum;
+using schema::F64;
+using schema::F64s;
+using schema::ImageRule;
+using schema::Str;
+using schema::Uint;
+
+// What is wrong with a message, and the code that says so.
+struct Problem {
+    ErrorCode code;
+    std::string message;
+};
+
+template <typename M, typename F>
+std::string field_name(const F& f) {
+    return std::string(Info<M>::name) + "." + f.name;
+}
+
+// "VdLayer is sent by the server, not by a client".
+std::string direction_problem(MessageType t, Side sender) {
+    const char* by = may_send(t, Side::kServer) ? "the server" : "a client";
+    return std::string(to_string(t)) + " is sent by " + by + ", not by " +
+           (sender == Side::kServer ? "the server" : "a client");
+}
+
+std::string too_large(const char* message, uint64_t bytes, uint32_t max) {
+    return std::string(message) + " payload of " + std::to_string(bytes) +
+           " bytes exceeds its limit of " + std::to_string(max);
+}
+
+// Bytes a field takes on the wire.
+template <typename M, typename F>
+size_t wire_bytes(const M&, const F& f) {
+    return schema::min_bytes(f);
+}
+template <typename M, typename Len>
+size_t wire_bytes(const M& m, const Str<M, Len>& f) {
+    return sizeof(Len) + (m.*f.member).size();
+}
+template <typename M>
+size_t wire_bytes(const M& m, const Bytes<M>& f) {
+    return 4 + (m.*f.member).size();
+}
+template <typename M>
+size_t payload_bytes(const M& m) {
+    return std::apply([&](const auto&... f) { return (size_t(0) + ... + wire_bytes(m, f)); },
+                      Info<M>::fields);
+}
+
 class Writer {
 public:
+    explicit Writer(size_t capacity) { out.reserve(capacity); }
     template <typename T>
     void put(T v) {
         static_assert(std::is_arithmetic_v<T>);
@@ -56,53 +217,73 @@ public:
         out.insert(out.end(), b, b + sizeof(T));
     }
     void bytes(const void* p, size_t n) {
-        out.insert(out.end(), (const uint8_t*)p, (const uint8_t*)p + n);
-    }
-    // A string preceded by its byte length as a `Len` (u16: str16, u32: str32).
-    template <typename Len>
-    void str(const std::string& s) {
-        put<Len>(Len(s.size()));
-        bytes(s.data(), s.size());
+        const auto* b = static_cast<const uint8_t*>(p);
+        out.insert(out.end(), b, b + n);
     }
     std::vector<uint8_t> out;
+};
+
+template <typename M, typename V>
+void write(Writer& w, const M& m, const Uint<M, V>& f) {
+    w.put<V>(m.*f.member);
+}
+template <typename M>
+void write(Writer& w, const M& m, const F64<M>& f) {
+    w.put<double>(m.*f.member);
+}
+template <typename M, size_t N>
+void write(Writer& w, const M& m, const F64s<M, N>& f) {
+    for (double d : m.*f.member) w.put<double>(d);
+}
+template <typename M, typename E, typename Wire, bool kClosed>
+void write(Writer& w, const M& m, const Enum<M, E, Wire, kClosed>& f) {
+    w.put<Wire>(Wire(m.*f.member));
+}
+template <typename M, typename Len>
+void write(Writer& w, const M& m, const Str<M, Len>& f) {
+    const std::string& s = m.*f.member;
+    w.put<Len>(Len(s.size()));  // the size was checked against the field's limit
+    w.bytes(s.data(), s.size());
+}
+template <typename M>
+void write(Writer& w, const M& m, const Bytes<M>& f) {
+    const std::vector<uint8_t>& b = m.*f.member;
+    w.put<uint32_t>(uint32_t(b.size()));  // the size was checked against the payload limit
+    w.bytes(b.data(), b.size());
+}
+template <typename M>
+void write(Writer&, const M&, const ImageRule&) {}
+
+// Reads a payload's structure: every field present, lengths within the payload, nothing left.
+// Values are checked afterwards by check(), the same check encode() makes. Field names are
+// joined into a sentence only on failure: decoding allocates nothing for them.
+struct Where {
+    const char* message;
+    const char* field;
+    std::string str() const { return std::string(message) + "." + field; }
 };
 
 class Reader {
 public:
     explicit Reader(std::span<const uint8_t> b) : b_(b) {}
     template <typename T>
-    bool get(T& v) {
+    bool get(T& v, Where where, const char* part = "") {
         if (b_.size() - pos_ < sizeof(T))
-            return fail("payload ends inside a field");
+            return fail("payload ends inside " + where.str() + part);
         std::memcpy(&v, b_.data() + pos_, sizeof(T));
         pos_ += sizeof(T);
         return true;
     }
-    bool bytes(size_t n, std::vector<uint8_t>& out) {
-        if (b_.size() - pos_ < n)
-            return fail("payload shorter than its declared data length");
-        out.assign(b_.begin() + pos_, b_.begin() + pos_ + n);
+    // n bytes, which must be present; empty after a failure.
+    std::span<const uint8_t> take(size_t n, Where where) {
+        if (b_.size() - pos_ < n) {
+            fail(where.str() + " runs past the payload (" + std::to_string(n) +
+                 " bytes declared, " + std::to_string(b_.size() - pos_) + " left)");
+            return {};
+        }
+        auto s = b_.subspan(pos_, n);
         pos_ += n;
-        return true;
-    }
-    // A string preceded by its byte length as a `Len`, at most `max` bytes.
-    template <typename Len>
-    bool str(std::string& s, size_t max, const char* what) {
-        Len n;
-        if (!get(n))
-            return false;
-        if (n > max)
-            return fail(std::string(what) + " longer than " + std::to_string(max) + " bytes");
-        if (b_.size() - pos_ < n)
-            return fail(std::string(what) + " runs past the payload");
-        s.assign((const char*)b_.data() + pos_, n);
-        pos_ += n;
-        return true;
-    }
-    bool fail(std::string m) {
-        if (error.empty())
-            error = std::move(m);
-        return false;
+        return s;
     }
     bool done() {
         if (pos_ != b_.size())
@@ -110,6 +291,12 @@ public:
                         " trailing byte(s) after the last field");
         return true;
     }
+    bool fail(std::string m) {
+        if (error.empty())
+            error = std::move(m);
+        return false;
+    }
+    bool failed() const { return !error.empty(); }
     std::string error;
 
 private:
@@ -117,106 +304,168 @@ private:
     size_t pos_ = 0;
 };
 
-bool valid_format(uint8_t f) {
-    return f == uint8_t(PixelFormat::kRgba8) || f == uint8_t(PixelFormat::kRgba16f);
-}
-bool valid_encoding(uint8_t e) {
-    return e == uint8_t(Encoding::kRaw) || e == uint8_t(Encoding::kSparseTiles);
-}
-size_t bytes_per_pixel(PixelFormat f) {
-    return f == PixelFormat::kRgba8 ? 4 : 8;
+template <typename M, typename F>
+Where where(const F& f) {
+    return Where{Info<M>::name, f.name};
 }
 
-void encode_payload(Writer& w, const Message& m) {
-    std::visit(
-        [&](const auto& v) {
-            using T = std::decay_t<decltype(v)>;
-            if constexpr (std::is_same_v<T, Hello>) {
-                w.put<uint8_t>(uint8_t(v.role));
-                w.str<uint16_t>(v.token);
-                w.str<uint16_t>(v.client_name);
-            } else if constexpr (std::is_same_v<T, Welcome>) {
-                w.put(v.session_id);
-                w.put(v.server_time_ns);
-                w.put(v.scene_version);
-            } else if constexpr (std::is_same_v<T, RegisterDisplay>) {
-                w.put(v.eye_width);
-                w.put(v.eye_height);
-                for (double d : {v.fx, v.fy, v.cx, v.cy, v.ipd_m}) w.put(d);
-                w.put<uint8_t>(uint8_t(v.format));
-                w.put<uint8_t>(uint8_t(v.encoding));
-                w.put<uint8_t>(uint8_t(v.mode));
-            } else if constexpr (std::is_same_v<T, Pose>) {
-                w.put(v.client_time_ns);
-                for (double d : v.position_m) w.put(d);
-                for (double d : v.orientation_wxyz) w.put(d);
-            } else if constexpr (std::is_same_v<T, VdLayer>) {
-                w.put(v.frame_id);
-                w.put(v.pose_time_ns);
-                w.put(v.eye);
-                w.put<uint8_t>(uint8_t(v.format));
-                w.put<uint8_t>(uint8_t(v.encoding));
-                w.put(v.width);
-                w.put(v.height);
-                w.put<uint32_t>(uint32_t(v.data.size()));
-                w.bytes(v.data.data(), v.data.size());
-            } else if constexpr (std::is_same_v<T, ProjectorFrame>) {
-                w.put(v.scene_version);
-                w.put(v.width);
-                w.put(v.height);
-                w.put<uint8_t>(uint8_t(v.format));
-                w.put<uint8_t>(uint8_t(v.encoding));
-                w.put<uint32_t>(uint32_t(v.data.size()));
-                w.bytes(v.data.data(), v.data.size());
-            } else if constexpr (std::is_same_v<T, SceneUpdate>) {
-                w.str<uint32_t>(v.scene_json);
-            } else if constexpr (std::is_same_v<T, Stats>) {
-                w.str<uint32_t>(v.json);
-            } else if constexpr (std::is_same_v<T, Ping>) {
-                w.put(v.client_time_ns);
-            } else if constexpr (std::is_same_v<T, Pong>) {
-                w.put(v.client_time_ns);
-                w.put(v.server_time_ns);
-            } else if constexpr (std::is_same_v<T, Error>) {
-                w.put<uint16_t>(uint16_t(v.code));
-                w.str<uint16_t>(v.message.substr(0, 1000));
-            } else if constexpr (std::is_same_v<T, Bye>) {
-                w.put(v.reason);
-            }  // FrameRequest, StatsRequest: empty payloads
-        },
-        m);
+template <typename M, typename V>
+bool read(Reader& r, M& m, const Uint<M, V>& f) {
+    return r.get(m.*f.member, where<M>(f));
 }
-
-// Checks a layer's pixel data against its size, format and encoding.
-bool check_image(Reader& r, uint32_t w, uint32_t h, uint8_t fmt, uint8_t enc, size_t data_bytes) {
-    if (!valid_format(fmt))
-        return r.fail("unknown pixel format " + std::to_string(fmt));
-    if (!valid_encoding(enc))
-        return r.fail("unknown encoding " + std::to_string(enc));
-    if (w == 0 || h == 0 || w > 16384 || h > 16384)
-        return r.fail("image size out of 1..16384");
-    if (enc == uint8_t(Encoding::kRaw) &&
-        data_bytes != size_t(w) * h * bytes_per_pixel(PixelFormat(fmt)))
-        return r.fail("raw data length does not match width x height x bytes per pixel");
+template <typename M>
+bool read(Reader& r, M& m, const F64<M>& f) {
+    return r.get(m.*f.member, where<M>(f));
+}
+template <typename M, size_t N>
+bool read(Reader& r, M& m, const F64s<M, N>& f) {
+    for (double& d : m.*f.member)
+        if (!r.get(d, where<M>(f)))
+            return false;
     return true;
+}
+template <typename M, typename E, typename Wire, bool kClosed>
+bool read(Reader& r, M& m, const Enum<M, E, Wire, kClosed>& f) {
+    Wire v = 0;
+    if (!r.get(v, where<M>(f)))
+        return false;
+    m.*f.member = E(v);  // a fixed underlying type holds any Wire value; check() judges it
+    return true;
+}
+template <typename M, typename Len>
+bool read(Reader& r, M& m, const Str<M, Len>& f) {
+    Len n = 0;
+    if (!r.get(n, where<M>(f), "'s length"))
+        return false;
+    auto s = r.take(n, where<M>(f));
+    if (r.failed())
+        return false;
+    (m.*f.member).assign(reinterpret_cast<const char*>(s.data()), s.size());
+    return true;
+}
+template <typename M>
+bool read(Reader& r, M& m, const Bytes<M>& f) {
+    uint32_t n = 0;
+    if (!r.get(n, where<M>(f), "'s length"))
+        return false;
+    auto s = r.take(n, where<M>(f));
+    if (r.failed())
+        return false;
+    (m.*f.member).assign(s.begin(), s.end());
+    return true;
+}
+template <typename M>
+bool read(Reader&, M&, const ImageRule&) {
+    return true;
+}
+
+// Value checks, made alike by encode() before it writes and by the decoder after it reads.
+template <typename M, typename V>
+std::optional<Problem> check(const M& m, const Uint<M, V>& f) {
+    if (m.*f.member > f.max)
+        return Problem{ErrorCode::kMalformed,
+                       field_name<M>(f) + " is " + std::to_string(m.*f.member) +
+                           ", above its maximum of " + std::to_string(f.max)};
+    return std::nullopt;
+}
+template <typename M, typename E, typename Wire, bool kClosed>
+std::optional<Problem> check(const M& m, const Enum<M, E, Wire, kClosed>& f) {
+    if constexpr (kClosed) {
+        if (!schema::is_known(m.*f.member))
+            return Problem{ErrorCode::kMalformed, field_name<M>(f) + " " +
+                                                      std::to_string(Wire(m.*f.member)) +
+                                                      " is not a known " + f.type_name};
+    }
+    return std::nullopt;
+}
+template <typename M, typename Len>
+std::optional<Problem> check(const M& m, const Str<M, Len>& f) {
+    const std::string& s = m.*f.member;
+    if (s.size() > f.max_bytes)
+        return Problem{ErrorCode::kMalformed, field_name<M>(f) + " is " + std::to_string(s.size()) +
+                                                  " bytes, longer than its limit of " +
+                                                  std::to_string(f.max_bytes)};
+    if (!is_valid_utf8(s))
+        return Problem{ErrorCode::kInvalidUtf8, field_name<M>(f) + " is not valid UTF-8"};
+    return std::nullopt;
+}
+// PROTOCOL.md, VdLayer: known format and encoding (checked as fields), 1..16384 pixels a side,
+// and raw data of exactly width x height x bytes per pixel.
+template <typename M>
+std::optional<Problem> check(const M& m, const ImageRule&) {
+    const auto problem = [](std::string what) {
+        return Problem{ErrorCode::kMalformed, std::string(Info<M>::name) + ": " + what};
+    };
+    if (m.width == 0 || m.height == 0 || m.width > 16384 || m.height > 16384)
+        return problem("image size " + std::to_string(m.width) + "x" + std::to_string(m.height) +
+                       " is out of 1..16384");
+    if (m.encoding == Encoding::kRaw) {
+        const size_t want = size_t(m.width) * m.height * (m.format == PixelFormat::kRgba8 ? 4 : 8);
+        if (m.data.size() != want)
+            return problem("raw data length " + std::to_string(m.data.size()) +
+                           " does not match width x height x bytes per pixel (" +
+                           std::to_string(want) + ")");
+    }
+    return std::nullopt;
+}
+template <typename M, typename F>
+std::optional<Problem> check(const M&, const F&) {
+    return std::nullopt;  // f64 and byte fields take any value
+}
+template <typename M>
+std::optional<Problem> check_message(const M& m) {
+    std::optional<Problem> p;
+    std::apply([&](const auto&... f) { (void)(static_cast<bool>(p = check(m, f)) || ...); },
+               Info<M>::fields);
+    return p;
+}
+
+template <typename M>
+std::variant<std::vector<uint8_t>, EncodeError> encode_message(const M& m, Side sender,
+                                                               uint32_t sequence) {
+    using I = Info<M>;
+    if (!may_send(I::type, sender))
+        return EncodeError{direction_problem(I::type, sender)};
+    const size_t n = payload_bytes(m);
+    if (n > I::max_payload)
+        return EncodeError{too_large(I::name, n, I::max_payload)};
+    if (auto p = check_message(m))
+        return EncodeError{std::move(p->message)};
+    Writer w(kHeaderBytes + n);
+    w.put(kMagic);
+    w.put(kVersion);
+    w.put<uint16_t>(uint16_t(I::type));
+    w.put<uint32_t>(uint32_t(n));
+    w.put(sequence);
+    std::apply([&](const auto&... f) { (write(w, m, f), ...); }, I::fields);
+    return std::move(w.out);
+}
+
+template <typename M>
+std::variant<Message, DecodeError> decode_message(const Header& h, std::span<const uint8_t> p) {
+    Reader r(p);
+    M m;
+    const bool ok =
+        std::apply([&](const auto&... f) { return (read(r, m, f) && ...); }, Info<M>::fields) &&
+        r.done();
+    if (!ok)
+        return DecodeError{ErrorCode::kMalformed, std::string(Info<M>::name) + ": " + r.error,
+                           h.sequence};
+    if (auto e = check_message(m))
+        return DecodeError{e->code, std::move(e->message), h.sequence};
+    return Message(std::move(m));
 }
 
 }  // namespace
 
-std::vector<uint8_t> encode(const Message& m, uint32_t sequence) {
-    Writer payload;
-    encode_payload(payload, m);
-    Writer w;
-    w.put(kMagic);
-    w.put(kVersion);
-    w.put<uint16_t>(uint16_t(type_of(m)));
-    w.put<uint32_t>(uint32_t(payload.out.size()));
-    w.put(sequence);
-    w.out.insert(w.out.end(), payload.out.begin(), payload.out.end());
-    return std::move(w.out);
+// ---- Frames -------------------------------------------------------------------------------------
+
+std::variant<std::vector<uint8_t>, EncodeError> encode(const Message& m, Side sender,
+                                                       uint32_t sequence) {
+    return std::visit([&](const auto& v) { return encode_message(v, sender, sequence); }, m);
 }
 
-std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes) {
+std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes, Side sender) {
     if (bytes.size() != kHeaderBytes)
         return DecodeError{ErrorCode::kMalformed, "a header is exactly 16 bytes"};
     Header h;
@@ -226,170 +475,64 @@ std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes) 
     std::memcpy(&h.payload_bytes, bytes.data() + 8, 4);
     std::memcpy(&h.sequence, bytes.data() + 12, 4);
     if (h.magic != kMagic)
-        return DecodeError{ErrorCode::kBadMagic, "bad magic: not a HySAR frame"};
+        return DecodeError{ErrorCode::kBadMagic, "bad magic: not a HySAR frame", h.sequence};
     if (h.version != kVersion)
-        return DecodeError{ErrorCode::kBadVersion, "protocol version " + std::to_string(h.version) +
-                                                       " is not supported (this server speaks " +
-                                                       std::to_string(kVersion) + ")"};
-    auto max = max_payload(h.type);
+        return DecodeError{ErrorCode::kBadVersion,
+                           "protocol version " + std::to_string(h.version) +
+                               " is not supported (this end speaks " + std::to_string(kVersion) +
+                               ")",
+                           h.sequence};
+    const auto max = max_payload(h.type);
     if (!max)
         return DecodeError{ErrorCode::kUnknownType,
-                           "unknown message type " + std::to_string(h.type)};
+                           "unknown message type " + std::to_string(h.type), h.sequence};
+    const auto type = MessageType(h.type);
+    if (!may_send(type, sender))
+        return DecodeError{ErrorCode::kForbidden, direction_problem(type, sender), h.sequence};
     if (h.payload_bytes > *max)
-        return DecodeError{ErrorCode::kTooLarge,
-                           std::string(to_string(MessageType(h.type))) + " payload of " +
-                               std::to_string(h.payload_bytes) + " bytes exceeds its limit of " +
-                               std::to_string(*max)};
+        return DecodeError{ErrorCode::kTooLarge, too_large(to_string(type), h.payload_bytes, *max),
+                           h.sequence};
     return h;
 }
 
 std::variant<Message, DecodeError> decode_payload(const Header& h, std::span<const uint8_t> p) {
     if (p.size() != h.payload_bytes)
-        return DecodeError{ErrorCode::kMalformed, "payload length differs from the header's"};
-    Reader r(p);
-    Message out;
-    bool ok = true;
-    switch (MessageType(h.type)) {
-        case MessageType::kHello: {
-            Hello m;
-            uint8_t role = 0;
-            ok = r.get(role) && r.str<uint16_t>(m.token, kMaxTokenBytes, "token") &&
-                 r.str<uint16_t>(m.client_name, kMaxNameBytes, "client name");
-            if (ok && (role < 1 || role > 3))
-                ok = r.fail("unknown role " + std::to_string(role));
-            m.role = Role(role);
-            out = m;
-            break;
-        }
-        case MessageType::kWelcome: {
-            Welcome m;
-            ok = r.get(m.session_id) && r.get(m.server_time_ns) && r.get(m.scene_version);
-            out = m;
-            break;
-        }
-        case MessageType::kRegisterDisplay: {
-            RegisterDisplay m;
-            uint8_t f = 0, e = 0, mode = 0;
-            ok = r.get(m.eye_width) && r.get(m.eye_height) && r.get(m.fx) && r.get(m.fy) &&
-                 r.get(m.cx) && r.get(m.cy) && r.get(m.ipd_m) && r.get(f) && r.get(e) &&
-                 r.get(mode);
-            if (ok && !valid_format(f))
-                ok = r.fail("unknown pixel format " + std::to_string(f));
-            if (ok && !valid_encoding(e))
-                ok = r.fail("unknown encoding " + std::to_string(e));
-            if (ok && mode > 1)
-                ok = r.fail("unknown frame mode " + std::to_string(mode));
-            m.format = PixelFormat(f);
-            m.encoding = Encoding(e);
-            m.mode = FrameMode(mode);
-            out = m;
-            break;
-        }
-        case MessageType::kPose: {
-            Pose m;
-            ok = r.get(m.client_time_ns);
-            for (double& d : m.position_m) ok = ok && r.get(d);
-            for (double& d : m.orientation_wxyz) ok = ok && r.get(d);
-            out = m;
-            break;
-        }
-        case MessageType::kFrameRequest:
-            out = FrameRequest{};
-            break;
-        case MessageType::kStatsRequest:
-            out = StatsRequest{};
-            break;
-        case MessageType::kVdLayer: {
-            VdLayer m;
-            uint8_t f = 0, e = 0;
-            uint32_t n = 0;
-            ok = r.get(m.frame_id) && r.get(m.pose_time_ns) && r.get(m.eye) && r.get(f) &&
-                 r.get(e) && r.get(m.width) && r.get(m.height) && r.get(n) && r.bytes(n, m.data);
-            if (ok && m.eye > 1)
-                ok = r.fail("eye must be 0 (left) or 1 (right)");
-            ok = ok && check_image(r, m.width, m.height, f, e, m.data.size());
-            m.format = PixelFormat(f);
-            m.encoding = Encoding(e);
-            out = std::move(m);
-            break;
-        }
-        case MessageType::kProjectorFrame: {
-            ProjectorFrame m;
-            uint8_t f = 0, e = 0;
-            uint32_t n = 0;
-            ok = r.get(m.scene_version) && r.get(m.width) && r.get(m.height) && r.get(f) &&
-                 r.get(e) && r.get(n) && r.bytes(n, m.data);
-            ok = ok && check_image(r, m.width, m.height, f, e, m.data.size());
-            m.format = PixelFormat(f);
-            m.encoding = Encoding(e);
-            out = std::move(m);
-            break;
-        }
-        case MessageType::kSceneUpdate: {
-            SceneUpdate m;
-            ok = r.str<uint32_t>(m.scene_json, 1048576 - 4, "scene JSON");
-            out = std::move(m);
-            break;
-        }
-        case MessageType::kStats: {
-            Stats m;
-            ok = r.str<uint32_t>(m.json, 1048576 - 4, "stats JSON");
-            out = std::move(m);
-            break;
-        }
-        case MessageType::kPing: {
-            Ping m;
-            ok = r.get(m.client_time_ns);
-            out = m;
-            break;
-        }
-        case MessageType::kPong: {
-            Pong m;
-            ok = r.get(m.client_time_ns) && r.get(m.server_time_ns);
-            out = m;
-            break;
-        }
-        case MessageType::kError: {
-            Error m;
-            uint16_t code = 0;
-            ok = r.get(code) && r.str<uint16_t>(m.message, 1000, "error message");
-            m.code = ErrorCode(code);
-            out = std::move(m);
-            break;
-        }
-        case MessageType::kBye: {
-            Bye m;
-            ok = r.get(m.reason);
-            out = m;
-            break;
-        }
-        default:
-            return DecodeError{ErrorCode::kUnknownType,
-                               "unknown message type " + std::to_string(h.type)};
-    }
-    if (ok)
-        ok = r.done();
-    if (!ok)
         return DecodeError{ErrorCode::kMalformed,
-                           std::string(to_string(MessageType(h.type))) + ": " + r.error};
-    return out;
+                           "payload of " + std::to_string(p.size()) +
+                               " bytes differs from the header's " +
+                               std::to_string(h.payload_bytes),
+                           h.sequence};
+    switch (h.type) {
+#define HS_MESSAGE(name, id, ...) \
+    case id:                      \
+        return decode_message<name>(h, p);
+#include "protocol/messages.def"
+#undef HS_MESSAGE
+    }
+    return DecodeError{ErrorCode::kUnknownType, "unknown message type " + std::to_string(h.type),
+                       h.sequence};
 }
 
-std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes,
+std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, Side sender,
                                                 Header* header_out) {
     if (bytes.size() < kHeaderBytes)
         return DecodeError{ErrorCode::kMalformed, "frame shorter than its 16-byte header"};
-    auto h = decode_header(bytes.first(kHeaderBytes));
+    auto h = decode_header(bytes.first(kHeaderBytes), sender);
     if (auto* e = std::get_if<DecodeError>(&h))
-        return *e;
+        return std::move(*e);
     const Header& hd = std::get<Header>(h);
     if (header_out)
         *header_out = hd;
     if (bytes.size() - kHeaderBytes != hd.payload_bytes)
         return DecodeError{ErrorCode::kMalformed,
-                           "frame length differs from 16 + the header's payload length"};
+                           "frame of " + std::to_string(bytes.size()) +
+                               " bytes differs from 16 + the header's payload length " +
+                               std::to_string(hd.payload_bytes),
+                           hd.sequence};
     return decode_payload(hd, bytes.subspan(kHeaderBytes));
 }
+
+// ---- Semantic checks ---------------------------------------------------------------------------
 
 std::optional<std::string> validate_pose(const Pose& p) {
     for (double d : p.position_m)

@@ -8,6 +8,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <variant>
 #include <vector>
 
@@ -18,11 +19,12 @@ inline constexpr uint16_t kVersion = 1;
 inline constexpr size_t kHeaderBytes = 16;
 inline constexpr size_t kMaxTokenBytes = 256;
 inline constexpr size_t kMaxNameBytes = 64;
+inline constexpr size_t kMaxErrorMessageBytes = 1000;     // Error.message; make_error() fits text
 inline constexpr uint32_t kMaxEyePixels = 8192;           // per side
 inline constexpr double kUnitQuaternionTolerance = 1e-3;  // | |q| - 1 | above this is rejected
 
 enum class MessageType : uint16_t {
-#define HS_MESSAGE(name, id, max, dir) k##name = id,
+#define HS_MESSAGE(name, id, max, dir, ...) k##name = id,
 #include "protocol/messages.def"
 #undef HS_MESSAGE
 };
@@ -50,7 +52,16 @@ enum class ErrorCode : uint16_t {
     kSceneRejected = 11,   // SceneUpdate JSON did not parse into a scene
     kServerBusy = 12,
     kInternal = 13,
+    kInvalidUtf8 = 14,  // a string field is not valid UTF-8
+    kTimeout = 15,      // no Hello in time, idle too long, or a frame left half-sent
 };
+
+// Who sends a message: each type may be sent by the client, the server, or both
+// (messages.def). Both ends check it when encoding and decoding.
+enum class Side : uint8_t { kClient = 1, kServer = 2 };
+const char* to_string(Side s);
+// Whether `sender` may send a message of type `t` (false for an unknown type).
+bool may_send(MessageType t, Side sender);
 
 struct Header {
     uint32_t magic = kMagic;
@@ -60,86 +71,75 @@ struct Header {
     uint32_t sequence = 0;  // chosen by the sender; replies echo the request's sequence
 };
 
-struct Hello {
-    Role role = Role::kHmd;
-    std::string token;        // the installation's shared token, <= 256 bytes
-    std::string client_name;  // for logs and stats, <= 64 bytes
-};
-struct Welcome {
-    uint32_t session_id = 0;
-    uint64_t server_time_ns = 0;  // server's steady clock
-    uint32_t scene_version = 0;
-};
-struct RegisterDisplay {
-    uint32_t eye_width = 0, eye_height = 0;  // pixels, 1..8192
-    double fx = 0, fy = 0, cx = 0,
-           cy = 0;         // per-eye pinhole intrinsics, pixels (OpenCV convention)
-    double ipd_m = 0.063;  // metres, 0..0.2
-    PixelFormat format = PixelFormat::kRgba8;
-    Encoding encoding = Encoding::kRaw;
-    FrameMode mode = FrameMode::kOnRequest;
-};
-struct Pose {
-    uint64_t client_time_ns = 0;         // the client's clock when the pose was sampled
-    std::array<double, 3> position_m{};  // world frame, metres
-    std::array<double, 4> orientation_wxyz{1, 0, 0, 0};  // unit quaternion, world from head
-};
-struct FrameRequest {};
-struct VdLayer {
-    uint32_t frame_id = 0;
-    uint64_t pose_time_ns = 0;  // client_time_ns of the pose it was rendered for
-    uint8_t eye = 0;            // 0 left, 1 right
-    PixelFormat format = PixelFormat::kRgba8;
-    Encoding encoding = Encoding::kRaw;
-    uint32_t width = 0, height = 0;
-    std::vector<uint8_t> data;
-};
-struct ProjectorFrame {
-    uint32_t scene_version = 0;
-    uint32_t width = 0, height = 0;
-    PixelFormat format = PixelFormat::kRgba8;
-    Encoding encoding = Encoding::kRaw;
-    std::vector<uint8_t> data;
-};
-struct SceneUpdate {
-    std::string scene_json;
-};
-struct StatsRequest {};
-struct Stats {
-    std::string json;
-};
-struct Ping {
-    uint64_t client_time_ns = 0;
-};
-struct Pong {
-    uint64_t client_time_ns = 0;
-    uint64_t server_time_ns = 0;
-};
-struct Error {
-    ErrorCode code = ErrorCode::kInternal;
-    std::string message;  // <= 1000 bytes, UTF-8
-};
-struct Bye {
-    uint16_t reason = 0;  // 0 normal
-};
+// The messages: one struct per row of messages.def, whose fields, in wire order, with their
+// units, ranges and defaults are declared there. Aggregates: Hello{Role::kHmd, token, "name"}.
+#define HS_MESSAGE(name, id, max, dir, ...) \
+    struct name {                           \
+        __VA_ARGS__                         \
+    };
+#define HS_U8(name, init) uint8_t name = init;
+#define HS_U8_MAX(name, init, max) uint8_t name = init;
+#define HS_U16(name, init) uint16_t name = init;
+#define HS_U32(name, init) uint32_t name = init;
+#define HS_U64(name, init) uint64_t name = init;
+#define HS_F64(name, init) double name = init;
+#define HS_F64S(name, count, ...) std::array<double, count> name{__VA_ARGS__};
+#define HS_ENUM8(name, type, init) type name = init;
+#define HS_OPEN_ENUM16(name, type, init) type name = init;
+#define HS_STR16(name, max) std::string name;
+#define HS_STR32(name, max) std::string name;
+#define HS_BYTES32(name) std::vector<uint8_t> name;
+#define HS_IMAGE()
+#include "protocol/messages.def"
+#undef HS_MESSAGE
+#undef HS_U8
+#undef HS_U8_MAX
+#undef HS_U16
+#undef HS_U32
+#undef HS_U64
+#undef HS_F64
+#undef HS_F64S
+#undef HS_ENUM8
+#undef HS_OPEN_ENUM16
+#undef HS_STR16
+#undef HS_STR32
+#undef HS_BYTES32
+#undef HS_IMAGE
 
-using Message =
-    std::variant<Hello, Welcome, RegisterDisplay, Pose, FrameRequest, VdLayer, ProjectorFrame,
-                 SceneUpdate, StatsRequest, Stats, Ping, Pong, Error, Bye>;
+namespace detail {
+template <typename First, typename... T>
+struct VariantOfRest {
+    using type = std::variant<T...>;
+};
+}  // namespace detail
+// Every message, in the table's order (Hello first).
+using Message = detail::VariantOfRest<void
+#define HS_MESSAGE(name, ...) , name
+#include "protocol/messages.def"
+#undef HS_MESSAGE
+                                      >::type;
 MessageType type_of(const Message& m);
 
 // A decoding failure: the code to send back and a sentence saying what was wrong.
 struct DecodeError {
     ErrorCode code;
     std::string message;
+    uint32_t sequence = 0;  // the frame's sequence where its header could be read, else 0
+};
+// An encoding refusal: the message may not be sent by this side, a field exceeds its limit,
+// or the payload exceeds its type's limit. Nothing is sent.
+struct EncodeError {
+    std::string message;
 };
 
-// Encodes a whole frame (header + payload).
-std::vector<uint8_t> encode(const Message& m, uint32_t sequence = 0);
+// Encodes a whole frame (header + payload) sent by `sender`, enforcing the same direction,
+// field and size limits as the decoder.
+std::variant<std::vector<uint8_t>, EncodeError> encode(const Message& m, Side sender,
+                                                       uint32_t sequence = 0);
 
-// Decodes and validates a header from exactly kHeaderBytes bytes: magic, version, known type,
-// payload within that type's limit.
-std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes);
+// Decodes and validates a header from exactly kHeaderBytes bytes received from `sender`: magic,
+// version, known type, direction, payload within that type's limit.
+std::variant<Header, DecodeError> decode_header(std::span<const uint8_t> bytes, Side sender);
 
 // Decodes a payload of a validated header. The payload must be exactly header.payload_bytes
 // long; trailing bytes, short fields and bad field values are errors.
@@ -147,8 +147,20 @@ std::variant<Message, DecodeError> decode_payload(const Header& header,
                                                   std::span<const uint8_t> payload);
 
 // Decodes one whole frame; `bytes` must hold exactly one frame.
-std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes,
+std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, Side sender,
                                                 Header* header_out = nullptr);
+
+// UTF-8 well-formedness (RFC 3629: no overlong forms, no surrogates, at most U+10FFFF).
+bool is_valid_utf8(std::string_view s);
+// `s` with every ill-formed sequence replaced by U+FFFD: safe to put in JSON or a log.
+std::string sanitize_utf8(std::string_view s);
+// The longest prefix of `s` of at most `max_bytes` bytes that does not end inside a UTF-8
+// sequence (`s` valid UTF-8 gives valid UTF-8).
+std::string truncate_utf8(std::string_view s, size_t max_bytes);
+// An Error that encode() accepts whatever `text` holds: `text` sanitized, then cut on a character
+// boundary to kMaxErrorMessageBytes. encode() refuses an Error whose message is longer or
+// ill-formed rather than cutting it silently.
+Error make_error(ErrorCode code, std::string_view text);
 
 // Field checks shared by both ends.
 std::optional<std::string> validate_pose(const Pose& p);
