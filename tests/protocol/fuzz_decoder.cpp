@@ -1,34 +1,73 @@
-// libFuzzer target: any bytes given to the decoder give a message or a DecodeError, never a
-// crash, a sanitizer report or an unbounded allocation; a message that decodes re-encodes to
-// the same bytes.
+// libFuzzer target: any bytes given to the decoder, as sent by a client and as sent by the
+// server, give a message or a DecodeError, never a crash, a sanitizer report or an unbounded
+// allocation; a message that decodes is one encode() accepts, and it re-encodes to the same
+// bytes. The UTF-8 functions keep their contracts on the same bytes.
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <string_view>
 
 #include "protocol/protocol.hpp"
 #include "protocol/tiles.hpp"
 
 using namespace hs::protocol;
 
+namespace {
+
+[[noreturn]] void fail(const char* what, const char* detail) {
+    std::fprintf(stderr, "%s: %s\n", what, detail);
+    std::abort();
+}
+
+void decode_as(std::span<const uint8_t> bytes, Side sender) {
+    Header h;
+    auto r = decode_frame(bytes, sender, &h);
+    if (auto* e = std::get_if<DecodeError>(&r)) {
+        // Every error after a whole header echoes its sequence.
+        uint32_t seq = 0;
+        if (bytes.size() >= kHeaderBytes)
+            std::memcpy(&seq, bytes.data() + 12, 4);
+        if (e->sequence != seq)
+            fail("a decode error lost the sequence", e->message.c_str());
+        return;
+    }
+    const Message& m = std::get<Message>(r);
+    auto again = encode(m, sender, h.sequence);
+    if (auto* e = std::get_if<EncodeError>(&again))
+        fail("encode refused a decoded message", e->message.c_str());
+    const auto& b = std::get<std::vector<uint8_t>>(again);
+    if (b.size() != bytes.size() || std::memcmp(b.data(), bytes.data(), b.size()) != 0)
+        fail("round trip changed the bytes of a", to_string(type_of(m)));
+    // Sparse-tile payloads of decoded layers.
+    if (auto* l = std::get_if<VdLayer>(&m); l && l->encoding == Encoding::kSparseTiles)
+        (void)decode_tiles(l->data, l->width, l->height, l->format == PixelFormat::kRgba8 ? 4 : 8);
+}
+
+}  // namespace
+
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     std::span<const uint8_t> bytes(data, size);
-    Header h;
-    auto r = decode_frame(bytes, &h);
-    if (auto* m = std::get_if<Message>(&r)) {
-        auto again = encode(*m, h.sequence);
-        if (again.size() != size || std::memcmp(again.data(), data, size) != 0) {
-            std::fprintf(stderr, "round trip changed the bytes of a %s\n", to_string(type_of(*m)));
-            std::abort();
-        }
-    }
-    // Sparse-tile payloads of decoded layers, and the raw bytes as a tile stream.
-    if (auto* m = std::get_if<Message>(&r))
-        if (auto* l = std::get_if<VdLayer>(m); l && l->encoding == Encoding::kSparseTiles)
-            (void)decode_tiles(l->data, l->width, l->height,
-                               l->format == PixelFormat::kRgba8 ? 4 : 8);
-    (void)decode_tiles(bytes, 61, 37, 4);
+    decode_as(bytes, Side::kClient);
+    decode_as(bytes, Side::kServer);
     // Header-only decoding of any 16-byte prefix.
     if (size >= kHeaderBytes)
-        (void)decode_header(bytes.first(kHeaderBytes));
+        for (Side s : {Side::kClient, Side::kServer}) {
+            auto h = decode_header(bytes.first(kHeaderBytes), s);
+            uint32_t seq;
+            std::memcpy(&seq, data + 12, 4);
+            if (auto* e = std::get_if<DecodeError>(&h); e && e->sequence != seq)
+                fail("a header error lost the sequence", e->message.c_str());
+        }
+    // The raw bytes as a tile stream.
+    (void)decode_tiles(bytes, 61, 37, 4);
+    // UTF-8: sanitizing gives valid UTF-8 and leaves valid UTF-8 alone; truncation keeps it valid.
+    const std::string_view text(reinterpret_cast<const char*>(data), size);
+    const std::string clean = sanitize_utf8(text);
+    if (!is_valid_utf8(clean))
+        fail("sanitize_utf8", "produced ill-formed UTF-8");
+    if (is_valid_utf8(text) && clean != text)
+        fail("sanitize_utf8", "changed valid UTF-8");
+    if (!is_valid_utf8(truncate_utf8(clean, size / 2)))
+        fail("truncate_utf8", "cut inside a character");
     return 0;
 }

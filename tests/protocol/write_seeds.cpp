@@ -1,9 +1,11 @@
-// Writes one valid frame of every message type into a folder: the decoder fuzzer's seeds.
+// Writes one valid frame of every message type, and the malformed-frame corpus of both sides,
+// into a folder: the decoder fuzzer's seeds.
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 
 #include "protocol/protocol.hpp"
+#include "tests/protocol/corpus.hpp"
 
 using namespace hs::protocol;
 
@@ -12,32 +14,27 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "usage: write_seeds DIR\n");
         return 2;
     }
-    std::filesystem::create_directories(argv[1]);
-    VdLayer layer;
-    layer.width = layer.height = 1;
-    layer.data = {1, 2, 3, 4};
-    ProjectorFrame pf;
-    pf.width = pf.height = 1;
-    pf.data = {1, 2, 3, 4};
-    const Message all[] = {Hello{Role::kHmd, "token", "name"},
-                           Welcome{1, 2, 3},
-                           RegisterDisplay{64, 32, 50, 50, 31.5, 15.5, 0.063, PixelFormat::kRgba8,
-                                           Encoding::kRaw, FrameMode::kOnRequest},
-                           Pose{1, {0, 1, 0}, {1, 0, 0, 0}},
-                           FrameRequest{},
-                           layer,
-                           pf,
-                           SceneUpdate{"{}"},
-                           StatsRequest{},
-                           Stats{"{}"},
-                           Ping{1},
-                           Pong{1, 2},
-                           Error{ErrorCode::kMalformed, "x"},
-                           Bye{0}};
-    for (const Message& m : all) {
-        auto bytes = encode(m, 1);
-        std::ofstream(std::filesystem::path(argv[1]) / to_string(type_of(m)), std::ios::binary)
-            .write((const char*)bytes.data(), std::streamsize(bytes.size()));
+    const std::filesystem::path dir(argv[1]);
+    std::filesystem::create_directories(dir);
+    auto write = [&](const std::string& name, const std::vector<uint8_t>& bytes) {
+        std::ofstream(dir / name, std::ios::binary)
+            .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    };
+    for (const Message& m : corpus::samples()) {
+        const Side sender = may_send(type_of(m), Side::kClient) ? Side::kClient : Side::kServer;
+        auto bytes = encode(m, sender, 1);
+        if (auto* e = std::get_if<EncodeError>(&bytes)) {
+            std::fprintf(stderr, "write_seeds: %s\n", e->message.c_str());
+            return 1;
+        }
+        write(to_string(type_of(m)), std::get<std::vector<uint8_t>>(bytes));
+    }
+    // The corpus's frames, whose payloads exceed no limit (the oversized ones are headers only).
+    for (Side sender : {Side::kClient, Side::kServer}) {
+        const auto frames = corpus::malformed_frames(sender);
+        for (size_t i = 0; i < frames.size(); ++i)
+            write(std::string("corpus-") + to_string(sender) + "-" + std::to_string(i),
+                  frames[i].bytes);
     }
     return 0;
 }
