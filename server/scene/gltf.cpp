@@ -368,9 +368,11 @@ Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info) {
     } catch (const std::exception& e) {
         return gltf_error(path, fmt::format("malformed glTF: {}", e.what()));
     }
-    if (ctx.refused)
-        return gltf_error(path, fmt::format("external file {}", ctx.refused->message));
     if (!ok) {
+        // A refused buffer: say so in the one wording. (A refused image is only a warning to
+        // tinygltf, and images are not used.)
+        if (ctx.refused)
+            return gltf_error(path, fmt::format("external file {}", ctx.refused->message));
         while (!err.empty() && std::isspace(static_cast<unsigned char>(err.back()))) err.pop_back();
         return gltf_error(path,
                           fmt::format("malformed glTF: {}", err.empty() ? "unknown error" : err));

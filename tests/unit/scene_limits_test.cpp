@@ -298,6 +298,16 @@ TEST_F(SceneAssets, GltfBufferOutsideTheRootIsRefused) {
         << s.error().message;
 }
 
+TEST_F(SceneAssets, GltfImageOutsideTheRootIsNotReadButTheMeshLoads) {
+    // Images are not used: one outside the root is refused quietly, as a missing one would be.
+    auto g = nlohmann::json::parse(std::ifstream(write_gltf(root_ / "scenes" / "img.gltf")));
+    g["images"] = {{{"uri", "../../outside/secret.png"}}};
+    std::ofstream(root_ / "scenes" / "img.gltf") << g.dump();
+    auto s = with_gltf("img.gltf");
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    EXPECT_EQ(prop_triangle_count(s->prop), 1u);
+}
+
 TEST_F(SceneAssets, GltfWithHostileJsonIsAnError) {
     write_gltf(root_ / "scenes" / "deep.gltf", "tri.bin",
                std::string(100000, '[') + std::string(100000, ']'));
