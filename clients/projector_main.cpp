@@ -1,4 +1,6 @@
 // hysar-projector: a projector client. Receives projector frames and writes them as PNG.
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 
@@ -20,7 +22,8 @@ static const char* kUsage =
     "  --out DIR       where frames are written as projector_v<scene version>.png (default "
     "out/projector)\n"
     "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n"
-    "  --timeout S     give up when no frame arrives for S seconds (default 60)\n"
+    "  --timeout S     give up when no frame arrives for S seconds (default 60; with --frames 0\n"
+    "                it waits for new scenes indefinitely, pinging the server)\n"
     "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on "
     "monitor N\n"
     "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n"
@@ -75,13 +78,26 @@ int projector_main(int argc, char** argv) {
         return 2;
     }
     int64_t frames = 0, server_errors = 0;
+    // A projector only receives: a Ping every kKeepAliveMs keeps the server's idle timeout
+    // (docs/OPERATIONS.md) from closing the session while it waits for a new scene.
+    constexpr int kKeepAliveMs = 30000;
+    auto last_message = std::chrono::steady_clock::now();
     while (frames_wanted == 0 || frames < frames_wanted) {
-        auto r = conn.receive(timeout_ms);
+        auto r = conn.receive(std::min(timeout_ms, kKeepAliveMs));
         if (std::holds_alternative<std::monostate>(r)) {
-            std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
-                         format_number(timeout_ms / 1000.0).c_str());
-            return 1;
+            const auto waited = std::chrono::steady_clock::now() - last_message;
+            if (frames_wanted != 0 && waited >= std::chrono::milliseconds(timeout_ms)) {
+                std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
+                             format_number(timeout_ms / 1000.0).c_str());
+                return 1;
+            }
+            if (!conn.send(proto::Ping{now_ns()})) {
+                std::fprintf(stderr, "hysar-projector: the server closed the connection\n");
+                return 1;
+            }
+            continue;
         }
+        last_message = std::chrono::steady_clock::now();
         if (auto* e = std::get_if<std::string>(&r)) {
             if (frames_wanted == 0)
                 break;  // the server closed

@@ -1,15 +1,19 @@
-// `hysar serve`: the render server on a scene, until SIGINT or SIGTERM.
+// `hysar serve`: the render server on a scene, until SIGINT or SIGTERM; SIGHUP reloads the scene.
+#include <sys/stat.h>
+
+#include <atomic>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <random>
-#include <sstream>
 #include <thread>
 
 #include <fmt/format.h>
 
 #include "commands.hpp"
 #include "core/log.hpp"
+#include "eval_common.hpp"
 #include "scene/config.hpp"
 #include "stream/server.hpp"
 
@@ -19,14 +23,32 @@ namespace {
 
 const char* kServeHelp =
     "usage: hysar serve [--scene FILE] [--listen HOST:PORT] [--unix PATH] [--token-file FILE]\n"
-    "                   [--device auto|cpu|gpu] [--stats-file FILE]\n"
+    "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
+    "                   [--stats-file FILE] [limits...]\n"
     "\n"
-    "  --scene FILE       scene JSON (default: the embedded experiment-1 room)\n"
-    "  --listen HOST:PORT TCP address (default 127.0.0.1:7700; use 0.0.0.0:PORT for a real room)\n"
-    "  --unix PATH        also listen on a Unix socket\n"
-    "  --token-file FILE  the installation's shared token (first line); without it a random\n"
-    "                     token is generated and printed\n"
-    "  --stats-file FILE  write the final stats JSON here on shutdown\n";
+    "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
+    "                           reloads it (a broken file is reported, the running scene stays)\n"
+    "  --listen HOST:PORT       TCP address (default 127.0.0.1:7700; 0.0.0.0:PORT for a room)\n"
+    "  --unix PATH              also listen on a Unix socket\n"
+    "  --token-file FILE        the viewers' token (first line; mode 600 or 640); without it a\n"
+    "                           random token is generated and printed\n"
+    "  --admin-token-file FILE  the admin role's own token (SceneUpdate); without it no session\n"
+    "                           may be admin\n"
+    "  --asset-root DIR         files a scene may reference lie inside DIR (default: the scene\n"
+    "                           file's folder, or the working directory)\n"
+    "  --stats-file FILE        write the final stats JSON here on shutdown\n"
+    "\n"
+    "limits (docs/OPERATIONS.md):\n"
+    "  --max-sessions N (256)            --max-pending N (32)\n"
+    "  --handshake-timeout-ms MS (5000)  --idle-timeout-ms MS (120000, 0: never)\n"
+    "  --frame-timeout-ms MS (10000)     --max-eye-pixels N (8388608)\n"
+    "  --max-target-mib MIB (2048)       --max-queued-mib MIB (16)\n"
+    "  --large-display-pixels N (2097152) --max-triangles N (1048576)\n"
+    "  --max-projector-pixels N (16000000)\n"
+    "\n"
+    "example:\n"
+    "  hysar serve --scene room.json --listen 0.0.0.0:7700 --token-file /etc/hysar/token \\\n"
+    "              --admin-token-file /etc/hysar/admin-token\n";
 
 std::string random_token() {
     std::random_device rd;
@@ -37,136 +59,236 @@ std::string random_token() {
 }
 
 std::atomic<bool> g_stop{false};
-extern "C" void on_signal(int) {
+std::atomic<bool> g_reload{false};
+extern "C" void on_stop_signal(int) {
     g_stop.store(true);
+}
+extern "C" void on_reload_signal(int) {
+    g_reload.store(true);
+}
+
+// The first line of a token file, without trailing whitespace or CR. A file that others may
+// read is refused: the token is the installation's only lock.
+Result<std::string> read_token_file(const std::string& path, const char* flag) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
+        return make_error(ErrorCode::kIo, fmt::format("{} {}: cannot read the file", flag, path));
+    if (st.st_mode & (S_IROTH | S_IWOTH))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{} {}: others may read or write it (mode {:o}); run "
+                                      "`chmod 600 {}`",
+                                      flag, path, st.st_mode & 0777, path));
+    std::ifstream in(path);
+    std::string token;
+    if (!in || !std::getline(in, token))
+        return make_error(ErrorCode::kIo, fmt::format("{} {}: cannot read the file", flag, path));
+    while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back())))
+        token.pop_back();
+    if (token.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{} {}: the first line is empty", flag, path));
+    return token;
+}
+
+// A whole number in [lo, hi] for `flag`.
+Result<uint64_t> parse_count(const Flags& f, const std::string& flag, uint64_t def, uint64_t lo,
+                             uint64_t hi) {
+    if (!f.has(flag))
+        return def;
+    HS_ASSIGN_OR_RETURN(double v, parse_double(flag, f.get(flag, "")));
+    if (v != std::floor(v) || v < double(lo) || v > double(hi))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{}: '{}' is not a whole number in [{}, {}]", flag,
+                                      f.get(flag, ""), lo, hi));
+    return uint64_t(v);
+}
+
+Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
+    constexpr uint64_t kDay = 86400000;
+    HS_ASSIGN_OR_RETURN(l.max_sessions, parse_count(f, "--max-sessions", l.max_sessions, 1, 65536));
+    HS_ASSIGN_OR_RETURN(l.max_pending, parse_count(f, "--max-pending", l.max_pending, 1, 65536));
+    HS_ASSIGN_OR_RETURN(l.handshake_timeout_ms,
+                        parse_count(f, "--handshake-timeout-ms", l.handshake_timeout_ms, 10, kDay));
+    HS_ASSIGN_OR_RETURN(l.idle_timeout_ms,
+                        parse_count(f, "--idle-timeout-ms", l.idle_timeout_ms, 0, kDay));
+    HS_ASSIGN_OR_RETURN(l.frame_timeout_ms,
+                        parse_count(f, "--frame-timeout-ms", l.frame_timeout_ms, 10, kDay));
+    HS_ASSIGN_OR_RETURN(l.max_eye_pixels,
+                        parse_count(f, "--max-eye-pixels", l.max_eye_pixels, 1, 8192ull * 8192));
+    HS_ASSIGN_OR_RETURN(uint64_t target_mib,
+                        parse_count(f, "--max-target-mib", l.max_target_bytes >> 20, 1, 1u << 20));
+    l.max_target_bytes = target_mib << 20;
+    HS_ASSIGN_OR_RETURN(uint64_t queued_mib,
+                        parse_count(f, "--max-queued-mib", l.max_queued_bytes >> 20, 1, 4096));
+    l.max_queued_bytes = queued_mib << 20;
+    HS_ASSIGN_OR_RETURN(
+        l.large_display_pixels,
+        parse_count(f, "--large-display-pixels", l.large_display_pixels, 1, 8192ull * 8192));
+    HS_ASSIGN_OR_RETURN(l.scene.max_triangles,
+                        parse_count(f, "--max-triangles", l.scene.max_triangles, 2, 1ull << 32));
+    HS_ASSIGN_OR_RETURN(l.scene.max_projector_pixels,
+                        parse_count(f, "--max-projector-pixels", l.scene.max_projector_pixels, 1,
+                                    16384ull * 16384));
+    return {};
+}
+
+Result<void> parse_listen(const std::string& v, stream::ServerCreateInfo& info) {
+    const auto colon = v.rfind(':');
+    int port = -1;
+    if (colon != std::string::npos && colon + 1 < v.size() && colon + 6 >= v.size() &&
+        v.find_first_not_of("0123456789", colon + 1) == std::string::npos)
+        port = std::stoi(v.substr(colon + 1));
+    if (colon == std::string::npos || port < 0 || port > 65535)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("--listen: expected HOST:PORT, got '{}'", v));
+    info.host = v.substr(0, colon);
+    info.port = uint16_t(port);
+    return {};
+}
+
+int usage_error(const std::string& message) {
+    std::fprintf(stderr, "hysar serve: %s\n", message.c_str());
+    return 2;
 }
 
 }  // namespace
 
 int run_serve(const std::vector<std::string>& args) {
-    std::optional<std::string> scene_path, token_file, stats_file;
-    stream::ServerCreateInfo info;
-    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> std::optional<std::string> {
-            if (i + 1 >= args.size())
-                return std::nullopt;
-            return args[++i];
-        };
-        std::optional<std::string> v;
+    for (const auto& a : args)
         if (a == "--help" || a == "-h") {
             std::fputs(kServeHelp, stdout);
             return 0;
         }
-        if (a != "--scene" && a != "--listen" && a != "--unix" && a != "--token-file" &&
-            a != "--device" && a != "--stats-file") {
-            std::fprintf(stderr, "hysar serve: unknown option '%s'\n\n%s", a.c_str(), kServeHelp);
-            return 2;
-        }
-        if (!(v = value())) {
-            std::fprintf(stderr, "hysar serve: %s needs a value\n", a.c_str());
-            return 2;
-        }
-        if (a == "--scene")
-            scene_path = v;
-        else if (a == "--unix")
-            info.unix_path = *v;
-        else if (a == "--token-file")
-            token_file = v;
-        else if (a == "--stats-file")
-            stats_file = v;
-        else if (a == "--device") {
-            if (*v == "cpu")
-                di.preference = gpu::DevicePreference::kCpu;
-            else if (*v == "gpu")
-                di.preference = gpu::DevicePreference::kGpu;
-            else if (*v == "auto")
-                di.preference = gpu::DevicePreference::kAuto;
-            else {
-                std::fprintf(stderr, "hysar serve: --device: '%s' is not auto, cpu or gpu\n",
-                             v->c_str());
-                return 2;
-            }
-        } else if (a == "--listen") {
-            auto colon = v->rfind(':');
-            int port = -1;
-            try {
-                if (colon != std::string::npos)
-                    port = std::stoi(v->substr(colon + 1));
-            } catch (...) {
-            }
-            if (colon == std::string::npos || port < 0 || port > 65535) {
-                std::fprintf(stderr, "hysar serve: --listen: expected HOST:PORT, got '%s'\n",
-                             v->c_str());
-                return 2;
-            }
-            info.host = v->substr(0, colon);
-            info.port = uint16_t(port);
-        }
+    auto parsed = parse_flags(
+        args, {"--scene", "--listen", "--unix", "--token-file", "--admin-token-file",
+               "--asset-root", "--device", "--stats-file", "--max-sessions", "--max-pending",
+               "--handshake-timeout-ms", "--idle-timeout-ms", "--frame-timeout-ms",
+               "--max-eye-pixels", "--max-target-mib", "--max-queued-mib", "--large-display-pixels",
+               "--max-triangles", "--max-projector-pixels"});
+    if (!parsed) {
+        std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
+        return 2;
     }
-    scene::Scene s;
-    if (scene_path) {
-        auto r = scene::load_scene_file(*scene_path);
-        if (!r) {
-            std::fprintf(stderr, "hysar serve: %s\n", r.error().message.c_str());
-            return 1;
-        }
-        s = std::move(r).value();
-    } else {
-        s = scene::default_scene();
+    const Flags& f = parsed.value();
+    stream::ServerCreateInfo info;
+    info.unix_path = f.get("--unix", "");
+    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
+    if (f.has("--device")) {
+        const std::string d = f.get("--device", "");
+        if (d == "cpu")
+            di.preference = gpu::DevicePreference::kCpu;
+        else if (d == "gpu")
+            di.preference = gpu::DevicePreference::kGpu;
+        else if (d == "auto")
+            di.preference = gpu::DevicePreference::kAuto;
+        else
+            return usage_error(fmt::format("--device: '{}' is not auto, cpu or gpu", d));
     }
-    if (token_file) {
-        std::ifstream in(*token_file);
-        std::getline(in, info.token);
-        if (!in && info.token.empty()) {
-            std::fprintf(stderr, "hysar serve: %s: cannot read the token file\n",
-                         token_file->c_str());
+    if (f.has("--listen"))
+        if (auto r = parse_listen(f.get("--listen", ""), info); !r)
+            return usage_error(r.error().message);
+    if (auto r = parse_limits(f, info.limits); !r)
+        return usage_error(r.error().message);
+
+    const std::optional<std::string> scene_path =
+        f.has("--scene") ? std::optional(f.get("--scene", "")) : std::nullopt;
+    std::error_code ec;
+    info.asset_root = f.has("--asset-root") ? std::filesystem::path(f.get("--asset-root", ""))
+                      : scene_path ? std::filesystem::absolute(*scene_path, ec).parent_path()
+                                   : std::filesystem::current_path(ec);
+    if (!std::filesystem::is_directory(info.asset_root, ec))
+        return usage_error(
+            fmt::format("--asset-root: '{}' is not a directory", info.asset_root.string()));
+    auto load = [&]() -> Result<scene::Scene> {
+        if (!scene_path)
+            return scene::default_scene();
+        return scene::load_scene_file(*scene_path, info.asset_root, info.limits.scene);
+    };
+    auto s = load();
+    if (!s) {
+        std::fprintf(stderr, "hysar serve: %s\n", s.error().message.c_str());
+        return 1;
+    }
+    if (f.has("--token-file")) {
+        auto t = read_token_file(f.get("--token-file", ""), "--token-file");
+        if (!t) {
+            std::fprintf(stderr, "hysar serve: %s\n", t.error().message.c_str());
             return 1;
         }
-        if (info.token.empty()) {
-            std::fprintf(stderr, "hysar serve: %s: the token file's first line is empty\n",
-                         token_file->c_str());
-            return 1;
-        }
+        info.token = t.value();
     } else {
         info.token = random_token();
         std::printf("token: %s\n", info.token.c_str());
+    }
+    if (f.has("--admin-token-file")) {
+        auto t = read_token_file(f.get("--admin-token-file", ""), "--admin-token-file");
+        if (!t) {
+            std::fprintf(stderr, "hysar serve: %s\n", t.error().message.c_str());
+            return 1;
+        }
+        info.admin_token = t.value();
     }
     auto device = gpu::Device::create(di);
     if (!device) {
         std::fprintf(stderr, "hysar serve: %s\n", device.error().message.c_str());
         return 1;
     }
-    auto server = stream::Server::create(*device.value(), s, info);
+    auto server = stream::Server::create(*device.value(), s.value(), info);
     if (!server) {
         std::fprintf(stderr, "hysar serve: %s\n", server.error().message.c_str());
         return 1;
     }
-    std::printf("serving '%s' on %s:%u%s (device: %s)\n", s.name.c_str(), info.host.c_str(),
-                server.value()->port(),
-                info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
-                device.value()->name().c_str());
+    std::printf(
+        "serving '%s' on %s:%u%s (device: %s)%s\n", s.value().name.c_str(), info.host.c_str(),
+        server.value()->port(), info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
+        device.value()->name().c_str(), info.admin_token.empty() ? "; admin role disabled" : "");
     std::fflush(stdout);
-    std::signal(SIGINT, on_signal);
-    std::signal(SIGTERM, on_signal);
+    struct sigaction stop_action {
+    }, reload_action{};
+    stop_action.sa_handler = on_stop_signal;
+    reload_action.sa_handler = on_reload_signal;
+    sigemptyset(&stop_action.sa_mask);
+    sigemptyset(&reload_action.sa_mask);
+    sigaction(SIGINT, &stop_action, nullptr);
+    sigaction(SIGTERM, &stop_action, nullptr);
+    sigaction(SIGHUP, &reload_action, nullptr);
     std::signal(SIGPIPE, SIG_IGN);
     stream::Server& srv = *server.value();
     std::thread watcher([&] {
-        while (!g_stop.load()) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        while (!g_stop.load()) {
+            if (g_reload.exchange(false)) {
+                if (!scene_path) {
+                    log::warn("SIGHUP: the server runs the embedded scene; nothing to reload");
+                } else if (auto next = load(); !next) {
+                    log::error("SIGHUP: {}; the running scene stays", next.error().message);
+                } else if (auto r = srv.update_scene(next.value()); !r) {
+                    log::error("SIGHUP: {}: {}; the running scene stays", *scene_path,
+                               r.error().message);
+                } else {
+                    log::info("SIGHUP: reloading {}", *scene_path);
+                }
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
         srv.stop();
     });
     srv.run();
     g_stop.store(true);
     watcher.join();
     auto stats = srv.stats();
-    if (stats_file)
-        std::ofstream(*stats_file) << stats.dump(2) << "\n";
-    std::printf("stopped: %llu projector render(s)\n",
-                (unsigned long long)stats["projector_renders"].get<uint64_t>());
+    if (f.has("--stats-file")) {
+        std::ofstream out(f.get("--stats-file", ""));
+        out << stats.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+        if (!out)
+            std::fprintf(stderr, "hysar serve: cannot write %s\n",
+                         f.get("--stats-file", "").c_str());
+    }
+    std::printf("stopped: %llu projector render(s), %zu viewer(s) served\n",
+                (unsigned long long)stats.value("projector_renders", uint64_t(0)),
+                stats.value("viewers", nlohmann::json::array()).size());
     for (const char* pass : {"projector", "viewer_vd"}) {
         const auto& c = stats["cost_ms"][pass];
-        if (c["frames"].get<uint64_t>() == 0)
+        if (c.value("frames", uint64_t(0)) == 0)
             continue;
         const auto& m = c["mean"];
         std::printf("  %-10s %llu frame(s), mean ms: pass %.2f  readback %.2f  encode %.2f\n", pass,

@@ -44,10 +44,11 @@ float max_value(ColorFormat f) {
     return 1.0f;
 }
 
-namespace {
 size_t bytes_per_pixel(ColorFormat f) {
     return f == ColorFormat::kRgba8Unorm ? 4 : f == ColorFormat::kRgba16Float ? 8 : 16;
 }
+
+namespace {
 
 Result<MemoryHandle> allocate(Device& dev, VkMemoryRequirements req, VkMemoryPropertyFlags props) {
     HS_ASSIGN_OR_RETURN(uint32_t type, dev.find_memory_type(req.memoryTypeBits, props));

@@ -16,6 +16,8 @@ const char* to_string(ColorFormat f);
 VkFormat to_vk(ColorFormat f);
 // The largest radiance a target of this format stores (shader output clamp).
 float max_value(ColorFormat f);
+// Bytes of one pixel of a target of this format.
+size_t bytes_per_pixel(ColorFormat f);
 
 enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback, kStaging };
 

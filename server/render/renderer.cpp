@@ -258,6 +258,39 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
     return r;
 }
 
+Result<gpu::RenderTarget*> Renderer::owned_target(uint64_t owner, size_t n, uint32_t w,
+                                                  uint32_t h) {
+    auto& mine = owned_targets_[owner];
+    if (mine.size() <= n)
+        mine.resize(n + 1);
+    gpu::RenderTarget& t = mine[n];
+    if (t.width() != w || t.height() != h || t.format() != info_.format) {
+        t = gpu::RenderTarget{};  // free the old one before making its replacement
+        HS_ASSIGN_OR_RETURN(t, gpu::RenderTarget::create(device_, w, h, info_.format,
+                                                         fmt::format("viewer{}.eye{}", owner, n)));
+    }
+    return &t;
+}
+
+void Renderer::release_targets(uint64_t owner) {
+    owned_targets_.erase(owner);
+}
+
+uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat format) {
+    const uint64_t px = uint64_t(w) * h;
+    return px * (2 * gpu::bytes_per_pixel(format) + 4);  // colour + readback, D32 depth
+}
+
+uint64_t Renderer::target_bytes() const {
+    uint64_t n = 0;
+    for (const auto& [key, t] : targets_) n += target_bytes_for(t.width(), t.height(), t.format());
+    for (const auto& [owner, ts] : owned_targets_)
+        for (const auto& t : ts)
+            if (t.width() != 0)
+                n += target_bytes_for(t.width(), t.height(), t.format());
+    return n;
+}
+
 Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeRequest>& reqs) {
     auto t0 = std::chrono::steady_clock::now();
     struct Item {
@@ -267,6 +300,7 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
     };
     std::vector<Item> items(reqs.size());
     std::map<std::pair<uint32_t, uint32_t>, uint32_t> slots;  // next free target slot per size
+    std::map<uint64_t, size_t> owned;                         // next target of each owner
     for (size_t i = 0; i < reqs.size(); ++i) {
         const auto& k = reqs[i].intrinsics;
         if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
@@ -276,8 +310,13 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         if (effects_of(scene_, true, reqs[i].spec).empty())
             continue;
         HS_ASSIGN_OR_RETURN(items[i].variant, variant(true, reqs[i].spec));
-        HS_ASSIGN_OR_RETURN(items[i].target,
-                            target(k.width, k.height, slots[{k.width, k.height}]++));
+        if (reqs[i].owner != 0) {
+            HS_ASSIGN_OR_RETURN(items[i].target, owned_target(reqs[i].owner, owned[reqs[i].owner]++,
+                                                              k.width, k.height));
+        } else {
+            HS_ASSIGN_OR_RETURN(items[i].target,
+                                target(k.width, k.height, slots[{k.width, k.height}]++));
+        }
         items[i].push = push_for(k, reqs[i].eye);
     }
     const bool any = std::any_of(items.begin(), items.end(),

@@ -1,9 +1,11 @@
 // The two passes of paper eq. (2): the projector (VI) pass and the viewer (VD) pass.
 // Created-once resources (mesh buffers, pipelines and their scene blocks) live in the Renderer;
-// per-request state is the render target, cached by size and format.
+// per-request state is the render target: a viewer's own targets (EyeRequest::owner), freed by
+// release_targets() when it leaves, or a shared pool by size and format for one-off renders.
 // Thread: one thread at a time (the device's submit lock serialises submissions).
 #pragma once
 
+#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
@@ -70,6 +72,9 @@ public:
         scene::Specular spec;
         scene::Intrinsics intrinsics;
         scene::Pose eye;
+        // Non-zero: the viewer whose targets this eye renders into (its n-th eye in the batch
+        // uses its n-th target, re-created when the size changes); 0: the shared pool.
+        uint64_t owner = 0;
     };
     Result<std::vector<RenderResult>> render_eyes(const std::vector<EyeRequest>& requests);
 
@@ -91,6 +96,14 @@ public:
     Result<RenderResult> render_capture_geometry(const scene::Intrinsics& k,
                                                  const scene::Pose& camera,
                                                  std::optional<double> sheen_exponent);
+
+    // Frees every target of `owner` (a viewer that left or re-registered). No submission is in
+    // flight between calls (each pass waits for its own), so nothing is still in use.
+    void release_targets(uint64_t owner);
+    // Device and host bytes held by all render targets (owned and pooled).
+    uint64_t target_bytes() const;
+    // What one render target of this size holds: colour, depth and readback buffer, bytes.
+    static uint64_t target_bytes_for(uint32_t width, uint32_t height, gpu::ColorFormat format);
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
@@ -132,6 +145,10 @@ private:
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
+    // Per viewer, per eye; a deque, so that growing it keeps the targets a batch points at.
+    std::map<uint64_t, std::deque<gpu::RenderTarget>> owned_targets_;
+    // The owner's n-th target at this size, made or re-made as needed.
+    Result<gpu::RenderTarget*> owned_target(uint64_t owner, size_t n, uint32_t w, uint32_t h);
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
 };

@@ -30,6 +30,21 @@ std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFor
     return out;
 }
 
+uint64_t max_layer_payload_bytes(uint32_t w, uint32_t h, protocol::PixelFormat format,
+                                 protocol::Encoding encoding) {
+    // frame_id, pose_time_ns, eye, format, encoding, width, height, data length (PROTOCOL.md)
+    constexpr uint64_t kFixed = 4 + 8 + 1 + 1 + 1 + 4 + 4 + 4;
+    const uint64_t bpp = format == protocol::PixelFormat::kRgba8 ? 4 : 8;
+    if (encoding == protocol::Encoding::kRaw)
+        return kFixed + uint64_t(w) * h * bpp;
+    const uint64_t ts = protocol::kDefaultTileSize;
+    const uint64_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    const uint64_t packed = tx * ty * ts * ts * bpp;
+    // LZ4 grows data by at most n/255 + 16 bytes, zstd by n/256 + 64 (their *_compressBound).
+    const uint64_t compressed = packed + packed / 128 + 1024;
+    return kFixed + 8 + (tx * ty + 7) / 8 + 4 + compressed;
+}
+
 std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h,
                                   protocol::PixelFormat format, protocol::Encoding encoding,
                                   protocol::TileCodec codec) {

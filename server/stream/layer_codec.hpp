@@ -24,6 +24,13 @@ std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t widt
                                   protocol::PixelFormat format, protocol::Encoding encoding,
                                   protocol::TileCodec codec);
 
+// The most bytes a VdLayer payload of this display can take: its fixed fields and the data in
+// the worst case (raw pixels, or sparse tiles padded to whole tiles with every tile present
+// and incompressible, plus the compressors' worst-case growth). Registration refuses a display
+// whose worst case exceeds the protocol's frame limit.
+uint64_t max_layer_payload_bytes(uint32_t width, uint32_t height, protocol::PixelFormat format,
+                                 protocol::Encoding encoding);
+
 // The codec the server uses for sparse tiles, chosen from `hysar bench encoding`
 // (docs/ARCHITECTURE.md, "Layer encoding"): zstd for RGBA8 (40% fewer bytes than LZ4 for
 // +0.35 ms), LZ4 for RGBA16F (zstd's encode time doubles there).

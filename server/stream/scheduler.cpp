@@ -17,9 +17,14 @@ void Scheduler::add_viewer(uint32_t id, const protocol::RegisterDisplay& d) {
     s.requests = 0;
 }
 
-void Scheduler::remove_viewer(uint32_t id) {
+std::optional<ViewerCounters> Scheduler::remove_viewer(uint32_t id) {
     std::lock_guard lock(mutex_);
-    slots_.erase(id);
+    auto it = slots_.find(id);
+    if (it == slots_.end())
+        return std::nullopt;
+    ViewerCounters c = std::move(it->second.counters);
+    slots_.erase(it);
+    return c;
 }
 
 bool Scheduler::set_pose(uint32_t id, const protocol::Pose& pose) {
@@ -62,6 +67,15 @@ std::vector<ViewerJob> Scheduler::wait_for_batch() {
         return false;
     });
     woken_ = false;
+    return take_locked();
+}
+
+std::vector<ViewerJob> Scheduler::take_batch() {
+    std::lock_guard lock(mutex_);
+    return take_locked();
+}
+
+std::vector<ViewerJob> Scheduler::take_locked() {
     std::vector<ViewerJob> batch;
     if (stopped_)
         return batch;
@@ -87,10 +101,14 @@ void Scheduler::complete(uint32_t id, uint64_t bytes, double latency_ms) {
         ViewerCounters& c = it->second.counters;
         if (c.in_flight > 0)
             --c.in_flight;
-        c.bytes_sent += bytes;
-        if (c.latency_ms.size() >= 1024)
-            c.latency_ms.erase(c.latency_ms.begin());
-        c.latency_ms.push_back(latency_ms);
+        if (latency_ms < 0) {
+            ++c.dropped;
+        } else {
+            c.bytes_sent += bytes;
+            if (c.latency_ms.size() >= 1024)
+                c.latency_ms.erase(c.latency_ms.begin());
+            c.latency_ms.push_back(latency_ms);
+        }
     }
     cv_.notify_one();
 }

@@ -1,9 +1,11 @@
 // `hysar serve`: the render server. One network thread (asio) owns every socket and session;
 // one render thread owns the GPU renderer. The projector frame is rendered once per scene
 // version; each headset's VD layers for its latest pose, at most kMaxInFlight frames in flight.
+// docs/OPERATIONS.md lists every limit, timeout and credential below and how to set it.
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <string>
 
@@ -12,16 +14,43 @@
 #include "core/result.hpp"
 #include "gpu/device.hpp"
 #include "render/renderer.hpp"
+#include "scene/config.hpp"
 #include "scene/scene.hpp"
 
 namespace hs::stream {
+
+// What one server holds at most, and how long it waits. Every field has a `hysar serve` flag.
+struct ServerLimits {
+    uint32_t max_sessions = 256;  // authenticated sessions; one more is refused "server busy"
+    // Connections that have not yet completed Hello. When full, the oldest is dropped for the
+    // new one, so silent connections never keep a headset out.
+    uint32_t max_pending = 32;
+    uint32_t handshake_timeout_ms = 5000;  // from accept to a valid Hello
+    uint32_t idle_timeout_ms = 120000;     // an authenticated session silent this long; 0: never
+    uint32_t frame_timeout_ms = 10000;     // from a frame's first byte to its last
+    uint32_t shutdown_grace_ms = 2000;     // SIGTERM: how long Bye may take before sockets close
+    uint64_t max_eye_pixels = 8u << 20;    // per eye; a larger RegisterDisplay is refused
+    // All viewers' render targets together (colour, depth and readback, bytes); a registration
+    // that would exceed it is refused "server busy" before anything is allocated.
+    uint64_t max_target_bytes = 2ull << 30;
+    // Bytes queued for one session besides its in-flight layers (replies, projector frames);
+    // a session that lets more pile up is not reading and is closed.
+    uint64_t max_queued_bytes = 16u << 20;
+    // Displays above this many pixels per eye render in a submission of their own, one per
+    // turn, so that they never hold up the batch of the others.
+    uint64_t large_display_pixels = 2u << 20;
+    scene::SceneLimits scene;  // triangles and projector pixels of any scene it accepts
+};
 
 struct ServerCreateInfo {
     std::string host = "127.0.0.1";  // TCP address to bind; loopback unless told otherwise
     uint16_t port = 7700;            // 0: an ephemeral port (see Server::port())
     std::string unix_path;           // non-empty: listen on this Unix socket as well
-    std::string token;               // the shared token every client must present in Hello
-    uint32_t max_sessions = 256;
+    std::string token;               // the viewers' token (projector, hmd) presented in Hello
+    std::string admin_token;         // the admin role's own token; empty: no admin sessions
+    // Every file a SceneUpdate (or a reloaded scene) references must lie inside this folder.
+    std::filesystem::path asset_root = ".";
+    ServerLimits limits;
     render::RendererCreateInfo renderer;
 };
 
@@ -38,10 +67,14 @@ public:
     // Serves until stop(): the calling thread runs the network loop; a render thread is started
     // and joined. Thread: one caller.
     void run();
-    // Thread: any (also from a signal-watching thread).
+    // Stops accepting, says Bye to every session (closing them within shutdown_grace_ms) and
+    // makes run() return. Thread: any (also from a signal-watching thread).
     void stop();
-    // Per-viewer frames, latency and bytes; projector renders; passes, effects and timings.
-    // Thread: any.
+    // Replaces the scene (a reloaded scene file), checked against the limits first; the
+    // running scene stays when it is refused. Thread: any.
+    Result<void> update_scene(const scene::Scene& scene);
+    // Per-viewer frames, latency and bytes (departed viewers too), projector renders, passes,
+    // effects, timings, what the server holds in memory, refusals. Never throws. Thread: any.
     nlohmann::json stats() const;
 
     struct Impl;

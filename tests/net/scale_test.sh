@@ -13,7 +13,7 @@ on_exit() {
   rm -rf "$dir"
 }
 trap on_exit EXIT
-echo "scale-test-token" > "$dir/token"
+(umask 077 && echo "scale-test-token" > "$dir/token")
 HYSAR_VALIDATION=1 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/hysar.sock" --token-file "$dir/token" \
   --stats-file "$dir/stats.json" > "$dir/serve.log" 2>&1 &
 server=$!

@@ -5,7 +5,7 @@ set -euo pipefail
 bin="$1"
 dir=$(mktemp -d)
 trap 'kill -TERM "$server" 2>/dev/null || true; rm -rf "$dir"' EXIT
-echo "window-test-token" > "$dir/token"
+(umask 077 && echo "window-test-token" > "$dir/token")
 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/s.sock" --token-file "$dir/token" > "$dir/serve.log" 2>&1 &
 server=$!
 for _ in $(seq 100); do [[ -S "$dir/s.sock" ]] && break; sleep 0.1; done
