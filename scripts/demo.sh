@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 scripts/setup.sh
 out=out/serve
 rm -rf "$out" && mkdir -p "$out"
-head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$out/token"
+(umask 077 && head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$out/token")
 ./build/hysar serve --listen 127.0.0.1:0 --unix "$out/hysar.sock" --token-file "$out/token" \
   --stats-file "$out/server_stats.json" > "$out/serve.log" 2>&1 &
 server=$!

@@ -5,10 +5,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 PACKAGES=(
-  build-essential cmake ninja-build pkg-config clang libclang-rt-14-dev
+  build-essential cmake ninja-build pkg-config clang libclang-rt-14-dev python3 util-linux
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libglm-dev libfmt-dev nlohmann-json3-dev libtinygltf-dev libstb-dev libopenexr-dev
-  libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev libglfw3-dev libgl-dev xvfb xauth
+  clang-format libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev libglfw3-dev libgl-dev xvfb xauth
   libopencv-dev libopencv-contrib-dev
 )
 
