@@ -91,20 +91,7 @@ struct Header {
 #define HS_BYTES32(name) std::vector<uint8_t> name;
 #define HS_IMAGE()
 #include "protocol/messages.def"
-#undef HS_MESSAGE
-#undef HS_U8
-#undef HS_U8_MAX
-#undef HS_U16
-#undef HS_U32
-#undef HS_U64
-#undef HS_F64
-#undef HS_F64S
-#undef HS_ENUM8
-#undef HS_OPEN_ENUM16
-#undef HS_STR16
-#undef HS_STR32
-#undef HS_BYTES32
-#undef HS_IMAGE
+#include "protocol/messages_end.def"
 
 namespace detail {
 template <typename First, typename... T>
