@@ -255,7 +255,8 @@ public:
                uint32_t sequence) {
         log::info("session {} ({}): error {}: {}", id_, name_, int(code), message);
         srv_.refused(code);
-        auto bytes = wire(proto::Error{code, message}, sequence);
+        // make_error fits any text to the Error's limit (valid UTF-8, at most 1000 bytes).
+        auto bytes = wire(proto::make_error(code, message), sequence);
         if (then_close)
             stop_reading();
         if (bytes)
