@@ -244,6 +244,16 @@ TEST_F(Reliability, HugeDeclaredPayloadsReserveNothing) {
 
 TEST_F(Reliability, AcceptSurvivesRunningOutOfDescriptors) {
     ASSERT_TRUE(eventually([](const auto& s) { return s["projector_renders"] == 1; }));
+    // Walk every path the server takes while the table is full (pending connections, the
+    // eviction of the oldest) once before it is: UBSan's type check caches what it has seen,
+    // and checking something new needs a descriptor of its own (a pipe), which it would not get.
+    {
+        std::vector<int> warm;
+        for (int i = 0; i < 24; ++i) warm.push_back(raw_connect(server_->port()));
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        for (int fd : warm) ::close(fd);
+        expect_fresh_headset_served("warming up");
+    }
     rlimit saved{};
     ASSERT_EQ(::getrlimit(RLIMIT_NOFILE, &saved), 0);
     const size_t in_use = open_descriptors();
