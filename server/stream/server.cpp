@@ -121,6 +121,7 @@ struct Server::Impl {
     Scheduler scheduler;
     std::thread render_thread;
     std::atomic<bool> stopping{false};
+    uint16_t bound_port = 0;  // set once before run(); read from any thread
 
     // Network thread only.
     std::map<uint32_t, std::shared_ptr<Session>> sessions;
@@ -629,6 +630,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
         impl->tcp_acceptor.set_option(asio::socket_base::reuse_address(true));
         impl->tcp_acceptor.bind(ep);
         impl->tcp_acceptor.listen();
+        impl->bound_port = impl->tcp_acceptor.local_endpoint().port();
         if (!info.unix_path.empty()) {
             ::unlink(info.unix_path.c_str());
             impl->unix_acceptor = std::make_unique<asio::local::stream_protocol::acceptor>(
@@ -644,8 +646,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
 }
 
 uint16_t Server::port() const {
-    asio::error_code ec;
-    return impl_->tcp_acceptor.local_endpoint(ec).port();
+    return impl_->bound_port;
 }
 
 void Server::stop() {
