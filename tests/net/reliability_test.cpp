@@ -133,11 +133,12 @@ TEST_F(Reliability, ConnectCloseCyclesReturnDescriptorsToBaseline) {
         ::close(fd);
         // Keep within the listen backlog: past it the kernel completes a connect that the
         // server never sees, and the count below would not add up.
-        if ((i + 1) % 500 == 0)
+        if ((i + 1) % 500 == 0) {
             ASSERT_TRUE(eventually([&](const auto& s) {
                 return s["connections"]["accepted"] >= i + 1;
             })) << "the server stopped accepting at cycle "
                 << i;
+        }
     }
     EXPECT_TRUE(eventually([](const auto& s) {
         return s["sessions"] == 0 && s["memory_bytes"]["receive_buffers"] == 0 &&
