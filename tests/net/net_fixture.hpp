@@ -45,8 +45,10 @@ using client::Connection;
 inline constexpr const char* kToken = "test-token";
 inline constexpr const char* kAdminToken = "test-admin-token";
 
+// One device for the whole test process, never destroyed: the driver stays loaded until the
+// process ends, as ThreadSanitizer's driver suppressions need (tests/tsan.supp).
 inline gpu::Device& device() {
-    static std::unique_ptr<gpu::Device> d = [] {
+    static gpu::Device* d = [] {
         gpu::DeviceCreateInfo info;
         info.validation = true;
         auto r = gpu::Device::create(gpu::device_info_from_environment(info));
@@ -54,7 +56,7 @@ inline gpu::Device& device() {
             std::fprintf(stderr, "no Vulkan device: %s\n", r.error().message.c_str());
             std::abort();
         }
-        return std::move(r).value();
+        return std::move(r).value().release();
     }();
     return *d;
 }
