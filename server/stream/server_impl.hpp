@@ -1,0 +1,162 @@
+// The server's insides, shared by its parts (not a public header): server.cpp (lifecycle,
+// accepting, admission, stats), session.cpp (one connection, the only code that speaks the
+// wire format) and render_loop.cpp (the render thread). Each member says which thread owns it.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include <asio.hpp>
+
+#include "stream/scheduler.hpp"
+#include "stream/server.hpp"
+
+namespace hs::stream {
+
+namespace proto = hs::protocol;
+using Clock = std::chrono::steady_clock;
+using Socket = asio::generic::stream_protocol::socket;
+using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
+
+// Bytes read from a socket per call: a payload's memory grows as its bytes arrive, never from
+// the length its header declares.
+inline constexpr size_t kReceiveChunk = 16384;
+// A receive buffer that grew past this for one large message is released afterwards.
+inline constexpr size_t kKeepReceiveBuffer = 65536;
+// Departed viewers whose figures the stats keep (the most recent).
+inline constexpr size_t kDepartedViewers = 1024;
+inline constexpr uint32_t kMaxAcceptBackoffMs = 1000;
+inline constexpr int kErrorCodes = 16;  // ErrorCode values counted in the stats
+
+uint64_t now_ns();
+double ms_since(Clock::time_point t);
+// Compares every byte whatever the first difference, so timing says nothing of the token.
+bool same_token(const std::string& a, const std::string& b);
+double percentile(std::vector<double> v, double p);
+const char* role_name(protocol::Role r);
+// The wire bytes of a message the server sends; nullopt (logged) when the encoder refuses it.
+std::optional<std::vector<uint8_t>> wire(const protocol::Message& m, uint32_t sequence = 0);
+
+// What one session holds and how it fared; read by stats() from any thread.
+struct SessionCounters {
+    std::atomic<uint64_t> queued_bytes{0};   // encoded frames waiting for the socket
+    std::atomic<uint64_t> receive_bytes{0};  // its receive buffer's capacity
+    std::atomic<uint64_t> layers_replaced{0};
+};
+
+class Session;
+
+// Per-frame cost accounting of one pass: the GPU work, the readback and the encoding, as the
+// last frame's figures and the means since start (stats "cost_ms").
+struct PassCost {
+    uint64_t frames = 0;
+    double gpu = 0, readback = 0, encode = 0;  // the last frame's, ms
+    double gpu_sum = 0, readback_sum = 0, encode_sum = 0;
+    void add(double gpu_ms, double readback_ms, double encode_ms) {
+        ++frames;
+        gpu = gpu_ms, readback = readback_ms, encode = encode_ms;
+        gpu_sum += gpu_ms, readback_sum += readback_ms, encode_sum += encode_ms;
+    }
+    nlohmann::json json() const {
+        const double n = double(std::max<uint64_t>(frames, 1));
+        return {
+            {"frames", frames},
+            {"last", {{"pass", gpu}, {"readback", readback}, {"encode", encode}}},
+            {"mean",
+             {{"pass", gpu_sum / n}, {"readback", readback_sum / n}, {"encode", encode_sum / n}}}};
+    }
+};
+
+struct Server::Impl {
+    gpu::Device& device;
+    ServerCreateInfo info;
+    const ServerLimits& limits;
+    asio::io_context io;
+    asio::ip::tcp::acceptor tcp_acceptor{io};
+    std::unique_ptr<asio::local::stream_protocol::acceptor> unix_acceptor;
+    asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
+    Scheduler scheduler;
+    std::thread render_thread;
+    std::atomic<bool> stopping{false};
+    uint16_t bound_port = 0;  // set once before run(); read from any thread
+
+    // Network thread only.
+    std::map<uint32_t, std::shared_ptr<Session>> sessions;
+    uint32_t next_session_id = 1;
+    uint32_t accept_backoff_ms = 0;
+    uint64_t next_layer_group = 1;                 // tags the layers of one delivered frame
+    Bytes projector_frame;                         // the encoded frame of the current scene
+    std::map<uint32_t, uint64_t> target_bytes_of;  // reserved render-target bytes per viewer
+
+    // Any thread.
+    std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};
+    std::atomic<uint64_t> reserved_target_bytes{0}, held_target_bytes{0};
+    std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};
+
+    // Shared between threads under `mutex`.
+    mutable std::mutex mutex;
+    scene::Scene initial_scene;  // read once by the render thread, which then owns the scene
+    struct PendingScene {
+        scene::Scene scene;
+        uint32_t session = 0;  // who asked (0: a reload), answered if it cannot be built
+        uint32_t sequence = 0;
+    };
+    std::optional<PendingScene> pending_scene;
+    std::vector<uint32_t> released_viewers;  // whose render targets the render thread frees
+    uint32_t scene_version = 1;
+    uint64_t projector_renders = 0;
+    nlohmann::json last_projector_report, last_vd_report;
+    double vd_render_ms_total = 0, vd_encode_ms_total = 0, projector_ms_total = 0;
+    uint64_t vd_layers = 0;
+    PassCost projector_cost, vd_cost;  // per frame (projector) and per layer (VD)
+    uint64_t batches = 0, batched_eyes = 0,
+             max_batch_eyes = 0;  // viewer-pass submissions and their eyes
+    uint64_t large_turns = 0;     // large displays rendered in a turn of their own
+    struct SessionInfo {
+        std::string name;  // valid UTF-8 (checked at decode)
+        proto::Role role = proto::Role::kHmd;
+        std::shared_ptr<const SessionCounters> counters;
+    };
+    std::map<uint32_t, SessionInfo> session_info;
+    std::deque<nlohmann::json> departed;  // the last kDepartedViewers viewers' final figures
+    uint64_t sessions_total = 0;
+
+    Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i), limits(info.limits) {}
+    void accept_tcp();
+    void accept_unix();
+    // An accept failed (EMFILE, ENFILE, ENOBUFS...): logged, retried with back-off.
+    void accept_failed(const char* which, const asio::error_code& ec, asio::steady_timer& timer,
+                       void (Impl::*retry)());
+    void start_session(Socket socket);
+    void sweep();
+    void begin_shutdown();
+    void refused(proto::ErrorCode code) {
+        const int c = int(code);
+        refusals[size_t(c >= 0 && c < kErrorCodes ? c : 0)]++;
+    }
+    // A RegisterDisplay that passed the protocol's checks: nullopt when it fits the server's
+    // limits (its render-target bytes then reserved), else the error to answer.
+    std::optional<proto::Error> admit_display(uint32_t id, const proto::RegisterDisplay& d);
+    Result<scene::Scene> accept_scene(const scene::Scene& s) const;
+    void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence);
+    void render_loop();
+    bool rebuild(std::unique_ptr<render::Renderer>& renderer, scene::Scene& current,
+                 ImageRgba32f& captured_vd, const scene::Scene& s, uint32_t version);
+    void serve(render::Renderer& renderer, const scene::Scene& current,
+               const ImageRgba32f& captured_vd, const std::vector<ViewerJob>& batch);
+    void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
+    void publish_projector_frame(Bytes frame);
+    void deliver(uint32_t session_id, std::vector<std::vector<uint8_t>> frames,
+                 Clock::time_point pose_received);
+    void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
+    void remove_session(uint32_t id);
+    nlohmann::json stats() const;
+};
+
+}  // namespace hs::stream

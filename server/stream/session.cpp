@@ -1,0 +1,365 @@
+#include "stream/session.hpp"
+
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "core/log.hpp"
+#include "scene/config.hpp"
+
+namespace hs::stream {
+
+Session::Session(Server::Impl& srv, Socket socket, uint32_t id)
+    : srv_(srv),
+      socket_(std::move(socket)),
+      id_(id),
+      created_(Clock::now()),
+      last_receive_(created_),
+      counters_(std::make_shared<SessionCounters>()) {}
+
+void Session::send(Bytes bytes, std::function<void(bool)> on_done, uint64_t layer_group,
+                   bool replaces_projector) {
+    if (closed_) {
+        if (on_done)
+            on_done(false);
+        return;
+    }
+    if (layer_group != 0 || replaces_projector)
+        drop_queued([&](const Out& o) {
+            return layer_group != 0 ? o.layer_group != 0 && o.layer_group != layer_group
+                                    : o.projector;
+        });
+    const bool bounded = layer_group == 0 && !replaces_projector;
+    if (bounded && other_bytes_ + bytes->size() > srv_.limits.max_queued_bytes) {
+        log::warn("session {} ({}): {} bytes queued and not reading; closing it", id_, name_,
+                  other_bytes_);
+        if (on_done)
+            on_done(false);
+        close();
+        return;
+    }
+    if (bounded)
+        other_bytes_ += bytes->size();
+    counters_->queued_bytes += bytes->size();
+    queue_.push_back({std::move(bytes), std::move(on_done), layer_group, replaces_projector});
+    if (!writing_)
+        write_next();
+}
+
+void Session::send(std::vector<uint8_t> bytes) {
+    send(std::make_shared<const std::vector<uint8_t>>(std::move(bytes)));
+}
+
+void Session::error(proto::ErrorCode code, const std::string& message, bool then_close,
+                    uint32_t sequence) {
+    log::info("session {} ({}): error {}: {}", id_, name_, int(code), message);
+    srv_.refused(code);
+    // make_error fits any text to the Error's limit (valid UTF-8, at most 1000 bytes).
+    auto bytes = wire(proto::make_error(code, message), sequence);
+    if (then_close)
+        stop_reading();
+    if (bytes)
+        send(std::move(*bytes));
+    else if (then_close)
+        close();
+}
+
+void Session::say_bye() {
+    stop_reading();
+    if (auto b = wire(proto::Bye{0}))
+        send(std::move(*b));
+}
+
+void Session::check_deadlines(Clock::time_point now) {
+    if (closed_)
+        return;
+    const ServerLimits& l = srv_.limits;
+    auto over = [&](Clock::time_point since, uint32_t ms) {
+        return ms != 0 && now - since > std::chrono::milliseconds(ms);
+    };
+    if (closing_since_) {
+        if (over(*closing_since_, l.shutdown_grace_ms))
+            close();
+        return;
+    }
+    if (!authed_ && over(created_, l.handshake_timeout_ms)) {
+        ++srv_.timeouts;
+        return error(proto::ErrorCode::kTimeout,
+                     fmt::format("no Hello within {} ms of connecting", l.handshake_timeout_ms),
+                     true, 0);
+    }
+    if (frame_started_ && over(*frame_started_, l.frame_timeout_ms)) {
+        ++srv_.timeouts;
+        return error(proto::ErrorCode::kTimeout,
+                     fmt::format("a frame was left incomplete for {} ms", l.frame_timeout_ms), true,
+                     header_have_ == proto::kHeaderBytes ? hdr_.sequence : 0);
+    }
+    if (authed_ && over(last_receive_, l.idle_timeout_ms)) {
+        ++srv_.timeouts;
+        return error(proto::ErrorCode::kTimeout,
+                     fmt::format("nothing received for {} ms (send Ping to stay connected)",
+                                 l.idle_timeout_ms),
+                     true, 0);
+    }
+}
+
+void Session::close() {
+    if (closed_)
+        return;
+    closed_ = true;
+    asio::error_code ec;
+    socket_.shutdown(asio::socket_base::shutdown_both, ec);
+    socket_.close(ec);
+    auto queue = std::move(queue_);
+    queue_.clear();
+    for (auto& q : queue)
+        if (q.on_done)
+            q.on_done(false);
+    counters_->queued_bytes = 0;
+    release_receive_buffer();
+    srv_.remove_session(id_);
+}
+
+template <typename F>
+void Session::guarded(F&& f) {
+    try {
+        f();
+    } catch (const std::exception& e) {
+        log::error("session {} ({}): internal error: {}", id_, name_, e.what());
+        srv_.refused(proto::ErrorCode::kInternal);
+        close();
+    }
+}
+
+void Session::stop_reading() {
+    if (!closing_since_)
+        closing_since_ = Clock::now();
+}
+
+void Session::release_receive_buffer() {
+    std::vector<uint8_t>().swap(payload_);
+    counters_->receive_bytes = 0;
+}
+
+void Session::read_some() {
+    auto self = shared_from_this();
+    socket_.async_read_some(asio::buffer(chunk_), [this, self](asio::error_code ec, size_t n) {
+        guarded([&] {
+            if (closed_)
+                return;
+            if (ec)
+                return close();
+            last_receive_ = Clock::now();
+            consume(chunk_.data(), n);
+            if (!closed_ && !closing_since_)
+                read_some();
+        });
+    });
+}
+
+void Session::consume(const uint8_t* p, size_t n) {
+    while (n > 0 && !closed_ && !closing_since_) {
+        if (!frame_started_)
+            frame_started_ = Clock::now();
+        if (header_have_ < proto::kHeaderBytes) {
+            const size_t take = std::min(n, proto::kHeaderBytes - header_have_);
+            std::memcpy(header_.data() + header_have_, p, take);
+            header_have_ += take, p += take, n -= take;
+            if (header_have_ == proto::kHeaderBytes && !on_header())
+                return;
+            continue;
+        }
+        const size_t take = std::min<size_t>(n, hdr_.payload_bytes - payload_.size());
+        payload_.insert(payload_.end(), p, p + take);
+        counters_->receive_bytes = payload_.capacity();
+        p += take, n -= take;
+        if (payload_.size() == hdr_.payload_bytes)
+            frame_done();
+    }
+}
+
+bool Session::on_header() {
+    auto h = proto::decode_header(header_, proto::Side::kClient);
+    if (auto* e = std::get_if<proto::DecodeError>(&h)) {
+        error(e->code, e->message, true, e->sequence);
+        return false;
+    }
+    hdr_ = std::get<proto::Header>(h);
+    if (!authed_ && proto::MessageType(hdr_.type) != proto::MessageType::kHello) {
+        // Before Hello, nothing but a Hello-sized payload is ever read.
+        error(proto::ErrorCode::kUnauthorized, "the first message must be Hello", true,
+              hdr_.sequence);
+        return false;
+    }
+    payload_.clear();
+    if (hdr_.payload_bytes == 0)
+        frame_done();
+    return !closed_;
+}
+
+void Session::frame_done() {
+    auto m = proto::decode_payload(hdr_, payload_);
+    header_have_ = 0;
+    frame_started_.reset();
+    if (payload_.capacity() > kKeepReceiveBuffer)
+        release_receive_buffer();
+    if (auto* e = std::get_if<proto::DecodeError>(&m))
+        return error(e->code, e->message, true, hdr_.sequence);
+    handle(std::get<proto::Message>(m));
+}
+
+void Session::hello(const proto::Hello& hello, uint32_t seq) {
+    const bool admin = hello.role == proto::Role::kAdmin;
+    if (admin && srv_.info.admin_token.empty())
+        return error(proto::ErrorCode::kForbidden,
+                     "the admin role is disabled on this server (no admin token configured)", true,
+                     seq);
+    if (!same_token(hello.token, admin ? srv_.info.admin_token : srv_.info.token))
+        return error(proto::ErrorCode::kUnauthorized, admin ? "wrong admin token" : "wrong token",
+                     true, seq);
+    uint32_t authed = 0;
+    for (const auto& [id, s] : srv_.sessions) authed += s->authed() ? 1u : 0u;
+    if (authed >= srv_.limits.max_sessions)
+        return error(proto::ErrorCode::kServerBusy,
+                     fmt::format("server busy: {} sessions, the most it serves", authed), true,
+                     seq);
+    authed_ = true;
+    role_ = hello.role;
+    name_ = hello.client_name;
+    uint32_t version;
+    {
+        std::lock_guard lock(srv_.mutex);
+        version = srv_.scene_version;
+        srv_.session_info[id_] = {name_, role_, counters_};
+        ++srv_.sessions_total;
+    }
+    log::info("session {}: {} '{}' joined", id_, role_name(role_), name_);
+    if (auto b = wire(proto::Welcome{id_, now_ns(), version}, seq))
+        send(std::move(*b));
+    if (role_ == proto::Role::kProjector && srv_.projector_frame)
+        send(srv_.projector_frame, nullptr, 0, true);
+}
+
+void Session::handle(const proto::Message& msg) {
+    const uint32_t seq = hdr_.sequence;
+    if (!authed_)
+        return hello(std::get<proto::Hello>(msg), seq);  // on_header let nothing else in
+    std::visit(
+        [&](const auto& m) {
+            using T = std::decay_t<decltype(m)>;
+            if constexpr (std::is_same_v<T, proto::Hello>) {
+                error(proto::ErrorCode::kOutOfOrder, "Hello was already received", false, seq);
+            } else if constexpr (std::is_same_v<T, proto::RegisterDisplay>) {
+                if (role_ != proto::Role::kHmd) {
+                    error(proto::ErrorCode::kForbidden,
+                          "only a headset (role hmd) registers a display", false, seq);
+                } else if (auto bad = proto::validate_display(m)) {
+                    error(proto::ErrorCode::kInvalidDisplay, *bad, false, seq);
+                } else if (auto refusal = srv_.admit_display(id_, m)) {
+                    error(refusal->code, refusal->message, false, seq);
+                } else {
+                    registered_ = true;
+                    srv_.scheduler.add_viewer(id_, m);
+                }
+            } else if constexpr (std::is_same_v<T, proto::Pose>) {
+                if (!registered_) {
+                    error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false, seq);
+                } else if (auto bad = proto::validate_pose(m)) {
+                    error(proto::ErrorCode::kInvalidPose, *bad, false, seq);
+                } else {
+                    srv_.scheduler.set_pose(id_, m);
+                }
+            } else if constexpr (std::is_same_v<T, proto::FrameRequest>) {
+                if (!registered_)
+                    error(proto::ErrorCode::kOutOfOrder, "FrameRequest before RegisterDisplay",
+                          false, seq);
+                else
+                    srv_.scheduler.request_frame(id_);
+            } else if constexpr (std::is_same_v<T, proto::SceneUpdate>) {
+                scene_update(m, seq);
+            } else if constexpr (std::is_same_v<T, proto::StatsRequest>) {
+                auto b = wire(proto::Stats{srv_.stats().dump(
+                                  -1, ' ', false, nlohmann::json::error_handler_t::replace)},
+                              seq);
+                if (b)
+                    send(std::move(*b));
+                else
+                    error(proto::ErrorCode::kInternal, "the stats do not fit in one message", false,
+                          seq);
+            } else if constexpr (std::is_same_v<T, proto::Ping>) {
+                if (auto b = wire(proto::Pong{m.client_time_ns, now_ns()}, seq))
+                    send(std::move(*b));
+            } else if constexpr (std::is_same_v<T, proto::Bye>) {
+                close();
+            } else {
+                // Pong and Error are informational from a client; the decoder refuses the
+                // types only the server sends.
+            }
+        },
+        msg);
+}
+
+void Session::scene_update(const proto::SceneUpdate& m, uint32_t seq) {
+    if (role_ != proto::Role::kAdmin)
+        return error(proto::ErrorCode::kForbidden, "only an admin session may change the scene",
+                     false, seq);
+    auto s = scene::parse_scene(m.scene_json, fmt::format("SceneUpdate from session {}", id_),
+                                srv_.info.asset_root, srv_.info.asset_root, srv_.limits.scene);
+    if (!s)
+        return error(proto::ErrorCode::kSceneRejected, s.error().message, false, seq);
+    auto accepted = srv_.accept_scene(s.value());
+    if (!accepted)
+        return error(proto::ErrorCode::kSceneRejected, accepted.error().message, false, seq);
+    srv_.queue_scene(std::move(accepted).value(), id_, seq);
+}
+
+void Session::write_next() {
+    if (queue_.empty() || closed_) {
+        writing_ = false;
+        if (closing_since_ && queue_.empty())
+            close();
+        return;
+    }
+    writing_ = true;
+    auto self = shared_from_this();
+    asio::async_write(socket_, asio::buffer(*queue_.front().bytes),
+                      [this, self](asio::error_code ec, size_t) {
+                          guarded([&] {
+                              if (closed_)
+                                  return;
+                              if (ec)
+                                  return close();
+                              Out done = std::move(queue_.front());
+                              queue_.pop_front();
+                              forget(done);
+                              if (done.on_done)
+                                  done.on_done(true);
+                              write_next();
+                          });
+                      });
+}
+
+template <typename Pred>
+void Session::drop_queued(Pred pred) {
+    for (size_t i = writing_ ? 1 : 0; i < queue_.size();) {
+        if (!pred(queue_[i])) {
+            ++i;
+            continue;
+        }
+        Out o = std::move(queue_[i]);
+        queue_.erase(queue_.begin() + std::ptrdiff_t(i));
+        forget(o);
+        if (o.layer_group)
+            ++counters_->layers_replaced;
+        if (o.on_done)
+            o.on_done(false);
+    }
+}
+
+void Session::forget(const Out& o) {
+    counters_->queued_bytes -= o.bytes->size();
+    if (o.layer_group == 0 && !o.projector)
+        other_bytes_ -= o.bytes->size();
+}
+
+}  // namespace hs::stream
