@@ -122,15 +122,11 @@ Result<Options> parse(const std::vector<std::string>& args) {
         } else if (a == "--device") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             o.device_set = true;
-            if (v == "auto")
-                o.device = gpu::DevicePreference::kAuto;
-            else if (v == "cpu")
-                o.device = gpu::DevicePreference::kCpu;
-            else if (v == "gpu")
-                o.device = gpu::DevicePreference::kGpu;
-            else
+            auto p = gpu::parse_device_preference(v);
+            if (!p)
                 return make_error(ErrorCode::kInvalidArgument,
                                   fmt::format("--device: '{}' is not auto, cpu or gpu", v));
+            o.device = *p;
         } else if (a == "--white") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             HS_ASSIGN_OR_RETURN(double w, parse_double(a, v));

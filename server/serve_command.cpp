@@ -2,6 +2,7 @@
 #include <sys/stat.h>
 
 #include <atomic>
+#include <cctype>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -175,14 +176,10 @@ int run_serve(const std::vector<std::string>& args) {
     gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
     if (f.has("--device")) {
         const std::string d = f.get("--device", "");
-        if (d == "cpu")
-            di.preference = gpu::DevicePreference::kCpu;
-        else if (d == "gpu")
-            di.preference = gpu::DevicePreference::kGpu;
-        else if (d == "auto")
-            di.preference = gpu::DevicePreference::kAuto;
-        else
+        auto p = gpu::parse_device_preference(d);
+        if (!p)
             return usage_error(fmt::format("--device: '{}' is not auto, cpu or gpu", d));
+        di.preference = *p;
     }
     if (f.has("--listen"))
         if (auto r = parse_listen(f.get("--listen", ""), info); !r)

@@ -34,14 +34,20 @@ const char* vk_result_string(VkResult r) {
     }
 }
 
+std::optional<DevicePreference> parse_device_preference(std::string_view text) {
+    if (text == "auto")
+        return DevicePreference::kAuto;
+    if (text == "cpu")
+        return DevicePreference::kCpu;
+    if (text == "gpu")
+        return DevicePreference::kGpu;
+    return std::nullopt;
+}
+
 DeviceCreateInfo device_info_from_environment(DeviceCreateInfo d) {
     if (const char* e = std::getenv("HYSAR_DEVICE")) {
-        if (!std::strcmp(e, "cpu"))
-            d.preference = DevicePreference::kCpu;
-        else if (!std::strcmp(e, "gpu"))
-            d.preference = DevicePreference::kGpu;
-        else if (!std::strcmp(e, "auto"))
-            d.preference = DevicePreference::kAuto;
+        if (auto p = parse_device_preference(e))
+            d.preference = *p;
         else
             log::warn("HYSAR_DEVICE='{}' is not auto, cpu or gpu; ignored", e);
     }

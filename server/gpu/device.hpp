@@ -2,6 +2,9 @@
 // there is one. No hidden globals: pass Device& explicitly (a test can make two).
 #pragma once
 
+#include <optional>
+#include <string_view>
+
 #include <atomic>
 #include <functional>
 #include <memory>
@@ -26,6 +29,8 @@ struct DeviceCreateInfo {
 
 // `defaults` with HYSAR_DEVICE (auto|cpu|gpu) and HYSAR_VALIDATION (0|1) applied over them.
 DeviceCreateInfo device_info_from_environment(DeviceCreateInfo defaults = {});
+// "auto", "cpu" or "gpu" (HYSAR_DEVICE and every --device flag); nullopt for anything else.
+std::optional<DevicePreference> parse_device_preference(std::string_view text);
 
 class Device {
 public:

@@ -320,9 +320,6 @@ std::string_view json_part(const std::vector<unsigned char>& bytes, bool binary)
 }  // namespace
 
 Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info) {
-    std::error_code ec;
-    if (!fs::exists(path, ec))
-        return make_error(ErrorCode::kNotFound, fmt::format("{}: glTF file does not exist", path));
     const fs::path folder =
         fs::path(path).parent_path().empty() ? fs::path(".") : fs::path(path).parent_path();
     FsContext ctx{info.asset_root.empty() ? folder : info.asset_root, {}, std::nullopt};

@@ -6,6 +6,8 @@
 
 #include <glm/gtc/packing.hpp>
 
+#include "protocol/schema.hpp"
+
 namespace hs::stream {
 
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format) {
@@ -32,8 +34,8 @@ std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFor
 
 uint64_t max_layer_payload_bytes(uint32_t w, uint32_t h, protocol::PixelFormat format,
                                  protocol::Encoding encoding) {
-    // frame_id, pose_time_ns, eye, format, encoding, width, height, data length (PROTOCOL.md)
-    constexpr uint64_t kFixed = 4 + 8 + 1 + 1 + 1 + 4 + 4 + 4;
+    // The fields before the pixel data, and the data's length prefix.
+    constexpr uint64_t kFixed = protocol::schema::min_payload<protocol::VdLayer>();
     const uint64_t bpp = format == protocol::PixelFormat::kRgba8 ? 4 : 8;
     if (encoding == protocol::Encoding::kRaw)
         return kFixed + uint64_t(w) * h * bpp;

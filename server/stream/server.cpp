@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "core/log.hpp"
+#include "protocol/schema.hpp"
 #include "stream/layer_codec.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
@@ -278,9 +279,10 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
 
 Result<scene::Scene> Server::Impl::accept_scene(const scene::Scene& s) const {
     HS_TRY(scene::check_scene_limits(s, limits.scene));
+    // rgba8, raw, with the message's fixed fields
     const uint64_t frame_bytes =
         uint64_t(s.projector.intrinsics.width) * s.projector.intrinsics.height * 4 +
-        32;  // rgba8, raw, with the message's fixed fields
+        proto::schema::min_payload<proto::ProjectorFrame>();
     const uint64_t frame_limit = *proto::max_payload(uint16_t(proto::MessageType::kProjectorFrame));
     if (frame_bytes > frame_limit)
         return make_error(ErrorCode::kInvalidArgument,
