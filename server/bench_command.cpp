@@ -17,7 +17,7 @@
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 
 namespace hs::cli {
 
@@ -87,14 +87,14 @@ int bench_encoding(int repeats, const std::string& json_path) {
         std::vector<std::vector<uint8_t>> raw;
         std::vector<double> pixel_ms;
         for (const auto& img : layers)
-            pixel_ms.push_back(time_ms([&] { raw.push_back(stream::encode_pixels(img, fmt)); }));
+            pixel_ms.push_back(time_ms([&] { raw.push_back(codec::encode_pixels(img, fmt)); }));
         for (const auto& var : variants) {
             std::vector<double> enc_ms, dec_ms, bytes;
             for (int r = 0; r < repeats; ++r)
                 for (const auto& px : raw) {
                     std::vector<uint8_t> data;
                     enc_ms.push_back(time_ms([&] {
-                        data = stream::encode_layer(px, k.width, k.height, fmt, var.enc, var.codec);
+                        data = codec::encode_layer(px, k.width, k.height, fmt, var.enc, var.codec);
                     }));
                     bytes.push_back(double(data.size()));
                     dec_ms.push_back(time_ms([&] {

@@ -15,7 +15,7 @@
 #include "scene/mesh.hpp"
 #include "shading/compare.hpp"
 #include "shading/reference.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 
 namespace hs::bench {
 
@@ -85,9 +85,9 @@ Errors errors_of(const ImageRgba32f& img, const ImageRgba32f& ref) {
             continue;
         const float* p = &img.pixels[i * 4];
         const auto a = optics::lab_from_linear_srgb(glm::dvec3(p[0], p[1], p[2]) /
-                                                    double(stream::kLayerWhite));
+                                                    double(codec::kLayerWhite));
         const auto b = optics::lab_from_linear_srgb(glm::dvec3(q[0], q[1], q[2]) /
-                                                    double(stream::kLayerWhite));
+                                                    double(codec::kLayerWhite));
         sum += optics::delta_e_2000(a, b);
         ++n;
     }
@@ -103,7 +103,7 @@ struct LayerEncoding {
 };
 const LayerEncoding kDefaultEncoding{"f16 tiles+lz4", protocol::PixelFormat::kRgba16f,
                                      protocol::Encoding::kSparseTiles,
-                                     stream::default_tile_codec(protocol::PixelFormat::kRgba16f)};
+                                     codec::default_tile_codec(protocol::PixelFormat::kRgba16f)};
 
 struct Encoded {
     std::vector<uint8_t> data;
@@ -115,8 +115,8 @@ Encoded encode(const ImageRgba32f& img, const LayerEncoding& e, int repeats) {
     std::vector<double> t;
     for (int r = 0; r < std::max(1, repeats); ++r) {
         const auto t0 = Clock::now();
-        auto px = stream::encode_pixels(img, e.format);
-        out.data = stream::encode_layer(px, img.width, img.height, e.format, e.encoding, e.codec);
+        auto px = codec::encode_pixels(img, e.format);
+        out.data = codec::encode_layer(px, img.width, img.height, e.format, e.encoding, e.codec);
         t.push_back(ms_since(t0));
     }
     out.ms = median(t);
@@ -133,7 +133,7 @@ ImageRgba32f decode(const Encoded& enc, const ImageRgba32f& img, const LayerEnco
             return ImageRgba32f::zeros(img.width, img.height);
         px = std::get<std::vector<uint8_t>>(d);
     }
-    ImageRgba32f out = stream::decode_pixels(px, img.width, img.height, e.format);
+    ImageRgba32f out = codec::decode_pixels(px, img.width, img.height, e.format);
     for (size_t i = 0; i < size_t(img.width) * img.height && !out.pixels.empty(); ++i)
         out.pixels[i * 4 + 3] = img.pixels[i * 4 + 3];
     return out;

@@ -7,7 +7,7 @@
 
 #include <fmt/format.h>
 
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 
 namespace hs::installation {
 
@@ -199,8 +199,8 @@ Result<RoundTrip> round_trip(const VirtualInstallation& inst, const DeviceResult
     // client's panel receives it.
     auto served = [](const ImageRgba32f& drive) {
         const auto fmt8 = protocol::PixelFormat::kRgba8;
-        return stream::drive_from_layer(
-            stream::decode_pixels(stream::encode_pixels(stream::drive_as_layer(drive), fmt8),
+        return codec::drive_from_layer(
+            codec::decode_pixels(codec::encode_pixels(codec::drive_as_layer(drive), fmt8),
                                   drive.width, drive.height, fmt8));
     };
     t.projector = served(pd);

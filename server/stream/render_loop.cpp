@@ -7,7 +7,7 @@
 
 #include "core/log.hpp"
 #include "scene/camera.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 #include "stream/server_impl.hpp"
 
 namespace hs::stream {
@@ -32,7 +32,7 @@ bool Server::Impl::rebuild(std::unique_ptr<render::Renderer>& renderer, scene::S
     double pass_ms = 0, readback_ms = 0;
     if (s.captured_material) {
         // A captured material: the calibrated VI image is the frame; nothing is rendered.
-        frame = drive_as_layer(*s.captured_material->projector_image);
+        frame = codec::drive_as_layer(*s.captured_material->projector_image);
         report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
     } else {
         auto proj = r.value()->render_projector();
@@ -52,7 +52,7 @@ bool Server::Impl::rebuild(std::unique_ptr<render::Renderer>& renderer, scene::S
     pf.format = proto::PixelFormat::kRgba8;
     pf.scene_version = version;
     const auto t_encode = Clock::now();
-    pf.data = encode_pixels(frame, pf.format);
+    pf.data = codec::encode_pixels(frame, pf.format);
     auto bytes = wire(pf);
     if (!bytes)
         return false;
@@ -61,7 +61,7 @@ bool Server::Impl::rebuild(std::unique_ptr<render::Renderer>& renderer, scene::S
     renderer = std::move(r).value();
     current = s;
     captured_vd =
-        s.captured_material ? drive_as_layer(*s.captured_material->viewer_image) : ImageRgba32f{};
+        s.captured_material ? codec::drive_as_layer(*s.captured_material->viewer_image) : ImageRgba32f{};
     {
         std::lock_guard lock(mutex);
         ++projector_renders;
@@ -248,8 +248,8 @@ void Server::Impl::serve(render::Renderer& renderer, const scene::Scene& current
             layer.encoding = d.encoding;
             layer.width = d.eye_width;
             layer.height = d.eye_height;
-            layer.data = encode_layer(encode_pixels(image, d.format), d.eye_width, d.eye_height,
-                                      d.format, d.encoding, default_tile_codec(d.format));
+            layer.data = codec::encode_layer(codec::encode_pixels(image, d.format), d.eye_width, d.eye_height,
+                                      d.format, d.encoding, codec::default_tile_codec(d.format));
             auto bytes = wire(layer);
             if (!bytes)
                 break;  // cannot happen for an admitted display; refused below all the same

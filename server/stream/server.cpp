@@ -7,7 +7,7 @@
 
 #include "core/log.hpp"
 #include "protocol/schema.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
 
@@ -253,7 +253,7 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
                             fmt::format("{}x{} is {} pixels per eye, over this server's limit of "
                                         "{} (--max-eye-pixels)",
                                         d.eye_width, d.eye_height, pixels, limits.max_eye_pixels)};
-    const uint64_t worst = max_layer_payload_bytes(d.eye_width, d.eye_height, d.format, d.encoding);
+    const uint64_t worst = codec::max_layer_payload_bytes(d.eye_width, d.eye_height, d.format, d.encoding);
     const uint64_t frame_limit = *proto::max_payload(uint16_t(proto::MessageType::kVdLayer));
     if (worst > frame_limit)
         return proto::Error{

@@ -13,7 +13,7 @@
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 
 using namespace hs;
 
@@ -98,8 +98,8 @@ void BM_EncodeLayer(benchmark::State& state) {
     size_t bytes = 0;
     for (auto _ : state) {
         auto data =
-            stream::encode_layer(stream::encode_pixels(img, f), img.width, img.height, f,
-                                 protocol::Encoding::kSparseTiles, stream::default_tile_codec(f));
+            codec::encode_layer(codec::encode_pixels(img, f), img.width, img.height, f,
+                                 protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
         bytes = data.size();
         benchmark::DoNotOptimize(data);
     }
@@ -113,14 +113,14 @@ void BM_DecodeLayer(benchmark::State& state) {
     const auto f = format_of(state.range(0));
     const uint32_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
     const auto data =
-        stream::encode_layer(stream::encode_pixels(img, f), img.width, img.height, f,
-                             protocol::Encoding::kSparseTiles, stream::default_tile_codec(f));
+        codec::encode_layer(codec::encode_pixels(img, f), img.width, img.height, f,
+                             protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
     for (auto _ : state) {
         auto px = protocol::decode_tiles(data, img.width, img.height, bpp);
         if (!std::holds_alternative<std::vector<uint8_t>>(px))
             state.SkipWithError("the layer did not decode");
         auto out =
-            stream::decode_pixels(std::get<std::vector<uint8_t>>(px), img.width, img.height, f);
+            codec::decode_pixels(std::get<std::vector<uint8_t>>(px), img.width, img.height, f);
         benchmark::DoNotOptimize(out);
     }
     state.SetLabel(state.range(0) == 0 ? "f16 tiles+lz4" : "srgb8 tiles+zstd");

@@ -12,7 +12,7 @@
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 #include "stream/server.hpp"
 
 #include "net_fixture.hpp"
@@ -66,7 +66,7 @@ TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
             auto want = offline->render_eye(scene::default_scene().material.specular, k,
                                             scene::eye_poses(head, display.ipd_m)[l.eye]);
             ASSERT_TRUE(want.ok());
-            auto got = stream::decode_pixels(l.data, l.width, l.height, l.format);
+            auto got = codec::decode_pixels(l.data, l.width, l.height, l.format);
             ASSERT_EQ(got.pixels.size(), want->image.pixels.size());
             double max_diff = 0, peak = 0;
             for (size_t p = 0; p < got.pixels.size(); ++p) {

@@ -8,7 +8,7 @@
 #include "protocol/protocol.hpp"
 #include "protocol/tiles.hpp"
 
-namespace hs::stream {
+namespace hs::codec {
 
 // The documented display white of RGBA8 layers: linear radiance 1.0 maps to 255 (sRGB encoded).
 inline constexpr float kLayerWhite = 1.0f;
@@ -51,4 +51,4 @@ ImageRgba32f drive_as_layer(const ImageRgba32f& drive);
 // The drive a client's panel receives from decoded layer radiance (srgb_oetf per channel).
 ImageRgba32f drive_from_layer(const ImageRgba32f& radiance);
 
-}  // namespace hs::stream
+}  // namespace hs::codec

@@ -1,4 +1,4 @@
-#include "stream/layer_codec.hpp"
+#include "codec/layer_codec.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@
 
 #include "protocol/schema.hpp"
 
-namespace hs::stream {
+namespace hs::codec {
 
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format) {
     if (format == protocol::PixelFormat::kRgba8) {
@@ -96,4 +96,4 @@ ImageRgba32f drive_from_layer(const ImageRgba32f& radiance) {
     return out;
 }
 
-}  // namespace hs::stream
+}  // namespace hs::codec
