@@ -1,6 +1,8 @@
 // `hysar bench`: measured costs, as medians over repeated runs in one process.
 //   hysar bench encoding: bytes, encode and decode time of VD layers per encoding and codec.
 //   hysar bench accuracy: error against cost of every quality knob (server/bench/accuracy.hpp).
+//   hysar bench serve: what the server serves against full-frame baselines
+//   (server/bench/serve_bench.hpp).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -11,13 +13,14 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/accuracy.hpp"
+#include "bench/serve_bench.hpp"
+#include "codec/layer_codec.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
 #include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "codec/layer_codec.hpp"
 
 namespace hs::cli {
 
@@ -26,6 +29,7 @@ namespace {
 const char* kBenchHelp =
     "usage: hysar bench encoding [--repeats N] [--json FILE]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
+    "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
     "\n"
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
     "             pixel, point against area lights, HDR format, layer encoding) against the\n"
@@ -34,7 +38,10 @@ const char* kBenchHelp =
     "             prints the table. --quick: a quarter of the resolution, fewer settings\n"
     "  encoding   VD layers of the default scene (HoloLens resolution, every Fig. 7 model and\n"
     "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
-    "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n";
+    "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n"
+    "  serve      the served path (an in-process server, N headsets on loopback) against\n"
+    "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
+    "             writes DIR/bench-serve.json and DIR/bench-serve.png (default out/bench-serve)\n";
 
 template <typename F>
 double time_ms(F&& f) {
@@ -184,6 +191,20 @@ int run_bench(const std::vector<std::string>& args) {
     if (args.empty() || args[0] == "--help" || args[0] == "-h") {
         std::fputs(kBenchHelp, args.empty() ? stderr : stdout);
         return args.empty() ? 2 : 0;
+    }
+    if (args[0] == "serve") {
+        auto parsed =
+            bench::parse_serve_bench_args(std::vector<std::string>(args.begin() + 1, args.end()));
+        if (auto* bad = std::get_if<std::string>(&parsed)) {
+            std::fprintf(stderr, "hysar bench serve: %s\n", bad->c_str());
+            return 2;
+        }
+        const auto& o = std::get<bench::ServeBenchOptions>(parsed);
+        if (o.args == std::vector<std::string>{"--help"}) {
+            std::fputs(bench::kServeBenchHelp, stdout);
+            return 0;
+        }
+        return bench::run_serve_bench(o);
     }
     int repeats = args[0] == "accuracy" ? 7 : 5;
     bool quick = false;

@@ -1,0 +1,1212 @@
+#include "bench/serve_bench.hpp"
+
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <thread>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "clients/connection.hpp"
+#include "core/check.hpp"
+#include "core/image.hpp"
+#include "core/log.hpp"
+#include "core/plot.hpp"
+#include "render/renderer.hpp"
+#include "scene/camera.hpp"
+#include "scene/config.hpp"
+#include "stream/server.hpp"
+
+extern char** environ;
+
+namespace hs::bench {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+namespace proto = hs::protocol;
+
+const char* const kServeBenchHelp =
+    "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
+    "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
+    "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
+    "                         [--lp-threads N,M] [--quick]\n"
+    "\n"
+    "  What the server serves against full-frame baselines, in one process and one sitting:\n"
+    "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
+    "  hemisphere at 64 x 32), then `hysar serve` in-process on loopback with N headsets\n"
+    "  (one thread and connection each, poses at 60 Hz on an orbit, continuous mode).\n"
+    "  Prints a table, writes DIR/bench-serve.json and DIR/bench-serve.png.\n"
+    "\n"
+    "  --headsets LIST      served rows, headsets per row (default 1,8,32)\n"
+    "  --seconds S          measured seconds per row, after 1 s of warm-up (default 10)\n"
+    "  --profile NAME       the scene's viewer profile (default its first)\n"
+    "  --format, --encoding what the headsets register (default srgb8, tiles)\n"
+    "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
+    "  --out DIR            default out/bench-serve\n"
+    "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
+    "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
+    "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
+    "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
+    "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
+    "                       the command works, says nothing about speed\n"
+    "\n"
+    "Example: hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline "
+    "../shared/perf/lean-baseline.sh\n";
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double percentile_of(std::vector<double> v, double p) {
+    if (v.empty())
+        return std::nan("");
+    std::sort(v.begin(), v.end());
+    const double pos = p * double(v.size() - 1);
+    const size_t lo = size_t(std::floor(pos)), hi = std::min(lo + 1, v.size() - 1);
+    return v[lo] + (v[hi] - v[lo]) * (pos - double(lo));
+}
+
+const char* format_name(proto::PixelFormat f) {
+    return f == proto::PixelFormat::kRgba16f ? "rgba16f" : "srgb8";
+}
+const char* encoding_name(proto::Encoding e) {
+    return e == proto::Encoding::kRaw ? "raw" : "tiles";
+}
+
+Result<scene::Pose> head_at(const scene::Scene& s, double angle_deg) {
+    auto h = s.viewing.heights_m.find(s.viewing.default_height);
+    if (h == s.viewing.heights_m.end())
+        return make_error(ErrorCode::kInvalidArgument,
+                          "the scene's viewing block has no height named '" +
+                              s.viewing.default_height + "' (its default_height)");
+    return scene::viewing_pose(s.viewing, angle_deg, h->second);
+}
+
+}  // namespace
+
+Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Scene& scene,
+                                           const scene::ViewerProfile& profile, int frames) {
+    HS_CHECK(frames >= 1, "full_frame_baseline needs at least one frame");
+    // Every renderer call of the benchmark is here, so that a change of the render path's API
+    // (or a flag that turns its level of detail and sparse shading off) is made in one place.
+    auto renderer = render::Renderer::create(device, scene, render::RendererCreateInfo{});
+    if (!renderer)
+        return renderer.error();
+    auto head = head_at(scene, 0.0);
+    if (!head)
+        return head.error();
+    const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    const auto eyes = scene::eye_poses(head.value(), profile.ipd_m);
+    const std::vector<render::Renderer::EyeRequest> pair{{scene.material.specular, k, eyes[0]},
+                                                         {scene.material.specular, k, eyes[1]}};
+    constexpr int kWarmup = 5;
+    std::vector<double> ms;
+    for (int i = 0; i < kWarmup + frames; ++i) {
+        const auto t0 = Clock::now();
+        auto out = renderer.value()->render_eyes(pair);
+        const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        if (!out)
+            return out.error();
+        for (const auto& r : out.value())
+            if (!r.report.ran)
+                return make_error(ErrorCode::kUnsupported,
+                                  "the VD pass recorded no work (" + r.report.skipped_because +
+                                      "): the material has nothing view-dependent to time");
+        if (i >= kWarmup)
+            ms.push_back(dt);
+    }
+    BaselineFigure f;
+    f.stereo_ms = percentile_of(ms, 0.5);
+    f.per_s = 1000.0 / f.stereo_ms;
+    f.triangles = renderer.value()->mesh().indices.size() / 3;
+    f.frames = frames;
+    return f;
+}
+
+Result<scene::Scene> lean_scene(const scene::Scene& scene) {
+    if (scene.prop.kind != scene::Prop::Kind::kHemisphere)
+        return make_error(ErrorCode::kUnsupported,
+                          "the prop is a glTF mesh: there is no hemisphere to tessellate at 64x32");
+    scene::Scene s = scene;
+    s.prop.hemisphere.segments = 64;
+    s.prop.hemisphere.rings = 32;
+    return s;
+}
+
+// ---- Command line ----
+
+namespace {
+
+std::optional<std::vector<int>> int_list(const std::string& text, int lo, int hi) {
+    std::vector<int> out;
+    size_t at = 0;
+    while (at <= text.size()) {
+        const size_t comma = std::min(text.find(',', at), text.size());
+        int v = 0;
+        const char* b = text.data() + at;
+        const char* e = text.data() + comma;
+        auto [p, ec] = std::from_chars(b, e, v);
+        if (b == e || ec != std::errc() || p != e || v < lo || v > hi)
+            return std::nullopt;
+        out.push_back(v);
+        at = comma + 1;
+    }
+    if (out.empty())
+        return std::nullopt;
+    return out;
+}
+
+std::optional<double> number(const std::string& text, double lo, double hi) {
+    char* end = nullptr;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v < lo || v > hi)
+        return std::nullopt;
+    return v;
+}
+
+}  // namespace
+
+std::variant<ServeBenchOptions, std::string> parse_serve_bench_args(
+    const std::vector<std::string>& args) {
+    ServeBenchOptions o;
+    o.args = args;
+    for (const auto& a : args)
+        if (a == "--help" || a == "-h") {
+            o.args = {"--help"};
+            return o;
+        }
+    bool quick = false, have_headsets = false, have_seconds = false, have_frames = false;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        if (a == "--quick") {
+            quick = true;
+            continue;
+        }
+        static const char* const kValued[] = {
+            "--headsets", "--seconds",       "--profile",    "--format", "--encoding",  "--scene",
+            "--out",      "--lean-baseline", "--lp-threads", "--frames", "--child-json"};
+        if (std::find_if(std::begin(kValued), std::end(kValued),
+                         [&](const char* f) { return a == f; }) == std::end(kValued))
+            return "unknown option '" + a + "' (see hysar bench serve --help)";
+        if (i + 1 >= args.size())
+            return a + " wants a value";
+        const std::string& v = args[++i];
+        if (a == "--headsets") {
+            auto l = int_list(v, 1, 256);
+            if (!l)
+                return "--headsets wants a comma-separated list of counts 1..256, got '" + v + "'";
+            o.headsets = *l, have_headsets = true;
+        } else if (a == "--seconds") {
+            auto s = number(v, 0.1, 3600);
+            if (!s)
+                return "--seconds wants a number of seconds in 0.1..3600, got '" + v + "'";
+            o.seconds = *s, have_seconds = true;
+        } else if (a == "--frames") {
+            auto l = int_list(v, 1, 10000);
+            if (!l || l->size() != 1)
+                return "--frames wants a count 1..10000, got '" + v + "'";
+            o.baseline_frames = l->front(), have_frames = true;
+        } else if (a == "--lp-threads") {
+            auto l = int_list(v, 1, 256);
+            if (!l)
+                return "--lp-threads wants a comma-separated list of thread counts 1..256, got '" +
+                       v + "'";
+            o.lp_threads = *l;
+        } else if (a == "--format") {
+            if (v != "srgb8" && v != "rgba16f")
+                return "--format wants srgb8 or rgba16f, got '" + v + "'";
+            o.format = v == "srgb8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
+        } else if (a == "--encoding") {
+            if (v != "tiles" && v != "raw")
+                return "--encoding wants tiles or raw, got '" + v + "'";
+            o.encoding = v == "tiles" ? proto::Encoding::kSparseTiles : proto::Encoding::kRaw;
+        } else if (v.empty()) {
+            return a + " wants a non-empty value";
+        } else if (a == "--profile") {
+            o.profile = v;
+        } else if (a == "--scene") {
+            o.scene_path = v;
+        } else if (a == "--out") {
+            o.out_dir = v;
+        } else if (a == "--lean-baseline") {
+            o.lean_baseline_command = v;
+        } else {
+            o.child_json = v;
+        }
+    }
+    if (quick) {
+        o.quick = true;
+        if (!have_headsets)
+            o.headsets = {1, 2};
+        if (!have_seconds)
+            o.seconds = 1.5;
+        if (!have_frames)
+            o.baseline_frames = 5;
+    }
+    return o;
+}
+
+// ---- The served path ----
+
+namespace {
+
+// The measured window, shared by the main thread and the headsets (client clock, ns; nothing
+// is inside it until the main thread opens it).
+struct Window {
+    std::atomic<bool> go{false}, stop{false};
+    std::atomic<uint64_t> start_ns{UINT64_MAX}, end_ns{0};
+    // Headsets that have received their first stereo layer or have ended (failed).
+    std::atomic<int> settled{0};
+};
+
+struct HeadsetPlan {
+    std::string address, token, name;
+    proto::RegisterDisplay display;
+    const scene::Scene* scene = nullptr;
+    double phase_deg = 0;       // where on the orbit this headset starts
+    double rate_hz = 60;        // poses per second
+    size_t layer_overhead = 0;  // wire bytes of a VdLayer besides its data
+};
+
+struct HeadsetTally {
+    uint64_t stereo_layers = 0, eye_layers = 0, bytes = 0, errors = 0;
+    std::vector<double> latency_ms;
+    std::string first_error;
+    void fail(const std::string& e) {
+        ++errors;
+        if (first_error.empty())
+            first_error = e;
+    }
+};
+
+constexpr double kOrbitDegPerS = 36.0;  // one turn around the target in 10 s
+constexpr double kMaxWarmupS = 60.0;    // the longest a row waits for every first layer
+
+// One headset: Hello, RegisterDisplay, then poses at the plan's rate until the window closes,
+// counting the layers that arrive inside it. Layers are decoded as messages, never as pixels.
+void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, HeadsetTally& t) {
+    bool counted = false, is_settled = false;
+    auto mark_ready = [&] {
+        if (!std::exchange(counted, true))
+            ++ready;
+    };
+    auto mark_settled = [&] {
+        if (!std::exchange(is_settled, true))
+            ++w.settled;
+    };
+    auto give_up = [&](const std::string& e) {
+        t.fail(e);
+        mark_ready();
+        mark_settled();
+    };
+    try {
+        auto c = client::Connection::open(plan.address);
+        if (auto* e = std::get_if<std::string>(&c))
+            return give_up("connect: " + *e);
+        auto& conn = *std::get<std::unique_ptr<client::Connection>>(c);
+        if (auto e = conn.hello(proto::Role::kHmd, plan.token, plan.name))
+            return give_up(*e);
+        if (!conn.send(plan.display))
+            return give_up("RegisterDisplay: " + conn.last_error());
+        mark_ready();
+        while (!w.go.load() && !w.stop.load())
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        const auto period = std::chrono::duration_cast<Clock::duration>(
+            std::chrono::duration<double>(1.0 / plan.rate_hz));
+        const Clock::time_point start = Clock::now();
+        Clock::time_point next_pose = start;
+        std::map<uint32_t, uint8_t> eyes_of_frame;  // frames with one eye received
+        while (!w.stop.load()) {
+            const auto now = Clock::now();
+            if (now >= next_pose) {
+                const double t_s = std::chrono::duration<double>(now - start).count();
+                auto head = scene::viewing_pose(
+                    plan.scene->viewing, plan.phase_deg + kOrbitDegPerS * t_s,
+                    plan.scene->viewing.heights_m.at(plan.scene->viewing.default_height));
+                if (!head) {
+                    t.fail(head.error().message);
+                    break;
+                }
+                proto::Pose p;
+                const auto& pos = head.value().position;
+                const auto& q = head.value().orientation;
+                p.position_m = {pos.x, pos.y, pos.z};
+                p.orientation_wxyz = {q.w, q.x, q.y, q.z};
+                // Stamped as it is sent: a layer's pose_time_ns is its pose's send time.
+                p.client_time_ns = client::now_ns();
+                if (!conn.send(p)) {
+                    t.fail("Pose: " + conn.last_error());
+                    break;
+                }
+                next_pose += period;
+                if (next_pose < now)  // fell behind (a slow machine): no burst to catch up
+                    next_pose = now + period;
+            }
+            // Rounded up: a wait rounded down to 0 ms would spin until the next pose, and 32
+            // spinning headsets take the cores the server is measured on.
+            const auto wait = std::chrono::ceil<std::chrono::milliseconds>(
+                                  std::min(next_pose - Clock::now(),
+                                           Clock::duration(std::chrono::milliseconds(20))))
+                                  .count();
+            auto m = conn.receive(int(std::max<int64_t>(wait, 0)));
+            if (auto* e = std::get_if<std::string>(&m)) {
+                t.fail(*e);
+                break;
+            }
+            auto* msg = std::get_if<proto::Message>(&m);
+            if (!msg)
+                continue;
+            if (auto* err = std::get_if<proto::Error>(msg)) {
+                t.fail("server error: " + client::describe(*err));
+                continue;
+            }
+            auto* layer = std::get_if<proto::VdLayer>(msg);
+            if (!layer)
+                continue;
+            const uint64_t at = client::now_ns();
+            const bool inside = at >= w.start_ns.load() && at < w.end_ns.load();
+            if (inside) {
+                ++t.eye_layers;
+                t.bytes += layer->data.size() + plan.layer_overhead;
+            }
+            uint8_t& eyes = eyes_of_frame[layer->frame_id];
+            eyes |= uint8_t(1u << layer->eye);
+            if (eyes == 3) {
+                eyes_of_frame.erase(layer->frame_id);
+                mark_settled();
+                if (inside) {
+                    ++t.stereo_layers;
+                    t.latency_ms.push_back(double(int64_t(at - layer->pose_time_ns)) * 1e-6);
+                }
+            }
+            while (eyes_of_frame.size() > 64) eyes_of_frame.erase(eyes_of_frame.begin());
+        }
+        conn.send(proto::Bye{0});
+        conn.close();
+    } catch (const std::exception& e) {
+        t.fail(std::string("internal error: ") + e.what());
+    }
+    mark_ready();
+    mark_settled();
+}
+
+// The server's cost of the VD pass: per stage, the sum over all eye layers so far (its mean
+// times its frame count). Read defensively: a field that is missing is left out.
+struct CostSnapshot {
+    double frames = 0;
+    std::map<std::string, double> sums;
+};
+CostSnapshot cost_snapshot(const json& stats) {
+    CostSnapshot s;
+    if (!stats.is_object() || !stats.contains("cost_ms") || !stats["cost_ms"].is_object())
+        return s;
+    const json& cost = stats["cost_ms"];
+    if (!cost.contains("viewer_vd") || !cost["viewer_vd"].is_object())
+        return s;
+    const json& vd = cost["viewer_vd"];
+    if (!vd.contains("frames") || !vd["frames"].is_number())
+        return s;
+    s.frames = vd["frames"].get<double>();
+    if (vd.contains("mean") && vd["mean"].is_object())
+        for (const auto& [stage, v] : vd["mean"].items())
+            if (v.is_number())
+                s.sums[stage] = v.get<double>() * s.frames;
+    return s;
+}
+
+double cpu_seconds() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
+           double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
+}
+
+template <typename T>
+std::optional<T> json_at(const json& j, std::initializer_list<const char*> path) {
+    const json* p = &j;
+    for (const char* k : path) {
+        if (!p->is_object() || !p->contains(k))
+            return std::nullopt;
+        p = &(*p)[k];
+    }
+    if (!p->is_number())
+        return std::nullopt;
+    return p->get<T>();
+}
+
+// After a row: every session gone and the render thread idle, so that the next row starts
+// from a quiet server.
+void settle(const stream::Server& server) {
+    const auto deadline = Clock::now() + std::chrono::seconds(10);
+    while (Clock::now() < deadline &&
+           json_at<uint64_t>(server.stats(), {"sessions"}).value_or(0) > 0)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    auto last = json_at<uint64_t>(server.stats(), {"timing_ms", "vd_layers"});
+    for (int quiet = 0; quiet < 6 && Clock::now() < deadline;) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        auto now = json_at<uint64_t>(server.stats(), {"timing_ms", "vd_layers"});
+        quiet = now == last ? quiet + 1 : 0;
+        last = now;
+    }
+}
+
+ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const ServeBenchOptions& o,
+                    const proto::RegisterDisplay& display, const std::string& token, int headsets) {
+    proto::VdLayer empty;
+    empty.encoding = proto::Encoding::kSparseTiles;
+    empty.width = empty.height = 1;
+    const auto frame = proto::encode(empty, proto::Side::kServer);
+    const size_t overhead = std::holds_alternative<std::vector<uint8_t>>(frame)
+                                ? std::get<std::vector<uint8_t>>(frame).size()
+                                : proto::kHeaderBytes;
+    std::vector<HeadsetPlan> plans(static_cast<size_t>(headsets));
+    for (int i = 0; i < headsets; ++i) {
+        auto& p = plans[size_t(i)];
+        p.address = "127.0.0.1:" + std::to_string(server.port());
+        p.token = token;
+        p.name = fmt::format("bench-{}-{}", headsets, i);
+        p.display = display;
+        p.scene = &scene;
+        p.phase_deg = 360.0 * i / headsets;
+        p.rate_hz = o.pose_rate_hz;
+        p.layer_overhead = overhead;
+    }
+    Window w;
+    std::atomic<int> ready{0};
+    std::vector<HeadsetTally> tallies(static_cast<size_t>(headsets));
+    std::vector<std::thread> threads;
+    for (int i = 0; i < headsets; ++i)
+        threads.emplace_back(run_headset, std::cref(plans[size_t(i)]), std::ref(w), std::ref(ready),
+                             std::ref(tallies[size_t(i)]));
+    const auto connect_deadline = Clock::now() + std::chrono::seconds(60);
+    while (ready.load() < headsets && Clock::now() < connect_deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    auto sleep_until = [](uint64_t t_ns) {
+        const uint64_t now = client::now_ns();
+        if (t_ns > now)
+            std::this_thread::sleep_for(std::chrono::nanoseconds(t_ns - now));
+    };
+    // Warm-up: warmup_s, and longer while a headset still waits for its first stereo layer
+    // (its targets and the first round over every headset are start-up, not the steady state).
+    const uint64_t go_ns = client::now_ns();
+    w.go = true;
+    sleep_until(go_ns + uint64_t(o.warmup_s * 1e9));
+    const uint64_t warmup_cap = go_ns + uint64_t(kMaxWarmupS * 1e9);
+    while (w.settled.load() < headsets && client::now_ns() < warmup_cap)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const uint64_t start = client::now_ns();
+    const uint64_t end = start + uint64_t(o.seconds * 1e9);
+    w.end_ns = end;  // before start_ns: the window never reads as open with no end
+    w.start_ns = start;
+    const CostSnapshot c0 = cost_snapshot(server.stats());
+    const double cpu0 = cpu_seconds();
+    sleep_until(end);
+    const double cpu1 = cpu_seconds();
+    const CostSnapshot c1 = cost_snapshot(server.stats());
+    w.stop = true;
+    for (auto& t : threads) t.join();
+
+    ServedRow r;
+    r.headsets = headsets;
+    r.seconds = o.seconds;
+    r.warmup_s = double(start - go_ns) * 1e-9;
+    std::vector<double> latency;
+    uint64_t bytes = 0;
+    for (const auto& t : tallies) {
+        r.stereo_layers += t.stereo_layers;
+        r.eye_layers += t.eye_layers;
+        bytes += t.bytes;
+        r.errors += t.errors;
+        r.headsets_without_layers += t.stereo_layers == 0;
+        if (r.first_error.empty())
+            r.first_error = t.first_error;
+        latency.insert(latency.end(), t.latency_ms.begin(), t.latency_ms.end());
+    }
+    r.per_s_total = double(r.stereo_layers) / o.seconds;
+    r.per_s_per_headset = r.per_s_total / headsets;
+    if (!latency.empty()) {
+        r.latency_p50_ms = percentile_of(latency, 0.5);
+        r.latency_p99_ms = percentile_of(latency, 0.99);
+    }
+    // The server counts one cost frame per eye layer: a stereo layer costs two.
+    const double frames = c1.frames - c0.frames;
+    if (frames > 0)
+        for (const auto& [stage, sum] : c1.sums) {
+            auto before = c0.sums.find(stage);
+            r.stage_ms[stage] =
+                2.0 * (sum - (before == c0.sums.end() ? 0.0 : before->second)) / frames;
+        }
+    if (r.eye_layers > 0)
+        r.bytes_per_layer = double(bytes) / double(r.eye_layers);
+    if (r.stereo_layers > 0)
+        r.cpu_ms_per_stereo_layer = (cpu1 - cpu0) * 1000.0 / double(r.stereo_layers);
+    settle(server);
+    return r;
+}
+
+json opt(const std::optional<double>& v) {
+    return v && std::isfinite(*v) ? json(*v) : json(nullptr);
+}
+std::optional<double> opt_of(const json& j, const char* key) {
+    if (!j.contains(key) || !j[key].is_number())
+        return std::nullopt;
+    return j[key].get<double>();
+}
+
+json row_json(const ServedRow& r) {
+    json stages = json::object();
+    for (const auto& [k, v] : r.stage_ms) stages[k] = opt(v);
+    return {{"headsets", r.headsets},
+            {"lp_num_threads", r.lp_num_threads ? json(*r.lp_num_threads) : json(nullptr)},
+            {"seconds", r.seconds},
+            {"warmup_s", r.warmup_s},
+            {"stereo_layers", r.stereo_layers},
+            {"eye_layers", r.eye_layers},
+            {"stereo_per_s_total", r.per_s_total},
+            {"stereo_per_s_per_headset", r.per_s_per_headset},
+            {"latency_ms_p50", opt(r.latency_p50_ms)},
+            {"latency_ms_p99", opt(r.latency_p99_ms)},
+            {"stage_ms_per_stereo_layer", stages},
+            {"bytes_per_layer", opt(r.bytes_per_layer)},
+            {"cpu_ms_per_stereo_layer", opt(r.cpu_ms_per_stereo_layer)},
+            {"headsets_without_layers", r.headsets_without_layers},
+            {"errors", r.errors},
+            {"first_error", r.first_error}};
+}
+
+ServedRow row_of(const json& j) {
+    ServedRow r;
+    r.headsets = j.value("headsets", 0);
+    if (j.contains("lp_num_threads") && j["lp_num_threads"].is_number_integer())
+        r.lp_num_threads = j["lp_num_threads"].get<int>();
+    r.seconds = j.value("seconds", 0.0);
+    r.warmup_s = j.value("warmup_s", 0.0);
+    r.stereo_layers = j.value("stereo_layers", uint64_t(0));
+    r.eye_layers = j.value("eye_layers", uint64_t(0));
+    r.per_s_total = j.value("stereo_per_s_total", 0.0);
+    r.per_s_per_headset = j.value("stereo_per_s_per_headset", 0.0);
+    r.latency_p50_ms = opt_of(j, "latency_ms_p50");
+    r.latency_p99_ms = opt_of(j, "latency_ms_p99");
+    if (j.contains("stage_ms_per_stereo_layer") && j["stage_ms_per_stereo_layer"].is_object())
+        for (const auto& [k, v] : j["stage_ms_per_stereo_layer"].items())
+            if (v.is_number())
+                r.stage_ms[k] = v.get<double>();
+    r.bytes_per_layer = opt_of(j, "bytes_per_layer");
+    r.cpu_ms_per_stereo_layer = opt_of(j, "cpu_ms_per_stereo_layer");
+    r.headsets_without_layers = j.value("headsets_without_layers", uint64_t(0));
+    r.errors = j.value("errors", uint64_t(0));
+    r.first_error = j.value("first_error", std::string());
+    return r;
+}
+
+std::string random_token() {
+    std::random_device rd;
+    std::string t;
+    for (int i = 0; i < 4; ++i) t += fmt::format("{:08x}", rd());
+    return t;
+}
+
+// Starts the server on an ephemeral loopback port, serves one row per headset count (progress
+// on stderr), stops it. `lp` labels the rows of a --lp-threads child.
+Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scene& scene,
+                                          const scene::ViewerProfile& profile,
+                                          const ServeBenchOptions& o, std::optional<int> lp) {
+    stream::ServerCreateInfo info;
+    info.host = "127.0.0.1";
+    info.port = 0;
+    info.token = random_token();
+    std::error_code ec;
+    info.asset_root =
+        o.scene_path.empty() ? fs::current_path(ec) : fs::absolute(o.scene_path, ec).parent_path();
+    const int most = *std::max_element(o.headsets.begin(), o.headsets.end());
+    info.limits.max_pending = std::max<uint32_t>(info.limits.max_pending, uint32_t(most) + 8);
+    info.limits.max_sessions = std::max<uint32_t>(info.limits.max_sessions, uint32_t(most) + 8);
+    auto server = stream::Server::create(device, scene, info);
+    if (!server)
+        return server.error();
+    stream::Server& srv = *server.value();
+    std::thread net([&srv] {
+        try {
+            srv.run();
+        } catch (const std::exception& e) {
+            log::error("bench serve: the server stopped: {}", e.what());
+        }
+    });
+    const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    proto::RegisterDisplay d;
+    d.eye_width = k.width, d.eye_height = k.height;
+    d.fx = k.fx, d.fy = k.fy, d.cx = k.cx, d.cy = k.cy;
+    d.ipd_m = profile.ipd_m;
+    d.format = o.format;
+    d.encoding = o.encoding;
+    d.mode = proto::FrameMode::kContinuous;
+    std::vector<ServedRow> rows;
+    std::optional<Error> failure;
+    if (auto bad = proto::validate_display(d))
+        failure = make_error(ErrorCode::kInvalidArgument, "profile '" + profile.name +
+                                                              "' is not a display the protocol "
+                                                              "accepts: " +
+                                                              *bad);
+    for (size_t i = 0; !failure && i < o.headsets.size(); ++i) {
+        const int h = o.headsets[i];
+        ServedRow r = serve_row(srv, scene, o, d, info.token, h);
+        r.lp_num_threads = lp;
+        fmt::print(stderr,
+                   "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
+                   "latency p50 {} ms, warm-up {:.1f} s, {} error(s){}\n",
+                   lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
+                   r.per_s_per_headset,
+                   r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-", r.warmup_s,
+                   r.errors, r.first_error.empty() ? "" : "; the first: " + r.first_error);
+        std::fflush(stderr);
+        rows.push_back(std::move(r));
+    }
+    srv.stop();
+    net.join();
+    if (failure)
+        return *failure;
+    return rows;
+}
+
+// ---- The rest of one sitting: the external lean baseline, the LP_NUM_THREADS children ----
+
+struct LeanExternal {
+    std::string command;
+    bool ok = false;
+    double stereo_ms = 0, per_s = 0;
+    std::string output, error;
+};
+
+std::optional<double> figure_after(const std::string& text, const std::string& key) {
+    size_t at = 0;
+    while ((at = text.find(key, at)) != std::string::npos) {
+        if (at == 0 || std::isspace((unsigned char)text[at - 1])) {
+            const char* b = text.c_str() + at + key.size();
+            char* e = nullptr;
+            const double v = std::strtod(b, &e);
+            if (e != b && std::isfinite(v) && v > 0)
+                return v;
+        }
+        at += key.size();
+    }
+    return std::nullopt;
+}
+
+LeanExternal run_lean_baseline(const std::string& command) {
+    LeanExternal l;
+    l.command = command;
+    std::fflush(nullptr);
+    FILE* p = popen(command.c_str(), "r");
+    if (!p) {
+        l.error = "cannot run it";
+        return l;
+    }
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) l.output.append(buf, n);
+    const int status = pclose(p);
+    auto ms = figure_after(l.output, "lean_stereo_ms=");
+    auto per_s = figure_after(l.output, "lean_stereo_per_s=");
+    if (status != 0)
+        l.error = WIFEXITED(status) ? fmt::format("it exited with status {}", WEXITSTATUS(status))
+                                    : std::string("it did not exit normally");
+    else if (!ms || !per_s)
+        l.error = "its output has no lean_stereo_ms=<ms> and lean_stereo_per_s=<x>";
+    else
+        l.ok = true, l.stereo_ms = *ms, l.per_s = *per_s;
+    return l;
+}
+
+// The served rows again in a child process with LP_NUM_THREADS=lp: lavapipe reads it when the
+// Vulkan device is created, so it cannot change inside this process.
+Result<std::vector<ServedRow>> child_rows(const ServeBenchOptions& o, int lp,
+                                          const fs::path& json_path) {
+    std::vector<std::string> argv{"hysar", "bench", "serve"};
+    for (size_t i = 0; i < o.args.size(); ++i) {
+        const std::string& a = o.args[i];
+        if (a == "--lp-threads" || a == "--lean-baseline" || a == "--child-json" || a == "--out")
+            ++i;  // and its value
+        else
+            argv.push_back(a);
+    }
+    argv.push_back("--child-json");
+    argv.push_back(json_path.string());
+    std::vector<std::string> env;
+    for (char** e = environ; *e; ++e)
+        if (std::string_view(*e).rfind("LP_NUM_THREADS=", 0) != 0)
+            env.emplace_back(*e);
+    env.push_back("LP_NUM_THREADS=" + std::to_string(lp));
+    std::vector<char*> argv_p, env_p;
+    for (auto& a : argv) argv_p.push_back(a.data());
+    for (auto& e : env) env_p.push_back(e.data());
+    argv_p.push_back(nullptr);
+    env_p.push_back(nullptr);
+    std::error_code ec;
+    fs::remove(json_path, ec);
+    std::fflush(nullptr);
+    pid_t pid = 0;
+    if (int rc = posix_spawn(&pid, "/proc/self/exe", nullptr, nullptr, argv_p.data(), env_p.data());
+        rc != 0)
+        return make_error(ErrorCode::kIo, fmt::format("cannot start the child: {}", strerror(rc)));
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    std::ifstream in(json_path);
+    const json j = json::parse(in, nullptr, false);
+    if (!j.is_object() || !j.contains("rows") || !j["rows"].is_array())
+        return make_error(
+            ErrorCode::kIo,
+            fmt::format("the child (exit status {}) wrote no rows to {}",
+                        WIFEXITED(status) ? WEXITSTATUS(status) : -1, json_path.string()));
+    std::vector<ServedRow> rows;
+    for (const auto& r : j["rows"]) {
+        rows.push_back(row_of(r));
+        rows.back().lp_num_threads = lp;
+    }
+    return rows;
+}
+
+std::string shell_output(const std::string& command) {
+    std::string out;
+    FILE* p = popen(command.c_str(), "r");
+    if (!p)
+        return out;
+    char buf[512];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+    if (pclose(p) != 0)
+        return {};
+    while (!out.empty() && std::isspace((unsigned char)out.back())) out.pop_back();
+    return out;
+}
+
+json machine_json(const std::string& device_name) {
+    std::string cpu;
+    std::ifstream info("/proc/cpuinfo");
+    for (std::string line; std::getline(info, line);)
+        if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
+            cpu = line.substr(line.find(':') + 1);
+            cpu.erase(0, cpu.find_first_not_of(" \t"));
+            break;
+        }
+    std::error_code ec;
+    const fs::path exe_dir = fs::read_symlink("/proc/self/exe", ec).parent_path();
+    std::string git;
+    if (!ec) {
+        std::string quoted = "'";
+        for (char c : exe_dir.string())
+            quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+        git = shell_output("git -C " + quoted + "' rev-parse HEAD 2>/dev/null");
+    }
+    char date[32] = "";
+    const std::time_t now = std::time(nullptr);
+    std::tm tm{};
+    gmtime_r(&now, &tm);
+    std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", &tm);
+    const char* lp = std::getenv("LP_NUM_THREADS");
+    return {{"cpu", cpu.empty() ? json(nullptr) : json(cpu)},
+            {"cores", std::thread::hardware_concurrency()},
+            {"vulkan_device", device_name},
+            {"lp_num_threads", lp ? json(lp) : json(nullptr)},
+            {"date", date},
+            {"git_commit", git.empty() ? json(nullptr) : json(git)}};
+}
+
+// ---- Output ----
+
+struct Baseline {
+    std::string name;  // "full frame", "lean"
+    std::string tessellation;
+    std::optional<BaselineFigure> figure;
+    std::string error;
+};
+
+struct Report {
+    std::vector<Baseline> baselines;  // full frame, lean
+    std::optional<LeanExternal> lean_external;
+    std::vector<ServedRow> rows;
+    std::vector<std::string> variant_errors;
+};
+
+std::optional<double> ratio(double served, const Baseline& b) {
+    if (!b.figure || !(b.figure->per_s > 0))
+        return std::nullopt;
+    return served / b.figure->per_s;
+}
+std::optional<double> ratio_external(double served, const std::optional<LeanExternal>& l) {
+    if (!l || !l->ok)
+        return std::nullopt;
+    return served / l->per_s;
+}
+
+std::string cell(std::optional<double> v, int precision, int width) {
+    if (!v || !std::isfinite(*v))
+        return fmt::format("{:>{}}", "-", width);
+    return fmt::format("{:>{}.{}f}", *v, width, precision);
+}
+
+std::optional<double> stage(const ServedRow& r, std::initializer_list<const char*> names) {
+    for (const char* n : names)
+        if (auto it = r.stage_ms.find(n); it != r.stage_ms.end())
+            return it->second;
+    return std::nullopt;
+}
+
+std::string row_label(const ServedRow& r) {
+    return r.lp_num_threads ? fmt::format("served LP_NUM_THREADS={}", *r.lp_num_threads)
+                            : std::string("served");
+}
+
+std::string table(const Report& rep) {
+    std::string out = fmt::format(
+        "{:<26} {:>4} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9} {:>8} "
+        "{:>8} {:>8}\n",
+        "", "HMDs", "stereo/s", "/headset", "ms/stereo", "p50 ms", "p99 ms", "render", "readback",
+        "encode", "send", "KiB/layer", "CPU ms", "x full", "x lean", "x script");
+    for (const auto& b : rep.baselines) {
+        const std::string label =
+            b.figure ? fmt::format("{} {} tri", b.name, b.figure->triangles) : b.name;
+        if (!b.figure) {
+            out += fmt::format("{:<26} {}\n", label, "not measured: " + b.error);
+            continue;
+        }
+        out += fmt::format("{:<26} {:>4} {} {:>9} {}\n", label, "-", cell(b.figure->per_s, 2, 9),
+                           "-", cell(b.figure->stereo_ms, 1, 9));
+    }
+    if (rep.lean_external) {
+        const auto& l = *rep.lean_external;
+        if (l.ok)
+            out += fmt::format("{:<26} {:>4} {} {:>9} {}\n", "lean script", "-",
+                               cell(l.per_s, 2, 9), "-", cell(l.stereo_ms, 1, 9));
+        else
+            out += fmt::format("{:<26} failed: {}\n", "lean script", l.error);
+    }
+    for (const auto& r : rep.rows) {
+        const std::optional<double> ms_per =
+            r.per_s_total > 0 ? std::optional(1000.0 / r.per_s_total) : std::nullopt;
+        const std::optional<double> kib =
+            r.bytes_per_layer ? std::optional(*r.bytes_per_layer / 1024.0) : std::nullopt;
+        out += fmt::format(
+            "{:<26} {:>4} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", row_label(r), r.headsets,
+            cell(r.per_s_total, 2, 9), cell(r.per_s_per_headset, 2, 9), cell(ms_per, 1, 9),
+            cell(r.latency_p50_ms, 1, 8), cell(r.latency_p99_ms, 1, 8),
+            cell(stage(r, {"render", "pass"}), 2, 8), cell(stage(r, {"readback"}), 2, 8),
+            cell(stage(r, {"encode"}), 2, 8), cell(stage(r, {"send"}), 2, 8), cell(kib, 1, 9),
+            cell(r.cpu_ms_per_stereo_layer, 1, 9),
+            cell(rep.baselines.size() > 0 ? ratio(r.per_s_total, rep.baselines[0]) : std::nullopt,
+                 2, 8),
+            cell(rep.baselines.size() > 1 ? ratio(r.per_s_total, rep.baselines[1]) : std::nullopt,
+                 2, 8),
+            cell(ratio_external(r.per_s_total, rep.lean_external), 2, 8));
+    }
+    out +=
+        "\n"
+        "stereo/s: stereo layers (both eyes of a frame) received per second; ms/stereo: the\n"
+        "baselines' median per stereo pair, the served rows' 1000 / stereo/s. p50/p99: from\n"
+        "sending a pose to receiving the second eye's layer rendered from it. render, readback,\n"
+        "encode, send: the server's ms per stereo layer over the row (- : it does not report the\n"
+        "stage). KiB/layer: on the wire, per eye. CPU ms: this process's user + system time per\n"
+        "stereo layer, which includes the in-process headset clients. x full, x lean, x script:\n"
+        "served stereo/s over the full-frame, lean (64 x 32) and lean-script baselines.\n";
+    for (const auto& e : rep.variant_errors) out += "note: " + e + "\n";
+    return out;
+}
+
+// The smallest of 1, 1.5, 2, 2.5, 3, 4, 5, 6 or 8 times a power of ten that is at least v: four
+// such steps label the axis with short, round numbers.
+double nice_step(double v) {
+    if (!(v > 0))
+        return 1;
+    const double p = std::pow(10.0, std::floor(std::log10(v)));
+    for (double m : {1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0})
+        if (m * p >= v * (1 - 1e-9))
+            return m * p;
+    return 10 * p;
+}
+
+ImageRgba8 plot(const Report& rep, const std::string& subtitle) {
+    int most = 1;
+    for (const auto& r : rep.rows) most = std::max(most, r.headsets);
+    // line_plot draws five ticks from lo to hi: 0..4k puts them on whole headset counts, and
+    // 0..4s with a round step s the layer rates on round values.
+    const double x_hi = 4.0 * std::ceil(most / 4.0);
+    double y_max = 0;
+    for (const auto& r : rep.rows) y_max = std::max(y_max, r.per_s_total);
+    for (const auto& b : rep.baselines)
+        if (b.figure)
+            y_max = std::max(y_max, b.figure->per_s);
+    if (rep.lean_external && rep.lean_external->ok)
+        y_max = std::max(y_max, rep.lean_external->per_s);
+    const double y_hi = 4.0 * nice_step(y_max * 1.08 / 4.0);
+    const Rgb served_colours[] = {
+        {215, 60, 40}, {70, 110, 200}, {40, 150, 80}, {150, 80, 190}, {200, 140, 30}};
+    std::vector<std::optional<int>> variants;
+    for (const auto& r : rep.rows)
+        if (std::find(variants.begin(), variants.end(), r.lp_num_threads) == variants.end())
+            variants.push_back(r.lp_num_threads);
+    std::vector<Series> series;
+    for (size_t v = 0; v < variants.size(); ++v) {
+        Series s;
+        s.colour = served_colours[v % std::size(served_colours)];
+        s.markers = true;
+        for (const auto& r : rep.rows)
+            if (r.lp_num_threads == variants[v]) {
+                s.name = row_label(r);
+                s.x.push_back(r.headsets);
+                s.y.push_back(r.per_s_total);
+                s.labels.push_back(fmt::format("{:.3g}", r.per_s_total));
+            }
+        series.push_back(std::move(s));
+    }
+    auto level = [&](const std::string& name, double per_s, Rgb c) {
+        Series s{fmt::format("{} {:.3g}/s", name, per_s), {0.0, x_hi}, {per_s, per_s}, c};
+        series.push_back(std::move(s));
+    };
+    const Rgb greys[] = {{40, 40, 40}, {140, 140, 140}};
+    for (size_t i = 0; i < rep.baselines.size(); ++i)
+        if (const auto& b = rep.baselines[i]; b.figure)
+            level(fmt::format("{} {} tri", b.name, b.figure->triangles), b.figure->per_s,
+                  greys[i % 2]);
+    if (rep.lean_external && rep.lean_external->ok)
+        level("lean script", rep.lean_external->per_s, {190, 150, 60});
+    PlotOptions po;
+    po.title = "stereo layers/s: served vs full frame";
+    po.x_label = "headsets";
+    po.y_label = "stereo layers/s, all headsets (" + subtitle + ")";
+    po.width = 720, po.height = 420;
+    po.x_lo = 0, po.x_hi = x_hi;
+    po.y_lo = 0, po.y_hi = y_hi;
+    return line_plot(series, po);
+}
+
+json report_json(const Report& rep) {
+    json baselines = json::array();
+    for (const auto& b : rep.baselines) {
+        json j = {{"name", b.name}, {"tessellation", b.tessellation}};
+        if (b.figure) {
+            j["stereo_ms_median"] = b.figure->stereo_ms;
+            j["stereo_per_s"] = b.figure->per_s;
+            j["triangles"] = b.figure->triangles;
+            j["frames"] = b.figure->frames;
+        } else {
+            j["error"] = b.error;
+        }
+        baselines.push_back(j);
+    }
+    json rows = json::array();
+    for (const auto& r : rep.rows) {
+        json j = row_json(r);
+        j["served_over_full"] =
+            opt(rep.baselines.size() > 0 ? ratio(r.per_s_total, rep.baselines[0]) : std::nullopt);
+        j["served_over_lean"] =
+            opt(rep.baselines.size() > 1 ? ratio(r.per_s_total, rep.baselines[1]) : std::nullopt);
+        j["served_over_lean_script"] = opt(ratio_external(r.per_s_total, rep.lean_external));
+        rows.push_back(j);
+    }
+    json out = {{"baselines", baselines}, {"rows", rows}, {"variant_errors", rep.variant_errors}};
+    if (rep.lean_external) {
+        const auto& l = *rep.lean_external;
+        out["lean_script"] = {{"command", l.command}, {"ok", l.ok}, {"output", l.output}};
+        if (l.ok) {
+            out["lean_script"]["stereo_ms"] = l.stereo_ms;
+            out["lean_script"]["stereo_per_s"] = l.per_s;
+        } else {
+            out["lean_script"]["error"] = l.error;
+        }
+    }
+    return out;
+}
+
+Result<scene::Scene> load(const ServeBenchOptions& o) {
+    if (o.scene_path.empty())
+        return scene::default_scene();
+    std::error_code ec;
+    return scene::load_scene_file(o.scene_path, fs::absolute(o.scene_path, ec).parent_path());
+}
+
+std::string tessellation_of(const scene::Scene& s) {
+    if (s.prop.kind != scene::Prop::Kind::kHemisphere)
+        return "glTF";
+    return fmt::format("{}x{}", s.prop.hemisphere.segments, s.prop.hemisphere.rings);
+}
+
+// Restores the log level on every way out.
+struct QuietLog {
+    log::Level was = log::level();
+    QuietLog() { log::set_level(std::max(was, log::Level::kWarn)); }
+    ~QuietLog() { log::set_level(was); }
+};
+
+}  // namespace
+
+int run_serve_bench(const ServeBenchOptions& o) {
+    auto fail = [](const std::string& what) {
+        std::fprintf(stderr, "hysar bench serve: %s\n", what.c_str());
+        return 1;
+    };
+    auto s = load(o);
+    if (!s)
+        return fail("--scene: " + s.error().message);
+    const scene::Scene& sc = s.value();
+    const scene::ViewerProfile* profile = o.profile.empty()
+                                              ? (sc.viewers.empty() ? nullptr : &sc.viewers.front())
+                                              : sc.find_viewer(o.profile);
+    if (!profile) {
+        std::string names;
+        for (const auto& v : sc.viewers) names += (names.empty() ? "" : ", ") + v.name;
+        std::fprintf(stderr,
+                     "hysar bench serve: --profile '%s': the scene has no such viewer profile "
+                     "(it has: %s)\n",
+                     o.profile.c_str(), names.c_str());
+        return 2;
+    }
+    const fs::path dir(o.out_dir);
+    if (o.child_json.empty()) {
+        std::error_code ec;
+        fs::create_directories(dir, ec);
+        if (ec)
+            return fail("--out: cannot create " + o.out_dir + ": " + ec.message());
+    }
+    std::signal(SIGPIPE, SIG_IGN);
+    QuietLog quiet;
+    Report rep;
+    std::string device_name;
+    {
+        auto device = gpu::Device::create(gpu::device_info_from_environment());
+        if (!device)
+            return fail(device.error().message);
+        device_name = device.value()->name();
+        if (o.child_json.empty()) {
+            const scene::Intrinsics k = scene::eye_intrinsics(*profile);
+            std::fprintf(stderr,
+                         "bench serve: %s, %s %ux%u per eye, %s %s; baselines over %d pairs\n",
+                         device_name.c_str(), profile->name.c_str(), k.width, k.height,
+                         format_name(o.format), encoding_name(o.encoding), o.baseline_frames);
+            auto lean = lean_scene(sc);
+            const std::pair<const char*, const scene::Scene*> scenes[] = {
+                {"full frame", &sc}, {"lean", lean ? &lean.value() : nullptr}};
+            for (const auto& [name, scene] : scenes) {
+                Baseline b{name, scene ? tessellation_of(*scene) : "64x32"};
+                auto f = scene ? full_frame_baseline(*device.value(), *scene, *profile,
+                                                     o.baseline_frames)
+                               : Result<BaselineFigure>(lean.error());
+                if (f) {
+                    b.figure = f.value();
+                    std::fprintf(stderr,
+                                 "bench serve: %s (%s, %llu triangles): %.2f ms per stereo pair "
+                                 "(%.2f/s)\n",
+                                 name, b.tessellation.c_str(),
+                                 (unsigned long long)b.figure->triangles, b.figure->stereo_ms,
+                                 b.figure->per_s);
+                } else {
+                    b.error = f.error().message;
+                    std::fprintf(stderr, "bench serve: %s: not measured: %s\n", name,
+                                 b.error.c_str());
+                }
+                rep.baselines.push_back(std::move(b));
+            }
+            if (!o.lean_baseline_command.empty()) {
+                std::fprintf(stderr, "bench serve: running the lean script: %s\n",
+                             o.lean_baseline_command.c_str());
+                rep.lean_external = run_lean_baseline(o.lean_baseline_command);
+                if (rep.lean_external->ok)
+                    std::fprintf(stderr,
+                                 "bench serve: lean script: %.2f ms per stereo pair (%.2f/s)\n",
+                                 rep.lean_external->stereo_ms, rep.lean_external->per_s);
+                else
+                    std::fprintf(stderr,
+                                 "bench serve: the lean script failed (%s); carrying on without "
+                                 "it\n",
+                                 rep.lean_external->error.c_str());
+            }
+        }
+        auto rows = serve_rows(*device.value(), sc, *profile, o, std::nullopt);
+        if (!rows)
+            return fail(rows.error().message);
+        rep.rows = std::move(rows.value());
+    }
+    if (!o.child_json.empty()) {
+        json rows = json::array();
+        for (const auto& r : rep.rows) rows.push_back(row_json(r));
+        std::ofstream out(o.child_json);
+        out << json{{"rows", rows}}.dump(2) << "\n";
+        return out ? 0 : fail("cannot write " + o.child_json);
+    }
+    for (int lp : o.lp_threads) {
+        std::fprintf(stderr, "bench serve: served rows again with LP_NUM_THREADS=%d\n", lp);
+        auto rows = child_rows(o, lp, dir / fmt::format("lp-threads-{}.json", lp));
+        if (!rows) {
+            rep.variant_errors.push_back(
+                fmt::format("LP_NUM_THREADS={}: {}", lp, rows.error().message));
+            std::fprintf(stderr, "bench serve: LP_NUM_THREADS=%d: %s\n", lp,
+                         rows.error().message.c_str());
+            continue;
+        }
+        rep.rows.insert(rep.rows.end(), rows.value().begin(), rows.value().end());
+    }
+    // Variants side by side: each headset count's rows together.
+    std::stable_sort(rep.rows.begin(), rep.rows.end(), [](const ServedRow& a, const ServedRow& b) {
+        return a.headsets < b.headsets;
+    });
+
+    const scene::Intrinsics k = scene::eye_intrinsics(*profile);
+    json j = report_json(rep);
+    j["machine"] = machine_json(device_name);
+    j["config"] = {{"scene", o.scene_path.empty() ? "default (embedded)" : o.scene_path},
+                   {"scene_tessellation", tessellation_of(sc)},
+                   {"profile", profile->name},
+                   {"eye_width", k.width},
+                   {"eye_height", k.height},
+                   {"format", format_name(o.format)},
+                   {"encoding", encoding_name(o.encoding)},
+                   {"headsets", o.headsets},
+                   {"seconds_per_row", o.seconds},
+                   {"warmup_s", o.warmup_s},
+                   {"pose_rate_hz", o.pose_rate_hz},
+                   {"baseline_frames", o.baseline_frames},
+                   {"lp_threads", o.lp_threads},
+                   {"quick", o.quick}};
+    j["notes"] = {
+        "stage_ms_per_stereo_layer: the server's cost_ms.viewer_vd means over the row (it counts "
+        "one frame per eye layer), times two",
+        "cpu_ms_per_stereo_layer: getrusage(RUSAGE_SELF) user + system over the row per stereo "
+        "layer; it includes the in-process headset clients",
+        "latency: client receive time of a frame's second eye layer minus the send time of the "
+        "pose it was rendered from",
+        "bytes_per_layer: wire bytes per eye layer, header included"};
+    std::printf("%s", table(rep).c_str());
+    const fs::path json_path = dir / "bench-serve.json", png_path = dir / "bench-serve.png";
+    std::ofstream out(json_path);
+    out << j.dump(2, ' ', false, json::error_handler_t::replace) << "\n";
+    if (!out)
+        return fail("cannot write " + json_path.string());
+    const std::string subtitle = fmt::format("{} {}x{}, {} {}", profile->name, k.width, k.height,
+                                             format_name(o.format), encoding_name(o.encoding));
+    if (auto w = write_png(png_path, plot(rep, subtitle)); !w)
+        return fail(w.error().message);
+    std::printf("wrote %s and %s\n", json_path.c_str(), png_path.c_str());
+    for (const auto& r : rep.rows)
+        if (r.stereo_layers == 0)
+            return fail(fmt::format("{} with {} headset(s) received no stereo layer{}",
+                                    row_label(r), r.headsets,
+                                    r.first_error.empty() ? "" : " (" + r.first_error + ")"));
+    return 0;
+}
+
+}  // namespace hs::bench
