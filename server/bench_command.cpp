@@ -4,10 +4,16 @@
 //   hysar bench serve: what the server serves against full-frame baselines
 //   (server/bench/serve_bench.hpp).
 #include <algorithm>
+#include <charconv>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -42,6 +48,145 @@ const char* kBenchHelp =
     "  serve      the served path (an in-process server, N headsets on loopback) against\n"
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
     "             writes DIR/bench-serve.json and DIR/bench-serve.png (default out/bench-serve)\n";
+
+const char* kServeHelp =
+    "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
+    "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
+    "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
+    "                         [--lp-threads N,M] [--quick]\n"
+    "\n"
+    "  What the server serves against full-frame baselines, in one process and one sitting:\n"
+    "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
+    "  hemisphere at 64 x 32), then `hysar serve` in-process on loopback with N headsets\n"
+    "  (one thread and connection each, poses at 60 Hz on an orbit, continuous mode).\n"
+    "  Prints a table, writes DIR/bench-serve.json and DIR/bench-serve.png.\n"
+    "\n"
+    "  --headsets LIST      served rows, headsets per row (default 1,8,32)\n"
+    "  --seconds S          measured seconds per row (default 10), after a warm-up of 1 s\n"
+    "                       or until every headset has had its first stereo layer\n"
+    "  --profile NAME       the scene's viewer profile (default its first)\n"
+    "  --format, --encoding what the headsets register (default srgb8, tiles)\n"
+    "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
+    "  --out DIR            default out/bench-serve\n"
+    "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
+    "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
+    "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
+    "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
+    "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
+    "                       the command works, says nothing about speed\n"
+    "\n"
+    "Example: hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline "
+    "../shared/perf/lean-baseline.sh\n";
+
+std::optional<std::vector<int>> int_list(const std::string& text, int lo, int hi) {
+    std::vector<int> out;
+    size_t at = 0;
+    while (at <= text.size()) {
+        const size_t comma = std::min(text.find(',', at), text.size());
+        int v = 0;
+        const char* b = text.data() + at;
+        const char* e = text.data() + comma;
+        auto [p, ec] = std::from_chars(b, e, v);
+        if (b == e || ec != std::errc() || p != e || v < lo || v > hi)
+            return std::nullopt;
+        out.push_back(v);
+        at = comma + 1;
+    }
+    if (out.empty())
+        return std::nullopt;
+    return out;
+}
+
+std::optional<double> number(const std::string& text, double lo, double hi) {
+    char* end = nullptr;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v < lo || v > hi)
+        return std::nullopt;
+    return v;
+}
+
+// The arguments after `hysar bench serve`; on a bad one, a sentence that names the flag.
+// --child-json is internal (the --lp-threads children).
+std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
+    const std::vector<std::string>& args) {
+    bench::ServeBenchOptions o;
+    o.args = args;
+    for (const auto& a : args)
+        if (a == "--help" || a == "-h") {
+            o.args = {"--help"};
+            return o;
+        }
+    bool quick = false, have_headsets = false, have_seconds = false, have_frames = false;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        if (a == "--quick") {
+            quick = true;
+            continue;
+        }
+        static const char* const kValued[] = {
+            "--headsets", "--seconds",       "--profile",    "--format", "--encoding",  "--scene",
+            "--out",      "--lean-baseline", "--lp-threads", "--frames", "--child-json"};
+        if (std::find_if(std::begin(kValued), std::end(kValued),
+                         [&](const char* f) { return a == f; }) == std::end(kValued))
+            return "unknown option '" + a + "' (see hysar bench serve --help)";
+        if (i + 1 >= args.size())
+            return a + " wants a value";
+        const std::string& v = args[++i];
+        if (a == "--headsets") {
+            auto l = int_list(v, 1, 256);
+            if (!l)
+                return "--headsets wants a comma-separated list of counts 1..256, got '" + v + "'";
+            o.headsets = *l, have_headsets = true;
+        } else if (a == "--seconds") {
+            auto s = number(v, 0.1, 3600);
+            if (!s)
+                return "--seconds wants a number of seconds in 0.1..3600, got '" + v + "'";
+            o.seconds = *s, have_seconds = true;
+        } else if (a == "--frames") {
+            auto l = int_list(v, 1, 10000);
+            if (!l || l->size() != 1)
+                return "--frames wants a count 1..10000, got '" + v + "'";
+            o.baseline_frames = l->front(), have_frames = true;
+        } else if (a == "--lp-threads") {
+            auto l = int_list(v, 1, 256);
+            if (!l)
+                return "--lp-threads wants a comma-separated list of thread counts 1..256, got '" +
+                       v + "'";
+            o.lp_threads = *l;
+        } else if (a == "--format") {
+            if (v != "srgb8" && v != "rgba16f")
+                return "--format wants srgb8 or rgba16f, got '" + v + "'";
+            o.format =
+                v == "srgb8" ? protocol::PixelFormat::kRgba8 : protocol::PixelFormat::kRgba16f;
+        } else if (a == "--encoding") {
+            if (v != "tiles" && v != "raw")
+                return "--encoding wants tiles or raw, got '" + v + "'";
+            o.encoding = v == "tiles" ? protocol::Encoding::kSparseTiles : protocol::Encoding::kRaw;
+        } else if (v.empty()) {
+            return a + " wants a non-empty value";
+        } else if (a == "--profile") {
+            o.profile = v;
+        } else if (a == "--scene") {
+            o.scene_path = v;
+        } else if (a == "--out") {
+            o.out_dir = v;
+        } else if (a == "--lean-baseline") {
+            o.lean_baseline_command = v;
+        } else {
+            o.child_json = v;
+        }
+    }
+    if (quick) {
+        o.quick = true;
+        if (!have_headsets)
+            o.headsets = {1, 2};
+        if (!have_seconds)
+            o.seconds = 1.5;
+        if (!have_frames)
+            o.baseline_frames = 5;
+    }
+    return o;
+}
 
 template <typename F>
 double time_ms(F&& f) {
@@ -193,15 +338,14 @@ int run_bench(const std::vector<std::string>& args) {
         return args.empty() ? 2 : 0;
     }
     if (args[0] == "serve") {
-        auto parsed =
-            bench::parse_serve_bench_args(std::vector<std::string>(args.begin() + 1, args.end()));
+        auto parsed = parse_serve_args(std::vector<std::string>(args.begin() + 1, args.end()));
         if (auto* bad = std::get_if<std::string>(&parsed)) {
             std::fprintf(stderr, "hysar bench serve: %s\n", bad->c_str());
             return 2;
         }
         const auto& o = std::get<bench::ServeBenchOptions>(parsed);
         if (o.args == std::vector<std::string>{"--help"}) {
-            std::fputs(bench::kServeBenchHelp, stdout);
+            std::fputs(kServeHelp, stdout);
             return 0;
         }
         return bench::run_serve_bench(o);

@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <csignal>
@@ -40,34 +39,6 @@ namespace hs::bench {
 namespace fs = std::filesystem;
 using json = nlohmann::json;
 namespace proto = hs::protocol;
-
-const char* const kServeBenchHelp =
-    "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
-    "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
-    "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
-    "                         [--lp-threads N,M] [--quick]\n"
-    "\n"
-    "  What the server serves against full-frame baselines, in one process and one sitting:\n"
-    "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
-    "  hemisphere at 64 x 32), then `hysar serve` in-process on loopback with N headsets\n"
-    "  (one thread and connection each, poses at 60 Hz on an orbit, continuous mode).\n"
-    "  Prints a table, writes DIR/bench-serve.json and DIR/bench-serve.png.\n"
-    "\n"
-    "  --headsets LIST      served rows, headsets per row (default 1,8,32)\n"
-    "  --seconds S          measured seconds per row, after 1 s of warm-up (default 10)\n"
-    "  --profile NAME       the scene's viewer profile (default its first)\n"
-    "  --format, --encoding what the headsets register (default srgb8, tiles)\n"
-    "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
-    "  --out DIR            default out/bench-serve\n"
-    "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
-    "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
-    "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
-    "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
-    "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
-    "                       the command works, says nothing about speed\n"
-    "\n"
-    "Example: hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline "
-    "../shared/perf/lean-baseline.sh\n";
 
 namespace {
 
@@ -147,119 +118,6 @@ Result<scene::Scene> lean_scene(const scene::Scene& scene) {
     s.prop.hemisphere.segments = 64;
     s.prop.hemisphere.rings = 32;
     return s;
-}
-
-// ---- Command line ----
-
-namespace {
-
-std::optional<std::vector<int>> int_list(const std::string& text, int lo, int hi) {
-    std::vector<int> out;
-    size_t at = 0;
-    while (at <= text.size()) {
-        const size_t comma = std::min(text.find(',', at), text.size());
-        int v = 0;
-        const char* b = text.data() + at;
-        const char* e = text.data() + comma;
-        auto [p, ec] = std::from_chars(b, e, v);
-        if (b == e || ec != std::errc() || p != e || v < lo || v > hi)
-            return std::nullopt;
-        out.push_back(v);
-        at = comma + 1;
-    }
-    if (out.empty())
-        return std::nullopt;
-    return out;
-}
-
-std::optional<double> number(const std::string& text, double lo, double hi) {
-    char* end = nullptr;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v < lo || v > hi)
-        return std::nullopt;
-    return v;
-}
-
-}  // namespace
-
-std::variant<ServeBenchOptions, std::string> parse_serve_bench_args(
-    const std::vector<std::string>& args) {
-    ServeBenchOptions o;
-    o.args = args;
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            o.args = {"--help"};
-            return o;
-        }
-    bool quick = false, have_headsets = false, have_seconds = false, have_frames = false;
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        if (a == "--quick") {
-            quick = true;
-            continue;
-        }
-        static const char* const kValued[] = {
-            "--headsets", "--seconds",       "--profile",    "--format", "--encoding",  "--scene",
-            "--out",      "--lean-baseline", "--lp-threads", "--frames", "--child-json"};
-        if (std::find_if(std::begin(kValued), std::end(kValued),
-                         [&](const char* f) { return a == f; }) == std::end(kValued))
-            return "unknown option '" + a + "' (see hysar bench serve --help)";
-        if (i + 1 >= args.size())
-            return a + " wants a value";
-        const std::string& v = args[++i];
-        if (a == "--headsets") {
-            auto l = int_list(v, 1, 256);
-            if (!l)
-                return "--headsets wants a comma-separated list of counts 1..256, got '" + v + "'";
-            o.headsets = *l, have_headsets = true;
-        } else if (a == "--seconds") {
-            auto s = number(v, 0.1, 3600);
-            if (!s)
-                return "--seconds wants a number of seconds in 0.1..3600, got '" + v + "'";
-            o.seconds = *s, have_seconds = true;
-        } else if (a == "--frames") {
-            auto l = int_list(v, 1, 10000);
-            if (!l || l->size() != 1)
-                return "--frames wants a count 1..10000, got '" + v + "'";
-            o.baseline_frames = l->front(), have_frames = true;
-        } else if (a == "--lp-threads") {
-            auto l = int_list(v, 1, 256);
-            if (!l)
-                return "--lp-threads wants a comma-separated list of thread counts 1..256, got '" +
-                       v + "'";
-            o.lp_threads = *l;
-        } else if (a == "--format") {
-            if (v != "srgb8" && v != "rgba16f")
-                return "--format wants srgb8 or rgba16f, got '" + v + "'";
-            o.format = v == "srgb8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
-        } else if (a == "--encoding") {
-            if (v != "tiles" && v != "raw")
-                return "--encoding wants tiles or raw, got '" + v + "'";
-            o.encoding = v == "tiles" ? proto::Encoding::kSparseTiles : proto::Encoding::kRaw;
-        } else if (v.empty()) {
-            return a + " wants a non-empty value";
-        } else if (a == "--profile") {
-            o.profile = v;
-        } else if (a == "--scene") {
-            o.scene_path = v;
-        } else if (a == "--out") {
-            o.out_dir = v;
-        } else if (a == "--lean-baseline") {
-            o.lean_baseline_command = v;
-        } else {
-            o.child_json = v;
-        }
-    }
-    if (quick) {
-        o.quick = true;
-        if (!have_headsets)
-            o.headsets = {1, 2};
-        if (!have_seconds)
-            o.seconds = 1.5;
-        if (!have_frames)
-            o.baseline_frames = 5;
-    }
-    return o;
 }
 
 // ---- The served path ----
@@ -406,8 +264,11 @@ void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, He
     mark_settled();
 }
 
-// The server's cost of the VD pass: per stage, the sum over all eye layers so far (its mean
-// times its frame count). Read defensively: a field that is missing is left out.
+// The server's cost of the VD path: per stage, its mean so far times the frame count beside it.
+// A stage may be counted in its own unit (per layer, per stereo frame, per batch); as long as
+// that count grows in step with `frames`, the difference of two snapshots over the difference of
+// their frames is the stage's mean, in its unit, between them. Read defensively: a field that is
+// missing is left out.
 struct CostSnapshot {
     double frames = 0;
     std::map<std::string, double> sums;
@@ -544,13 +405,11 @@ ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const Ser
         r.latency_p50_ms = percentile_of(latency, 0.5);
         r.latency_p99_ms = percentile_of(latency, 0.99);
     }
-    // The server counts one cost frame per eye layer: a stereo layer costs two.
     const double frames = c1.frames - c0.frames;
     if (frames > 0)
         for (const auto& [stage, sum] : c1.sums) {
             auto before = c0.sums.find(stage);
-            r.stage_ms[stage] =
-                2.0 * (sum - (before == c0.sums.end() ? 0.0 : before->second)) / frames;
+            r.stage_ms[stage] = (sum - (before == c0.sums.end() ? 0.0 : before->second)) / frames;
         }
     if (r.eye_layers > 0)
         r.bytes_per_layer = double(bytes) / double(r.eye_layers);
@@ -582,7 +441,7 @@ json row_json(const ServedRow& r) {
             {"stereo_per_s_per_headset", r.per_s_per_headset},
             {"latency_ms_p50", opt(r.latency_p50_ms)},
             {"latency_ms_p99", opt(r.latency_p99_ms)},
-            {"stage_ms_per_stereo_layer", stages},
+            {"stage_ms_mean", stages},
             {"bytes_per_layer", opt(r.bytes_per_layer)},
             {"cpu_ms_per_stereo_layer", opt(r.cpu_ms_per_stereo_layer)},
             {"headsets_without_layers", r.headsets_without_layers},
@@ -603,8 +462,8 @@ ServedRow row_of(const json& j) {
     r.per_s_per_headset = j.value("stereo_per_s_per_headset", 0.0);
     r.latency_p50_ms = opt_of(j, "latency_ms_p50");
     r.latency_p99_ms = opt_of(j, "latency_ms_p99");
-    if (j.contains("stage_ms_per_stereo_layer") && j["stage_ms_per_stereo_layer"].is_object())
-        for (const auto& [k, v] : j["stage_ms_per_stereo_layer"].items())
+    if (j.contains("stage_ms_mean") && j["stage_ms_mean"].is_object())
+        for (const auto& [k, v] : j["stage_ms_mean"].items())
             if (v.is_number())
                 r.stage_ms[k] = v.get<double>();
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
@@ -920,8 +779,9 @@ std::string table(const Report& rep) {
         "stereo/s: stereo layers (both eyes of a frame) received per second; ms/stereo: the\n"
         "baselines' median per stereo pair, the served rows' 1000 / stereo/s. p50/p99: from\n"
         "sending a pose to receiving the second eye's layer rendered from it. render, readback,\n"
-        "encode, send: the server's ms per stereo layer over the row (- : it does not report the\n"
-        "stage). KiB/layer: on the wire, per eye. CPU ms: this process's user + system time per\n"
+        "encode, send: the server's mean ms of the stage over the row, in the server's unit (per\n"
+        "eye layer for the stages it counts per layer; - : it does not report the stage).\n"
+        "KiB/layer: on the wire, per eye. CPU ms: this process's user + system time per\n"
         "stereo layer, which includes the in-process headset clients. x full, x lean, x script:\n"
         "served stereo/s over the full-frame, lean (64 x 32) and lean-script baselines.\n";
     for (const auto& e : rep.variant_errors) out += "note: " + e + "\n";
@@ -1183,8 +1043,9 @@ int run_serve_bench(const ServeBenchOptions& o) {
                    {"lp_threads", o.lp_threads},
                    {"quick", o.quick}};
     j["notes"] = {
-        "stage_ms_per_stereo_layer: the server's cost_ms.viewer_vd means over the row (it counts "
-        "one frame per eye layer), times two",
+        "stage_ms_mean: the server's cost_ms.viewer_vd means over the row (from the difference "
+        "of its means times its frame count at the row's start and end), in the server's own "
+        "unit per stage",
         "cpu_ms_per_stereo_layer: getrusage(RUSAGE_SELF) user + system over the row per stereo "
         "layer; it includes the in-process headset clients",
         "latency: client receive time of a frame's second eye layer minus the send time of the "

@@ -8,7 +8,6 @@
 #include <map>
 #include <optional>
 #include <string>
-#include <variant>
 #include <vector>
 
 #include "core/result.hpp"
@@ -57,16 +56,9 @@ struct ServeBenchOptions {
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.
     std::string child_json;
-    // The arguments after "serve", as given: the children are re-run with them.
+    // The arguments after "serve", as given: the --lp-threads children are run with them.
     std::vector<std::string> args;
 };
-
-// Parses the arguments after `hysar bench serve`. On a bad argument, one sentence that names
-// the flag. `--help` gives an options object with `args == {"--help"}`.
-std::variant<ServeBenchOptions, std::string> parse_serve_bench_args(
-    const std::vector<std::string>& args);
-
-extern const char* const kServeBenchHelp;
 
 // One served row: `headsets` clients for the measured window.
 struct ServedRow {
@@ -80,9 +72,9 @@ struct ServedRow {
     double per_s_total = 0;      // stereo layers per second, all headsets
     double per_s_per_headset = 0;
     std::optional<double> latency_p50_ms, latency_p99_ms;  // pose sent to second eye received
-    // Server stages (its cost_ms.viewer_vd means over the row) per stereo layer, by the
-    // server's own names (pass, readback, encode, send, ...); a stage it does not report is
-    // absent.
+    // The server's stages (its cost_ms.viewer_vd means over the row), by its own names (pass,
+    // readback, encode, send, ...) and in its own unit per stage (today: per eye layer); a stage
+    // it does not report is absent.
     std::map<std::string, double> stage_ms;
     std::optional<double> bytes_per_layer;          // wire bytes per eye layer (header included)
     std::optional<double> cpu_ms_per_stereo_layer;  // this process: server and clients
