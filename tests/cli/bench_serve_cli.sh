@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# `hysar bench serve --quick`: checks that the command works end to end, never a speed. The
+# JSON has both baselines and every served row (the default and an LP_NUM_THREADS=1 child) with
+# stereo layers received and finite latencies; the lean-baseline command's figures are parsed
+# (a stand-in command: the project does not depend on the real script); the PNG exists; a bad
+# flag exits 2 with one line naming it.
+set -euo pipefail
+hysar="$1/hysar"
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+command -v python3 > /dev/null || { echo "python3 is needed to read the JSON"; exit 1; }
+
+if ! "$hysar" bench serve --quick --out "$out/bs" --lp-threads 1 \
+        --lean-baseline 'echo lean_stereo_ms=40.00 lean_stereo_per_s=25.0 seg=64x32' \
+        > "$out/table.txt" 2> "$out/progress.txt"; then
+    cat "$out/progress.txt" "$out/table.txt"
+    exit 1
+fi
+python3 - "$out/bs/bench-serve.json" <<'PY'
+import json, math, sys
+j = json.load(open(sys.argv[1]))
+def finite(x):
+    return isinstance(x, (int, float)) and math.isfinite(x)
+names = [b["name"] for b in j["baselines"]]
+assert names == ["full frame", "lean"], names
+for b in j["baselines"]:
+    assert finite(b["stereo_per_s"]) and b["stereo_per_s"] > 0, b
+    assert b["triangles"] > 0, b
+assert j["baselines"][0]["triangles"] > j["baselines"][1]["triangles"], j["baselines"]
+assert j["lean_script"]["ok"] and j["lean_script"]["stereo_per_s"] == 25.0, j["lean_script"]
+rows = j["rows"]
+got = sorted((r["headsets"], r["lp_num_threads"] or 0) for r in rows)
+assert got == [(1, 0), (1, 1), (2, 0), (2, 1)], got
+for r in rows:
+    assert r["stereo_layers"] > 0, r
+    assert finite(r["latency_ms_p50"]) and finite(r["latency_ms_p99"]), r
+    assert r["latency_ms_p50"] <= r["latency_ms_p99"], r
+    assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
+    for k in ("served_over_full", "served_over_lean", "served_over_lean_script"):
+        assert finite(r[k]) and r[k] > 0, (k, r)
+m = j["machine"]
+assert m["vulkan_device"] and m["cores"] >= 1 and m["date"], m
+print("bench serve: %d rows, JSON as documented" % len(rows))
+PY
+[[ $(head -c 8 "$out/bs/bench-serve.png" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]
+grep -q '^served ' "$out/table.txt"
+grep -q '^lean script ' "$out/table.txt"
+[[ $(grep -c 'headset(s):' "$out/progress.txt") -eq 4 ]]
+
+# A bad flag: exit 2 and one line that names it.
+bad() {
+    local flag=$1; shift
+    local rc=0
+    "$hysar" bench serve "$@" > /dev/null 2> "$out/err.txt" || rc=$?
+    [[ $rc -eq 2 ]] || { echo "bench serve $*: exit $rc, not 2"; exit 1; }
+    [[ $(wc -l < "$out/err.txt") -eq 1 ]] || { echo "bench serve $*: not one line:"; cat "$out/err.txt"; exit 1; }
+    grep -q -- "$flag" "$out/err.txt" || { echo "bench serve $*: does not name $flag:"; cat "$out/err.txt"; exit 1; }
+}
+bad --headsets --headsets 0
+bad --headsets --headsets 1,,2
+bad --seconds --seconds -1
+bad --seconds --seconds
+bad --format --format png
+bad --encoding --encoding zip
+bad --lp-threads --lp-threads x
+bad --bogus --bogus
+bad --profile --profile no-such-headset --quick
+echo "bench serve: files, rows and errors as documented"
