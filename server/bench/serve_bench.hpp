@@ -18,11 +18,12 @@
 namespace hs::bench {
 
 // One full-frame baseline: a stereo pair at the profile's resolution, seen from the scene's
-// viewing block (angle 0, default height), in the renderer's default target format.
+// viewing block (angle 0, default height), in the renderer's default target format, the scene's
+// own tessellation (no level of detail), every prop pixel shaded.
 struct BaselineFigure {
     double stereo_ms = 0;    // median wall time per stereo pair: record, submit, wait, readback
     double per_s = 0;        // 1000 / stereo_ms
-    uint64_t triangles = 0;  // of the mesh the renderer drew
+    uint64_t triangles = 0;  // drawn per eye
     int frames = 0;          // timed pairs (after 5 untimed warm-up pairs)
 };
 
