@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <set>
 #include <thread>
 
 #include <fmt/format.h>
@@ -684,11 +685,18 @@ json machine_json(const std::string& device_name) {
     std::error_code ec;
     const fs::path exe_dir = fs::read_symlink("/proc/self/exe", ec).parent_path();
     std::string git;
+    json dirty = nullptr;  // tracked files differ from the commit: the binary may not be it
     if (!ec) {
         std::string quoted = "'";
         for (char c : exe_dir.string())
             quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
         git = shell_output("git -C " + quoted + "' rev-parse HEAD 2>/dev/null");
+        const std::string diff = git.empty() ? ""
+                                             : shell_output("git -C " + quoted +
+                                                            "' diff --quiet HEAD -- 2>/dev/null; "
+                                                            "echo $?");
+        if (diff == "0" || diff == "1")
+            dirty = diff == "1";
     }
     char date[32] = "";
     const std::time_t now = std::time(nullptr);
@@ -701,7 +709,8 @@ json machine_json(const std::string& device_name) {
             {"vulkan_device", device_name},
             {"lp_num_threads", lp ? json(lp) : json(nullptr)},
             {"date", date},
-            {"git_commit", git.empty() ? json(nullptr) : json(git)}};
+            {"git_commit", git.empty() ? json(nullptr) : json(git)},
+            {"git_tracked_changes", dirty}};
 }
 
 // ---- Output ----
@@ -801,6 +810,13 @@ std::string table(const Report& rep) {
         "KiB/layer: on the wire, per eye. CPU ms: this process's user + system time per\n"
         "stereo layer, which includes the in-process headset clients. x full, x lean, x script:\n"
         "served stereo/s over the full-frame, lean (64 x 32) and lean-script baselines.\n";
+    std::set<std::string> other;
+    for (const auto& r : rep.rows)
+        for (const auto& [k, v] : r.stage_ms)
+            if (k != "pass" && k != "render" && k != "readback" && k != "encode" && k != "send")
+                other.insert(k);
+    for (const auto& k : other)
+        out += "the server also reports the stage '" + k + "' (stage_ms_mean in the JSON)\n";
     for (const auto& e : rep.variant_errors) out += "note: " + e + "\n";
     return out;
 }
