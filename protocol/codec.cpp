@@ -209,6 +209,8 @@ size_t payload_bytes(const M& m) {
 class Writer {
 public:
     explicit Writer(size_t capacity) { out.reserve(capacity); }
+    // Writes into `buffer` (cleared; its capacity kept): no allocation once it is large enough.
+    explicit Writer(std::vector<uint8_t>&& buffer) : out(std::move(buffer)) { out.clear(); }
     template <typename T>
     void put(T v) {
         static_assert(std::is_arithmetic_v<T>);
@@ -459,6 +461,38 @@ std::variant<Message, DecodeError> decode_message(const Header& h, std::span<con
 }  // namespace
 
 // ---- Frames -------------------------------------------------------------------------------------
+
+std::optional<EncodeError> encode_vd_layer_into(std::vector<uint8_t>& out, const VdLayer& m,
+                                                uint32_t sequence,
+                                                const std::function<bool(std::vector<uint8_t>&)>& fill) {
+    using I = schema::Info<VdLayer>;
+    if (!m.data.empty())
+        return EncodeError{"VdLayer: encode_vd_layer_into writes the data itself; data must be empty"};
+    Writer w(std::move(out));
+    w.put(kMagic);
+    w.put(kVersion);
+    w.put<uint16_t>(uint16_t(I::type));
+    w.put<uint32_t>(0);  // payload length, patched below
+    w.put(sequence);
+    std::apply([&](const auto&... f) { (write(w, m, f), ...); }, I::fields);
+    out = std::move(w.out);
+    const size_t data_at = out.size();  // the data's u32 length is the last field written
+    if (!fill(out))
+        return EncodeError{"VdLayer: the layer data could not be encoded"};
+    const size_t data_bytes = out.size() - data_at;
+    const size_t payload = out.size() - kHeaderBytes;
+    if (payload > I::max_payload)
+        return EncodeError{too_large(I::name, payload, I::max_payload)};
+    const uint32_t d32 = uint32_t(data_bytes), p32 = uint32_t(payload);
+    std::memcpy(out.data() + data_at - 4, &d32, 4);
+    std::memcpy(out.data() + 8, &p32, 4);
+    if (m.encoding == Encoding::kRaw &&
+        data_bytes != size_t(m.width) * m.height * (m.format == PixelFormat::kRgba8 ? 4 : 8))
+        return EncodeError{"VdLayer: raw data length does not match width x height"};
+    if (m.width == 0 || m.height == 0 || m.width > 16384 || m.height > 16384)
+        return EncodeError{"VdLayer: image size is out of 1..16384"};
+    return std::nullopt;
+}
 
 std::variant<std::vector<uint8_t>, EncodeError> encode(const Message& m, Side sender,
                                                        uint32_t sequence) {

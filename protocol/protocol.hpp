@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -123,6 +124,14 @@ struct EncodeError {
 // field and size limits as the decoder.
 std::variant<std::vector<uint8_t>, EncodeError> encode(const Message& m, Side sender,
                                                        uint32_t sequence = 0);
+
+// Encodes a VdLayer frame into `out` (cleared; its capacity kept, so a reused buffer costs no
+// allocation) with its data written in place: the header and the fields of `fields` (whose
+// data must be empty), then `fill` appends the data bytes (false: it could not); the lengths
+// are patched after. The same limits as encode(); on an error `out` holds nothing to send.
+std::optional<EncodeError> encode_vd_layer_into(
+    std::vector<uint8_t>& out, const VdLayer& fields, uint32_t sequence,
+    const std::function<bool(std::vector<uint8_t>&)>& fill);
 
 // Decodes and validates a header from exactly kHeaderBytes bytes received from `sender`: magic,
 // version, known type, direction, payload within that type's limit.

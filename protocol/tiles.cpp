@@ -1,5 +1,6 @@
 #include "protocol/tiles.hpp"
 
+#include <algorithm>
 #include <cstring>
 
 #include <lz4.h>
@@ -12,28 +13,33 @@ namespace {
 // bitmask (one bit per tile, row-major, LSB first), then u32 compressed bytes and the payload.
 constexpr size_t kFixedHeader = 8;
 
-// Appends by resize and memcpy: GCC 12 at -O3 reports false stringop-overflow errors for
-// vector::insert of a few bytes after push_back.
-void put32(std::vector<uint8_t>& out, uint32_t v) {
-    out.resize(out.size() + 4);
-    std::memcpy(out.data() + out.size() - 4, &v, 4);
-}
 }  // namespace
 
-std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
-                                  uint32_t bpp, TileCodec codec, uint16_t ts) {
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
+                       uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
+                       std::vector<uint8_t>& packed, uint16_t ts) {
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    region.x1 = std::min(region.x1, tx);
+    region.y1 = std::min(region.y1, ty);
     const size_t tile_bytes = size_t(ts) * ts * bpp;
-    std::vector<uint8_t> mask((size_t(tx) * ty + 7) / 8, 0);
-    std::vector<uint8_t> packed;
+    const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
+    const size_t header_at = out.size();
+    out.resize(header_at + kFixedHeader + mask_bytes);
+    uint8_t* head = out.data() + header_at;
+    head[0] = uint8_t(ts & 0xff);
+    head[1] = uint8_t(ts >> 8);
+    head[2] = uint8_t(codec);
+    head[3] = 0;
+    std::memset(head + kFixedHeader, 0, mask_bytes);
+    packed.clear();
     uint32_t present = 0;
-    for (uint32_t by = 0; by < ty; ++by)
-        for (uint32_t bx = 0; bx < tx; ++bx) {
+    for (uint32_t by = region.y0; by < region.y1; ++by)
+        for (uint32_t bx = region.x0; bx < region.x1; ++bx) {
             const uint32_t x0 = bx * ts, y0 = by * ts, cw = std::min<uint32_t>(ts, w - x0),
                            ch = std::min<uint32_t>(ts, h - y0);
             bool any = false;
             for (uint32_t y = 0; y < ch && !any; ++y) {
-                const uint8_t* row = raw.data() + (size_t(y0 + y) * w + x0) * bpp;
+                const uint8_t* row = raw + size_t(y0 + y) * stride + size_t(x0) * bpp;
                 for (size_t i = 0; i < size_t(cw) * bpp; ++i)
                     if (row[i]) {
                         any = true;
@@ -43,43 +49,53 @@ std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint
             if (!any)
                 continue;
             const size_t tile = size_t(by) * tx + bx;
-            mask[tile / 8] |= uint8_t(1u << (tile % 8));
+            out[header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
             ++present;
             const size_t base = packed.size();
-            packed.resize(base + tile_bytes, 0);  // edge tiles are padded with zeros
+            packed.resize(base + tile_bytes);  // zeros: edge tiles are padded with them
             for (uint32_t y = 0; y < ch; ++y)
                 std::memcpy(&packed[base + size_t(y) * ts * bpp],
-                            raw.data() + (size_t(y0 + y) * w + x0) * bpp, size_t(cw) * bpp);
+                            raw + size_t(y0 + y) * stride + size_t(x0) * bpp, size_t(cw) * bpp);
         }
-    std::vector<uint8_t> out(kFixedHeader + mask.size());
-    out[0] = uint8_t(ts & 0xff);
-    out[1] = uint8_t(ts >> 8);
-    out[2] = uint8_t(codec);
-    out[3] = 0;
-    std::memcpy(out.data() + 4, &present, 4);
-    if (!mask.empty())
-        std::memcpy(out.data() + kFixedHeader, mask.data(), mask.size());
-    std::vector<uint8_t> comp;
+    std::memcpy(out.data() + header_at + 4, &present, 4);
+    const size_t len_at = out.size();
+    out.resize(len_at + 4);
+    size_t n = 0;
     switch (codec) {
         case TileCodec::kNone:
-            comp = packed;
+            out.resize(len_at + 4 + packed.size());
+            if (!packed.empty())
+                std::memcpy(out.data() + len_at + 4, packed.data(), packed.size());
+            n = packed.size();
             break;
         case TileCodec::kLz4: {
-            comp.resize(size_t(LZ4_compressBound(int(packed.size()))));
-            int n = LZ4_compress_default((const char*)packed.data(), (char*)comp.data(),
-                                         int(packed.size()), int(comp.size()));
-            comp.resize(size_t(std::max(n, 0)));
+            const size_t bound = size_t(LZ4_compressBound(int(packed.size())));
+            out.resize(len_at + 4 + bound);
+            const int k = LZ4_compress_default((const char*)packed.data(),
+                                               (char*)out.data() + len_at + 4, int(packed.size()),
+                                               int(bound));
+            n = size_t(std::max(k, 0));
             break;
         }
         case TileCodec::kZstd: {
-            comp.resize(ZSTD_compressBound(packed.size()));
-            size_t n = ZSTD_compress(comp.data(), comp.size(), packed.data(), packed.size(), 3);
-            comp.resize(ZSTD_isError(n) ? 0 : n);
+            const size_t bound = ZSTD_compressBound(packed.size());
+            out.resize(len_at + 4 + bound);
+            const size_t k =
+                ZSTD_compress(out.data() + len_at + 4, bound, packed.data(), packed.size(), 3);
+            n = ZSTD_isError(k) ? 0 : k;
             break;
         }
     }
-    put32(out, uint32_t(comp.size()));
-    out.insert(out.end(), comp.begin(), comp.end());
+    out.resize(len_at + 4 + n);
+    const uint32_t n32 = uint32_t(n);
+    std::memcpy(out.data() + len_at, &n32, 4);
+}
+
+std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
+                                  uint32_t bpp, TileCodec codec, uint16_t ts) {
+    std::vector<uint8_t> out, packed;
+    encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed,
+                      ts);
     return out;
 }
 

@@ -3,6 +3,7 @@
 // are compressed with LZ4 or zstd. Lossless.
 #pragma once
 
+#include <climits>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -18,6 +19,20 @@ inline constexpr uint16_t kDefaultTileSize = 32;
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t width, uint32_t height,
                                   uint32_t bytes_per_pixel, TileCodec codec,
                                   uint16_t tile_size = kDefaultTileSize);
+
+// The tiles that may hold non-zero pixels, in tile units [x0, x1) x [y0, y1): tiles outside are
+// sent absent without being read.
+struct TileRegion {
+    uint32_t x0 = 0, y0 = 0, x1 = UINT32_MAX, y1 = UINT32_MAX;
+};
+
+// Appends the encoding of `raw` (rows `stride` bytes apart) to `out`, packing present tiles in
+// `scratch`; both keep their capacity, so reused buffers cost no allocation. The same bytes as
+// encode_tiles.
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride,
+                       uint32_t width, uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
+                       TileRegion region, std::vector<uint8_t>& scratch,
+                       uint16_t tile_size = kDefaultTileSize);
 
 // Decodes to raw pixel bytes, or an error sentence; never reads or writes out of bounds,
 // whatever the input.

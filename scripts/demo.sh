@@ -35,7 +35,7 @@ for f in sorted(glob.glob(os.path.join(out, "hmd_*.json")), key=lambda p: int(p.
     j = json.load(open(f))
     print(f"{j['name']:<14}{j['frames']:>8}{j['latency_ms_p50']:>16.1f}{j['bytes']/1e6:>8.1f}")
 s = json.load(open(os.path.join(out, "server_stats.json")))
-print(f"projector renders: {s['projector_renders']}  (mean VD render {s['timing_ms']['vd_render_mean']:.1f} ms, encode {s['timing_ms']['vd_encode_mean']:.1f} ms per layer)")
+print(f"projector renders: {s['projector_renders']}  (mean VD pass {s['timing_ms']['vd_pass_mean']:.1f} ms, encode {s['timing_ms']['vd_encode_mean']:.1f} ms per layer)")
 PY
 echo "demo: projector frame and headset layers in $out/; server log $out/serve.log"
 

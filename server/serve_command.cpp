@@ -46,6 +46,8 @@ const char* kServeHelp =
     "  --max-target-mib MIB (2048)       --max-queued-mib MIB (16)\n"
     "  --large-display-pixels N (2097152) --max-triangles N (1048576)\n"
     "  --max-projector-pixels N (16000000)\n"
+    "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
+    "  --encoder-threads N (1)\n"
     "\n"
     "example:\n"
     "  hysar serve --scene room.json --listen 0.0.0.0:7700 --token-file /etc/hysar/token \\\n"
@@ -125,6 +127,9 @@ Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
     HS_ASSIGN_OR_RETURN(
         l.large_display_pixels,
         parse_count(f, "--large-display-pixels", l.large_display_pixels, 1, 8192ull * 8192));
+    HS_ASSIGN_OR_RETURN(l.max_viewer_hz, parse_count(f, "--max-viewer-hz", l.max_viewer_hz, 0, 1000));
+    HS_ASSIGN_OR_RETURN(l.max_batch_viewers,
+                        parse_count(f, "--max-batch-viewers", l.max_batch_viewers, 1, 1024));
     HS_ASSIGN_OR_RETURN(l.scene.max_triangles,
                         parse_count(f, "--max-triangles", l.scene.max_triangles, 2, 1ull << 32));
     HS_ASSIGN_OR_RETURN(l.scene.max_projector_pixels,
@@ -165,7 +170,8 @@ int run_serve(const std::vector<std::string>& args) {
                "--asset-root", "--device", "--stats-file", "--max-sessions", "--max-pending",
                "--handshake-timeout-ms", "--idle-timeout-ms", "--frame-timeout-ms",
                "--max-eye-pixels", "--max-target-mib", "--max-queued-mib", "--large-display-pixels",
-               "--max-triangles", "--max-projector-pixels"});
+               "--max-triangles", "--max-projector-pixels", "--max-viewer-hz",
+               "--max-batch-viewers", "--encoder-threads"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -186,6 +192,10 @@ int run_serve(const std::vector<std::string>& args) {
             return usage_error(r.error().message);
     if (auto r = parse_limits(f, info.limits); !r)
         return usage_error(r.error().message);
+    if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 1, 64); n)
+        info.encoder_threads = uint32_t(n.value());
+    else
+        return usage_error(n.error().message);
 
     const std::optional<std::string> scene_path =
         f.has("--scene") ? std::optional(f.get("--scene", "")) : std::nullopt;
@@ -283,15 +293,19 @@ int run_serve(const std::vector<std::string>& args) {
     std::printf("stopped: %llu projector render(s), %zu viewer(s) served\n",
                 (unsigned long long)stats.value("projector_renders", uint64_t(0)),
                 stats.value("viewers", nlohmann::json::array()).size());
-    for (const char* pass : {"projector", "viewer_vd"}) {
-        const auto& c = stats["cost_ms"][pass];
-        if (c.value("frames", uint64_t(0)) == 0)
-            continue;
-        const auto& m = c["mean"];
-        std::printf("  %-10s %llu frame(s), mean ms: pass %.2f  readback %.2f  encode %.2f\n", pass,
-                    (unsigned long long)c["frames"].get<uint64_t>(), m["pass"].get<double>(),
-                    m["readback"].get<double>(), m["encode"].get<double>());
-    }
+    const auto& proj = stats["cost_ms"]["projector"];
+    if (proj.value("frames", uint64_t(0)) > 0)
+        std::printf("  projector  %llu frame(s), mean ms: pass %.2f  readback %.2f  encode %.2f\n",
+                    (unsigned long long)proj.value("frames", uint64_t(0)),
+                    proj["mean"].value("pass", 0.0), proj["mean"].value("readback", 0.0),
+                    proj["mean"].value("encode", 0.0));
+    const auto& vd = stats["cost_ms"]["viewer_vd"];
+    if (vd.value("frames", uint64_t(0)) > 0)
+        std::printf("  viewer VD  %llu layer(s), mean ms: queue %.2f  pass %.2f  encode %.2f  "
+                    "send %.2f\n",
+                    (unsigned long long)vd.value("frames", uint64_t(0)),
+                    vd["mean"].value("queue", 0.0), vd["mean"].value("pass", 0.0),
+                    vd["mean"].value("encode", 0.0), vd["mean"].value("send", 0.0));
     return 0;
 }
 

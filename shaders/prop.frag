@@ -15,6 +15,8 @@ layout(constant_id = HS_SC_MESH_TANGENT) const bool kMeshTangent = false;
 layout(constant_id = HS_SC_ALBEDO_TEXTURE) const bool kAlbedoTexture = false;
 layout(constant_id = HS_SC_PROP_SHEEN) const bool kPropSheen = false;
 layout(constant_id = HS_SC_AREA_SAMPLES) const int kAreaSamples = 0;
+layout(constant_id = HS_SC_OUTPUT_ENCODING) const int kOutputEncoding = 0;
+layout(constant_id = HS_SC_ANALYTIC_SPHERE) const bool kAnalyticSphere = false;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
@@ -83,10 +85,67 @@ void light_sample(int i, int j, vec3 p, vec3 n, out vec3 l, out vec3 E) {
     E = light.irradiance.rgb * (cos_e / (float(kAreaSamples) * dc * dc));
 }
 
+// What the target stores (HS_SC_OUTPUT_ENCODING). The layer encodings write the bytes the wire
+// carries, so that a readback is sent as it is: sRGB8 codes as codec::encode_pixels makes them
+// (NaN magenta), or half floats (NaN 0); alpha 0 exactly where the colour's bytes are 0.
+vec4 encode_output(vec3 sum) {
+    if (kOutputEncoding == 1) {
+        if (any(isnan(sum))) return vec4(1.0, 0.0, 1.0, 1.0);
+        vec3 x = clamp(sum, 0.0, 1.0);
+        vec3 s = mix(12.92 * x, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055,
+                     greaterThan(x, vec3(0.0031308)));
+        vec3 q = floor(s * 255.0 + 0.5);
+        // q + 0.25 lands on code q whether the target rounds to nearest or truncates.
+        return vec4(min((q + 0.25) / 255.0, vec3(1.0)), any(greaterThan(q, vec3(0.0))) ? 1.0 : 0.0);
+    }
+    if (kOutputEncoding == 2) {
+        vec3 v = clamp(mix(sum, vec3(0.0), isnan(sum)), -65504.0, 65504.0);
+        uint bits = packHalf2x16(v.xy) | (packHalf2x16(vec2(v.z, 0.0)) & 0xffffu);
+        return vec4(v, bits != 0u ? 1.0 : 0.0);
+    }
+    // A 16-bit float target holds at most 65504: clamp rather than write inf (docs/SHADING.md).
+    return vec4(min(sum, vec3(kOutputMax)), 1.0);
+}
+
+// The analytic prop: where this pixel's ray from the camera meets the dome. The tessellation
+// encloses the sphere (by at most half a pixel, render/clusters.hpp), so every pixel the dome
+// covers is rasterised; one whose ray misses the dome, or meets the sphere first below the
+// dome's base, is not the prop's and is discarded. Silhouette, position and normal are exact.
+bool sphere_hit(vec3 p, out vec3 q) {
+    vec3 o = pc.camera_position.xyz, c = scene.prop_sphere.xyz;
+    vec3 d = normalize(p - o);
+    vec3 oc = o - c;
+    float b = dot(d, oc);
+    float disc = b * b - (dot(oc, oc) - scene.prop_sphere.w * scene.prop_sphere.w);
+    if (disc < 0.0) return false;
+    q = o + (-b - sqrt(disc)) * d;
+    return q.y >= c.y;
+}
+
+// The dome's texture coordinates and azimuthal tangent at unit normal n (scene/mesh.hpp).
+vec2 sphere_uv(vec3 n) {
+    float phi = atan(-n.z, n.x);
+    if (phi < 0.0) phi += 2.0 * kPi;
+    return vec2(phi / (2.0 * kPi), acos(clamp(n.y, -1.0, 1.0)) / (0.5 * kPi));
+}
+vec3 sphere_tangent(vec3 n) {
+    vec3 t = vec3(n.z, 0.0, -n.x);
+    float len = length(t);
+    return len > 1e-12 ? t / len : vec3(1.0, 0.0, 0.0);
+}
+
 void main() {
+    if (kPassKind == 3) {
+        out_radiance = vec4(0.0);
+        return;
+    }
     if (kAreaSamples > 0) g_area_shift = vec2(pcg2d(uvec2(gl_FragCoord.xy))) * (1.0 / 4294967296.0);
-    vec3 n = in_normal * inversesqrt(max(dot(in_normal, in_normal), 1e-30));
     vec3 p = in_position;
+    if (kAnalyticSphere && !sphere_hit(in_position, p)) discard;
+    vec3 n = kAnalyticSphere ? normalize(p - scene.prop_sphere.xyz)
+                             : in_normal * inversesqrt(max(dot(in_normal, in_normal), 1e-30));
+    vec2 uv = kAnalyticSphere ? sphere_uv(n) : in_uv;
+    vec3 mesh_tangent = kAnalyticSphere ? sphere_tangent(n) : in_tangent;
     vec3 sum = vec3(0.0);
     if (kPassKind == 0) {
         // Paper eq. (2), VI: sum_i L_d(p, l_i).
@@ -97,7 +156,7 @@ void main() {
                 sum += E * max(dot(n, l), 0.0);
             }
         sum *= scene.albedo_over_pi.rgb;
-        if (kAlbedoTexture) sum *= texture(albedo_texture, in_uv).rgb;  // sRGB decoded by the sampler
+        if (kAlbedoTexture) sum *= texture(albedo_texture, uv).rgb;  // sRGB decoded by the sampler
     } else if (kPassKind == 2) {
         // Capture geometry (docs/OPTICS.md): where this camera pixel meets the projector image,
         // and how much of a projector pixel's intensity arrives here per unit area.
@@ -129,13 +188,12 @@ void main() {
                     vec3 l, E;
                     light_sample(i, j, p, n, l, E);
                     s += E * hs_specular_factor(kSpecModel, kAnisotropic, n, l, v,
-                                                kMeshTangent ? in_tangent : scene.tangent_axis.xyz,
+                                                kMeshTangent ? mesh_tangent : scene.tangent_axis.xyz,
                                                 scene.spec_params.xyz);
                 }
             sum += scene.spec_colour.rgb * s;
         }
         if (kEmission) sum += scene.emission.rgb;
     }
-    // A 16-bit float target holds at most 65504: clamp rather than write inf (docs/SHADING.md).
-    out_radiance = vec4(min(sum, vec3(kOutputMax)), 1.0);
+    out_radiance = encode_output(sum);
 }

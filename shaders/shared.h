@@ -23,7 +23,8 @@ using uint = uint32_t;
 // Specialization constant ids (gpu/shared_layout.hpp mirrors them as an enum).
 #define HS_SC_PASS_KIND \
     0  // 0: projector VI pass (diffuse), 1: viewer VD pass (specular + emission),
-       // 2: capture geometry (where each camera pixel meets the projector; docs/OPTICS.md)
+       // 2: capture geometry (where each camera pixel meets the projector; docs/OPTICS.md),
+       // 3: occluder (writes black: a cluster that cannot light a VD layer but may hide one)
 #define HS_SC_SPEC_MODEL \
     1  // scene::SpecularModel: 0 none, 1 phong, 2 blinn-phong, 3 ward, 4 kajiya-kay
 #define HS_SC_EMISSION 2        // bool: add the material's emission
@@ -35,6 +36,13 @@ using uint = uint32_t;
 #define HS_SC_ALBEDO_TEXTURE 8  // bool: albedo = colour * texture(uv)
 #define HS_SC_PROP_SHEEN 9      // bool: capture geometry also writes the prop's sheen lobe
 #define HS_SC_AREA_SAMPLES 10   // int: samples per rect light per pixel; 0: the scene has none
+#define HS_SC_OUTPUT_ENCODING \
+    11  // 0: linear radiance (clamped to OUTPUT_MAX), 1: a VD layer's sRGB8 codes into an RGBA8
+        // target, 2: a VD layer's half floats into an RGBA16F target. 1 and 2 write what the
+        // wire carries (PROTOCOL.md, VdLayer): alpha 0 exactly where the colour is 0
+#define HS_SC_ANALYTIC_SPHERE 12  // bool: the prop is prop_sphere's dome: each pixel shades the
+                                  // exact point its ray hits, with the sphere's normal, UV and
+                                  // tangent there; the tessellation only decides coverage
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit
@@ -57,11 +65,13 @@ struct GpuScene {
     vec4 projector_k;                 // fx, fy, cx, cy in pixels (OpenCV convention)
     vec4 projector_position;          // xyz: projector centre, metres, world
     vec4 sheen_params;                // x: Phong exponent of the prop's sheen
+    vec4 prop_sphere;  // xyz: the analytic prop's sphere centre (m, world), w: its radius
 };
 
 struct GpuPush {
     mat4 clip_from_world;  // Vulkan clip space from world (scene/camera.hpp)
     vec4 eye_position;     // xyz: viewer eye (VD pass) in metres, world
+    vec4 camera_position;  // xyz: the camera this pass renders from (rays start here), world
 };
 
 // One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).

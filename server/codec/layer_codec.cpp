@@ -56,6 +56,28 @@ std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, u
                                   codec);
 }
 
+void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
+                       protocol::Encoding encoding, protocol::TileCodec codec,
+                       std::vector<uint8_t>& scratch) {
+    const size_t bpp = px.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
+    const uint32_t x1 = std::min(px.x1, px.width), y1 = std::min(px.y1, px.height);
+    if (encoding == protocol::Encoding::kRaw) {
+        const size_t at = out.size(), row = size_t(px.width) * bpp;
+        out.resize(at + row * px.height);  // zeros: black outside the rectangle
+        if (px.x0 < x1)
+            for (uint32_t y = px.y0; y < y1; ++y)
+                std::memcpy(out.data() + at + y * row + px.x0 * bpp,
+                            px.data + y * px.stride + px.x0 * bpp, (x1 - px.x0) * bpp);
+        return;
+    }
+    const uint32_t ts = protocol::kDefaultTileSize;
+    protocol::TileRegion region{px.x0 / ts, px.y0 / ts, (x1 + ts - 1) / ts, (y1 + ts - 1) / ts};
+    if (px.x0 >= x1 || px.y0 >= y1)
+        region = {0, 0, 0, 0};
+    protocol::encode_tiles_into(out, px.data, px.stride, px.width, px.height, uint32_t(bpp), codec,
+                                region, scratch);
+}
+
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h,
                            protocol::PixelFormat format) {
     const size_t n = size_t(w) * h * 4;

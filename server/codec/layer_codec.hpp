@@ -39,6 +39,23 @@ constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat f) {
                                               : protocol::TileCodec::kLz4;
 }
 
+// A layer's pixels in the wire's pixel format where they lie (a persistently mapped readback
+// buffer): rows `stride` bytes apart; only the rectangle [x0, x1) x [y0, y1) is read, the rest
+// of the layer is black.
+struct LayerPixels {
+    const uint8_t* data = nullptr;
+    size_t stride = 0;
+    uint32_t width = 0, height = 0;
+    protocol::PixelFormat format = protocol::PixelFormat::kRgba8;
+    uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+// Appends the layer's data bytes in `encoding` to `out`: raw pixels (black outside the
+// rectangle), or sparse tiles (tiles outside it absent, never read; the rectangle should lie
+// on the tile grid). `scratch` and `out` keep their capacity between calls.
+void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& pixels,
+                       protocol::Encoding encoding, protocol::TileCodec codec,
+                       std::vector<uint8_t>& scratch);
+
 // The inverse of encode_pixels for RGBA16F (exact up to half precision); RGBA8 decodes the
 // sRGB values back to linear. Returns an empty image when the byte count does not fit.
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t width, uint32_t height,

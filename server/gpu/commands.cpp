@@ -4,7 +4,16 @@
 
 namespace hs::gpu {
 
-void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* label) {
+namespace {
+Area whole(const RenderTarget& t, Area a) {
+    if (a.width == 0 || a.height == 0)
+        return {0, 0, t.width(), t.height()};
+    return a;
+}
+}  // namespace
+
+void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* label, Area area) {
+    area = whole(t, area);
     device_.begin_label(cmd_, label);
     // Contents are always cleared, so the previous layout (and any earlier readback) is dropped.
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED,
@@ -30,14 +39,14 @@ void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* lab
     depth.storeOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
     depth.clearValue.depthStencil = {1.0f, 0};
     VkRenderingInfo ri{VK_STRUCTURE_TYPE_RENDERING_INFO};
-    ri.renderArea = {{0, 0}, {t.width(), t.height()}};
+    ri.renderArea = {{int32_t(area.x), int32_t(area.y)}, {area.width, area.height}};
     ri.layerCount = 1;
     ri.colorAttachmentCount = 1;
     ri.pColorAttachments = &color;
     ri.pDepthAttachment = &depth;
     vkCmdBeginRendering(cmd_, &ri);
     VkViewport vp{0, 0, float(t.width()), float(t.height()), 0.0f, 1.0f};
-    VkRect2D sc{{0, 0}, {t.width(), t.height()}};
+    VkRect2D sc{{int32_t(area.x), int32_t(area.y)}, {area.width, area.height}};
     vkCmdSetViewport(cmd_, 0, 1, &vp);
     vkCmdSetScissor(cmd_, 0, 1, &sc);
 }
@@ -57,14 +66,23 @@ void CommandList::push_constants(const GraphicsPipeline& p, const void* data, ui
 }
 
 void CommandList::draw_indexed(const VertexStreams& s, const Buffer& indices, uint32_t count) {
+    bind_mesh(s, indices);
+    draw_range(0, count);
+}
+
+void CommandList::bind_mesh(const VertexStreams& s, const Buffer& indices) {
     VkBuffer vbs[4] = {s.positions->vk(), s.normals->vk(), s.tangents->vk(), s.uvs->vk()};
     VkDeviceSize offs[4] = {0, 0, 0, 0};
     vkCmdBindVertexBuffers(cmd_, 0, 4, vbs, offs);
     vkCmdBindIndexBuffer(cmd_, indices.vk(), 0, VK_INDEX_TYPE_UINT32);
-    vkCmdDrawIndexed(cmd_, count, 1, 0, 0, 0);
 }
 
-void CommandList::end_render_and_read_back(RenderTarget& t) {
+void CommandList::draw_range(uint32_t first, uint32_t count) {
+    vkCmdDrawIndexed(cmd_, count, 1, first, 0, 0);
+}
+
+void CommandList::end_render_and_read_back(RenderTarget& t, Area area) {
+    area = whole(t, area);
     vkCmdEndRendering(cmd_);
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT,
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
@@ -72,8 +90,12 @@ void CommandList::end_render_and_read_back(RenderTarget& t) {
                   VK_ACCESS_2_COLOR_ATTACHMENT_WRITE_BIT, VK_PIPELINE_STAGE_2_COPY_BIT,
                   VK_ACCESS_2_TRANSFER_READ_BIT);
     VkBufferImageCopy region{};
+    region.bufferOffset = (uint64_t(area.y) * t.width() + area.x) * bytes_per_pixel(t.format());
+    region.bufferRowLength = t.width();
+    region.bufferImageHeight = t.height();
     region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-    region.imageExtent = {t.width(), t.height(), 1};
+    region.imageOffset = {int32_t(area.x), int32_t(area.y), 0};
+    region.imageExtent = {area.width, area.height, 1};
     vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(), 1,
                            &region);
     host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);

@@ -286,6 +286,12 @@ Result<uint32_t> Device::find_memory_type(uint32_t bits, VkMemoryPropertyFlags p
                       fmt::format("no memory type with properties 0x{:x}", props));
 }
 
+Result<void> Device::queue_submit(const VkSubmitInfo2& submit) {
+    std::lock_guard lock(submit_mutex_);
+    HS_VK_TRY(vkQueueSubmit2(queue_, 1, &submit, VK_NULL_HANDLE));
+    return {};
+}
+
 Result<void> Device::submit_and_wait(const char* label,
                                      const std::function<void(VkCommandBuffer)>& record) {
     std::lock_guard lock(submit_mutex_);

@@ -57,6 +57,11 @@ public:
     Result<void> submit_and_wait(const char* label,
                                  const std::function<void(VkCommandBuffer)>& record);
 
+    // Submits to the queue under the device's submit lock (the queue is shared by every
+    // submitter). Thread: any.
+    Result<void> queue_submit(const VkSubmitInfo2& submit);
+    uint32_t queue_family() const { return queue_family_; }
+
     // Debug-region helpers for command recording (no-ops without VK_EXT_debug_utils).
     void begin_label(VkCommandBuffer cmd, const char* label) const;
     void end_label(VkCommandBuffer cmd) const;

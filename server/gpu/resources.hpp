@@ -79,6 +79,8 @@ public:
     VkImage depth() const { return depth_.get(); }
     VkImageView depth_view() const { return depth_view_.get(); }
     VkBuffer readback() const { return readback_.vk(); }
+    // The readback buffer, persistently mapped: the pixels in the target's format, row-major.
+    const uint8_t* readback_data() const { return static_cast<const uint8_t*>(readback_.mapped()); }
 
     // Converts the readback buffer (filled by CommandList::end_render) to linear float RGBA.
     ImageRgba32f read() const;

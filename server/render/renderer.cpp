@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <glm/gtc/constants.hpp>
@@ -18,13 +20,37 @@ namespace {
 bool has_emission(const scene::Scene& s) {
     return s.material.emission.r > 0 || s.material.emission.g > 0 || s.material.emission.b > 0;
 }
+bool is_lit(const scene::Light& l) {
+    const glm::dvec3 e = l.colour * l.intensity;
+    return e.r > 0 || e.g > 0 || e.b > 0;
+}
+// A light of this type that adds light (black lights are skipped everywhere).
 bool has_light(const scene::Scene& s, scene::LightType type) {
     for (const auto& l : s.lights)
-        if (l.type == type)
+        if (l.type == type && is_lit(l))
             return true;
     return false;
 }
+bool any_lit(const scene::Scene& s) {
+    for (const auto& l : s.lights)
+        if (is_lit(l))
+            return true;
+    return false;
+}
+bool has_specular(const scene::Scene& s, const scene::Specular& spec) {
+    return spec.model != scene::SpecularModel::kNone &&
+           (spec.colour.r > 0 || spec.colour.g > 0 || spec.colour.b > 0) && any_lit(s);
+}
+bool has_albedo(const scene::Scene& s) {
+    return (s.material.albedo.r > 0 || s.material.albedo.g > 0 || s.material.albedo.b > 0) &&
+           any_lit(s);
+}
 }  // namespace
+
+gpu::ColorFormat layer_target_format(LayerEncoding e) {
+    return e == LayerEncoding::kSrgb8 ? gpu::ColorFormat::kRgba8Unorm
+                                      : gpu::ColorFormat::kRgba16Float;
+}
 
 std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene::Specular& spec,
                                     uint32_t area_light_samples) {
@@ -33,6 +59,8 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
     const bool area = has_light(s, scene::LightType::kRect);
     const std::string area_effect = fmt::format("area-lights:{}spp", area_light_samples);
     if (!vd) {
+        if (!has_albedo(s))
+            return e;
         e.push_back("diffuse");
         if (s.material.albedo_texture)
             e.push_back("albedo-texture");
@@ -42,7 +70,7 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
             e.push_back(area_effect);
         return e;
     }
-    if (spec.model != scene::SpecularModel::kNone) {
+    if (has_specular(s, spec)) {
         e.push_back(std::string("specular:") + scene::to_string(spec.model));
         if (spec.anisotropic())
             e.push_back("anisotropy");
@@ -69,26 +97,35 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
                           fmt::format("area_light_samples must be in 1..{}, got {}",
                                       kMaxAreaLightSamples, info.area_light_samples));
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
-    HS_ASSIGN_OR_RETURN(r->mesh_, scene::build_prop_mesh(scene.prop));
-    const auto& m = r->mesh_;
-    HS_ASSIGN_OR_RETURN(r->positions_,
-                        gpu::Buffer::create(device, m.positions.size() * 12,
-                                            gpu::BufferUsage::kVertex, "prop.positions"));
-    HS_ASSIGN_OR_RETURN(
-        r->normals_, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex,
-                                         "prop.normals"));
-    HS_ASSIGN_OR_RETURN(r->indices_, gpu::Buffer::create(device, m.indices.size() * 4,
-                                                         gpu::BufferUsage::kIndex, "prop.indices"));
-    HS_ASSIGN_OR_RETURN(
-        r->tangents_, gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex,
-                                          "prop.tangents"));
-    HS_ASSIGN_OR_RETURN(r->uvs_, gpu::Buffer::create(device, m.uvs.size() * 8,
-                                                     gpu::BufferUsage::kVertex, "prop.uvs"));
-    r->positions_.write(m.positions.data(), m.positions.size() * 12);
-    r->normals_.write(m.normals.data(), m.normals.size() * 12);
-    r->tangents_.write(m.tangents.data(), m.tangents.size() * 12);
-    r->uvs_.write(m.uvs.data(), m.uvs.size() * 8);
-    r->indices_.write(m.indices.data(), m.indices.size() * 4);
+    HS_ASSIGN_OR_RETURN(scene::Mesh finest, scene::build_prop_mesh(scene.prop));
+    r->levels_ = prop_levels(scene.prop, finest);
+    r->convex_ = scene.prop.kind == scene::Prop::Kind::kHemisphere;
+    r->lit_ = lit_lights(scene, &r->lights_skipped_);
+    for (size_t i = 0; i < r->levels_.size(); ++i) {
+        const auto& m = r->levels_[i].mesh;
+        const std::string name = fmt::format("prop.lod{}", i);
+        LevelBuffers b;
+        HS_ASSIGN_OR_RETURN(b.positions, gpu::Buffer::create(device, m.positions.size() * 12,
+                                                             gpu::BufferUsage::kVertex,
+                                                             name + ".positions"));
+        HS_ASSIGN_OR_RETURN(b.normals, gpu::Buffer::create(device, m.normals.size() * 12,
+                                                           gpu::BufferUsage::kVertex,
+                                                           name + ".normals"));
+        HS_ASSIGN_OR_RETURN(b.indices, gpu::Buffer::create(device, m.indices.size() * 4,
+                                                           gpu::BufferUsage::kIndex,
+                                                           name + ".indices"));
+        HS_ASSIGN_OR_RETURN(b.tangents, gpu::Buffer::create(device, m.tangents.size() * 12,
+                                                            gpu::BufferUsage::kVertex,
+                                                            name + ".tangents"));
+        HS_ASSIGN_OR_RETURN(b.uvs, gpu::Buffer::create(device, m.uvs.size() * 8,
+                                                       gpu::BufferUsage::kVertex, name + ".uvs"));
+        b.positions.write(m.positions.data(), m.positions.size() * 12);
+        b.normals.write(m.normals.data(), m.normals.size() * 12);
+        b.tangents.write(m.tangents.data(), m.tangents.size() * 12);
+        b.uvs.write(m.uvs.data(), m.uvs.size() * 8);
+        b.indices.write(m.indices.data(), m.indices.size() * 4);
+        r->buffers_.push_back(std::move(b));
+    }
     const ImageRgba8 white{1, 1, {255, 255, 255, 255}};
     const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
     HS_ASSIGN_OR_RETURN(r->albedo_texture_,
@@ -96,38 +133,50 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     return r;
 }
 
-Result<Renderer::Variant*> Renderer::variant(bool vd, const scene::Specular& spec) {
+Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
+                                             int encoding) {
+    const bool vd = kind == PassKind::kVd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
     const std::string key = fmt::format(
-        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}", vd, int(sp.model), sp.colour.r, sp.colour.g,
-        sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x, sp.tangent_axis.y,
-        sp.tangent_axis.z, int(sp.tangent_source));
+        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}", int(kind), int(sp.model), sp.colour.r,
+        sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
+        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding);
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
 
     Variant v;
-    v.effects = effects_of(scene_, vd, sp, info_.area_light_samples);
+    if (kind == PassKind::kOccluder)
+        v.effects = {"occluder"};
+    else
+        v.effects = effects_of(scene_, vd, sp, info_.area_light_samples);
     const bool area = has_light(scene_, scene::LightType::kRect);
     const bool falloff = scene_.effects.point_light_falloff;
+    const gpu::ColorFormat format =
+        encoding == 0 ? info_.format : layer_target_format(LayerEncoding(encoding - 1));
     gpu::GraphicsPipelineInfo pi;
     pi.vertex_spv = kPropVertSpv;
     pi.fragment_spv = kPropFragSpv;
-    pi.color_format = info_.format;
+    pi.color_format = format;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
-    pi.name = fmt::format("pipeline.{}.{}", vd ? "viewer-vd" : "projector-vi",
+    pi.name = fmt::format("pipeline.{}.{}",
+                          kind == PassKind::kOccluder ? "occluder"
+                          : vd                        ? "viewer-vd"
+                                                      : "projector-vi",
                           scene::to_string(sp.model));
-    pi.spec.set_int(HS_SC_PASS_KIND, int(vd ? PassKind::kVd : PassKind::kVi))
-        .set_int(HS_SC_SPEC_MODEL, int(sp.model))
+    pi.spec.set_int(HS_SC_PASS_KIND, int(kind))
+        .set_int(HS_SC_SPEC_MODEL, has_specular(scene_, sp) ? int(sp.model) : 0)
         .set_bool(HS_SC_EMISSION, vd && has_emission(scene_))
         .set_bool(HS_SC_POINT_FALLOFF, falloff)
-        .set_int(HS_SC_NUM_LIGHTS, int(scene_.lights.size()))
-        .set_float(HS_SC_OUTPUT_MAX, gpu::max_value(info_.format))
+        .set_int(HS_SC_NUM_LIGHTS, int(lit_.size()))
+        .set_float(HS_SC_OUTPUT_MAX, gpu::max_value(format))
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
         .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr)
-        .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0);
+        .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0)
+        .set_int(HS_SC_OUTPUT_ENCODING, encoding)
+        .set_bool(HS_SC_ANALYTIC_SPHERE, convex_);
     return build_variant(key, std::move(v), pi, scene_block(sp));
 }
 
@@ -153,8 +202,8 @@ gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
                                   float(scene::kMinLightDistance));
     block.tangent_axis = glm::vec4(glm::vec3(sp.tangent_axis), 0);
     block.emission = glm::vec4(glm::vec3(scene_.material.emission), 0);
-    for (size_t i = 0; i < scene_.lights.size() && i < HS_MAX_LIGHTS; ++i) {
-        const auto& l = scene_.lights[i];
+    for (size_t i = 0; i < lit_.size() && i < HS_MAX_LIGHTS; ++i) {
+        const auto& l = lit_[i];
         glm::dvec3 E = l.colour * l.intensity;
         block.lights[i].irradiance = glm::vec4(glm::vec3(E), 0);
         switch (l.type) {
@@ -175,6 +224,9 @@ gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
     block.projector_frame_from_world = glm::mat4(scene::frame_from_world(scene_.projector.pose));
     block.projector_k = glm::vec4(float(pk.fx), float(pk.fy), float(pk.cx), float(pk.cy));
     block.projector_position = glm::vec4(glm::vec3(scene_.projector.pose.position), 1.0f);
+    if (scene_.prop.kind == scene::Prop::Kind::kHemisphere)
+        block.prop_sphere = glm::vec4(glm::vec3(scene_.prop.hemisphere.centre),
+                                      float(scene_.prop.hemisphere.radius));
     return block;
 }
 
@@ -194,7 +246,8 @@ Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> shee
     pi.name = "pipeline.capture-geometry";
     pi.spec.set_int(HS_SC_PASS_KIND, int(PassKind::kCaptureGeometry))
         .set_int(HS_SC_NUM_LIGHTS, 0)
-        .set_bool(HS_SC_PROP_SHEEN, sheen_exponent.has_value());
+        .set_bool(HS_SC_PROP_SHEEN, sheen_exponent.has_value())
+        .set_bool(HS_SC_ANALYTIC_SPHERE, convex_);
     gpu::GpuScene block = scene_block(scene::Specular{});
     block.sheen_params = glm::vec4(float(sheen_exponent.value_or(1.0)), 0, 0, 0);
     return build_variant(key, std::move(v), pi, block);
@@ -222,16 +275,33 @@ gpu::GpuPush Renderer::push_for(const scene::Intrinsics& k, const scene::Pose& p
     push.clip_from_world = glm::mat4(scene::clip_from_frame(k, info_.near_m, info_.far_m) *
                                      scene::frame_from_world(pose));
     push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
+    push.camera_position = push.eye_position;
     return push;
 }
 
+gpu::CommandList::VertexStreams Renderer::streams(uint32_t level) const {
+    const LevelBuffers& b = buffers_[level];
+    return {&b.positions, &b.normals, &b.tangents, &b.uvs};
+}
+
+uint32_t Renderer::level_for(const scene::Intrinsics& k, const scene::Pose& pose) const {
+    if (!info_.level_of_detail || levels_.size() < 2)
+        return 0;
+    // Off axis a displacement projects larger than f / distance, by up to 1 / cos^2 of the
+    // corner ray's angle: the focal length is scaled by that.
+    const double du = std::max(std::abs(k.cx + 0.5), std::abs(k.width - 0.5 - k.cx)) / k.fx;
+    const double dv = std::max(std::abs(k.cy + 0.5), std::abs(k.height - 0.5 - k.cy)) / k.fy;
+    const double focal = std::max(k.fx, k.fy) * (1.0 + du * du + dv * dv);
+    return uint32_t(select_level(levels_, pose.position, focal, info_.max_error_px));
+}
+
 void Renderer::record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
-                      const gpu::GpuPush& push, const char* label) const {
+                      const gpu::GpuPush& push, const char* label, uint32_t level) const {
     cl.begin_render(t, glm::vec4(0.0f), label);
     cl.bind(v.pipeline);
     cl.push_constants(v.pipeline, &push, sizeof(push));
-    cl.draw_indexed({&positions_, &normals_, &tangents_, &uvs_}, indices_,
-                    uint32_t(mesh_.indices.size()));
+    cl.draw_indexed(streams(level), buffers_[level].indices,
+                    uint32_t(levels_[level].mesh.indices.size()));
     cl.end_render_and_read_back(t);
 }
 
@@ -244,36 +314,22 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
     gpu::GpuPush push = push_for(k, pose);
     if (eye_override)
         push.eye_position = glm::vec4(glm::vec3(*eye_override), 1.0f);
+    const uint32_t level = level_for(k, pose);
     HS_TRY(gpu::execute(device_, label,
-                        [&](gpu::CommandList& cl) { record(cl, v, *t, push, label); }));
+                        [&](gpu::CommandList& cl) { record(cl, v, *t, push, label, level); }));
     const auto t1 = std::chrono::steady_clock::now();
     RenderResult r;
     r.image = t->read();
     r.report.ran = true;
     r.report.effects = v.effects;
+    r.report.lights_skipped = lights_skipped_;
+    r.report.level = level;
+    r.report.triangles = levels_[level].mesh.indices.size() / 3;
     const auto t2 = std::chrono::steady_clock::now();
     r.report.gpu_ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
     r.report.readback_ms = std::chrono::duration<double, std::milli>(t2 - t1).count();
     r.report.render_ms = r.report.gpu_ms + r.report.readback_ms;
     return r;
-}
-
-Result<gpu::RenderTarget*> Renderer::owned_target(uint64_t owner, size_t n, uint32_t w,
-                                                  uint32_t h) {
-    auto& mine = owned_targets_[owner];
-    if (mine.size() <= n)
-        mine.resize(n + 1);
-    gpu::RenderTarget& t = mine[n];
-    if (t.width() != w || t.height() != h || t.format() != info_.format) {
-        t = gpu::RenderTarget{};  // free the old one before making its replacement
-        HS_ASSIGN_OR_RETURN(t, gpu::RenderTarget::create(device_, w, h, info_.format,
-                                                         fmt::format("viewer{}.eye{}", owner, n)));
-    }
-    return &t;
-}
-
-void Renderer::release_targets(uint64_t owner) {
-    owned_targets_.erase(owner);
 }
 
 uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat format) {
@@ -284,11 +340,15 @@ uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat for
 uint64_t Renderer::target_bytes() const {
     uint64_t n = 0;
     for (const auto& [key, t] : targets_) n += target_bytes_for(t.width(), t.height(), t.format());
-    for (const auto& [owner, ts] : owned_targets_)
-        for (const auto& t : ts)
-            if (t.width() != 0)
-                n += target_bytes_for(t.width(), t.height(), t.format());
     return n;
+}
+
+std::vector<std::string> Renderer::vd_effects(const scene::Specular& spec) const {
+    return effects_of(scene_, true, spec, info_.area_light_samples);
+}
+
+bool Renderer::has_vd_term(const scene::Specular& spec) const {
+    return !effects_of(scene_, true, spec, info_.area_light_samples).empty();
 }
 
 Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeRequest>& reqs) {
@@ -297,27 +357,23 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         Variant* variant = nullptr;  // null: nothing view-dependent, no work
         gpu::RenderTarget* target = nullptr;
         gpu::GpuPush push{};
+        uint32_t level = 0;
     };
     std::vector<Item> items(reqs.size());
     std::map<std::pair<uint32_t, uint32_t>, uint32_t> slots;  // next free target slot per size
-    std::map<uint64_t, size_t> owned;                         // next target of each owner
     for (size_t i = 0; i < reqs.size(); ++i) {
         const auto& k = reqs[i].intrinsics;
         if (k.width == 0 || k.height == 0 || k.width > 16384 || k.height > 16384)
             return make_error(
                 ErrorCode::kInvalidArgument,
                 fmt::format("eye resolution {}x{} outside 1..16384", k.width, k.height));
-        if (effects_of(scene_, true, reqs[i].spec).empty())
+        if (!has_vd_term(reqs[i].spec))
             continue;
         HS_ASSIGN_OR_RETURN(items[i].variant, variant(true, reqs[i].spec));
-        if (reqs[i].owner != 0) {
-            HS_ASSIGN_OR_RETURN(items[i].target, owned_target(reqs[i].owner, owned[reqs[i].owner]++,
-                                                              k.width, k.height));
-        } else {
-            HS_ASSIGN_OR_RETURN(items[i].target,
-                                target(k.width, k.height, slots[{k.width, k.height}]++));
-        }
+        HS_ASSIGN_OR_RETURN(items[i].target,
+                            target(k.width, k.height, slots[{k.width, k.height}]++));
         items[i].push = push_for(k, reqs[i].eye);
+        items[i].level = level_for(k, reqs[i].eye);
     }
     const bool any = std::any_of(items.begin(), items.end(),
                                  [](const Item& it) { return it.variant != nullptr; });
@@ -325,21 +381,24 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
         HS_TRY(gpu::execute(device_, "pass.viewer-vd.batch", [&](gpu::CommandList& cl) {
             for (auto& it : items)
                 if (it.variant)
-                    record(cl, *it.variant, *it.target, it.push, "pass.viewer-vd");
+                    record(cl, *it.variant, *it.target, it.push, "pass.viewer-vd", it.level);
         }));
     }
     const auto t1 = std::chrono::steady_clock::now();
     std::vector<RenderResult> out(reqs.size());
     for (size_t i = 0; i < reqs.size(); ++i) {
         out[i].report.pass = "viewer-vd";
+        out[i].report.lights_skipped = lights_skipped_;
         if (!items[i].variant) {
             out[i].image = ImageRgba32f::zeros(reqs[i].intrinsics.width, reqs[i].intrinsics.height);
-            out[i].report.skipped_because = "the material has no specular term and no emission";
+            out[i].report.skipped_because = vd_skip_reason(reqs[i].spec);
             continue;
         }
         out[i].image = items[i].target->read();
         out[i].report.ran = true;
         out[i].report.effects = items[i].variant->effects;
+        out[i].report.level = items[i].level;
+        out[i].report.triangles = levels_[items[i].level].mesh.indices.size() / 3;
     }
     const auto t2 = std::chrono::steady_clock::now();
     const double n = double(out.size());
@@ -351,7 +410,162 @@ Result<std::vector<RenderResult>> Renderer::render_eyes(const std::vector<EyeReq
     return out;
 }
 
+std::string Renderer::vd_skip_reason(const scene::Specular& spec) const {
+    if (has_emission(scene_))
+        return {};
+    if (spec.model == scene::SpecularModel::kNone)
+        return "the material has no specular term and no emission";
+    if (!(spec.colour.r > 0 || spec.colour.g > 0 || spec.colour.b > 0))
+        return "the specular colour is black and there is no emission";
+    return "every light is black and there is no emission";
+}
+
+namespace {
+bool overlaps(const PixelRect& a, const PixelRect& b) {
+    return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
+}
+}  // namespace
+
+Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
+    gpu::CommandList& cl, std::span<const LayerRequest> reqs) {
+    std::vector<LayerPlan> plans(reqs.size());
+    for (size_t i = 0; i < reqs.size(); ++i) {
+        const LayerRequest& r = reqs[i];
+        const auto& k = r.intrinsics;
+        LayerPlan& plan = plans[i];
+        plan.lights_skipped = lights_skipped_;
+        if (!r.target || r.target->width() != k.width || r.target->height() != k.height ||
+            r.target->format() != layer_target_format(r.encoding))
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("layer target must be {}x{} {}", k.width, k.height,
+                                          gpu::to_string(layer_target_format(r.encoding))));
+        if (!has_vd_term(r.spec)) {
+            plan.skipped_because = vd_skip_reason(r.spec);
+            continue;
+        }
+        plan.level = level_for(k, r.eye);
+        const ClusteredMesh& level = levels_[plan.level];
+        plan.clusters_total = uint32_t(level.clusters.size());
+        VdBound bound;
+        bound.spec = r.spec;
+        bound.lights = lit_;
+        bound.emission = has_emission(scene_);
+        bound.point_falloff = scene_.effects.point_light_falloff;
+        bound.threshold = layer_threshold(r.encoding == LayerEncoding::kSrgb8);
+        // Per cluster: 0 outside the view, 1 lit, 2 in view but dark. Its rect is re-derived
+        // when drawing occluders (a dark cluster matters only where it overlaps the lit rect).
+        lit_scratch_.assign(level.clusters.size(), 0);
+        PixelRect rect;
+        for (size_t c = 0; c < level.clusters.size(); ++c) {
+            const Cluster& cl_ = level.clusters[c];
+            const PixelRect on_screen =
+                project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
+            if (on_screen.empty())
+                continue;
+            if (!r.sparse || cluster_may_light(cl_, r.eye.position, bound)) {
+                lit_scratch_[c] = 1;
+                rect = unite(rect, on_screen);
+            } else {
+                lit_scratch_[c] = 2;
+            }
+        }
+        if (!r.sparse)
+            rect = {0, 0, k.width, k.height};
+        plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
+        if (plan.rect.empty()) {
+            plan.skipped_because = "nothing view-dependent in view";
+            continue;
+        }
+        HS_ASSIGN_OR_RETURN(Variant * lit, variant(PassKind::kVd, r.spec, 1 + int(r.encoding)));
+        if (!r.indices || r.indices->size() < layer_index_bytes())
+            return make_error(ErrorCode::kInvalidArgument,
+                              "a layer request needs an index buffer of layer_index_bytes()");
+        const gpu::Area area{plan.rect.x0, plan.rect.y0, plan.rect.x1 - plan.rect.x0,
+                             plan.rect.y1 - plan.rect.y0};
+        const gpu::GpuPush push = push_for(k, r.eye);
+        // The drawn clusters' indices, gathered: one draw call each for the occluders and the
+        // lit clusters (on lavapipe a draw call costs more than the triangles it skips).
+        auto* gathered = static_cast<uint32_t*>(r.indices->mapped());
+        const uint32_t* source = level.mesh.indices.data();
+        uint32_t written = 0;
+        auto gather = [&](auto pick) {
+            const uint32_t first = written;
+            uint32_t count = 0;
+            for (size_t c = 0; c < level.clusters.size(); ++c) {
+                if (!pick(c))
+                    continue;
+                const Cluster& cc = level.clusters[c];
+                std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
+                written += cc.index_count;
+                ++count;
+            }
+            return std::make_tuple(first, written - first, count);
+        };
+        auto [occ_first, occ_count, occ_clusters] = gather([&](size_t c) {
+            // A dark cluster in front of a lit one must still hide it (a prop that is not
+            // convex): drawn black, where it overlaps the lit rectangle.
+            if (convex_ || !r.sparse || lit_scratch_[c] != 2)
+                return false;
+            const Cluster& cc = level.clusters[c];
+            return overlaps(project_sphere(cc.centre, cc.radius, k, r.eye, info_.near_m),
+                            plan.rect);
+        });
+        auto [lit_first, lit_count, lit_clusters] =
+            gather([&](size_t c) { return lit_scratch_[c] == 1; });
+        plan.clusters_occluding = occ_clusters;
+        plan.clusters_lit = lit_clusters;
+        plan.triangles = (occ_count + lit_count) / 3;
+        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area);
+        cl.bind_mesh(streams(plan.level), *r.indices);
+        if (occ_count > 0) {
+            HS_ASSIGN_OR_RETURN(Variant * occ,
+                                variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
+            cl.bind(occ->pipeline);
+            cl.push_constants(occ->pipeline, &push, sizeof(push));
+            cl.draw_range(occ_first, occ_count);
+        }
+        cl.bind(lit->pipeline);
+        cl.push_constants(lit->pipeline, &push, sizeof(push));
+        cl.draw_range(lit_first, lit_count);
+        cl.end_render_and_read_back(*r.target, area);
+    }
+    return plans;
+}
+
+Result<std::vector<Renderer::LayerPlan>> Renderer::render_layers(
+    std::span<const LayerRequest> reqs) {
+    std::vector<LayerRequest> own(reqs.begin(), reqs.end());
+    if (index_scratch_.size() < own.size())
+        index_scratch_.resize(own.size());  // before any pointer into it is taken
+    for (size_t i = 0; i < own.size(); ++i) {
+        if (own[i].indices)
+            continue;
+        if (index_scratch_[i].size() < layer_index_bytes()) {
+            HS_ASSIGN_OR_RETURN(index_scratch_[i],
+                                gpu::Buffer::create(device_, layer_index_bytes(),
+                                                    gpu::BufferUsage::kIndex,
+                                                    fmt::format("layer.indices.{}", i)));
+        }
+        own[i].indices = &index_scratch_[i];
+    }
+    Result<std::vector<LayerPlan>> plans = std::vector<LayerPlan>{};
+    HS_TRY(gpu::execute(device_, "pass.viewer-vd.layers",
+                        [&](gpu::CommandList& cl) { plans = record_layers(cl, own); }));
+    return plans;
+}
+
 Result<RenderResult> Renderer::render_projector() {
+    if (!has_albedo(scene_)) {
+        // Nothing diffuse to light: no pass, a black frame.
+        RenderResult r;
+        r.image = ImageRgba32f::zeros(scene_.projector.intrinsics.width,
+                                      scene_.projector.intrinsics.height);
+        r.report.pass = "projector-vi";
+        r.report.lights_skipped = lights_skipped_;
+        r.report.skipped_because = "the albedo is black or every light is black";
+        ++projector_renders_;
+        return r;
+    }
     HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
     HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, scene_.projector.intrinsics, scene_.projector.pose,
                                              "pass.projector-vi"));
@@ -373,9 +587,9 @@ Result<RenderResult> Renderer::render_projector_vd(const scene::Specular& spec,
     const auto& k = scene_.projector.intrinsics;
     RenderResult r;
     r.report.pass = "projector-vd-baked";
-    if (effects_of(scene_, true, spec).empty()) {
+    if (!has_vd_term(spec)) {
         r.image = ImageRgba32f::zeros(k.width, k.height);
-        r.report.skipped_because = "the material has no specular term and no emission";
+        r.report.skipped_because = vd_skip_reason(spec);
         return r;
     }
     HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));

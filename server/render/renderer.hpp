@@ -1,11 +1,13 @@
 // The two passes of paper eq. (2): the projector (VI) pass and the viewer (VD) pass.
-// Created-once resources (mesh buffers, pipelines and their scene blocks) live in the Renderer;
-// per-request state is the render target: a viewer's own targets (EyeRequest::owner), freed by
-// release_targets() when it leaves, or a shared pool by size and format for one-off renders.
+// Created-once resources (the prop's levels of detail and their clusters, mesh buffers,
+// pipelines and their scene blocks) live in the Renderer. One-off renders (render_eyes, the
+// projector) use a pool of targets by size and format and read back linear radiance; the served
+// path records VD layers (record_layers) into targets its caller owns, in the wire's pixel
+// format, shading only the clusters that can light the layer (docs/ARCHITECTURE.md).
 // Thread: one thread at a time (the device's submit lock serialises submissions).
 #pragma once
 
-#include <deque>
+#include <span>
 #include <map>
 #include <memory>
 #include <optional>
@@ -18,6 +20,7 @@
 #include "gpu/device.hpp"
 #include "gpu/pipeline.hpp"
 #include "gpu/shared_layout.hpp"
+#include "render/clusters.hpp"
 #include "scene/scene.hpp"
 
 namespace hs::render {
@@ -33,7 +36,17 @@ struct RendererCreateInfo {
     double far_m = 100.0;
     // Samples per pixel of each rect (area) light; compiled out when the scene has none.
     uint32_t area_light_samples = kDefaultAreaLightSamples;
+    // Tessellation by projected error: each view draws the coarsest level of the prop whose
+    // surface error stays within max_error_px pixels (the scene's segments x rings is the finest);
+    // false: always the scene's own tessellation.
+    bool level_of_detail = true;
+    double max_error_px = 0.5;
 };
+
+// How a VD layer is stored in its target: the bytes the wire carries (PROTOCOL.md, VdLayer).
+enum class LayerEncoding { kSrgb8, kHalf };
+// The target format of a layer encoding: RGBA8 (sRGB codes) or RGBA16F.
+gpu::ColorFormat layer_target_format(LayerEncoding e);
 
 // What one pass did: whether it was recorded, the effects compiled in, and its wall time.
 struct PassReport {
@@ -41,6 +54,9 @@ struct PassReport {
     bool ran = false;                  // false: nothing to draw, no GPU work was recorded
     std::string skipped_because;       // when !ran
     std::vector<std::string> effects;  // the terms compiled into the pipeline
+    uint32_t lights_skipped = 0;       // black lights (colour x intensity 0): not in the loop
+    uint32_t level = 0;                // level of detail drawn (0: the scene's tessellation)
+    uint64_t triangles = 0;            // triangles drawn
     double render_ms = 0;              // record + submit + wait + readback, wall clock
     double gpu_ms = 0;                 // of which record + submit + wait for the GPU
     double readback_ms = 0;            // of which converting the mapped target to float RGBA
@@ -65,18 +81,57 @@ public:
     Result<RenderResult> render_eye(const scene::Specular& spec, const scene::Intrinsics& k,
                                     const scene::Pose& eye);
 
-    // Several eyes (of one or many viewers) recorded into one command buffer and one
-    // submission; each gets its own target. Results are in request order; report.render_ms is
-    // the whole batch's time divided evenly. Eyes with nothing view-dependent record no work.
+    // Several eyes recorded into one command buffer and one submission, every prop pixel
+    // shaded, read back as linear radiance; each gets its own target from the pool. Results
+    // are in request order; report.render_ms is the whole batch's time divided evenly. Eyes
+    // with nothing view-dependent record no work.
     struct EyeRequest {
         scene::Specular spec;
         scene::Intrinsics intrinsics;
         scene::Pose eye;
-        // Non-zero: the viewer whose targets this eye renders into (its n-th eye in the batch
-        // uses its n-th target, re-created when the size changes); 0: the shared pool.
-        uint64_t owner = 0;
     };
     Result<std::vector<RenderResult>> render_eyes(const std::vector<EyeRequest>& requests);
+
+    // One eye's VD layer for the served path, into a target its caller owns.
+    struct LayerRequest {
+        scene::Specular spec;
+        scene::Intrinsics intrinsics;
+        scene::Pose eye;
+        LayerEncoding encoding = LayerEncoding::kSrgb8;
+        // intrinsics' size, in layer_target_format(encoding); its readback buffer receives the
+        // rendered rectangle in the wire's pixel format, laid out as the whole image.
+        gpu::RenderTarget* target = nullptr;
+        // true: only the clusters that can light the layer above its quantisation step are
+        // shaded, within the rectangle they cover; false: every prop pixel (a full frame).
+        bool sparse = true;
+        uint32_t tile = 32;  // the rectangle is grown to whole tiles of this many pixels
+        // The drawn clusters' indices are gathered here and drawn in one call: a host-visible
+        // index buffer of at least layer_index_bytes(), not in use by the device, its caller's
+        // until the submission completes. Null: the renderer's own (render_layers only).
+        gpu::Buffer* indices = nullptr;
+    };
+    // What was recorded for one layer. Outside `rect` the layer is black (nothing was drawn or
+    // read back there); an empty rect: no GPU work at all, the layer is black.
+    struct LayerPlan {
+        PixelRect rect;
+        std::string skipped_because;  // when rect is empty
+        uint32_t level = 0;
+        uint32_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0;
+        uint64_t triangles = 0;  // drawn, lit and occluding
+        uint32_t lights_skipped = 0;
+    };
+    // Records the layers' passes into `cl` (the caller submits). Plans are in request order.
+    Result<std::vector<LayerPlan>> record_layers(gpu::CommandList& cl,
+                                                 std::span<const LayerRequest> requests);
+    // record_layers, submitted and waited for.
+    Result<std::vector<LayerPlan>> render_layers(std::span<const LayerRequest> requests);
+    // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
+    uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }
+    // Whether a layer of `spec` can ever be non-zero in this scene (a specular term with a
+    // non-black colour and a non-black light, or emission).
+    bool has_vd_term(const scene::Specular& spec) const;
+    // The terms a VD pass of `spec` compiles in (effects_of for this scene).
+    std::vector<std::string> vd_effects(const scene::Specular& spec) const;
 
     // The VI term seen from an eye (what a perfectly calibrated projector shows that viewer):
     // sum_i L_d at the prop points the eye sees. For simulation and contact sheets.
@@ -97,17 +152,19 @@ public:
                                                  const scene::Pose& camera,
                                                  std::optional<double> sheen_exponent);
 
-    // Frees every target of `owner` (a viewer that left or re-registered). No submission is in
-    // flight between calls (each pass waits for its own), so nothing is still in use.
-    void release_targets(uint64_t owner);
-    // Device and host bytes held by all render targets (owned and pooled).
+    // Device and host bytes held by the pooled render targets.
     uint64_t target_bytes() const;
     // What one render target of this size holds: colour, depth and readback buffer, bytes.
     static uint64_t target_bytes_for(uint32_t width, uint32_t height, gpu::ColorFormat format);
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
-    const scene::Mesh& mesh() const { return mesh_; }
+    // The scene's own tessellation (the finest level).
+    const scene::Mesh& mesh() const { return levels_.front().mesh; }
+    const std::vector<ClusteredMesh>& levels() const { return levels_; }
+    // The level of detail a camera with these intrinsics at this pose draws.
+    uint32_t level_for(const scene::Intrinsics& k, const scene::Pose& pose) const;
+    uint32_t lights_skipped() const { return lights_skipped_; }
     gpu::ColorFormat format() const { return info_.format; }
 
 private:
@@ -118,8 +175,12 @@ private:
     };
     Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
         : device_(device), scene_(scene), info_(info) {}
-    enum class PassKind { kVi = 0, kVd = 1, kCaptureGeometry = 2 };
-    Result<Variant*> variant(bool vd, const scene::Specular& spec);
+    enum class PassKind { kVi = 0, kVd = 1, kCaptureGeometry = 2, kOccluder = 3 };
+    // encoding: 0 linear radiance in info_.format, else 1 + LayerEncoding.
+    Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0);
+    Result<Variant*> variant(bool vd, const scene::Specular& spec) {
+        return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
+    }
     Result<Variant*> geometry_variant(std::optional<double> sheen_exponent);
     // Builds the pipeline and its scene block, and keeps the variant under `key`.
     Result<Variant*> build_variant(const std::string& key, Variant v,
@@ -129,26 +190,33 @@ private:
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot,
                                       gpu::ColorFormat format);
     gpu::GpuPush push_for(const scene::Intrinsics& k, const scene::Pose& pose) const;
-    // Records one draw of the prop into `t` and its readback.
+    // Records one draw of the prop (level `level`, every cluster) into `t` and its readback.
     void record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
-                const gpu::GpuPush& push, const char* label) const;
+                const gpu::GpuPush& push, const char* label, uint32_t level) const;
+    gpu::CommandList::VertexStreams streams(uint32_t level) const;
     Result<RenderResult> draw(Variant& v, const scene::Intrinsics& k, const scene::Pose& pose,
                               const char* label, const glm::dvec3* eye_override = nullptr,
                               std::optional<gpu::ColorFormat> format = std::nullopt);
     gpu::GpuScene scene_block(const scene::Specular& spec) const;
+    // Why a layer of `spec` has nothing to draw (has_vd_term false).
+    std::string vd_skip_reason(const scene::Specular& spec) const;
 
     gpu::Device& device_;
     scene::Scene scene_;
     RendererCreateInfo info_;
-    scene::Mesh mesh_;
-    gpu::Buffer positions_, normals_, tangents_, uvs_, indices_;
+    struct LevelBuffers {
+        gpu::Buffer positions, normals, tangents, uvs, indices;
+    };
+    std::vector<ClusteredMesh> levels_;  // finest first
+    std::vector<LevelBuffers> buffers_;  // one per level
+    std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
+    uint32_t lights_skipped_ = 0;
+    bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
+    std::vector<uint8_t> lit_scratch_;  // per cluster, reused by record_layers
+    std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
-    // Per viewer, per eye; a deque, so that growing it keeps the targets a batch points at.
-    std::map<uint64_t, std::deque<gpu::RenderTarget>> owned_targets_;
-    // The owner's n-th target at this size, made or re-made as needed.
-    Result<gpu::RenderTarget*> owned_target(uint64_t owner, size_t n, uint32_t w, uint32_t h);
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
 };

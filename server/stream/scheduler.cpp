@@ -2,10 +2,29 @@
 
 namespace hs::stream {
 
-bool Scheduler::ready(const Slot& s) const {
-    if (!s.pose || s.counters.in_flight >= kMaxInFlight)
+using SteadyClock = std::chrono::steady_clock;
+
+void Scheduler::set_options(SchedulerOptions options) {
+    std::lock_guard lock(mutex_);
+    options_ = options;
+}
+
+bool Scheduler::wants(const Slot& s) const {
+    if (!s.pose || s.rendering || s.counters.in_flight >= kMaxInFlight)
         return false;
     return s.display.mode == protocol::FrameMode::kContinuous ? s.pose_fresh : s.requests > 0;
+}
+
+bool Scheduler::ready(const Slot& s, SteadyClock::time_point now) const {
+    return wants(s) && now >= s.next_allowed;
+}
+
+SteadyClock::time_point Scheduler::next_eligible_locked() const {
+    auto t = SteadyClock::time_point::max();
+    for (const auto& [id, s] : slots_)
+        if (wants(s))
+            t = std::min(t, s.next_allowed);
+    return t;
 }
 
 void Scheduler::add_viewer(uint32_t id, const protocol::RegisterDisplay& d) {
@@ -58,16 +77,31 @@ bool Scheduler::request_frame(uint32_t id) {
 
 std::vector<ViewerJob> Scheduler::wait_for_batch() {
     std::unique_lock lock(mutex_);
-    cv_.wait(lock, [&] {
+    for (;;) {
         if (stopped_ || woken_)
-            return true;
-        for (const auto& [id, s] : slots_)
-            if (ready(s))
-                return true;
-        return false;
-    });
+            break;
+        const auto next = next_eligible_locked();
+        if (next <= SteadyClock::now())
+            break;
+        // A viewer held back by its display's rate wakes us at its time.
+        if (next == SteadyClock::time_point::max())
+            cv_.wait(lock);
+        else
+            cv_.wait_until(lock, next);
+    }
     woken_ = false;
     return take_locked();
+}
+
+void Scheduler::rendered(uint32_t id) {
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(id);
+        if (it == slots_.end())
+            return;
+        it->second.rendering = false;
+    }
+    cv_.notify_one();
 }
 
 std::vector<ViewerJob> Scheduler::take_batch() {
@@ -77,17 +111,32 @@ std::vector<ViewerJob> Scheduler::take_batch() {
 
 std::vector<ViewerJob> Scheduler::take_locked() {
     std::vector<ViewerJob> batch;
-    if (stopped_)
+    if (stopped_ || slots_.empty())
         return batch;
-    for (auto& [id, s] : slots_) {
-        if (!ready(s))
+    const auto now = SteadyClock::now();
+    const auto interval = options_.max_viewer_hz > 0
+                              ? std::chrono::duration_cast<SteadyClock::duration>(
+                                    std::chrono::duration<double>(1.0 / options_.max_viewer_hz))
+                              : SteadyClock::duration::zero();
+    // Round-robin: start after the last viewer taken, wrap around once.
+    auto it = slots_.upper_bound(last_taken_);
+    for (size_t seen = 0; seen < slots_.size(); ++seen, ++it) {
+        if (it == slots_.end())
+            it = slots_.begin();
+        if (batch.size() >= std::max<uint32_t>(options_.max_batch, 1))
+            break;
+        auto& [id, s] = *it;
+        if (!ready(s, now))
             continue;
         batch.push_back({id, s.next_frame++, s.display, *s.pose, s.pose_received});
         s.pose_fresh = false;
         if (s.requests > 0)
             --s.requests;
+        s.rendering = true;
+        s.next_allowed = now + interval;
         ++s.counters.in_flight;
         ++s.counters.frames;
+        last_taken_ = id;
     }
     return batch;
 }

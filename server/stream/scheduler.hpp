@@ -1,5 +1,7 @@
 // Which headset gets the next frame: latest pose wins, at most kMaxInFlight frames in flight per
-// headset, and every ready headset is taken in one batch. Pure bookkeeping, no I/O, no GPU.
+// headset and one of them rendering or encoding (its ViewerFrame is in use until rendered()),
+// each at most at its display's rate, ready headsets taken round-robin up to a batch's size.
+// Pure bookkeeping, no I/O, no GPU.
 // Thread: any; every method takes the scheduler's lock.
 #pragma once
 
@@ -34,19 +36,29 @@ struct ViewerCounters {
     std::vector<double> latency_ms;  // pose received -> layers handed to the socket, last 1024
 };
 
+struct SchedulerOptions {
+    uint32_t max_batch = 8;     // viewers per batch; the next batch starts after the last taken
+    double max_viewer_hz = 0;   // frames per second per viewer at most; 0: unlimited
+};
+
 class Scheduler {
 public:
+    explicit Scheduler(SchedulerOptions options = {}) : options_(options) {}
+    void set_options(SchedulerOptions options);
     void add_viewer(uint32_t session_id, const protocol::RegisterDisplay& display);
     // Forgets the viewer; returns its final counters (nullopt when it registered no display).
     std::optional<ViewerCounters> remove_viewer(uint32_t session_id);
     // Keeps only this pose; returns false when the session registered no display.
     bool set_pose(uint32_t session_id, const protocol::Pose& pose);
     bool request_frame(uint32_t session_id);
-    // Blocks until at least one viewer is ready, wake() or stop() was called; returns every
-    // ready viewer, each counted in flight (possibly none after wake() or stop()).
+    // Blocks until at least one viewer is ready, wake() or stop() was called; returns up to
+    // max_batch ready viewers, round-robin, each counted in flight and rendering (possibly none
+    // after wake() or stop()).
     std::vector<ViewerJob> wait_for_batch();
-    // As wait_for_batch(), without blocking: every viewer ready now (possibly none).
+    // As wait_for_batch(), without blocking: the viewers ready now (possibly none).
     std::vector<ViewerJob> take_batch();
+    // The frame of `session_id` was rendered and encoded: its ViewerFrame is free for the next.
+    void rendered(uint32_t session_id);
     // Makes a waiting wait_for_batch() return, so its caller can look at other work.
     void wake();
     bool stopped() const;
@@ -65,11 +77,20 @@ private:
         bool pose_fresh = false;  // a pose not yet rendered
         uint32_t requests = 0;    // mode on-request: frames asked for and not yet rendered (<= 2)
         uint32_t next_frame = 1;
+        bool rendering = false;  // its frame is being rendered or encoded
+        std::chrono::steady_clock::time_point next_allowed{};  // by the display's rate
         ViewerCounters counters;
     };
-    bool ready(const Slot& s) const;
+    // Ready, rate aside: has a pose, room in flight, not rendering, and a reason (a fresh pose
+    // in continuous mode, a request in on-request mode).
+    bool wants(const Slot& s) const;
+    bool ready(const Slot& s, std::chrono::steady_clock::time_point now) const;
     std::vector<ViewerJob> take_locked();
+    // The earliest time a viewer that wants a frame is allowed one (max(): none waits).
+    std::chrono::steady_clock::time_point next_eligible_locked() const;
 
+    SchedulerOptions options_;
+    uint32_t last_taken_ = 0;  // round-robin: the next batch starts after this session id
     mutable std::mutex mutex_;
     std::condition_variable cv_;
     std::map<uint32_t, Slot> slots_;

@@ -68,6 +68,9 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
         return make_error(ErrorCode::kInvalidArgument,
                           "the admin token must differ from the viewers' token");
     auto impl = std::make_unique<Impl>(device, info);
+    impl->scheduler.set_options({std::max<uint32_t>(info.limits.max_batch_viewers, 1),
+                                 double(info.limits.max_viewer_hz)});
+    impl->encoder_threads = std::clamp<uint32_t>(info.encoder_threads, 1, 64);
     auto checked = impl->accept_scene(scene);
     if (!checked)
         return checked.error();
@@ -264,7 +267,11 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
                         d.format == proto::PixelFormat::kRgba8 ? "rgba8" : "rgba16f", worst,
                         frame_limit)};
     const uint64_t need =
-        2 * render::Renderer::target_bytes_for(d.eye_width, d.eye_height, info.renderer.format);
+        2 * render::Renderer::target_bytes_for(
+                d.eye_width, d.eye_height,
+                render::layer_target_format(d.format == proto::PixelFormat::kRgba8
+                                                ? render::LayerEncoding::kSrgb8
+                                                : render::LayerEncoding::kHalf));
     const uint64_t had = target_bytes_of.count(id) ? target_bytes_of[id] : 0;
     const uint64_t others = reserved_target_bytes - had;
     if (others + need > limits.max_target_bytes)
@@ -360,11 +367,10 @@ void Server::Impl::publish_projector_frame(Bytes frame) {
             s->send(frame, nullptr, 0, true);
 }
 
-void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames,
+void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
                            Clock::time_point pose_received) {
     auto it = sessions.find(id);
-    uint64_t bytes = 0;
-    for (const auto& f : frames) bytes += f.size();
+    const uint64_t bytes = layers[0]->size() + layers[1]->size();
     if (it == sessions.end()) {
         scheduler.complete(id, 0, -1.0);
         return;
@@ -372,21 +378,54 @@ void Server::Impl::deliver(uint32_t id, std::vector<std::vector<uint8_t>> frames
     // Our own reference: a send() that closes the session erases its entry from `sessions`.
     std::shared_ptr<Session> session = it->second;
     struct Pending {
-        size_t remaining;
+        size_t remaining = 2;
         bool all_sent = true;
     };
-    auto pending = std::make_shared<Pending>(Pending{frames.size()});
+    auto pending = std::make_shared<Pending>();
     const uint64_t group = next_layer_group++;
-    for (auto& f : frames) {
+    const auto handed = Clock::now();
+    for (auto& layer : layers) {
         session->send(
-            std::make_shared<const std::vector<uint8_t>>(std::move(f)),
-            [this, id, pending, bytes, pose_received](bool sent) {
+            std::move(layer),
+            [this, id, pending, bytes, pose_received, handed](bool sent) {
+                if (sent) {
+                    std::lock_guard lock(mutex);
+                    frame_stats.send.add(ms_since(handed));
+                }
                 pending->all_sent = pending->all_sent && sent;
                 if (--pending->remaining == 0)
                     scheduler.complete(id, bytes, pending->all_sent ? ms_since(pose_received) : -1);
             },
             group);
     }
+}
+
+nlohmann::json FrameStats::json() const {
+    const double n = double(std::max<uint64_t>(layers, 1));
+    const auto stage = [](const StageCost& c) {
+        return nlohmann::json{{"last", c.last}, {"mean", c.mean()}, {"count", c.n}};
+    };
+    return {{"frames", frames},
+            {"layers", layers},
+            {"bytes", bytes},
+            {"bytes_per_layer", double(bytes) / n},
+            {"submissions", submissions},
+            {"eyes", eyes},
+            {"max_eyes", max_eyes},
+            {"eyes_per_submission", submissions ? double(eyes) / double(submissions) : 0.0},
+            {"large_display_turns", large_turns},
+            {"sparse",
+             {{"layers_black", layers_black},
+              {"clusters_total", clusters_total},
+              {"clusters_lit", clusters_lit},
+              {"clusters_occluding", clusters_occluding},
+              {"triangles", triangles},
+              {"pixels_rendered", pixels_rendered}}},
+            {"stages_ms",
+             {{"queue", stage(queue)},
+              {"pass", stage(pass)},
+              {"encode", stage(encode)},
+              {"send", stage(send)}}}};
 }
 
 nlohmann::json Server::stats() const {
@@ -429,7 +468,7 @@ nlohmann::json Server::Impl::stats() const {
     for (int c = 0; c < kErrorCodes; ++c)
         if (refusals[size_t(c)])
             refused[std::to_string(c)] = refusals[size_t(c)].load();
-    const double n = double(std::max<uint64_t>(vd_layers, 1));
+    const auto& fs = frame_stats;
     return {{"scene_version", scene_version},
             {"projector_renders", projector_renders},
             {"sessions", session_info.size()},
@@ -447,20 +486,30 @@ nlohmann::json Server::Impl::stats() const {
               {"render_targets_budget", limits.max_target_bytes},
               {"send_queues", queued},
               {"send_queue_max_session", queued_max},
-              {"receive_buffers", receive}}},
-            {"passes", {{"projector", last_projector_report}, {"viewer", last_vd_report}}},
+              {"receive_buffers", receive},
+              {"index_buffers", held_index_bytes.load()},
+              {"layer_buffers_pooled", buffers->pooled_bytes()}}},
+            {"passes", {{"projector", last_projector_report}, {"viewer", fs.last_report}}},
             {"timing_ms",
-             {{"vd_render_mean", vd_render_ms_total / n},
-              {"vd_encode_mean", vd_encode_ms_total / n},
+             {{"vd_pass_mean", fs.pass.mean()},
+              {"vd_encode_mean", fs.encode.mean()},
               {"projector_total", projector_ms_total},
-              {"vd_layers", vd_layers}}},
-            {"cost_ms", {{"projector", projector_cost.json()}, {"viewer_vd", vd_cost.json()}}},
-            {"batches",
-             {{"submissions", batches},
-              {"eyes", batched_eyes},
-              {"max_eyes", max_batch_eyes},
-              {"large_display_turns", large_turns},
-              {"eyes_per_submission", batches ? double(batched_eyes) / double(batches) : 0.0}}}};
+              {"vd_layers", fs.layers}}},
+            {"cost_ms",
+             {{"projector", projector_cost.json()},
+              {"viewer_vd",
+               {{"frames", fs.layers},
+                {"last",
+                 {{"queue", fs.queue.last},
+                  {"pass", fs.pass.last},
+                  {"encode", fs.encode.last},
+                  {"send", fs.send.last}}},
+                {"mean",
+                 {{"queue", fs.queue.mean()},
+                  {"pass", fs.pass.mean()},
+                  {"encode", fs.encode.mean()},
+                  {"send", fs.send.mean()}}}}}}},
+            {"frames", fs.json()}};
 }
 
 }  // namespace hs::stream

@@ -39,6 +39,11 @@ struct ServerLimits {
     // Displays above this many pixels per eye render in a submission of their own, one per
     // turn, so that they never hold up the batch of the others.
     uint64_t large_display_pixels = 2u << 20;
+    // Frames per second one viewer gets at most (its display's rate; the protocol carries
+    // none): a pose stream faster than this is served at this rate, latest pose first.
+    // 0: no limit.
+    uint32_t max_viewer_hz = 60;
+    uint32_t max_batch_viewers = 8;  // viewers rendered in one submission
     scene::SceneLimits scene;  // triangles and projector pixels of any scene it accepts
 };
 
@@ -52,6 +57,9 @@ struct ServerCreateInfo {
     std::filesystem::path asset_root = ".";
     ServerLimits limits;
     render::RendererCreateInfo renderer;
+    // Threads that encode layers beside the render thread (docs/ARCHITECTURE.md measures the
+    // split of the cores between them and lavapipe's rasteriser threads).
+    uint32_t encoder_threads = 1;
 };
 
 class Server {

@@ -1,6 +1,7 @@
 // The server's insides, shared by its parts (not a public header): server.cpp (lifecycle,
 // accepting, admission, stats), session.cpp (one connection, the only code that speaks the
-// wire format) and render_loop.cpp (the render thread). Each member says which thread owns it.
+// wire format), frame_loop.cpp (the render thread) and encoder.cpp (the encoder threads). Each
+// member says which thread owns it.
 #pragma once
 
 #include <array>
@@ -14,6 +15,8 @@
 
 #include <asio.hpp>
 
+#include "render/renderer.hpp"
+#include "stream/encoder.hpp"
 #include "stream/scheduler.hpp"
 #include "stream/server.hpp"
 
@@ -22,7 +25,6 @@ namespace hs::stream {
 namespace proto = hs::protocol;
 using Clock = std::chrono::steady_clock;
 using Socket = asio::generic::stream_protocol::socket;
-using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
 
 // Bytes read from a socket per call: a payload's memory grows as its bytes arrive, never from
 // the length its header declares.
@@ -73,6 +75,42 @@ struct PassCost {
     }
 };
 
+// One stage's cost per frame or layer: the last value and the mean, ms.
+struct StageCost {
+    uint64_t n = 0;
+    double last = 0, sum = 0;
+    void add(double ms) {
+        ++n;
+        last = ms;
+        sum += ms;
+    }
+    double mean() const { return n ? sum / double(n) : 0.0; }
+};
+
+// What the VD path did, as one typed record (stats "frames"). Under Impl::mutex.
+struct FrameStats {
+    uint64_t frames = 0, layers = 0, bytes = 0;  // sent to the sockets' queues
+    uint64_t submissions = 0, eyes = 0, max_eyes = 0, large_turns = 0;
+    // Per layer: what the sparse path drew and what it skipped.
+    uint64_t layers_black = 0;  // nothing view-dependent in view: no pass, no readback
+    uint64_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0, triangles = 0;
+    uint64_t pixels_rendered = 0;
+    // Stages: queue = taken from the scheduler to submitted (culling and recording, per
+    // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
+    // frame); encode = per layer, CPU; send = handed to the socket to written (per layer).
+    StageCost queue, pass, encode, send;
+    nlohmann::json last_report;
+    void add_plan(const render::Renderer::LayerPlan& p) {
+        layers_black += p.rect.empty() ? 1 : 0;
+        clusters_total += p.clusters_total;
+        clusters_lit += p.clusters_lit;
+        clusters_occluding += p.clusters_occluding;
+        triangles += p.triangles;
+        pixels_rendered += p.rect.area();
+    }
+    nlohmann::json json() const;
+};
+
 struct Server::Impl {
     gpu::Device& device;
     ServerCreateInfo info;
@@ -96,7 +134,9 @@ struct Server::Impl {
 
     // Any thread.
     std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};
-    std::atomic<uint64_t> reserved_target_bytes{0}, held_target_bytes{0};
+    std::atomic<uint64_t> reserved_target_bytes{0}, held_target_bytes{0}, held_index_bytes{0};
+    std::shared_ptr<BufferPool> buffers = std::make_shared<BufferPool>();  // layer bytes
+    uint32_t encoder_threads = 1;  // set before run()
     std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};
 
     // Shared between threads under `mutex`.
@@ -111,13 +151,10 @@ struct Server::Impl {
     std::vector<uint32_t> released_viewers;  // whose render targets the render thread frees
     uint32_t scene_version = 1;
     uint64_t projector_renders = 0;
-    nlohmann::json last_projector_report, last_vd_report;
-    double vd_render_ms_total = 0, vd_encode_ms_total = 0, projector_ms_total = 0;
-    uint64_t vd_layers = 0;
-    PassCost projector_cost, vd_cost;  // per frame (projector) and per layer (VD)
-    uint64_t batches = 0, batched_eyes = 0,
-             max_batch_eyes = 0;  // viewer-pass submissions and their eyes
-    uint64_t large_turns = 0;     // large displays rendered in a turn of their own
+    nlohmann::json last_projector_report;
+    double projector_ms_total = 0;
+    PassCost projector_cost;  // per projector frame
+    FrameStats frame_stats;
     struct SessionInfo {
         std::string name;  // valid UTF-8 (checked at decode)
         proto::Role role = proto::Role::kHmd;
@@ -145,14 +182,11 @@ struct Server::Impl {
     std::optional<proto::Error> admit_display(uint32_t id, const proto::RegisterDisplay& d);
     Result<scene::Scene> accept_scene(const scene::Scene& s) const;
     void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence);
-    void render_loop();
-    bool rebuild(std::unique_ptr<render::Renderer>& renderer, scene::Scene& current,
-                 ImageRgba32f& captured_vd, const scene::Scene& s, uint32_t version);
-    void serve(render::Renderer& renderer, const scene::Scene& current,
-               const ImageRgba32f& captured_vd, const std::vector<ViewerJob>& batch);
+    void render_loop();  // the render thread (frame_loop.cpp)
     void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
     void publish_projector_frame(Bytes frame);
-    void deliver(uint32_t session_id, std::vector<std::vector<uint8_t>> frames,
+    // Network thread: a frame's two layers to the session's queue (latest frame wins).
+    void deliver(uint32_t session_id, std::array<Bytes, 2> layers,
                  Clock::time_point pose_received);
     void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
     void remove_session(uint32_t id);

@@ -2,6 +2,7 @@
 // test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding,
 // the calibration's kernel regression and CIEDE2000 over an image.
 //   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
+#include <array>
 #include <cmath>
 #include <random>
 
@@ -64,6 +65,52 @@ void BM_VdPass(benchmark::State& state) {
         benchmark::Counter(double(reqs.size()), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_VdPass)->Arg(1)->Arg(4)->Arg(8)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// One viewer's stereo VD layer as the server renders it: into targets in the wire's pixel
+// format (sRGB8), read back into mapped memory, no conversion. range(0): 1 sparse (only the
+// clusters that can light the layer), 0 full (every prop pixel, the full-frame baseline).
+// range(1): 1 level of detail by projected error, 0 the scene's tessellation.
+void BM_VdLayers(benchmark::State& state) {
+    auto& g = Gpu::get();
+    render::RendererCreateInfo info;
+    info.level_of_detail = state.range(1) != 0;
+    auto r = render::Renderer::create(*g.device, g.scene, info);
+    if (!r) {
+        state.SkipWithError(r.error().message.c_str());
+        return;
+    }
+    std::array<gpu::RenderTarget, 2> targets;
+    for (auto& t : targets)
+        t = gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
+                                      gpu::ColorFormat::kRgba8Unorm, "bench.eye")
+                .value();
+    size_t frame = 0;
+    uint64_t pixels = 0, triangles = 0;
+    for (auto _ : state) {
+        const auto eyes = scene::eye_poses(g.heads[frame++ % g.heads.size()], 0.063);
+        std::vector<render::Renderer::LayerRequest> reqs;
+        for (size_t e = 0; e < 2; ++e)
+            reqs.push_back({g.scene.material.specular, g.eye_k, eyes[e],
+                            render::LayerEncoding::kSrgb8, &targets[e], state.range(0) != 0});
+        auto plans = r.value()->render_layers(reqs);
+        if (!plans) {
+            state.SkipWithError(plans.error().message.c_str());
+            break;
+        }
+        for (const auto& p : *plans) pixels += p.rect.area(), triangles += p.triangles;
+    }
+    state.counters["stereo/s"] =
+        benchmark::Counter(1.0, benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["rect_px"] =
+        benchmark::Counter(double(pixels) / 2.0, benchmark::Counter::kAvgIterations);
+    state.counters["triangles"] =
+        benchmark::Counter(double(triangles) / 2.0, benchmark::Counter::kAvgIterations);
+}
+BENCHMARK(BM_VdLayers)
+    ->ArgsProduct({{1, 0}, {1, 0}})
+    ->ArgNames({"sparse", "lod"})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_ProjectorPass(benchmark::State& state) {
     auto& g = Gpu::get();

@@ -1,0 +1,344 @@
+#include "render/clusters.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
+
+#include "scene/camera.hpp"
+#include "scene/mesh.hpp"
+
+namespace hs::render {
+
+namespace {
+
+constexpr double kPi = glm::pi<double>();
+constexpr double kHalfPi = 0.5 * glm::pi<double>();
+// Angles are compared with this much slack, so that rounding never culls a lit cluster.
+constexpr double kSlack = 1e-6;
+
+double angle_between(const glm::dvec3& a, const glm::dvec3& b) {
+    // atan2 of |a x b| and a.b: accurate at small and large angles alike.
+    return std::atan2(glm::length(glm::cross(a, b)), glm::dot(a, b));
+}
+
+// Spreads the low 10 bits of v to every third bit.
+uint32_t spread3(uint32_t v) {
+    v &= 0x3ff;
+    v = (v | (v << 16)) & 0x030000ff;
+    v = (v | (v << 8)) & 0x0300f00f;
+    v = (v | (v << 4)) & 0x030c30c3;
+    v = (v | (v << 2)) & 0x09249249;
+    return v;
+}
+
+// Half-angle of the cone of directions from a point in the sphere (c, r) to a point in the
+// sphere (q, rq): pi when they overlap.
+double spread_towards(const glm::dvec3& c, double r, const glm::dvec3& q, double rq) {
+    const double d = glm::length(q - c);
+    if (d <= r + rq)
+        return kPi;
+    return std::asin(std::min(1.0, (r + rq) / d));
+}
+
+double max_channel(const glm::dvec3& v) { return std::max({v.x, v.y, v.z}); }
+
+}  // namespace
+
+ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster) {
+    ClusteredMesh out;
+    const size_t tris = mesh.indices.size() / 3;
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (const auto& p : mesh.positions) {
+        lo = glm::min(lo, glm::dvec3(p));
+        hi = glm::max(hi, glm::dvec3(p));
+    }
+    const glm::dvec3 extent = glm::max(hi - lo, glm::dvec3(1e-12));
+    std::vector<uint32_t> code(tris);
+    for (size_t t = 0; t < tris; ++t) {
+        glm::dvec3 c(0.0);
+        for (int k = 0; k < 3; ++k) c += glm::dvec3(mesh.positions[mesh.indices[3 * t + k]]);
+        const glm::dvec3 u = glm::clamp((c / 3.0 - lo) / extent, 0.0, 1.0) * 1023.0;
+        code[t] = spread3(uint32_t(u.x)) | (spread3(uint32_t(u.y)) << 1) |
+                  (spread3(uint32_t(u.z)) << 2);
+    }
+    std::vector<uint32_t> order(tris);
+    std::iota(order.begin(), order.end(), 0u);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t a, uint32_t b) { return code[a] < code[b]; });
+    std::vector<uint32_t> indices(mesh.indices.size());
+    for (size_t i = 0; i < tris; ++i)
+        for (int k = 0; k < 3; ++k) indices[3 * i + k] = mesh.indices[3 * order[i] + k];
+    mesh.indices.swap(indices);
+
+    per_cluster = std::max<uint32_t>(per_cluster, 1);
+    for (size_t first = 0; first < tris; first += per_cluster) {
+        const size_t last = std::min(tris, first + per_cluster);
+        Cluster cl;
+        cl.first_index = uint32_t(3 * first);
+        cl.index_count = uint32_t(3 * (last - first));
+        glm::dvec3 blo(1e300), bhi(-1e300), nsum(0.0);
+        for (size_t i = 3 * first; i < 3 * last; ++i) {
+            const glm::dvec3 p = mesh.positions[mesh.indices[i]];
+            blo = glm::min(blo, p);
+            bhi = glm::max(bhi, p);
+            nsum += glm::normalize(glm::dvec3(mesh.normals[mesh.indices[i]]));
+        }
+        cl.centre = 0.5 * (blo + bhi);
+        double r2 = 0;
+        for (size_t i = 3 * first; i < 3 * last; ++i) {
+            const glm::dvec3 d = glm::dvec3(mesh.positions[mesh.indices[i]]) - cl.centre;
+            r2 = std::max(r2, glm::dot(d, d));
+        }
+        // Widened by a relative 1e-6: the vertices are floats, the bounds doubles.
+        cl.radius = std::sqrt(r2) * (1.0 + 1e-6) + 1e-9;
+        const double nlen = glm::length(nsum);
+        if (nlen > 1e-9) {
+            cl.cone_axis = nsum / nlen;
+            double a = 0;
+            for (size_t i = 3 * first; i < 3 * last; ++i)
+                a = std::max(a, angle_between(cl.cone_axis,
+                                              glm::dvec3(mesh.normals[mesh.indices[i]])));
+            cl.cone_angle = a + kSlack;
+        }
+        out.clusters.push_back(cl);
+    }
+    out.mesh = std::move(mesh);
+    return out;
+}
+
+std::vector<ClusteredMesh> prop_levels(const scene::Prop& prop, const scene::Mesh& finest) {
+    std::vector<ClusteredMesh> levels;
+    if (prop.kind != scene::Prop::Kind::kHemisphere) {
+        levels.push_back(cluster_mesh(finest));
+        return levels;
+    }
+    const auto& h = prop.hemisphere;
+    for (uint32_t s = h.segments, r = h.rings;; s /= 2, r /= 2) {
+        scene::Hemisphere hs = h;
+        hs.segments = s;
+        hs.rings = r;
+        scene::Mesh m = s == h.segments ? finest : scene::tessellate_hemisphere(hs);
+        if (s != h.segments)
+            scene::clean_mesh(m);
+        // How far the inscribed tessellation lies inside the sphere: its triangles' planes'
+        // least distance from the centre.
+        double err = 0;
+        for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+            const glm::dvec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]],
+                             c = m.positions[m.indices[t + 2]];
+            const glm::dvec3 n = glm::normalize(glm::cross(b - a, c - a));
+            err = std::max(err, h.radius - std::abs(glm::dot(a - h.centre, n)));
+        }
+        // Scaled about the centre so that every plane lies at least a radius away: the mesh
+        // then encloses the dome, and the shader finds the exact point on the sphere. A ray
+        // runs at most `chord` through the shell between them, so the point it shades lies
+        // within that of the triangle it rasterises.
+        err *= 1.0 + 1e-6;
+        const double scale = h.radius / (h.radius - err);
+        for (auto& p : m.positions)
+            p = glm::vec3(h.centre + (glm::dvec3(p) - h.centre) * scale);
+        const double outer = h.radius * scale;
+        const double chord = std::sqrt(outer * outer - h.radius * h.radius);
+        ClusteredMesh level = cluster_mesh(std::move(m));
+        for (auto& c : level.clusters) {
+            c.radius += chord;
+            c.cone_angle += std::asin(std::min(1.0, chord / h.radius));
+        }
+        level.surface_error_m = outer - h.radius;
+        level.segments = s;
+        level.rings = r;
+        levels.push_back(std::move(level));
+        if (s / 2 < 16 || r / 2 < 4)
+            break;
+    }
+    return levels;
+}
+
+size_t select_level(std::span<const ClusteredMesh> levels, const glm::dvec3& eye, double focal_px,
+                    double max_error_px) {
+    if (levels.empty())
+        return 0;
+    // The prop's bounds: the union of the finest level's clusters.
+    const auto& finest = levels.front().clusters;
+    glm::dvec3 lo(1e300), hi(-1e300);
+    for (const auto& c : finest) {
+        lo = glm::min(lo, c.centre - c.radius);
+        hi = glm::max(hi, c.centre + c.radius);
+    }
+    const glm::dvec3 centre = 0.5 * (lo + hi);
+    const double radius = 0.5 * glm::length(hi - lo);
+    const double dist = glm::length(eye - centre) - radius;
+    if (!(dist > 1e-6))
+        return 0;
+    size_t best = 0;
+    for (size_t i = 0; i < levels.size(); ++i)
+        if (levels[i].surface_error_m * focal_px / dist <= max_error_px)
+            best = i;
+    return best;
+}
+
+std::vector<scene::Light> lit_lights(const scene::Scene& scene, uint32_t* skipped) {
+    std::vector<scene::Light> out;
+    uint32_t n = 0;
+    for (const auto& l : scene.lights) {
+        if (max_channel(l.colour * l.intensity) > 0)
+            out.push_back(l);
+        else
+            ++n;
+    }
+    if (skipped)
+        *skipped = n;
+    return out;
+}
+
+double layer_threshold(bool srgb8) {
+    // sRGB8: round(255 * 12.92 x) = 0 below x = 0.5 / (255 * 12.92); half: below 2^-25.
+    // Both a little below, for the shader's own rounding.
+    return srgb8 ? 0.99 * 0.5 / (255.0 * 12.92) : 0.99 * std::ldexp(1.0, -25);
+}
+
+bool cluster_may_light(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
+    if (b.emission)
+        return true;
+    if (b.spec.model == scene::SpecularModel::kNone || max_channel(b.spec.colour) <= 0)
+        return false;
+    const double ks = max_channel(b.spec.colour);
+    const double theta_n = cl.cone_angle;
+    if (theta_n >= kHalfPi)
+        return true;  // no normal bound: assume lit
+    // The view: directions from the cluster to the eye.
+    const glm::dvec3 to_eye = eye - cl.centre;
+    const double alpha_v = spread_towards(cl.centre, cl.radius, eye, 0.0);
+    if (alpha_v >= kHalfPi)
+        return true;
+    const glm::dvec3 v_axis = glm::normalize(to_eye);
+    const double nv_angle = angle_between(cl.cone_axis, v_axis);
+    // Gate n.v > 0: impossible when every normal is at least 90 degrees from every view ray.
+    if (nv_angle - theta_n - alpha_v >= kHalfPi + kSlack)
+        return false;
+    const double nv_lb = std::cos(std::min(kHalfPi, nv_angle + theta_n + alpha_v));
+
+    double total = 0;
+    for (const auto& light : b.lights) {
+        glm::dvec3 l_axis;
+        double alpha_l = 0, E = max_channel(light.colour * light.intensity);
+        if (light.type == scene::LightType::kDirectional) {
+            l_axis = glm::normalize(-light.direction);
+        } else {
+            const double panel = light.type == scene::LightType::kRect
+                                     ? 0.5 * (glm::length(light.edge_u) + glm::length(light.edge_v))
+                                     : 0.0;
+            const glm::dvec3 d = light.position - cl.centre;
+            const double dist = glm::length(d);
+            alpha_l = spread_towards(cl.centre, cl.radius, light.position, panel);
+            if (alpha_l >= kHalfPi)
+                return true;  // the light is among the cluster's points: no direction bound
+            l_axis = d / dist;
+            const bool falloff = b.point_falloff || light.type == scene::LightType::kRect;
+            if (falloff) {
+                const double dmin = std::max(dist - cl.radius - panel, b.min_light_distance);
+                E /= dmin * dmin;
+            }
+        }
+        const double nl_angle = angle_between(cl.cone_axis, l_axis);
+        if (nl_angle - theta_n - alpha_l >= kHalfPi + kSlack)
+            continue;  // gate n.l > 0 fails everywhere: this light adds nothing
+        double factor = 1.0;  // Kajiya-Kay: the gate only
+        if (b.spec.model != scene::SpecularModel::kKajiyaKay) {
+            // The half vector h = (l + v) / |l + v| over the cluster: within theta_h of h_axis.
+            const double lv = angle_between(l_axis, v_axis);  // 2 psi0
+            const double cos_psi0 = std::cos(0.5 * lv);
+            const double spread = alpha_l + alpha_v;
+            if (spread >= 2.0 * cos_psi0)
+                return true;  // h can point anywhere
+            const double theta_h = std::asin(std::min(1.0, spread / (2.0 * cos_psi0)));
+            const glm::dvec3 h_axis = glm::normalize(l_axis + v_axis);
+            const double delta =
+                std::clamp(angle_between(cl.cone_axis, h_axis) - theta_n - theta_h - kSlack, 0.0,
+                           kHalfPi);
+            const double psi = std::min(kHalfPi, 0.5 * lv + 0.5 * spread + kSlack);
+            const double s = std::sin(delta), c = std::cos(psi);
+            switch (b.spec.model) {
+                case scene::SpecularModel::kPhong: {
+                    // r.v <= 1 - 2 cos^2(psi) sin^2(delta) (docs/ARCHITECTURE.md).
+                    const double rv = 1.0 - 2.0 * c * c * s * s;
+                    factor = rv > 0 ? std::pow(std::min(rv, 1.0), b.spec.exponent) : 0.0;
+                    break;
+                }
+                case scene::SpecularModel::kBlinnPhong:
+                    factor = std::pow(std::cos(delta), b.spec.exponent);
+                    break;
+                case scene::SpecularModel::kWard: {
+                    const double ax = b.spec.alpha_x, ay = b.spec.alpha_y;
+                    const double amax = std::max(ax, ay);
+                    const double t = std::tan(delta) / amax;
+                    // n.l / sqrt(max(n.l n.v, 1e-8)) with n.l <= 1 and n.v >= nv_lb.
+                    const double w = nv_lb > 1e-8
+                                         ? std::max(1.0 / std::sqrt(nv_lb), 1e-4 / nv_lb)
+                                         : 1e4;
+                    factor = std::exp(-t * t) * w / (4.0 * kPi * ax * ay);
+                    break;
+                }
+                default:
+                    break;
+            }
+        }
+        total += ks * E * factor;
+        if (total >= b.threshold)
+            return true;
+    }
+    return total >= b.threshold;
+}
+
+PixelRect unite(const PixelRect& a, const PixelRect& b) {
+    if (a.empty())
+        return b;
+    if (b.empty())
+        return a;
+    return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1),
+            std::max(a.y1, b.y1)};
+}
+
+PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
+                         const scene::Pose& camera, double near_m) {
+    const PixelRect all{0, 0, k.width, k.height};
+    const glm::dvec3 q = glm::dvec3(scene::frame_from_world(camera) * glm::dvec4(centre, 1.0));
+    const double depth = -q.z;
+    if (depth - radius <= near_m)
+        return all;
+    // The cube around the sphere, aligned with the camera: its corners' projections bound the
+    // sphere's.
+    double u0 = 1e300, u1 = -1e300, v0 = 1e300, v1 = -1e300;
+    for (int i = 0; i < 8; ++i) {
+        const double x = q.x + ((i & 1) ? radius : -radius);
+        const double y = q.y + ((i & 2) ? radius : -radius);
+        const double z = depth + ((i & 4) ? radius : -radius);
+        const double u = k.fx * x / z + k.cx, v = k.cy - k.fy * y / z;
+        u0 = std::min(u0, u), u1 = std::max(u1, u), v0 = std::min(v0, v), v1 = std::max(v1, v);
+    }
+    // Pixel centres at integers: pixel i covers [i - 0.5, i + 0.5).
+    const double x0 = std::floor(u0 - 1.0), x1 = std::ceil(u1 + 2.0);
+    const double y0 = std::floor(v0 - 1.0), y1 = std::ceil(v1 + 2.0);
+    PixelRect r;
+    r.x0 = uint32_t(std::clamp(x0, 0.0, double(k.width)));
+    r.x1 = uint32_t(std::clamp(x1, 0.0, double(k.width)));
+    r.y0 = uint32_t(std::clamp(y0, 0.0, double(k.height)));
+    r.y1 = uint32_t(std::clamp(y1, 0.0, double(k.height)));
+    return r;
+}
+
+PixelRect align_to_tiles(const PixelRect& r, uint32_t tile, uint32_t w, uint32_t h) {
+    if (r.empty())
+        return {};
+    PixelRect out;
+    out.x0 = r.x0 / tile * tile;
+    out.y0 = r.y0 / tile * tile;
+    out.x1 = std::min(w, (r.x1 + tile - 1) / tile * tile);
+    out.y1 = std::min(h, (r.y1 + tile - 1) / tile * tile);
+    return out;
+}
+
+}  // namespace hs::render

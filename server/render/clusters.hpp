@@ -1,0 +1,98 @@
+// Where a VD layer can be non-zero, decided per cluster of triangles before anything is drawn
+// (docs/ARCHITECTURE.md, "Sparse VD layers"), and which tessellation a view needs (level of
+// detail by projected error). Pure CPU geometry: no GPU, unit-tested on its own.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "scene/scene.hpp"
+
+namespace hs::render {
+
+// A run of triangles of a mesh's index buffer with bounds of what shading sees on it.
+struct Cluster {
+    uint32_t first_index = 0;  // into the mesh's (reordered) index buffer
+    uint32_t index_count = 0;
+    glm::dvec3 centre{0.0};  // bounding sphere of its vertices, metres, world
+    double radius = 0;
+    // Normal cone: every shading normal on the cluster (vertex normals and their normalised
+    // interpolations, or the sphere's normal over it) lies within `cone_angle` of `cone_axis`.
+    // cone_angle >= pi/2: no useful bound.
+    glm::dvec3 cone_axis{0.0, 1.0, 0.0};
+    double cone_angle = 3.14159265358979;
+};
+
+// A mesh cut into clusters of about `triangles_per_cluster` neighbouring triangles: the
+// triangles are reordered along a Morton curve of their centroids (the mesh's index buffer is
+// rewritten in that order) and cut into consecutive runs.
+struct ClusteredMesh {
+    scene::Mesh mesh;
+    std::vector<Cluster> clusters;
+    // The farthest the mesh lies from the exact surface, metres: for the hemisphere, how far its
+    // enclosing tessellation stands out of the sphere (the shader shades the sphere itself);
+    // 0 for a mesh that is its own exact surface.
+    double surface_error_m = 0;
+    uint32_t segments = 0, rings = 0;  // a hemisphere level's tessellation; 0 for a glTF mesh
+};
+ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t triangles_per_cluster = 16);
+
+// The levels of detail of a prop, finest first: for the hemisphere, its own segments x rings
+// (an upper bound) halved while at least 16 x 4 remain, each scaled to enclose the dome (the
+// shader ray-casts the sphere within it, so the tessellation decides only which pixels are
+// tried; the clusters' bounds are widened by the shell between mesh and sphere); for a glTF
+// mesh, the mesh alone.
+std::vector<ClusteredMesh> prop_levels(const scene::Prop& prop, const scene::Mesh& finest);
+
+// The coarsest level whose surface error, seen by a camera at `eye` with focal length
+// `focal_px` (the larger of fx, fy, widened for off-axis pixels), stays within `max_error_px`
+// pixels where the prop is nearest to the camera. Level 0 when no level is coarse enough or the camera is inside the
+// prop's bounds.
+size_t select_level(std::span<const ClusteredMesh> levels, const glm::dvec3& eye, double focal_px,
+                    double max_error_px = 0.5);
+
+// What bounds a VD term: the specular model and its parameters, the lights that are not black,
+// and the output's quantisation step (a value below it is stored as 0).
+struct VdBound {
+    scene::Specular spec;
+    std::span<const scene::Light> lights;  // only lights with colour * intensity > 0
+    bool emission = false;             // emission lights every covered pixel
+    bool point_falloff = true;
+    double min_light_distance = scene::kMinLightDistance;
+    double threshold = 0;  // radiance below this is stored as 0 (sRGB8: code 0; half: 0)
+};
+
+// The lights of `scene` that can add light: colour * intensity non-zero. Returns the count
+// skipped through `skipped`.
+std::vector<scene::Light> lit_lights(const scene::Scene& scene, uint32_t* skipped = nullptr);
+
+// Radiance (per channel, at most) below which a layer of this format stores 0: sRGB8 code 0
+// below 0.5/255 in sRGB (linear 0.5 / (255 * 12.92)), a half float rounds below 2^-25 to 0.
+double layer_threshold(bool srgb8);
+
+// Whether the VD term L_e + sum_i L_s(p, l_i, v) can reach `bound.threshold` anywhere on
+// `cluster` seen from `eye`: a conservative test (false only where every pixel of the cluster
+// would be stored as 0). Uses the visibility gate n.l > 0, n.v > 0 (with the cone and the
+// bounding sphere), and per model a bound of its lobe from the least angle between the normal
+// and the half vector over the cluster (Kajiya-Kay: the gate only).
+bool cluster_may_light(const Cluster& cluster, const glm::dvec3& eye, const VdBound& bound);
+
+// A pixel rectangle [x0, x1) x [y0, y1).
+struct PixelRect {
+    uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    bool empty() const { return x1 <= x0 || y1 <= y0; }
+    uint64_t area() const { return empty() ? 0 : uint64_t(x1 - x0) * (y1 - y0); }
+};
+// The smallest rect containing both.
+PixelRect unite(const PixelRect& a, const PixelRect& b);
+// The pixels a bounding sphere can cover through a pinhole camera (conservative), clipped to
+// the image; the whole image when the sphere reaches the near plane.
+PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
+                         const scene::Pose& camera, double near_m);
+// `r` grown to whole tiles of `tile` pixels, clipped to the image.
+PixelRect align_to_tiles(const PixelRect& r, uint32_t tile, uint32_t width, uint32_t height);
+
+}  // namespace hs::render

@@ -1,0 +1,144 @@
+#include "stream/encoder.hpp"
+
+#include <chrono>
+
+#include "codec/layer_codec.hpp"
+
+namespace hs::stream {
+
+namespace {
+double ms_between(std::chrono::steady_clock::time_point a, std::chrono::steady_clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
+}  // namespace
+
+std::vector<uint8_t> BufferPool::take() {
+    std::lock_guard lock(mutex_);
+    if (free_.empty())
+        return {};
+    std::vector<uint8_t> v = std::move(free_.back());
+    free_.pop_back();
+    pooled_bytes_ -= v.capacity();
+    return v;
+}
+
+Bytes BufferPool::share(std::vector<uint8_t>&& filled) {
+    auto* v = new std::vector<uint8_t>(std::move(filled));
+    std::weak_ptr<BufferPool> pool = weak_from_this();
+    return Bytes(v, [pool](const std::vector<uint8_t>* p) {
+        auto* owned = const_cast<std::vector<uint8_t>*>(p);
+        if (auto alive = pool.lock())
+            alive->give_back(std::move(*owned));
+        delete owned;
+    });
+}
+
+void BufferPool::give_back(std::vector<uint8_t>&& v) {
+    std::lock_guard lock(mutex_);
+    if (free_.size() >= kMaxPooled)
+        return;
+    pooled_bytes_ += v.capacity();
+    free_.push_back(std::move(v));
+}
+
+uint64_t BufferPool::pooled_bytes() const {
+    std::lock_guard lock(mutex_);
+    return pooled_bytes_;
+}
+
+Encoder::Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
+                 Done done)
+    : ring_(ring), pool_(std::move(pool)), done_(std::move(done)) {
+    for (uint32_t i = 0; i < std::max<uint32_t>(threads, 1); ++i)
+        threads_.emplace_back([this] { run(); });
+}
+
+Encoder::~Encoder() {
+    {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+    }
+    cv_.notify_all();
+    for (auto& t : threads_) t.join();
+}
+
+void Encoder::push(std::shared_ptr<ViewerFrame> frame) {
+    {
+        std::lock_guard lock(mutex_);
+        queue_.push_back(std::move(frame));
+    }
+    cv_.notify_one();
+}
+
+void Encoder::drain() {
+    std::unique_lock lock(mutex_);
+    idle_.wait(lock, [&] { return queue_.empty() && busy_ == 0; });
+}
+
+void Encoder::run() {
+    std::vector<uint8_t> scratch;  // packed tiles, reused by this thread
+    for (;;) {
+        std::shared_ptr<ViewerFrame> frame;
+        {
+            std::unique_lock lock(mutex_);
+            cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+            if (queue_.empty())
+                return;  // stopping, and nothing left
+            frame = std::move(queue_.front());
+            queue_.pop_front();
+            ++busy_;
+        }
+        EncodedFrame out = encode(std::move(frame), scratch);
+        try {
+            done_(std::move(out));
+        } catch (...) {
+            // done_ counts and posts; a failure there must not take the thread down.
+        }
+        {
+            std::lock_guard lock(mutex_);
+            --busy_;
+        }
+        idle_.notify_all();
+    }
+}
+
+EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, std::vector<uint8_t>& scratch) {
+    EncodedFrame out;
+    out.frame = frame;
+    ViewerFrame& f = *frame;
+    auto t0 = std::chrono::steady_clock::now();
+    if (f.timeline != 0) {
+        if (auto r = ring_.wait(f.timeline); !r.ok()) {
+            out.error = r.error().message;
+            return out;
+        }
+        t0 = std::chrono::steady_clock::now();
+        out.gpu_ms = ms_between(f.submitted, t0);
+    }
+    const auto& d = f.job.display;
+    const protocol::TileCodec codec = codec::default_tile_codec(f.format);
+    for (uint8_t e = 0; e < 2; ++e) {
+        protocol::VdLayer fields;
+        fields.frame_id = f.job.frame_id;
+        fields.pose_time_ns = f.job.pose.client_time_ns;
+        fields.eye = e;
+        fields.format = f.format;
+        fields.encoding = d.encoding;
+        fields.width = f.width;
+        fields.height = f.height;
+        std::vector<uint8_t> buf = pool_->take();
+        auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
+            codec::append_layer_data(o, f.pixels[e], d.encoding, codec, scratch);
+            return true;
+        });
+        if (err) {
+            out.error = err->message;
+            return out;
+        }
+        out.layers[e] = pool_->share(std::move(buf));
+    }
+    out.encode_ms = ms_between(t0, std::chrono::steady_clock::now());
+    return out;
+}
+
+}  // namespace hs::stream

@@ -1,0 +1,80 @@
+// The encoder threads: each takes a submitted ViewerFrame, waits for its timeline value (the
+// GPU finished writing its readback buffers), encodes both eyes' layers from the mapped memory
+// in place into one buffer per layer (header and payload together, sent as they are), and
+// hands them on. Buffers come from a pool and go back to it when the socket is done with them,
+// so a steady stream allocates nothing large.
+#pragma once
+
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gpu/submit_ring.hpp"
+#include "stream/viewer_frame.hpp"
+
+namespace hs::stream {
+
+using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
+
+// Byte buffers reused from frame to frame. Thread: any.
+class BufferPool : public std::enable_shared_from_this<BufferPool> {
+public:
+    // A buffer (empty, with the capacity of an earlier frame's when there is one).
+    std::vector<uint8_t> take();
+    // Shares a filled buffer; it returns to the pool when its last user lets go.
+    Bytes share(std::vector<uint8_t>&& filled);
+    // Capacity of the buffers resting in the pool.
+    uint64_t pooled_bytes() const;
+
+private:
+    void give_back(std::vector<uint8_t>&& v);
+    static constexpr size_t kMaxPooled = 256;
+    mutable std::mutex mutex_;
+    std::vector<std::vector<uint8_t>> free_;
+    uint64_t pooled_bytes_ = 0;
+};
+
+// One encoded frame: both eyes' wire frames, or why there are none.
+struct EncodedFrame {
+    std::shared_ptr<ViewerFrame> frame;
+    std::array<Bytes, 2> layers;
+    std::string error;       // non-empty: nothing to send
+    double gpu_ms = 0;       // submitted -> the GPU finished (as the encoder saw it)
+    double encode_ms = 0;    // both layers, CPU
+};
+
+class Encoder {
+public:
+    using Done = std::function<void(EncodedFrame&&)>;
+    // `threads` encoder threads; `done` is called on them, once per pushed frame.
+    Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
+            Done done);
+    ~Encoder();  // encodes what is queued, then joins
+    Encoder(const Encoder&) = delete;
+    Encoder& operator=(const Encoder&) = delete;
+
+    void push(std::shared_ptr<ViewerFrame> frame);
+    // Blocks until every pushed frame was handed to `done`.
+    void drain();
+
+private:
+    void run();
+    EncodedFrame encode(std::shared_ptr<ViewerFrame> frame, std::vector<uint8_t>& scratch);
+
+    const gpu::SubmitRing& ring_;
+    std::shared_ptr<BufferPool> pool_;
+    Done done_;
+    std::mutex mutex_;
+    std::condition_variable cv_, idle_;
+    std::deque<std::shared_ptr<ViewerFrame>> queue_;
+    size_t busy_ = 0;
+    bool stopping_ = false;
+    std::vector<std::thread> threads_;
+};
+
+}  // namespace hs::stream

@@ -1,0 +1,146 @@
+#include "stream/frame_source.hpp"
+
+#include <fmt/format.h>
+
+#include "scene/camera.hpp"
+
+namespace hs::stream {
+
+namespace {
+
+render::LayerEncoding encoding_of(protocol::PixelFormat f) {
+    return f == protocol::PixelFormat::kRgba8 ? render::LayerEncoding::kSrgb8
+                                              : render::LayerEncoding::kHalf;
+}
+
+class Rendered final : public FrameSource {
+public:
+    Rendered(render::Renderer& r, const scene::Specular& spec)
+        : renderer_(r), spec_(spec), effects_(r.vd_effects(spec)) {}
+
+    std::optional<Refusal> check(const protocol::RegisterDisplay&) const override {
+        return std::nullopt;
+    }
+    bool uses_gpu() const override { return true; }
+
+    Result<bool> fill(gpu::CommandList* cl, std::span<const FrameSlot> slots) override {
+        requests_.clear();
+        for (const FrameSlot& s : slots) {
+            ViewerFrame& f = *s.frame;
+            const auto& d = f.job.display;
+            const scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
+            const auto eyes = scene::eye_poses(s.head, d.ipd_m);
+            for (size_t e = 0; e < 2; ++e)
+                requests_.push_back({spec_, k, eyes[e], encoding_of(f.format), &f.targets[e],
+                                     true, protocol::kDefaultTileSize, &f.indices[e]});
+        }
+        HS_ASSIGN_OR_RETURN(auto plans, renderer_.record_layers(*cl, requests_));
+        bool recorded = false;
+        for (size_t i = 0; i < slots.size(); ++i) {
+            ViewerFrame& f = *slots[i].frame;
+            for (size_t e = 0; e < 2; ++e) {
+                const auto& plan = plans[2 * i + e];
+                f.plans[e] = plan;
+                const gpu::RenderTarget& t = f.targets[e];
+                f.pixels[e] = {t.readback_data(),
+                               size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
+                               t.width(),
+                               t.height(),
+                               f.format,
+                               plan.rect.x0,
+                               plan.rect.y0,
+                               plan.rect.x1,
+                               plan.rect.y1};
+                recorded = recorded || !plan.rect.empty();
+                last_ = plan;
+            }
+        }
+        return recorded;
+    }
+
+    nlohmann::json report() const override {
+        return {{"pass", "viewer-vd"},
+                {"ran", !last_.rect.empty()},
+                {"effects", effects_},
+                {"skipped_because", last_.skipped_because},
+                {"level", last_.level},
+                {"clusters", {{"total", last_.clusters_total},
+                              {"lit", last_.clusters_lit},
+                              {"occluding", last_.clusters_occluding}}},
+                {"triangles", last_.triangles},
+                {"pixels", last_.rect.area()},
+                {"lights_skipped", last_.lights_skipped}};
+    }
+
+private:
+    render::Renderer& renderer_;
+    scene::Specular spec_;
+    std::vector<std::string> effects_;
+    std::vector<render::Renderer::LayerRequest> requests_;  // reused: no allocation per frame
+    render::Renderer::LayerPlan last_;
+};
+
+class Captured final : public FrameSource {
+public:
+    explicit Captured(const scene::CapturedMaterial& c) : captured_(c) {
+        const ImageRgba32f layer = codec::drive_as_layer(*c.viewer_image);
+        srgb8_ = std::make_shared<const std::vector<uint8_t>>(
+            codec::encode_pixels(layer, protocol::PixelFormat::kRgba8));
+        half_ = std::make_shared<const std::vector<uint8_t>>(
+            codec::encode_pixels(layer, protocol::PixelFormat::kRgba16f));
+    }
+
+    std::optional<Refusal> check(const protocol::RegisterDisplay& d) const override {
+        const auto& img = *captured_.viewer_image;
+        if (d.eye_width == img.width && d.eye_height == img.height)
+            return std::nullopt;
+        return Refusal{protocol::ErrorCode::kInvalidDisplay,
+                       fmt::format("the captured material's VD image is {}x{}, this headset's "
+                                   "display is {}x{}",
+                                   img.width, img.height, d.eye_width, d.eye_height)};
+    }
+    bool uses_gpu() const override { return false; }
+
+    Result<bool> fill(gpu::CommandList*, std::span<const FrameSlot> slots) override {
+        for (const FrameSlot& s : slots) {
+            ViewerFrame& f = *s.frame;
+            near_ = scene::pose_within(s.head, captured_.capture_head,
+                                       captured_.position_tolerance_m,
+                                       captured_.angle_tolerance_deg);
+            const bool srgb8 = f.format == protocol::PixelFormat::kRgba8;
+            const auto& bytes = srgb8 ? srgb8_ : half_;
+            f.keep_alive = bytes;
+            for (size_t e = 0; e < 2; ++e) {
+                f.plans[e] = {};
+                f.pixels[e] = {bytes->data(), size_t(f.width) * (srgb8 ? 4 : 8), f.width, f.height,
+                               f.format,      0, 0, near_ ? f.width : 0, near_ ? f.height : 0};
+            }
+        }
+        return false;
+    }
+
+    nlohmann::json report() const override {
+        return {{"pass", "captured-vd"},
+                {"ran", near_},
+                {"effects", {"captured"}},
+                {"views", "one: both eyes get the capture camera's image"}};
+    }
+
+private:
+    scene::CapturedMaterial captured_;
+    std::shared_ptr<const std::vector<uint8_t>> srgb8_, half_;
+    bool near_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameSource> rendered_source(render::Renderer& renderer,
+                                             const scene::Specular& spec) {
+    return std::make_unique<Rendered>(renderer, spec);
+}
+
+std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured) {
+    return std::make_unique<Captured>(captured);
+}
+
+}  // namespace hs::stream
