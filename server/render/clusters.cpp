@@ -307,6 +307,8 @@ PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::I
     const PixelRect all{0, 0, k.width, k.height};
     const glm::dvec3 q = glm::dvec3(scene::frame_from_world(camera) * glm::dvec4(centre, 1.0));
     const double depth = -q.z;
+    if (depth + radius <= near_m)
+        return {};  // wholly behind the near plane
     if (depth - radius <= near_m)
         return all;
     // The cube around the sphere, aligned with the camera: its corners' projections bound the

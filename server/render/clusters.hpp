@@ -89,7 +89,8 @@ struct PixelRect {
 // The smallest rect containing both.
 PixelRect unite(const PixelRect& a, const PixelRect& b);
 // The pixels a bounding sphere can cover through a pinhole camera (conservative), clipped to
-// the image; the whole image when the sphere reaches the near plane.
+// the image; empty when it lies wholly behind the near plane, the whole image when it straddles
+// it.
 PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
                          const scene::Pose& camera, double near_m);
 // `r` grown to whole tiles of `tile` pixels, clipped to the image.

@@ -1,0 +1,264 @@
+// The served path's VD layers: the sparse layer (only the clusters that can light it, inside the
+// rectangle they cover) equals the full layer (every prop pixel) within the output's
+// quantisation step, on the hard cases; and what can only be black costs nothing.
+#include <cstring>
+
+#include <glm/gtc/packing.hpp>
+
+#include "gpu_fixture.hpp"
+#include "scene/camera.hpp"
+#include "scene/mesh.hpp"
+
+using namespace hs;
+using namespace hs::test;
+
+namespace {
+
+using Request = render::Renderer::LayerRequest;
+using Plan = render::Renderer::LayerPlan;
+
+// A layer as the wire carries it: the rendered rectangle, black elsewhere (4 floats a pixel).
+std::vector<float> layer_values(const gpu::RenderTarget& t, const Plan& plan) {
+    const size_t w = t.width(), h = t.height();
+    std::vector<float> out(w * h * 4, 0.0f);
+    const bool srgb8 = t.format() == gpu::ColorFormat::kRgba8Unorm;
+    for (uint32_t y = plan.rect.y0; y < plan.rect.y1; ++y)
+        for (uint32_t x = plan.rect.x0; x < plan.rect.x1; ++x)
+            for (size_t c = 0; c < 4; ++c) {
+                const size_t i = (y * w + x) * 4 + c;
+                if (srgb8) {
+                    out[i] = float(t.readback_data()[i]);  // codes
+                } else {
+                    uint16_t hv;
+                    std::memcpy(&hv, t.readback_data() + 2 * i, 2);
+                    out[i] = glm::unpackHalf1x16(hv);
+                }
+            }
+    return out;
+}
+
+class SparseLayers : public GpuTest {
+protected:
+    struct Pair {
+        std::vector<float> sparse, full;
+        Plan sparse_plan, full_plan;
+    };
+    // The same eye rendered sparse and full.
+    Pair render_both(render::Renderer& r, const scene::Specular& spec, const scene::Pose& eye,
+                     render::LayerEncoding enc, const scene::Intrinsics& k) {
+        const auto fmt = render::layer_target_format(enc);
+        std::array<gpu::RenderTarget, 2> t;
+        for (auto& x : t) x = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "t").value();
+        const std::vector<Request> reqs = {{spec, k, eye, enc, &t[0], true},
+                                           {spec, k, eye, enc, &t[1], false}};
+        auto plans = r.render_layers(reqs);
+        EXPECT_TRUE(plans.ok()) << plans.error().message;
+        if (!plans.ok())
+            return {};
+        return {layer_values(t[0], (*plans)[0]), layer_values(t[1], (*plans)[1]), (*plans)[0],
+                (*plans)[1]};
+    }
+    // Sparse equals full within one quantisation step: one sRGB8 code, or for halves one unit
+    // in the last place (2^-24 at the subnormals). Returns the pixels that differ at all.
+    static size_t expect_within_step(const Pair& p, bool srgb8, const std::string& what) {
+        size_t differ = 0, over = 0;
+        float worst = 0;
+        for (size_t i = 0; i < p.full.size(); ++i) {
+            const float a = p.sparse[i], b = p.full[i], d = std::abs(a - b);
+            const float step = srgb8 ? 1.0f : std::max(std::ldexp(1.0f, -24), std::abs(b) / 1024);
+            differ += d > 0;
+            if (d > step) {
+                ++over;
+                worst = std::max(worst, d);
+            }
+        }
+        EXPECT_EQ(over, 0u) << what << ": " << over << " values beyond one step, worst " << worst;
+        return differ;
+    }
+    static double lit_values(const std::vector<float>& v) {
+        double n = 0;
+        for (size_t i = 0; i < v.size(); i += 4) n += (v[i] + v[i + 1] + v[i + 2]) > 0;
+        return n;
+    }
+};
+
+// Two domes, one in front of the other: a prop that is not convex, so dark clusters must still
+// hide lit ones (drawn as black occluders).
+scene::Scene two_domes() {
+    scene::Scene s = scene::default_scene();
+    scene::Hemisphere a = s.prop.hemisphere, b = a;
+    a.segments = b.segments = 64;
+    a.rings = b.rings = 16;
+    b.centre += glm::dvec3(0.05, 0.0, 0.25);
+    b.radius = 0.08;
+    scene::Mesh m = scene::tessellate_hemisphere(a), mb = scene::tessellate_hemisphere(b);
+    const uint32_t base = uint32_t(m.positions.size());
+    m.positions.insert(m.positions.end(), mb.positions.begin(), mb.positions.end());
+    m.normals.insert(m.normals.end(), mb.normals.begin(), mb.normals.end());
+    m.uvs.insert(m.uvs.end(), mb.uvs.begin(), mb.uvs.end());
+    m.tangents.insert(m.tangents.end(), mb.tangents.begin(), mb.tangents.end());
+    for (uint32_t i : mb.indices) m.indices.push_back(base + i);
+    s.prop.kind = scene::Prop::Kind::kGltf;
+    s.prop.gltf_mesh = std::make_shared<const scene::Mesh>(std::move(m));
+    return s;
+}
+
+TEST_F(SparseLayers, SparseEqualsFullOnTheHardCases) {
+    struct Case {
+        std::string name;
+        scene::Scene scene;
+        scene::Specular spec;
+    };
+    std::vector<Case> cases;
+    const scene::Scene base = scene::default_scene();
+    for (const auto& [name, spec] : base.specular_presets) cases.push_back({name, base, spec});
+    {
+        scene::Specular sharp = base.specular_presets.at("ward");
+        sharp.alpha_x = sharp.alpha_y = 2e-3;  // a needle highlight
+        cases.push_back({"ward alpha 2e-3", base, sharp});
+        scene::Specular blinn = base.specular_presets.at("blinn-phong");
+        blinn.exponent = 20000;
+        cases.push_back({"blinn-phong exponent 20000", base, blinn});
+    }
+    {
+        scene::Scene near = base;  // a point light 2 mm above the dome
+        scene::Light l;
+        l.type = scene::LightType::kPoint;
+        l.intensity = 0.05;
+        l.position = near.prop.hemisphere.centre +
+                     glm::normalize(glm::dvec3(0.2, 1.0, 0.4)) * (near.prop.hemisphere.radius + 2e-3);
+        near.lights.push_back(l);
+        cases.push_back({"point light 2 mm off the surface", near, near.material.specular});
+    }
+    {
+        scene::Scene area = base;
+        area.lights.push_back(
+            scene::rect_light_facing({0.3, 1.2, 0.4}, {0, 0.745, 0}, 0.3, 0.2, 0.8).value());
+        cases.push_back({"rect light", area, area.material.specular});
+    }
+    {
+        scene::Scene glowing = base;
+        glowing.material.emission = {0.01, 0.0, 0.02};
+        cases.push_back({"emission", glowing, glowing.material.specular});
+    }
+    cases.push_back({"two domes (not convex)", two_domes(), base.material.specular});
+
+    const auto k = small_eye(2);
+    size_t culled_somewhere = 0;
+    for (const auto& c : cases) {
+        auto r = make_renderer(c.scene);
+        ASSERT_TRUE(r);
+        for (double angle : {-40.0, 0.0, 40.0})
+            for (double height : {0.80, 1.35}) {
+                const auto head = scene::viewing_pose(c.scene.viewing, angle, height).value();
+                const auto eye = scene::eye_poses(head, 0.063)[1];
+                for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
+                    const bool srgb8 = enc == render::LayerEncoding::kSrgb8;
+                    const std::string what = c.name + " at " + std::to_string(int(angle)) +
+                                             " deg, " + std::to_string(height) + " m, " +
+                                             (srgb8 ? "srgb8" : "half");
+                    const Pair p = render_both(*r, c.spec, eye, enc, k);
+                    ASSERT_FALSE(p.full.empty()) << what;
+                    EXPECT_GT(lit_values(p.full), 0) << what << ": the full layer is black";
+                    expect_within_step(p, srgb8, what);
+                    EXPECT_LE(p.sparse_plan.triangles, p.full_plan.triangles) << what;
+                    culled_somewhere += p.sparse_plan.clusters_lit < p.sparse_plan.clusters_total;
+                }
+            }
+    }
+    // The sparse path must actually skip clusters on these scenes, or this proves nothing.
+    EXPECT_GT(culled_somewhere, cases.size()) << "no case culled a cluster";
+}
+
+TEST_F(SparseLayers, DefaultSceneShadesAFractionOfTheProp) {
+    const scene::Scene s = scene::default_scene();
+    auto r = make_renderer(s);
+    const auto head = scene::viewing_pose(s.viewing, 20.0, 1.10).value();
+    const auto eye = scene::eye_poses(head, 0.063)[0];
+    const Pair p = render_both(*r, s.material.specular, eye, render::LayerEncoding::kSrgb8,
+                               small_eye(2));
+    EXPECT_LT(p.sparse_plan.triangles * 2, p.full_plan.triangles)
+        << p.sparse_plan.triangles << " of " << p.full_plan.triangles << " triangles drawn";
+    EXPECT_LT(p.sparse_plan.clusters_lit * 2, p.sparse_plan.clusters_total);
+}
+
+TEST_F(SparseLayers, BlackLightsCostNothing) {
+    // 64 lights of which 61 are black: the same layer as the 3 real ones, and the light loop
+    // runs over 3.
+    const scene::Scene three = scene::default_scene();
+    scene::Scene many = three;
+    for (int i = 0; i < 61; ++i) {
+        scene::Light l;
+        l.type = i % 2 ? scene::LightType::kPoint : scene::LightType::kDirectional;
+        l.intensity = i % 3 ? 0.0 : 1.0;
+        l.colour = i % 3 ? glm::dvec3(1.0) : glm::dvec3(0.0);
+        l.position = {0.1 * i, 1.5, 0.2};
+        many.lights.push_back(l);
+    }
+    auto r3 = make_renderer(three), r64 = make_renderer(many);
+    EXPECT_EQ(r3->lights_skipped(), 0u);
+    EXPECT_EQ(r64->lights_skipped(), 61u);
+    const auto head = scene::viewing_pose(three.viewing, 0.0, 1.10).value();
+    const auto eye = scene::eye_poses(head, 0.063)[0];
+    const auto k = small_eye(4);
+    const Pair a = render_both(*r3, three.material.specular, eye, render::LayerEncoding::kHalf, k);
+    const Pair b = render_both(*r64, many.material.specular, eye, render::LayerEncoding::kHalf, k);
+    EXPECT_EQ(a.sparse, b.sparse);
+    EXPECT_EQ(a.sparse_plan.triangles, b.sparse_plan.triangles);
+    EXPECT_GT(lit_values(a.sparse), 0);
+    auto proj = r64->render_projector();
+    ASSERT_TRUE(proj.ok());
+    EXPECT_EQ(proj->report.lights_skipped, 61u);
+}
+
+TEST_F(SparseLayers, WhatCanOnlyBeBlackRecordsNoPass) {
+    const scene::Scene s = scene::default_scene();
+    const auto head = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
+    const auto eye = scene::eye_poses(head, 0.063)[0];
+    const auto k = small_eye(4);
+    auto t = gpu::RenderTarget::create(device(), k.width, k.height, gpu::ColorFormat::kRgba8Unorm,
+                                       "t")
+                 .value();
+    auto plan_of = [&](const scene::Scene& scene, const scene::Specular& spec,
+                       const scene::Pose& pose) {
+        auto r = make_renderer(scene);
+        auto plans = r->render_layers(std::vector<Request>{{spec, k, pose,
+                                                            render::LayerEncoding::kSrgb8, &t}});
+        EXPECT_TRUE(plans.ok());
+        return plans.ok() ? (*plans)[0] : Plan{};
+    };
+    scene::Specular black = s.material.specular;
+    black.colour = glm::dvec3(0.0);
+    Plan p = plan_of(s, black, eye);
+    EXPECT_TRUE(p.rect.empty());
+    EXPECT_NE(p.skipped_because.find("specular colour is black"), std::string::npos)
+        << p.skipped_because;
+
+    scene::Scene dark = s;
+    for (auto& l : dark.lights) l.intensity = 0.0;
+    p = plan_of(dark, dark.material.specular, eye);
+    EXPECT_TRUE(p.rect.empty());
+    EXPECT_NE(p.skipped_because.find("every light is black"), std::string::npos)
+        << p.skipped_because;
+    auto r = make_renderer(dark);
+    auto proj = r->render_projector();
+    ASSERT_TRUE(proj.ok());
+    EXPECT_FALSE(proj->report.ran);
+    EXPECT_EQ(r->pipelines_built(), 0u) << "a black projector frame built a pipeline";
+
+    scene::Scene grey = s;
+    grey.material.albedo = glm::dvec3(0.0);
+    auto rg = make_renderer(grey);
+    auto pg = rg->render_projector();
+    ASSERT_TRUE(pg.ok());
+    EXPECT_FALSE(pg->report.ran);
+    EXPECT_NE(pg->report.skipped_because.find("albedo"), std::string::npos);
+
+    // Looking away from the prop: nothing in view, no pass.
+    const auto away = scene::look_at(head.position, head.position + glm::dvec3(0, 1, 0.2)).value();
+    p = plan_of(s, s.material.specular, away);
+    EXPECT_TRUE(p.rect.empty());
+    EXPECT_EQ(p.skipped_because, "nothing view-dependent in view");
+}
+
+}  // namespace

@@ -1,0 +1,165 @@
+// The sparse VD path's bound must be conservative: wherever the double-precision reference puts
+// light above the quantisation step on a cluster, cluster_may_light says so. Checked by brute
+// force over every cluster of every level of the default hemisphere, for every specular model,
+// many eyes, and lights from far away to a few millimetres off the surface.
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <glm/geometric.hpp>
+
+#include "render/clusters.hpp"
+#include "scene/config.hpp"
+#include "scene/mesh.hpp"
+#include "shading/brdf.hpp"
+
+using namespace hs;
+
+namespace {
+
+// The sphere point the shader shades for a ray from `eye` through mesh point m (nullopt: the
+// ray misses the dome).
+std::optional<glm::dvec3> dome_hit(const scene::Hemisphere& h, glm::dvec3 eye, glm::dvec3 m) {
+    const glm::dvec3 d = glm::normalize(m - eye), oc = eye - h.centre;
+    const double b = glm::dot(d, oc), disc = b * b - (glm::dot(oc, oc) - h.radius * h.radius);
+    if (disc < 0)
+        return std::nullopt;
+    const glm::dvec3 q = eye + (-b - std::sqrt(disc)) * d;
+    if (q.y < h.centre.y)
+        return std::nullopt;
+    return q;
+}
+
+// The largest VD radiance (any channel) the reference finds on `cl` from `eye`, sampling each
+// triangle that faces the eye (the others are culled) at its corners, edge midpoints and
+// centroid.
+double brute_force_peak(const render::ClusteredMesh& level, const render::Cluster& cl,
+                        const scene::Hemisphere& h, const scene::Specular& spec,
+                        std::span<const scene::Light> lights, glm::dvec3 eye) {
+    double peak = 0;
+    const auto& m = level.mesh;
+    for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
+        const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
+                         c = m.positions[m.indices[i + 2]];
+        if (glm::dot(glm::cross(b - a, c - a), eye - a) <= 0)
+            continue;
+        for (const glm::dvec3 w : {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1),
+                                   glm::dvec3(.5, .5, 0), glm::dvec3(0, .5, .5),
+                                   glm::dvec3(.5, 0, .5), glm::dvec3(1, 1, 1) / 3.0}) {
+            const auto q = dome_hit(h, eye, w.x * a + w.y * b + w.z * c);
+            if (!q)
+                continue;
+            const glm::dvec3 n = glm::normalize(*q - h.centre), v = glm::normalize(eye - *q);
+            double sum = 0;
+            for (const auto& light : lights) {
+                const auto at = shading::light_at(light, *q, n, true);
+                const double f = shading::specular_factor(spec, n, at.l, v, scene::hemisphere_tangent(n));
+                sum += std::max({at.E.x, at.E.y, at.E.z}) * f;
+            }
+            peak = std::max(peak, sum * std::max({spec.colour.x, spec.colour.y, spec.colour.z}));
+        }
+    }
+    return peak;
+}
+
+TEST(Clusters, BoundNeverMissesLight) {
+    const scene::Scene s = scene::default_scene();
+    const auto& h = s.prop.hemisphere;
+    auto finest = scene::build_prop_mesh(s.prop);
+    ASSERT_TRUE(finest.ok());
+    const auto levels = render::prop_levels(s.prop, finest.value());
+    ASSERT_GE(levels.size(), 3u);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    size_t checked = 0, lit = 0, culled = 0;
+    for (const auto& [name, spec] : s.specular_presets) {
+        if (spec.model == scene::SpecularModel::kKajiyaKay)
+            continue;  // bounded by the gate only: nothing to check beyond it
+        for (int trial = 0; trial < 6; ++trial) {
+            // An eye around the prop, and lights: the scene's, plus one point light placed
+            // from 30 cm down to 2 mm off the surface.
+            const glm::dvec3 eye =
+                h.centre + glm::dvec3(0.8 * u(rng), 0.3 + 0.4 * std::abs(u(rng)), 0.8 * u(rng));
+            std::vector<scene::Light> lights = s.lights;
+            scene::Light near;
+            near.type = scene::LightType::kPoint;
+            near.intensity = 0.3;
+            const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)) + 0.1, u(rng)));
+            near.position = h.centre + dir * (h.radius + 0.3 * std::pow(0.01, trial / 5.0));
+            lights.push_back(near);
+            render::VdBound bound;
+            bound.spec = spec;
+            bound.lights = lights;
+            bound.threshold = render::layer_threshold(true);
+            const auto& level = levels[size_t(trial) % levels.size()];
+            for (const auto& cl : level.clusters) {
+                const bool may = render::cluster_may_light(cl, eye, bound);
+                const double peak = brute_force_peak(level, cl, h, spec, lights, eye);
+                ++checked;
+                lit += may;
+                culled += !may;
+                if (peak >= bound.threshold) {
+                    EXPECT_TRUE(may) << name << " trial " << trial << ": a culled cluster reaches "
+                                     << peak << " (threshold " << bound.threshold << ")";
+                }
+            }
+        }
+    }
+    // The bound must also cull: a test of a bound that says "lit" everywhere proves nothing.
+    EXPECT_GT(culled, checked / 4) << lit << " lit of " << checked;
+}
+
+TEST(Clusters, LevelsEncloseTheDomeWithinTheirError) {
+    const scene::Scene s = scene::default_scene();
+    const auto& h = s.prop.hemisphere;
+    auto finest = scene::build_prop_mesh(s.prop);
+    ASSERT_TRUE(finest.ok());
+    const auto levels = render::prop_levels(s.prop, finest.value());
+    EXPECT_EQ(levels.front().segments, h.segments);
+    for (size_t i = 0; i < levels.size(); ++i) {
+        const auto& m = levels[i].mesh;
+        if (i > 0) {
+            EXPECT_LT(m.indices.size(), levels[i - 1].mesh.indices.size());
+        }
+        double least = 1e9, most = 0;
+        for (size_t t = 0; t + 2 < m.indices.size(); t += 3) {
+            const glm::dvec3 a = m.positions[m.indices[t]], b = m.positions[m.indices[t + 1]],
+                             c = m.positions[m.indices[t + 2]];
+            const glm::dvec3 n = glm::normalize(glm::cross(b - a, c - a));
+            least = std::min(least, std::abs(glm::dot(a - h.centre, n)));
+            most = std::max(most, glm::length(a - h.centre));
+        }
+        EXPECT_GE(least, h.radius * (1 - 1e-6)) << "level " << i << " cuts into the dome";
+        EXPECT_LE(most - h.radius, levels[i].surface_error_m * 1.001 + 1e-7) << "level " << i;
+    }
+    // A far camera takes a coarser level than a near one.
+    const double f = 2400;
+    const size_t near = render::select_level(levels, h.centre + glm::dvec3(0, 0.1, 0.3), f);
+    const size_t far = render::select_level(levels, h.centre + glm::dvec3(0, 1, 4), f);
+    EXPECT_GT(far, near);
+    EXPECT_EQ(render::select_level(levels, h.centre, f), 0u);  // inside: the finest
+}
+
+TEST(Clusters, ProjectedRectsContainTheSphere) {
+    const scene::Intrinsics k{640, 360, 500, 500, 319.5, 179.5};
+    const auto cam = scene::Pose{{0, 0, 1}, {1, 0, 0, 0}};  // at z = 1 looking down -z
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < 200; ++i) {
+        const glm::dvec3 c(0.4 * u(rng), 0.3 * u(rng), -0.5 * std::abs(u(rng)));
+        const double r = 0.05 * std::abs(u(rng)) + 1e-3;
+        const auto rect = render::project_sphere(c, r, k, cam, 0.01);
+        for (int j = 0; j < 50; ++j) {
+            const glm::dvec3 p = c + r * glm::normalize(glm::dvec3(u(rng), u(rng), u(rng)));
+            const double z = 1.0 - p.z, x = p.x, y = p.y;
+            const double px = k.fx * x / z + k.cx, py = k.cy - k.fy * y / z;
+            if (px < 0 || py < 0 || px >= k.width || py >= k.height)
+                continue;
+            EXPECT_TRUE(px >= rect.x0 && px < rect.x1 && py >= rect.y0 && py < rect.y1)
+                << px << "," << py << " outside " << rect.x0 << ".." << rect.x1 << " x "
+                << rect.y0 << ".." << rect.y1;
+        }
+    }
+}
+
+}  // namespace
