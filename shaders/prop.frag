@@ -183,7 +183,11 @@ void main() {
         vec3 v = normalize(pc.eye_position.xyz - p);
         if (kSpecModel != 0) {
             vec3 s = vec3(0.0);
-            for (int i = 0; i < kNumLights; ++i)
+            for (int i = 0; i < kNumLights; ++i) {
+                // Lights that cannot reach this draw's clusters above the output's step are
+                // skipped (render/clusters.hpp, cluster_light_mask).
+                if (((i < 32 ? pc.light_mask.x : pc.light_mask.y) & (1u << (i & 31))) == 0u)
+                    continue;
                 for (int j = 0; j < samples_of(i); ++j) {
                     vec3 l, E;
                     light_sample(i, j, p, n, l, E);
@@ -191,6 +195,7 @@ void main() {
                                                 kMeshTangent ? mesh_tangent : scene.tangent_axis.xyz,
                                                 scene.spec_params.xyz);
                 }
+            }
             sum += scene.spec_colour.rgb * s;
         }
         if (kEmission) sum += scene.emission.rgb;

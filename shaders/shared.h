@@ -7,10 +7,12 @@
 #include <cstdint>
 #include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
+#include <glm/ext/vector_uint4.hpp>
 namespace hs::gpu_shared {
 using vec4 = glm::vec4;
 using mat4 = glm::mat4;
 using uint = uint32_t;
+using uvec4 = glm::uvec4;
 #endif
 
 #define HS_MAX_LIGHTS 64
@@ -72,6 +74,7 @@ struct GpuPush {
     mat4 clip_from_world;  // Vulkan clip space from world (scene/camera.hpp)
     vec4 eye_position;     // xyz: viewer eye (VD pass) in metres, world
     vec4 camera_position;  // xyz: the camera this pass renders from (rays start here), world
+    uvec4 light_mask;      // VD pass: bit i of (x, y) set: light i may add light to this draw
 };
 
 // One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <glm/geometric.hpp>
@@ -200,97 +201,134 @@ double layer_threshold(bool srgb8) {
     return srgb8 ? 0.99 * 0.5 / (255.0 * 12.92) : 0.99 * std::ldexp(1.0, -25);
 }
 
-bool cluster_may_light(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
-    if (b.emission)
-        return true;
-    if (b.spec.model == scene::SpecularModel::kNone || max_channel(b.spec.colour) <= 0)
-        return false;
-    const double ks = max_channel(b.spec.colour);
-    const double theta_n = cl.cone_angle;
-    if (theta_n >= kHalfPi)
-        return true;  // no normal bound: assume lit
-    // The view: directions from the cluster to the eye.
-    const glm::dvec3 to_eye = eye - cl.centre;
-    const double alpha_v = spread_towards(cl.centre, cl.radius, eye, 0.0);
-    if (alpha_v >= kHalfPi)
-        return true;
-    const glm::dvec3 v_axis = glm::normalize(to_eye);
-    const double nv_angle = angle_between(cl.cone_axis, v_axis);
-    // Gate n.v > 0: impossible when every normal is at least 90 degrees from every view ray.
-    if (nv_angle - theta_n - alpha_v >= kHalfPi + kSlack)
-        return false;
-    const double nv_lb = std::cos(std::min(kHalfPi, nv_angle + theta_n + alpha_v));
+namespace {
 
-    double total = 0;
-    for (const auto& light : b.lights) {
-        glm::dvec3 l_axis;
-        double alpha_l = 0, E = max_channel(light.colour * light.intensity);
-        if (light.type == scene::LightType::kDirectional) {
-            l_axis = glm::normalize(-light.direction);
-        } else {
-            const double panel = light.type == scene::LightType::kRect
-                                     ? 0.5 * (glm::length(light.edge_u) + glm::length(light.edge_v))
-                                     : 0.0;
-            const glm::dvec3 d = light.position - cl.centre;
-            const double dist = glm::length(d);
-            alpha_l = spread_towards(cl.centre, cl.radius, light.position, panel);
-            if (alpha_l >= kHalfPi)
-                return true;  // the light is among the cluster's points: no direction bound
-            l_axis = d / dist;
-            const bool falloff = b.point_falloff || light.type == scene::LightType::kRect;
-            if (falloff) {
-                const double dmin = std::max(dist - cl.radius - panel, b.min_light_distance);
-                E /= dmin * dmin;
-            }
-        }
-        const double nl_angle = angle_between(cl.cone_axis, l_axis);
-        if (nl_angle - theta_n - alpha_l >= kHalfPi + kSlack)
-            continue;  // gate n.l > 0 fails everywhere: this light adds nothing
-        double factor = 1.0;  // Kajiya-Kay: the gate only
-        if (b.spec.model != scene::SpecularModel::kKajiyaKay) {
-            // The half vector h = (l + v) / |l + v| over the cluster: within theta_h of h_axis.
-            const double lv = angle_between(l_axis, v_axis);  // 2 psi0
-            const double cos_psi0 = std::cos(0.5 * lv);
-            const double spread = alpha_l + alpha_v;
-            if (spread >= 2.0 * cos_psi0)
-                return true;  // h can point anywhere
-            const double theta_h = std::asin(std::min(1.0, spread / (2.0 * cos_psi0)));
-            const glm::dvec3 h_axis = glm::normalize(l_axis + v_axis);
-            const double delta =
-                std::clamp(angle_between(cl.cone_axis, h_axis) - theta_n - theta_h - kSlack, 0.0,
-                           kHalfPi);
-            const double psi = std::min(kHalfPi, 0.5 * lv + 0.5 * spread + kSlack);
-            const double s = std::sin(delta), c = std::cos(psi);
-            switch (b.spec.model) {
-                case scene::SpecularModel::kPhong: {
-                    // r.v <= 1 - 2 cos^2(psi) sin^2(delta) (docs/ARCHITECTURE.md).
-                    const double rv = 1.0 - 2.0 * c * c * s * s;
-                    factor = rv > 0 ? std::pow(std::min(rv, 1.0), b.spec.exponent) : 0.0;
-                    break;
-                }
-                case scene::SpecularModel::kBlinnPhong:
-                    factor = std::pow(std::cos(delta), b.spec.exponent);
-                    break;
-                case scene::SpecularModel::kWard: {
-                    const double ax = b.spec.alpha_x, ay = b.spec.alpha_y;
-                    const double amax = std::max(ax, ay);
-                    const double t = std::tan(delta) / amax;
-                    // n.l / sqrt(max(n.l n.v, 1e-8)) with n.l <= 1 and n.v >= nv_lb.
-                    const double w = nv_lb > 1e-8
-                                         ? std::max(1.0 / std::sqrt(nv_lb), 1e-4 / nv_lb)
-                                         : 1e4;
-                    factor = std::exp(-t * t) * w / (4.0 * kPi * ax * ay);
-                    break;
-                }
-                default:
-                    break;
-            }
-        }
-        total += ks * E * factor;
-        if (total >= b.threshold)
-            return true;
+// Per light, an upper bound of its VD radiance anywhere on the cluster (+inf: no bound); the
+// view terms are shared by every light.
+struct ViewBound {
+    bool unbounded = false;  // no normal or view bound: every light may light the cluster
+    bool dark = false;       // the gate n.v > 0 fails everywhere
+    double theta_n = 0, alpha_v = 0, nv_lb = 0;
+    glm::dvec3 v_axis{0.0};
+};
+
+ViewBound view_bound(const Cluster& cl, const glm::dvec3& eye) {
+    ViewBound vb;
+    vb.theta_n = cl.cone_angle;
+    if (vb.theta_n >= kHalfPi) {
+        vb.unbounded = true;
+        return vb;
     }
-    return total >= b.threshold;
+    vb.alpha_v = spread_towards(cl.centre, cl.radius, eye, 0.0);
+    if (vb.alpha_v >= kHalfPi) {
+        vb.unbounded = true;
+        return vb;
+    }
+    vb.v_axis = glm::normalize(eye - cl.centre);
+    const double nv_angle = angle_between(cl.cone_axis, vb.v_axis);
+    // Gate n.v > 0: impossible when every normal is at least 90 degrees from every view ray.
+    vb.dark = nv_angle - vb.theta_n - vb.alpha_v >= kHalfPi + kSlack;
+    vb.nv_lb = std::cos(std::min(kHalfPi, nv_angle + vb.theta_n + vb.alpha_v));
+    return vb;
+}
+
+constexpr double kUnbounded = std::numeric_limits<double>::infinity();
+
+double light_bound(const Cluster& cl, const ViewBound& vb, const scene::Light& light,
+                   const VdBound& b) {
+    const double ks = max_channel(b.spec.colour);
+    glm::dvec3 l_axis;
+    double alpha_l = 0, E = max_channel(light.colour * light.intensity);
+    if (light.type == scene::LightType::kDirectional) {
+        l_axis = glm::normalize(-light.direction);
+    } else {
+        const double panel = light.type == scene::LightType::kRect
+                                 ? 0.5 * (glm::length(light.edge_u) + glm::length(light.edge_v))
+                                 : 0.0;
+        const glm::dvec3 d = light.position - cl.centre;
+        const double dist = glm::length(d);
+        alpha_l = spread_towards(cl.centre, cl.radius, light.position, panel);
+        if (alpha_l >= kHalfPi)
+            return kUnbounded;  // the light is among the cluster's points: no direction bound
+        l_axis = d / dist;
+        const bool falloff = b.point_falloff || light.type == scene::LightType::kRect;
+        if (falloff) {
+            const double dmin = std::max(dist - cl.radius - panel, b.min_light_distance);
+            E /= dmin * dmin;
+        }
+    }
+    const double nl_angle = angle_between(cl.cone_axis, l_axis);
+    if (nl_angle - vb.theta_n - alpha_l >= kHalfPi + kSlack)
+        return 0;  // gate n.l > 0 fails everywhere: this light adds nothing
+    double factor = 1.0;  // Kajiya-Kay: the gate only
+    if (b.spec.model != scene::SpecularModel::kKajiyaKay) {
+        // The half vector h = (l + v) / |l + v| over the cluster: within theta_h of h_axis.
+        const double lv = angle_between(l_axis, vb.v_axis);  // 2 psi0
+        const double cos_psi0 = std::cos(0.5 * lv);
+        const double spread = alpha_l + vb.alpha_v;
+        if (spread >= 2.0 * cos_psi0)
+            return kUnbounded;  // h can point anywhere
+        const double theta_h = std::asin(std::min(1.0, spread / (2.0 * cos_psi0)));
+        const glm::dvec3 h_axis = glm::normalize(l_axis + vb.v_axis);
+        const double delta = std::clamp(
+            angle_between(cl.cone_axis, h_axis) - vb.theta_n - theta_h - kSlack, 0.0, kHalfPi);
+        const double psi = std::min(kHalfPi, 0.5 * lv + 0.5 * spread + kSlack);
+        const double s = std::sin(delta), c = std::cos(psi);
+        switch (b.spec.model) {
+            case scene::SpecularModel::kPhong: {
+                // r.v <= 1 - 2 cos^2(psi) sin^2(delta) (docs/ARCHITECTURE.md).
+                const double rv = 1.0 - 2.0 * c * c * s * s;
+                factor = rv > 0 ? std::pow(std::min(rv, 1.0), b.spec.exponent) : 0.0;
+                break;
+            }
+            case scene::SpecularModel::kBlinnPhong:
+                factor = std::pow(std::cos(delta), b.spec.exponent);
+                break;
+            case scene::SpecularModel::kWard: {
+                const double ax = b.spec.alpha_x, ay = b.spec.alpha_y;
+                const double t = std::tan(delta) / std::max(ax, ay);
+                // n.l / sqrt(max(n.l n.v, 1e-8)) with n.l <= 1 and n.v >= nv_lb.
+                const double w = vb.nv_lb > 1e-8
+                                     ? std::max(1.0 / std::sqrt(vb.nv_lb), 1e-4 / vb.nv_lb)
+                                     : 1e4;
+                factor = std::exp(-t * t) * w / (4.0 * kPi * ax * ay);
+                break;
+            }
+            default:
+                break;
+        }
+    }
+    return ks * E * factor;
+}
+
+}  // namespace
+
+uint64_t cluster_light_mask(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
+    const size_t n = std::min<size_t>(b.lights.size(), 64);
+    const uint64_t all = n >= 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1;
+    if (b.emission)
+        return all == 0 ? 1 : all;  // emission lights every covered pixel
+    if (b.spec.model == scene::SpecularModel::kNone || max_channel(b.spec.colour) <= 0 || n == 0)
+        return 0;
+    const ViewBound vb = view_bound(cl, eye);
+    if (vb.unbounded)
+        return all;
+    if (vb.dark)
+        return 0;
+    const double share = b.threshold / double(n);
+    double total = 0;
+    uint64_t mask = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double bi = light_bound(cl, vb, b.lights[i], b);
+        total += bi;
+        if (bi >= share)
+            mask |= uint64_t(1) << i;
+    }
+    return total >= b.threshold ? mask : 0;
+}
+
+bool cluster_may_light(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
+    return cluster_light_mask(cl, eye, b) != 0;
 }
 
 PixelRect unite(const PixelRect& a, const PixelRect& b) {

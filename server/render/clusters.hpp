@@ -80,6 +80,12 @@ double layer_threshold(bool srgb8);
 // and the half vector over the cluster (Kajiya-Kay: the gate only).
 bool cluster_may_light(const Cluster& cluster, const glm::dvec3& eye, const VdBound& bound);
 
+// The lights (bit i: bound.lights[i]; at most 64) that a VD pass over `cluster` must evaluate:
+// 0 where the cluster cannot reach the threshold at all (cluster_may_light false). A light is
+// left out when its own bound is below threshold / (number of lights), so the lights left out
+// together change no pixel by a quantisation step. All bits when emission is on.
+uint64_t cluster_light_mask(const Cluster& cluster, const glm::dvec3& eye, const VdBound& bound);
+
 // A pixel rectangle [x0, x1) x [y0, y1).
 struct PixelRect {
     uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;

@@ -1,6 +1,7 @@
 #include "render/renderer.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstring>
 #include <tuple>
@@ -276,6 +277,7 @@ gpu::GpuPush Renderer::push_for(const scene::Intrinsics& k, const scene::Pose& p
                                      scene::frame_from_world(pose));
     push.eye_position = glm::vec4(glm::vec3(pose.position), 1.0f);
     push.camera_position = push.eye_position;
+    push.light_mask = glm::uvec4(~0u, ~0u, 0u, 0u);  // every light
     return push;
 }
 
@@ -455,6 +457,9 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         // Per cluster: 0 outside the view, 1 lit, 2 in view but dark. Its rect is re-derived
         // when drawing occluders (a dark cluster matters only where it overlaps the lit rect).
         lit_scratch_.assign(level.clusters.size(), 0);
+        mask_scratch_.assign(level.clusters.size(), 0);
+        const uint64_t all_lights =
+            lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
         PixelRect rect;
         for (size_t c = 0; c < level.clusters.size(); ++c) {
             const Cluster& cl_ = level.clusters[c];
@@ -462,8 +467,11 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
                 project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
             if (on_screen.empty())
                 continue;
-            if (!r.sparse || cluster_may_light(cl_, r.eye.position, bound)) {
+            const uint64_t mask =
+                r.sparse ? cluster_light_mask(cl_, r.eye.position, bound) : all_lights | 1;
+            if (mask != 0) {
                 lit_scratch_[c] = 1;
+                mask_scratch_[c] = mask;
                 rect = unite(rect, on_screen);
             } else {
                 lit_scratch_[c] = 2;
@@ -510,10 +518,43 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             return overlaps(project_sphere(cc.centre, cc.radius, k, r.eye, info_.near_m),
                             plan.rect);
         });
-        auto [lit_first, lit_count, lit_clusters] =
-            gather([&](size_t c) { return lit_scratch_[c] == 1; });
+        // The lit clusters grouped by the lights they need: one draw per group, each
+        // evaluating only its lights (a handful of groups; past kMaxLightGroups, one group
+        // with every light any of them needs).
+        constexpr size_t kMaxLightGroups = 8;
+        order_scratch_.clear();
+        for (size_t c = 0; c < level.clusters.size(); ++c)
+            if (lit_scratch_[c] == 1)
+                order_scratch_.push_back(uint32_t(c));
+        std::stable_sort(order_scratch_.begin(), order_scratch_.end(),
+                         [&](uint32_t a, uint32_t b) { return mask_scratch_[a] < mask_scratch_[b]; });
+        size_t groups = 0;
+        uint64_t union_mask = 0;
+        for (size_t i = 0; i < order_scratch_.size(); ++i) {
+            union_mask |= mask_scratch_[order_scratch_[i]];
+            groups += i == 0 || mask_scratch_[order_scratch_[i]] != mask_scratch_[order_scratch_[i - 1]];
+        }
+        if (groups > kMaxLightGroups)
+            for (uint32_t c : order_scratch_) mask_scratch_[c] = union_mask;
+        struct Group {
+            uint64_t mask;
+            uint32_t first, count;
+        };
+        std::array<Group, kMaxLightGroups> group_list{};
+        size_t group_count = 0;
+        const uint32_t lit_first = written;
+        for (size_t i = 0; i < order_scratch_.size(); ++i) {
+            const uint32_t c = order_scratch_[i];
+            const Cluster& cc = level.clusters[c];
+            if (group_count == 0 || group_list[group_count - 1].mask != mask_scratch_[c])
+                group_list[group_count++] = {mask_scratch_[c], written, 0};
+            std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
+            written += cc.index_count;
+            group_list[group_count - 1].count += cc.index_count;
+        }
+        const uint32_t lit_count = written - lit_first;
         plan.clusters_occluding = occ_clusters;
-        plan.clusters_lit = lit_clusters;
+        plan.clusters_lit = uint32_t(order_scratch_.size());
         plan.triangles = (occ_count + lit_count) / 3;
         cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area);
         cl.bind_mesh(streams(plan.level), *r.indices);
@@ -525,8 +566,13 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             cl.draw_range(occ_first, occ_count);
         }
         cl.bind(lit->pipeline);
-        cl.push_constants(lit->pipeline, &push, sizeof(push));
-        cl.draw_range(lit_first, lit_count);
+        for (size_t g = 0; g < group_count; ++g) {
+            gpu::GpuPush gp = push;
+            gp.light_mask = glm::uvec4(uint32_t(group_list[g].mask),
+                                       uint32_t(group_list[g].mask >> 32), 0, 0);
+            cl.push_constants(lit->pipeline, &gp, sizeof(gp));
+            cl.draw_range(group_list[g].first, group_list[g].count);
+        }
         cl.end_render_and_read_back(*r.target, area);
     }
     return plans;
