@@ -193,10 +193,11 @@ private:
     }
     Result<std::unique_ptr<render::Renderer>> renderer(
         const scene::Scene& s, gpu::ColorFormat format,
-        uint32_t area_samples = render::kDefaultAreaLightSamples) {
+        uint32_t area_samples = render::kDefaultAreaLightSamples, bool level_of_detail = true) {
         render::RendererCreateInfo info;
         info.format = format;
         info.area_light_samples = area_samples;
+        info.level_of_detail = level_of_detail;
         return render::Renderer::create(device_, s, info);
     }
     // The layer at `k_` rendered at `scale` times its resolution, timed. Integer scales > 1 are
@@ -258,16 +259,33 @@ Result<void> Sweep::tessellation(std::vector<AccuracyRow>& rows) {
                                                        {128, 32}, {256, 64}, {512, 128}};
     if (o_.quick)
         grid.pop_back();
+    // Fixed tessellations (level of detail off), then the server's default: the level of
+    // detail chosen for this view under the scene's own segments x rings.
     for (auto [seg, rings] : grid) {
         scene::Scene s = s_;
         s.prop.hemisphere.segments = seg, s.prop.hemisphere.rings = rings;
-        HS_ASSIGN_OR_RETURN(auto r, renderer(s, gpu::ColorFormat::kRgba16Float));
+        HS_ASSIGN_OR_RETURN(auto r, renderer(s, gpu::ColorFormat::kRgba16Float,
+                                             render::kDefaultAreaLightSamples, false));
         HS_ASSIGN_OR_RETURN(auto m, render_layer(*r, 1.0));
         const bool is_def = seg == def.segments && rings == def.rings;
         AccuracyRow row_ =
             row("tessellation", fmt::format("{}x{}", seg, rings), "centre", is_def, m, ref_centre_);
         row_.geometric_error_mm = hemisphere_geometric_error_mm(s.prop.hemisphere);
         rows.push_back(row_);
+    }
+    // The level of detail: the scene's own tessellation for every view, against the coarsest
+    // level whose shell stays within half a pixel of this view (the server's default).
+    for (bool lod : {false, true}) {
+        HS_ASSIGN_OR_RETURN(auto r, renderer(s_, gpu::ColorFormat::kRgba16Float,
+                                             render::kDefaultAreaLightSamples, lod));
+        HS_ASSIGN_OR_RETURN(auto m, render_layer(*r, 1.0));
+        const auto& level = r->levels()[r->level_for(k_, eye_)];
+        AccuracyRow lr = row("level-of-detail",
+                             fmt::format("{} {}x{}", lod ? "per-view" : "fixed", level.segments,
+                                         level.rings),
+                             "centre", lod, m, ref_centre_);
+        lr.geometric_error_mm = level.surface_error_m * 1000.0;
+        rows.push_back(lr);
     }
     return {};
 }

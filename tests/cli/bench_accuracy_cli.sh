@@ -10,7 +10,7 @@ csv="$out/acc/accuracy.csv"
 head -1 "$csv" | grep -q '^knob,setting,reference,default,geometric_error_mm,rmse,mean_de00,render_ms,encode_ms,bytes,pareto$'
 rows=$(($(wc -l < "$csv") - 1))
 [[ $rows -ge 25 ]] || { echo "only $rows rows"; exit 1; }
-for knob in tessellation render-scale samples-per-pixel lights format encoding format+encoding; do
+for knob in tessellation level-of-detail render-scale samples-per-pixel lights format encoding format+encoding; do
     grep -q "^$knob," "$csv" || { echo "no $knob rows"; exit 1; }
 done
 # Every rmse, render and encode figure is a finite number.

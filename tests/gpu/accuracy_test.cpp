@@ -70,7 +70,14 @@ TEST_F(Accuracy, MoreTessellationNeverIncreasesGeometricError) {
         EXPECT_GT(t[i].geometric_error_mm, 0.0);
         EXPECT_LT(t[i].geometric_error_mm, t[i - 1].geometric_error_mm) << t[i].setting;
     }
-    EXPECT_LT(t.back().rmse, t.front().rmse);
+    // The dome is ray-cast inside the mesh: the tessellation moves no shaded point, so the error
+    // is the same at every tessellation (within 5 %), and so is the per-view level of detail's.
+    for (const auto& r : t)
+        EXPECT_NEAR(r.rmse, t.front().rmse, 0.05 * t.front().rmse) << r.setting;
+    const auto lod = knob("level-of-detail");
+    ASSERT_EQ(lod.size(), 2u);
+    EXPECT_NEAR(lod[1].rmse, lod[0].rmse, 0.05 * lod[0].rmse);
+    EXPECT_TRUE(lod[1].is_default);
 }
 
 TEST_F(Accuracy, Rgba32fIsNeverWorseThanRgba8) {
