@@ -846,7 +846,8 @@ ImageRgba8 plot(const Report& rep, const std::string& subtitle) {
             y_max = std::max(y_max, b.figure->per_s);
     if (rep.lean_external && rep.lean_external->ok)
         y_max = std::max(y_max, rep.lean_external->per_s);
-    const double y_hi = 4.0 * nice_step(y_max * 1.08 / 4.0);
+    // A quarter of headroom at least: the legend sits in the top of the plot.
+    const double y_hi = 4.0 * nice_step(y_max / 3.0);
     const Rgb served_colours[] = {
         {215, 60, 40}, {70, 110, 200}, {40, 150, 80}, {150, 80, 190}, {200, 140, 30}};
     std::vector<std::optional<int>> variants;
