@@ -69,31 +69,16 @@ Result<scene::Pose> head_at(const scene::Scene& s, double angle_deg) {
     return scene::viewing_pose(s.viewing, angle_deg, h->second);
 }
 
-// The render path is gaining RendererCreateInfo::level_of_detail, and PassReport::triangles
-// (what a pass drew). A full-frame baseline draws the scene's own tessellation whichever of the
-// two versions this is built against; once the flag is in, these become plain assignments.
-template <typename Info>
-void draw_scene_tessellation(Info& info) {
-    if constexpr (requires { info.level_of_detail; })
-        info.level_of_detail = false;
-}
-template <typename Report>
-std::optional<uint64_t> triangles_drawn(const Report& report) {
-    if constexpr (requires { report.triangles; })
-        return uint64_t(report.triangles);
-    else
-        return std::nullopt;
-}
-
 }  // namespace
 
 Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Scene& scene,
                                            const scene::ViewerProfile& profile, int frames) {
     HS_CHECK(frames >= 1, "full_frame_baseline needs at least one frame");
     // Every renderer call of the benchmark is here, so that a change of the render path's API
-    // (or a flag that turns its level of detail and sparse shading off) is made in one place.
+    // is made in one place. render_eyes shades every prop pixel (no sparse shading) and reads
+    // back linear radiance; with level of detail off it draws the scene's own tessellation.
     render::RendererCreateInfo info;
-    draw_scene_tessellation(info);
+    info.level_of_detail = false;
     auto renderer = render::Renderer::create(device, scene, info);
     if (!renderer)
         return renderer.error();
@@ -106,7 +91,7 @@ Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Sce
                                                          {scene.material.specular, k, eyes[1]}};
     constexpr int kWarmup = 5;
     std::vector<double> ms;
-    uint64_t triangles = renderer.value()->mesh().indices.size() / 3;
+    uint64_t triangles = 0;
     for (int i = 0; i < kWarmup + frames; ++i) {
         const auto t0 = Clock::now();
         auto out = renderer.value()->render_eyes(pair);
@@ -118,7 +103,7 @@ Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Sce
                 return make_error(ErrorCode::kUnsupported,
                                   "the VD pass recorded no work (" + r.report.skipped_because +
                                       "): the material has nothing view-dependent to time");
-        triangles = triangles_drawn(out.value().front().report).value_or(triangles);
+        triangles = out.value().front().report.triangles;
         if (i >= kWarmup)
             ms.push_back(dt);
     }
