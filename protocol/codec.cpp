@@ -462,12 +462,13 @@ std::variant<Message, DecodeError> decode_message(const Header& h, std::span<con
 
 // ---- Frames -------------------------------------------------------------------------------------
 
-std::optional<EncodeError> encode_vd_layer_into(std::vector<uint8_t>& out, const VdLayer& m,
-                                                uint32_t sequence,
-                                                const std::function<bool(std::vector<uint8_t>&)>& fill) {
+std::optional<EncodeError> encode_vd_layer_into(
+    std::vector<uint8_t>& out, const VdLayer& m, uint32_t sequence,
+    const std::function<bool(std::vector<uint8_t>&)>& fill) {
     using I = schema::Info<VdLayer>;
     if (!m.data.empty())
-        return EncodeError{"VdLayer: encode_vd_layer_into writes the data itself; data must be empty"};
+        return EncodeError{
+            "VdLayer: encode_vd_layer_into writes the data itself; data must be empty"};
     Writer w(std::move(out));
     w.put(kMagic);
     w.put(kVersion);

@@ -71,9 +71,9 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
         case TileCodec::kLz4: {
             const size_t bound = size_t(LZ4_compressBound(int(packed.size())));
             out.resize(len_at + 4 + bound);
-            const int k = LZ4_compress_default((const char*)packed.data(),
-                                               (char*)out.data() + len_at + 4, int(packed.size()),
-                                               int(bound));
+            const int k =
+                LZ4_compress_default((const char*)packed.data(), (char*)out.data() + len_at + 4,
+                                     int(packed.size()), int(bound));
             n = size_t(std::max(k, 0));
             break;
         }
@@ -94,8 +94,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
                                   uint32_t bpp, TileCodec codec, uint16_t ts) {
     std::vector<uint8_t> out, packed;
-    encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed,
-                      ts);
+    encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed, ts);
     return out;
 }
 

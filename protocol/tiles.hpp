@@ -29,8 +29,8 @@ struct TileRegion {
 // Appends the encoding of `raw` (rows `stride` bytes apart) to `out`, packing present tiles in
 // `scratch`; both keep their capacity, so reused buffers cost no allocation. The same bytes as
 // encode_tiles.
-void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride,
-                       uint32_t width, uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t width,
+                       uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
                        TileRegion region, std::vector<uint8_t>& scratch,
                        uint16_t tile_size = kDefaultTileSize);
 

@@ -127,7 +127,8 @@ Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
     HS_ASSIGN_OR_RETURN(
         l.large_display_pixels,
         parse_count(f, "--large-display-pixels", l.large_display_pixels, 1, 8192ull * 8192));
-    HS_ASSIGN_OR_RETURN(l.max_viewer_hz, parse_count(f, "--max-viewer-hz", l.max_viewer_hz, 0, 1000));
+    HS_ASSIGN_OR_RETURN(l.max_viewer_hz,
+                        parse_count(f, "--max-viewer-hz", l.max_viewer_hz, 0, 1000));
     HS_ASSIGN_OR_RETURN(l.max_batch_viewers,
                         parse_count(f, "--max-batch-viewers", l.max_batch_viewers, 1, 1024));
     HS_ASSIGN_OR_RETURN(l.scene.max_triangles,
@@ -165,13 +166,28 @@ int run_serve(const std::vector<std::string>& args) {
             std::fputs(kServeHelp, stdout);
             return 0;
         }
-    auto parsed = parse_flags(
-        args, {"--scene", "--listen", "--unix", "--token-file", "--admin-token-file",
-               "--asset-root", "--device", "--stats-file", "--max-sessions", "--max-pending",
-               "--handshake-timeout-ms", "--idle-timeout-ms", "--frame-timeout-ms",
-               "--max-eye-pixels", "--max-target-mib", "--max-queued-mib", "--large-display-pixels",
-               "--max-triangles", "--max-projector-pixels", "--max-viewer-hz",
-               "--max-batch-viewers", "--encoder-threads"});
+    auto parsed = parse_flags(args, {"--scene",
+                                     "--listen",
+                                     "--unix",
+                                     "--token-file",
+                                     "--admin-token-file",
+                                     "--asset-root",
+                                     "--device",
+                                     "--stats-file",
+                                     "--max-sessions",
+                                     "--max-pending",
+                                     "--handshake-timeout-ms",
+                                     "--idle-timeout-ms",
+                                     "--frame-timeout-ms",
+                                     "--max-eye-pixels",
+                                     "--max-target-mib",
+                                     "--max-queued-mib",
+                                     "--large-display-pixels",
+                                     "--max-triangles",
+                                     "--max-projector-pixels",
+                                     "--max-viewer-hz",
+                                     "--max-batch-viewers",
+                                     "--encoder-threads"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -301,11 +317,12 @@ int run_serve(const std::vector<std::string>& args) {
                     proj["mean"].value("encode", 0.0));
     const auto& vd = stats["cost_ms"]["viewer_vd"];
     if (vd.value("frames", uint64_t(0)) > 0)
-        std::printf("  viewer VD  %llu layer(s), mean ms: queue %.2f  pass %.2f  encode %.2f  "
-                    "send %.2f\n",
-                    (unsigned long long)vd.value("frames", uint64_t(0)),
-                    vd["mean"].value("queue", 0.0), vd["mean"].value("pass", 0.0),
-                    vd["mean"].value("encode", 0.0), vd["mean"].value("send", 0.0));
+        std::printf(
+            "  viewer VD  %llu layer(s), mean ms: queue %.2f  pass %.2f  encode %.2f  "
+            "send %.2f\n",
+            (unsigned long long)vd.value("frames", uint64_t(0)), vd["mean"].value("queue", 0.0),
+            vd["mean"].value("pass", 0.0), vd["mean"].value("encode", 0.0),
+            vd["mean"].value("send", 0.0));
     return 0;
 }
 

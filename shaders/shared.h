@@ -5,9 +5,9 @@
 
 #ifdef __cplusplus
 #include <cstdint>
+#include <glm/ext/vector_uint4.hpp>
 #include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
-#include <glm/ext/vector_uint4.hpp>
 namespace hs::gpu_shared {
 using vec4 = glm::vec4;
 using mat4 = glm::mat4;
@@ -42,9 +42,10 @@ using uvec4 = glm::uvec4;
     11  // 0: linear radiance (clamped to OUTPUT_MAX), 1: a VD layer's sRGB8 codes into an RGBA8
         // target, 2: a VD layer's half floats into an RGBA16F target. 1 and 2 write what the
         // wire carries (PROTOCOL.md, VdLayer): alpha 0 exactly where the colour is 0
-#define HS_SC_ANALYTIC_SPHERE 12  // bool: the prop is prop_sphere's dome: each pixel shades the
-                                  // exact point its ray hits, with the sphere's normal, UV and
-                                  // tangent there; the tessellation only decides coverage
+#define HS_SC_ANALYTIC_SPHERE \
+    12  // bool: the prop is prop_sphere's dome: each pixel shades the
+        // exact point its ray hits, with the sphere's normal, UV and
+        // tangent there; the tessellation only decides coverage
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit

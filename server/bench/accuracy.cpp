@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 #include <glm/geometric.hpp>
 
+#include "codec/layer_codec.hpp"
 #include "core/plot.hpp"
 #include "optics/colour.hpp"
 #include "render/renderer.hpp"
@@ -15,7 +16,6 @@
 #include "scene/mesh.hpp"
 #include "shading/compare.hpp"
 #include "shading/reference.hpp"
-#include "codec/layer_codec.hpp"
 
 namespace hs::bench {
 
@@ -84,10 +84,10 @@ Errors errors_of(const ImageRgba32f& img, const ImageRgba32f& ref) {
         if (!(q[3] > 0.5f) || std::max({q[0], q[1], q[2]}) < visible)
             continue;
         const float* p = &img.pixels[i * 4];
-        const auto a = optics::lab_from_linear_srgb(glm::dvec3(p[0], p[1], p[2]) /
-                                                    double(codec::kLayerWhite));
-        const auto b = optics::lab_from_linear_srgb(glm::dvec3(q[0], q[1], q[2]) /
-                                                    double(codec::kLayerWhite));
+        const auto a =
+            optics::lab_from_linear_srgb(glm::dvec3(p[0], p[1], p[2]) / double(codec::kLayerWhite));
+        const auto b =
+            optics::lab_from_linear_srgb(glm::dvec3(q[0], q[1], q[2]) / double(codec::kLayerWhite));
         sum += optics::delta_e_2000(a, b);
         ++n;
     }
@@ -280,10 +280,10 @@ Result<void> Sweep::tessellation(std::vector<AccuracyRow>& rows) {
                                              render::kDefaultAreaLightSamples, lod));
         HS_ASSIGN_OR_RETURN(auto m, render_layer(*r, 1.0));
         const auto& level = r->levels()[r->level_for(k_, eye_)];
-        AccuracyRow lr = row("level-of-detail",
-                             fmt::format("{} {}x{}", lod ? "per-view" : "fixed", level.segments,
-                                         level.rings),
-                             "centre", lod, m, ref_centre_);
+        AccuracyRow lr =
+            row("level-of-detail",
+                fmt::format("{} {}x{}", lod ? "per-view" : "fixed", level.segments, level.rings),
+                "centre", lod, m, ref_centre_);
         lr.geometric_error_mm = level.surface_error_m * 1000.0;
         rows.push_back(lr);
     }

@@ -201,7 +201,7 @@ Result<RoundTrip> round_trip(const VirtualInstallation& inst, const DeviceResult
         const auto fmt8 = protocol::PixelFormat::kRgba8;
         return codec::drive_from_layer(
             codec::decode_pixels(codec::encode_pixels(codec::drive_as_layer(drive), fmt8),
-                                  drive.width, drive.height, fmt8));
+                                 drive.width, drive.height, fmt8));
     };
     t.projector = served(pd);
     t.hmd = served(hd);

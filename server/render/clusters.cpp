@@ -44,7 +44,9 @@ double spread_towards(const glm::dvec3& c, double r, const glm::dvec3& q, double
     return std::asin(std::min(1.0, (r + rq) / d));
 }
 
-double max_channel(const glm::dvec3& v) { return std::max({v.x, v.y, v.z}); }
+double max_channel(const glm::dvec3& v) {
+    return std::max({v.x, v.y, v.z});
+}
 
 }  // namespace
 
@@ -62,8 +64,8 @@ ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster) {
         glm::dvec3 c(0.0);
         for (int k = 0; k < 3; ++k) c += glm::dvec3(mesh.positions[mesh.indices[3 * t + k]]);
         const glm::dvec3 u = glm::clamp((c / 3.0 - lo) / extent, 0.0, 1.0) * 1023.0;
-        code[t] = spread3(uint32_t(u.x)) | (spread3(uint32_t(u.y)) << 1) |
-                  (spread3(uint32_t(u.z)) << 2);
+        code[t] =
+            spread3(uint32_t(u.x)) | (spread3(uint32_t(u.y)) << 1) | (spread3(uint32_t(u.z)) << 2);
     }
     std::vector<uint32_t> order(tris);
     std::iota(order.begin(), order.end(), 0u);
@@ -100,8 +102,8 @@ ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster) {
             cl.cone_axis = nsum / nlen;
             double a = 0;
             for (size_t i = 3 * first; i < 3 * last; ++i)
-                a = std::max(a, angle_between(cl.cone_axis,
-                                              glm::dvec3(mesh.normals[mesh.indices[i]])));
+                a = std::max(
+                    a, angle_between(cl.cone_axis, glm::dvec3(mesh.normals[mesh.indices[i]])));
             cl.cone_angle = a + kSlack;
         }
         out.clusters.push_back(cl);
@@ -139,8 +141,7 @@ std::vector<ClusteredMesh> prop_levels(const scene::Prop& prop, const scene::Mes
         // within that of the triangle it rasterises.
         err *= 1.0 + 1e-6;
         const double scale = h.radius / (h.radius - err);
-        for (auto& p : m.positions)
-            p = glm::vec3(h.centre + (glm::dvec3(p) - h.centre) * scale);
+        for (auto& p : m.positions) p = glm::vec3(h.centre + (glm::dvec3(p) - h.centre) * scale);
         const double outer = h.radius * scale;
         const double chord = std::sqrt(outer * outer - h.radius * h.radius);
         ClusteredMesh level = cluster_mesh(std::move(m));
@@ -259,7 +260,7 @@ double light_bound(const Cluster& cl, const ViewBound& vb, const scene::Light& l
     }
     const double nl_angle = angle_between(cl.cone_axis, l_axis);
     if (nl_angle - vb.theta_n - alpha_l >= kHalfPi + kSlack)
-        return 0;  // gate n.l > 0 fails everywhere: this light adds nothing
+        return 0;         // gate n.l > 0 fails everywhere: this light adds nothing
     double factor = 1.0;  // Kajiya-Kay: the gate only
     if (b.spec.model != scene::SpecularModel::kKajiyaKay) {
         // The half vector h = (l + v) / |l + v| over the cluster: within theta_h of h_axis.
@@ -288,9 +289,8 @@ double light_bound(const Cluster& cl, const ViewBound& vb, const scene::Light& l
                 const double ax = b.spec.alpha_x, ay = b.spec.alpha_y;
                 const double t = std::tan(delta) / std::max(ax, ay);
                 // n.l / sqrt(max(n.l n.v, 1e-8)) with n.l <= 1 and n.v >= nv_lb.
-                const double w = vb.nv_lb > 1e-8
-                                     ? std::max(1.0 / std::sqrt(vb.nv_lb), 1e-4 / vb.nv_lb)
-                                     : 1e4;
+                const double w =
+                    vb.nv_lb > 1e-8 ? std::max(1.0 / std::sqrt(vb.nv_lb), 1e-4 / vb.nv_lb) : 1e4;
                 factor = std::exp(-t * t) * w / (4.0 * kPi * ax * ay);
                 break;
             }
@@ -336,8 +336,7 @@ PixelRect unite(const PixelRect& a, const PixelRect& b) {
         return b;
     if (b.empty())
         return a;
-    return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1),
-            std::max(a.y1, b.y1)};
+    return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
 }
 
 PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,

@@ -49,8 +49,8 @@ std::vector<ClusteredMesh> prop_levels(const scene::Prop& prop, const scene::Mes
 
 // The coarsest level whose surface error, seen by a camera at `eye` with focal length
 // `focal_px` (the larger of fx, fy, widened for off-axis pixels), stays within `max_error_px`
-// pixels where the prop is nearest to the camera. Level 0 when no level is coarse enough or the camera is inside the
-// prop's bounds.
+// pixels where the prop is nearest to the camera. Level 0 when no level is coarse enough or the
+// camera is inside the prop's bounds.
 size_t select_level(std::span<const ClusteredMesh> levels, const glm::dvec3& eye, double focal_px,
                     double max_error_px = 0.5);
 
@@ -59,7 +59,7 @@ size_t select_level(std::span<const ClusteredMesh> levels, const glm::dvec3& eye
 struct VdBound {
     scene::Specular spec;
     std::span<const scene::Light> lights;  // only lights with colour * intensity > 0
-    bool emission = false;             // emission lights every covered pixel
+    bool emission = false;                 // emission lights every covered pixel
     bool point_falloff = true;
     double min_light_distance = scene::kMinLightDistance;
     double threshold = 0;  // radiance below this is stored as 0 (sRGB8: code 0; half: 0)

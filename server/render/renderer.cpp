@@ -106,18 +106,18 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         const auto& m = r->levels_[i].mesh;
         const std::string name = fmt::format("prop.lod{}", i);
         LevelBuffers b;
-        HS_ASSIGN_OR_RETURN(b.positions, gpu::Buffer::create(device, m.positions.size() * 12,
-                                                             gpu::BufferUsage::kVertex,
-                                                             name + ".positions"));
-        HS_ASSIGN_OR_RETURN(b.normals, gpu::Buffer::create(device, m.normals.size() * 12,
-                                                           gpu::BufferUsage::kVertex,
-                                                           name + ".normals"));
-        HS_ASSIGN_OR_RETURN(b.indices, gpu::Buffer::create(device, m.indices.size() * 4,
-                                                           gpu::BufferUsage::kIndex,
-                                                           name + ".indices"));
-        HS_ASSIGN_OR_RETURN(b.tangents, gpu::Buffer::create(device, m.tangents.size() * 12,
-                                                            gpu::BufferUsage::kVertex,
-                                                            name + ".tangents"));
+        HS_ASSIGN_OR_RETURN(b.positions,
+                            gpu::Buffer::create(device, m.positions.size() * 12,
+                                                gpu::BufferUsage::kVertex, name + ".positions"));
+        HS_ASSIGN_OR_RETURN(
+            b.normals, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex,
+                                           name + ".normals"));
+        HS_ASSIGN_OR_RETURN(
+            b.indices, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex,
+                                           name + ".indices"));
+        HS_ASSIGN_OR_RETURN(b.tangents,
+                            gpu::Buffer::create(device, m.tangents.size() * 12,
+                                                gpu::BufferUsage::kVertex, name + ".tangents"));
         HS_ASSIGN_OR_RETURN(b.uvs, gpu::Buffer::create(device, m.uvs.size() * 8,
                                                        gpu::BufferUsage::kVertex, name + ".uvs"));
         b.positions.write(m.positions.data(), m.positions.size() * 12);
@@ -526,13 +526,15 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         for (size_t c = 0; c < level.clusters.size(); ++c)
             if (lit_scratch_[c] == 1)
                 order_scratch_.push_back(uint32_t(c));
-        std::stable_sort(order_scratch_.begin(), order_scratch_.end(),
-                         [&](uint32_t a, uint32_t b) { return mask_scratch_[a] < mask_scratch_[b]; });
+        std::stable_sort(order_scratch_.begin(), order_scratch_.end(), [&](uint32_t a, uint32_t b) {
+            return mask_scratch_[a] < mask_scratch_[b];
+        });
         size_t groups = 0;
         uint64_t union_mask = 0;
         for (size_t i = 0; i < order_scratch_.size(); ++i) {
             union_mask |= mask_scratch_[order_scratch_[i]];
-            groups += i == 0 || mask_scratch_[order_scratch_[i]] != mask_scratch_[order_scratch_[i - 1]];
+            groups +=
+                i == 0 || mask_scratch_[order_scratch_[i]] != mask_scratch_[order_scratch_[i - 1]];
         }
         if (groups > kMaxLightGroups)
             for (uint32_t c : order_scratch_) mask_scratch_[c] = union_mask;
@@ -568,8 +570,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         cl.bind(lit->pipeline);
         for (size_t g = 0; g < group_count; ++g) {
             gpu::GpuPush gp = push;
-            gp.light_mask = glm::uvec4(uint32_t(group_list[g].mask),
-                                       uint32_t(group_list[g].mask >> 32), 0, 0);
+            gp.light_mask =
+                glm::uvec4(uint32_t(group_list[g].mask), uint32_t(group_list[g].mask >> 32), 0, 0);
             cl.push_constants(lit->pipeline, &gp, sizeof(gp));
             cl.draw_range(group_list[g].first, group_list[g].count);
         }
@@ -587,10 +589,10 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::render_layers(
         if (own[i].indices)
             continue;
         if (index_scratch_[i].size() < layer_index_bytes()) {
-            HS_ASSIGN_OR_RETURN(index_scratch_[i],
-                                gpu::Buffer::create(device_, layer_index_bytes(),
-                                                    gpu::BufferUsage::kIndex,
-                                                    fmt::format("layer.indices.{}", i)));
+            HS_ASSIGN_OR_RETURN(
+                index_scratch_[i],
+                gpu::Buffer::create(device_, layer_index_bytes(), gpu::BufferUsage::kIndex,
+                                    fmt::format("layer.indices.{}", i)));
         }
         own[i].indices = &index_scratch_[i];
     }

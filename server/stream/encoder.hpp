@@ -43,9 +43,9 @@ private:
 struct EncodedFrame {
     std::shared_ptr<ViewerFrame> frame;
     std::array<Bytes, 2> layers;
-    std::string error;       // non-empty: nothing to send
-    double gpu_ms = 0;       // submitted -> the GPU finished (as the encoder saw it)
-    double encode_ms = 0;    // both layers, CPU
+    std::string error;     // non-empty: nothing to send
+    double gpu_ms = 0;     // submitted -> the GPU finished (as the encoder saw it)
+    double encode_ms = 0;  // both layers, CPU
 };
 
 class Encoder {

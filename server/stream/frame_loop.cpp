@@ -55,7 +55,7 @@ private:
     std::unique_ptr<FrameSource> source_;
     scene::Scene current_;
     std::map<uint32_t, std::shared_ptr<ViewerFrame>> frames_;
-    std::deque<ViewerJob> large_;  // large displays waiting for a turn of their own
+    std::deque<ViewerJob> large_;   // large displays waiting for a turn of their own
     std::vector<FrameSlot> slots_;  // reused per batch
 };
 
@@ -119,9 +119,8 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     source_.reset();
     renderer_ = std::move(r).value();
     current_ = next;
-    source_ = current_.captured_material
-                  ? captured_source(*current_.captured_material)
-                  : rendered_source(*renderer_, current_.material.specular);
+    source_ = current_.captured_material ? captured_source(*current_.captured_material)
+                                         : rendered_source(*renderer_, current_.material.specular);
     {
         std::lock_guard lock(s_.mutex);
         ++s_.projector_renders;
@@ -164,8 +163,9 @@ void FrameLoop::run() {
     if (!ring)
         throw std::runtime_error(ring.error().message);
     ring_ = std::move(ring).value();
-    encoder_ = std::make_unique<Encoder>(*ring_, s_.buffers, std::max<uint32_t>(s_.encoder_threads, 1),
-                                         [this](EncodedFrame&& f) { encoded(std::move(f)); });
+    encoder_ =
+        std::make_unique<Encoder>(*ring_, s_.buffers, std::max<uint32_t>(s_.encoder_threads, 1),
+                                  [this](EncodedFrame&& f) { encoded(std::move(f)); });
     scene::Scene initial;
     uint32_t version;
     {
@@ -256,13 +256,13 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->format = d.format;
     const gpu::ColorFormat cf = render::layer_target_format(encoding_of(d.format));
     for (size_t e = 0; e < 2; ++e) {
-        HS_ASSIGN_OR_RETURN(f->targets[e],
-                            gpu::RenderTarget::create(s_.device, d.eye_width, d.eye_height, cf,
-                                                      fmt::format("viewer{}.eye{}", job.session_id, e)));
-        HS_ASSIGN_OR_RETURN(f->indices[e],
-                            gpu::Buffer::create(s_.device, index_bytes, gpu::BufferUsage::kIndex,
-                                                fmt::format("viewer{}.eye{}.indices",
-                                                            job.session_id, e)));
+        HS_ASSIGN_OR_RETURN(f->targets[e], gpu::RenderTarget::create(
+                                               s_.device, d.eye_width, d.eye_height, cf,
+                                               fmt::format("viewer{}.eye{}", job.session_id, e)));
+        HS_ASSIGN_OR_RETURN(
+            f->indices[e],
+            gpu::Buffer::create(s_.device, index_bytes, gpu::BufferUsage::kIndex,
+                                fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
     }
     f->target_bytes = 2 * render::Renderer::target_bytes_for(d.eye_width, d.eye_height, cf);
     f->index_bytes = 2 * index_bytes;

@@ -31,8 +31,8 @@ public:
             const scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
             const auto eyes = scene::eye_poses(s.head, d.ipd_m);
             for (size_t e = 0; e < 2; ++e)
-                requests_.push_back({spec_, k, eyes[e], encoding_of(f.format), &f.targets[e],
-                                     true, protocol::kDefaultTileSize, &f.indices[e]});
+                requests_.push_back({spec_, k, eyes[e], encoding_of(f.format), &f.targets[e], true,
+                                     protocol::kDefaultTileSize, &f.indices[e]});
         }
         HS_ASSIGN_OR_RETURN(auto plans, renderer_.record_layers(*cl, requests_));
         bool recorded = false;
@@ -42,15 +42,12 @@ public:
                 const auto& plan = plans[2 * i + e];
                 f.plans[e] = plan;
                 const gpu::RenderTarget& t = f.targets[e];
-                f.pixels[e] = {t.readback_data(),
-                               size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
-                               t.width(),
-                               t.height(),
-                               f.format,
-                               plan.rect.x0,
-                               plan.rect.y0,
-                               plan.rect.x1,
-                               plan.rect.y1};
+                f.pixels[e] = {
+                    t.readback_data(), size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
+                    t.width(),         t.height(),
+                    f.format,          plan.rect.x0,
+                    plan.rect.y0,      plan.rect.x1,
+                    plan.rect.y1};
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;
             }
@@ -64,9 +61,10 @@ public:
                 {"effects", effects_},
                 {"skipped_because", last_.skipped_because},
                 {"level", last_.level},
-                {"clusters", {{"total", last_.clusters_total},
-                              {"lit", last_.clusters_lit},
-                              {"occluding", last_.clusters_occluding}}},
+                {"clusters",
+                 {{"total", last_.clusters_total},
+                  {"lit", last_.clusters_lit},
+                  {"occluding", last_.clusters_occluding}}},
                 {"triangles", last_.triangles},
                 {"pixels", last_.rect.area()},
                 {"lights_skipped", last_.lights_skipped}};
@@ -104,16 +102,23 @@ public:
     Result<bool> fill(gpu::CommandList*, std::span<const FrameSlot> slots) override {
         for (const FrameSlot& s : slots) {
             ViewerFrame& f = *s.frame;
-            near_ = scene::pose_within(s.head, captured_.capture_head,
-                                       captured_.position_tolerance_m,
-                                       captured_.angle_tolerance_deg);
+            near_ =
+                scene::pose_within(s.head, captured_.capture_head, captured_.position_tolerance_m,
+                                   captured_.angle_tolerance_deg);
             const bool srgb8 = f.format == protocol::PixelFormat::kRgba8;
             const auto& bytes = srgb8 ? srgb8_ : half_;
             f.keep_alive = bytes;
             for (size_t e = 0; e < 2; ++e) {
                 f.plans[e] = {};
-                f.pixels[e] = {bytes->data(), size_t(f.width) * (srgb8 ? 4 : 8), f.width, f.height,
-                               f.format,      0, 0, near_ ? f.width : 0, near_ ? f.height : 0};
+                f.pixels[e] = {bytes->data(),
+                               size_t(f.width) * (srgb8 ? 4 : 8),
+                               f.width,
+                               f.height,
+                               f.format,
+                               0,
+                               0,
+                               near_ ? f.width : 0,
+                               near_ ? f.height : 0};
             }
         }
         return false;

@@ -37,8 +37,8 @@ struct ViewerCounters {
 };
 
 struct SchedulerOptions {
-    uint32_t max_batch = 8;     // viewers per batch; the next batch starts after the last taken
-    double max_viewer_hz = 0;   // frames per second per viewer at most; 0: unlimited
+    uint32_t max_batch = 8;    // viewers per batch; the next batch starts after the last taken
+    double max_viewer_hz = 0;  // frames per second per viewer at most; 0: unlimited
 };
 
 class Scheduler {

@@ -5,9 +5,9 @@
 
 #include <fmt/format.h>
 
+#include "codec/layer_codec.hpp"
 #include "core/log.hpp"
 #include "protocol/schema.hpp"
-#include "codec/layer_codec.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
 
@@ -68,8 +68,8 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
         return make_error(ErrorCode::kInvalidArgument,
                           "the admin token must differ from the viewers' token");
     auto impl = std::make_unique<Impl>(device, info);
-    impl->scheduler.set_options({std::max<uint32_t>(info.limits.max_batch_viewers, 1),
-                                 double(info.limits.max_viewer_hz)});
+    impl->scheduler.set_options(
+        {std::max<uint32_t>(info.limits.max_batch_viewers, 1), double(info.limits.max_viewer_hz)});
     impl->encoder_threads = std::clamp<uint32_t>(info.encoder_threads, 1, 64);
     auto checked = impl->accept_scene(scene);
     if (!checked)
@@ -256,7 +256,8 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
                             fmt::format("{}x{} is {} pixels per eye, over this server's limit of "
                                         "{} (--max-eye-pixels)",
                                         d.eye_width, d.eye_height, pixels, limits.max_eye_pixels)};
-    const uint64_t worst = codec::max_layer_payload_bytes(d.eye_width, d.eye_height, d.format, d.encoding);
+    const uint64_t worst =
+        codec::max_layer_payload_bytes(d.eye_width, d.eye_height, d.format, d.encoding);
     const uint64_t frame_limit = *proto::max_payload(uint16_t(proto::MessageType::kVdLayer));
     if (worst > frame_limit)
         return proto::Error{
@@ -266,12 +267,11 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
                         d.eye_width, d.eye_height,
                         d.format == proto::PixelFormat::kRgba8 ? "rgba8" : "rgba16f", worst,
                         frame_limit)};
-    const uint64_t need =
-        2 * render::Renderer::target_bytes_for(
-                d.eye_width, d.eye_height,
-                render::layer_target_format(d.format == proto::PixelFormat::kRgba8
-                                                ? render::LayerEncoding::kSrgb8
-                                                : render::LayerEncoding::kHalf));
+    const uint64_t need = 2 * render::Renderer::target_bytes_for(
+                                  d.eye_width, d.eye_height,
+                                  render::layer_target_format(d.format == proto::PixelFormat::kRgba8
+                                                                  ? render::LayerEncoding::kSrgb8
+                                                                  : render::LayerEncoding::kHalf));
     const uint64_t had = target_bytes_of.count(id) ? target_bytes_of[id] : 0;
     const uint64_t others = reserved_target_bytes - had;
     if (others + need > limits.max_target_bytes)

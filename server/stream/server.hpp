@@ -44,7 +44,7 @@ struct ServerLimits {
     // 0: no limit.
     uint32_t max_viewer_hz = 60;
     uint32_t max_batch_viewers = 8;  // viewers rendered in one submission
-    scene::SceneLimits scene;  // triangles and projector pixels of any scene it accepts
+    scene::SceneLimits scene;        // triangles and projector pixels of any scene it accepts
 };
 
 struct ServerCreateInfo {

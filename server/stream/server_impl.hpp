@@ -136,7 +136,7 @@ struct Server::Impl {
     std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};
     std::atomic<uint64_t> reserved_target_bytes{0}, held_target_bytes{0}, held_index_bytes{0};
     std::shared_ptr<BufferPool> buffers = std::make_shared<BufferPool>();  // layer bytes
-    uint32_t encoder_threads = 1;  // set before run()
+    uint32_t encoder_threads = 1;                                          // set before run()
     std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};
 
     // Shared between threads under `mutex`.
@@ -186,8 +186,7 @@ struct Server::Impl {
     void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
     void publish_projector_frame(Bytes frame);
     // Network thread: a frame's two layers to the session's queue (latest frame wins).
-    void deliver(uint32_t session_id, std::array<Bytes, 2> layers,
-                 Clock::time_point pose_received);
+    void deliver(uint32_t session_id, std::array<Bytes, 2> layers, Clock::time_point pose_received);
     void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
     void remove_session(uint32_t id);
     nlohmann::json stats() const;

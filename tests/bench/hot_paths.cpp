@@ -9,12 +9,12 @@
 #include <benchmark/benchmark.h>
 
 #include "calib/inverse_map.hpp"
+#include "codec/layer_codec.hpp"
 #include "gpu/device.hpp"
 #include "optics/colour.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "codec/layer_codec.hpp"
 
 using namespace hs;
 
@@ -146,7 +146,7 @@ void BM_EncodeLayer(benchmark::State& state) {
     for (auto _ : state) {
         auto data =
             codec::encode_layer(codec::encode_pixels(img, f), img.width, img.height, f,
-                                 protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
+                                protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
         bytes = data.size();
         benchmark::DoNotOptimize(data);
     }
@@ -161,7 +161,7 @@ void BM_DecodeLayer(benchmark::State& state) {
     const uint32_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
     const auto data =
         codec::encode_layer(codec::encode_pixels(img, f), img.width, img.height, f,
-                             protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
+                            protocol::Encoding::kSparseTiles, codec::default_tile_codec(f));
     for (auto _ : state) {
         auto px = protocol::decode_tiles(data, img.width, img.height, bpp);
         if (!std::holds_alternative<std::vector<uint8_t>>(px))

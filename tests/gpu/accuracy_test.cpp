@@ -72,8 +72,7 @@ TEST_F(Accuracy, MoreTessellationNeverIncreasesGeometricError) {
     }
     // The dome is ray-cast inside the mesh: the tessellation moves no shaded point, so the error
     // is the same at every tessellation (within 5 %), and so is the per-view level of detail's.
-    for (const auto& r : t)
-        EXPECT_NEAR(r.rmse, t.front().rmse, 0.05 * t.front().rmse) << r.setting;
+    for (const auto& r : t) EXPECT_NEAR(r.rmse, t.front().rmse, 0.05 * t.front().rmse) << r.setting;
     const auto lod = knob("level-of-detail");
     ASSERT_EQ(lod.size(), 2u);
     EXPECT_NEAR(lod[1].rmse, lod[0].rmse, 0.05 * lod[0].rmse);

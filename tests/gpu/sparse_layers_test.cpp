@@ -48,7 +48,8 @@ protected:
                      render::LayerEncoding enc, const scene::Intrinsics& k) {
         const auto fmt = render::layer_target_format(enc);
         std::array<gpu::RenderTarget, 2> t;
-        for (auto& x : t) x = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "t").value();
+        for (auto& x : t)
+            x = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "t").value();
         const std::vector<Request> reqs = {{spec, k, eye, enc, &t[0], true},
                                            {spec, k, eye, enc, &t[1], false}};
         auto plans = r.render_layers(reqs);
@@ -125,8 +126,8 @@ TEST_F(SparseLayers, SparseEqualsFullOnTheHardCases) {
         scene::Light l;
         l.type = scene::LightType::kPoint;
         l.intensity = 0.05;
-        l.position = near.prop.hemisphere.centre +
-                     glm::normalize(glm::dvec3(0.2, 1.0, 0.4)) * (near.prop.hemisphere.radius + 2e-3);
+        l.position = near.prop.hemisphere.centre + glm::normalize(glm::dvec3(0.2, 1.0, 0.4)) *
+                                                       (near.prop.hemisphere.radius + 2e-3);
         near.lights.push_back(l);
         cases.push_back({"point light 2 mm off the surface", near, near.material.specular});
     }
@@ -175,8 +176,8 @@ TEST_F(SparseLayers, DefaultSceneShadesAFractionOfTheProp) {
     auto r = make_renderer(s);
     const auto head = scene::viewing_pose(s.viewing, 20.0, 1.10).value();
     const auto eye = scene::eye_poses(head, 0.063)[0];
-    const Pair p = render_both(*r, s.material.specular, eye, render::LayerEncoding::kSrgb8,
-                               small_eye(2));
+    const Pair p =
+        render_both(*r, s.material.specular, eye, render::LayerEncoding::kSrgb8, small_eye(2));
     EXPECT_LT(p.sparse_plan.triangles * 2, p.full_plan.triangles)
         << p.sparse_plan.triangles << " of " << p.full_plan.triangles << " triangles drawn";
     EXPECT_LT(p.sparse_plan.clusters_lit * 2, p.sparse_plan.clusters_total);
@@ -216,14 +217,14 @@ TEST_F(SparseLayers, WhatCanOnlyBeBlackRecordsNoPass) {
     const auto head = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
     const auto eye = scene::eye_poses(head, 0.063)[0];
     const auto k = small_eye(4);
-    auto t = gpu::RenderTarget::create(device(), k.width, k.height, gpu::ColorFormat::kRgba8Unorm,
-                                       "t")
-                 .value();
+    auto t =
+        gpu::RenderTarget::create(device(), k.width, k.height, gpu::ColorFormat::kRgba8Unorm, "t")
+            .value();
     auto plan_of = [&](const scene::Scene& scene, const scene::Specular& spec,
                        const scene::Pose& pose) {
         auto r = make_renderer(scene);
-        auto plans = r->render_layers(std::vector<Request>{{spec, k, pose,
-                                                            render::LayerEncoding::kSrgb8, &t}});
+        auto plans = r->render_layers(
+            std::vector<Request>{{spec, k, pose, render::LayerEncoding::kSrgb8, &t}});
         EXPECT_TRUE(plans.ok());
         return plans.ok() ? (*plans)[0] : Plan{};
     };

@@ -7,12 +7,12 @@
 #include <gtest/gtest.h>
 
 #include "clients/connection.hpp"
+#include "codec/layer_codec.hpp"
 #include "gpu/device.hpp"
 #include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "codec/layer_codec.hpp"
 #include "stream/server.hpp"
 
 #include "net_fixture.hpp"

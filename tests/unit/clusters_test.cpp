@@ -43,9 +43,9 @@ double brute_force_peak(const render::ClusteredMesh& level, const render::Cluste
                          c = m.positions[m.indices[i + 2]];
         if (glm::dot(glm::cross(b - a, c - a), eye - a) <= 0)
             continue;
-        for (const glm::dvec3 w : {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1),
-                                   glm::dvec3(.5, .5, 0), glm::dvec3(0, .5, .5),
-                                   glm::dvec3(.5, 0, .5), glm::dvec3(1, 1, 1) / 3.0}) {
+        for (const glm::dvec3 w :
+             {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1), glm::dvec3(.5, .5, 0),
+              glm::dvec3(0, .5, .5), glm::dvec3(.5, 0, .5), glm::dvec3(1, 1, 1) / 3.0}) {
             const auto q = dome_hit(h, eye, w.x * a + w.y * b + w.z * c);
             if (!q)
                 continue;
@@ -53,7 +53,8 @@ double brute_force_peak(const render::ClusteredMesh& level, const render::Cluste
             double sum = 0;
             for (const auto& light : lights) {
                 const auto at = shading::light_at(light, *q, n, true);
-                const double f = shading::specular_factor(spec, n, at.l, v, scene::hemisphere_tangent(n));
+                const double f =
+                    shading::specular_factor(spec, n, at.l, v, scene::hemisphere_tangent(n));
                 sum += std::max({at.E.x, at.E.y, at.E.z}) * f;
             }
             peak = std::max(peak, sum * std::max({spec.colour.x, spec.colour.y, spec.colour.z}));
@@ -84,7 +85,8 @@ TEST(Clusters, BoundNeverMissesLight) {
             scene::Light near;
             near.type = scene::LightType::kPoint;
             near.intensity = 0.3;
-            const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)) + 0.1, u(rng)));
+            const glm::dvec3 dir =
+                glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)) + 0.1, u(rng)));
             near.position = h.centre + dir * (h.radius + 0.3 * std::pow(0.01, trial / 5.0));
             lights.push_back(near);
             render::VdBound bound;
@@ -156,8 +158,8 @@ TEST(Clusters, ProjectedRectsContainTheSphere) {
             if (px < 0 || py < 0 || px >= k.width || py >= k.height)
                 continue;
             EXPECT_TRUE(px >= rect.x0 && px < rect.x1 && py >= rect.y0 && py < rect.y1)
-                << px << "," << py << " outside " << rect.x0 << ".." << rect.x1 << " x "
-                << rect.y0 << ".." << rect.y1;
+                << px << "," << py << " outside " << rect.x0 << ".." << rect.x1 << " x " << rect.y0
+                << ".." << rect.y1;
         }
     }
 }
