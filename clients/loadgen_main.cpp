@@ -188,7 +188,8 @@ int loadgen_main(int argc, char** argv) {
                     ++r.poses;
                     next_pose += std::chrono::duration_cast<Clock::duration>(period);
                 }
-                int wait = int(std::chrono::duration_cast<std::chrono::milliseconds>(
+                // Rounded up: rounding down would spin for up to a millisecond before each pose.
+                int wait = int(std::chrono::ceil<std::chrono::milliseconds>(
                                    std::min(next_pose, end) - Clock::now())
                                    .count());
                 auto m = conn.receive(std::max(wait, 0));

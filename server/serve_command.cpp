@@ -47,7 +47,7 @@ const char* kServeHelp =
     "  --large-display-pixels N (2097152) --max-triangles N (1048576)\n"
     "  --max-projector-pixels N (16000000)\n"
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
-    "  --encoder-threads N (1)\n"
+    "  --encoder-threads N (1)           --tile-codec lz4|zstd|none (lz4)\n"
     "\n"
     "example:\n"
     "  hysar serve --scene room.json --listen 0.0.0.0:7700 --token-file /etc/hysar/token \\\n"
@@ -208,6 +208,17 @@ int run_serve(const std::vector<std::string>& args) {
             return usage_error(r.error().message);
     if (auto r = parse_limits(f, info.limits); !r)
         return usage_error(r.error().message);
+    if (f.has("--tile-codec")) {
+        const std::string c = f.get("--tile-codec", "");
+        if (c == "lz4")
+            info.tile_codec = protocol::TileCodec::kLz4;
+        else if (c == "zstd")
+            info.tile_codec = protocol::TileCodec::kZstd;
+        else if (c == "none")
+            info.tile_codec = protocol::TileCodec::kNone;
+        else
+            return usage_error("--tile-codec: expected lz4, zstd or none, got '" + c + "'");
+    }
     if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 1, 64); n)
         info.encoder_threads = uint32_t(n.value());
     else

@@ -92,8 +92,10 @@ vec4 encode_output(vec3 sum) {
     if (kOutputEncoding == 1) {
         if (any(isnan(sum))) return vec4(1.0, 0.0, 1.0, 1.0);
         vec3 x = clamp(sum, 0.0, 1.0);
-        vec3 s = mix(12.92 * x, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055,
-                     greaterThan(x, vec3(0.0031308)));
+        vec3 s = 12.92 * x;
+        // Most pixels of a sparse layer are dark: the power curve only where it applies.
+        if (max(max(x.r, x.g), x.b) > 0.0031308)
+            s = mix(s, 1.055 * pow(x, vec3(1.0 / 2.4)) - 0.055, greaterThan(x, vec3(0.0031308)));
         vec3 q = floor(s * 255.0 + 0.5);
         // q + 0.25 lands on code q whether the target rounds to nearest or truncates.
         return vec4(min((q + 0.25) / 255.0, vec3(1.0)), any(greaterThan(q, vec3(0.0))) ? 1.0 : 0.0);

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -75,8 +76,10 @@ Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Sce
                                            const scene::ViewerProfile& profile, int frames) {
     HS_CHECK(frames >= 1, "full_frame_baseline needs at least one frame");
     // Every renderer call of the benchmark is here, so that a change of the render path's API
-    // is made in one place. render_eyes shades every prop pixel (no sparse shading) and reads
-    // back linear radiance; with level of detail off it draws the scene's own tessellation.
+    // is made in one place. The served path's own layer pass with sparse shading off: every
+    // prop pixel shaded into targets in the wire's pixel format (the profile's, sRGB8 unless
+    // told), read back into mapped memory; no encode. Level of detail off: the scene's own
+    // tessellation.
     render::RendererCreateInfo info;
     info.level_of_detail = false;
     auto renderer = render::Renderer::create(device, scene, info);
@@ -87,23 +90,33 @@ Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Sce
         return head.error();
     const scene::Intrinsics k = scene::eye_intrinsics(profile);
     const auto eyes = scene::eye_poses(head.value(), profile.ipd_m);
-    const std::vector<render::Renderer::EyeRequest> pair{{scene.material.specular, k, eyes[0]},
-                                                         {scene.material.specular, k, eyes[1]}};
+    const auto enc = render::LayerEncoding::kSrgb8;
+    std::array<gpu::RenderTarget, 2> targets;
+    for (auto& t : targets) {
+        auto made = gpu::RenderTarget::create(device, k.width, k.height,
+                                              render::layer_target_format(enc), "baseline.eye");
+        if (!made)
+            return made.error();
+        t = std::move(made).value();
+    }
+    std::vector<render::Renderer::LayerRequest> pair;
+    for (size_t e = 0; e < 2; ++e)
+        pair.push_back({scene.material.specular, k, eyes[e], enc, &targets[e], false});
     constexpr int kWarmup = 5;
     std::vector<double> ms;
     uint64_t triangles = 0;
     for (int i = 0; i < kWarmup + frames; ++i) {
         const auto t0 = Clock::now();
-        auto out = renderer.value()->render_eyes(pair);
+        auto out = renderer.value()->render_layers(pair);
         const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
         if (!out)
             return out.error();
-        for (const auto& r : out.value())
-            if (!r.report.ran)
+        for (const auto& p : out.value())
+            if (p.rect.empty())
                 return make_error(ErrorCode::kUnsupported,
-                                  "the VD pass recorded no work (" + r.report.skipped_because +
+                                  "the VD pass recorded no work (" + p.skipped_because +
                                       "): the material has nothing view-dependent to time");
-        triangles = out.value().front().report.triangles;
+        triangles = out.value().front().triangles;
         if (i >= kWarmup)
             ms.push_back(dt);
     }

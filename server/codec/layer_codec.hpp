@@ -31,12 +31,13 @@ std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t widt
 uint64_t max_layer_payload_bytes(uint32_t width, uint32_t height, protocol::PixelFormat format,
                                  protocol::Encoding encoding);
 
-// The codec the server uses for sparse tiles, chosen from `hysar bench encoding`
-// (docs/ARCHITECTURE.md, "Layer encoding"): zstd for RGBA8 (40% fewer bytes than LZ4 for
-// +0.35 ms), LZ4 for RGBA16F (zstd's encode time doubles there).
-constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat f) {
-    return f == protocol::PixelFormat::kRgba8 ? protocol::TileCodec::kZstd
-                                              : protocol::TileCodec::kLz4;
+// The codec the server uses for sparse tiles unless told otherwise (`hysar serve --tile-codec`):
+// LZ4 for both formats. zstd makes RGBA8 layers 40 % smaller (`hysar bench encoding`) but costs
+// more time per layer than LZ4 on the same two cores that lavapipe renders on; `hysar bench
+// serve` measured the served rate with each (docs/ARCHITECTURE.md, "Layer encoding"). zstd is
+// the choice for a bandwidth-limited link.
+constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat) {
+    return protocol::TileCodec::kLz4;
 }
 
 // A layer's pixels in the wire's pixel format where they lie (a persistently mapped readback

@@ -48,8 +48,8 @@ uint64_t BufferPool::pooled_bytes() const {
 }
 
 Encoder::Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
-                 Done done)
-    : ring_(ring), pool_(std::move(pool)), done_(std::move(done)) {
+                 std::optional<protocol::TileCodec> codec, Done done)
+    : ring_(ring), pool_(std::move(pool)), codec_(codec), done_(std::move(done)) {
     for (uint32_t i = 0; i < std::max<uint32_t>(threads, 1); ++i)
         threads_.emplace_back([this] { run(); });
 }
@@ -117,7 +117,7 @@ EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, std::vector<uin
         out.gpu_ms = ms_between(f.submitted, t0);
     }
     const auto& d = f.job.display;
-    const protocol::TileCodec codec = codec::default_tile_codec(f.format);
+    const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(f.format));
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;

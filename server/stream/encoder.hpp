@@ -10,6 +10,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -53,7 +54,7 @@ public:
     using Done = std::function<void(EncodedFrame&&)>;
     // `threads` encoder threads; `done` is called on them, once per pushed frame.
     Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
-            Done done);
+            std::optional<protocol::TileCodec> codec, Done done);
     ~Encoder();  // encodes what is queued, then joins
     Encoder(const Encoder&) = delete;
     Encoder& operator=(const Encoder&) = delete;
@@ -68,6 +69,7 @@ private:
 
     const gpu::SubmitRing& ring_;
     std::shared_ptr<BufferPool> pool_;
+    std::optional<protocol::TileCodec> codec_;
     Done done_;
     std::mutex mutex_;
     std::condition_variable cv_, idle_;

@@ -163,9 +163,9 @@ void FrameLoop::run() {
     if (!ring)
         throw std::runtime_error(ring.error().message);
     ring_ = std::move(ring).value();
-    encoder_ =
-        std::make_unique<Encoder>(*ring_, s_.buffers, std::max<uint32_t>(s_.encoder_threads, 1),
-                                  [this](EncodedFrame&& f) { encoded(std::move(f)); });
+    encoder_ = std::make_unique<Encoder>(
+        *ring_, s_.buffers, std::max<uint32_t>(s_.encoder_threads, 1), s_.info.tile_codec,
+        [this](EncodedFrame&& f) { encoded(std::move(f)); });
     scene::Scene initial;
     uint32_t version;
     {

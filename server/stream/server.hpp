@@ -7,12 +7,14 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include <nlohmann/json.hpp>
 
 #include "core/result.hpp"
 #include "gpu/device.hpp"
+#include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/config.hpp"
 #include "scene/scene.hpp"
@@ -60,6 +62,8 @@ struct ServerCreateInfo {
     // Threads that encode layers beside the render thread (docs/ARCHITECTURE.md measures the
     // split of the cores between them and lavapipe's rasteriser threads).
     uint32_t encoder_threads = 1;
+    // The compressor of sparse-tile layers; nullopt: codec::default_tile_codec.
+    std::optional<protocol::TileCodec> tile_codec;
 };
 
 class Server {
