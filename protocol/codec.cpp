@@ -490,8 +490,6 @@ std::optional<EncodeError> encode_vd_layer_into(
     if (m.encoding == Encoding::kRaw &&
         data_bytes != size_t(m.width) * m.height * (m.format == PixelFormat::kRgba8 ? 4 : 8))
         return EncodeError{"VdLayer: raw data length does not match width x height"};
-    if (m.width == 0 || m.height == 0 || m.width > 16384 || m.height > 16384)
-        return EncodeError{"VdLayer: image size is out of 1..16384"};
     return std::nullopt;
 }
 

@@ -454,28 +454,22 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         bound.emission = has_emission(scene_);
         bound.point_falloff = scene_.effects.point_light_falloff;
         bound.threshold = layer_threshold(r.encoding == LayerEncoding::kSrgb8);
-        // Per cluster: 0 outside the view, 1 lit, 2 in view but dark. Its rect is re-derived
-        // when drawing occluders (a dark cluster matters only where it overlaps the lit rect).
-        lit_scratch_.assign(level.clusters.size(), 0);
+        // Per cluster: the pixels it may cover (empty: out of view) and the lights it needs
+        // (0: dark).
+        rect_scratch_.assign(level.clusters.size(), PixelRect{});
         mask_scratch_.assign(level.clusters.size(), 0);
         const uint64_t all_lights =
             lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
         PixelRect rect;
         for (size_t c = 0; c < level.clusters.size(); ++c) {
             const Cluster& cl_ = level.clusters[c];
-            const PixelRect on_screen =
-                project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
-            if (on_screen.empty())
+            rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
+            if (rect_scratch_[c].empty())
                 continue;
-            const uint64_t mask =
+            mask_scratch_[c] =
                 r.sparse ? cluster_light_mask(cl_, r.eye.position, bound) : all_lights | 1;
-            if (mask != 0) {
-                lit_scratch_[c] = 1;
-                mask_scratch_[c] = mask;
-                rect = unite(rect, on_screen);
-            } else {
-                lit_scratch_[c] = 2;
-            }
+            if (mask_scratch_[c] != 0)
+                rect = unite(rect, rect_scratch_[c]);
         }
         if (!r.sparse)
             rect = {0, 0, k.width, k.height};
@@ -512,11 +506,9 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         auto [occ_first, occ_count, occ_clusters] = gather([&](size_t c) {
             // A dark cluster in front of a lit one must still hide it (a prop that is not
             // convex): drawn black, where it overlaps the lit rectangle.
-            if (convex_ || !r.sparse || lit_scratch_[c] != 2)
+            if (convex_ || !r.sparse || mask_scratch_[c] != 0)
                 return false;
-            const Cluster& cc = level.clusters[c];
-            return overlaps(project_sphere(cc.centre, cc.radius, k, r.eye, info_.near_m),
-                            plan.rect);
+            return overlaps(rect_scratch_[c], plan.rect);
         });
         // The lit clusters grouped by the lights they need: one draw per group, each
         // evaluating only its lights (a handful of groups; past kMaxLightGroups, one group
@@ -524,7 +516,7 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         constexpr size_t kMaxLightGroups = 8;
         order_scratch_.clear();
         for (size_t c = 0; c < level.clusters.size(); ++c)
-            if (lit_scratch_[c] == 1)
+            if (mask_scratch_[c] != 0)
                 order_scratch_.push_back(uint32_t(c));
         std::stable_sort(order_scratch_.begin(), order_scratch_.end(), [&](uint32_t a, uint32_t b) {
             return mask_scratch_[a] < mask_scratch_[b];

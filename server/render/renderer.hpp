@@ -212,8 +212,10 @@ private:
     std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
     uint32_t lights_skipped_ = 0;
     bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
-    std::vector<uint8_t> lit_scratch_;        // per cluster, reused by record_layers
-    std::vector<uint64_t> mask_scratch_;      // per cluster: the lights it must evaluate
+    // Per cluster, reused by record_layers: the pixels it may cover (empty: out of view) and
+    // the lights it must evaluate (0: dark).
+    std::vector<PixelRect> rect_scratch_;
+    std::vector<uint64_t> mask_scratch_;
     std::vector<uint32_t> order_scratch_;     // lit clusters grouped by light mask
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
