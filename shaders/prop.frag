@@ -17,6 +17,8 @@ layout(constant_id = HS_SC_PROP_SHEEN) const bool kPropSheen = false;
 layout(constant_id = HS_SC_AREA_SAMPLES) const int kAreaSamples = 0;
 layout(constant_id = HS_SC_OUTPUT_ENCODING) const int kOutputEncoding = 0;
 layout(constant_id = HS_SC_ANALYTIC_SPHERE) const bool kAnalyticSphere = false;
+layout(constant_id = HS_SC_LIGHTS_LO) const uint kLightsLo = 0xffffffffu;
+layout(constant_id = HS_SC_LIGHTS_HI) const uint kLightsHi = 0xffffffffu;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
@@ -109,6 +111,18 @@ vec4 encode_output(vec3 sum) {
     return vec4(min(sum, vec3(kOutputMax)), 1.0);
 }
 
+// Whether light i may add to this draw. A pipeline specialised on the draw's lights compiles
+// the others out (lavapipe evaluates a branch on a push constant for every pixel and masks the
+// result, so a skipped light would cost as much as a lit one); the generic pipeline reads the
+// mask from the push constants.
+bool light_in_draw(int i) {
+    const uint bit = 1u << uint(i & 31);
+    const uint compiled = i < 32 ? kLightsLo : kLightsHi;
+    if ((compiled & bit) == 0u) return false;
+    if (kLightsLo != 0xffffffffu || kLightsHi != 0xffffffffu) return true;
+    return ((i < 32 ? pc.light_mask.x : pc.light_mask.y) & bit) != 0u;
+}
+
 // The analytic prop: where this pixel's ray from the camera meets the dome. The tessellation
 // encloses the sphere (by at most half a pixel, render/clusters.hpp), so every pixel the dome
 // covers is rasterised; one whose ray misses the dome, or meets the sphere first below the
@@ -188,8 +202,7 @@ void main() {
             for (int i = 0; i < kNumLights; ++i) {
                 // Lights that cannot reach this draw's clusters above the output's step are
                 // skipped (render/clusters.hpp, cluster_light_mask).
-                if (((i < 32 ? pc.light_mask.x : pc.light_mask.y) & (1u << (i & 31))) == 0u)
-                    continue;
+                if (!light_in_draw(i)) continue;
                 for (int j = 0; j < samples_of(i); ++j) {
                     vec3 l, E;
                     light_sample(i, j, p, n, l, E);

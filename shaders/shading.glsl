@@ -6,8 +6,22 @@ const float kPi = 3.14159265358979;
 const float kWardMinCosProduct = 1e-8;
 const float kTangentFallbackLength = 1e-4;
 
-// x^e on (0, 1], zero below: no pow of a negative number or of zero.
-float hs_lobe(float x, float e) { return x > 0.0 ? pow(min(x, 1.0), e) : 0.0; }
+layout(constant_id = HS_SC_LOBE_EXPONENT) const int kLobeExponent = 0;
+
+// x^e on (0, 1], zero below: no pow of a negative number or of zero. A whole exponent known
+// when the pipeline is built is applied by squaring (the loop unrolls and folds to a few
+// multiplications).
+float hs_lobe(float x, float e) {
+    if (!(x > 0.0)) return 0.0;
+    x = min(x, 1.0);
+    if (kLobeExponent <= 0) return pow(x, e);
+    float r = 1.0, b = x;
+    for (int bit = 0; bit < 12; ++bit) {
+        if (((kLobeExponent >> bit) & 1) != 0) r *= b;
+        b *= b;
+    }
+    return r;
+}
 
 vec3 hs_tangent_from_axis(vec3 n, vec3 axis) {
     vec3 t = axis - dot(axis, n) * n;

@@ -46,6 +46,13 @@ using uvec4 = glm::uvec4;
     12  // bool: the prop is prop_sphere's dome: each pixel shades the
         // exact point its ray hits, with the sphere's normal, UV and
         // tangent there; the tessellation only decides coverage
+#define HS_SC_LIGHTS_LO \
+    13  // uint: VD pass, bit i (of lights 0..31) clear: light i is compiled out. All ones: the
+        // push constants' light_mask decides per draw instead (one pipeline for every mask)
+#define HS_SC_LIGHTS_HI 14  // uint: the same for lights 32..63
+#define HS_SC_LOBE_EXPONENT \
+    15  // int: the lobe exponent when it is a whole number in 1..4095 (x^e by squaring, exact
+        // to a few ulp and without pow's exp2/log2); 0: pow with the scene block's exponent
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit

@@ -134,15 +134,26 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     return r;
 }
 
+namespace {
+// The lobe exponent as HS_SC_LOBE_EXPONENT takes it: a whole number in 1..4095, else 0 (pow).
+int whole_exponent(const scene::Specular& sp) {
+    const bool lobe = sp.model == scene::SpecularModel::kPhong ||
+                      sp.model == scene::SpecularModel::kBlinnPhong ||
+                      sp.model == scene::SpecularModel::kKajiyaKay;
+    const double e = sp.exponent;
+    return lobe && e >= 1.0 && e <= 4095.0 && e == std::floor(e) ? int(e) : 0;
+}
+}  // namespace
+
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
-                                             int encoding) {
+                                             int encoding, uint64_t lights) {
     const bool vd = kind == PassKind::kVd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
     const std::string key = fmt::format(
-        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}", int(kind), int(sp.model), sp.colour.r,
+        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model), sp.colour.r,
         sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
-        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding);
+        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding, lights);
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
 
@@ -177,8 +188,21 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr)
         .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0)
         .set_int(HS_SC_OUTPUT_ENCODING, encoding)
-        .set_bool(HS_SC_ANALYTIC_SPHERE, convex_);
+        .set_bool(HS_SC_ANALYTIC_SPHERE, convex_)
+        .set_int(HS_SC_LOBE_EXPONENT, vd ? whole_exponent(sp) : 0)
+        .set_int(HS_SC_LIGHTS_LO, int32_t(uint32_t(lights)))
+        .set_int(HS_SC_LIGHTS_HI, int32_t(uint32_t(lights >> 32)));
     return build_variant(key, std::move(v), pi, scene_block(sp));
+}
+
+Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int encoding,
+                                                uint64_t lights) {
+    if (light_variants_ >= info_.max_light_variants)
+        return variant(PassKind::kVd, spec, encoding);
+    const uint64_t before = pipelines_built_;
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights));
+    light_variants_ += uint32_t(pipelines_built_ - before);
+    return v;
 }
 
 Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Variant v,
@@ -478,7 +502,6 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             plan.skipped_because = "nothing view-dependent in view";
             continue;
         }
-        HS_ASSIGN_OR_RETURN(Variant * lit, variant(PassKind::kVd, r.spec, 1 + int(r.encoding)));
         if (!r.indices || r.indices->size() < layer_index_bytes())
             return make_error(ErrorCode::kInvalidArgument,
                               "a layer request needs an index buffer of layer_index_bytes()");
@@ -559,11 +582,13 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             cl.push_constants(occ->pipeline, &push, sizeof(push));
             cl.draw_range(occ_first, occ_count);
         }
-        cl.bind(lit->pipeline);
         for (size_t g = 0; g < group_count; ++g) {
+            HS_ASSIGN_OR_RETURN(Variant * lit,
+                                vd_variant(r.spec, 1 + int(r.encoding), group_list[g].mask));
             gpu::GpuPush gp = push;
             gp.light_mask =
                 glm::uvec4(uint32_t(group_list[g].mask), uint32_t(group_list[g].mask >> 32), 0, 0);
+            cl.bind(lit->pipeline);
             cl.push_constants(lit->pipeline, &gp, sizeof(gp));
             cl.draw_range(group_list[g].first, group_list[g].count);
         }

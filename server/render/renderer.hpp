@@ -41,6 +41,11 @@ struct RendererCreateInfo {
     // false: always the scene's own tessellation.
     bool level_of_detail = true;
     double max_error_px = 0.5;
+    // Sparse VD draws: pipelines compiled for the exact set of lights a group of clusters needs
+    // (each a compile, tens of ms on lavapipe, the first time the set occurs). Past this many,
+    // draws use one pipeline that skips lights by a push-constant mask, which on lavapipe still
+    // costs every light for every pixel.
+    uint32_t max_light_variants = 64;
 };
 
 // How a VD layer is stored in its target: the bytes the wire carries (PROTOCOL.md, VdLayer).
@@ -176,8 +181,14 @@ private:
     Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
         : device_(device), scene_(scene), info_(info) {}
     enum class PassKind { kVi = 0, kVd = 1, kCaptureGeometry = 2, kOccluder = 3 };
-    // encoding: 0 linear radiance in info_.format, else 1 + LayerEncoding.
-    Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0);
+    // encoding: 0 linear radiance in info_.format, else 1 + LayerEncoding. lights: the VD
+    // lights compiled in (bit i: lit_[i]); all ones: every light, chosen per draw by the push
+    // constants' light_mask.
+    Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0,
+                             uint64_t lights = ~uint64_t(0));
+    // The VD pipeline for a draw that needs `lights`: one compiled for exactly those lights, or
+    // past info_.max_light_variants of them the generic one.
+    Result<Variant*> vd_variant(const scene::Specular& spec, int encoding, uint64_t lights);
     Result<Variant*> variant(bool vd, const scene::Specular& spec) {
         return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
     }
@@ -223,6 +234,7 @@ private:
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
+    uint32_t light_variants_ = 0;  // VD pipelines compiled for a set of lights
 };
 
 // Effects and specialisation key of a pass, as the renderer decides them from the scene.

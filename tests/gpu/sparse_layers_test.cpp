@@ -171,6 +171,64 @@ TEST_F(SparseLayers, SparseEqualsFullOnTheHardCases) {
     EXPECT_GT(culled_somewhere, cases.size()) << "no case culled a cluster";
 }
 
+// The pipelines compiled for a draw's lights and the one that skips lights by a push-constant
+// mask (used past max_light_variants) draw the same layer, on the default scene, where clusters
+// need different subsets of its three lights.
+TEST_F(SparseLayers, LightSetPipelinesEqualTheMaskedOne) {
+    const scene::Scene s = scene::default_scene();
+    render::RendererCreateInfo generic_info;
+    generic_info.max_light_variants = 0;
+    auto specialised = make_renderer(s);
+    auto generic = render::Renderer::create(device(), s, generic_info);
+    ASSERT_TRUE(specialised && generic.ok());
+    const auto k = small_eye(2);
+    size_t compared = 0;
+    for (double angle : {-40.0, 0.0, 40.0}) {
+        const auto head = scene::viewing_pose(s.viewing, angle, 1.10).value();
+        const auto eye = scene::eye_poses(head, 0.063)[0];
+        for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
+            const Pair a = render_both(*specialised, s.material.specular, eye, enc, k);
+            const Pair b = render_both(**generic, s.material.specular, eye, enc, k);
+            ASSERT_FALSE(a.sparse.empty() || b.sparse.empty());
+            EXPECT_GT(lit_values(a.sparse), 0);
+            EXPECT_EQ(a.sparse_plan.rect.area(), b.sparse_plan.rect.area());
+            expect_within_step({a.sparse, b.sparse, a.sparse_plan, b.sparse_plan},
+                               enc == render::LayerEncoding::kSrgb8,
+                               "light-set pipelines at " + std::to_string(int(angle)) + " deg");
+            ++compared;
+        }
+    }
+    EXPECT_EQ(compared, 6u);
+    // The groups drew with pipelines of their own lights (more than the generic pipeline per
+    // encoding that the other renderer built).
+    EXPECT_EQ((*generic)->pipelines_built(), 2u);
+    EXPECT_GT(specialised->pipelines_built(), 4u);
+}
+
+// A whole lobe exponent is applied by squaring, any other by pow: the two agree within one
+// step (40 and 40 + 1e-9, the same float in the shader, take the two paths).
+TEST_F(SparseLayers, WholeExponentBySquaringMatchesPow) {
+    const scene::Scene s = scene::default_scene();
+    auto r = make_renderer(s);
+    const auto k = small_eye(2);
+    for (const char* preset : {"phong", "blinn-phong", "kajiya-kay"}) {
+        scene::Specular whole = s.specular_presets.at(preset), fractional = whole;
+        fractional.exponent += 1e-9;
+        ASSERT_EQ(float(whole.exponent), float(fractional.exponent));
+        const auto head = scene::viewing_pose(s.viewing, 20.0, 1.10).value();
+        const auto eye = scene::eye_poses(head, 0.063)[1];
+        for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
+            const Pair a = render_both(*r, whole, eye, enc, k);
+            const Pair b = render_both(*r, fractional, eye, enc, k);
+            ASSERT_FALSE(a.full.empty() || b.full.empty());
+            EXPECT_GT(lit_values(a.full), 0) << preset;
+            expect_within_step({a.full, b.full, a.full_plan, b.full_plan},
+                               enc == render::LayerEncoding::kSrgb8,
+                               std::string(preset) + ": squaring against pow");
+        }
+    }
+}
+
 TEST_F(SparseLayers, DefaultSceneShadesAFractionOfTheProp) {
     const scene::Scene s = scene::default_scene();
     auto r = make_renderer(s);
