@@ -54,23 +54,63 @@ float hs_blinn_phong(vec3 n, vec3 l, vec3 v, float e) {
     return hs_lobe(dot(n, h) * inversesqrt(dot(h, h)), e);
 }
 
-// Ward 1992, times n.l. `aniso` selects the tangent-frame form; the isotropic form needs no
-// tangent: (h.t)^2 + (h.b)^2 = |h|^2 - (h.n)^2.
-float hs_ward(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso) {
-    float nl = dot(n, l), nv = dot(n, v);
-    vec3 h = hs_scaled_half(l, v);  // the ratio below does not depend on the scale of h
-    float hn = dot(h, n);
-    float num;
+// Ward 1992, times n.l: exp(-((h.t/ax)^2 + (h.b/ay)^2) / (h.n)^2) / (4 pi ax ay sqrt(n.l n.v)).
+// Near the peak of a narrow lobe the numerator is the square of a small difference of O(1)
+// numbers: in fp32, (h.t)^2 + (h.b)^2 = |h|^2 - (h.n)^2 cancels outright, and even |h x n|^2
+// keeps an absolute error of ~1e-7 in sin(theta_h), which at alpha = 1e-6 is 10 % of the lobe's
+// width. The exponent is therefore formed in double where the device has shaderFloat64 (l + v
+// and every product of two floats are then exact to 1e-16), and from |h x n|^2 in fp32
+// otherwise (docs/SHADING.md gives the accuracy of both, as measured).
+#ifndef HS_NO_FLOAT64
+dvec3 hs_tangent_from_axis_d(dvec3 n, dvec3 axis) {
+    dvec3 t = axis - dot(axis, n) * n;
+    double len = length(t);
+    if (len < double(kTangentFallbackLength)) {
+        dvec3 a2 = abs(n.y) < 0.9 ? dvec3(0.0, 1.0, 0.0) : dvec3(0.0, 0.0, 1.0);
+        t = a2 - dot(a2, n) * n;
+        len = length(t);
+    }
+    return t / len;
+}
+#endif
+
+float hs_ward_exponent(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso) {
+#ifndef HS_NO_FLOAT64
+    const dvec3 nd = dvec3(n), h = dvec3(l) + dvec3(v);  // h unnormalised: the ratio is not
+    const double hn = dot(h, nd);                          // affected by its length
+    double num;
     if (aniso) {
-        vec3 t = hs_tangent_from_axis(n, axis);
-        vec3 b = cross(n, t);
-        float ht = dot(h, t) / ax, hb = dot(h, b) / ay;
+        const dvec3 t = hs_tangent_from_axis_d(nd, dvec3(axis));
+        const dvec3 b = cross(nd, t);
+        const double ht = dot(h, t) / double(ax), hb = dot(h, b) / double(ay);
         num = ht * ht + hb * hb;
     } else {
-        num = max(dot(h, h) - hn * hn, 0.0) / (ax * ax);
+        const dvec3 c = cross(h, nd);  // |c| = |h| sin(theta_h): no cancellation
+        num = dot(c, c) / (double(ax) * double(ax));
     }
-    float expo = -num / (hn * hn);  // hn >= 1/sqrt(3): no division by zero
-    return exp(expo) * nl / (4.0 * kPi * ax * ay * sqrt(max(nl * nv, kWardMinCosProduct)));
+    // n.l > 0 and n.v > 0 in fp32 imply hn > 0 but for a rounding at 1e-38: no lobe there.
+    return hn > 0.0 ? float(-num / (hn * hn)) : -1e30;
+#else
+    const vec3 h = hs_scaled_half(l, v);  // the ratio below does not depend on the scale of h
+    const float hn = dot(h, n);           // >= 1/sqrt(3): no division by zero
+    float num;
+    if (aniso) {
+        const vec3 t = hs_tangent_from_axis(n, axis);
+        const vec3 b = cross(n, t);
+        const float ht = dot(h, t) / ax, hb = dot(h, b) / ay;
+        num = ht * ht + hb * hb;
+    } else {
+        const vec3 c = cross(h, n);
+        num = dot(c, c) / (ax * ax);
+    }
+    return -num / (hn * hn);
+#endif
+}
+
+float hs_ward(vec3 n, vec3 l, vec3 v, vec3 axis, float ax, float ay, bool aniso) {
+    const float nl = dot(n, l), nv = dot(n, v);
+    return exp(hs_ward_exponent(n, l, v, axis, ax, ay, aniso)) * nl /
+           (4.0 * kPi * ax * ay * sqrt(max(nl * nv, kWardMinCosProduct)));
 }
 
 // Kajiya and Kay 1989: cos of the angle between v and the mirror cone around t.

@@ -215,8 +215,14 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
     f12.timelineSemaphore = VK_TRUE;
     f12.pNext = &f13;
+    VkPhysicalDeviceFeatures supported{};
+    vkGetPhysicalDeviceFeatures(d->physical_, &supported);
+    d->float64_ = info.float64 && supported.shaderFloat64 == VK_TRUE;
+    VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+    f2.features.shaderFloat64 = d->float64_ ? VK_TRUE : VK_FALSE;
+    f2.pNext = &f12;
     VkDeviceCreateInfo dci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
-    dci.pNext = &f12;
+    dci.pNext = &f2;
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
     HS_VK_TRY(vkCreateDevice(d->physical_, &dci, nullptr, &d->device_));
@@ -234,7 +240,8 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     d->fence_ = FenceHandle(d->device_, fence);
     d->set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), "hysar.command_pool");
     d->set_name(VK_OBJECT_TYPE_FENCE, uint64_t(fence), "hysar.submit_fence");
-    log::debug("vulkan device: {}{}", d->name_, d->validation_ ? " (validation on)" : "");
+    log::debug("vulkan device: {}{}{}", d->name_, d->validation_ ? " (validation on)" : "",
+               d->float64_ ? "" : " (no shaderFloat64: fp32 shaders)");
     return d;
 }
 

@@ -25,6 +25,9 @@ enum class DevicePreference {
 struct DeviceCreateInfo {
     DevicePreference preference = DevicePreference::kAuto;
     bool validation = false;  // enable VK_LAYER_KHRONOS_validation; its messages are counted
+    // Use shaderFloat64 where the device has it (the stable Ward exponent, shaders/shading.glsl);
+    // false: the fp32 shaders even where it has it (tests of the fallback).
+    bool float64 = true;
 };
 
 // `defaults` with HYSAR_DEVICE (auto|cpu|gpu) and HYSAR_VALIDATION (0|1) applied over them.
@@ -44,6 +47,8 @@ public:
     const std::string& name() const { return name_; }
     bool is_cpu() const { return is_cpu_; }
     bool validation_enabled() const { return validation_; }
+    // shaderFloat64 is enabled: the shaders with double-precision parts may be used.
+    bool float64() const { return float64_; }
 
     // Validation messages (warnings and errors) seen so far, and their texts.
     uint32_t validation_message_count() const { return validation_count_.load(); }
@@ -83,6 +88,7 @@ private:
     std::string name_;
     bool is_cpu_ = false;
     bool validation_ = false;
+    bool float64_ = false;
     bool debug_utils_ = false;
     VkPhysicalDeviceMemoryProperties memory_props_{};
     CommandPoolHandle pool_;

@@ -3,6 +3,7 @@
 #include "gpu/commands.hpp"
 #include "gpu/shared_layout.hpp"
 #include "shaders/probe_comp.h"
+#include "shaders/probe_comp_f32.h"
 
 namespace hs::render {
 
@@ -11,7 +12,8 @@ Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const sc
     if (cases.empty())
         return std::vector<ProbeResult>{};
     gpu::ComputePipelineInfo pi;
-    pi.spv = kProbeCompSpv;
+    pi.spv = device.float64() ? std::span<const uint32_t>(kProbeCompSpv)
+                              : std::span<const uint32_t>(kProbeCompSpvF32);
     pi.spec.set_int(HS_SC_SPEC_MODEL, int(spec.model))
         .set_bool(HS_SC_ANISOTROPIC, spec.anisotropic());
     pi.storage_buffers = 2;

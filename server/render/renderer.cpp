@@ -13,6 +13,7 @@
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
 #include "shaders/prop_frag.h"
+#include "shaders/prop_frag_f32.h"
 #include "shaders/prop_vert.h"
 
 namespace hs::render {
@@ -135,6 +136,13 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
 }
 
 namespace {
+// The fragment shader with double-precision parts where the device has shaderFloat64.
+std::span<const uint32_t> prop_fragment_spv(const gpu::Device& device) {
+    if (device.float64())
+        return kPropFragSpv;
+    return kPropFragSpvF32;
+}
+
 // The lobe exponent as HS_SC_LOBE_EXPONENT takes it: a whole number in 1..4095, else 0 (pow).
 int whole_exponent(const scene::Specular& sp) {
     const bool lobe = sp.model == scene::SpecularModel::kPhong ||
@@ -168,7 +176,7 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         encoding == 0 ? info_.format : layer_target_format(LayerEncoding(encoding - 1));
     gpu::GraphicsPipelineInfo pi;
     pi.vertex_spv = kPropVertSpv;
-    pi.fragment_spv = kPropFragSpv;
+    pi.fragment_spv = prop_fragment_spv(device_);
     pi.color_format = format;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
     pi.name = fmt::format("pipeline.{}.{}",
@@ -265,7 +273,7 @@ Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> shee
         v.effects.push_back("prop-sheen");
     gpu::GraphicsPipelineInfo pi;
     pi.vertex_spv = kPropVertSpv;
-    pi.fragment_spv = kPropFragSpv;
+    pi.fragment_spv = prop_fragment_spv(device_);
     pi.color_format = gpu::ColorFormat::kRgba32Float;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
     pi.name = "pipeline.capture-geometry";

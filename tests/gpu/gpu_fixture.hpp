@@ -11,6 +11,8 @@
 namespace hs::test {
 
 gpu::Device& device();
+// The same device created without shaderFloat64: the fp32 shaders (created on first use).
+gpu::Device& fp32_device();
 
 class GpuTest : public ::testing::Test {
 protected:
@@ -25,7 +27,7 @@ protected:
     static scene::Intrinsics small_eye(uint32_t div = 4);
 
 private:
-    uint32_t messages_before_ = 0;
+    uint32_t messages_before_ = 0, fp32_messages_before_ = 0;
 };
 
 }  // namespace hs::test
