@@ -292,7 +292,9 @@ Result<void> cmd_capture(const Flags& f) {
 }  // namespace
 
 Result<scene::Pose> capture_head(const scene::Scene& s, const Flags& f) {
-    HS_ASSIGN_OR_RETURN(double angle, parse_double("--angle", f.get("--angle", "0")));
+    HS_ASSIGN_OR_RETURN(double angle,
+                        parse_double("--angle", f.get("--angle", "0"), -scene::kMaxViewAngleDeg,
+                                     scene::kMaxViewAngleDeg));
     const std::string h = f.get("--height", s.viewing.default_height);
     auto it = s.viewing.heights_m.find(h);
     if (it == s.viewing.heights_m.end())

@@ -64,7 +64,9 @@ Result<void> calibrate_simulate(const Flags& f) {
     HS_ASSIGN_OR_RETURN(scene::Scene s, load_scene(f));
     installation::Options io;
     io.viewer = f.get("--viewer", "");
-    HS_ASSIGN_OR_RETURN(io.angle_deg, parse_double("--angle", f.get("--angle", "0")));
+    HS_ASSIGN_OR_RETURN(io.angle_deg,
+                        parse_double("--angle", f.get("--angle", "0"), -scene::kMaxViewAngleDeg,
+                                     scene::kMaxViewAngleDeg));
     io.height = f.get("--height", "");
     HS_ASSIGN_OR_RETURN(io.scale, parse_double("--scale", f.get("--scale", "1")));
     HS_ASSIGN_OR_RETURN(io.noise_dn, parse_double("--noise", f.get("--noise", "0.7")));

@@ -87,6 +87,14 @@ Result<double> parse_double(const std::string& flag, const std::string& s) {
                       fmt::format("{}: '{}' is not a number", flag, s));
 }
 
+Result<double> parse_double(const std::string& flag, const std::string& s, double lo, double hi) {
+    HS_ASSIGN_OR_RETURN(double v, parse_double(flag, s));
+    if (v < lo || v > hi)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{}: {} is out of range [{}, {}]", flag, s, lo, hi));
+    return v;
+}
+
 Result<optics::PaperOptics> load_params(const Flags& f) {
     if (f.has("--params"))
         return optics::load_paper_optics(f.get("--params", ""));

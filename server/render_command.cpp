@@ -94,7 +94,8 @@ Result<Options> parse(const std::vector<std::string>& args) {
         } else if (a == "--angles") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             for (const auto& x : split(v)) {
-                HS_ASSIGN_OR_RETURN(double d, parse_double(a, x));
+                HS_ASSIGN_OR_RETURN(double d, parse_double(a, x, -scene::kMaxViewAngleDeg,
+                                                           scene::kMaxViewAngleDeg));
                 o.angles.push_back(d);
             }
             if (o.angles.empty())
@@ -219,7 +220,8 @@ Result<void> run(const Options& o) {
         if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end())
             heights.push_back(*it);
         else {
-            HS_ASSIGN_OR_RETURN(double m, parse_double("--heights", h));
+            HS_ASSIGN_OR_RETURN(double m, parse_double("--heights", h, -scene::kMaxViewHeightM,
+                                                       scene::kMaxViewHeightM));
             heights.push_back({fmt::format("{:.2f}m", m), m});
         }
     }

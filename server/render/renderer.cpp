@@ -98,6 +98,7 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("area_light_samples must be in 1..{}, got {}",
                                       kMaxAreaLightSamples, info.area_light_samples));
+    HS_TRY(scene::check_point_lights(scene));
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
     HS_ASSIGN_OR_RETURN(scene::Mesh finest, scene::build_prop_mesh(scene.prop));
     r->levels_ = prop_levels(scene.prop, finest);

@@ -133,6 +133,14 @@ glm::dvec3 pixel_ray(const Intrinsics& k, const Pose& pose, double u, double v) 
 }
 
 Result<Pose> viewing_pose(const Viewing& viewing, double angle_deg, double height_m) {
+    if (!(std::abs(angle_deg) <= kMaxViewAngleDeg))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("view angle {} deg is out of range [{}, {}]", angle_deg,
+                                      -kMaxViewAngleDeg, kMaxViewAngleDeg));
+    if (!(std::abs(height_m) <= kMaxViewHeightM))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("view height {} m is out of range [{}, {}]", height_m,
+                                      -kMaxViewHeightM, kMaxViewHeightM));
     double a = glm::radians(angle_deg);
     glm::dvec3 eye(viewing.target.x + viewing.distance_m * std::sin(a), height_m,
                    viewing.target.z + viewing.distance_m * std::cos(a));

@@ -26,7 +26,10 @@ Result<Pose> look_at(glm::dvec3 eye, glm::dvec3 target, glm::dvec3 up = {0, 1, 0
 Result<Light> rect_light_facing(glm::dvec3 centre, glm::dvec3 target, double width_m,
                                 double height_m, double intensity);
 
-// Symmetric intrinsics from full fields of view (radians).
+// Symmetric intrinsics from full fields of view (radians), OpenCV convention (pixel centres at
+// integers, x right, y down): fx = (width / 2) / tan(fov_x / 2), fy likewise with the height,
+// cx = (width - 1) / 2, cy = (height - 1) / 2. A headset profile's fov_x_deg / fov_y_deg go
+// through this (a diagonal field of view is split by the aspect ratio first, scene/config.cpp).
 Intrinsics intrinsics_from_fov(uint32_t width, uint32_t height, double fov_x_rad, double fov_y_rad);
 
 // One eye's intrinsics: the profile's own, or symmetric ones from its fields of view.
@@ -49,7 +52,13 @@ std::array<Pose, 2> eye_poses(const Pose& head, double ipd_m);
 // World-space unit ray direction through OpenCV pixel (u, v) (pixel centres at integers).
 glm::dvec3 pixel_ray(const Intrinsics& k, const Pose& pose, double u, double v);
 
-// The head pose at azimuth `angle_deg` and height `height_m` of the scene's viewing plan.
+// The head pose at azimuth `angle_deg` and height `height_m` of the scene's viewing plan (the
+// paper's Fig. 7): the eye stands `viewing.distance_m` from `viewing.target` horizontally, at
+// azimuth angle_deg about +y measured from +z towards +x (0: in front, on the +z side; +40: to
+// the right as seen from the front), at world height height_m (not relative to the target),
+// and looks at the target with +y up (look_at: x right, y up, looking along -z in the head
+// frame). |angle_deg| <= kMaxViewAngleDeg and |height_m| <= kMaxViewHeightM, finite; anything
+// else is an error naming the value and the range.
 Result<Pose> viewing_pose(const Viewing& viewing, double angle_deg, double height_m);
 
 }  // namespace hs::scene

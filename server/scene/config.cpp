@@ -542,6 +542,9 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
                 }
                 s.lights.push_back(l);
             }
+        if (!r.failed())
+            if (auto placed = check_point_lights(s); !placed.ok())
+                r.fail("lights", placed.error().message);
     }
 
     // projector
@@ -621,12 +624,20 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
             if (!a->is_array() || a->empty())
                 r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
             else
-                for (const auto& x : *a) {
+                for (size_t i = 0; i < a->size(); ++i) {
+                    const json& x = (*a)[i];
+                    const std::string at = fmt::format("viewing.angles_deg[{}]", i);
                     if (!x.is_number()) {
-                        r.fail("viewing.angles_deg", "expected numbers");
+                        r.fail(at, fmt::format("expected a number, got {}", x.type_name()));
                         break;
                     }
-                    s.viewing.angles_deg.push_back(x.get<double>());
+                    const double deg = x.get<double>();
+                    if (!std::isfinite(deg) || std::abs(deg) > kMaxViewAngleDeg) {
+                        r.fail(at, fmt::format("expected a number in [{}, {}], got {}",
+                                               -kMaxViewAngleDeg, kMaxViewAngleDeg, deg));
+                        break;
+                    }
+                    s.viewing.angles_deg.push_back(deg);
                 }
         }
         if (const json* h = r.member(*vw, "viewing", "heights_m", false)) {
@@ -635,8 +646,9 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
                 r.fail("viewing.heights_m", "expected an object of name: height");
             else
                 for (auto it = h->begin(); it != h->end(); ++it)
-                    s.viewing.heights_m[it.key()] = r.number(
-                        *h, "viewing.heights_m", it.key().c_str(), std::nullopt, -1e4, 1e4);
+                    s.viewing.heights_m[it.key()] =
+                        r.number(*h, "viewing.heights_m", it.key().c_str(), std::nullopt,
+                                 -kMaxViewHeightM, kMaxViewHeightM);
         }
         s.viewing.default_height =
             r.string(*vw, "viewing", "default_height", s.viewing.default_height);

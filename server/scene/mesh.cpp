@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <fmt/format.h>
 #include <glm/geometric.hpp>
@@ -143,6 +144,77 @@ Result<Mesh> build_prop_mesh(const Prop& prop) {
         return make_error(ErrorCode::kInvalidArgument, "prop mesh has no non-degenerate triangle");
     }
     return m;
+}
+
+namespace {
+// The point of triangle abc nearest to p (Ericson, "Real-Time Collision Detection", 5.1.5).
+glm::dvec3 closest_on_triangle(glm::dvec3 p, glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
+    const glm::dvec3 ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = glm::dot(ab, ap), d2 = glm::dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0)
+        return a;
+    const glm::dvec3 bp = p - b;
+    const double d3 = glm::dot(ab, bp), d4 = glm::dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3)
+        return b;
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0)
+        return a + ab * (d1 / (d1 - d3));
+    const glm::dvec3 cp = p - c;
+    const double d5 = glm::dot(ab, cp), d6 = glm::dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6)
+        return c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0)
+        return a + ac * (d2 / (d2 - d6));
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    const double denom = 1.0 / (va + vb + vc);
+    return a + ab * (vb * denom) + ac * (vc * denom);
+}
+}  // namespace
+
+PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p) {
+    if (prop.kind == Prop::Kind::kHemisphere) {
+        const Hemisphere& h = prop.hemisphere;
+        const glm::dvec3 d = p - h.centre;
+        const double r = glm::length(d);
+        if (d.y >= 0)  // above the base plane: the dome is the nearest part
+            return {std::abs(r - h.radius), r < h.radius};
+        const double rho = std::hypot(d.x, d.z);  // below it: the rim circle
+        return {std::hypot(rho - h.radius, d.y), false};
+    }
+    PropDistance out{std::numeric_limits<double>::infinity(), false};
+    if (!prop.gltf_mesh)
+        return out;
+    const Mesh& m = *prop.gltf_mesh;
+    for (size_t i = 0; i + 2 < m.indices.size(); i += 3) {
+        const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
+                         c = m.positions[m.indices[i + 2]];
+        out.distance_m = std::min(out.distance_m, glm::length(p - closest_on_triangle(p, a, b, c)));
+    }
+    return out;
+}
+
+Result<void> check_point_lights(const Scene& scene) {
+    for (size_t i = 0; i < scene.lights.size(); ++i) {
+        const Light& l = scene.lights[i];
+        if (l.type != LightType::kPoint)
+            continue;
+        const PropDistance d = distance_to_prop(scene.prop, l.position);
+        if (!d.inside && d.distance_m >= kMinLightDistance)
+            continue;
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("lights[{}]: a point light at ({}, {}, {}) lies {} the prop{}; a point "
+                        "light must be outside it, at least {} m from its surface",
+                        i, l.position.x, l.position.y, l.position.z,
+                        d.inside ? "inside" : "on or next to",
+                        d.inside ? "" : fmt::format(" ({:.3g} m from its surface)", d.distance_m),
+                        kMinLightDistance));
+    }
+    return {};
 }
 
 }  // namespace hs::scene

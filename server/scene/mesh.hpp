@@ -41,6 +41,21 @@ struct GltfLoadInfo {
 Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info);
 Result<Mesh> load_gltf_mesh(const std::string& path, double scale, glm::dvec3 translation);
 
+// The distance from p to the prop's surface (metres), and whether p lies inside it. The
+// hemisphere is exact (the dome and its rim; inside: within the sphere and above the base
+// plane); a glTF mesh is measured to its nearest triangle and `inside` is false (an open mesh
+// has no inside).
+struct PropDistance {
+    double distance_m = 0.0;
+    bool inside = false;
+};
+PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p);
+
+// Point lights must lie outside the prop, at least kMinLightDistance from its surface: closer,
+// the 1/d^2 falloff is clamped and a light on the surface lights a spot the exact model leaves
+// black (docs/SHADING.md, "Lights"). An error naming the light, its distance and the rule.
+Result<void> check_point_lights(const Scene& scene);
+
 // Drops triangles whose area is below `min_area_m2` (and ones with out-of-range indices),
 // then computes area-weighted vertex normals where `normals` is empty or has a bad entry.
 void clean_mesh(Mesh& mesh, double min_area_m2 = 1e-14);

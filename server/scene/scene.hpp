@@ -134,7 +134,11 @@ struct ViewerProfile {
     double alpha = 1.0;     // transparency of the optics in [0, 1] (paper eq. 3)
 };
 
-// How `hysar render` places viewers, as in the paper's Fig. 7.
+// The ranges of Viewing's numbers, where scenes and command lines give them.
+inline constexpr double kMaxViewAngleDeg = 360.0;  // |angle| about +y
+inline constexpr double kMaxViewHeightM = 1e4;     // |eye height| above the floor, metres
+
+// How `hysar render` places viewers, as in the paper's Fig. 7 (scene::viewing_pose).
 struct Viewing {
     glm::dvec3 target{0.0, 0.745, 0.0};  // the point every viewer looks at, metres, world
     double distance_m = 0.8;             // horizontal distance from target

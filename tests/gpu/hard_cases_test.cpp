@@ -86,12 +86,28 @@ double reference_diffuse_sum(const scene::Scene& s, const scene::Intrinsics& k,
     return sum;
 }
 
-TEST_F(HardCases, PointLightAtZeroDistance) {
-    // A light exactly on the pole of the prop: distance 0 there, and below the tangent plane of
-    // every other point of the sphere. Output is finite and within the documented bound
-    // rho_d/pi * I / d_min^2 (d clamped at kMinLightDistance), VI and VD alike.
-    scene::Scene s = one_point_light(1e-4, {0.0, 0.845, 0.0});
+TEST_F(HardCases, PointLightOnOrInsideThePropIsRefused) {
+    // On the pole, 1e-9 m above it, 0.5 mm above it, inside the dome, and on the rim: a light
+    // there would light a spot the exact model leaves black (its 1/d^2 is clamped), so the
+    // renderer refuses the scene with a message naming the light; 1 mm off is accepted.
+    const glm::dvec3 pole{0.0, 0.845, 0.0};
+    for (const glm::dvec3& at : {pole, pole + glm::dvec3(0, 1e-9, 0), pole + glm::dvec3(0, 5e-4, 0),
+                                 glm::dvec3(0.0, 0.745, 0.0), glm::dvec3(0.15, 0.695, 0.0)}) {
+        scene::Scene s = one_point_light(1e-4, at);
+        auto r = render::Renderer::create(device(), s, {});
+        ASSERT_FALSE(r.ok()) << "accepted a point light at y " << at.y;
+        EXPECT_NE(r.error().message.find("lights[0]"), std::string::npos) << r.error().message;
+        EXPECT_NE(r.error().message.find("at least 0.001 m"), std::string::npos)
+            << r.error().message;
+    }
+    auto ok = render::Renderer::create(device(),
+                                       one_point_light(1e-4, pole + glm::dvec3(0, 1.01e-3, 0)), {});
+    EXPECT_TRUE(ok.ok()) << ok.error().message;
+    // Output stays finite and within the documented bound rho_d/pi * I / d_min^2 for the
+    // nearest accepted light.
+    scene::Scene s = one_point_light(1e-4, pole + glm::dvec3(0, 1.01e-3, 0));
     auto r = make_renderer(s, gpu::ColorFormat::kRgba32Float);
+    ASSERT_TRUE(r);
     const auto k = small_eye(4);
     const auto eye = front_eye();
     const double bound =

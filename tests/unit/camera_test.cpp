@@ -66,3 +66,27 @@ TEST(Camera, EyesAreIpdApartAlongHeadX) {
     glm::dvec3 x = head->orientation * glm::dvec3(1, 0, 0);
     EXPECT_GT(glm::dot(eyes[1].position - eyes[0].position, x), 0.0);
 }
+
+TEST(Camera, ViewingPoseConventionAndRange) {
+    Viewing v;
+    v.target = {0.0, 0.745, 0.0};
+    v.distance_m = 0.8;
+    // 0 deg: in front on +z; +90 deg: on +x; the height is the world height of the eye.
+    auto front = viewing_pose(v, 0.0, 1.1);
+    ASSERT_TRUE(front.ok());
+    EXPECT_NEAR(front->position.x, 0.0, 1e-12);
+    EXPECT_NEAR(front->position.y, 1.1, 1e-12);
+    EXPECT_NEAR(front->position.z, 0.8, 1e-12);
+    auto side = viewing_pose(v, 90.0, 0.9);
+    ASSERT_TRUE(side.ok());
+    EXPECT_NEAR(side->position.x, 0.8, 1e-12);
+    EXPECT_NEAR(side->position.z, 0.0, 1e-12);
+    for (auto [angle, height] : {std::pair{1e300, 1.0},
+                                 {std::nan(""), 1.0},
+                                 {0.0, 1e300},
+                                 {0.0, std::numeric_limits<double>::infinity()}}) {
+        auto p = viewing_pose(v, angle, height);
+        ASSERT_FALSE(p.ok());
+        EXPECT_NE(p.error().message.find("out of range"), std::string::npos) << p.error().message;
+    }
+}

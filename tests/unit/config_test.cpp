@@ -228,3 +228,30 @@ TEST(Config, RectLightIsReadAndItsEdgesChecked) {
         << bad.error().message;
     EXPECT_NE(bad.error().message.find("parallel"), std::string::npos);
 }
+
+TEST(Config, ViewingAnglesAndHeightsHaveARange) {
+    auto a = parse_edited([](auto& j) { j["viewing"]["angles_deg"] = {0, 1e300}; });
+    ASSERT_FALSE(a.ok());
+    EXPECT_NE(a.error().message.find("viewing.angles_deg[1]"), std::string::npos)
+        << a.error().message;
+    EXPECT_NE(a.error().message.find("[-360, 360]"), std::string::npos) << a.error().message;
+    auto h = parse_edited([](auto& j) { j["viewing"]["heights_m"]["H"] = 1e300; });
+    ASSERT_FALSE(h.ok());
+    EXPECT_NE(h.error().message.find("viewing.heights_m.H"), std::string::npos)
+        << h.error().message;
+    EXPECT_TRUE(parse_edited([](auto& j) { j["viewing"]["angles_deg"] = {-360, 360}; }).ok());
+}
+
+TEST(Config, PointLightOnOrInsideThePropIsRefused) {
+    // The default dome: centre (0, 0.695, 0), radius 0.15; its pole is at y = 0.845.
+    for (double y : {0.845, 0.845 + 1e-9, 0.8455, 0.75}) {
+        auto s = parse_edited([y](auto& j) { j["lights"][1]["position"] = {0.0, y, 0.0}; });
+        ASSERT_FALSE(s.ok()) << "accepted a point light at y " << y;
+        EXPECT_NE(s.error().message.find("lights[1]"), std::string::npos) << s.error().message;
+        EXPECT_NE(s.error().message.find("at least 0.001 m"), std::string::npos)
+            << s.error().message;
+    }
+    EXPECT_TRUE(parse_edited([](auto& j) {
+                    j["lights"][1]["position"] = {0.0, 0.8461, 0.0};
+                }).ok());
+}

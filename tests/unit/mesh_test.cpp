@@ -166,3 +166,34 @@ TEST(Mesh, BrokenGltfFilesAreErrors) {
     EXPECT_NE(missing.error().message.find("not a readable asset"), std::string::npos)
         << missing.error().message;
 }
+
+TEST(Mesh, DistanceToTheDomeItsRimAndAMesh) {
+    Prop dome;
+    dome.kind = Prop::Kind::kHemisphere;
+    dome.hemisphere.centre = {1.0, 0.5, -2.0};
+    dome.hemisphere.radius = 0.2;
+    const glm::dvec3 c = dome.hemisphere.centre;
+    auto d = distance_to_prop(dome, c + glm::dvec3(0, 0.3, 0));
+    EXPECT_NEAR(d.distance_m, 0.1, 1e-12);
+    EXPECT_FALSE(d.inside);
+    d = distance_to_prop(dome, c + glm::dvec3(0.05, 0.1, 0));
+    EXPECT_TRUE(d.inside);
+    EXPECT_NEAR(d.distance_m, 0.2 - std::hypot(0.05, 0.1), 1e-12);
+    // Below the base plane the rim is nearest: (0.2 + 0.3, -0.4) from the centre's foot.
+    d = distance_to_prop(dome, c + glm::dvec3(0.5, -0.4, 0));
+    EXPECT_NEAR(d.distance_m, std::hypot(0.3, 0.4), 1e-12);
+    EXPECT_FALSE(d.inside);
+
+    // A glTF-like mesh: one triangle in the plane z = 0; nearest points on its face, edge and
+    // corner.
+    Prop tri;
+    tri.kind = Prop::Kind::kGltf;
+    auto m = std::make_shared<Mesh>();
+    m->positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    m->indices = {0, 1, 2};
+    tri.gltf_mesh = m;
+    EXPECT_NEAR(distance_to_prop(tri, {0.2, 0.2, 0.5}).distance_m, 0.5, 1e-7);
+    EXPECT_NEAR(distance_to_prop(tri, {0.5, -0.3, 0.0}).distance_m, 0.3, 1e-7);
+    EXPECT_NEAR(distance_to_prop(tri, {-0.3, -0.4, 0.0}).distance_m, 0.5, 1e-7);
+    EXPECT_NEAR(distance_to_prop(tri, {1.0, 1.0, 0.0}).distance_m, std::sqrt(0.5), 1e-7);
+}
