@@ -28,8 +28,7 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
                           const std::vector<std::string>& switches = {});
 Result<double> parse_double(const std::string& flag, const std::string& text);
 // The same, refused outside [lo, hi] with a message naming the flag, the value and the range.
-Result<double> parse_double(const std::string& flag, const std::string& text, double lo,
-                            double hi);
+Result<double> parse_double(const std::string& flag, const std::string& text, double lo, double hi);
 // Parses the flags (exit code 2 on a bad one), runs `body`, logs its error (exit code 1).
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
                    const std::function<Result<void>(const Flags&)>& body,
