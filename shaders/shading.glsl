@@ -121,12 +121,15 @@ float hs_kajiya_kay(vec3 n, vec3 l, vec3 v, vec3 axis, float e) {
     return hs_lobe(c, e);
 }
 
-// The specular factor of `model` (a specialization constant at every call site).
+// The specular factor of `model` (a specialization constant at every call site): paper eq. (2),
+// f_s (n.l), so every model's term falls to 0 continuously at the terminator (n.l = 0); Ward's
+// n.l is inside hs_ward.
 float hs_specular_factor(int model, bool aniso, vec3 n, vec3 l, vec3 v, vec3 axis, vec3 params) {
-    if (!(dot(n, l) > 0.0 && dot(n, v) > 0.0)) return 0.0;
-    if (model == 1) return hs_phong(n, l, v, params.x);
-    if (model == 2) return hs_blinn_phong(n, l, v, params.x);
+    const float nl = dot(n, l);
+    if (!(nl > 0.0 && dot(n, v) > 0.0)) return 0.0;
+    if (model == 1) return hs_phong(n, l, v, params.x) * nl;
+    if (model == 2) return hs_blinn_phong(n, l, v, params.x) * nl;
     if (model == 3) return hs_ward(n, l, v, axis, params.y, params.z, aniso);
-    if (model == 4) return hs_kajiya_kay(n, l, v, axis, params.x);
+    if (model == 4) return hs_kajiya_kay(n, l, v, axis, params.x) * nl;
     return 0.0;
 }

@@ -144,15 +144,16 @@ double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, 
     switch (spec.model) {
         case M::kNone:
             return 0.0;
-        case M::kPhong:
-            return phong(n, l, v, spec.exponent);
+        case M::kPhong:  // paper eq. (2): f_s (n.l); the n.l of Ward is inside ward()
+            return phong(n, l, v, spec.exponent) * std::max(glm::dot(n, l), 0.0);
         case M::kBlinnPhong:
-            return blinn_phong(n, l, v, spec.exponent);
+            return blinn_phong(n, l, v, spec.exponent) * std::max(glm::dot(n, l), 0.0);
         case M::kWard:
             return ward(n, l, v, shading_tangent(spec, n, surface_tangent), spec.alpha_x,
                         spec.alpha_y);
         case M::kKajiyaKay:
-            return kajiya_kay(n, l, v, shading_tangent(spec, n, surface_tangent), spec.exponent);
+            return kajiya_kay(n, l, v, shading_tangent(spec, n, surface_tangent), spec.exponent) *
+                   std::max(glm::dot(n, l), 0.0);
     }
     return 0.0;
 }

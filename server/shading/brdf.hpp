@@ -5,9 +5,11 @@
 // Conventions (docs/SHADING.md): n, l, v, t are unit vectors pointing away from the surface
 // (l towards the light, v towards the viewer). E is the light's irradiance at normal incidence.
 //   VI:  L_d = rho_d / pi * E * max(n.l, 0)                            (Lambert)
-//   VD:  L_s = k_s * E * S(n, l, v, t)      for Phong, Blinn-Phong, Kajiya-Kay
-//        L_s = rho_s * E * W(n, l, v, t)    for Ward (W includes the n.l factor)
+//   VD:  L_s = k_s * E * S(n, l, v, t) * n.l   for Phong, Blinn-Phong, Kajiya-Kay
+//        L_s = rho_s * E * W(n, l, v, t)        for Ward (W includes the n.l factor)
+// as eq. (2) writes it: f_s L_i (n.l), so every term goes to 0 continuously at the terminator.
 // Every specular term is zero unless n.l > 0 and n.v > 0 (light and viewer above the surface).
+// phong(), blinn_phong() and kajiya_kay() are the papers' lobes S; specular_factor() is S n.l.
 #pragma once
 
 #include <functional>
@@ -74,7 +76,7 @@ glm::dvec3 specular_radiance(const scene::Scene& scene, const scene::Specular& s
                              glm::dvec3 n, glm::dvec3 v, glm::dvec3 surface_tangent = {1, 0, 0},
                              int rect_grid = kRectReferenceGrid);
 
-// The specular factor (S or W above) of one model for one light direction. `surface_tangent`
+// The specular factor (S n.l, or W, above) of one model for one light direction. `surface_tangent`
 // is the mesh's tangent at the point, used when spec.tangent_source is kMesh.
 double specular_factor(const scene::Specular& spec, glm::dvec3 n, glm::dvec3 l, glm::dvec3 v,
                        glm::dvec3 surface_tangent = {1, 0, 0});

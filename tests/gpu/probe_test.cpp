@@ -186,6 +186,47 @@ TEST_F(Probe, WardFp32FallbackStaysBounded) {
     EXPECT_GT(check_ward_table(fp32_device(), 1e-4), 300u);
 }
 
+// The terminator is continuous (paper eq. (2): f_s (n.l)): with the light at n.l = eps and the
+// view at its peak, Phong, Blinn-Phong and Kajiya-Kay give at most eps, and agree with the
+// reference; in tilted frames.
+TEST_F(Probe, TerminatorIsContinuousForTheClassicLobes) {
+    for (auto model : {scene::SpecularModel::kPhong, scene::SpecularModel::kBlinnPhong,
+                       scene::SpecularModel::kKajiyaKay})
+        for (double e : {1.0, 60.0}) {
+            scene::Specular s;
+            s.model = model;
+            s.exponent = e;
+            std::vector<render::ProbeCase> cases;
+            std::vector<double> eps_of;
+            for (uint32_t seed = 1; seed <= 3; ++seed)
+                for (double eps : {1e-1, 1e-2, 1e-3, 1e-5}) {
+                    const glm::dmat3 f = tilted_frame(seed);
+                    const dvec3 l(std::sqrt(1 - eps * eps), 0, eps);
+                    // Phong/Blinn peak: the mirror direction, lifted to stay above the surface;
+                    // Kajiya-Kay (tangent along y) peaks on the whole cone, which holds it too.
+                    const dvec3 v = glm::normalize(dvec3(-l.x, 0, std::max(eps, 0.05)));
+                    cases.push_back(
+                        as_float({f * dvec3(0, 0, 1), f * l, f * v, f * dvec3(0, 1, 0)}));
+                    eps_of.push_back(eps);
+                }
+            auto out = render::run_shading_probe(device(), s, cases);
+            ASSERT_TRUE(out.ok()) << out.error().message;
+            for (size_t i = 0; i < cases.size(); ++i) {
+                scene::Specular cs = s;
+                cs.tangent_axis = cases[i].tangent_axis;
+                const double want =
+                    shading::specular_factor(cs, cases[i].n, cases[i].l, cases[i].v);
+                const double got = (*out)[i].specular;
+                // n.l of the fp32 inputs (eps, rounded): the lobe is at most 1, times n.l
+                const double nl = glm::dot(cases[i].n, cases[i].l);
+                EXPECT_LE(got, 1.001 * nl + 1e-7)
+                    << scene::to_string(model) << " exponent " << e << " at n.l = " << eps_of[i];
+                EXPECT_LE(want, nl * (1 + 1e-12));
+                EXPECT_NEAR(got, want, 2e-3 * want + 1e-6) << scene::to_string(model);
+            }
+        }
+}
+
 TEST_F(Probe, KajiyaKayTangentParallelToLightOrView) {
     for (double e : {1.0, 60.0, 1e4}) {
         scene::Specular s;
