@@ -5,6 +5,7 @@
 #include <limits>
 
 #include <fmt/format.h>
+#include <glm/common.hpp>
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
 
@@ -189,9 +190,16 @@ PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p) {
     if (!prop.gltf_mesh)
         return out;
     const Mesh& m = *prop.gltf_mesh;
+    const size_t n = m.positions.size();
     for (size_t i = 0; i + 2 < m.indices.size(); i += 3) {
+        if (m.indices[i] >= n || m.indices[i + 1] >= n || m.indices[i + 2] >= n)
+            continue;
         const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
                          c = m.positions[m.indices[i + 2]];
+        // A triangle whose bounding box is farther than the best so far cannot be nearer.
+        const glm::dvec3 lo = glm::min(a, glm::min(b, c)), hi = glm::max(a, glm::max(b, c));
+        if (glm::length(glm::max(glm::max(lo - p, p - hi), glm::dvec3(0.0))) >= out.distance_m)
+            continue;
         out.distance_m = std::min(out.distance_m, glm::length(p - closest_on_triangle(p, a, b, c)));
     }
     return out;
