@@ -89,7 +89,11 @@ TEST_F(Probe, WardRoughnessDownToTenToTheMinusFour) {
 // The vectors as the GPU receives them (fp32), back in double: the reference is computed from
 // exactly the inputs the shader sees, so what remains is the shader's own arithmetic.
 render::ProbeCase as_float(const render::ProbeCase& c) {
-    auto f = [](dvec3 x) { return dvec3(glm::vec3(x)); };
+    // volatile: the optimiser may otherwise drop the double -> float -> double round trip.
+    auto f = [](dvec3 x) {
+        volatile float a = float(x.x), b = float(x.y), c = float(x.z);
+        return dvec3(a, b, c);
+    };
     return {f(c.n), f(c.l), f(c.v), f(c.tangent_axis)};
 }
 
@@ -175,10 +179,8 @@ size_t check_ward_table(gpu::Device& dev, double one_percent_down_to) {
 
 TEST_F(Probe, WardStableDownToRoughnessTenToTheMinusSix) {
     ASSERT_TRUE(device().float64()) << "the test device has no shaderFloat64";
-    // The table must reach the regime it is about. 1 % holds down to alpha 1e-4 in every build;
-    // below it (1.3-1.8 % at 1e-5 and 1e-6 in some builds, docs/SHADING.md) the value is
-    // bounded by the peak.
-    EXPECT_GT(check_ward_table(device(), 1e-4), 300u);
+    // The table must reach the regime it is about.
+    EXPECT_GT(check_ward_table(device(), 1e-6), 500u);
 }
 
 // Without shaderFloat64 the exponent is formed from |h x n|^2 in fp32 (docs/SHADING.md):
