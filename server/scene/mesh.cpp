@@ -206,9 +206,21 @@ PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p) {
 }
 
 Result<void> check_point_lights(const Scene& scene) {
+    // A glTF prop's bounding box, once: a light farther than d_min from it needs no search of
+    // the triangles (a large mesh would otherwise cost a pass per light at every scene load).
+    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi = -lo;
+    const bool mesh = scene.prop.kind == Prop::Kind::kGltf && scene.prop.gltf_mesh;
+    if (mesh)
+        for (const glm::vec3& q : scene.prop.gltf_mesh->positions) {
+            lo = glm::min(lo, glm::dvec3(q));
+            hi = glm::max(hi, glm::dvec3(q));
+        }
     for (size_t i = 0; i < scene.lights.size(); ++i) {
         const Light& l = scene.lights[i];
         if (l.type != LightType::kPoint)
+            continue;
+        if (mesh && glm::length(glm::max(glm::max(lo - l.position, l.position - hi),
+                                         glm::dvec3(0.0))) >= kMinLightDistance)
             continue;
         const PropDistance d = distance_to_prop(scene.prop, l.position);
         if (!d.inside && d.distance_m >= kMinLightDistance)

@@ -197,3 +197,23 @@ TEST(Mesh, DistanceToTheDomeItsRimAndAMesh) {
     EXPECT_NEAR(distance_to_prop(tri, {-0.3, -0.4, 0.0}).distance_m, 0.5, 1e-7);
     EXPECT_NEAR(distance_to_prop(tri, {1.0, 1.0, 0.0}).distance_m, std::sqrt(0.5), 1e-7);
 }
+
+TEST(Mesh, PointLightsNearAMeshPropAreRefused) {
+    Scene s;
+    s.prop.kind = Prop::Kind::kGltf;
+    auto m = std::make_shared<Mesh>();
+    m->positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    m->indices = {0, 1, 2};
+    s.prop.gltf_mesh = m;
+    Light l;
+    l.type = LightType::kPoint;
+    l.position = {0.2, 0.2, 5e-4};  // above the face, inside the mesh's box padded by d_min
+    s.lights = {l};
+    auto near = check_point_lights(s);
+    ASSERT_FALSE(near.ok());
+    EXPECT_NE(near.error().message.find("lights[0]"), std::string::npos) << near.error().message;
+    s.lights[0].position = {0.9, 0.9, 2e-3};  // inside the box, 2 mm off the plane, past the face
+    EXPECT_TRUE(check_point_lights(s).ok());
+    s.lights[0].position = {5, 5, 5};  // outside the box: no triangle searched
+    EXPECT_TRUE(check_point_lights(s).ok());
+}
