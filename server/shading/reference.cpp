@@ -72,6 +72,10 @@ Result<ImageRgba32f> reference_viewer(const scene::Scene& s, const scene::Specul
     if (ndv)
         ndv->assign(size_t(k.width) * k.height, 0.0f);
     const uint32_t g = o.pixel_grid;
+    // The dome's mesh tangent is azimuthal about +y (scene::hemisphere_tangent).
+    const glm::dvec3 tangent_singular_axis =
+        spec.tangent_source == scene::Specular::TangentSource::kAxis ? spec.tangent_axis
+                                                                     : glm::dvec3(0, 1, 0);
     parallel_rows(k.height, [&](uint32_t y) {
         for (uint32_t x = 0; x < k.width; ++x) {
             glm::dvec3 sum(0.0);
@@ -93,8 +97,12 @@ Result<ImageRgba32f> reference_viewer(const scene::Scene& s, const scene::Specul
             img.set(x, y, glm::vec4(glm::vec3(sum / n), float(hits / n)));
             if (ndv) {
                 glm::dvec3 d = scene::pixel_ray(k, eye, x, y);
-                if (auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d))
-                    (*ndv)[size_t(y) * k.width + x] = float(glm::dot(hit->n, -d));
+                if (auto hit = intersect_hemisphere(s.prop.hemisphere, eye.position, d)) {
+                    const bool singular = spec.uses_tangent() &&
+                                          glm::length(glm::cross(hit->n, tangent_singular_axis)) <
+                                              kTangentSingularSin;
+                    (*ndv)[size_t(y) * k.width + x] = singular ? 0.0f : float(glm::dot(hit->n, -d));
+                }
             }
         }
     });

@@ -24,6 +24,8 @@ std::optional<Hit> intersect_hemisphere(const scene::Hemisphere& h, glm::dvec3 o
 // point it lights; alpha = 1 where the prop is hit. Hemisphere props only.
 Result<ImageRgba32f> reference_projector(const scene::Scene& scene);
 
+inline constexpr double kTangentSingularSin = 0.25;
+
 struct ReferenceOptions {
     // pixel_grid x pixel_grid rays per pixel on a regular grid, averaged (a box filter over the
     // pixel: what supersampling converges to); 1 = the pixel centre only.
@@ -33,7 +35,11 @@ struct ReferenceOptions {
 
 // One eye's VD layer: specular radiance plus emission; alpha = the fraction of the pixel's rays
 // that hit the prop (1 or 0 at the pixel centre). `n_dot_v_out`, when given, receives n.v per
-// pixel (of the centre ray; 0 where missed) for masking silhouettes. Rows run in parallel.
+// pixel (of the centre ray; 0 where missed) for masking silhouettes, and 0 also where a model
+// with a tangent (anisotropic Ward, Kajiya-Kay) is within asin(kTangentSingularSin) of its
+// tangent field's singular point: the field t = axis projected on the tangent plane turns
+// arbitrarily fast there (no smooth tangent field covers a sphere), and the mesh's interpolated
+// normals pick a different t. Rows run in parallel.
 Result<ImageRgba32f> reference_viewer(const scene::Scene& scene, const scene::Specular& spec,
                                       const scene::Intrinsics& k, const scene::Pose& eye,
                                       std::vector<float>* n_dot_v_out = nullptr,
