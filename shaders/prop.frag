@@ -35,18 +35,8 @@ layout(location = 0) out vec4 out_radiance;
 // Direction to light i and its irradiance at normal incidence (docs/SHADING.md, "Lights").
 void light_at(int i, vec3 p, vec3 n, out vec3 l, out vec3 E) {
     GpuLight light = scene.lights[i];
-    E = light.irradiance.rgb;
-    if (light.position_or_direction.w == 0.0) {
-        l = light.position_or_direction.xyz;
-        return;
-    }
-    vec3 d = light.position_or_direction.xyz - p;
-    float dist = length(d);
-    l = dist > 1e-9 ? d / dist : n;  // a light on the surface shines along the normal
-    if (kPointFalloff) {
-        float dc = max(dist, scene.spec_params.w);
-        E /= dc * dc;
-    }
+    hs_light(light.position_or_direction, light.irradiance.rgb, p, n, scene.spec_params.w,
+             kPointFalloff, l, E);
 }
 
 // Area lights (docs/SHADING.md, "Area lights"): kAreaSamples points of a rank-1 lattice (the R2
@@ -103,7 +93,7 @@ vec4 encode_output(vec3 sum) {
         return vec4(min((q + 0.25) / 255.0, vec3(1.0)), any(greaterThan(q, vec3(0.0))) ? 1.0 : 0.0);
     }
     if (kOutputEncoding == 2) {
-        vec3 v = clamp(mix(sum, vec3(0.0), isnan(sum)), -65504.0, 65504.0);
+        vec3 v = hs_half_layer(sum);
         uint bits = packHalf2x16(v.xy) | (packHalf2x16(vec2(v.z, 0.0)) & 0xffffu);
         return vec4(v, bits != 0u ? 1.0 : 0.0);
     }

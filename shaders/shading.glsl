@@ -133,3 +133,26 @@ float hs_specular_factor(int model, bool aniso, vec3 n, vec3 l, vec3 v, vec3 axi
     if (model == 4) return hs_kajiya_kay(n, l, v, axis, params.x) * nl;
     return 0.0;
 }
+
+// Direction to a directional (w = 0) or point (w = 1) light and its irradiance at normal
+// incidence at surface point p (docs/SHADING.md, "Lights"): a point light's intensity falls off
+// as 1 / max(d, d_min)^2, and a light on the surface shines along the normal.
+void hs_light(vec4 position_or_direction, vec3 irradiance, vec3 p, vec3 n, float d_min,
+              bool falloff, out vec3 l, out vec3 E) {
+    E = irradiance;
+    if (position_or_direction.w == 0.0) {
+        l = position_or_direction.xyz;
+        return;
+    }
+    vec3 d = position_or_direction.xyz - p;
+    float dist = length(d);
+    l = dist > 1e-9 ? d / dist : n;
+    if (falloff) {
+        float dc = max(dist, d_min);
+        E /= dc * dc;
+    }
+}
+
+// Radiance as a half-float layer carries it: NaN as 0, clamped to the largest finite half
+// (65504) rather than Inf.
+vec3 hs_half_layer(vec3 sum) { return clamp(mix(sum, vec3(0.0), isnan(sum)), -65504.0, 65504.0); }

@@ -87,14 +87,17 @@ struct GpuPush {
 
 // One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).
 struct GpuProbeCase {
-    vec4 n;       // xyz unit normal
-    vec4 l;       // xyz unit direction to the light
-    vec4 v;       // xyz unit direction to the viewer
-    vec4 t;       // xyz tangent axis (projected to the plane of n in the shader)
-    vec4 params;  // x exponent, y alpha_x, z alpha_y
+    vec4 n;         // xyz unit normal
+    vec4 l;         // xyz unit direction to the light (w = 0), or a point light's position (w = 1)
+    vec4 v;         // xyz unit direction to the viewer
+    vec4 t;         // xyz tangent axis (projected to the plane of n in the shader)
+    vec4 params;    // x exponent, y alpha_x, z alpha_y, w min light distance (m)
+    vec4 p;         // xyz surface point (for a point light)
+    vec4 material;  // x irradiance (direction) or intensity (point), y albedo / pi, z k_s
 };
 struct GpuProbeResult {
-    vec4 value;  // x: specular factor (S or W), y: diffuse cosine max(n.l, 0), zw: 0
+    vec4 value;     // x: specular factor (S n.l, or W), y: diffuse cosine max(n.l, 0)
+    vec4 radiance;  // x: L_d, y: L_s in fp32; z, w: the same as a half-float layer stores them
 };
 
 #ifdef __cplusplus

@@ -15,6 +15,6 @@ static_assert(sizeof(GpuScene) == 5 * 16 + HS_MAX_LIGHTS * 64 + 64 + 4 * 16,
               "GpuScene must match std140 layout");
 static_assert(sizeof(GpuPush) == 112, "GpuPush must match the push constant block");
 static_assert(sizeof(GpuPush) <= 128, "push constants must fit the guaranteed 128 bytes");
-static_assert(sizeof(GpuProbeCase) == 80, "GpuProbeCase must match std430 layout");
-static_assert(sizeof(GpuProbeResult) == 16, "GpuProbeResult must match std430 layout");
+static_assert(sizeof(GpuProbeCase) == 112, "GpuProbeCase must match std430 layout");
+static_assert(sizeof(GpuProbeResult) == 32, "GpuProbeResult must match std430 layout");
 }  // namespace hs::gpu

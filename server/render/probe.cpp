@@ -1,7 +1,10 @@
 #include "render/probe.hpp"
 
+#include <glm/gtc/constants.hpp>
+
 #include "gpu/commands.hpp"
 #include "gpu/shared_layout.hpp"
+#include "render/renderer.hpp"
 #include "shaders/probe_comp.h"
 #include "shaders/probe_comp_f32.h"
 
@@ -15,7 +18,8 @@ Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const sc
     pi.spv = device.float64() ? std::span<const uint32_t>(kProbeCompSpv)
                               : std::span<const uint32_t>(kProbeCompSpvF32);
     pi.spec.set_int(HS_SC_SPEC_MODEL, int(spec.model))
-        .set_bool(HS_SC_ANISOTROPIC, spec.anisotropic());
+        .set_bool(HS_SC_ANISOTROPIC, spec.anisotropic())
+        .set_int(HS_SC_LOBE_EXPONENT, whole_exponent(spec));
     pi.storage_buffers = 2;
     pi.push_constant_bytes = 4;
     pi.name = "pipeline.shading-probe";
@@ -23,10 +27,16 @@ Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const sc
     std::vector<gpu::GpuProbeCase> in(cases.size());
     for (size_t i = 0; i < cases.size(); ++i) {
         in[i].n = glm::vec4(glm::vec3(cases[i].n), 0);
-        in[i].l = glm::vec4(glm::vec3(cases[i].l), 0);
+        const auto& c = cases[i];
+        in[i].l = c.point_light ? glm::vec4(glm::vec3(c.light_position), 1)
+                                : glm::vec4(glm::vec3(c.l), 0);
+        in[i].p = glm::vec4(glm::vec3(c.p), 1);
+        in[i].material = glm::vec4(float(c.intensity), float(c.albedo / glm::pi<double>()),
+                                   float(c.specular_colour), 0);
         in[i].v = glm::vec4(glm::vec3(cases[i].v), 0);
         in[i].t = glm::vec4(glm::vec3(cases[i].tangent_axis), 0);
-        in[i].params = glm::vec4(float(spec.exponent), float(spec.alpha_x), float(spec.alpha_y), 0);
+        in[i].params = glm::vec4(float(spec.exponent), float(spec.alpha_x), float(spec.alpha_y),
+                                 float(c.min_distance));
     }
     HS_ASSIGN_OR_RETURN(auto in_buf, gpu::Buffer::create(device, in.size() * sizeof(in[0]),
                                                          gpu::BufferUsage::kStorage, "probe.in"));
@@ -42,7 +52,9 @@ Result<std::vector<ProbeResult>> run_shading_probe(gpu::Device& device, const sc
     }));
     const auto* res = static_cast<const gpu::GpuProbeResult*>(out_buf.mapped());
     std::vector<ProbeResult> out(cases.size());
-    for (size_t i = 0; i < cases.size(); ++i) out[i] = {res[i].value.x, res[i].value.y};
+    for (size_t i = 0; i < cases.size(); ++i)
+        out[i] = {res[i].value.x,    res[i].value.y,    res[i].radiance.x,
+                  res[i].radiance.y, res[i].radiance.z, res[i].radiance.w};
     return out;
 }
 

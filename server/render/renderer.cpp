@@ -144,7 +144,8 @@ std::span<const uint32_t> prop_fragment_spv(const gpu::Device& device) {
     return kPropFragSpvF32;
 }
 
-// The lobe exponent as HS_SC_LOBE_EXPONENT takes it: a whole number in 1..4095, else 0 (pow).
+}  // namespace
+
 int whole_exponent(const scene::Specular& sp) {
     const bool lobe = sp.model == scene::SpecularModel::kPhong ||
                       sp.model == scene::SpecularModel::kBlinnPhong ||
@@ -152,7 +153,6 @@ int whole_exponent(const scene::Specular& sp) {
     const double e = sp.exponent;
     return lobe && e >= 1.0 && e <= 4095.0 && e == std::floor(e) ? int(e) : 0;
 }
-}  // namespace
 
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
                                              int encoding, uint64_t lights) {

@@ -241,4 +241,8 @@ private:
 std::vector<std::string> effects_of(const scene::Scene& scene, bool vd, const scene::Specular& spec,
                                     uint32_t area_light_samples = kDefaultAreaLightSamples);
 
+// The lobe exponent as the shaders' HS_SC_LOBE_EXPONENT takes it: a whole number in 1..4095 of
+// Phong, Blinn-Phong or Kajiya-Kay is applied by squaring; anything else is 0 (pow).
+int whole_exponent(const scene::Specular& spec);
+
 }  // namespace hs::render
