@@ -40,25 +40,26 @@ inline std::string format_number(double v) {
 
 // Parses all of `text` as a finite decimal number in [lo, hi] (an optional leading '+'; no
 // spaces, no "nan" or "inf", no trailing characters). Returns the value or a sentence saying what
-// is wrong with it; locale-independent.
+// is wrong with it that names the range; locale-independent.
 inline std::variant<double, std::string> parse_number(std::string_view text, double lo, double hi) {
     const std::string quoted = "'" + std::string(text) + "'";
+    const std::string range = "[" + format_number(lo) + ", " + format_number(hi) + "]";
     std::string_view s = text;
     if (s.size() > 1 && s[0] == '+' && s[1] != '-')
         s.remove_prefix(1);
     if (s.empty())
-        return text.empty() ? std::string("an empty value is not a number")
-                            : quoted + " is not a number";
+        return text.empty() ? "an empty value is not a number in " + range
+                            : quoted + " is not a number in " + range;
     double v = 0;
     const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
     if (ec == std::errc::result_out_of_range)
-        return quoted + " is too large or too small to be a number";
+        return quoted + " is too large or too small to be a number in " + range;
     if (ec != std::errc() || end != s.data() + s.size())
-        return quoted + " is not a number";
+        return quoted + " is not a number in " + range;
     if (!std::isfinite(v))
-        return quoted + " is not a finite number";
+        return quoted + " is not a finite number in " + range;
     if (v < lo || v > hi)
-        return quoted + " is outside [" + format_number(lo) + ", " + format_number(hi) + "]";
+        return quoted + " is outside " + range;
     return v;
 }
 
@@ -66,20 +67,21 @@ inline std::variant<double, std::string> parse_number(std::string_view text, dou
 inline std::variant<int64_t, std::string> parse_integer(std::string_view text, int64_t lo,
                                                         int64_t hi) {
     const std::string quoted = "'" + std::string(text) + "'";
+    const std::string range = "[" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
     std::string_view s = text;
     if (s.size() > 1 && s[0] == '+' && s[1] != '-')
         s.remove_prefix(1);
     if (s.empty())
-        return text.empty() ? std::string("an empty value is not a whole number")
-                            : quoted + " is not a whole number";
+        return text.empty() ? "an empty value is not a whole number in " + range
+                            : quoted + " is not a whole number in " + range;
     int64_t v = 0;
     const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
     if (ec == std::errc::result_out_of_range)
-        return quoted + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+        return quoted + " is outside " + range;
     if (ec != std::errc() || end != s.data() + s.size())
-        return quoted + " is not a whole number";
+        return quoted + " is not a whole number in " + range;
     if (v < lo || v > hi)
-        return quoted + " is outside [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+        return quoted + " is outside " + range;
     return v;
 }
 

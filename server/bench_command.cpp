@@ -23,6 +23,7 @@
 #include "codec/layer_codec.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
+#include "eval_common.hpp"
 #include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
@@ -78,31 +79,19 @@ const char* kServeHelp =
     "Example: hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline "
     "../shared/perf/lean-baseline.sh\n";
 
-std::optional<std::vector<int>> int_list(const std::string& text, int lo, int hi) {
+// A comma-separated list of whole numbers in [lo, hi], at least one; a refusal names `flag`, the
+// item and the range.
+Result<std::vector<int>> int_list(const std::string& flag, const std::string& text, int lo,
+                                  int hi) {
     std::vector<int> out;
     size_t at = 0;
     while (at <= text.size()) {
         const size_t comma = std::min(text.find(',', at), text.size());
-        int v = 0;
-        const char* b = text.data() + at;
-        const char* e = text.data() + comma;
-        auto [p, ec] = std::from_chars(b, e, v);
-        if (b == e || ec != std::errc() || p != e || v < lo || v > hi)
-            return std::nullopt;
-        out.push_back(v);
+        HS_ASSIGN_OR_RETURN(int64_t v, parse_integer(flag, text.substr(at, comma - at), lo, hi));
+        out.push_back(int(v));
         at = comma + 1;
     }
-    if (out.empty())
-        return std::nullopt;
     return out;
-}
-
-std::optional<double> number(const std::string& text, double lo, double hi) {
-    char* end = nullptr;
-    const double v = std::strtod(text.c_str(), &end);
-    if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v) || v < lo || v > hi)
-        return std::nullopt;
-    return v;
 }
 
 // The arguments after `hysar bench serve`; on a bad one, a sentence that names the flag.
@@ -133,25 +122,24 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             return a + " wants a value";
         const std::string& v = args[++i];
         if (a == "--headsets") {
-            auto l = int_list(v, 1, 256);
+            auto l = int_list(a, v, 1, 256);
             if (!l)
-                return "--headsets wants a comma-separated list of counts 1..256, got '" + v + "'";
+                return l.error().message;
             o.headsets = *l, have_headsets = true;
         } else if (a == "--seconds") {
-            auto s = number(v, 0.1, 3600);
+            auto s = parse_double(a, v, 0.1, 3600);
             if (!s)
-                return "--seconds wants a number of seconds in 0.1..3600, got '" + v + "'";
+                return s.error().message;
             o.seconds = *s, have_seconds = true;
         } else if (a == "--frames") {
-            auto l = int_list(v, 1, 10000);
-            if (!l || l->size() != 1)
-                return "--frames wants a count 1..10000, got '" + v + "'";
-            o.baseline_frames = l->front(), have_frames = true;
+            auto n = parse_integer(a, v, 1, 10000);
+            if (!n)
+                return n.error().message;
+            o.baseline_frames = int(*n), have_frames = true;
         } else if (a == "--lp-threads") {
-            auto l = int_list(v, 1, 256);
+            auto l = int_list(a, v, 1, 256);
             if (!l)
-                return "--lp-threads wants a comma-separated list of thread counts 1..256, got '" +
-                       v + "'";
+                return l.error().message;
             o.lp_threads = *l;
         } else if (a == "--format") {
             if (v != "srgb8" && v != "rgba16f")
@@ -355,12 +343,12 @@ int run_bench(const std::vector<std::string>& args) {
     std::string json, scene_path, out_dir = "accuracy-out";
     for (size_t i = 1; i < args.size(); ++i) {
         if (args[i] == "--repeats" && i + 1 < args.size()) {
-            repeats = std::atoi(args[++i].c_str());
-            if (repeats < 1 || repeats > 1000) {
-                std::fprintf(stderr, "hysar bench: --repeats wants 1..1000, got '%s'\n",
-                             args[i].c_str());
+            auto n = parse_integer("--repeats", args[++i], 1, 1000);
+            if (!n) {
+                std::fprintf(stderr, "hysar bench: %s\n", n.error().message.c_str());
                 return 2;
             }
+            repeats = int(*n);
         } else if (args[i] == "--json" && i + 1 < args.size() && args[0] == "encoding") {
             json = args[++i];
         } else if (args[i] == "--scene" && i + 1 < args.size() && args[0] == "accuracy") {

@@ -50,16 +50,9 @@ const char* kHelp =
     "  simulate [--scene FILE] [--viewer NAME] [--angle DEG] [--height NAME] [--scale S]\n"
     "           [--noise DN] [--model linear|curve] [--bandwidth PX] [--out DIR]\n"
     "      the whole chain on the virtual installation, checked against its ground truth;\n"
-    "      exit code 1 when a target is missed\n";
-
-Result<std::pair<uint32_t, uint32_t>> parse_size(const std::string& flag, const std::string& s) {
-    unsigned w = 0, h = 0;
-    char x = 0, extra = 0;
-    if (std::sscanf(s.c_str(), "%u%c%u%c", &w, &x, &h, &extra) != 3 || x != 'x' || w == 0 || h == 0)
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("{}: '{}' is not WIDTHxHEIGHT", flag, s));
-    return std::pair{uint32_t(w), uint32_t(h)};
-}
+    "      exit code 1 when a target is missed\n"
+    "\n"
+    "every numeric flag's unit, range and default: docs/LIMITS.md\n";
 
 Result<std::string> need(const Flags& f, const std::string& flag) {
     if (!f.has(flag))
@@ -105,11 +98,8 @@ Result<json> read_manifest(const fs::path& dir) {
 // 1000 / --exposure-ms: calibration files are in camera DN per second, so that every step
 // may use the exposure that suits it.
 Result<double> exposure_scale(const Flags& f) {
-    HS_ASSIGN_OR_RETURN(std::string e, need(f, "--exposure-ms"));
-    HS_ASSIGN_OR_RETURN(double ms, parse_double("--exposure-ms", e));
-    if (!(ms > 0))
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("--exposure-ms: {} is not a positive exposure", ms));
+    HS_TRY(need(f, "--exposure-ms"));
+    HS_ASSIGN_OR_RETURN(double ms, parse_number(f, kExposureFlag, 0));
     return 1000.0 / ms;
 }
 
@@ -118,11 +108,11 @@ void progress_line(const char* what, uint64_t done, uint64_t total) {
 }
 
 Result<void> cmd_patterns(const Flags& f) {
-    HS_ASSIGN_OR_RETURN(std::string size, need(f, "--size"));
-    HS_ASSIGN_OR_RETURN(auto wh, parse_size("--size", size));
+    HS_TRY(need(f, "--size"));
+    HS_ASSIGN_OR_RETURN(auto wh, parse_size(f, kSizeFlag));
     HS_ASSIGN_OR_RETURN(std::string out_s, need(f, "--out"));
-    HS_ASSIGN_OR_RETURN(double ramp, parse_double("--ramp", f.get("--ramp", "17")));
-    HS_ASSIGN_OR_RETURN(double grid, parse_double("--grid", f.get("--grid", "4")));
+    HS_ASSIGN_OR_RETURN(double ramp, parse_number(f, kRampFlag, 17));
+    HS_ASSIGN_OR_RETURN(double grid, parse_number(f, kGridFlag, 4));
     const fs::path out = out_s;
     HS_TRY(make_dirs(out / "gray"));
     HS_TRY(make_dirs(out / "colour"));
@@ -133,8 +123,7 @@ Result<void> cmd_patterns(const Flags& f) {
         HS_TRY(write_png(out / name, set.images[i]));
         gray.push_back(name);
     }
-    const auto drives = calib::colour_patch_drives(uint32_t(std::clamp(ramp, 2.0, 256.0)),
-                                                   uint32_t(std::clamp(grid, 2.0, 16.0)));
+    const auto drives = calib::colour_patch_drives(uint32_t(ramp), uint32_t(grid));
     for (size_t i = 0; i < drives.size(); ++i) {
         const std::string name = fmt::format("colour/{:03}.png", i);
         const glm::dvec3 code = glm::round(drives[i] * 255.0) / 255.0;  // what the PNG holds
@@ -160,10 +149,8 @@ Result<void> cmd_decode(const Flags& f) {
     HS_ASSIGN_OR_RETURN(std::string cdir, need(f, "--captures"));
     HS_ASSIGN_OR_RETURN(std::string out_s, need(f, "--out"));
     calib::DecodeOptions o;
-    HS_ASSIGN_OR_RETURN(o.black_threshold,
-                        parse_double("--black-threshold", f.get("--black-threshold", "20")));
-    HS_ASSIGN_OR_RETURN(o.white_threshold,
-                        parse_double("--white-threshold", f.get("--white-threshold", "4")));
+    HS_ASSIGN_OR_RETURN(o.black_threshold, parse_number(f, kBlackThresholdFlag, 20));
+    HS_ASSIGN_OR_RETURN(o.white_threshold, parse_number(f, kWhiteThresholdFlag, 4));
     HS_ASSIGN_OR_RETURN(double per_second, exposure_scale(f));
     HS_ASSIGN_OR_RETURN(json m, read_manifest(pdir));
     std::vector<ImageRgba32f> caps;
@@ -210,8 +197,8 @@ Result<void> cmd_invert(const Flags& f) {
     HS_ASSIGN_OR_RETURN(std::string dir_s, need(f, "--calibration"));
     const fs::path dir = dir_s;
     calib::InverseMapOptions o;
-    HS_ASSIGN_OR_RETURN(o.bandwidth, parse_double("--bandwidth", f.get("--bandwidth", "0")));
-    HS_ASSIGN_OR_RETURN(o.max_gap, parse_double("--max-gap", f.get("--max-gap", "2")));
+    HS_ASSIGN_OR_RETURN(o.bandwidth, parse_number(f, kBandwidthFlag, 0));
+    HS_ASSIGN_OR_RETURN(o.max_gap, parse_number(f, kMaxGapFlag, 2));
     HS_ASSIGN_OR_RETURN(calib::DeviceLut lut, calib::load_lut(dir));
     HS_ASSIGN_OR_RETURN(calib::InverseMap m, calib::invert_lut(lut, o, [](uint64_t d, uint64_t t) {
                             if (d == t || d % 256 < 64)
@@ -265,7 +252,7 @@ Result<void> cmd_capture(const Flags& f) {
     HS_ASSIGN_OR_RETURN(std::string vi_s, need(f, "--vi"));
     HS_ASSIGN_OR_RETURN(std::string vivd_s, need(f, "--vivd"));
     HS_ASSIGN_OR_RETURN(std::string out_s, need(f, "--out"));
-    HS_ASSIGN_OR_RETURN(double floor, parse_double("--noise-floor", f.get("--noise-floor", "4")));
+    HS_ASSIGN_OR_RETURN(double floor, parse_number(f, kNoiseFloorFlag, 4));
     HS_ASSIGN_OR_RETURN(scene::Scene s, load_scene(f));
     HS_ASSIGN_OR_RETURN(scene::Pose head, capture_head(s, f));
     HS_ASSIGN_OR_RETURN(calib::DeviceCalibration proj, calib::load_device_calibration(pdir));
@@ -292,9 +279,7 @@ Result<void> cmd_capture(const Flags& f) {
 }  // namespace
 
 Result<scene::Pose> capture_head(const scene::Scene& s, const Flags& f) {
-    HS_ASSIGN_OR_RETURN(double angle,
-                        parse_double("--angle", f.get("--angle", "0"), -scene::kMaxViewAngleDeg,
-                                     scene::kMaxViewAngleDeg));
+    HS_ASSIGN_OR_RETURN(double angle, parse_number(f, kAngleFlag, 0));
     const std::string h = f.get("--height", s.viewing.default_height);
     auto it = s.viewing.heights_m.find(h);
     if (it == s.viewing.heights_m.end())
@@ -343,27 +328,31 @@ int run_calibrate(const std::vector<std::string>& args) {
     const std::string step = args[0];
     const std::vector<std::string> rest(args.begin() + 1, args.end());
     if (step == "patterns")
-        return run_subcommand(rest, {"--size", "--out", "--ramp", "--grid"}, cmd_patterns);
+        return run_subcommand(rest, {"--size", "--out", "--ramp", "--grid"},
+                              {kSizeFlag, kRampFlag, kGridFlag}, cmd_patterns);
     if (step == "decode")
         return run_subcommand(rest,
                               {"--patterns", "--captures", "--out", "--exposure-ms",
                                "--black-threshold", "--white-threshold"},
+                              {kExposureFlag, kBlackThresholdFlag, kWhiteThresholdFlag},
                               cmd_decode);
     if (step == "invert")
-        return run_subcommand(rest, {"--calibration", "--bandwidth", "--max-gap"}, cmd_invert);
+        return run_subcommand(rest, {"--calibration", "--bandwidth", "--max-gap"},
+                              {kBandwidthFlag, kMaxGapFlag}, cmd_invert);
     if (step == "colour")
         return run_subcommand(
             rest, {"--patterns", "--captures", "--calibration", "--exposure-ms", "--model"},
-            cmd_colour);
+            {kExposureFlag}, cmd_colour);
     if (step == "capture")
         return run_subcommand(rest,
                               {"--projector", "--hmd", "--vi", "--vivd", "--exposure-ms", "--out",
                                "--scene", "--angle", "--height", "--noise-floor"},
-                              cmd_capture);
+                              {kExposureFlag, kAngleFlag, kNoiseFloorFlag}, cmd_capture);
     if (step == "simulate")
         return run_subcommand(rest,
                               {"--scene", "--viewer", "--angle", "--height", "--scale", "--noise",
                                "--model", "--bandwidth", "--out"},
+                              {kAngleFlag, kScaleFlag, kNoiseFlag, kBandwidthFlag},
                               calibrate_simulate);
     std::fprintf(stderr, "hysar calibrate: unknown step '%s'\n\n%s", step.c_str(), kHelp);
     return 2;

@@ -64,16 +64,13 @@ Result<void> calibrate_simulate(const Flags& f) {
     HS_ASSIGN_OR_RETURN(scene::Scene s, load_scene(f));
     installation::Options io;
     io.viewer = f.get("--viewer", "");
-    HS_ASSIGN_OR_RETURN(io.angle_deg,
-                        parse_double("--angle", f.get("--angle", "0"), -scene::kMaxViewAngleDeg,
-                                     scene::kMaxViewAngleDeg));
+    HS_ASSIGN_OR_RETURN(io.angle_deg, parse_number(f, kAngleFlag, 0));
     io.height = f.get("--height", "");
-    HS_ASSIGN_OR_RETURN(io.scale, parse_double("--scale", f.get("--scale", "1")));
-    HS_ASSIGN_OR_RETURN(io.noise_dn, parse_double("--noise", f.get("--noise", "0.7")));
+    HS_ASSIGN_OR_RETURN(io.scale, parse_number(f, kScaleFlag, 1));
+    HS_ASSIGN_OR_RETURN(io.noise_dn, parse_number(f, kNoiseFlag, 0.7));
     installation::ChainOptions co;
     HS_ASSIGN_OR_RETURN(co.model, calib::parse_colour_model(f.get("--model", "curve")));
-    HS_ASSIGN_OR_RETURN(co.inverse.bandwidth,
-                        parse_double("--bandwidth", f.get("--bandwidth", "0")));
+    HS_ASSIGN_OR_RETURN(co.inverse.bandwidth, parse_number(f, kBandwidthFlag, 0));
 
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
     HS_ASSIGN_OR_RETURN(auto inst, installation::VirtualInstallation::create(*device, s, io));

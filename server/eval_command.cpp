@@ -1,9 +1,13 @@
 // `hysar eval`: paper eqs. (5)-(6) and Table 2, resolution (Sec. 4.3), the real-material
 // metrics of Sec. 5.2 on any captures, and the whole evaluation as a report.
+#include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <string_view>
+#include <system_error>
 
 #include <fmt/format.h>
 #include <glm/trigonometric.hpp>
@@ -60,12 +64,15 @@ Result<Flags> parse_flags(const std::vector<std::string>& args,
     return f;
 }
 
-int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                   const std::function<Result<void>(const Flags&)>& body,
-                   const std::vector<std::string>& switches) {
+namespace {
+
+int run_checked(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                const std::vector<std::string>& switches, const std::vector<NumericFlag>& numbers,
+                const std::function<Result<void>(const Flags&)>& body) {
     auto flags = parse_flags(args, with_value, switches);
-    if (!flags.ok()) {
-        log::error("{}", flags.error().message);
+    Result<void> usable = flags.ok() ? check_numbers(*flags, numbers) : flags.error();
+    if (!usable.ok()) {
+        log::error("{}", usable.error().message);
         return 2;
     }
     if (auto r = body(*flags); !r.ok()) {
@@ -75,24 +82,141 @@ int run_subcommand(const std::vector<std::string>& args, const std::vector<std::
     return 0;
 }
 
+enum class Reading { kNumber, kNotNumber, kNotFinite, kTooLarge };
+
+// `s` as a double: all of it, an optional leading '+', "nan" and "inf" read but not finite.
+Reading read_double(std::string_view s, double& v) {
+    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
+        s.remove_prefix(1);
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (s.empty() || end != s.data() + s.size() ||
+        (ec != std::errc() && ec != std::errc::result_out_of_range))
+        return Reading::kNotNumber;
+    if (ec == std::errc::result_out_of_range) {
+        // Too large, or too small to be told from 0 (strtod says which).
+        v = std::strtod(std::string(s).c_str(), nullptr);
+        return std::isinf(v) ? Reading::kTooLarge : Reading::kNumber;
+    }
+    return std::isfinite(v) ? Reading::kNumber : Reading::kNotFinite;
+}
+
+Error refused(const std::string& flag, const std::string& s, const char* why,
+              const std::string& range) {
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: '{}' {} {}", flag, s, why, range));
+}
+
+Result<std::pair<uint32_t, uint32_t>> parse_size_text(const NumericFlag& spec,
+                                                      const std::string& s) {
+    const size_t x = s.find('x');
+    auto side = [&](const std::string& t) {
+        return parse_integer(spec.flag, t, int64_t(spec.lo), int64_t(spec.hi));
+    };
+    if (x != std::string::npos) {
+        auto w = side(s.substr(0, x)), h = side(s.substr(x + 1));
+        if (w && h)
+            return std::pair{uint32_t(*w), uint32_t(*h)};
+    }
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: '{}' is not WIDTHxHEIGHT with each side a whole number in "
+                                  "[{}, {}]",
+                                  spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
+}
+
+}  // namespace
+
+int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                   const std::function<Result<void>(const Flags&)>& body,
+                   const std::vector<std::string>& switches) {
+    return run_checked(args, with_value, switches, {}, body);
+}
+
+int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                   const std::vector<NumericFlag>& numbers,
+                   const std::function<Result<void>(const Flags&)>& body) {
+    return run_checked(args, with_value, {}, numbers, body);
+}
+
 Result<double> parse_double(const std::string& flag, const std::string& s) {
-    try {
-        size_t used = 0;
-        double v = std::stod(s, &used);
-        if (used == s.size() && std::isfinite(v))
+    double v = 0;
+    switch (read_double(s, v)) {
+        case Reading::kNumber:
             return v;
-    } catch (...) {
+        case Reading::kNotFinite:
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("{}: '{}' is not a finite number", flag, s));
+        case Reading::kTooLarge:
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("{}: '{}' is too large to be a number", flag, s));
+        case Reading::kNotNumber:
+            break;
     }
     return make_error(ErrorCode::kInvalidArgument,
                       fmt::format("{}: '{}' is not a number", flag, s));
 }
 
 Result<double> parse_double(const std::string& flag, const std::string& s, double lo, double hi) {
-    HS_ASSIGN_OR_RETURN(double v, parse_double(flag, s));
-    if (v < lo || v > hi)
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("{}: {} is out of range [{}, {}]", flag, s, lo, hi));
+    const std::string range = fmt::format("[{:g}, {:g}]", lo, hi);
+    double v = 0;
+    switch (read_double(s, v)) {
+        case Reading::kNumber:
+            if (v >= lo && v <= hi)
+                return v;
+            return refused(flag, s, "is outside", range);
+        case Reading::kNotFinite:
+            return refused(flag, s, "is not a finite number in", range);
+        case Reading::kTooLarge:
+            return refused(flag, s, "is outside", range);
+        case Reading::kNotNumber:
+            break;
+    }
+    return refused(flag, s, "is not a number in", range);
+}
+
+Result<int64_t> parse_integer(const std::string& flag, const std::string& s, int64_t lo,
+                              int64_t hi) {
+    const std::string range = fmt::format("[{}, {}]", lo, hi);
+    std::string_view t = s;
+    if (t.size() > 1 && t[0] == '+' && t[1] != '-')
+        t.remove_prefix(1);
+    int64_t v = 0;
+    const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+    if (t.empty() || end != t.data() + t.size() ||
+        (ec != std::errc() && ec != std::errc::result_out_of_range))
+        return refused(flag, s, "is not a whole number in", range);
+    if (ec == std::errc::result_out_of_range || v < lo || v > hi)
+        return refused(flag, s, "is outside", range);
     return v;
+}
+
+Result<double> parse_number(const Flags& f, const NumericFlag& spec, double def) {
+    if (!f.has(spec.flag))
+        return def;
+    const std::string s = f.get(spec.flag, "");
+    if (spec.kind == NumericFlag::kWhole) {
+        HS_ASSIGN_OR_RETURN(int64_t v,
+                            parse_integer(spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
+        return double(v);
+    }
+    return parse_double(spec.flag, s, spec.lo, spec.hi);
+}
+
+Result<std::pair<uint32_t, uint32_t>> parse_size(const Flags& f, const NumericFlag& spec) {
+    return parse_size_text(spec, f.get(spec.flag, ""));
+}
+
+Result<void> check_numbers(const Flags& f, const std::vector<NumericFlag>& specs) {
+    for (const auto& spec : specs)
+        for (const auto& s : f.all(spec.flag)) {
+            if (spec.kind == NumericFlag::kSize) {
+                HS_TRY(parse_size_text(spec, s));
+            } else if (spec.kind == NumericFlag::kWhole) {
+                HS_TRY(parse_integer(spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
+            } else {
+                HS_TRY(parse_double(spec.flag, s, spec.lo, spec.hi));
+            }
+        }
+    return {};
 }
 
 Result<optics::PaperOptics> load_params(const Flags& f) {
@@ -318,7 +442,9 @@ const char* kEvalHelp =
     "              Sec. 5.2: VD areas, MR1, MR2, the matching map, Lab differences (Delta E\n"
     "              1976 and CIEDE2000) over the reference's VD area\n"
     "  report      [--scene FILE] [--params FILE] [--viewer NAME] [--out DIR]\n"
-    "              all of the above on the simulated installation: out/report/index.html\n";
+    "              all of the above on the simulated installation: out/report/index.html\n"
+    "\n"
+    "--threshold: 8-bit code values in [0, 255]; every numeric flag's range: docs/LIMITS.md\n";
 
 Result<void> eval_optics(const Flags& flags) {
     HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
@@ -351,6 +477,9 @@ Result<void> eval_resolution(const Flags& flags) {
     return {};
 }
 
+// A difference in 8-bit code values (docs/LIMITS.md).
+constexpr NumericFlag kThresholdFlag{"--threshold", 0, 255};
+
 Result<void> eval_compare(const Flags& f) {
     if (!f.has("--reference") || !f.has("--reference-vi") || !f.has("--capture"))
         return make_error(ErrorCode::kInvalidArgument,
@@ -359,7 +488,7 @@ Result<void> eval_compare(const Flags& f) {
     if (enc != "linear" && enc != "srgb")
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("--encoding: '{}' is not linear or srgb", enc));
-    HS_ASSIGN_OR_RETURN(double thr, parse_double("--threshold", f.get("--threshold", "20")));
+    HS_ASSIGN_OR_RETURN(double thr, parse_number(f, kThresholdFlag, 20));
     HS_ASSIGN_OR_RETURN(auto ref, read_png(f.get("--reference", "")));
     HS_ASSIGN_OR_RETURN(auto ref_vi, read_png(f.get("--reference-vi", "")));
     const fs::path out = f.get("--out", "out/compare");
@@ -406,7 +535,7 @@ int run_eval(const std::vector<std::string>& args) {
         return run_subcommand(rest,
                               {"--reference", "--reference-vi", "--capture", "--name", "--encoding",
                                "--threshold", "--out"},
-                              eval_compare);
+                              {kThresholdFlag}, eval_compare);
     if (args[0] == "report")
         return run_subcommand(rest, {"--scene", "--params", "--viewer", "--out"}, eval_report);
     std::fprintf(stderr, "hysar eval: unknown subcommand '%s'\n\n%s", args[0].c_str(), kEvalHelp);

@@ -1,11 +1,13 @@
 // Shared pieces of the `hysar eval` subcommands: flags, tables, CSV and the figures' sections.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/result.hpp"
@@ -26,13 +28,39 @@ struct Flags {
 Result<Flags> parse_flags(const std::vector<std::string>& args,
                           const std::vector<std::string>& with_value,
                           const std::vector<std::string>& switches = {});
+// All of `text` as a finite number: an optional leading '+', no spaces, no "nan" or "inf",
+// nothing after the number; locale-independent.
 Result<double> parse_double(const std::string& flag, const std::string& text);
-// The same, refused outside [lo, hi] with a message naming the flag, the value and the range.
+// The same, refused outside [lo, hi]. Every refusal names the flag, the value and the range:
+// "--white: '1e300' is outside [1e-06, 1e+06]", "--white: 'abc' is not a number in [...]".
 Result<double> parse_double(const std::string& flag, const std::string& text, double lo, double hi);
-// Parses the flags (exit code 2 on a bad one), runs `body`, logs its error (exit code 1).
+// A whole number in [lo, hi] (no exponent, no fraction), refused as parse_double does.
+Result<int64_t> parse_integer(const std::string& flag, const std::string& text, int64_t lo,
+                              int64_t hi);
+
+// A numeric flag and its range, as docs/LIMITS.md lists it: a number in [lo, hi], a whole
+// number in [lo, hi], or WIDTHxHEIGHT with each side a whole number in [lo, hi].
+struct NumericFlag {
+    enum Kind { kNumber, kWhole, kSize };
+    const char* flag;
+    double lo, hi;
+    Kind kind = kNumber;
+};
+// `spec.flag`'s value, or `def` when the flag is absent, checked against the spec's range.
+Result<double> parse_number(const Flags& flags, const NumericFlag& spec, double def);
+// A kSize flag's value as (width, height).
+Result<std::pair<uint32_t, uint32_t>> parse_size(const Flags& flags, const NumericFlag& spec);
+// Checks every flag of `specs` that is given.
+Result<void> check_numbers(const Flags& flags, const std::vector<NumericFlag>& specs);
+
+// Parses the flags and checks the numeric ones (exit code 2 on a bad one), runs `body`, logs
+// its error (exit code 1).
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
                    const std::function<Result<void>(const Flags&)>& body,
                    const std::vector<std::string>& switches = {});
+int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
+                   const std::vector<NumericFlag>& numbers,
+                   const std::function<Result<void>(const Flags&)>& body);
 
 Result<optics::PaperOptics> load_params(const Flags& flags);
 Result<scene::Scene> load_scene(const Flags& flags);

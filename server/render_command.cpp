@@ -38,12 +38,14 @@ const char* kRenderHelp =
     "  --out DIR        output folder (default: out/render)\n"
     "  --angles LIST    view angles in degrees around the prop, comma separated\n"
     "                   (default: the scene's viewing.angles_deg, -40,-20,0,20,40)\n"
-    "  --heights LIST   eye heights: names from viewing.heights_m (H, M, L) or metres\n"
-    "                   (default: the scene's viewing.default_height)\n"
+    "  --heights LIST   eye heights: names from viewing.heights_m (H, M, L) or metres in\n"
+    "                   [-10000, 10000]; an item that starts with a digit, a sign or a point\n"
+    "                   is a number (default: the scene's viewing.default_height)\n"
     "  --model LIST     specular presets or model names: phong, blinn-phong, ward, ward-aniso,\n"
     "                   kajiya-kay, none (default: every preset of the scene, Fig. 7 order)\n"
     "  --viewer NAME    headset profile (default: the scene's first viewer)\n"
-    "  --white W        linear radiance drawn as white in PNG files (default 1.0)\n"
+    "  --white W        linear radiance drawn as white in PNG files, in [1e-06, 1e+06]\n"
+    "                   (default 1.0)\n"
     "  --no-reference   skip the double-precision reference comparison\n"
     "  --no-exr         write no float EXR files\n"
     "\n"
@@ -76,6 +78,18 @@ std::vector<std::string> split(const std::string& s) {
     return out;
 }
 
+// A --heights item written as a number (a digit, a sign or a point first, or nan, inf) is a
+// height in metres, checked as the flags are read; any other item names a height of the scene.
+bool written_as_number(const std::string& s) {
+    if (s.empty())
+        return false;
+    if ((s[0] >= '0' && s[0] <= '9') || s[0] == '+' || s[0] == '-' || s[0] == '.')
+        return true;
+    std::string head;
+    for (char c : s.substr(0, 3)) head += char(c | 0x20);  // ASCII lower case
+    return head == "nan" || head == "inf";
+}
+
 Result<Options> parse(const std::vector<std::string>& args) {
     Options o;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -103,6 +117,9 @@ Result<Options> parse(const std::vector<std::string>& args) {
         } else if (a == "--heights") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             o.heights = split(v);
+            for (const auto& h : o.heights)
+                if (written_as_number(h))
+                    HS_TRY(parse_double(a, h, -scene::kMaxViewHeightM, scene::kMaxViewHeightM));
         } else if (a == "--model") {
             HS_ASSIGN_OR_RETURN(auto v, value());
             o.models = split(v);
@@ -130,9 +147,7 @@ Result<Options> parse(const std::vector<std::string>& args) {
             o.device = *p;
         } else if (a == "--white") {
             HS_ASSIGN_OR_RETURN(auto v, value());
-            HS_ASSIGN_OR_RETURN(double w, parse_double(a, v));
-            if (!(w > 0))
-                return make_error(ErrorCode::kInvalidArgument, "--white must be > 0");
+            HS_ASSIGN_OR_RETURN(double w, parse_double(a, v, 1e-6, 1e6));
             o.white = float(w);
         } else if (a == "--no-reference")
             o.reference = false;

@@ -39,7 +39,7 @@ const char* kServeHelp =
     "                           file's folder, or the working directory)\n"
     "  --stats-file FILE        write the final stats JSON here on shutdown\n"
     "\n"
-    "limits (docs/OPERATIONS.md):\n"
+    "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
     "  --handshake-timeout-ms MS (5000)  --idle-timeout-ms MS (120000, 0: never)\n"
     "  --frame-timeout-ms MS (10000)     --max-eye-pixels N (8388608)\n"
@@ -93,16 +93,12 @@ Result<std::string> read_token_file(const std::string& path, const char* flag) {
     return token;
 }
 
-// A whole number in [lo, hi] for `flag`.
+// A whole number in [lo, hi] for `flag` (docs/LIMITS.md).
 Result<uint64_t> parse_count(const Flags& f, const std::string& flag, uint64_t def, uint64_t lo,
                              uint64_t hi) {
     if (!f.has(flag))
         return def;
-    HS_ASSIGN_OR_RETURN(double v, parse_double(flag, f.get(flag, "")));
-    if (v != std::floor(v) || v < double(lo) || v > double(hi))
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("{}: '{}' is not a whole number in [{}, {}]", flag,
-                                      f.get(flag, ""), lo, hi));
+    HS_ASSIGN_OR_RETURN(int64_t v, parse_integer(flag, f.get(flag, ""), int64_t(lo), int64_t(hi)));
     return uint64_t(v);
 }
 
@@ -140,16 +136,17 @@ Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
 }
 
 Result<void> parse_listen(const std::string& v, stream::ServerCreateInfo& info) {
+    // Port 0: any free port (the server prints the one it got).
     const auto colon = v.rfind(':');
-    int port = -1;
-    if (colon != std::string::npos && colon + 1 < v.size() && colon + 6 >= v.size() &&
-        v.find_first_not_of("0123456789", colon + 1) == std::string::npos)
-        port = std::stoi(v.substr(colon + 1));
-    if (colon == std::string::npos || port < 0 || port > 65535)
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("--listen: expected HOST:PORT, got '{}'", v));
+    Result<int64_t> port = make_error(ErrorCode::kInvalidArgument, "no port");
+    if (colon != std::string::npos)
+        port = parse_integer("--listen", v.substr(colon + 1), 0, 65535);
+    if (!port)
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("--listen: '{}' is not HOST:PORT with a port in [0, 65535]", v));
     info.host = v.substr(0, colon);
-    info.port = uint16_t(port);
+    info.port = uint16_t(*port);
     return {};
 }
 
@@ -187,7 +184,8 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--max-projector-pixels",
                                      "--max-viewer-hz",
                                      "--max-batch-viewers",
-                                     "--encoder-threads"});
+                                     "--encoder-threads",
+                                     "--tile-codec"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
