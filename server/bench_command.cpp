@@ -20,6 +20,7 @@
 
 #include "bench/accuracy.hpp"
 #include "bench/serve_bench.hpp"
+#include "bench/stability.hpp"
 #include "codec/layer_codec.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
@@ -37,6 +38,7 @@ const char* kBenchHelp =
     "usage: hysar bench encoding [--repeats N] [--json FILE]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
+    "       hysar bench stability [--out DIR]\n"
     "\n"
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
     "             pixel, point against area lights, HDR format, layer encoding) against the\n"
@@ -48,7 +50,12 @@ const char* kBenchHelp =
     "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n"
     "  serve      the served path (an in-process server, N headsets on loopback) against\n"
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
-    "             writes DIR/bench-serve.json and DIR/bench-serve.png (default out/bench-serve)\n";
+    "             writes DIR/bench-serve.json and DIR/bench-serve.png (default out/bench-serve)\n"
+    "  stability  the hard-case table (docs/STABILITY.md): per formula and regime, the GPU's\n"
+    "             shading code against the double reference, max error in relative terms and\n"
+    "             ulps for fp32 and the half-float layer, with each regime's tolerance; writes\n"
+    "             DIR/stability.csv and DIR/stability.md (default out/stability); exit 1 when a\n"
+    "             case is outside its tolerance\n";
 
 const char* kServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
@@ -267,6 +274,47 @@ int bench_encoding(int repeats, const std::string& json_path) {
     return 0;
 }
 
+int bench_stability(const std::string& out_dir) {
+    auto device = gpu::Device::create(gpu::device_info_from_environment());
+    if (!device) {
+        std::fprintf(stderr, "hysar bench: %s\n", device.error().message.c_str());
+        return 1;
+    }
+    const auto regimes = bench::stability_regimes(device.value()->float64());
+    auto rows = bench::run_stability(*device.value(), regimes);
+    if (!rows) {
+        std::fprintf(stderr, "hysar bench: %s\n", rows.error().message.c_str());
+        return 1;
+    }
+    const std::filesystem::path dir(out_dir);
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    std::ofstream(dir / "stability.csv") << bench::stability_csv(rows.value());
+    std::ofstream(dir / "stability.md")
+        << "Device: " << device.value()->name()
+        << (device.value()->float64() ? " (shaderFloat64)" : " (fp32 shaders)") << "\n\n"
+        << bench::stability_table(rows.value(), true);
+    if (ec || !std::ifstream(dir / "stability.md")) {
+        std::fprintf(stderr, "hysar bench: cannot write %s\n", (dir / "stability.md").c_str());
+        return 1;
+    }
+    size_t cases = 0, failures = 0;
+    for (const auto& r : rows.value()) {
+        cases += r.cases;
+        failures += r.failures;
+    }
+    std::printf("device: %s%s\n%s\n%zu cases in %zu rows, %zu outside tolerance\nwrote %s and %s\n",
+                device.value()->name().c_str(),
+                device.value()->float64() ? " (shaderFloat64)" : " (fp32 shaders)",
+                bench::stability_table(rows.value(), false).c_str(), cases, rows->size(), failures,
+                (dir / "stability.csv").c_str(), (dir / "stability.md").c_str());
+    for (const auto& r : rows.value())
+        if (r.failures)
+            std::printf("  %s, %s: %zu of %zu outside tolerance; %s\n", r.formula.c_str(),
+                        r.regime.c_str(), r.failures, r.cases, r.first_failure.c_str());
+    return failures ? 1 : 0;
+}
+
 int bench_accuracy(const std::string& scene_path, const std::string& out_dir, bool quick,
                    int repeats) {
     scene::Scene s = scene::default_scene();
@@ -337,6 +385,19 @@ int run_bench(const std::vector<std::string>& args) {
             return 0;
         }
         return bench::run_serve_bench(o);
+    }
+    if (args[0] == "stability") {
+        std::string out_dir = "out/stability";
+        for (size_t i = 1; i < args.size(); ++i) {
+            if (args[i] == "--out" && i + 1 < args.size()) {
+                out_dir = args[++i];
+            } else {
+                std::fprintf(stderr, "hysar bench stability: unknown option '%s'\n\n%s",
+                             args[i].c_str(), kBenchHelp);
+                return 2;
+            }
+        }
+        return bench_stability(out_dir);
     }
     int repeats = args[0] == "accuracy" ? 7 : 5;
     bool quick = false;

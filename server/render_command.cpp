@@ -33,6 +33,7 @@ const char* kRenderHelp =
     "usage: hysar render [--scene FILE] [--out DIR] [--angles LIST] [--heights LIST]\n"
     "                    [--model LIST] [--viewer NAME] [--format rgba16f|rgba32f|rgba8]\n"
     "                    [--device auto|cpu|gpu] [--white W] [--no-reference] [--no-exr]\n"
+    "                    [--check]\n"
     "\n"
     "  --scene FILE     scene JSON (default: the embedded experiment-1 room)\n"
     "  --out DIR        output folder (default: out/render)\n"
@@ -48,10 +49,12 @@ const char* kRenderHelp =
     "                   (default 1.0)\n"
     "  --no-reference   skip the double-precision reference comparison\n"
     "  --no-exr         write no float EXR files\n"
+    "  --check          exit with status 3 when an image disagrees with the reference beyond the\n"
+    "                   stated tolerance (docs/SHADING.md, \"Agreement with the reference\")\n"
     "\n"
     "writes DIR/projector.png (+.exr), DIR/vd/<model>_<angle>_<height>_<eye>.png (+.exr),\n"
     "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the "
-    "reference).\n";
+    "reference,\nand whether that is within the stated tolerance).\n";
 
 struct Options {
     std::optional<fs::path> scene;
@@ -66,6 +69,7 @@ struct Options {
     float white = 1.0f;
     bool reference = true;
     bool exr = true;
+    bool check = false;
 };
 
 std::vector<std::string> split(const std::string& s) {
@@ -153,6 +157,8 @@ Result<Options> parse(const std::vector<std::string>& args) {
             o.reference = false;
         else if (a == "--no-exr")
             o.exr = false;
+        else if (a == "--check")
+            o.check = true;
         else
             return make_error(ErrorCode::kInvalidArgument, fmt::format("unknown option '{}'", a));
     }
@@ -207,14 +213,28 @@ json stats_json(const shading::ErrorStats& e) {
                 {"reference_peak", e.reference_peak},
                 {"pixels", e.pixels},
                 {"interior_pixels", e.interior_pixels},
-                {"non_finite", e.non_finite}};
+                {"non_finite", e.non_finite},
+                {"negative", e.negative},
+                {"saturated", e.saturated}};
 }
 
-// The interior of a comparison excludes silhouette pixels, where the tessellated mesh and the
-// exact hemisphere cover different pixels.
-constexpr double kInteriorMinNdotV = 0.1;
+// An image's comparison with the reference, and whether it is within the stated tolerance
+// (the interior excludes silhouette pixels, where the tessellated mesh and the exact hemisphere
+// cover different pixels).
+json error_json(const shading::ErrorStats& e, std::vector<std::string>& disagreements,
+                const std::string& file) {
+    json j = stats_json(e);
+    const std::string d = shading::disagreement(e);
+    j["within_tolerance"] = d.empty();
+    if (!d.empty()) {
+        j["disagreement"] = d;
+        disagreements.push_back(file + ": " + d);
+    }
+    return j;
+}
 
-Result<void> run(const Options& o) {
+// Returns how many images disagree with the reference beyond the stated tolerance.
+Result<size_t> run(const Options& o) {
     const auto t_start = std::chrono::steady_clock::now();
     scene::Scene s;
     if (o.scene) {
@@ -266,8 +286,13 @@ Result<void> run(const Options& o) {
     report["viewer"] = viewer->name;
     report["white"] = o.white;
     report["tone_map"] = "png = srgb_oetf(clamp(L / white, 0, 1)); docs/SHADING.md";
-    report["interior_min_n_dot_v"] = kInteriorMinNdotV;
+    report["interior_min_n_dot_v"] = shading::kInteriorMinNdotV;
+    const shading::Tolerance tol;
+    report["tolerance"] = {
+        {"interior_max", fmt::format("{} * peak + {}", tol.interior_max_rel, tol.interior_max_abs)},
+        {"rmse", fmt::format("{} * peak + {}", tol.rmse_rel, tol.rmse_abs)}};
     json images = json::array();
+    std::vector<std::string> disagreements;
 
     auto write_pair = [&](const fs::path& stem, const ImageRgba32f& img) -> Result<void> {
         HS_TRY(write_png(fs::path(stem).concat(".png"), tonemap_srgb8(img, o.white)));
@@ -288,7 +313,8 @@ Result<void> run(const Options& o) {
     if (o.reference) {
         auto ref = shading::reference_projector(s);
         if (ref)
-            pj["error"] = stats_json(shading::compare_images(proj.image, ref.value(), {}, 0.0));
+            pj["error"] = error_json(shading::compare_images(proj.image, ref.value(), {}, 0.0),
+                                     disagreements, "projector.png");
         else
             pj["error"] = ref.error().message;
     }
@@ -356,8 +382,8 @@ Result<void> run(const Options& o) {
                         auto ref = shading::reference_viewer(s, models[mi].spec, k, eyes[e], &ndv);
                         if (ref) {
                             auto st = shading::compare_images(vd.image, ref.value(), ndv,
-                                                              kInteriorMinNdotV);
-                            ij["error"] = stats_json(st);
+                                                              shading::kInteriorMinNdotV);
+                            ij["error"] = error_json(st, disagreements, "vd/" + stem + ".png");
                             err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}",
                                                    st.rmse, st.interior_rmse, st.max_abs);
                         } else {
@@ -386,13 +412,18 @@ Result<void> run(const Options& o) {
     report["pipelines_built"] = renderer->pipelines_built();
     report["total_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    report["disagreements"] = disagreements;
     std::ofstream(o.out / "render.json") << report.dump(2) << "\n";
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
                                                           device->validation_message_count()));
     std::printf("wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n",
                 o.out.c_str(), done, report["total_s"].get<double>());
-    return {};
+    if (o.reference)
+        std::printf("%zu of %zu images disagree with the reference beyond the stated tolerance\n",
+                    disagreements.size(), done + 1);
+    for (const auto& d : disagreements) std::printf("  %s\n", d.c_str());
+    return disagreements.size();
 }
 
 }  // namespace
@@ -412,6 +443,11 @@ int run_render(const std::vector<std::string>& args) {
     if (!r) {
         std::fprintf(stderr, "hysar render: %s\n", r.error().message.c_str());
         return 1;
+    }
+    if (opts->check && r.value() > 0) {
+        std::fprintf(stderr, "hysar render: %zu images disagree with the reference (--check)\n",
+                     r.value());
+        return 3;
     }
     return 0;
 }

@@ -153,6 +153,6 @@ void hs_light(vec4 position_or_direction, vec3 irradiance, vec3 p, vec3 n, float
     }
 }
 
-// Radiance as a half-float layer carries it: NaN as 0, clamped to the largest finite half
-// (65504) rather than Inf.
-vec3 hs_half_layer(vec3 sum) { return clamp(mix(sum, vec3(0.0), isnan(sum)), -65504.0, 65504.0); }
+// Radiance as a half-float layer carries it: NaN as 0, clamped to [0, 65504] (the largest
+// finite half rather than Inf; radiance is never negative, whatever reached the shader).
+vec3 hs_half_layer(vec3 sum) { return clamp(mix(sum, vec3(0.0), isnan(sum)), 0.0, 65504.0); }

@@ -4,6 +4,7 @@
 
 #include <glm/gtc/constants.hpp>
 
+#include "bench/stability.hpp"
 #include "gpu_fixture.hpp"
 #include "render/probe.hpp"
 #include "shading/brdf.hpp"
@@ -88,23 +89,8 @@ TEST_F(Probe, WardRoughnessDownToTenToTheMinusFour) {
 
 // The vectors as the GPU receives them (fp32), back in double: the reference is computed from
 // exactly the inputs the shader sees, so what remains is the shader's own arithmetic.
-render::ProbeCase as_float(const render::ProbeCase& c) {
-    // volatile: the optimiser may otherwise drop the double -> float -> double round trip.
-    auto f = [](dvec3 x) {
-        volatile float a = float(x.x), b = float(x.y), c = float(x.z);
-        return dvec3(a, b, c);
-    };
-    return {f(c.n), f(c.l), f(c.v), f(c.tangent_axis)};
-}
-
-// A rotation taking +z to a direction that is not near any axis (fixed seeds: reproducible).
-glm::dmat3 tilted_frame(uint32_t seed) {
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
-    dvec3 z = glm::normalize(dvec3(0.37 + 0.2 * u(rng), 0.61 + 0.2 * u(rng), 0.70 + 0.2 * u(rng)));
-    dvec3 x = glm::normalize(glm::cross(dvec3(u(rng), 1.0, u(rng)), z));
-    return glm::dmat3(x, glm::cross(z, x), z);
-}
+render::ProbeCase as_float(const render::ProbeCase& c) { return bench::as_gpu_inputs(c); }
+using bench::tilted_frame;
 
 // v rotated from the mirror direction of l by `offset` radians about the axis `axis_angle`
 // around it (in the local frame where n = +z), then everything turned by `frame`.
