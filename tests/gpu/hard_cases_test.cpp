@@ -1,6 +1,8 @@
 // Numerical hard cases through whole renders: finite output, and agreement with the reference
 // where the reference is finite.
 #include <cmath>
+#include <limits>
+#include <memory>
 
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
@@ -210,6 +212,63 @@ TEST_F(HardCases, SliverTrianglesRenderFinite) {
     EXPECT_EQ(count_non_finite(vd->image), 0u);
     EXPECT_EQ(count_non_finite(vi->image), 0u);
     EXPECT_GT(channel_sum(vi->image), 0.0);
+}
+
+// The default dome as a mesh prop, with `extra` triangles appended over vertices of its own.
+scene::Scene mesh_prop(const std::vector<glm::vec3>& extra_positions,
+                       const std::vector<uint32_t>& extra_indices) {
+    scene::Scene s = scene::default_scene();
+    s.prop.hemisphere.segments = 64;
+    s.prop.hemisphere.rings = 16;
+    scene::Mesh m = scene::tessellate_hemisphere(s.prop.hemisphere);
+    const uint32_t base = uint32_t(m.positions.size());
+    for (const auto& p : extra_positions) {
+        m.positions.push_back(p);
+        m.normals.push_back({0, 1, 0});
+        m.uvs.push_back({0, 0});
+        m.tangents.push_back({1, 0, 0});
+    }
+    for (uint32_t i : extra_indices) m.indices.push_back(i < 1000000 ? base + i : i);
+    s.prop.kind = scene::Prop::Kind::kGltf;
+    s.prop.gltf_mesh = std::make_shared<const scene::Mesh>(std::move(m));
+    return s;
+}
+
+TEST_F(HardCases, DegenerateAndZeroAreaTrianglesChangeNothing) {
+    // Repeated indices, three collinear points, a 1e-20 m^2 triangle (below the 1e-14 m^2 floor), a
+    // NaN vertex, an index past the end: each dropped when the mesh is built; the image is the
+    // clean mesh's, bit for bit.
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    const std::vector<glm::vec3> pts = {{0.0f, 0.8f, 0.0f},  {0.1f, 0.8f, 0.0f},
+                                        {0.2f, 0.8f, 0.0f},  {0.0f, 0.8f, 2e-19f},
+                                        {0.0f, 0.8f, 0.05f}, {nan, 0.8f, 0.0f}};
+    const std::vector<uint32_t> bad = {0, 0, 1, 1, 1, 1, 0, 1, 2, 0, 3, 1, 5, 0, 4, 0, 4, 4000000};
+    scene::Scene clean = mesh_prop({}, {}), dirty = mesh_prop(pts, bad);
+    auto rc = make_renderer(clean);
+    auto rd = make_renderer(dirty);
+    ASSERT_TRUE(rc && rd);
+    EXPECT_EQ(rd->mesh().dropped_triangles, bad.size() / 3);
+    const auto k = small_eye(4);
+    for (const char* preset : {"phong", "ward-aniso"}) {
+        auto a = rc->render_eye(clean.specular_presets.at(preset), k, front_eye());
+        auto b = rd->render_eye(dirty.specular_presets.at(preset), k, front_eye());
+        ASSERT_TRUE(a.ok() && b.ok());
+        EXPECT_EQ(count_non_finite(b->image), 0u);
+        EXPECT_GT(channel_sum(b->image), 0.0) << preset;
+        EXPECT_EQ(a->image.pixels, b->image.pixels) << preset;
+    }
+    auto pa = rc->render_projector(), pb = rd->render_projector();
+    ASSERT_TRUE(pa.ok() && pb.ok());
+    EXPECT_EQ(pa->image.pixels, pb->image.pixels);
+    // Only degenerate triangles: refused with a message, not rendered as nothing.
+    scene::Scene none = mesh_prop(pts, bad);
+    scene::Mesh only = *none.prop.gltf_mesh;
+    only.indices.assign(only.indices.end() - bad.size(), only.indices.end());
+    none.prop.gltf_mesh = std::make_shared<const scene::Mesh>(std::move(only));
+    auto r = render::Renderer::create(device(), none, {});
+    ASSERT_FALSE(r.ok());
+    EXPECT_NE(r.error().message.find("no non-degenerate triangle"), std::string::npos)
+        << r.error().message;
 }
 
 TEST_F(HardCases, ValidationMessagesAreCaught) {
