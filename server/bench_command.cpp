@@ -38,7 +38,7 @@ const char* kBenchHelp =
     "usage: hysar bench encoding [--repeats N] [--json FILE]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
-    "       hysar bench stability [--out DIR]\n"
+    "       hysar bench stability [--out DIR] [--no-float64]\n"
     "\n"
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
     "             pixel, point against area lights, HDR format, layer encoding) against the\n"
@@ -55,7 +55,8 @@ const char* kBenchHelp =
     "             shading code against the double reference, max error in relative terms and\n"
     "             ulps for fp32 and the half-float layer, with each regime's tolerance; writes\n"
     "             DIR/stability.csv and DIR/stability.md (default out/stability); exit 1 when a\n"
-    "             case is outside its tolerance\n";
+    "             case is outside its tolerance. --no-float64: the shaders a device without\n"
+    "             shaderFloat64 runs\n";
 
 const char* kServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
@@ -274,8 +275,10 @@ int bench_encoding(int repeats, const std::string& json_path) {
     return 0;
 }
 
-int bench_stability(const std::string& out_dir) {
-    auto device = gpu::Device::create(gpu::device_info_from_environment());
+int bench_stability(const std::string& out_dir, bool float64) {
+    gpu::DeviceCreateInfo info = gpu::device_info_from_environment();
+    info.float64 = float64;
+    auto device = gpu::Device::create(info);
     if (!device) {
         std::fprintf(stderr, "hysar bench: %s\n", device.error().message.c_str());
         return 1;
@@ -388,16 +391,19 @@ int run_bench(const std::vector<std::string>& args) {
     }
     if (args[0] == "stability") {
         std::string out_dir = "out/stability";
+        bool float64 = true;
         for (size_t i = 1; i < args.size(); ++i) {
             if (args[i] == "--out" && i + 1 < args.size()) {
                 out_dir = args[++i];
+            } else if (args[i] == "--no-float64") {
+                float64 = false;
             } else {
                 std::fprintf(stderr, "hysar bench stability: unknown option '%s'\n\n%s",
                              args[i].c_str(), kBenchHelp);
                 return 2;
             }
         }
-        return bench_stability(out_dir);
+        return bench_stability(out_dir, float64);
     }
     int repeats = args[0] == "accuracy" ? 7 : 5;
     bool quick = false;
