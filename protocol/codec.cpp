@@ -2,8 +2,11 @@
 // descriptors (schema.hpp, from messages.def); nothing here names a message's fields.
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <string>
 #include <type_traits>
+#include <utility>
 
 #include "protocol/protocol.hpp"
 #include "protocol/schema.hpp"
@@ -567,37 +570,56 @@ std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, 
 
 // ---- Semantic checks ---------------------------------------------------------------------------
 
+namespace {
+std::string number(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.9g", v);
+    return b;
+}
+}  // namespace
+
 std::optional<std::string> validate_pose(const Pose& p) {
-    for (double d : p.position_m)
-        if (!std::isfinite(d))
-            return "pose position has a non-finite component";
+    static const char* const kAxes[] = {"x", "y", "z"};
+    static const char* const kParts[] = {"w", "x", "y", "z"};
+    for (int i = 0; i < 3; ++i)
+        if (!std::isfinite(p.position_m[i]))
+            return std::string("pose position_m.") + kAxes[i] + " = " + number(p.position_m[i]) +
+                   " is not a finite number (metres, within 1e4 of the origin)";
     double n2 = 0;
-    for (double d : p.orientation_wxyz) {
+    for (int i = 0; i < 4; ++i) {
+        const double d = p.orientation_wxyz[i];
         if (!std::isfinite(d))
-            return "pose quaternion has a non-finite component";
+            return std::string("pose quaternion has a non-finite component: orientation_wxyz.") +
+                   kParts[i] + " = " + number(d);
         n2 += d * d;
     }
     if (std::abs(std::sqrt(n2) - 1.0) > kUnitQuaternionTolerance)
-        return "pose quaternion is not unit length (norm " + std::to_string(std::sqrt(n2)) + ")";
-    for (double d : p.position_m)
-        if (std::abs(d) > 1e4)
-            return "pose position is more than 10 km from the origin";
+        return "pose quaternion is not unit length (norm " + number(std::sqrt(n2)) +
+               ", allowed 1 +- " + number(kUnitQuaternionTolerance) + ")";
+    for (int i = 0; i < 3; ++i)
+        if (std::abs(p.position_m[i]) > 1e4)
+            return std::string("pose position_m.") + kAxes[i] + " = " + number(p.position_m[i]) +
+                   " m is outside [-1e4, 1e4] (more than 10 km from the origin)";
     return std::nullopt;
 }
 
 std::optional<std::string> validate_display(const RegisterDisplay& d) {
     if (d.eye_width < 1 || d.eye_height < 1 || d.eye_width > kMaxEyePixels ||
         d.eye_height > kMaxEyePixels)
-        return "eye resolution " + std::to_string(d.eye_width) + "x" +
+        return "eye resolution eye_width x eye_height = " + std::to_string(d.eye_width) + "x" +
                std::to_string(d.eye_height) + " is outside 1..8192";
-    for (double v : {d.fx, d.fy})
+    const std::pair<const char*, double> focal[] = {{"fx", d.fx}, {"fy", d.fy}};
+    for (const auto& [name, v] : focal)
         if (!std::isfinite(v) || v <= 0 || v > 1e6)
-            return "focal length must be finite and in (0, 1e6] pixels";
-    for (double v : {d.cx, d.cy})
+            return std::string(name) + " = " + number(v) +
+                   ": focal length must be finite and in (0, 1e6] pixels";
+    const std::pair<const char*, double> centre[] = {{"cx", d.cx}, {"cy", d.cy}};
+    for (const auto& [name, v] : centre)
         if (!std::isfinite(v) || std::abs(v) > 1e5)
-            return "principal point must be finite and within 1e5 pixels";
+            return std::string(name) + " = " + number(v) +
+                   ": principal point must be finite and within [-1e5, 1e5] pixels";
     if (!std::isfinite(d.ipd_m) || d.ipd_m < 0 || d.ipd_m > 0.2)
-        return "ipd_m must lie in [0, 0.2]";
+        return "ipd_m = " + number(d.ipd_m) + " must lie in [0, 0.2] metres";
     return std::nullopt;
 }
 

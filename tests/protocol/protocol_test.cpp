@@ -588,6 +588,16 @@ TEST(Protocol, PoseValidation) {
     p.orientation_wxyz = {1, 0, 0, 0};
     p.position_m = {0, NAN, 0};
     EXPECT_TRUE(validate_pose(p));
+    // Each message names the field, the value and the range.
+    EXPECT_NE(validate_pose(p)->find("position_m.y = nan"), std::string::npos) << *validate_pose(p);
+    p.position_m = {0, 0, -2e4};
+    EXPECT_NE(validate_pose(p)->find("position_m.z = -20000 m is outside [-1e4, 1e4]"),
+              std::string::npos)
+        << *validate_pose(p);
+    p.position_m = {0, 1, 0};
+    p.orientation_wxyz = {1, 0, INFINITY, 0};
+    EXPECT_NE(validate_pose(p)->find("orientation_wxyz.y = inf"), std::string::npos)
+        << *validate_pose(p);
 }
 
 TEST(Protocol, DisplayValidation) {
@@ -602,9 +612,15 @@ TEST(Protocol, DisplayValidation) {
     d.eye_width = 1268;
     d.fx = NAN;
     EXPECT_TRUE(validate_display(d));
+    EXPECT_NE(validate_display(d)->find("fx = nan"), std::string::npos) << *validate_display(d);
     d.fx = 2366;
+    d.cy = 1e300;
+    EXPECT_NE(validate_display(d)->find("cy = 1e+300"), std::string::npos) << *validate_display(d);
+    EXPECT_NE(validate_display(d)->find("[-1e5, 1e5]"), std::string::npos);
+    d.cy = 359.5;
     d.ipd_m = -1;
-    EXPECT_TRUE(validate_display(d));
+    EXPECT_NE(validate_display(d)->find("ipd_m = -1 must lie in [0, 0.2]"), std::string::npos)
+        << *validate_display(d);
 }
 
 namespace {
