@@ -1,12 +1,16 @@
 // hysar-hmd: a headset client. Registers a display profile, plays a pose trajectory (the
-// paper's view angles, an orbit, or a CSV of timestamped poses), writes the received layers.
+// paper's view angles, an orbit, or a CSV of timestamped poses) or follows live poses from a
+// tracker (standard input or UDP), writes the received layers.
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <thread>
 
 #include <nlohmann/json.hpp>
@@ -14,6 +18,7 @@
 #include "clients/args.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
+#include "clients/pose_input.hpp"
 #include "clients/window.hpp"
 
 using namespace hs;
@@ -22,7 +27,8 @@ namespace proto = hs::protocol;
 
 static const char* kUsage =
     "usage: hysar-hmd [--connect ADDR] (--token T | --token-file F) [--profile FILE] [--scale S]\n"
-    "                 [--angles LIST | --orbit SECONDS | --csv FILE] [--distance M] [--height M]\n"
+    "                 [--angles LIST | --orbit SECONDS | --csv FILE | --poses SRC]\n"
+    "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
     "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
     "                 [--name NAME] [--out DIR] [--window]\n"
     "                 [--summary FILE]\n"
@@ -33,7 +39,15 @@ static const char* kUsage =
     "  --angles LIST    view angles in degrees around the target (default -40,-20,0,20,40)\n"
     "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous mode)\n"
     "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
-    "  --out DIR        where layers are written as PNG (default out/hmd)\n"
+    "  --poses SRC      live poses from a tracker: '-' (standard input) or udp:[HOST:]PORT\n"
+    "                   (HOST 127.0.0.1 unless given), lines 't_s,x,y,z,qw,qx,qy,qz[,frame_id]'\n"
+    "                   (clients/pose_input.hpp); each new pose is sent at once, bad lines are\n"
+    "                   reported and skipped; runs until the input ends, --frames, or a signal\n"
+    "  --frames N       with --poses: stop after N layer pairs; 0 (default) until stopped\n"
+    "  --stale-ms MS    with --poses: report the source stale after MS without a pose\n"
+    "                   (10..600000, default 500)\n"
+    "  --out DIR        where layers are written as PNG (default out/hmd; with --orbit, --csv\n"
+    "                   or --poses, only when given): NAME_LABEL_left.png, _right.png\n"
     "  --window         show the latest layers in a window, left and right eye side by side\n"
     "  --summary FILE   also write the run's figures as JSON\n"
     "\n"
@@ -50,11 +64,79 @@ struct Step {
     std::string label;
 };
 
+std::atomic<bool> g_stop{false};
+
+// --poses: sends each new pose from `source` at once (continuous mode: the server renders the
+// newest), hands every message to `handle` with the label of the pose it answers (frame_id, or
+// the line number), reports a stale source once per silence. Ends when standard input has ended
+// and the last pose was answered (or 3 s passed), after `frame_limit` layer pairs (0: never),
+// or on SIGINT/SIGTERM. Returns 0, or the exit status of a lost connection.
+template <typename Handle>
+int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit, double stale_ms,
+                      Handle& handle, const uint64_t& layers) {
+    using Clock = std::chrono::steady_clock;
+    std::signal(SIGINT, [](int) { g_stop = true; });
+    std::signal(SIGTERM, [](int) { g_stop = true; });
+    std::map<uint64_t, std::string> label_of;  // client_time_ns -> label, the newest 1024
+    uint64_t last_sent_ns = 0;
+    bool last_answered = true, stale = false;
+    auto last_pose = Clock::now(), last_activity = Clock::now();
+    std::fprintf(stderr, "hysar-hmd: following poses from %s\n", source.description().c_str());
+    while (!g_stop) {
+        if (auto p = source.take_latest()) {
+            if (stale)
+                std::fprintf(stderr, "hysar-hmd: %s: poses again\n", source.description().c_str());
+            stale = false;
+            last_pose = last_activity = Clock::now();
+            p->pose.client_time_ns = now_ns();
+            if (!conn.send(p->pose)) {
+                std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
+                return 1;
+            }
+            label_of[p->pose.client_time_ns] =
+                p->frame_id ? "f" + std::to_string(*p->frame_id) : "line" + std::to_string(p->line);
+            if (label_of.size() > 1024)
+                label_of.erase(label_of.begin());
+            last_sent_ns = p->pose.client_time_ns;
+            last_answered = false;
+        }
+        const double silent_ms =
+            std::chrono::duration<double, std::milli>(Clock::now() - last_pose).count();
+        if (!stale && !source.finished() && silent_ms > stale_ms) {
+            stale = true;
+            std::fprintf(stderr, "hysar-hmd: %s is stale: no pose for %.0f ms\n",
+                         source.description().c_str(), silent_ms);
+        }
+        auto r = conn.receive(10);
+        if (auto* e = std::get_if<std::string>(&r)) {
+            std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+            return 1;
+        }
+        if (auto* m = std::get_if<proto::Message>(&r)) {
+            last_activity = Clock::now();
+            std::string label;
+            if (auto* l = std::get_if<proto::VdLayer>(m)) {
+                auto it = label_of.find(l->pose_time_ns);
+                label = it != label_of.end() ? it->second : "t" + std::to_string(l->frame_id);
+                if (l->eye == 1 && l->pose_time_ns == last_sent_ns)
+                    last_answered = true;
+            }
+            handle(*m, label);
+            if (frame_limit > 0 && int64_t(layers / 2) >= frame_limit)
+                break;
+        }
+        if (source.finished() &&
+            (last_answered || Clock::now() - last_activity > std::chrono::seconds(3)))
+            break;
+    }
+    return 0;
+}
+
 int hmd_main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles",
                "--orbit", "--csv", "--distance", "--height", "--target", "--format", "--encoding",
-               "--name", "--out", "--summary"},
+               "--name", "--out", "--summary", "--poses", "--frames", "--stale-ms"},
               {"--window"}, kUsage);
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
@@ -80,8 +162,15 @@ int hmd_main(int argc, char** argv) {
         auto t = args.numbers("--target", "", -1000, 1000, 3, 3);
         target = {t[0], t[1], t[2]};
     }
-    if (int(args.has("--angles")) + int(args.has("--orbit")) + int(args.has("--csv")) > 1)
-        args.fail("give one of --angles, --orbit and --csv");
+    if (int(args.has("--angles")) + int(args.has("--orbit")) + int(args.has("--csv")) +
+            int(args.has("--poses")) >
+        1)
+        args.fail("give one of --angles, --orbit, --csv and --poses");
+    const bool live = args.has("--poses");
+    if (!live && (args.has("--frames") || args.has("--stale-ms")))
+        args.fail("--frames and --stale-ms go with --poses");
+    const int64_t frame_limit = args.integer("--frames", 0, 0, 1000000000);
+    const double stale_ms = args.number("--stale-ms", 500, 10, 600000);
     std::vector<Step> steps;
     if (args.has("--csv")) {
         auto poses = load_pose_csv(args.get("--csv", ""));
@@ -93,7 +182,7 @@ int hmd_main(int argc, char** argv) {
         const double secs = args.number("--orbit", 10, 0.1, 3600);
         for (double t = 0; t < secs; t += 0.05)
             steps.push_back({t, orbit_pose(360.0 * t / secs, distance, height, target, 0), ""});
-    } else {
+    } else if (!live) {
         for (double a : args.numbers("--angles", "-40,-20,0,20,40", -360, 360, 1, 3600)) {
             char label[32];
             std::snprintf(label, sizeof label, "%s%03d", a < 0 ? "m" : "p",
@@ -110,6 +199,13 @@ int hmd_main(int argc, char** argv) {
     const std::filesystem::path out = args.get("--out", "out/hmd");
     if (auto err = make_output_dir(out.string()))
         args.fail("--out " + *err);
+    std::unique_ptr<PoseSource> source;
+    if (live) {
+        auto src = PoseSource::open(args.get("--poses", ""));
+        if (auto* e = std::get_if<std::string>(&src))
+            args.fail("--poses " + *e);
+        source = std::move(std::get<std::unique_ptr<PoseSource>>(src));
+    }
     std::ofstream summary_file;
     if (args.has("--summary")) {
         const std::string path = args.output_path("--summary", "");
@@ -128,7 +224,8 @@ int hmd_main(int argc, char** argv) {
         std::fprintf(stderr, "hysar-hmd: %s: %s\n", address.c_str(), err->c_str());
         return 2;
     }
-    const bool stills = !args.has("--orbit") && !args.has("--csv");
+    const bool stills = !args.has("--orbit") && !args.has("--csv") && !live;
+    const bool write_layers = stills || args.has("--out");
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
     auto lost = [&]() {
         std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
@@ -170,7 +267,7 @@ int hmd_main(int argc, char** argv) {
             bytes += l->data.size();
             if (l->eye == 1)
                 latency_ms.push_back(double(int64_t(now_ns() - l->pose_time_ns)) * 1e-6);
-            if (!label.empty() || stills) {
+            if (write_layers) {
                 std::string file =
                     (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
                             (l->eye ? "_right.png" : "_left.png")))
@@ -190,28 +287,52 @@ int hmd_main(int argc, char** argv) {
             std::fprintf(stderr, "hysar-hmd: server error: %s\n", describe(*e).c_str());
         }
     };
+    if (live) {
+        if (int rc = follow_live_poses(conn, *source, frame_limit, stale_ms, handle, layers))
+            return rc;
+    }
+    // A trajectory (--orbit, --csv): each layer is labelled by the pose it answers; after the
+    // last pose, its layers are awaited (5 s at most).
+    std::map<uint64_t, std::string> label_of;
+    uint64_t last_sent_ns = 0;
+    bool last_answered = false;
+    auto drain = [&](int timeout_ms) -> bool {
+        for (;;) {
+            auto r = conn.receive(timeout_ms);
+            if (auto* e = std::get_if<std::string>(&r)) {
+                std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+                return false;
+            }
+            auto* m = std::get_if<proto::Message>(&r);
+            if (!m)
+                return true;
+            std::string label;
+            if (auto* l = std::get_if<proto::VdLayer>(m)) {
+                auto it = label_of.find(l->pose_time_ns);
+                label = it != label_of.end() ? it->second : "";
+                last_answered |= l->eye == 1 && l->pose_time_ns == last_sent_ns;
+            }
+            handle(*m, label);
+            if (last_answered && timeout_ms > 0)
+                return true;
+        }
+    };
     const auto start = std::chrono::steady_clock::now();
     for (auto& s : steps) {
         if (!stills) {
             std::this_thread::sleep_until(start + std::chrono::duration<double>(s.t_s));
-            // Drain whatever arrived meanwhile.
-            for (;;) {
-                auto r = conn.receive(0);
-                if (auto* e = std::get_if<std::string>(&r)) {
-                    std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
-                    return 1;
-                }
-                if (auto* m = std::get_if<proto::Message>(&r))
-                    handle(*m, s.label);
-                else
-                    break;
-            }
+            if (!drain(0))  // whatever arrived meanwhile
+                return 1;
         }
         s.pose.client_time_ns = now_ns();
         if (!conn.send(s.pose))
             return lost();
-        if (!stills)
+        if (!stills) {
+            label_of[s.pose.client_time_ns] = s.label;
+            last_sent_ns = s.pose.client_time_ns;
+            last_answered = false;
             continue;
+        }
         if (!conn.send(proto::FrameRequest{}))
             return lost();
         int eyes = 0;
@@ -238,14 +359,32 @@ int hmd_main(int argc, char** argv) {
             }
         }
     }
+    if (!stills && !live && !steps.empty()) {
+        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+        while (!last_answered && std::chrono::steady_clock::now() < until)
+            if (!drain(100))
+                return 1;
+    }
     conn.send(proto::Bye{0});
     nlohmann::json summary{{"name", name},
+                           {"mode", live     ? "poses"
+                                    : stills ? "angles"
+                                             : "trajectory"},
                            {"frames", layers / 2},
                            {"layers", layers},
                            {"bytes", bytes},
                            {"latency_ms_p50", percentile(latency_ms, 0.5)},
                            {"latency_ms_p95", percentile(latency_ms, 0.95)},
                            {"errors", errors}};
+    if (source) {
+        const auto n = source->counts();
+        summary["pose_input"] = {{"source", source->description()},
+                                 {"lines", n.lines},
+                                 {"poses", n.poses},
+                                 {"bad_lines", n.bad},
+                                 {"out_of_order", n.out_of_order},
+                                 {"superseded", n.superseded}};
+    }
     if (summary_file.is_open()) {
         summary_file << summary.dump(2) << "\n";
         summary_file.close();
