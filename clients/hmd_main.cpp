@@ -19,6 +19,7 @@
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
 #include "clients/pose_input.hpp"
+#include "clients/usb_cli.hpp"
 #include "clients/window.hpp"
 
 using namespace hs;
@@ -31,7 +32,9 @@ static const char* kUsage =
     "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
     "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
     "                 [--name NAME] [--out DIR] [--window]\n"
-    "                 [--summary FILE]\n"
+    "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
+    "       hysar-hmd --list-devices | --watch-devices SECONDS [--profile FILE]\n"
+    "                 [--device-table DIR]\n"
     "\n"
     "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
     "  --profile FILE   headset profile (default configs/devices/hololens.json)\n"
@@ -50,6 +53,15 @@ static const char* kUsage =
     "                   or --poses, only when given): NAME_LABEL_left.png, _right.png\n"
     "  --window         show the latest layers in a window, left and right eye side by side\n"
     "  --summary FILE   also write the run's figures as JSON\n"
+    "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
+    "                   --profile, with a message; two different ones: an error naming both)\n"
+    "  --device-table DIR  profiles with the USB ids of known headsets (default\n"
+    "                   configs/devices; configs/devices/README.md says how to add one)\n"
+    "  --list-devices   print the attached USB devices, mark the known headsets and their\n"
+    "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
+    "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
+    "                   (0..86400; 0: until SIGINT or SIGTERM); exit 1 when the bus cannot\n"
+    "                   be watched (no bus, or libusb without hot-plug support)\n"
     "\n"
     "Exit status: 0 ok; 1 the run failed (an Error from the server, a lost connection, no\n"
     "layers); 2 bad arguments or no session (server unreachable, closed, or refused the token).\n"
@@ -134,10 +146,16 @@ int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit,
 
 int hmd_main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--profile", "--scale", "--angles",
-               "--orbit", "--csv", "--distance", "--height", "--target", "--format", "--encoding",
-               "--name", "--out", "--summary", "--poses", "--frames", "--stale-ms"},
-              {"--window"}, kUsage);
+              {"--connect",  "--token",  "--token-file",   "--profile",      "--scale",  "--angles",
+               "--orbit",    "--csv",    "--distance",     "--height",       "--target", "--format",
+               "--encoding", "--name",   "--out",          "--summary",      "--poses",  "--frames",
+               "--stale-ms", "--device", "--device-table", "--watch-devices"},
+              {"--window", "--list-devices"}, kUsage);
+    // USB listing and watching: no token, no server.
+    const std::string configured_profile =
+        args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json");
+    if (wants_usb_command(args))
+        return run_usb_command(args, configured_profile);
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
@@ -145,8 +163,7 @@ int hmd_main(int argc, char** argv) {
     const std::string token = args.token(proto::kMaxTokenBytes);
     proto::RegisterDisplay display;
     const double scale = args.number("--scale", 1.0, 0.01, 8.0);
-    if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
-                                scale, &display))
+    if (auto err = load_profile(choose_profile(args, configured_profile), scale, &display))
         args.fail("--profile " + *err);
     const std::string fmt = args.choice("--format", "rgba8", {"rgba8", "rgba16f"});
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;

@@ -1,0 +1,30 @@
+// hysar-hmd's USB options (usb_devices.hpp does the work): --list-devices, --watch-devices S,
+// --device auto and --device-table DIR. Bad values are usage errors (Args::fail, exit 2).
+#pragma once
+
+#include <string>
+
+#include "clients/args.hpp"
+
+namespace hs::client {
+
+// The table of known headsets when --device-table is not given.
+std::string default_device_table();
+
+// True when the command line asks for --list-devices or --watch-devices: run_usb_command then
+// does all the work, without a token or a server.
+bool wants_usb_command(const Args& args);
+
+// --list-devices: prints the attached USB devices, marks the known headsets and the profile each
+// implies, and says which profile a run would use; exit status 0, also without a USB bus or
+// without permission to it (a line says so). --watch-devices S: reports known headsets arriving
+// and leaving for S seconds (0: until SIGINT or SIGTERM); exit status 0, or 1 with one line when
+// the bus cannot be watched. `configured_profile` is --profile or its default.
+int run_usb_command(const Args& args, const std::string& configured_profile);
+
+// The profile a run uses: `configured_profile`, or with --device auto the profile of the one
+// known headset attached (a line on stderr says which, or why the configured one is kept). Two
+// different known headsets attached, or a broken table, are usage errors naming them.
+std::string choose_profile(const Args& args, const std::string& configured_profile);
+
+}  // namespace hs::client
