@@ -89,7 +89,9 @@ TEST_F(Probe, WardRoughnessDownToTenToTheMinusFour) {
 
 // The vectors as the GPU receives them (fp32), back in double: the reference is computed from
 // exactly the inputs the shader sees, so what remains is the shader's own arithmetic.
-render::ProbeCase as_float(const render::ProbeCase& c) { return bench::as_gpu_inputs(c); }
+render::ProbeCase as_float(const render::ProbeCase& c) {
+    return bench::as_gpu_inputs(c);
+}
 using bench::tilted_frame;
 
 // v rotated from the mirror direction of l by `offset` radians about the axis `axis_angle`
