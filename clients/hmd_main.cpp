@@ -43,7 +43,8 @@ static const char* kUsage =
     "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous mode)\n"
     "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
     "  --poses SRC      live poses from a tracker: '-' (standard input) or udp:[HOST:]PORT\n"
-    "                   (HOST 127.0.0.1 unless given), lines 't_s,x,y,z,qw,qx,qy,qz[,frame_id]'\n"
+    "                   (HOST 127.0.0.1 unless given; PORT 0: a free port, printed), lines\n"
+    "                   't_s,x,y,z,qw,qx,qy,qz[,frame_id]'\n"
     "                   (clients/pose_input.hpp); each new pose is sent at once, bad lines are\n"
     "                   reported and skipped; runs until the input ends, --frames, or a signal\n"
     "  --frames N       with --poses: stop after N layer pairs; 0 (default) until stopped\n"
@@ -78,6 +79,32 @@ struct Step {
 
 std::atomic<bool> g_stop{false};
 
+// The poses sent in continuous mode (--orbit, --csv, --poses): each one's label (the newest
+// 1024, by client_time_ns), so that a layer is named by the pose it answers, not by the pose
+// being played when it arrives; and whether the last one has had its right eye.
+struct SentPoses {
+    std::map<uint64_t, std::string> label_of;
+    uint64_t last_ns = 0;
+    bool last_answered = true;
+
+    void sent(uint64_t t_ns, std::string label) {
+        label_of[t_ns] = std::move(label);
+        if (label_of.size() > 1024)
+            label_of.erase(label_of.begin());
+        last_ns = t_ns;
+        last_answered = false;
+    }
+    // The label of the pose `m` answers ("" for other messages and unknown poses).
+    std::string answered(const proto::Message& m) {
+        auto* l = std::get_if<proto::VdLayer>(&m);
+        if (!l)
+            return "";
+        last_answered |= l->eye == 1 && l->pose_time_ns == last_ns;
+        auto it = label_of.find(l->pose_time_ns);
+        return it != label_of.end() ? it->second : "";
+    }
+};
+
 // --poses: sends each new pose from `source` at once (continuous mode: the server renders the
 // newest), hands every message to `handle` with the label of the pose it answers (frame_id, or
 // the line number), reports a stale source once per silence. Ends when standard input has ended
@@ -89,9 +116,8 @@ int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit,
     using Clock = std::chrono::steady_clock;
     std::signal(SIGINT, [](int) { g_stop = true; });
     std::signal(SIGTERM, [](int) { g_stop = true; });
-    std::map<uint64_t, std::string> label_of;  // client_time_ns -> label, the newest 1024
-    uint64_t last_sent_ns = 0;
-    bool last_answered = true, stale = false;
+    SentPoses sent;
+    bool stale = false;
     auto last_pose = Clock::now(), last_activity = Clock::now();
     std::fprintf(stderr, "hysar-hmd: following poses from %s\n", source.description().c_str());
     while (!g_stop) {
@@ -105,12 +131,8 @@ int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit,
                 std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
                 return 1;
             }
-            label_of[p->pose.client_time_ns] =
-                p->frame_id ? "f" + std::to_string(*p->frame_id) : "line" + std::to_string(p->line);
-            if (label_of.size() > 1024)
-                label_of.erase(label_of.begin());
-            last_sent_ns = p->pose.client_time_ns;
-            last_answered = false;
+            sent.sent(p->pose.client_time_ns, p->frame_id ? "f" + std::to_string(*p->frame_id)
+                                                          : "line" + std::to_string(p->line));
         }
         const double silent_ms =
             std::chrono::duration<double, std::milli>(Clock::now() - last_pose).count();
@@ -126,19 +148,12 @@ int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit,
         }
         if (auto* m = std::get_if<proto::Message>(&r)) {
             last_activity = Clock::now();
-            std::string label;
-            if (auto* l = std::get_if<proto::VdLayer>(m)) {
-                auto it = label_of.find(l->pose_time_ns);
-                label = it != label_of.end() ? it->second : "t" + std::to_string(l->frame_id);
-                if (l->eye == 1 && l->pose_time_ns == last_sent_ns)
-                    last_answered = true;
-            }
-            handle(*m, label);
+            handle(*m, sent.answered(*m));
             if (frame_limit > 0 && int64_t(layers / 2) >= frame_limit)
                 break;
         }
         if (source.finished() &&
-            (last_answered || Clock::now() - last_activity > std::chrono::seconds(3)))
+            (sent.last_answered || Clock::now() - last_activity > std::chrono::seconds(3)))
             break;
     }
     return 0;
@@ -310,9 +325,7 @@ int hmd_main(int argc, char** argv) {
     }
     // A trajectory (--orbit, --csv): each layer is labelled by the pose it answers; after the
     // last pose, its layers are awaited (5 s at most).
-    std::map<uint64_t, std::string> label_of;
-    uint64_t last_sent_ns = 0;
-    bool last_answered = false;
+    SentPoses sent;
     auto drain = [&](int timeout_ms) -> bool {
         for (;;) {
             auto r = conn.receive(timeout_ms);
@@ -323,14 +336,8 @@ int hmd_main(int argc, char** argv) {
             auto* m = std::get_if<proto::Message>(&r);
             if (!m)
                 return true;
-            std::string label;
-            if (auto* l = std::get_if<proto::VdLayer>(m)) {
-                auto it = label_of.find(l->pose_time_ns);
-                label = it != label_of.end() ? it->second : "";
-                last_answered |= l->eye == 1 && l->pose_time_ns == last_sent_ns;
-            }
-            handle(*m, label);
-            if (last_answered && timeout_ms > 0)
+            handle(*m, sent.answered(*m));
+            if (sent.last_answered && timeout_ms > 0)
                 return true;
         }
     };
@@ -345,9 +352,7 @@ int hmd_main(int argc, char** argv) {
         if (!conn.send(s.pose))
             return lost();
         if (!stills) {
-            label_of[s.pose.client_time_ns] = s.label;
-            last_sent_ns = s.pose.client_time_ns;
-            last_answered = false;
+            sent.sent(s.pose.client_time_ns, s.label);
             continue;
         }
         if (!conn.send(proto::FrameRequest{}))
@@ -378,7 +383,7 @@ int hmd_main(int argc, char** argv) {
     }
     if (!stills && !live && !steps.empty()) {
         const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-        while (!last_answered && std::chrono::steady_clock::now() < until)
+        while (!sent.last_answered && std::chrono::steady_clock::now() < until)
             if (!drain(100))
                 return 1;
     }

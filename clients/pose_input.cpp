@@ -77,7 +77,7 @@ std::variant<std::unique_ptr<PoseSource>, std::string> PoseSource::open(const st
         host = port_text.substr(0, colon);
         port_text = port_text.substr(colon + 1);
     }
-    auto port = parse_integer(port_text, 1, 65535);
+    auto port = parse_integer(port_text, 0, 65535);
     if (auto* e = std::get_if<std::string>(&port))
         return "'" + spec + "': port " + *e;
     sockaddr_in addr{};
@@ -88,12 +88,16 @@ std::variant<std::unique_ptr<PoseSource>, std::string> PoseSource::open(const st
     const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
     if (fd < 0)
         return "'" + spec + "': socket: " + std::strerror(errno);
-    if (::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    socklen_t len = sizeof addr;
+    if (::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0 ||
+        ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0) {
         const std::string why = std::strerror(errno);
         ::close(fd);
         return "'" + spec + "': cannot bind: " + why;
     }
-    return std::unique_ptr<PoseSource>(new PoseSource(fd, true, "UDP " + host + ":" + port_text));
+    // The bound port (port 0 picks a free one): the description names it for the sender.
+    return std::unique_ptr<PoseSource>(
+        new PoseSource(fd, true, "UDP " + host + ":" + std::to_string(ntohs(addr.sin_port))));
 }
 
 PoseSource::PoseSource(int fd, bool udp, std::string description)

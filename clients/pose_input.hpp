@@ -40,7 +40,8 @@ std::variant<std::monostate, LivePose, std::string> parse_pose_line(std::string_
 class PoseSource {
 public:
     // "-": standard input; "udp:PORT" or "udp:HOST:PORT": a UDP socket bound there (HOST a
-    // numeric IPv4 address, 127.0.0.1 unless given). An error sentence when it cannot open.
+    // numeric IPv4 address, 127.0.0.1 unless given; PORT 0 picks a free port, which
+    // description() names). An error sentence when it cannot open.
     static std::variant<std::unique_ptr<PoseSource>, std::string> open(const std::string& spec);
     ~PoseSource();
     PoseSource(const PoseSource&) = delete;

@@ -276,6 +276,14 @@ int bench_encoding(int repeats, const std::string& json_path) {
 }
 
 int bench_stability(const std::string& out_dir, bool float64) {
+    const std::filesystem::path dir(out_dir);
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) {
+        std::fprintf(stderr, "hysar bench: cannot create %s: %s\n", out_dir.c_str(),
+                     ec.message().c_str());
+        return 1;
+    }
     gpu::DeviceCreateInfo info = gpu::device_info_from_environment();
     info.float64 = float64;
     auto device = gpu::Device::create(info);
@@ -289,28 +297,28 @@ int bench_stability(const std::string& out_dir, bool float64) {
         std::fprintf(stderr, "hysar bench: %s\n", rows.error().message.c_str());
         return 1;
     }
-    const std::filesystem::path dir(out_dir);
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    std::ofstream(dir / "stability.csv") << bench::stability_csv(rows.value());
-    std::ofstream(dir / "stability.md")
-        << "Device: " << device.value()->name()
-        << (device.value()->float64() ? " (shaderFloat64)" : " (fp32 shaders)") << "\n\n"
-        << bench::stability_table(rows.value(), true);
-    if (ec || !std::ifstream(dir / "stability.md")) {
-        std::fprintf(stderr, "hysar bench: cannot write %s\n", (dir / "stability.md").c_str());
-        return 1;
+    const std::string device_text =
+        device.value()->name() +
+        (device.value()->float64() ? " (shaderFloat64)" : " (fp32 shaders)");
+    for (const auto& [file, text] :
+         {std::pair{dir / "stability.csv", bench::stability_csv(rows.value())},
+          std::pair{dir / "stability.md", "Device: " + device_text + "\n\n" +
+                                              bench::stability_table(rows.value(), true)}}) {
+        std::ofstream f(file);
+        if (!(f << text)) {
+            std::fprintf(stderr, "hysar bench: cannot write %s\n", file.c_str());
+            return 1;
+        }
     }
     size_t cases = 0, failures = 0;
     for (const auto& r : rows.value()) {
         cases += r.cases;
         failures += r.failures;
     }
-    std::printf("device: %s%s\n%s\n%zu cases in %zu rows, %zu outside tolerance\nwrote %s and %s\n",
-                device.value()->name().c_str(),
-                device.value()->float64() ? " (shaderFloat64)" : " (fp32 shaders)",
-                bench::stability_table(rows.value(), false).c_str(), cases, rows->size(), failures,
-                (dir / "stability.csv").c_str(), (dir / "stability.md").c_str());
+    std::printf("device: %s\n%s\n%zu cases in %zu rows, %zu outside tolerance\nwrote %s and %s\n",
+                device_text.c_str(), bench::stability_table(rows.value(), false).c_str(), cases,
+                rows->size(), failures, (dir / "stability.csv").c_str(),
+                (dir / "stability.md").c_str());
     for (const auto& r : rows.value())
         if (r.failures)
             std::printf("  %s, %s: %zu of %zu outside tolerance; %s\n", r.formula.c_str(),

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # `hysar bench accuracy --quick`: writes a CSV with a row per setting and a PNG, prints the
 # table; a missing scene and a bad option are refused with a message naming them.
+# `hysar bench stability`: writes its CSV and markdown table, exits 0 with every case within
+# tolerance (the table itself is asserted by the GPU test Stability.*), refuses a folder it
+# cannot create.
 set -euo pipefail
 hysar="$1/hysar"
 out=$(mktemp -d)
@@ -25,3 +28,16 @@ grep -q '/nonexistent.json' "$out/err.txt"
 if "$hysar" bench accuracy --repeats 0 2> "$out/err.txt"; then echo "--repeats 0 accepted"; exit 1; fi
 grep -q -- '--repeats' "$out/err.txt"
 echo "bench accuracy: $rows rows, files and errors as documented"
+
+HYSAR_VALIDATION=1 "$hysar" bench stability --out "$out/stab" > "$out/stab.txt"
+head -1 "$out/stab/stability.csv" | grep -q '^formula,regime,rel_tolerance,abs_tolerance,'
+rows=$(($(wc -l < "$out/stab/stability.csv") - 1))
+[[ $rows -ge 60 ]] || { echo "stability: only $rows rows"; exit 1; }
+grep -q '^Device: ' "$out/stab/stability.md"
+grep -q '| ward | alpha 0.0001 x 0.0001 |' "$out/stab/stability.md"
+grep -q ' 0 outside tolerance$' "$out/stab.txt"
+if "$hysar" bench stability --out /proc/hysar-no-such-dir 2> "$out/err.txt"; then
+    echo "stability: an impossible --out was accepted"; exit 1
+fi
+grep -q 'cannot create /proc/hysar-no-such-dir' "$out/err.txt"
+echo "bench stability: $rows rows, files and errors as documented"

@@ -64,11 +64,12 @@ grep -q '"bad_lines": 1' "$dir/stdin.json" || fail "summary: bad_lines"
 grep -q '"out_of_order": 1' "$dir/stdin.json" || fail "summary: out_of_order"
 
 # UDP: two datagrams, then silence (reported stale), then --frames 2 ends the run.
-udp_port=$((20000 + RANDOM % 20000))
-"$hmd" "${common[@]}" --poses "udp:$udp_port" --frames 2 --stale-ms 300 --out "$dir/udp" --name udp \
+"$hmd" "${common[@]}" --poses udp:0 --frames 2 --stale-ms 300 --out "$dir/udp" --name udp \
   > "$dir/udp.log" 2>&1 &
 hmd_pid=$!
 for _ in $(seq 100); do grep -q "following poses" "$dir/udp.log" && break; sleep 0.1; done
+udp_port=$(sed -n 's/.*following poses from UDP 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$dir/udp.log")
+[[ -n $udp_port && $udp_port != 0 ]] || fail "hysar-hmd did not name the UDP port it bound"
 sleep 0.3
 printf '1,%s,1\n' "$pose1" > "/dev/udp/127.0.0.1/$udp_port"
 sleep 1.5
