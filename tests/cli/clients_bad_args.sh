@@ -6,6 +6,7 @@
 # closes at once, answers with an Error, or sends bytes that are not a frame.
 # Usage: clients_bad_args.sh BUILD_DIR
 set -u
+case_lib="$(cd "$(dirname "$0")" && pwd)/case_lib.sh"
 build="$1"
 hmd="$build/clients/hysar-hmd"
 projector="$build/clients/hysar-projector"
@@ -14,34 +15,13 @@ work="$build/tests/clients_bad_args"
 rm -rf "$work" && mkdir -p "$work"
 cd "$work" || exit 1
 
-failures=0
-cases=0
+source "$case_lib"
 # expect_usage NAME PATTERN COMMAND...: COMMAND exits 2, its stderr is not empty and matches
 # PATTERN (grep -E), and nothing in its output speaks of an abort or an internal error.
 expect_usage() {
   local name="$1" pattern="$2"
   shift 2
-  cases=$((cases + 1))
-  "$@" > out.log 2> err.log < /dev/null
-  local rc=$?
-  local why=""
-  if [ "$rc" -ne 2 ]; then
-    why="exit status $rc, expected 2"
-  elif [ ! -s err.log ]; then
-    why="nothing on stderr"
-  elif ! grep -qE -- "$pattern" err.log; then
-    why="stderr does not match '$pattern'"
-  elif grep -qE "terminate called|Aborted|internal error|what\(\)" out.log err.log; then
-    why="the output speaks of an abort or an internal error"
-  fi
-  if [ -n "$why" ]; then
-    failures=$((failures + 1))
-    echo "FAIL $name: $why"
-    echo "  command: $*"
-    sed 's/^/  stderr: /' err.log | head -5
-  else
-    echo "ok   $name: $(head -1 err.log)"
-  fi
+  expect "$name" 2 err "$pattern" "$@"
 }
 
 # A port nobody listens on: bound and closed again (python3), else port 1.
@@ -282,5 +262,4 @@ else
   failures=$((failures + 1))
 fi
 
-echo "$cases cases, $failures failed"
-[ "$failures" -eq 0 ]
+finish

@@ -5,55 +5,24 @@
 # file written), so nothing here needs a GPU. A few values inside the ranges are accepted.
 # Usage: numeric_ranges.sh BUILD_DIR
 set -u
+case_lib="$(cd "$(dirname "$0")" && pwd)/case_lib.sh"
 build=$(cd "$1" && pwd) || exit 1
 hysar="$build/hysar"
 work="$build/tests/numeric_ranges"
 rm -rf "$work" && mkdir -p "$work"
 cd "$work" || exit 1
 
-failures=0
-cases=0
+source "$case_lib"
 # refused FLAG VALUE RANGE COMMAND...: COMMAND exits 2 and its stderr holds "FLAG: 'VALUE'" and
-# RANGE (fixed strings), and nothing speaks of an abort. The timeout only guards against a value
-# that is wrongly accepted and starts the work.
+# RANGE (fixed strings). The time limit guards against a value that is wrongly accepted and
+# starts the work.
 refused() {
   local flag="$1" value="$2" range="$3"
   shift 3
-  cases=$((cases + 1))
-  timeout 60 "$@" > out.log 2> err.log < /dev/null
-  local rc=$?
-  local why=""
-  if [ "$rc" -ne 2 ]; then
-    why="exit status $rc, expected 2"
-  elif ! grep -qF -- "$flag: '$value'" err.log; then
-    why="stderr does not name \"$flag: '$value'\""
-  elif ! grep -qF -- "$range" err.log; then
-    why="stderr does not name the range $range"
-  elif grep -qE "terminate called|Aborted|internal error|what\(\)" out.log err.log; then
-    why="the output speaks of an abort or an internal error"
-  fi
-  if [ -n "$why" ]; then
-    failures=$((failures + 1))
-    echo "FAIL $*: $why"
-    sed 's/^/  stderr: /' err.log | head -5
-  else
-    echo "ok   $(head -1 err.log)"
-  fi
+  CASE_GREP=-F expect "$flag '$value'" 2 err "$flag: '$value'"$'\n'"$range" "$@"
 }
-
 # accepted COMMAND...: COMMAND exits 0.
-accepted() {
-  cases=$((cases + 1))
-  timeout 120 "$@" > out.log 2> err.log < /dev/null
-  local rc=$?
-  if [ "$rc" -eq 0 ]; then
-    echo "ok   accepted: $*"
-  else
-    failures=$((failures + 1))
-    echo "FAIL $*: exit status $rc, expected 0"
-    sed 's/^/  stderr: /' err.log | head -5
-  fi
-}
+accepted() { CASE_TIMEOUT=120 expect "accepted" 0 all "" "$@"; }
 
 # Values every real-number flag must refuse, whatever its range.
 not_numbers=(nan NaN inf -inf 1e300 1e999 12abc 0x10 " 1" "")
@@ -152,5 +121,4 @@ refused --viewers 12abc "[1, 1024]" "$build/clients/hysar-loadgen" "${T[@]}" --v
 accepted "$hysar" calibrate patterns --size 2x16384 --ramp +2 --grid 2 --out "$work/pat_ok"
 accepted "$hysar" calibrate patterns --size 8x8 --ramp 256 --grid 16 --out "$work/pat_ok2"
 
-echo "$cases cases, $failures failed"
-[ "$failures" -eq 0 ]
+finish

@@ -5,6 +5,7 @@
 # values exit 2 naming the option. Nothing may abort. No server, no GPU.
 # Usage: usb_devices_cli.sh BUILD_DIR SOURCE_DIR
 set -u
+case_lib="$(cd "$(dirname "$0")" && pwd)/case_lib.sh"
 build=$(cd "$1" && pwd) || exit 1
 src=$(cd "$2" && pwd) || exit 1
 hmd="$build/clients/hysar-hmd"
@@ -12,33 +13,13 @@ work="$build/tests/usb_devices_cli"
 rm -rf "$work" && mkdir -p "$work"
 cd "$work" || exit 1
 
-failures=0
-cases=0
-# check NAME WANT_RC PATTERN COMMAND...: COMMAND exits WANT_RC (a list like "0|1" is allowed),
-# stdout + stderr match PATTERN (grep -E), and nothing speaks of an abort.
+source "$case_lib"
+# check NAME WANT_RC PATTERN COMMAND...: COMMAND exits WANT_RC (a list like "0|1" is allowed) and
+# its stdout + stderr match PATTERN (grep -E).
 check() {
   local name="$1" want="$2" pattern="$3"
   shift 3
-  cases=$((cases + 1))
-  timeout 60 "$@" > out.log 2>&1 < /dev/null
-  local rc=$?
-  local why=""
-  if ! [[ "$rc" =~ ^($want)$ ]]; then
-    why="exit status $rc, expected $want"
-  elif ! grep -qE -- "$pattern" out.log; then
-    why="the output does not match '$pattern'"
-  elif grep -qE "terminate called|Aborted|Segmentation|internal error|what\(\)" out.log; then
-    why="the output speaks of an abort or an internal error"
-  fi
-  if [ -n "$why" ]; then
-    failures=$((failures + 1))
-    echo "FAIL $name: $why"
-    echo "  command: $*"
-    sed 's/^/  | /' out.log | head -20
-  else
-    echo "ok   $name (exit $rc)"
-    sed 's/^/  | /' out.log | head -6
-  fi
+  expect "$name" "$want" all "$pattern" "$@"
 }
 
 check list-devices 0 "^(USB devices: |No USB devices listed: )" "$hmd" --list-devices
@@ -74,5 +55,4 @@ check table-without-device 2 "--device-table is read by --device auto" \
 check profile-broken 2 "--profile '$work/none.json'" \
   "$hmd" --list-devices --profile "$work/none.json"
 
-echo "$cases cases, $failures failed"
-[ "$failures" -eq 0 ]
+finish

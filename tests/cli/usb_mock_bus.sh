@@ -6,6 +6,7 @@
 # both, --watch-devices reports the one present. Registered only where umockdev-run exists.
 # Usage: usb_mock_bus.sh BUILD_DIR SOURCE_DIR
 set -u
+case_lib="$(cd "$(dirname "$0")" && pwd)/case_lib.sh"
 build=$(cd "$1" && pwd) || exit 1
 src=$(cd "$2" && pwd) || exit 1
 hmd="$build/clients/hysar-hmd"
@@ -16,37 +17,13 @@ work="$build/tests/usb_mock_bus"
 rm -rf "$work" && mkdir -p "$work"
 cd "$work" || exit 1
 
-failures=0
-cases=0
-# check NAME WANT_RC PATTERN BUS ARGS...: hysar-hmd ARGS on the bus BUS exits WANT_RC and its
-# stdout + stderr match every line of PATTERN (grep -E, one pattern per line).
+source "$case_lib"
+# check NAME WANT_RC PATTERNS BUS ARGS...: hysar-hmd ARGS on the bus BUS exits WANT_RC and its
+# stdout + stderr match every line of PATTERNS (grep -E, one pattern per line).
 check() {
   local name="$1" want="$2" patterns="$3" bus="$4"
   shift 4
-  cases=$((cases + 1))
-  timeout 60 umockdev-run -d "$bus" -- "$hmd" "$@" > out.log 2>&1 < /dev/null
-  local rc=$?
-  local why=""
-  if [ "$rc" -ne "$want" ]; then
-    why="exit status $rc, expected $want"
-  else
-    while IFS= read -r p; do
-      if ! grep -qE -- "$p" out.log; then
-        why="the output does not match '$p'"
-        break
-      fi
-    done <<< "$patterns"
-  fi
-  if [ -z "$why" ] && grep -qE "terminate called|Aborted|Segmentation|internal error" out.log; then
-    why="the output speaks of an abort or an internal error"
-  fi
-  if [ -n "$why" ]; then
-    failures=$((failures + 1))
-    echo "FAIL $name: $why"
-    sed 's/^/  | /' out.log | head -20
-  else
-    echo "ok   $name"
-  fi
+  expect "$name" "$want" all "$patterns" umockdev-run -d "$bus" -- "$hmd" "$@"
 }
 
 check list-one 0 "^USB devices: 2$
@@ -69,5 +46,4 @@ check watch-present 0 "^present: Epson MOVERIO BT-300 \(test id\)  bus 001 addre
 ^Watch ended: 0 arrivals and 0 departures" \
   "$one" --watch-devices 0.3 --device-table "$table"
 
-echo "$cases cases, $failures failed"
-[ "$failures" -eq 0 ]
+finish
