@@ -228,56 +228,59 @@ bool Connection::send(const protocol::Message& m, uint32_t sequence) {
     return send_bytes(b.data(), b.size());
 }
 
-bool Connection::read_exact(uint8_t* p, size_t n, int timeout_ms) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (n > 0) {
-        int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
-                           deadline - std::chrono::steady_clock::now())
-                           .count());
-        if (left < 0)
-            return false;
+bool Connection::fill(size_t want, int timeout_ms) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    if (inbox_.size() < want)
+        inbox_.resize(want);  // grows once per frame size; never shrinks between frames
+    while (inbox_len_ < want) {
+        const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                 deadline - std::chrono::steady_clock::now())
+                                 .count());
         pollfd pfd{fd_, POLLIN, 0};
-        int rc = ::poll(&pfd, 1, left);
+        const int rc = ::poll(&pfd, 1, std::max(left, 0));
         if (rc < 0 && errno == EINTR)
             continue;
         if (rc <= 0)
             return false;
-        ssize_t r = ::recv(fd_, p, n, 0);
-        if (r < 0 && errno == EINTR)
+        const ssize_t r = ::recv(fd_, inbox_.data() + inbox_len_, want - inbox_len_, 0);
+        if (r < 0 && (errno == EINTR || errno == EAGAIN))
             continue;
         if (r <= 0) {
             close();
             return false;
         }
-        p += r;
-        n -= size_t(r);
+        inbox_len_ += size_t(r);
+        bytes_read_ += uint64_t(r);
     }
     return true;
 }
 
 std::variant<std::monostate, protocol::Message, std::string> Connection::receive(int timeout_ms) {
     if (fd_ < 0)
-        return std::string("the connection is closed");
-    uint8_t hdr[protocol::kHeaderBytes];
-    if (!read_exact(hdr, sizeof hdr, timeout_ms)) {
-        if (fd_ < 0)
-            return std::string("the server closed the connection");
-        return std::monostate{};
-    }
-    auto h = protocol::decode_header(hdr, protocol::Side::kServer);
+        return std::string(inbox_len_ == 0 ? "the connection is closed"
+                                           : "the connection closed inside a frame");
+    // Bytes that arrived before a timeout stay in inbox_: a frame is never cut by a short wait.
+    if (!fill(protocol::kHeaderBytes, timeout_ms))
+        return fd_ < 0 ? std::string(inbox_len_ == 0 ? "the server closed the connection"
+                                                     : "the connection closed inside a frame")
+                       : std::variant<std::monostate, protocol::Message, std::string>{};
+    auto h = protocol::decode_header(
+        std::span<const uint8_t>(inbox_.data(), protocol::kHeaderBytes), protocol::Side::kServer);
     if (auto* e = std::get_if<protocol::DecodeError>(&h)) {
         close();  // the stream is out of step: nothing after this can be framed
+        inbox_len_ = 0;
         return "bad header from the server: " + describe(protocol::Error{e->code, e->message});
     }
     const auto& header = std::get<protocol::Header>(h);
-    std::vector<uint8_t> payload(header.payload_bytes);
-    // The header arrived: the payload follows without waiting for the sender's next event.
-    if (!payload.empty() &&
-        !read_exact(payload.data(), payload.size(), std::max(timeout_ms, 30000))) {
-        close();
-        return std::string("the connection closed inside a frame");
-    }
-    auto m = protocol::decode_payload(header, payload);
+    if (!fill(protocol::kHeaderBytes + header.payload_bytes, timeout_ms))
+        return fd_ < 0 ? std::string("the connection closed inside a frame")
+                       : std::variant<std::monostate, protocol::Message, std::string>{};
+    auto m = protocol::decode_payload(
+        header,
+        std::span<const uint8_t>(inbox_.data() + protocol::kHeaderBytes, header.payload_bytes));
+    inbox_len_ = 0;
+    if (inbox_.size() > kKeptInboxBytes)
+        std::vector<uint8_t>().swap(inbox_);  // a large frame's buffer is not kept for good
     if (auto* e = std::get_if<protocol::DecodeError>(&m))
         return "bad " + std::string(protocol::to_string(protocol::MessageType(header.type))) +
                " from the server: " + describe(protocol::Error{e->code, e->message});

@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 #include <variant>
+#include <vector>
 
 #include "protocol/protocol.hpp"
 
@@ -45,8 +46,9 @@ public:
     bool send_bytes(const void* data, size_t n);
     // Why the last send() failed.
     const std::string& last_error() const { return last_error_; }
-    // Waits up to `timeout_ms` for one whole message. monostate on timeout; an error sentence
-    // when the connection closed or the bytes do not decode.
+    // Waits up to `timeout_ms` for one whole message. monostate on timeout (a frame partly
+    // received is kept for the next call); an error sentence when the connection closed or the
+    // bytes do not decode.
     std::variant<std::monostate, protocol::Message, std::string> receive(int timeout_ms);
 
     // Hello with the token, then Welcome. Returns an error sentence on failure: no answer, the
@@ -56,11 +58,19 @@ public:
                                      int timeout_ms = 10000);
     void close();
     int fd() const { return fd_; }
+    // Bytes received on this connection.
+    uint64_t bytes_read() const { return bytes_read_; }
 
 private:
     explicit Connection(int fd) : fd_(fd) {}
-    bool read_exact(uint8_t* p, size_t n, int timeout_ms);
+    // Reads until `want` bytes of the current frame are in inbox_, or `timeout_ms` passed
+    // (false; what arrived stays), or the connection closed (false, fd_ -1).
+    bool fill(size_t want, int timeout_ms);
+    static constexpr size_t kKeptInboxBytes = size_t(16) << 20;
     int fd_ = -1;
+    std::vector<uint8_t> inbox_;  // the frame being read: header, then payload
+    size_t inbox_len_ = 0;        // bytes of it received
+    uint64_t bytes_read_ = 0;
     std::string last_error_;
 };
 

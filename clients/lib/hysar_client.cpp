@@ -1,0 +1,314 @@
+// The C API of libhysar-client (hysar_client.h) over hs::client::Session. Every entry point
+// catches what C++ may throw and turns it into a status and a sentence.
+#include "clients/lib/hysar_client.h"
+
+#include <cmath>
+#include <new>
+#include <string>
+
+#include "clients/common.hpp"
+#include "clients/lib/session.hpp"
+
+namespace proto = hs::protocol;
+using hs::client::Session;
+using hs::client::SessionConfig;
+using hs::client::SessionEvent;
+
+struct hysar_client {
+    std::unique_ptr<Session> session;
+};
+
+static_assert(int(SessionEvent::Kind::kConnected) == HYSAR_EVENT_CONNECTED &&
+              int(SessionEvent::Kind::kDisconnected) == HYSAR_EVENT_DISCONNECTED &&
+              int(SessionEvent::Kind::kLayer) == HYSAR_EVENT_LAYER &&
+              int(SessionEvent::Kind::kProjectorFrame) == HYSAR_EVENT_PROJECTOR_FRAME &&
+              int(SessionEvent::Kind::kServerError) == HYSAR_EVENT_SERVER_ERROR &&
+              int(SessionEvent::Kind::kStats) == HYSAR_EVENT_STATS &&
+              int(SessionEvent::Kind::kClosed) == HYSAR_EVENT_CLOSED);
+static_assert(int(proto::PixelFormat::kRgba8) == HYSAR_FORMAT_RGBA8 &&
+              int(proto::PixelFormat::kRgba16f) == HYSAR_FORMAT_RGBA16F &&
+              int(proto::Encoding::kRaw) == HYSAR_ENCODING_RAW &&
+              int(proto::Encoding::kSparseTiles) == HYSAR_ENCODING_SPARSE &&
+              int(proto::FrameMode::kContinuous) == HYSAR_MODE_CONTINUOUS);
+
+namespace {
+
+thread_local std::string t_error;
+
+hysar_status fail(hysar_status s, std::string text) {
+    t_error = std::move(text);
+    return s;
+}
+
+// Runs `f` (returns hysar_status); exceptions become statuses.
+template <typename F>
+hysar_status guarded(F&& f) noexcept {
+    try {
+        t_error.clear();
+        return f();
+    } catch (const std::bad_alloc&) {
+        return fail(HYSAR_E_NO_MEMORY, "out of memory");
+    } catch (const std::exception& e) {
+        return fail(HYSAR_E_INTERNAL, std::string("internal error: ") + e.what());
+    } catch (...) {
+        return fail(HYSAR_E_INTERNAL, "internal error");
+    }
+}
+
+hysar_status from_session(const std::optional<std::string>& err) {
+    if (!err)
+        return HYSAR_OK;
+    return fail(
+        err->rfind("the client is closed", 0) == 0 ? HYSAR_E_CLOSED : HYSAR_E_INVALID_ARGUMENT,
+        *err);
+}
+
+proto::Pose to_proto(const hysar_pose& p) {
+    proto::Pose q;
+    q.client_time_ns = p.time_ns;
+    for (int i = 0; i < 3; ++i) q.position_m[i] = p.position_m[i];
+    for (int i = 0; i < 4; ++i) q.orientation_wxyz[i] = p.orientation_wxyz[i];
+    return q;
+}
+
+hysar_pose from_proto(const proto::Pose& q) {
+    hysar_pose p{};
+    p.time_ns = q.client_time_ns;
+    for (int i = 0; i < 3; ++i) p.position_m[i] = q.position_m[i];
+    for (int i = 0; i < 4; ++i) p.orientation_wxyz[i] = q.orientation_wxyz[i];
+    return p;
+}
+
+// A C enum value as the protocol's enum, or an error sentence.
+template <typename E>
+std::optional<E> enum_value(uint32_t v, uint32_t lo, uint32_t hi) {
+    if (v < lo || v > hi)
+        return std::nullopt;
+    return E(v);
+}
+
+}  // namespace
+
+extern "C" {
+
+uint32_t hysar_client_api_version(void) {
+    return HYSAR_CLIENT_API_VERSION;
+}
+
+const char* hysar_status_name(hysar_status s) {
+    switch (s) {
+        case HYSAR_OK:
+            return "ok";
+        case HYSAR_E_INVALID_ARGUMENT:
+            return "invalid argument";
+        case HYSAR_E_CONNECT:
+            return "cannot connect";
+        case HYSAR_E_REFUSED:
+            return "refused by the server";
+        case HYSAR_E_PROTOCOL:
+            return "protocol error";
+        case HYSAR_E_CLOSED:
+            return "closed";
+        case HYSAR_E_NO_MEMORY:
+            return "out of memory";
+        case HYSAR_E_INTERNAL:
+            return "internal error";
+    }
+    return "unknown status";
+}
+
+const char* hysar_last_error(void) {
+    return t_error.c_str();
+}
+
+uint64_t hysar_now_ns(void) {
+    return hs::client::now_ns();
+}
+
+void hysar_client_config_init(hysar_client_config* c) {
+    if (!c)
+        return;
+    *c = hysar_client_config{};
+    c->struct_size = sizeof(hysar_client_config);
+    c->role = HYSAR_ROLE_HMD;
+    const SessionConfig d;
+    c->connect_timeout_ms = uint32_t(d.connect_timeout_ms);
+    c->reconnect_initial_ms = uint32_t(d.reconnect_initial_ms);
+    c->reconnect_max_ms = uint32_t(d.reconnect_max_ms);
+    c->reconnect_attempts = d.reconnect_attempts;
+    c->keepalive_ms = uint32_t(d.keepalive_ms);
+    c->queue_limit = uint32_t(d.queue_limit);
+}
+
+hysar_status hysar_display_from_profile(const char* path, double scale, hysar_display* out) {
+    return guarded([&] {
+        if (!path || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "path and out must not be NULL");
+        if (!std::isfinite(scale) || scale < 0.01 || scale > 8)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "scale " + std::to_string(scale) + " is outside [0.01, 8]");
+        proto::RegisterDisplay d;
+        if (auto err = hs::client::load_profile(path, scale, &d))
+            return fail(HYSAR_E_INVALID_ARGUMENT, *err);
+        *out = hysar_display{d.eye_width,
+                             d.eye_height,
+                             d.fx,
+                             d.fy,
+                             d.cx,
+                             d.cy,
+                             d.ipd_m,
+                             HYSAR_FORMAT_RGBA8,
+                             HYSAR_ENCODING_SPARSE,
+                             HYSAR_MODE_CONTINUOUS};
+        return HYSAR_OK;
+    });
+}
+
+hysar_status hysar_client_connect(const hysar_client_config* c, hysar_client** out) {
+    return guarded([&] {
+        if (!c || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "config and out must not be NULL");
+        *out = nullptr;
+        // A config from a newer header is longer; one from an older one would be shorter than
+        // every field this library reads.
+        if (c->struct_size < sizeof(hysar_client_config))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "config.struct_size is " + std::to_string(c->struct_size) +
+                            ", expected at least " + std::to_string(sizeof(hysar_client_config)) +
+                            " (call hysar_client_config_init first)");
+        if (!c->address || !c->token)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "config.address and config.token are required");
+        SessionConfig sc;
+        sc.address = c->address;
+        sc.token = c->token;
+        sc.name = c->name ? c->name : "hysar-client";
+        sc.role = proto::Role(c->role);
+        sc.connect_timeout_ms = int(std::min<uint32_t>(c->connect_timeout_ms, 1u << 30));
+        sc.reconnect_initial_ms = int(std::min<uint32_t>(c->reconnect_initial_ms, 1u << 30));
+        sc.reconnect_max_ms = int(std::min<uint32_t>(c->reconnect_max_ms, 1u << 30));
+        sc.reconnect_attempts = c->reconnect_attempts;
+        sc.keepalive_ms = int(std::min<uint32_t>(c->keepalive_ms, 1u << 30));
+        sc.queue_limit = c->queue_limit;
+        if (auto bad = hs::client::check_config(sc))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "config." + *bad);
+        auto s = Session::connect(std::move(sc));
+        if (auto* e = std::get_if<Session::ConnectError>(&s))
+            return fail(e->refused ? HYSAR_E_REFUSED : HYSAR_E_CONNECT, e->text);
+        *out = new hysar_client{std::move(std::get<std::unique_ptr<Session>>(s))};
+        return HYSAR_OK;
+    });
+}
+
+void hysar_client_close(hysar_client* client) {
+    guarded([&] {
+        delete client;
+        return HYSAR_OK;
+    });
+}
+
+hysar_status hysar_client_register_display(hysar_client* client, const hysar_display* d) {
+    return guarded([&] {
+        if (!client || !d)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and display must not be NULL");
+        proto::RegisterDisplay r;
+        r.eye_width = d->eye_width, r.eye_height = d->eye_height;
+        r.fx = d->fx, r.fy = d->fy, r.cx = d->cx, r.cy = d->cy, r.ipd_m = d->ipd_m;
+        auto format = enum_value<proto::PixelFormat>(d->format, 1, 2);
+        auto encoding = enum_value<proto::Encoding>(d->encoding, 1, 2);
+        auto mode = enum_value<proto::FrameMode>(d->mode, 0, 1);
+        if (!format)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "display.format " + std::to_string(d->format) + " is not 1 or 2");
+        if (!encoding)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "display.encoding " + std::to_string(d->encoding) + " is not 1 or 2");
+        if (!mode)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "display.mode " + std::to_string(d->mode) + " is not 0 or 1");
+        r.format = *format, r.encoding = *encoding, r.mode = *mode;
+        return from_session(client->session->register_display(r));
+    });
+}
+
+hysar_status hysar_client_send_pose(hysar_client* client, const hysar_pose* pose,
+                                    uint64_t* sent_time_ns) {
+    return guarded([&] {
+        if (!client || !pose)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and pose must not be NULL");
+        proto::Pose p = to_proto(*pose);
+        const hysar_status s = from_session(client->session->send_pose(p));
+        if (s == HYSAR_OK && sent_time_ns)
+            *sent_time_ns = p.client_time_ns;
+        return s;
+    });
+}
+
+hysar_status hysar_client_request_frame(hysar_client* client) {
+    return guarded([&] {
+        if (!client)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client must not be NULL");
+        return from_session(client->session->request_frame());
+    });
+}
+
+hysar_status hysar_client_request_stats(hysar_client* client) {
+    return guarded([&] {
+        if (!client)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client must not be NULL");
+        return from_session(client->session->request_stats());
+    });
+}
+
+hysar_status hysar_client_poll(hysar_client* client, int32_t timeout_ms, hysar_event* out) {
+    return guarded([&] {
+        if (!client || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and out must not be NULL");
+        *out = hysar_event{};
+        out->text = "";
+        if (client->session->closed())
+            return fail(HYSAR_E_CLOSED, "the client is closed (the CLOSED event was taken)");
+        auto e = client->session->poll(timeout_ms);
+        if (!e)
+            return HYSAR_OK;
+        auto* held = new SessionEvent(std::move(*e));
+        out->kind = uint32_t(held->kind);
+        out->eye = held->eye;
+        out->frame_id = held->frame_id;
+        out->scene_version = held->scene_version;
+        out->session_id = held->session_id;
+        out->error_code = held->error_code;
+        out->reconnects = held->reconnects;
+        out->pose = from_proto(held->pose);
+        out->received_ns = held->received_ns;
+        out->decoded_ns = held->decoded_ns;
+        if (!held->pixels.empty()) {
+            const uint32_t bpp = held->format == proto::PixelFormat::kRgba8 ? 4 : 8;
+            out->image = hysar_image{held->width, held->height,        uint32_t(held->format),
+                                     bpp,         held->pixels.size(), held->pixels.data()};
+        }
+        out->text = held->text.c_str();
+        out->internal_ = held;
+        return HYSAR_OK;
+    });
+}
+
+void hysar_event_release(hysar_event* event) {
+    if (!event)
+        return;
+    delete static_cast<SessionEvent*>(event->internal_);
+    *event = hysar_event{};
+    event->text = "";
+}
+
+hysar_status hysar_client_get_info(hysar_client* client, hysar_client_info* out) {
+    return guarded([&] {
+        if (!client || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and out must not be NULL");
+        const auto i = client->session->info();
+        *out = hysar_client_info{i.connected ? 1u : 0u, i.session_id,     i.scene_version,
+                                 i.reconnects,          i.images_dropped, i.bytes_received};
+        return HYSAR_OK;
+    });
+}
+
+}  // extern "C"

@@ -1,0 +1,190 @@
+/* hysar_client.h: libhysar-client, the C API of a HySAR client (a headset or a projector).
+ *
+ * It connects to `hysar serve`, authenticates, registers a display, sends poses and hands back
+ * decoded layers and projector frames with their pose, sequence and timing. When the server goes
+ * away it reconnects by itself, with jittered exponential back-off, and sends Hello, the
+ * registered display, the last pose and an unanswered frame request again; the application sees
+ * DISCONNECTED and CONNECTED events and carries on.
+ *
+ * Threads: every function may be called from any thread; one thread inside the library does
+ * the network. Nothing here throws or aborts: every function returns a hysar_status, and
+ * hysar_last_error() gives the sentence of the last failure on the calling thread.
+ *
+ * Ownership: the library copies every string and struct it is given. An event's pixels and
+ * text belong to the event until hysar_event_release().
+ *
+ * Link with `pkg-config --cflags --libs hysar-client`. The wire protocol is protocol/PROTOCOL.md;
+ * a 100-line example is examples/c/hmd_example.c.
+ */
+#ifndef HYSAR_CLIENT_H
+#define HYSAR_CLIENT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#if defined(__GNUC__)
+#define HYSAR_API __attribute__((visibility("default")))
+#else
+#define HYSAR_API
+#endif
+
+/* The version of this API; hysar_client_api_version() returns the library's. */
+#define HYSAR_CLIENT_API_VERSION 1
+
+typedef enum hysar_status {
+    HYSAR_OK = 0,
+    HYSAR_E_INVALID_ARGUMENT = 1, /* a NULL pointer, a malformed address, a value out of range */
+    HYSAR_E_CONNECT = 2,          /* the server cannot be reached */
+    HYSAR_E_REFUSED = 3,          /* the server refused the session (a wrong token, ...) */
+    HYSAR_E_PROTOCOL = 4,         /* the server sent something that is not HySAR */
+    HYSAR_E_CLOSED = 5,           /* the client was closed, or gave up reconnecting */
+    HYSAR_E_NO_MEMORY = 6,
+    HYSAR_E_INTERNAL = 7
+} hysar_status;
+
+enum { HYSAR_ROLE_PROJECTOR = 1, HYSAR_ROLE_HMD = 2 };
+/* RGBA8: sRGB-encoded bytes. RGBA16F: linear radiance as IEEE 754 half floats. */
+enum { HYSAR_FORMAT_RGBA8 = 1, HYSAR_FORMAT_RGBA16F = 2 };
+/* What travels on the wire; the library hands back decoded pixels either way. */
+enum { HYSAR_ENCODING_RAW = 1, HYSAR_ENCODING_SPARSE = 2 };
+/* ON_REQUEST: one layer pair per hysar_client_request_frame(). CONTINUOUS: one per new pose,
+ * the newest pose winning when the server is busy. */
+enum { HYSAR_MODE_ON_REQUEST = 0, HYSAR_MODE_CONTINUOUS = 1 };
+
+typedef struct hysar_client hysar_client;
+
+typedef struct hysar_client_config {
+    uint32_t struct_size;          /* sizeof(hysar_client_config) */
+    const char* address;           /* "HOST:PORT", "[IPv6]:PORT" or "unix:PATH" */
+    const char* token;             /* the installation's shared token */
+    const char* name;              /* shown in the server's logs and stats */
+    uint32_t role;                 /* HYSAR_ROLE_* */
+    uint32_t connect_timeout_ms;   /* per attempt (default 10000) */
+    uint32_t reconnect_initial_ms; /* the first back-off (default 250) */
+    uint32_t reconnect_max_ms;     /* back-off doubles up to this (default 5000) */
+    int32_t reconnect_attempts;    /* -1: forever (default); 0: never; N: give up after N */
+    uint32_t keepalive_ms;         /* a Ping after this long without sending (default 20000) */
+    uint32_t queue_limit;          /* undelivered images kept; older ones dropped (default 8) */
+} hysar_client_config;
+
+/* A headset's display: per-eye pixels and pinhole intrinsics (OpenCV convention: u right,
+ * v down, pixel centres at integers), the interpupillary distance, and what it wants. */
+typedef struct hysar_display {
+    uint32_t eye_width, eye_height; /* 1..8192 */
+    double fx, fy, cx, cy;          /* pixels */
+    double ipd_m;                   /* metres, [0, 0.2] */
+    uint32_t format;                /* HYSAR_FORMAT_* */
+    uint32_t encoding;              /* HYSAR_ENCODING_* */
+    uint32_t mode;                  /* HYSAR_MODE_* */
+} hysar_display;
+
+/* A head pose in the world frame (+y up, metres): the position of the point between the eyes
+ * and the unit quaternion (w, x, y, z) that turns head axes into world axes (the head looks
+ * along its -z, +y up). time_ns is the client's clock when the pose was sampled (0: now). */
+typedef struct hysar_pose {
+    uint64_t time_ns;
+    double position_m[3];
+    double orientation_wxyz[4];
+} hysar_pose;
+
+typedef enum hysar_event_kind {
+    HYSAR_EVENT_NONE = 0,            /* hysar_client_poll() timed out */
+    HYSAR_EVENT_CONNECTED = 1,       /* a session began (also after a reconnect): session_id,
+                                        scene_version, reconnects */
+    HYSAR_EVENT_DISCONNECTED = 2,    /* the connection was lost (text: why); reconnecting */
+    HYSAR_EVENT_LAYER = 3,           /* a VD layer: eye, frame_id, pose, image */
+    HYSAR_EVENT_PROJECTOR_FRAME = 4, /* a projector frame: scene_version, image */
+    HYSAR_EVENT_SERVER_ERROR = 5,    /* an Error from the server: error_code, text */
+    HYSAR_EVENT_STATS = 6,           /* the answer to hysar_client_request_stats(): text (JSON) */
+    HYSAR_EVENT_CLOSED = 7           /* no more events: closed, or reconnecting gave up (text) */
+} hysar_event_kind;
+
+typedef struct hysar_image {
+    uint32_t width, height;
+    uint32_t format;          /* HYSAR_FORMAT_* */
+    uint32_t bytes_per_pixel; /* 4 (RGBA8) or 8 (RGBA16F) */
+    size_t size_bytes;        /* width * height * bytes_per_pixel */
+    const uint8_t* pixels;    /* rows top to bottom, tightly packed */
+} hysar_image;
+
+typedef struct hysar_event {
+    uint32_t kind;          /* hysar_event_kind */
+    uint32_t eye;           /* LAYER: 0 left, 1 right */
+    uint32_t frame_id;      /* LAYER: the server's frame counter of this headset */
+    uint32_t scene_version; /* CONNECTED, PROJECTOR_FRAME */
+    uint32_t session_id;    /* CONNECTED */
+    uint32_t error_code;    /* SERVER_ERROR: the protocol's error code */
+    uint32_t reconnects;    /* sessions begun after the first one */
+    uint32_t reserved_;
+    hysar_pose pose;      /* LAYER: the pose the layer was rendered for, as it was sent */
+    uint64_t received_ns; /* hysar_now_ns() when the last byte arrived */
+    uint64_t decoded_ns;  /* hysar_now_ns() when the pixels were decoded */
+    hysar_image image;    /* LAYER, PROJECTOR_FRAME */
+    const char* text;     /* never NULL; "" when the kind has none */
+    void* internal_;      /* the library's; released by hysar_event_release() */
+} hysar_event;
+
+typedef struct hysar_client_info {
+    uint32_t connected; /* 1 while a session is up */
+    uint32_t session_id;
+    uint32_t scene_version;
+    uint32_t reconnects;
+    uint64_t images_dropped; /* images dropped because the queue was full */
+    uint64_t bytes_received;
+} hysar_client_info;
+
+/* The library's API version (HYSAR_CLIENT_API_VERSION of the build). */
+HYSAR_API uint32_t hysar_client_api_version(void);
+/* "ok", "invalid argument", ...; never NULL. */
+HYSAR_API const char* hysar_status_name(hysar_status status);
+/* The sentence of the last failed call on this thread ("" when none). Valid until the next call
+ * into the library on this thread. */
+HYSAR_API const char* hysar_last_error(void);
+/* The clock of pose time stamps and event times: steady, nanoseconds. */
+HYSAR_API uint64_t hysar_now_ns(void);
+
+/* Fills the defaults (struct_size included); address, token and name stay to be set. */
+HYSAR_API void hysar_client_config_init(hysar_client_config* config);
+/* Reads a headset profile (a JSON file in configs/devices) into a display, its resolution times
+ * `scale`; format RGBA8, encoding SPARSE, mode CONTINUOUS. */
+HYSAR_API hysar_status hysar_display_from_profile(const char* path, double scale,
+                                                  hysar_display* out);
+
+/* Connects, sends Hello and waits for Welcome: on HYSAR_OK *out is a client with its session up
+ * (the first event is CONNECTED). HYSAR_E_CONNECT or HYSAR_E_REFUSED when this first session
+ * cannot be had; later losses are reconnected. */
+HYSAR_API hysar_status hysar_client_connect(const hysar_client_config* config, hysar_client** out);
+/* Says Bye, stops the network thread and frees the client. NULL is ignored. */
+HYSAR_API void hysar_client_close(hysar_client* client);
+
+/* Registers the display (headsets): checked here first, kept and sent again on reconnect. */
+HYSAR_API hysar_status hysar_client_register_display(hysar_client* client,
+                                                     const hysar_display* display);
+/* Sends a pose (time_ns 0: stamped now; *sent_time_ns, when not NULL, gets the stamp). Checked
+ * here first. While disconnected the newest pose waits and goes first after the reconnect. */
+HYSAR_API hysar_status hysar_client_send_pose(hysar_client* client, const hysar_pose* pose,
+                                              uint64_t* sent_time_ns);
+/* Asks for one layer pair of the last pose (ON_REQUEST mode); kept across a reconnect until
+ * answered. */
+HYSAR_API hysar_status hysar_client_request_frame(hysar_client* client);
+/* Asks for the server's statistics; the answer is a STATS event. */
+HYSAR_API hysar_status hysar_client_request_stats(hysar_client* client);
+
+/* Waits up to timeout_ms (0: do not wait; -1: forever) for the next event. HYSAR_OK with kind
+ * NONE on timeout, HYSAR_E_CLOSED after the CLOSED event was taken. Release every event. */
+HYSAR_API hysar_status hysar_client_poll(hysar_client* client, int32_t timeout_ms,
+                                         hysar_event* out);
+/* Frees what an event holds and zeroes it. NULL and zeroed events are ignored. */
+HYSAR_API void hysar_event_release(hysar_event* event);
+
+HYSAR_API hysar_status hysar_client_get_info(hysar_client* client, hysar_client_info* out);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* HYSAR_CLIENT_H */
