@@ -251,11 +251,13 @@ std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t w, uint32_t 
 }
 
 bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::PixelFormat format,
-                     const std::vector<uint8_t>& data) {
+                     std::span<const uint8_t> data) {
     std::vector<uint8_t> rgba8;
     if (format == protocol::PixelFormat::kRgba8) {
-        rgba8 = data;
+        rgba8.assign(data.begin(), data.end());
     } else {
+        if (data.size() != size_t(w) * h * 8)
+            return false;
         rgba8.resize(size_t(w) * h * 4);
         for (size_t i = 0; i < rgba8.size(); ++i) {
             uint16_t hv;

@@ -3,6 +3,7 @@
 
 #include <array>
 #include <optional>
+#include <span>
 #include <string>
 #include <variant>
 #include <vector>
@@ -51,6 +52,6 @@ std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t width, uint3
 
 // Writes raw RGBA8 pixels as PNG; RGBA16F ones are tone-mapped (white = 1, sRGB) first.
 bool write_layer_png(const std::string& path, uint32_t width, uint32_t height,
-                     protocol::PixelFormat format, const std::vector<uint8_t>& raw);
+                     protocol::PixelFormat format, std::span<const uint8_t> raw);
 
 }  // namespace hs::client

@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "clients/args.hpp"
+#include "clients/client_handle.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
 #include "clients/pose_input.hpp"
@@ -26,46 +27,55 @@ using namespace hs;
 using namespace hs::client;
 namespace proto = hs::protocol;
 
-static const char* kUsage =
-    "usage: hysar-hmd [--connect ADDR] (--token T | --token-file F) [--profile FILE] [--scale S]\n"
-    "                 [--angles LIST | --orbit SECONDS | --csv FILE | --poses SRC]\n"
-    "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
-    "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
-    "                 [--name NAME] [--out DIR] [--window]\n"
-    "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
-    "       hysar-hmd --list-devices | --watch-devices SECONDS [--profile FILE]\n"
-    "                 [--device-table DIR]\n"
+static const std::string kUsage =
+    std::string(
+        "usage: hysar-hmd [--connect ADDR] (--token T | --token-file F) [--profile FILE]\n"
+        "                 [--scale S] [--angles LIST | --orbit SECONDS | --csv FILE | --poses "
+        "SRC]\n"
+        "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
+        "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
+        "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS]\n"
+        "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
+        "                 [--retries N] [--backoff-ms MS]\n"
+        "       hysar-hmd --list-devices | --watch-devices SECONDS [--profile FILE]\n"
+        "                 [--device-table DIR]\n"
+        "\n"
+        "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
+        "  --profile FILE   headset profile (default configs/devices/hololens.json)\n"
+        "  --scale S        resolution multiplier of the profile (default 1)\n"
+        "  --angles LIST    view angles in degrees around the target (default -40,-20,0,20,40)\n"
+        "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous)\n"
+        "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
+        "  --poses SRC      live poses from a tracker: '-' (standard input) or udp:[HOST:]PORT\n"
+        "                   (HOST 127.0.0.1 unless given; PORT 0: a free port, printed), lines\n"
+        "                   't_s,x,y,z,qw,qx,qy,qz[,frame_id]' (clients/pose_input.hpp); each\n"
+        "                   new pose is sent at once, bad lines are reported and skipped; runs\n"
+        "                   until the input ends, --frames, or a signal\n"
+        "  --frames N       stop after N layer pairs, repeating the angles or trajectory as\n"
+        "                   needed; 0: until SIGINT or SIGTERM. Default: the angles or the\n"
+        "                   trajectory once; with --poses, until the input ends\n"
+        "  --stale-ms MS    with --poses: report the source stale after MS without a pose\n"
+        "                   (10..600000, default 500)\n"
+        "  --out DIR        where layers are written as PNG (default out/hmd; with --orbit, --csv\n"
+        "                   or --poses, only when given): NAME_LABEL_left.png, _right.png\n"
+        "  --window         show the latest layers in a window, left and right eye side by side\n"
+        "  --clear-after-ms MS  with --window: show black (see-through) when no new layer came\n"
+        "                   for MS, or the connection is lost (1..600000, default 1000): better\n"
+        "                   nothing than a highlight in the wrong place\n"
+        "  --summary FILE   also write the run's figures as JSON\n"
+        "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
+        "                   --profile, with a message; two different ones: an error naming both)\n"
+        "  --device-table DIR  profiles with the USB ids of known headsets (default\n"
+        "                   configs/devices; configs/devices/README.md says how to add one)\n"
+        "  --list-devices   print the attached USB devices, mark the known headsets and their\n"
+        "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
+        "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
+        "                   (0..86400; 0: until SIGINT or SIGTERM); exit 1 when the bus cannot\n"
+        "                   be watched (no bus, or libusb without hot-plug support)\n") +
+    kReconnectUsage +
     "\n"
-    "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
-    "  --profile FILE   headset profile (default configs/devices/hololens.json)\n"
-    "  --scale S        resolution multiplier of the profile (default 1)\n"
-    "  --angles LIST    view angles in degrees around the target (default -40,-20,0,20,40)\n"
-    "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous mode)\n"
-    "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
-    "  --poses SRC      live poses from a tracker: '-' (standard input) or udp:[HOST:]PORT\n"
-    "                   (HOST 127.0.0.1 unless given; PORT 0: a free port, printed), lines\n"
-    "                   't_s,x,y,z,qw,qx,qy,qz[,frame_id]'\n"
-    "                   (clients/pose_input.hpp); each new pose is sent at once, bad lines are\n"
-    "                   reported and skipped; runs until the input ends, --frames, or a signal\n"
-    "  --frames N       with --poses: stop after N layer pairs; 0 (default) until stopped\n"
-    "  --stale-ms MS    with --poses: report the source stale after MS without a pose\n"
-    "                   (10..600000, default 500)\n"
-    "  --out DIR        where layers are written as PNG (default out/hmd; with --orbit, --csv\n"
-    "                   or --poses, only when given): NAME_LABEL_left.png, _right.png\n"
-    "  --window         show the latest layers in a window, left and right eye side by side\n"
-    "  --summary FILE   also write the run's figures as JSON\n"
-    "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
-    "                   --profile, with a message; two different ones: an error naming both)\n"
-    "  --device-table DIR  profiles with the USB ids of known headsets (default\n"
-    "                   configs/devices; configs/devices/README.md says how to add one)\n"
-    "  --list-devices   print the attached USB devices, mark the known headsets and their\n"
-    "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
-    "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
-    "                   (0..86400; 0: until SIGINT or SIGTERM); exit 1 when the bus cannot\n"
-    "                   be watched (no bus, or libusb without hot-plug support)\n"
-    "\n"
-    "Exit status: 0 ok; 1 the run failed (an Error from the server, a lost connection, no\n"
-    "layers); 2 bad arguments or no session (server unreachable, closed, or refused the token).\n"
+    "Exit status: 0 ok; 1 the run failed (an Error from the server, reconnecting gave up, no\n"
+    "layers); 2 bad arguments or no first session (server unreachable or the token refused).\n"
     "Example: hysar-hmd --connect 127.0.0.1:7700 --token-file token --angles -40,0,40\n";
 
 namespace {
@@ -77,62 +87,260 @@ struct Step {
     std::string label;
 };
 
-std::atomic<bool> g_stop{false};
-
-// The poses sent in continuous mode (--orbit, --csv, --poses): each one's label (the newest
-// 1024, by client_time_ns), so that a layer is named by the pose it answers, not by the pose
-// being played when it arrives; and whether the last one has had its right eye.
-struct SentPoses {
-    std::map<uint64_t, std::string> label_of;
-    uint64_t last_ns = 0;
-    bool last_answered = true;
-
-    void sent(uint64_t t_ns, std::string label) {
-        label_of[t_ns] = std::move(label);
-        if (label_of.size() > 1024)
-            label_of.erase(label_of.begin());
-        last_ns = t_ns;
-        last_answered = false;
+// A run: the client, what it has sent, what it has received, the window and the files.
+class Run {
+public:
+    Run(hysar_client* client, const proto::RegisterDisplay& display, std::string name,
+        std::filesystem::path out, bool write_layers, ImageWindow* window, int clear_after_ms)
+        : client_(client),
+          display_(display),
+          name_(std::move(name)),
+          out_(std::move(out)),
+          write_layers_(write_layers),
+          window_(window),
+          clear_after_(std::chrono::milliseconds(clear_after_ms)) {
+        if (window_)
+            side_by_side_.assign(size_t(display.eye_width) * 2 * display.eye_height * 4, 0);
     }
-    // The label of the pose `m` answers ("" for other messages and unknown poses).
-    std::string answered(const proto::Message& m) {
-        auto* l = std::get_if<proto::VdLayer>(&m);
-        if (!l)
-            return "";
-        last_answered |= l->eye == 1 && l->pose_time_ns == last_ns;
-        auto it = label_of.find(l->pose_time_ns);
-        return it != label_of.end() ? it->second : "";
+
+    // Sends a pose labelled `label`; returns its stamp, or 0 with a line when it was refused.
+    uint64_t send(const proto::Pose& pose, const std::string& label) {
+        hysar_pose p{};
+        for (int i = 0; i < 3; ++i) p.position_m[i] = pose.position_m[i];
+        for (int i = 0; i < 4; ++i) p.orientation_wxyz[i] = pose.orientation_wxyz[i];
+        uint64_t stamp = 0;
+        if (hysar_client_send_pose(client_, &p, &stamp) != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-hmd: pose '%s' not sent: %s\n", label.c_str(),
+                         hysar_last_error());
+            ++errors_;
+            return 0;
+        }
+        labels_[stamp] = label;
+        if (labels_.size() > 1024)
+            labels_.erase(labels_.begin());
+        last_sent_ = stamp;
+        last_answered_ = false;
+        return stamp;
     }
+
+    // What one call of pump() saw.
+    enum class Saw { kNothing, kLayer, kServerError, kClosed, kOther };
+    // Waits up to `timeout_ms` for one event and handles it. After kLayer, last_eye() and
+    // last_stamp() say which.
+    Saw pump(int timeout_ms) {
+        Event e;
+        const hysar_status s = hysar_client_poll(client_, timeout_ms, &e);
+        if (window_)
+            window_->poll();
+        clear_if_stale();
+        if (s != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
+            return Saw::kClosed;
+        }
+        switch (e.kind) {
+            case HYSAR_EVENT_NONE:
+                return Saw::kNothing;
+            case HYSAR_EVENT_LAYER:
+                layer(e);
+                return Saw::kLayer;
+            case HYSAR_EVENT_SERVER_ERROR:
+                ++errors_;
+                std::fprintf(stderr, "hysar-hmd: server error: %s\n", e.text);
+                return Saw::kServerError;
+            case HYSAR_EVENT_CLOSED:
+                std::fprintf(stderr, "hysar-hmd: %s\n", e.text);
+                return Saw::kClosed;
+            case HYSAR_EVENT_DISCONNECTED:
+                clear();  // the server is away: no layer follows the head now
+                break;
+            case HYSAR_EVENT_CONNECTED:
+                reconnects_ = e.reconnects;
+                break;
+        }
+        report_connection("hysar-hmd", e);
+        return Saw::kOther;
+    }
+
+    uint32_t last_eye() const { return last_eye_; }
+    uint64_t last_stamp() const { return last_stamp_; }
+    bool last_answered() const { return last_answered_; }
+    uint64_t pairs() const { return layers_ / 2; }
+    uint64_t errors() const { return errors_; }
+
+    nlohmann::json summary(const char* mode) const {
+        return {{"name", name_},
+                {"mode", mode},
+                {"frames", layers_ / 2},
+                {"layers", layers_},
+                {"bytes", bytes_},
+                {"latency_ms_p50", percentile(latency_ms_, 0.5)},
+                {"latency_ms_p95", percentile(latency_ms_, 0.95)},
+                {"reconnects", reconnects_},
+                {"cleared", clears_},
+                {"errors", errors_}};
+    }
+    void print_line() const {
+        std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %u reconnects, %llu errors\n",
+                    name_.c_str(), (unsigned long long)(layers_ / 2), percentile(latency_ms_, 0.5),
+                    bytes_ / 1e6, reconnects_, (unsigned long long)errors_);
+    }
+
+private:
+    void layer(const hysar_event& e) {
+        const hysar_image& im = e.image;
+        const auto format = proto::PixelFormat(im.format);
+        ++layers_;
+        bytes_ += im.size_bytes;
+        last_eye_ = e.eye;
+        last_stamp_ = e.pose.time_ns;
+        if (e.eye == 1) {
+            latency_ms_.push_back(double(int64_t(e.received_ns - e.pose.time_ns)) * 1e-6);
+            last_answered_ |= e.pose.time_ns == last_sent_;
+        }
+        const auto it = labels_.find(e.pose.time_ns);
+        const std::string label =
+            it != labels_.end() && !it->second.empty() ? it->second : std::to_string(e.frame_id);
+        if (window_ && e.eye <= 1 && format == proto::PixelFormat::kRgba8 &&
+            im.width == display_.eye_width && im.height == display_.eye_height) {
+            const size_t row = size_t(im.width) * 4;
+            for (uint32_t y = 0; y < im.height; ++y)
+                for (size_t i = 0; i < row; ++i)
+                    side_by_side_[(size_t(y) * 2 * im.width) * 4 + e.eye * row + i] =
+                        i % 4 == 3 ? 255 : im.pixels[y * row + i];
+            if (e.eye == 1) {
+                window_->show(side_by_side_, 2 * im.width, im.height);
+                shown_ = std::chrono::steady_clock::now();
+                cleared_ = false;
+            }
+        }
+        if (!write_layers_)
+            return;
+        const std::string file =
+            (out_ / (name_ + "_" + label + (e.eye ? "_right.png" : "_left.png"))).string();
+        if (!write_layer_png(file, im.width, im.height, format, {im.pixels, im.size_bytes})) {
+            ++errors_;
+            std::fprintf(stderr, "hysar-hmd: cannot write %s\n", file.c_str());
+        }
+    }
+    void clear_if_stale() {
+        if (window_ && !cleared_ && std::chrono::steady_clock::now() - shown_ > clear_after_)
+            clear();
+    }
+    void clear() {
+        if (!window_ || cleared_)
+            return;
+        std::fill(side_by_side_.begin(), side_by_side_.end(), uint8_t(0));
+        for (size_t i = 3; i < side_by_side_.size(); i += 4) side_by_side_[i] = 255;
+        window_->show(side_by_side_, 2 * display_.eye_width, display_.eye_height);
+        cleared_ = true;
+        ++clears_;
+    }
+
+    hysar_client* client_;
+    const proto::RegisterDisplay display_;
+    const std::string name_;
+    const std::filesystem::path out_;
+    const bool write_layers_;
+    ImageWindow* window_;
+    const std::chrono::steady_clock::duration clear_after_;
+    std::chrono::steady_clock::time_point shown_ = std::chrono::steady_clock::now();
+    bool cleared_ = true;  // nothing shown yet
+    std::vector<uint8_t> side_by_side_;
+    std::map<uint64_t, std::string> labels_;  // the newest 1024 poses sent, by stamp
+    uint64_t last_sent_ = 0, last_stamp_ = 0;
+    bool last_answered_ = true;
+    uint32_t last_eye_ = 0, reconnects_ = 0;
+    uint64_t layers_ = 0, bytes_ = 0, errors_ = 0, clears_ = 0;
+    std::vector<double> latency_ms_;
 };
 
-// --poses: sends each new pose from `source` at once (continuous mode: the server renders the
-// newest), hands every message to `handle` with the label of the pose it answers (frame_id, or
-// the line number), reports a stale source once per silence. Ends when standard input has ended
-// and the last pose was answered (or 3 s passed), after `frame_limit` layer pairs (0: never),
-// or on SIGINT/SIGTERM. Returns 0, or the exit status of a lost connection.
-template <typename Handle>
-int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit, double stale_ms,
-                      Handle& handle, const uint64_t& layers) {
+// --angles: each pose with a FrameRequest, its two layers awaited (30 s each; a reconnect on the
+// way is the library's: it sends the pose and the request again). Cycles through the steps
+// until `limit` pairs (-1: one pass; 0: until stopped). Returns the exit status.
+int play_stills(Run& run, const std::vector<Step>& steps, int64_t limit, hysar_client* client) {
+    for (size_t k = 0; !stop_requested(); ++k) {
+        if (limit < 0 ? k >= steps.size() : limit > 0 && int64_t(run.pairs()) >= limit)
+            break;
+        const Step& s = steps[k % steps.size()];
+        const uint64_t stamp = run.send(s.pose, s.label);
+        if (stamp == 0)
+            return 1;
+        if (hysar_client_request_frame(client) != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
+            return 1;
+        }
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+        for (int eyes = 0; eyes < 2 && !stop_requested();) {
+            const auto saw = run.pump(100);
+            if (saw == Run::Saw::kLayer && run.last_stamp() == stamp) {
+                ++eyes;
+                deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+            }
+            if (saw == Run::Saw::kClosed)
+                return 1;
+            // No layer follows a refused display or pose: do not wait 30 s for one.
+            if (saw == Run::Saw::kServerError) {
+                std::fprintf(stderr, "hysar-hmd: pose '%s' got no layers\n", s.label.c_str());
+                return 1;
+            }
+            if (std::chrono::steady_clock::now() > deadline) {
+                std::fprintf(stderr, "hysar-hmd: no layers within 30 s for pose '%s'\n",
+                             s.label.c_str());
+                return 1;
+            }
+        }
+    }
+    return 0;
+}
+
+// --orbit, --csv: each pose sent at its time (continuous mode: the server renders the newest),
+// whatever arrives handled meanwhile. Repeats the trajectory until `limit` pairs (-1: one pass;
+// 0: until stopped); after the last pose, its layers are awaited (5 s at most).
+int play_trajectory(Run& run, const std::vector<Step>& steps, int64_t limit) {
     using Clock = std::chrono::steady_clock;
-    std::signal(SIGINT, [](int) { g_stop = true; });
-    std::signal(SIGTERM, [](int) { g_stop = true; });
-    SentPoses sent;
+    const double pass_s = steps.back().t_s + 0.05;
+    const auto start = Clock::now();
+    auto done = [&] { return stop_requested() || (limit > 0 && int64_t(run.pairs()) >= limit); };
+    for (int64_t pass = 0; !done() && (limit >= 0 || pass < 1); ++pass) {
+        for (const auto& s : steps) {
+            const auto at = start + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(pass * pass_s + s.t_s));
+            while (!done() && Clock::now() < at) {
+                const auto left =
+                    std::chrono::duration_cast<std::chrono::milliseconds>(at - Clock::now());
+                if (run.pump(int(std::clamp<int64_t>(left.count(), 0, 50))) == Run::Saw::kClosed)
+                    return 1;
+            }
+            if (done())
+                break;
+            if (run.send(s.pose, s.label) == 0)
+                return 1;
+        }
+    }
+    const auto until = Clock::now() + std::chrono::seconds(5);
+    while (!run.last_answered() && !done() && Clock::now() < until)
+        if (run.pump(100) == Run::Saw::kClosed)
+            return 1;
+    return 0;
+}
+
+// --poses: sends each new pose from `source` at once, reports a stale source once per silence.
+// Ends when the input has ended and the last pose was answered (or 3 s passed), after `limit`
+// pairs (0: never), or on SIGINT/SIGTERM.
+int follow_live_poses(Run& run, PoseSource& source, int64_t limit, double stale_ms) {
+    using Clock = std::chrono::steady_clock;
     bool stale = false;
     auto last_pose = Clock::now(), last_activity = Clock::now();
     std::fprintf(stderr, "hysar-hmd: following poses from %s\n", source.description().c_str());
-    while (!g_stop) {
+    while (!stop_requested()) {
         if (auto p = source.take_latest()) {
             if (stale)
                 std::fprintf(stderr, "hysar-hmd: %s: poses again\n", source.description().c_str());
             stale = false;
             last_pose = last_activity = Clock::now();
-            p->pose.client_time_ns = now_ns();
-            if (!conn.send(p->pose)) {
-                std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
+            if (run.send(p->pose, p->frame_id ? "f" + std::to_string(*p->frame_id)
+                                              : "line" + std::to_string(p->line)) == 0)
                 return 1;
-            }
-            sent.sent(p->pose.client_time_ns, p->frame_id ? "f" + std::to_string(*p->frame_id)
-                                                          : "line" + std::to_string(p->line));
         }
         const double silent_ms =
             std::chrono::duration<double, std::milli>(Clock::now() - last_pose).count();
@@ -141,31 +349,47 @@ int follow_live_poses(Connection& conn, PoseSource& source, int64_t frame_limit,
             std::fprintf(stderr, "hysar-hmd: %s is stale: no pose for %.0f ms\n",
                          source.description().c_str(), silent_ms);
         }
-        auto r = conn.receive(10);
-        if (auto* e = std::get_if<std::string>(&r)) {
-            std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+        const auto saw = run.pump(10);
+        if (saw == Run::Saw::kClosed)
             return 1;
-        }
-        if (auto* m = std::get_if<proto::Message>(&r)) {
+        if (saw != Run::Saw::kNothing)
             last_activity = Clock::now();
-            handle(*m, sent.answered(*m));
-            if (frame_limit > 0 && int64_t(layers / 2) >= frame_limit)
-                break;
-        }
+        if (limit > 0 && int64_t(run.pairs()) >= limit)
+            break;
         if (source.finished() &&
-            (sent.last_answered || Clock::now() - last_activity > std::chrono::seconds(3)))
+            (run.last_answered() || Clock::now() - last_activity > std::chrono::seconds(3)))
             break;
     }
     return 0;
 }
 
 int hmd_main(int argc, char** argv) {
-    Args args(argc, argv,
-              {"--connect",  "--token",  "--token-file",   "--profile",      "--scale",  "--angles",
-               "--orbit",    "--csv",    "--distance",     "--height",       "--target", "--format",
-               "--encoding", "--name",   "--out",          "--summary",      "--poses",  "--frames",
-               "--stale-ms", "--device", "--device-table", "--watch-devices"},
-              {"--window", "--list-devices"}, kUsage);
+    Args args(argc, argv, {"--connect",
+                           "--token",
+                           "--token-file",
+                           "--profile",
+                           "--scale",
+                           "--angles",
+                           "--orbit",
+                           "--csv",
+                           "--distance",
+                           "--height",
+                           "--target",
+                           "--format",
+                           "--encoding",
+                           "--name",
+                           "--out",
+                           "--summary",
+                           "--poses",
+                           "--frames",
+                           "--stale-ms",
+                           "--device",
+                           "--device-table",
+                           "--watch-devices",
+                           "--clear-after-ms",
+                           "--retries",
+                           "--backoff-ms"},
+              {"--window", "--list-devices"}, kUsage.c_str());
     // USB listing and watching: no token, no server.
     const std::string configured_profile =
         args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json");
@@ -199,10 +423,15 @@ int hmd_main(int argc, char** argv) {
         1)
         args.fail("give one of --angles, --orbit, --csv and --poses");
     const bool live = args.has("--poses");
-    if (!live && (args.has("--frames") || args.has("--stale-ms")))
-        args.fail("--frames and --stale-ms go with --poses");
-    const int64_t frame_limit = args.integer("--frames", 0, 0, 1000000000);
+    if (!live && args.has("--stale-ms"))
+        args.fail("--stale-ms goes with --poses");
+    // -1: the default of the mode (one pass; with --poses, until the input ends).
+    const int64_t frame_limit =
+        args.has("--frames") ? args.integer("--frames", 0, 0, 1000000000) : (live ? 0 : -1);
     const double stale_ms = args.number("--stale-ms", 500, 10, 600000);
+    if (!args.has("--window") && args.has("--clear-after-ms"))
+        args.fail("--clear-after-ms goes with --window");
+    const int clear_after_ms = int(args.integer("--clear-after-ms", 1000, 1, 600000));
     std::vector<Step> steps;
     if (args.has("--csv")) {
         auto poses = load_pose_csv(args.get("--csv", ""));
@@ -210,6 +439,8 @@ int hmd_main(int argc, char** argv) {
             args.fail("--csv " + *e);
         for (const auto& p : std::get<std::vector<TimedPose>>(poses))
             steps.push_back({p.t_s, p.pose, "csv" + std::to_string(p.line)});
+        if (steps.empty())
+            args.fail("--csv '" + args.get("--csv", "") + "': no poses in it");
     } else if (args.has("--orbit")) {
         const double secs = args.number("--orbit", 10, 0.1, 3600);
         for (double t = 0; t < secs; t += 0.05)
@@ -245,28 +476,11 @@ int hmd_main(int argc, char** argv) {
         if (!summary_file)
             args.fail("--summary '" + path + "': cannot write: " + std::strerror(errno));
     }
-
-    auto c = Connection::open(address);
-    if (auto* e = std::get_if<std::string>(&c)) {
-        std::fprintf(stderr, "hysar-hmd: --connect: %s\n", e->c_str());
-        return 2;
-    }
-    auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-    if (auto err = conn.hello(proto::Role::kHmd, token, name)) {
-        std::fprintf(stderr, "hysar-hmd: %s: %s\n", address.c_str(), err->c_str());
-        return 2;
-    }
+    const hysar_client_config config = client_config(args, address, token, name, HYSAR_ROLE_HMD);
     const bool stills = !args.has("--orbit") && !args.has("--csv") && !live;
-    const bool write_layers = stills || args.has("--out");
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
-    auto lost = [&]() {
-        std::fprintf(stderr, "hysar-hmd: %s\n", conn.last_error().c_str());
-        return 1;
-    };
-    if (!conn.send(display))
-        return lost();
+
     std::unique_ptr<ImageWindow> window;
-    std::vector<uint8_t> side_by_side;
     if (args.has("--window")) {
         auto w =
             ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
@@ -275,129 +489,33 @@ int hmd_main(int argc, char** argv) {
             return 2;
         }
         window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
-        side_by_side.assign(size_t(display.eye_width) * 2 * display.eye_height * 4, 0);
     }
-    std::vector<double> latency_ms;
-    uint64_t bytes = 0, layers = 0, errors = 0;
-    auto handle = [&](const proto::Message& m, const std::string& label) {
-        if (auto* l = std::get_if<proto::VdLayer>(&m)) {
-            if (window && l->eye <= 1 && l->format == proto::PixelFormat::kRgba8 &&
-                l->width == display.eye_width && l->height == display.eye_height) {
-                auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
-                if (auto* px = std::get_if<std::vector<uint8_t>>(&raw)) {
-                    const size_t row = size_t(l->width) * 4;
-                    for (uint32_t y = 0; y < l->height; ++y)
-                        for (size_t i = 0; i < row; ++i)
-                            side_by_side[(size_t(y) * 2 * l->width) * 4 + l->eye * row + i] =
-                                i % 4 == 3 ? 255 : (*px)[y * row + i];
-                    if (l->eye == 1)
-                        window->show(side_by_side, 2 * l->width, l->height);
-                }
-                window->poll();
-            }
-            ++layers;
-            bytes += l->data.size();
-            if (l->eye == 1)
-                latency_ms.push_back(double(int64_t(now_ns() - l->pose_time_ns)) * 1e-6);
-            if (write_layers) {
-                std::string file =
-                    (out / (name + "_" + (label.empty() ? std::to_string(l->frame_id) : label) +
-                            (l->eye ? "_right.png" : "_left.png")))
-                        .string();
-                auto raw = raw_pixels(l->width, l->height, l->format, l->encoding, l->data);
-                if (auto* e = std::get_if<std::string>(&raw)) {
-                    ++errors;
-                    std::fprintf(stderr, "hysar-hmd: layer %u: %s\n", l->frame_id, e->c_str());
-                } else if (!write_layer_png(file, l->width, l->height, l->format,
-                                            std::get<std::vector<uint8_t>>(raw))) {
-                    ++errors;
-                    std::fprintf(stderr, "hysar-hmd: cannot write %s\n", file.c_str());
-                }
-            }
-        } else if (auto* e = std::get_if<proto::Error>(&m)) {
-            ++errors;
-            std::fprintf(stderr, "hysar-hmd: server error: %s\n", describe(*e).c_str());
-        }
-    };
-    if (live) {
-        if (int rc = follow_live_poses(conn, *source, frame_limit, stale_ms, handle, layers))
-            return rc;
+    auto connected = connect_client(config);
+    if (auto* e = std::get_if<std::string>(&connected)) {
+        std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
+        return 2;
     }
-    // A trajectory (--orbit, --csv): each layer is labelled by the pose it answers; after the
-    // last pose, its layers are awaited (5 s at most).
-    SentPoses sent;
-    auto drain = [&](int timeout_ms) -> bool {
-        for (;;) {
-            auto r = conn.receive(timeout_ms);
-            if (auto* e = std::get_if<std::string>(&r)) {
-                std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
-                return false;
-            }
-            auto* m = std::get_if<proto::Message>(&r);
-            if (!m)
-                return true;
-            handle(*m, sent.answered(*m));
-            if (sent.last_answered && timeout_ms > 0)
-                return true;
-        }
-    };
-    const auto start = std::chrono::steady_clock::now();
-    for (auto& s : steps) {
-        if (!stills) {
-            std::this_thread::sleep_until(start + std::chrono::duration<double>(s.t_s));
-            if (!drain(0))  // whatever arrived meanwhile
-                return 1;
-        }
-        s.pose.client_time_ns = now_ns();
-        if (!conn.send(s.pose))
-            return lost();
-        if (!stills) {
-            sent.sent(s.pose.client_time_ns, s.label);
-            continue;
-        }
-        if (!conn.send(proto::FrameRequest{}))
-            return lost();
-        int eyes = 0;
-        while (eyes < 2) {
-            auto r = conn.receive(30000);
-            if (auto* e = std::get_if<std::string>(&r)) {
-                std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
-                return 1;
-            }
-            if (std::holds_alternative<std::monostate>(r)) {
-                std::fprintf(stderr, "hysar-hmd: no layers within 30 s for pose '%s'\n",
-                             s.label.c_str());
-                return 1;
-            }
-            const auto& m = std::get<proto::Message>(r);
-            if (auto* l = std::get_if<proto::VdLayer>(&m);
-                l && l->pose_time_ns == s.pose.client_time_ns)
-                ++eyes;
-            handle(m, s.label);
-            // No layer follows a refused display or pose: do not wait 30 s for one.
-            if (std::holds_alternative<proto::Error>(m)) {
-                std::fprintf(stderr, "hysar-hmd: pose '%s' got no layers\n", s.label.c_str());
-                return 1;
-            }
-        }
+    hysar_client* client = std::get<ClientPtr>(connected).get();
+    const hysar_display d{display.eye_width,
+                          display.eye_height,
+                          display.fx,
+                          display.fy,
+                          display.cx,
+                          display.cy,
+                          display.ipd_m,
+                          uint32_t(display.format),
+                          uint32_t(display.encoding),
+                          uint32_t(display.mode)};
+    if (hysar_client_register_display(client, &d) != HYSAR_OK) {
+        std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
+        return 1;
     }
-    if (!stills && !live && !steps.empty()) {
-        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
-        while (!sent.last_answered && std::chrono::steady_clock::now() < until)
-            if (!drain(100))
-                return 1;
-    }
-    conn.send(proto::Bye{0});
-    nlohmann::json summary{{"name", name},
-                           {"mode", live     ? "poses"
-                                    : stills ? "angles"
-                                             : "trajectory"},
-                           {"frames", layers / 2},
-                           {"layers", layers},
-                           {"bytes", bytes},
-                           {"latency_ms_p50", percentile(latency_ms, 0.5)},
-                           {"latency_ms_p95", percentile(latency_ms, 0.95)},
-                           {"errors", errors}};
+    stop_on_signals();
+    Run run(client, display, name, out, stills || args.has("--out"), window.get(), clear_after_ms);
+    const int rc = live     ? follow_live_poses(run, *source, frame_limit, stale_ms)
+                   : stills ? play_stills(run, steps, frame_limit, client)
+                            : play_trajectory(run, steps, frame_limit);
+    nlohmann::json summary = run.summary(live ? "poses" : stills ? "angles" : "trajectory");
     if (source) {
         const auto n = source->counts();
         summary["pose_input"] = {{"source", source->description()},
@@ -416,10 +534,8 @@ int hmd_main(int argc, char** argv) {
             return 1;
         }
     }
-    std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %llu errors\n", name.c_str(),
-                (unsigned long long)(layers / 2), percentile(latency_ms, 0.5), bytes / 1e6,
-                (unsigned long long)errors);
-    return errors ? 1 : 0;
+    run.print_line();
+    return rc ? rc : run.errors() ? 1 : 0;
 }
 
 }  // namespace

@@ -1,10 +1,12 @@
-// hysar-projector: a projector client. Receives projector frames and writes them as PNG.
+// hysar-projector: a projector client on libhysar-client. Receives projector frames, writes
+// them as PNG and shows them; survives the server going away (the window keeps the last frame).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 
 #include "clients/args.hpp"
+#include "clients/client_handle.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
 #include "clients/window.hpp"
@@ -12,25 +14,29 @@
 using namespace hs::client;
 namespace proto = hs::protocol;
 
-static const char* kUsage =
-    "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR] [--frames "
-    "N]\n"
-    "                       [--timeout SECONDS] [--name NAME] [--window] [--monitor N]\n"
-    "                       [--screenshot FILE]\n"
+static const std::string kUsage =
+    std::string(
+        "usage: hysar-projector [--connect ADDR] (--token T | --token-file F) [--out DIR]\n"
+        "                       [--frames N] [--timeout SECONDS] [--name NAME] [--window]\n"
+        "                       [--monitor N] [--screenshot FILE] [--retries N] [--backoff-ms "
+        "MS]\n"
+        "\n"
+        "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
+        "  --out DIR       where frames are written as projector_v<scene version>.png (default\n"
+        "                  out/projector)\n"
+        "  --frames N      exit after N frames (default 1; 0: until SIGINT or SIGTERM, or the\n"
+        "                  window is closed)\n"
+        "  --timeout S     with --frames N: give up when no frame arrives for S seconds (default\n"
+        "                  60); with --frames 0 it waits for new scenes indefinitely\n"
+        "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on\n"
+        "                  monitor N; while the server is away the window keeps the last frame\n"
+        "  --screenshot F  with --window: save what the window shows after the last frame as "
+        "PNG\n") +
+    kReconnectUsage +
     "\n"
-    "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
-    "  --out DIR       where frames are written as projector_v<scene version>.png (default "
-    "out/projector)\n"
-    "  --frames N      exit after N frames (default 1; 0 = run until the server says Bye)\n"
-    "  --timeout S     give up when no frame arrives for S seconds (default 60; with --frames 0\n"
-    "                it waits for new scenes indefinitely, pinging the server)\n"
-    "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on "
-    "monitor N\n"
-    "  --screenshot F  with --window: save what the window shows after the last frame as PNG\n"
-    "\n"
-    "Exit status: 0 ok; 1 the run failed (no frame in time, a lost connection, a bad frame, an\n"
-    "Error from the server);\n"
-    "2 bad arguments or no session (server unreachable, closed, or refused the token).\n"
+    "Exit status: 0 ok; 1 the run failed (no frame in time, reconnecting gave up, a bad frame,\n"
+    "an Error from the server); 2 bad arguments or no first session (server unreachable or the\n"
+    "token refused).\n"
     "Example: hysar-projector --connect 127.0.0.1:7700 --token-file token --frames 0\n";
 
 namespace {
@@ -38,8 +44,8 @@ namespace {
 int projector_main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name",
-               "--monitor", "--screenshot"},
-              {"--window"}, kUsage);
+               "--monitor", "--screenshot", "--retries", "--backoff-ms"},
+              {"--window"}, kUsage.c_str());
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
@@ -57,6 +63,8 @@ int projector_main(int argc, char** argv) {
     const std::filesystem::path out = args.get("--out", "out/projector");
     if (auto err = make_output_dir(out.string()))
         args.fail("--out " + *err);
+    const hysar_client_config config =
+        client_config(args, address, token, name, HYSAR_ROLE_PROJECTOR);
 
     std::unique_ptr<ImageWindow> window;
     if (args.has("--window")) {
@@ -67,77 +75,70 @@ int projector_main(int argc, char** argv) {
         }
         window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
     }
-    auto c = Connection::open(address);
-    if (auto* e = std::get_if<std::string>(&c)) {
-        std::fprintf(stderr, "hysar-projector: --connect: %s\n", e->c_str());
+    auto connected = connect_client(config);
+    if (auto* e = std::get_if<std::string>(&connected)) {
+        std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
         return 2;
     }
-    auto& conn = *std::get<std::unique_ptr<Connection>>(c);
-    if (auto err = conn.hello(proto::Role::kProjector, token, name)) {
-        std::fprintf(stderr, "hysar-projector: %s: %s\n", address.c_str(), err->c_str());
-        return 2;
-    }
+    hysar_client* client = std::get<ClientPtr>(connected).get();
+    stop_on_signals();
     int64_t frames = 0, server_errors = 0;
-    // A projector only receives: a Ping every kKeepAliveMs keeps the server's idle timeout
-    // (docs/OPERATIONS.md) from closing the session while it waits for a new scene.
-    constexpr int kKeepAliveMs = 30000;
-    auto last_message = std::chrono::steady_clock::now();
-    while (frames_wanted == 0 || frames < frames_wanted) {
-        auto r = conn.receive(std::min(timeout_ms, kKeepAliveMs));
-        if (std::holds_alternative<std::monostate>(r)) {
-            const auto waited = std::chrono::steady_clock::now() - last_message;
+    int rc = 0;
+    auto last_frame = std::chrono::steady_clock::now();
+    // The window is polled every 50 ms whatever the network does: it stays responsive and
+    // keeps showing the last frame while the library reconnects.
+    while (!stop_requested() && (frames_wanted == 0 || frames < frames_wanted)) {
+        Event e;
+        if (hysar_client_poll(client, window ? 50 : 200, &e) != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-projector: %s\n", hysar_last_error());
+            rc = 1;
+            break;
+        }
+        if (window && !window->poll())
+            break;
+        if (e.kind == HYSAR_EVENT_NONE) {
+            const auto waited = std::chrono::steady_clock::now() - last_frame;
             if (frames_wanted != 0 && waited >= std::chrono::milliseconds(timeout_ms)) {
                 std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
                              format_number(timeout_ms / 1000.0).c_str());
-                return 1;
-            }
-            if (!conn.send(proto::Ping{now_ns()})) {
-                std::fprintf(stderr, "hysar-projector: the server closed the connection\n");
-                return 1;
+                rc = 1;
+                break;
             }
             continue;
         }
-        last_message = std::chrono::steady_clock::now();
-        if (auto* e = std::get_if<std::string>(&r)) {
-            if (frames_wanted == 0)
-                break;  // the server closed
-            std::fprintf(stderr, "hysar-projector: %s\n", e->c_str());
-            return 1;
-        }
-        const auto& m = std::get<proto::Message>(r);
-        if (std::holds_alternative<proto::Bye>(m))
+        if (report_connection("hysar-projector", e))
+            continue;
+        if (e.kind == HYSAR_EVENT_CLOSED) {
+            std::fprintf(stderr, "hysar-projector: %s\n", e.text);
+            rc = 1;
             break;
-        if (auto* e = std::get_if<proto::Error>(&m)) {
+        }
+        if (e.kind == HYSAR_EVENT_SERVER_ERROR) {
             ++server_errors;  // reported, and the exit status says so; frames may still come
-            std::fprintf(stderr, "hysar-projector: server error: %s\n", describe(*e).c_str());
+            std::fprintf(stderr, "hysar-projector: server error: %s\n", e.text);
+            continue;
         }
-        if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
-            std::string file =
-                (out / ("projector_v" + std::to_string(f->scene_version) + ".png")).string();
-            auto raw = raw_pixels(f->width, f->height, f->format, f->encoding, f->data);
-            if (auto* e = std::get_if<std::string>(&raw)) {
-                std::fprintf(stderr, "hysar-projector: frame v%u: %s\n", f->scene_version,
-                             e->c_str());
-                return 1;
-            }
-            if (!write_layer_png(file, f->width, f->height, f->format,
-                                 std::get<std::vector<uint8_t>>(raw))) {
-                std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
-                return 1;
-            }
-            std::printf("projector frame v%u %ux%u -> %s\n", f->scene_version, f->width, f->height,
-                        file.c_str());
-            if (window) {
-                auto px = std::get<std::vector<uint8_t>>(raw);
-                if (f->format == proto::PixelFormat::kRgba8) {
-                    for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
-                    window->show(px, f->width, f->height);
-                }
-                if (!window->poll())
-                    break;
-            }
-            ++frames;
+        if (e.kind != HYSAR_EVENT_PROJECTOR_FRAME)
+            continue;
+        last_frame = std::chrono::steady_clock::now();
+        const hysar_image& im = e.image;
+        const auto format = proto::PixelFormat(im.format);
+        std::string file =
+            (out / ("projector_v" + std::to_string(e.scene_version) + ".png")).string();
+        if (!write_layer_png(file, im.width, im.height, format, {im.pixels, im.size_bytes})) {
+            std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
+            rc = 1;
+            break;
         }
+        std::printf("projector frame v%u %ux%u -> %s\n", e.scene_version, im.width, im.height,
+                    file.c_str());
+        std::fflush(stdout);
+        if (window && format == proto::PixelFormat::kRgba8) {
+            std::vector<uint8_t> px(im.pixels, im.pixels + im.size_bytes);
+            for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
+            window->show(px, im.width, im.height);
+        }
+        ++frames;
     }
     if (window && !screenshot.empty()) {
         uint32_t w = 0, h = 0;
@@ -148,8 +149,7 @@ int projector_main(int argc, char** argv) {
             return 1;
         }
     }
-    conn.send(proto::Bye{0});
-    return server_errors ? 1 : 0;
+    return rc ? rc : server_errors ? 1 : 0;
 }
 
 }  // namespace
