@@ -168,11 +168,13 @@ public:
     uint64_t errors() const { return errors_; }
 
     nlohmann::json summary(const char* mode) const {
+        hysar_client_info info{};
+        hysar_client_get_info(client_, &info);
         return {{"name", name_},
                 {"mode", mode},
                 {"frames", layers_ / 2},
                 {"layers", layers_},
-                {"bytes", bytes_},
+                {"bytes", info.bytes_received},
                 {"latency_ms_p50", percentile(latency_ms_, 0.5)},
                 {"latency_ms_p95", percentile(latency_ms_, 0.95)},
                 {"reconnects", reconnects_},
@@ -180,9 +182,11 @@ public:
                 {"errors", errors_}};
     }
     void print_line() const {
+        hysar_client_info info{};
+        hysar_client_get_info(client_, &info);
         std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %u reconnects, %llu errors\n",
                     name_.c_str(), (unsigned long long)(layers_ / 2), percentile(latency_ms_, 0.5),
-                    bytes_ / 1e6, reconnects_, (unsigned long long)errors_);
+                    info.bytes_received / 1e6, reconnects_, (unsigned long long)errors_);
     }
 
 private:
@@ -190,7 +194,6 @@ private:
         const hysar_image& im = e.image;
         const auto format = proto::PixelFormat(im.format);
         ++layers_;
-        bytes_ += im.size_bytes;
         last_eye_ = e.eye;
         last_stamp_ = e.pose.time_ns;
         if (e.eye == 1) {
@@ -250,7 +253,7 @@ private:
     uint64_t last_sent_ = 0, last_stamp_ = 0;
     bool last_answered_ = true;
     uint32_t last_eye_ = 0, reconnects_ = 0;
-    uint64_t layers_ = 0, bytes_ = 0, errors_ = 0, clears_ = 0;
+    uint64_t layers_ = 0, errors_ = 0, clears_ = 0;
     std::vector<double> latency_ms_;
 };
 
