@@ -262,7 +262,10 @@ void Session::handle(const proto::Message& msg) {
                     srv_.scheduler.add_viewer(id_, m);
                 }
             } else if constexpr (std::is_same_v<T, proto::Pose>) {
-                if (!registered_) {
+                if (role_ != proto::Role::kHmd) {
+                    error(proto::ErrorCode::kForbidden, "only a headset (role hmd) sends poses",
+                          false, seq);
+                } else if (!registered_) {
                     error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false, seq);
                 } else if (auto bad = proto::validate_pose(m)) {
                     error(proto::ErrorCode::kInvalidPose, *bad, false, seq);
@@ -270,7 +273,10 @@ void Session::handle(const proto::Message& msg) {
                     srv_.scheduler.set_pose(id_, m);
                 }
             } else if constexpr (std::is_same_v<T, proto::FrameRequest>) {
-                if (!registered_)
+                if (role_ != proto::Role::kHmd)
+                    error(proto::ErrorCode::kForbidden, "only a headset (role hmd) requests frames",
+                          false, seq);
+                else if (!registered_)
                     error(proto::ErrorCode::kOutOfOrder, "FrameRequest before RegisterDisplay",
                           false, seq);
                 else
