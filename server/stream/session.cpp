@@ -24,11 +24,16 @@ void Session::send(Bytes bytes, std::function<void(bool)> on_done, uint64_t laye
             on_done(false);
         return;
     }
-    if (layer_group != 0 || replaces_projector)
+    if (layer_group != 0 || replaces_projector) {
+        // A frame's two layers arrive together or not at all (PROTOCOL.md §Rules.Layers): the
+        // partner of a layer already being written is kept with it.
+        const uint64_t writing_group = writing_ && !queue_.empty() ? queue_.front().layer_group : 0;
         drop_queued([&](const Out& o) {
-            return layer_group != 0 ? o.layer_group != 0 && o.layer_group != layer_group
+            return layer_group != 0 ? o.layer_group != 0 && o.layer_group != layer_group &&
+                                          o.layer_group != writing_group
                                     : o.projector;
         });
+    }
     const bool bounded = layer_group == 0 && !replaces_projector;
     if (bounded && other_bytes_ + bytes->size() > srv_.limits.max_queued_bytes) {
         log::warn("session {} ({}): {} bytes queued and not reading; closing it", id_, name_,
