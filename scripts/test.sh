@@ -18,7 +18,7 @@ CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWith
 cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs_fuzz_seeds hs_net_tests hysar \
   hysar-loadgen
 (cd build-san && ctest --output-on-failure --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
-  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|net\.scale)')
+  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|net\.scale)')
 
 # The server's loopback and reliability tests once more under ThreadSanitizer; tests/tsan.supp
 # lists the suppressions (the Vulkan driver only) and why.
