@@ -1,0 +1,96 @@
+/* The ABI of libhysar-client from a C translation unit: hysar_client.h compiles as C11, the
+ * structs keep the layout of version 1 on LP64 (a change here breaks every compiled plug-in and
+ * the Python example's mirror), and every entry point behaves from C as documented without a
+ * server: NULLs refused with a sentence, an unreachable server is HYSAR_E_CONNECT, a profile
+ * becomes a display. argv[1]: a headset profile; argv[2]: a Unix socket path nobody listens on. */
+#include <hysar_client.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#if defined(__LP64__)
+_Static_assert(sizeof(hysar_client_config) == 64, "hysar_client_config layout changed");
+_Static_assert(offsetof(hysar_client_config, address) == 8, "config.address moved");
+_Static_assert(offsetof(hysar_client_config, role) == 32, "config.role moved");
+_Static_assert(offsetof(hysar_client_config, queue_limit) == 56, "config.queue_limit moved");
+_Static_assert(sizeof(hysar_display) == 64, "hysar_display layout changed");
+_Static_assert(offsetof(hysar_display, fx) == 8, "display.fx moved");
+_Static_assert(offsetof(hysar_display, mode) == 56, "display.mode moved");
+_Static_assert(sizeof(hysar_pose) == 64, "hysar_pose layout changed");
+_Static_assert(sizeof(hysar_image) == 32, "hysar_image layout changed");
+_Static_assert(offsetof(hysar_image, pixels) == 24, "image.pixels moved");
+_Static_assert(sizeof(hysar_event) == 160, "hysar_event layout changed");
+_Static_assert(offsetof(hysar_event, pose) == 32, "event.pose moved");
+_Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
+_Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
+_Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
+#endif
+_Static_assert(HYSAR_CLIENT_API_VERSION == 1, "API version");
+
+static int failures = 0;
+#define CHECK(cond)                                                                           \
+    do {                                                                                      \
+        if (!(cond)) {                                                                        \
+            fprintf(stderr, "abi_test.c:%d: %s failed (last error: '%s')\n", __LINE__, #cond, \
+                    hysar_last_error());                                                      \
+            failures++;                                                                       \
+        }                                                                                     \
+    } while (0)
+
+int main(int argc, char** argv) {
+    if (argc < 3) {
+        fprintf(stderr, "usage: abi_test PROFILE UNUSED_SOCKET\n");
+        return 2;
+    }
+    CHECK(hysar_client_api_version() == HYSAR_CLIENT_API_VERSION);
+    CHECK(strcmp(hysar_status_name(HYSAR_OK), "ok") == 0);
+    CHECK(strcmp(hysar_status_name((hysar_status)99), "unknown status") == 0);
+    CHECK(hysar_now_ns() > 0);
+
+    hysar_client_config config;
+    memset(&config, 0xAB, sizeof config);
+    hysar_client_config_init(&config);
+    CHECK(config.struct_size == sizeof(hysar_client_config));
+    CHECK(config.address == NULL && config.token == NULL);
+    CHECK(config.reconnect_attempts == -1 && config.queue_limit > 0);
+
+    hysar_client* client = (hysar_client*)&config; /* must be overwritten with NULL */
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(client == NULL);
+    CHECK(strstr(hysar_last_error(), "config.address") != NULL);
+
+    char address[300];
+    snprintf(address, sizeof address, "unix:%s", argv[2]);
+    config.address = address;
+    config.token = "t";
+    config.connect_timeout_ms = 2000;
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_CONNECT);
+    CHECK(strstr(hysar_last_error(), argv[2]) != NULL);
+
+    hysar_display display;
+    CHECK(hysar_display_from_profile(argv[1], 0.5, &display) == HYSAR_OK);
+    CHECK(display.eye_width > 0 && display.eye_height > 0 && display.fx > 0);
+    CHECK(display.format == HYSAR_FORMAT_RGBA8 && display.mode == HYSAR_MODE_CONTINUOUS);
+    CHECK(hysar_display_from_profile("/nonexistent/profile.json", 1, &display) ==
+          HYSAR_E_INVALID_ARGUMENT);
+    CHECK(strstr(hysar_last_error(), "/nonexistent/profile.json") != NULL);
+    CHECK(hysar_display_from_profile(argv[1], 0, &display) == HYSAR_E_INVALID_ARGUMENT);
+
+    hysar_pose pose;
+    memset(&pose, 0, sizeof pose);
+    hysar_event event;
+    CHECK(hysar_client_send_pose(NULL, &pose, NULL) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(hysar_client_register_display(NULL, &display) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(hysar_client_request_frame(NULL) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(hysar_client_request_stats(NULL) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(hysar_client_poll(NULL, 0, &event) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(hysar_client_get_info(NULL, NULL) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(strlen(hysar_last_error()) > 0);
+    memset(&event, 0, sizeof event);
+    hysar_event_release(&event); /* a zeroed event is ignored */
+    hysar_event_release(NULL);
+    hysar_client_close(NULL);
+    if (failures == 0)
+        printf("abi_test: the C API behaves as documented from C\n");
+    return failures ? 1 : 0;
+}

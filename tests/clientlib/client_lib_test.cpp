@@ -1,0 +1,330 @@
+// libhysar-client through its C API against a real server (lavapipe, validation on): the first
+// session, layers with their pose, a server that goes away and comes back (the display, the last
+// pose and an unanswered FrameRequest are sent again without the application doing anything),
+// giving up, the bounded queue, and bad arguments.
+#include <filesystem>
+#include <random>
+
+#include "clients/lib/hysar_client.h"
+#include "clients/lib/session.hpp"
+#include "net/net_fixture.hpp"
+
+namespace hs::net_test {
+namespace {
+
+struct Closer {
+    void operator()(hysar_client* c) const { hysar_client_close(c); }
+};
+using Client = std::unique_ptr<hysar_client, Closer>;
+
+// A server on a Unix socket that a test can stop and start again at the same address (the
+// fixture's TCP server is not started).
+class ClientLib : public ServerTest {
+protected:
+    void SetUp() override {
+        messages_before_ = device().validation_message_count();
+        dir_ = std::filesystem::temp_directory_path() /
+               ("hs_clientlib_" + std::to_string(::getpid()) + "_" +
+                ::testing::UnitTest::GetInstance()->current_test_info()->name());
+        std::filesystem::create_directories(dir_);
+        address_ = "unix:" + (dir_ / "s.sock").string();
+        start();
+    }
+    void TearDown() override {
+        stop();
+        std::filesystem::remove_all(dir_);
+        EXPECT_EQ(device().validation_message_count(), messages_before_)
+            << "Vulkan validation reported messages";
+    }
+    void start() {
+        stream::ServerCreateInfo info;
+        info.port = 0;
+        info.unix_path = (dir_ / "s.sock").string();
+        info.token = kToken;
+        info.admin_token = kAdminToken;
+        auto s = stream::Server::create(device(), test_scene(), info);
+        ASSERT_TRUE(s.ok()) << s.error().message;
+        server_ = std::move(s).value();
+        thread_ = std::thread([this] { server_->run(); });
+    }
+    void stop() {
+        if (!server_)
+            return;
+        server_->stop();
+        thread_.join();
+        server_.reset();
+    }
+
+    hysar_client_config config(uint32_t role = HYSAR_ROLE_HMD) {
+        hysar_client_config c;
+        hysar_client_config_init(&c);
+        c.address = address_.c_str();
+        c.token = kToken;
+        c.name = "lib-test";
+        c.role = role;
+        c.reconnect_initial_ms = 50;
+        c.reconnect_max_ms = 400;
+        return c;
+    }
+    Client connect(const hysar_client_config& c) {
+        hysar_client* raw = nullptr;
+        EXPECT_EQ(hysar_client_connect(&c, &raw), HYSAR_OK) << hysar_last_error();
+        return Client(raw);
+    }
+    static hysar_display display(uint32_t mode) {
+        const auto d = small_display(proto::PixelFormat::kRgba8, proto::FrameMode(mode));
+        return {d.eye_width,        d.eye_height,          d.fx, d.fy, d.cx, d.cy, d.ipd_m,
+                HYSAR_FORMAT_RGBA8, HYSAR_ENCODING_SPARSE, mode};
+    }
+    static hysar_pose pose(double angle_deg) {
+        const auto p = pose_at(angle_deg, 0);
+        hysar_pose h{};
+        std::copy(p.position_m.begin(), p.position_m.end(), h.position_m);
+        std::copy(p.orientation_wxyz.begin(), p.orientation_wxyz.end(), h.orientation_wxyz);
+        return h;
+    }
+    // Polls until an event of `kind` (others are counted in `seen`), up to `timeout_ms`. The
+    // returned event must be released.
+    hysar_event wait_for(hysar_client* c, uint32_t kind, int timeout_ms = 30000,
+                         std::vector<uint32_t>* seen = nullptr) {
+        const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+        while (std::chrono::steady_clock::now() < until) {
+            hysar_event e;
+            if (hysar_client_poll(c, 200, &e) != HYSAR_OK) {
+                ADD_FAILURE() << "poll: " << hysar_last_error();
+                break;
+            }
+            if (e.kind == kind)
+                return e;
+            if (seen && e.kind != HYSAR_EVENT_NONE)
+                seen->push_back(e.kind);
+            hysar_event_release(&e);
+        }
+        ADD_FAILURE() << "no event of kind " << kind << " within " << timeout_ms << " ms";
+        hysar_event none{};
+        none.text = "";
+        return none;
+    }
+
+    std::filesystem::path dir_;
+};
+
+TEST_F(ClientLib, LayersCarryThePoseTheyAnswer) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    EXPECT_GT(e.session_id, 0u);
+    EXPECT_EQ(e.reconnects, 0u);
+    hysar_event_release(&e);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK) << hysar_last_error();
+    const hysar_pose p = pose(20);
+    uint64_t stamp = 0;
+    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK);
+    EXPECT_GT(stamp, 0u);
+    ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+    bool eyes[2] = {false, false};
+    for (int k = 0; k < 2; ++k) {
+        e = wait_for(c.get(), HYSAR_EVENT_LAYER);
+        ASSERT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+        ASSERT_LE(e.eye, 1u);
+        eyes[e.eye] = true;
+        EXPECT_EQ(e.pose.time_ns, stamp);
+        for (int i = 0; i < 3; ++i) EXPECT_EQ(e.pose.position_m[i], p.position_m[i]);
+        for (int i = 0; i < 4; ++i) EXPECT_EQ(e.pose.orientation_wxyz[i], p.orientation_wxyz[i]);
+        EXPECT_EQ(e.image.width, d.eye_width);
+        EXPECT_EQ(e.image.height, d.eye_height);
+        EXPECT_EQ(e.image.bytes_per_pixel, 4u);
+        ASSERT_EQ(e.image.size_bytes, size_t(d.eye_width) * d.eye_height * 4);
+        // The decoded layer lights some pixels (the prop's highlight) and not all of them.
+        size_t lit = 0;
+        for (size_t i = 0; i < e.image.size_bytes; i += 4)
+            lit += e.image.pixels[i] | e.image.pixels[i + 1] | e.image.pixels[i + 2] ? 1 : 0;
+        EXPECT_GT(lit, 0u);
+        EXPECT_LT(lit, size_t(d.eye_width) * d.eye_height);
+        EXPECT_GE(e.decoded_ns, e.received_ns);
+        EXPECT_GE(e.received_ns, stamp);
+        hysar_event_release(&e);
+        EXPECT_EQ(e.internal_, nullptr);
+    }
+    EXPECT_TRUE(eyes[0] && eyes[1]);
+    hysar_client_info info{};
+    ASSERT_EQ(hysar_client_get_info(c.get(), &info), HYSAR_OK);
+    EXPECT_EQ(info.connected, 1u);
+    EXPECT_GT(info.bytes_received, 0u);
+}
+
+TEST_F(ClientLib, ReconnectsAndSendsDisplayPoseAndRequestAgain) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
+    const hysar_pose p = pose(-20);
+    uint64_t stamp = 0;
+    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK);
+    stop();  // the server goes away before the request
+    e = wait_for(c.get(), HYSAR_EVENT_DISCONNECTED);
+    EXPECT_STRNE(e.text, "");
+    hysar_event_release(&e);
+    // Asked while disconnected: kept until answered.
+    ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK) << hysar_last_error();
+    start();
+    e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    EXPECT_EQ(e.reconnects, 1u);
+    hysar_event_release(&e);
+    // The new server never saw this client's display or pose from the application: the layers
+    // prove the library sent both, and the request, again.
+    std::vector<uint32_t> seen;
+    e = wait_for(c.get(), HYSAR_EVENT_LAYER, 30000, &seen);
+    EXPECT_EQ(e.pose.time_ns, stamp);
+    EXPECT_EQ(e.image.width, d.eye_width);
+    hysar_event_release(&e);
+    for (uint32_t k : seen) EXPECT_NE(k, uint32_t(HYSAR_EVENT_SERVER_ERROR));
+    hysar_client_info info{};
+    ASSERT_EQ(hysar_client_get_info(c.get(), &info), HYSAR_OK);
+    EXPECT_EQ(info.reconnects, 1u);
+}
+
+TEST_F(ClientLib, ProjectorFramesComeAgainAfterARestart) {
+    auto c = connect(config(HYSAR_ROLE_PROJECTOR));
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_PROJECTOR_FRAME);
+    EXPECT_EQ(e.image.width, 480u);
+    EXPECT_EQ(e.image.height, 300u);
+    EXPECT_GT(e.scene_version, 0u);
+    hysar_event_release(&e);
+    stop();
+    start();
+    e = wait_for(c.get(), HYSAR_EVENT_PROJECTOR_FRAME);
+    EXPECT_EQ(e.image.width, 480u);
+    hysar_event_release(&e);
+}
+
+TEST_F(ClientLib, GivesUpAfterTheAttemptsItWasAllowed) {
+    hysar_client_config cfg = config();
+    cfg.reconnect_attempts = 2;
+    auto c = connect(cfg);
+    ASSERT_TRUE(c);
+    stop();
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CLOSED);
+    EXPECT_NE(std::string(e.text).find("gave up after 2 reconnect attempts"), std::string::npos)
+        << e.text;
+    hysar_event_release(&e);
+    hysar_event after;
+    EXPECT_EQ(hysar_client_poll(c.get(), 0, &after), HYSAR_E_CLOSED);
+    const hysar_pose p = pose(0);
+    EXPECT_EQ(hysar_client_send_pose(c.get(), &p, nullptr), HYSAR_E_CLOSED);
+    EXPECT_STRNE(hysar_last_error(), "");
+}
+
+TEST_F(ClientLib, TheQueueKeepsTheNewestImagesOnly) {
+    hysar_client_config cfg = config();
+    cfg.queue_limit = 2;
+    auto c = connect(cfg);
+    ASSERT_TRUE(c);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
+    // Three requests answered one after the other while nobody polls: six layers, two kept.
+    for (int k = 0; k < 3; ++k) {
+        const hysar_pose p = pose(10.0 * k);
+        ASSERT_EQ(hysar_client_send_pose(c.get(), &p, nullptr), HYSAR_OK);
+        ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+        hysar_client_info info{};
+        for (int i = 0; i < 300 && info.bytes_received == 0; ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));
+            hysar_client_get_info(c.get(), &info);
+        }
+    }
+    hysar_client_info info{};
+    for (int i = 0; i < 3000 && info.images_dropped < 4; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        hysar_client_get_info(c.get(), &info);
+    }
+    EXPECT_EQ(info.images_dropped, 4u);
+    int images = 0;
+    for (;;) {
+        hysar_event e;
+        ASSERT_EQ(hysar_client_poll(c.get(), 500, &e), HYSAR_OK);
+        if (e.kind == HYSAR_EVENT_NONE)
+            break;
+        images += e.kind == HYSAR_EVENT_LAYER;
+        hysar_event_release(&e);
+    }
+    EXPECT_EQ(images, 2);
+}
+
+TEST_F(ClientLib, RefusedAndUnreachableAreTheirOwnStatuses) {
+    hysar_client_config cfg = config();
+    cfg.token = "wrong";
+    hysar_client* c = nullptr;
+    EXPECT_EQ(hysar_client_connect(&cfg, &c), HYSAR_E_REFUSED);
+    EXPECT_EQ(c, nullptr);
+    EXPECT_NE(std::string(hysar_last_error()).find("unauthorized"), std::string::npos)
+        << hysar_last_error();
+    const std::string gone = "unix:" + (dir_ / "nothing.sock").string();
+    cfg = config();
+    cfg.address = gone.c_str();
+    EXPECT_EQ(hysar_client_connect(&cfg, &c), HYSAR_E_CONNECT);
+    EXPECT_NE(std::string(hysar_last_error()).find("nothing.sock"), std::string::npos);
+}
+
+TEST_F(ClientLib, BadArgumentsAreRefusedWithTheFieldNamed) {
+    hysar_client* c = nullptr;
+    EXPECT_EQ(hysar_client_connect(nullptr, &c), HYSAR_E_INVALID_ARGUMENT);
+    hysar_client_config cfg = config();
+    cfg.address = "no-port";
+    EXPECT_EQ(hysar_client_connect(&cfg, &c), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("config.address"), std::string::npos);
+    cfg = config();
+    cfg.keepalive_ms = 1;
+    EXPECT_EQ(hysar_client_connect(&cfg, &c), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("keepalive_ms"), std::string::npos);
+    cfg = config();
+    cfg.struct_size = 8;
+    EXPECT_EQ(hysar_client_connect(&cfg, &c), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("struct_size"), std::string::npos);
+
+    auto client = connect(config());
+    ASSERT_TRUE(client);
+    hysar_pose p = pose(0);
+    p.orientation_wxyz[0] = std::nan("");
+    EXPECT_EQ(hysar_client_send_pose(client.get(), &p, nullptr), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("pose"), std::string::npos);
+    hysar_display d = display(HYSAR_MODE_CONTINUOUS);
+    d.format = 9;
+    EXPECT_EQ(hysar_client_register_display(client.get(), &d), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("display.format"), std::string::npos);
+    d = display(HYSAR_MODE_CONTINUOUS);
+    d.eye_width = 0;
+    EXPECT_EQ(hysar_client_register_display(client.get(), &d), HYSAR_E_INVALID_ARGUMENT);
+    // The session is still good after refused arguments: a valid pose still gets layers.
+    d = display(HYSAR_MODE_CONTINUOUS);
+    ASSERT_EQ(hysar_client_register_display(client.get(), &d), HYSAR_OK);
+    p = pose(0);
+    ASSERT_EQ(hysar_client_send_pose(client.get(), &p, nullptr), HYSAR_OK);
+    hysar_event e = wait_for(client.get(), HYSAR_EVENT_LAYER);
+    EXPECT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+    hysar_event_release(&e);
+    hysar_client_close(nullptr);
+    hysar_event_release(nullptr);
+}
+
+TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
+    std::mt19937 rng(7);
+    for (int attempt = 0; attempt < 12; ++attempt) {
+        const double full = std::min(100.0 * std::pow(2.0, attempt), 3000.0);
+        int lo = INT32_MAX, hi = 0;
+        for (int k = 0; k < 200; ++k) {
+            const int d = client::backoff_ms(attempt, 100, 3000, rng);
+            lo = std::min(lo, d), hi = std::max(hi, d);
+        }
+        EXPECT_GE(lo, int(full * 0.5) - 1) << "attempt " << attempt;
+        EXPECT_LE(hi, int(full)) << "attempt " << attempt;
+        EXPECT_GT(hi - lo, int(full * 0.2)) << "no jitter at attempt " << attempt;
+    }
+}
+
+}  // namespace
+}  // namespace hs::net_test
