@@ -16,18 +16,18 @@ jobs=$(nproc 2>/dev/null || echo 2)
 CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_SANITIZE=ON \
   -DHYSAR_WERROR=ON -DHYSAR_FUZZ_SECONDS="${HYSAR_FUZZ_SECONDS:-30}" >/dev/null
 cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs_fuzz_seeds hs_net_tests hysar \
-  hysar-loadgen
+  hysar-loadgen hs_client_lib_tests
 (cd build-san && ctest --output-on-failure --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
-  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|net\.scale)')
+  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|ClientLib|net\.scale)')
 
 # The server's loopback and reliability tests once more under ThreadSanitizer; tests/tsan.supp
 # lists the suppressions (the Vulkan driver only) and why.
 CC=clang CXX=clang++ cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_TSAN=ON \
   -DHYSAR_WERROR=ON >/dev/null
-cmake --build build-tsan -j "$jobs" --target hs_net_tests
+cmake --build build-tsan -j "$jobs" --target hs_net_tests hs_client_lib_tests
 (cd build-tsan &&
   TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/../tests/tsan.supp" \
-    ctest --output-on-failure --timeout 900 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules)')
+    ctest --output-on-failure --timeout 900 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ClientLib)')
 
 cd build
 ctest --output-on-failure -j "$jobs" --timeout 900
