@@ -56,8 +56,8 @@ inline hysar_client_config client_config(Args& args, const std::string& address,
 // The first session, or the line to print and exit status 2 (unreachable, or refused).
 inline std::variant<ClientPtr, std::string> connect_client(const hysar_client_config& c) {
     hysar_client* raw = nullptr;
-    if (hysar_client_connect(&c, &raw) != HYSAR_OK)
-        return std::string(c.address) + ": " + hysar_last_error();
+    if (hysar_client_connect(&c, &raw) != HYSAR_OK)  // the sentence names the address
+        return std::string("--connect: ") + hysar_last_error();
     return ClientPtr(raw);
 }
 

@@ -110,8 +110,9 @@ std::variant<std::unique_ptr<Connection>, Session::ConnectError> Session::open_s
     if (auto* e = std::get_if<std::string>(&c))
         return ConnectError{false, *e};
     auto conn = std::move(std::get<std::unique_ptr<Connection>>(c));
+    const std::string at = config_.address + ": ";  // every sentence after connect() names it
     if (!conn->send(proto::Hello{config_.role, config_.token, config_.name}, sequence_++))
-        return ConnectError{false, "cannot send Hello: " + conn->last_error()};
+        return ConnectError{false, at + "cannot send Hello: " + conn->last_error()};
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::milliseconds(config_.connect_timeout_ms);
     for (;;) {
@@ -120,13 +121,13 @@ std::variant<std::unique_ptr<Connection>, Session::ConnectError> Session::open_s
                                  .count());
         auto r = conn->receive(std::max(left, 0));
         if (auto* e = std::get_if<std::string>(&r))
-            return ConnectError{false, "no answer to Hello: " + *e};
+            return ConnectError{false, at + "no answer to Hello: " + *e};
         if (std::holds_alternative<std::monostate>(r))
-            return ConnectError{false, "no answer to Hello within " +
+            return ConnectError{false, at + "no answer to Hello within " +
                                            std::to_string(config_.connect_timeout_ms) + " ms"};
         const auto& m = std::get<Message>(r);
         if (auto* err = std::get_if<proto::Error>(&m))
-            return ConnectError{true, "the server refused the session: " + describe(*err)};
+            return ConnectError{true, at + "the server refused the session: " + describe(*err)};
         if (auto* w = std::get_if<proto::Welcome>(&m)) {
             *session_id = w->session_id;
             *version = w->scene_version;
