@@ -116,6 +116,10 @@ refused --scale nan "[0.01, 8]" "$build/clients/hysar-hmd" "${T[@]}" --scale nan
 refused --frames 1e3 "[0, 1000000000]" "$build/clients/hysar-projector" "${T[@]}" --frames 1e3
 refused --rate inf "[0.1, 1000]" "$build/clients/hysar-loadgen" "${T[@]}" --rate inf
 refused --viewers 12abc "[1, 1024]" "$build/clients/hysar-loadgen" "${T[@]}" --viewers 12abc
+refused --retries -2 "[-1, 1000000]" "$build/clients/hysar-projector" "${T[@]}" --retries -2
+refused --backoff-ms 0 "[1, 60000]" "$build/clients/hysar-hmd" "${T[@]}" --backoff-ms 0
+refused --clear-after-ms 1e9 "[1, 600000]" "$build/clients/hysar-hmd" "${T[@]}" --window --clear-after-ms 1e9
+refused --seconds -1 "[0, 86400]" "$build/clients/hysar-loadgen" "${T[@]}" --seconds -1
 
 # Values inside the ranges: a leading '+', the bounds themselves (a small device, no GPU).
 accepted "$hysar" calibrate patterns --size 2x16384 --ramp +2 --grid 2 --out "$work/pat_ok"
