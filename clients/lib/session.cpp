@@ -296,22 +296,20 @@ void Session::handle(Message m, uint64_t received_ns) {
         e.decoded_ns = now_ns();
         return true;
     };
-    std::lock_guard lock(mutex_);
-    if (auto* l = std::get_if<proto::VdLayer>(&m)) {
+    // Decoding (up to tens of MB) happens outside the lock: the application's calls never wait
+    // for it.
+    auto* layer = std::get_if<proto::VdLayer>(&m);
+    auto* frame = std::get_if<proto::ProjectorFrame>(&m);
+    if (layer) {
         e.kind = SessionEvent::Kind::kLayer;
-        e.eye = l->eye;
-        e.frame_id = l->frame_id;
-        e.pose.client_time_ns = l->pose_time_ns;
-        if (auto it = sent_poses_.find(l->pose_time_ns); it != sent_poses_.end())
-            e.pose = it->second;
-        if (l->eye == 1 && frame_request_sent_)
-            frame_wanted_ = frame_request_sent_ = false;  // the request was answered
-        decode(l->width, l->height, l->format, l->encoding, l->data);
-    } else if (auto* f = std::get_if<proto::ProjectorFrame>(&m)) {
+        e.eye = layer->eye;
+        e.frame_id = layer->frame_id;
+        e.pose.client_time_ns = layer->pose_time_ns;
+        decode(layer->width, layer->height, layer->format, layer->encoding, layer->data);
+    } else if (frame) {
         e.kind = SessionEvent::Kind::kProjectorFrame;
-        e.scene_version = f->scene_version;
-        info_.scene_version = f->scene_version;
-        decode(f->width, f->height, f->format, f->encoding, f->data);
+        e.scene_version = frame->scene_version;
+        decode(frame->width, frame->height, frame->format, frame->encoding, frame->data);
     } else if (auto* err = std::get_if<proto::Error>(&m)) {
         e.kind = SessionEvent::Kind::kServerError;
         e.error_code = uint32_t(err->code);
@@ -322,6 +320,15 @@ void Session::handle(Message m, uint64_t received_ns) {
     } else {
         return;  // Pong, and what needs no event
     }
+    std::lock_guard lock(mutex_);
+    if (layer) {
+        if (auto it = sent_poses_.find(layer->pose_time_ns); it != sent_poses_.end())
+            e.pose = it->second;
+        if (layer->eye == 1 && frame_request_sent_)
+            frame_wanted_ = frame_request_sent_ = false;  // the request was answered
+    }
+    if (frame)
+        info_.scene_version = frame->scene_version;
     push(std::move(e));
 }
 
