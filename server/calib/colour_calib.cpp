@@ -90,6 +90,14 @@ glm::dvec3 ColourCalibration::linearise(const glm::dvec3& d) const {
             curve_eval(response[2], d.z)};
 }
 
+glm::dvec3 ColourCalibration::unlinearise(const glm::dvec3& r) const {
+    const glm::dvec3 c = glm::clamp(r, glm::dvec3(0.0), glm::dvec3(1.0));
+    if (model == ColourModel::kLinear)
+        return c;
+    return {curve_invert(response[0], c.x), curve_invert(response[1], c.y),
+            curve_invert(response[2], c.z)};
+}
+
 glm::dvec3 ColourCalibration::predict(const glm::dvec3& d) const {
     return matrix * linearise(d) + offset;
 }
@@ -99,10 +107,7 @@ glm::dvec3 ColourCalibration::drive_for(const glm::dvec3& camera, bool* clipped)
     glm::dvec3 c = glm::clamp(r, glm::dvec3(0.0), glm::dvec3(1.0));
     if (clipped)
         *clipped = glm::any(glm::greaterThan(glm::abs(c - r), glm::dvec3(1e-9)));
-    if (model == ColourModel::kLinear)
-        return c;
-    return {curve_invert(response[0], c.x), curve_invert(response[1], c.y),
-            curve_invert(response[2], c.z)};
+    return unlinearise(c);
 }
 
 double ColourCalibration::delta_e00(const glm::dvec3& a, const glm::dvec3& b) const {

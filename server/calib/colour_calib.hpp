@@ -50,7 +50,9 @@ struct ColourCalibration {
     uint64_t samples = 0;
 
     glm::dvec3 linearise(const glm::dvec3& drive) const;  // r(drive)
-    glm::dvec3 predict(const glm::dvec3& drive) const;    // M r(drive) + o
+    // r^-1 per channel, each clamped to [0, 1] first: the drive whose response is `response`.
+    glm::dvec3 unlinearise(const glm::dvec3& response) const;
+    glm::dvec3 predict(const glm::dvec3& drive) const;  // M r(drive) + o
     glm::dvec3 white() const { return predict(glm::dvec3(1.0)); }
     // The drive whose camera value is `camera`, clamped to the device's range; `clipped` is set
     // when the clamp changed it.

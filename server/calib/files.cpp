@@ -3,6 +3,8 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -32,16 +34,68 @@ Result<json> read_json(const fs::path& file) {
     }
 }
 
-// Runs `fn` on a parsed file; a missing key or wrong type becomes an error naming the file.
+// A field that is missing or not what it must be; from_json names the file.
+struct FieldError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+constexpr double kMaxDevicePixels = 16384;
+
+const json& field(const json& j, const std::string& key, const std::string& name) {
+    if (!j.is_object() || !j.contains(key))
+        throw FieldError(fmt::format("no \"{}\"", name));
+    return j.at(key);
+}
+
+double finite_number(const json& v, const std::string& name) {
+    if (!v.is_number())
+        throw FieldError(fmt::format("{} is {}, not a finite number", name,
+                                     v.is_null() ? "null (a NaN or infinity written as JSON)"
+                                                 : std::string("a ") + v.type_name()));
+    const double d = v.get<double>();
+    if (!std::isfinite(d))
+        throw FieldError(fmt::format("{} is {}, not a finite number", name, d));
+    return d;
+}
+
+double finite_number(const json& j, const std::string& key, const std::string& name) {
+    return finite_number(field(j, key, name), name);
+}
+
+const json& array_of(const json& j, const std::string& key, size_t n, const std::string& name) {
+    const json& a = field(j, key, name);
+    if (!a.is_array() || a.size() != n)
+        throw FieldError(fmt::format("{} is not an array of {}", name, n));
+    return a;
+}
+
+std::pair<uint32_t, uint32_t> device_size(const json& j, const std::string& key) {
+    const json& a = array_of(j, key, 2, key);
+    uint32_t wh[2];
+    for (int i = 0; i < 2; ++i) {
+        const std::string name = fmt::format("{}[{}]", key, i);
+        const double v = finite_number(a.at(i), name);
+        if (!(v >= 1 && v <= kMaxDevicePixels && v == std::floor(v)))
+            throw FieldError(fmt::format("{} is {}, not a whole number of pixels in [1, {}]", name,
+                                         v, kMaxDevicePixels));
+        wh[i] = uint32_t(v);
+    }
+    return {wh[0], wh[1]};
+}
+
+// Runs `fn` on a parsed file; a missing key, a wrong type or a FieldError becomes an error
+// naming the file (and the field).
 template <typename T, typename Fn>
 Result<T> from_json(const fs::path& file, const char* kind, Fn fn) {
     HS_ASSIGN_OR_RETURN(json j, read_json(file));
     try {
-        if (j.value("kind", std::string()) != kind)
+        if (!j.is_object() || j.value("kind", std::string()) != kind)
             return make_error(ErrorCode::kParse,
                               fmt::format("{}: not a {} file (its \"kind\" is not \"{}\")",
                                           file.string(), kind, kind));
         return fn(j);
+    } catch (const FieldError& e) {
+        return make_error(ErrorCode::kParse, fmt::format("{}: {}", file.string(), e.what()));
     } catch (const json::exception& e) {
         return make_error(ErrorCode::kParse,
                           fmt::format("{}: malformed {} file: {}", file.string(), kind, e.what()));
@@ -87,16 +141,7 @@ Result<void> save_lut(const fs::path& dir, const DeviceLut& lut, const DecodeOpt
 }
 
 Result<DeviceLut> load_lut(const fs::path& dir) {
-    HS_ASSIGN_OR_RETURN(
-        DeviceLut lut,
-        (from_json<DeviceLut>(dir / "lut.json", "hysar-lut", [](const json& j) -> DeviceLut {
-            DeviceLut l;
-            l.camera_width = j.at("camera").at(0);
-            l.camera_height = j.at("camera").at(1);
-            l.device_width = j.at("device").at(0);
-            l.device_height = j.at("device").at(1);
-            return l;
-        })));
+    HS_ASSIGN_OR_RETURN(DeviceLut lut, load_lut_sizes(dir));
     HS_ASSIGN_OR_RETURN(ImageRgba32f img, read_exr(dir / "lut.exr"));
     HS_TRY(check_map_image(dir / "lut.exr", img, lut.camera_width, lut.camera_height));
     const size_t n = size_t(img.width) * img.height;
@@ -119,6 +164,15 @@ Result<DeviceLut> load_lut(const fs::path& dir) {
         lut.valid += lut.state[i] == DeviceLut::kValid;
     }
     return lut;
+}
+
+Result<DeviceLut> load_lut_sizes(const fs::path& dir) {
+    return from_json<DeviceLut>(dir / "lut.json", "hysar-lut", [](const json& j) -> DeviceLut {
+        DeviceLut l;
+        std::tie(l.camera_width, l.camera_height) = device_size(j, "camera");
+        std::tie(l.device_width, l.device_height) = device_size(j, "device");
+        return l;
+    });
 }
 
 Result<void> save_inverse(const fs::path& dir, const InverseMap& m) {
@@ -195,20 +249,47 @@ Result<ColourCalibration> load_colour(const fs::path& file) {
     return from_json<ColourCalibration>(
         file, "hysar-colour", [&](const json& j) -> Result<ColourCalibration> {
             ColourCalibration c;
-            HS_ASSIGN_OR_RETURN(c.model, parse_colour_model(j.at("model")));
-            for (int p = 0; p < 3; ++p)
-                for (int k = 0; k < 3; ++k) c.matrix[p][k] = j.at("primaries").at(p).at(k);
-            for (int k = 0; k < 3; ++k) c.offset[k] = j.at("offset").at(k);
-            if (c.model == ColourModel::kCurve)
+            const json& model = field(j, "model", "model");
+            if (!model.is_string())
+                throw FieldError("model is not \"linear\" or \"curve\"");
+            auto parsed = parse_colour_model(model.get<std::string>());
+            if (!parsed)
+                throw FieldError("model: " + parsed.error().message);
+            c.model = parsed.value();
+            const json& primaries = array_of(j, "primaries", 3, "primaries");
+            for (int p = 0; p < 3; ++p) {
+                const json& row = primaries.at(p);
+                if (!row.is_array() || row.size() != 3)
+                    throw FieldError(fmt::format("primaries[{}] is not an array of 3", p));
+                for (int k = 0; k < 3; ++k)
+                    c.matrix[p][k] =
+                        finite_number(row.at(k), fmt::format("primaries[{}][{}]", p, k));
+            }
+            const json& offset = array_of(j, "offset", 3, "offset");
+            for (int k = 0; k < 3; ++k)
+                c.offset[k] = finite_number(offset.at(k), fmt::format("offset[{}]", k));
+            if (c.model == ColourModel::kCurve) {
+                const json& response = array_of(j, "response", 3, "response");
                 for (int ch = 0; ch < 3; ++ch) {
-                    for (const auto& k : j.at("response").at(ch))
-                        c.response[ch].push_back({k.at(0), k.at(1)});
-                    if (c.response[ch].size() < 2)
-                        return make_error(ErrorCode::kParse,
-                                          fmt::format("{}: response curve {} has fewer than 2 "
-                                                      "knots",
-                                                      file.string(), ch));
+                    const json& knots = response.at(ch);
+                    if (!knots.is_array() || knots.size() < 2)
+                        throw FieldError(fmt::format("response[{}] has fewer than 2 knots", ch));
+                    for (size_t i = 0; i < knots.size(); ++i) {
+                        const std::string name = fmt::format("response[{}][{}]", ch, i);
+                        if (!knots[i].is_array() || knots[i].size() != 2)
+                            throw FieldError(name + " is not a (drive, response) pair");
+                        const double d = finite_number(knots[i][0], name + "[0]");
+                        const double v = finite_number(knots[i][1], name + "[1]");
+                        if (d < 0 || d > 1 || (i > 0 && !(d > c.response[ch].back().first)) ||
+                            (i > 0 && v < c.response[ch].back().second))
+                            throw FieldError(fmt::format(
+                                "{} = ({}, {}): knots must rise in drive within [0, 1] and "
+                                "never fall in response",
+                                name, d, v));
+                        c.response[ch].push_back({d, v});
+                    }
                 }
+            }
             c.condition = j.value("condition", 0.0);
             c.rmse = j.value("rmse_dn_per_s", 0.0);
             c.mean_de00 = j.value("mean_de00", 0.0);
@@ -219,6 +300,84 @@ Result<ColourCalibration> load_colour(const fs::path& file) {
                                   fmt::format("{}: the primaries are degenerate", file.string()));
             return c;
         });
+}
+
+Result<void> save_optics(const fs::path& file, const OpticalConstants& c) {
+    const auto& l = c.levels;
+    return write_json(
+        file, {{"kind", "hysar-optics"},
+               {"comment",
+                "Optical constants of the installation (docs/CALIBRATION.md, optics.json): the "
+                "headset's transparency alpha, the scene-to-signal scale k (0: per scene, the "
+                "largest the projector can show), the device levels and room light in camera DN/s "
+                "(docs/OPTICS.md), the prop's albedo"},
+               {"source", c.source},
+               {"alpha", c.alpha},
+               {"scene_to_signal", c.scene_to_signal},
+               {"levels",
+                {{"projector_max", l.projector_max},
+                 {"projector_min", l.projector_min},
+                 {"hmd_max", l.hmd_max},
+                 {"hmd_min", l.hmd_min},
+                 {"environment", l.environment}}},
+               {"prop_albedo", {c.prop_albedo.r, c.prop_albedo.g, c.prop_albedo.b}}});
+}
+
+Result<OpticalConstants> load_optics(const fs::path& file) {
+    return from_json<OpticalConstants>(file, "hysar-optics", [](const json& j) {
+        OpticalConstants c;
+        c.source = j.value("source", std::string());
+        c.alpha = finite_number(j, "alpha", "alpha");
+        if (!(c.alpha > 0 && c.alpha <= 1))
+            throw FieldError(fmt::format("alpha is {}, outside (0, 1]", c.alpha));
+        c.scene_to_signal = finite_number(j, "scene_to_signal", "scene_to_signal");
+        if (c.scene_to_signal < 0)
+            throw FieldError(fmt::format("scene_to_signal is {}; it must be >= 0 (0: per scene)",
+                                         c.scene_to_signal));
+        const json& l = field(j, "levels", "levels");
+        auto level = [&](const char* key) {
+            const std::string name = std::string("levels.") + key;
+            const double v = finite_number(l, key, name);
+            if (v < 0)
+                throw FieldError(fmt::format("{} is {} DN/s; levels are >= 0", name, v));
+            return v;
+        };
+        c.levels.projector_max = level("projector_max");
+        c.levels.projector_min = level("projector_min");
+        c.levels.hmd_max = level("hmd_max");
+        c.levels.hmd_min = level("hmd_min");
+        c.levels.environment = level("environment");
+        if (!(c.levels.projector_max > c.levels.projector_min))
+            throw FieldError(
+                fmt::format("levels.projector_max ({}) must be above levels.projector_min ({})",
+                            c.levels.projector_max, c.levels.projector_min));
+        if (!(c.levels.hmd_max > c.levels.hmd_min))
+            throw FieldError(fmt::format("levels.hmd_max ({}) must be above levels.hmd_min ({})",
+                                         c.levels.hmd_max, c.levels.hmd_min));
+        const json& albedo = array_of(j, "prop_albedo", 3, "prop_albedo");
+        for (int k = 0; k < 3; ++k) {
+            const std::string name = fmt::format("prop_albedo[{}]", k);
+            c.prop_albedo[k] = finite_number(albedo.at(k), name);
+            if (!(c.prop_albedo[k] > 0 && c.prop_albedo[k] <= 10))
+                throw FieldError(fmt::format("{} is {}, outside (0, 10]", name, c.prop_albedo[k]));
+        }
+        return c;
+    });
+}
+
+Result<void> save_device_directory(const fs::path& dir, const DeviceLut& lut,
+                                   const DecodeOptions& decode, const DeviceCalibration& cal) {
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec)
+        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create the folder: {}",
+                                                      dir.string(), ec.message()));
+    HS_TRY(save_lut(dir, lut, decode));
+    HS_TRY(write_png(dir / "lut.png", lut_picture(lut)));
+    HS_TRY(write_exr(dir / "white.exr", cal.white));
+    HS_TRY(write_exr(dir / "black.exr", cal.black));
+    HS_TRY(save_inverse(dir, cal.inverse));
+    return save_colour(dir / "colour.json", cal.colour);
 }
 
 Result<DeviceCalibration> load_device_calibration(const fs::path& dir) {
