@@ -1,0 +1,316 @@
+// Calibrated output without a GPU (calib/serving.hpp): the calibration folder `hysar serve
+// --calibration` reads and every error it names, the compensation list, the headset drive's
+// lookups against its double-precision reference, and the projector drive against the optical
+// model it inverts.
+#include <unistd.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <gtest/gtest.h>
+#include <glm/gtc/packing.hpp>
+#include <nlohmann/json.hpp>
+
+#include "calib/serving.hpp"
+
+namespace hs::calib {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// A device with gamma 2.2 / 2.0 / 2.4, a few per cent of cross-talk, white about 900 DN/s over
+// a black of 12: camera = M r(d) + o.
+glm::dvec3 device(const glm::dvec3& d) {
+    const glm::dmat3 m(880, 40, 10, 50, 900, 30, 8, 35, 860);
+    return m * glm::dvec3(std::pow(d.r, 2.2), std::pow(d.g, 2.0), std::pow(d.b, 2.4)) +
+           glm::dvec3(12.0);
+}
+
+ColourCalibration fitted(ColourModel model = ColourModel::kCurve) {
+    std::vector<ColourSample> samples;
+    for (const auto& d : colour_patch_drives()) samples.push_back({d, device(d)});
+    auto c = fit_colour(samples, model);
+    EXPECT_TRUE(c.ok()) << c.error().message;
+    return c.ok() ? c.value() : ColourCalibration{};
+}
+
+json read(const fs::path& f) {
+    std::ifstream in(f);
+    return json::parse(in);
+}
+void write(const fs::path& f, const json& j) {
+    std::ofstream(f) << j.dump(2);
+}
+
+// A calibration folder: a 64 x 40 projector, a 32 x 20 headset, optics.json.
+class Folder : public ::testing::Test {
+protected:
+    void SetUp() override {
+        dir_ = fs::temp_directory_path() / ("hysar_serving_test_" + std::to_string(::getpid()));
+        fs::remove_all(dir_);
+        for (auto [name, w, h] : {std::tuple{"projector", 64u, 40u}, std::tuple{"hmd", 32u, 20u}}) {
+            fs::create_directories(dir_ / name);
+            DeviceLut lut;
+            lut.camera_width = 16, lut.camera_height = 8;
+            lut.device_width = w, lut.device_height = h;
+            lut.x.assign(128, NAN), lut.y.assign(128, NAN), lut.state.assign(128, 0);
+            ASSERT_TRUE(save_lut(dir_ / name, lut, {}).ok());
+            ASSERT_TRUE(save_colour(dir_ / name / "colour.json", fitted()).ok());
+        }
+        OpticalConstants c;
+        c.alpha = 0.4;
+        c.scene_to_signal = 1500;
+        c.prop_albedo = {0.9, 0.8, 0.7};
+        ASSERT_TRUE(save_optics(dir_ / "optics.json", c).ok());
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+
+    // The message of loading the folder, which must fail.
+    std::string failure() {
+        auto r = load_serving_calibration(dir_, Compensation{});
+        EXPECT_FALSE(r.ok());
+        return r.ok() ? std::string() : r.error().message;
+    }
+    fs::path dir_;
+};
+
+#define EXPECT_HAS(text, part) EXPECT_NE((text).find(part), std::string::npos) << (text)
+
+TEST_F(Folder, LoadsWhatTheCalibrateCommandsWrite) {
+    auto r = load_serving_calibration(dir_, Compensation{});
+    ASSERT_TRUE(r.ok()) << r.error().message;
+    EXPECT_EQ(r->projector.width, 64u);
+    EXPECT_EQ(r->projector.height, 40u);
+    EXPECT_EQ(r->hmd.width, 32u);
+    EXPECT_EQ(r->optics.alpha, 0.4);
+    EXPECT_EQ(r->optics.scene_to_signal, 1500);
+    EXPECT_EQ(r->optics.prop_albedo.b, 0.7);
+    EXPECT_EQ(r->projector.colour.model, ColourModel::kCurve);
+    EXPECT_HAS(r->summary(), "projector 64x40");
+    EXPECT_HAS(r->summary(), "falloff, albedo, hmd_alpha, black_levels");
+}
+
+TEST_F(Folder, AMissingFolderOrFileIsNamed) {
+    fs::remove_all(dir_ / "hmd");
+    EXPECT_HAS(failure(), "hmd: missing; a calibration folder holds projector/, hmd/");
+    fs::remove_all(dir_);
+    EXPECT_HAS(failure(), "no such calibration folder");
+    std::ofstream(dir_) << "a file";
+    EXPECT_HAS(failure(), "not a folder");
+}
+
+TEST_F(Folder, AMissingOpticsFileSaysHowToWriteIt) {
+    fs::remove(dir_ / "optics.json");
+    EXPECT_HAS(failure(),
+               "optics.json: missing; write the optical constants with `hysar "
+               "calibrate optics");
+}
+
+TEST_F(Folder, AFileOfAnotherKindIsNamed) {
+    fs::copy_file(dir_ / "hmd" / "lut.json", dir_ / "hmd" / "colour.json",
+                  fs::copy_options::overwrite_existing);
+    const std::string m = failure();
+    EXPECT_HAS(m, "hmd/colour.json: not a hysar-colour file");
+}
+
+TEST_F(Folder, NaNAndNonsenseNameTheFileAndField) {
+    const fs::path colour = dir_ / "projector" / "colour.json";
+    json j = read(colour);
+    j["primaries"][1][2] = nullptr;  // how a NaN is written
+    write(colour, j);
+    EXPECT_HAS(failure(), "projector/colour.json: primaries[1][2] is null");
+    { std::ofstream(colour) << "{\"kind\": \"hysar-colour\", \"offset\": [NaN, 0, 0]}"; }
+    EXPECT_HAS(failure(), "projector/colour.json: not JSON");
+
+    ASSERT_TRUE(save_colour(colour, fitted()).ok());
+    j = read(colour);
+    j["response"][0][3][0] = 0.01;  // a knot whose drive falls
+    write(colour, j);
+    EXPECT_HAS(failure(), "response[0][3]");
+
+    ASSERT_TRUE(save_colour(colour, fitted()).ok());
+    const fs::path lut = dir_ / "hmd" / "lut.json";
+    j = read(lut);
+    j["device"][0] = 31.5;
+    write(lut, j);
+    EXPECT_HAS(failure(), "hmd/lut.json: device[0] is 31.5, not a whole number of pixels");
+    j["device"][0] = 32;
+    write(lut, j);
+
+    const fs::path optics = dir_ / "optics.json";
+    const json good = read(optics);
+    j = good;
+    j["alpha"] = 1.5;
+    write(optics, j);
+    EXPECT_HAS(failure(), "optics.json: alpha is 1.5, outside (0, 1]");
+    j = good;
+    j["levels"]["hmd_min"] = nullptr;
+    write(optics, j);
+    EXPECT_HAS(failure(), "optics.json: levels.hmd_min is null");
+    j = good;
+    j["levels"]["projector_min"] = 5000;
+    write(optics, j);
+    EXPECT_HAS(failure(), "levels.projector_max (2053) must be above levels.projector_min (5000)");
+    j = good;
+    j.erase("prop_albedo");
+    write(optics, j);
+    EXPECT_HAS(failure(), "optics.json: no \"prop_albedo\"");
+}
+
+TEST_F(Folder, TheSceneAndTheHeadsetMustBeTheCalibratedSizes) {
+    auto cal = load_serving_calibration(dir_, Compensation{});
+    ASSERT_TRUE(cal.ok());
+    scene::Scene s;
+    s.projector.name = "ceiling";
+    s.projector.intrinsics = {64, 40, 100, 100, 31.5, 19.5};
+    EXPECT_TRUE(cal->check_scene(s).ok());
+    s.projector.intrinsics.width = 1920;
+    auto r = cal->check_scene(s);
+    ASSERT_FALSE(r.ok());
+    EXPECT_HAS(r.error().message,
+               "projector/lut.json) is 64x40, the scene's projector "
+               "'ceiling' is 1920x40");
+    EXPECT_FALSE(cal->check_display(32, 20));
+    auto why = cal->check_display(1268, 720);
+    ASSERT_TRUE(why);
+    EXPECT_HAS(*why, "hmd/lut.json) is 32x20 per eye, this headset's display is 1268x720");
+}
+
+TEST(Compensation, ParsesListsAndNamesWhatItDoesNotKnow) {
+    auto all = parse_compensation("all");
+    ASSERT_TRUE(all.ok());
+    EXPECT_EQ(compensation_names(*all).size(), 4u);
+    auto none = parse_compensation("none");
+    ASSERT_TRUE(none.ok());
+    EXPECT_TRUE(compensation_names(*none).empty());
+    auto two = parse_compensation("hmd_alpha,falloff");
+    ASSERT_TRUE(two.ok());
+    EXPECT_EQ(compensation_names(*two), (std::vector<std::string>{"falloff", "hmd_alpha"}));
+    auto bad = parse_compensation("falloff,glare");
+    ASSERT_FALSE(bad.ok());
+    EXPECT_HAS(bad.error().message, "'glare' is not falloff, albedo, hmd_alpha or black_levels");
+    EXPECT_FALSE(parse_compensation("").ok());
+    EXPECT_FALSE(parse_compensation("falloff,").ok());
+}
+
+// The lookups against LayerDrive::drive (double precision, no tables) on every grey code and
+// random colours: RGBA8 within one code, RGBA16F within half precision plus the table's error.
+TEST(LayerDrive, LookupsAgreeWithTheDoubleReference) {
+    const LayerDrive drive(fitted(), 700.0);
+    std::mt19937 rng(9);
+    std::uniform_int_distribution<int> code(0, 255);
+    const uint32_t w = 256, h = 40;
+    std::vector<uint8_t> in8(size_t(w) * h * 4), out8(in8.size(), 7);
+    std::vector<uint8_t> in16(size_t(w) * h * 8), out16(in16.size(), 7);
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            uint8_t* p = &in8[(size_t(y) * w + x) * 4];
+            for (int c = 0; c < 3; ++c) p[c] = uint8_t(y == 0 ? x : code(rng));
+            p[3] = (p[0] | p[1] | p[2]) ? 255 : 0;
+            uint16_t hv[4];
+            for (int c = 0; c < 3; ++c) hv[c] = glm::packHalf1x16(float(srgb_eotf(p[c] / 255.0)));
+            hv[3] = p[3] ? glm::packHalf1x16(1.0f) : 0;
+            std::memcpy(&in16[(size_t(y) * w + x) * 8], hv, 8);
+        }
+    drive.apply_rgba8(in8.data(), w * 4, out8.data(), w * 4, 0, 0, w, h);
+    drive.apply_rgba16f(in16.data(), w * 8, out16.data(), w * 8, 0, 0, w, h);
+    int worst8 = 0;
+    double worst16 = 0;
+    for (size_t i = 0; i < size_t(w) * h; ++i) {
+        const uint8_t* p = &in8[i * 4];
+        const glm::dvec3 l(srgb_eotf(p[0] / 255.0), srgb_eotf(p[1] / 255.0),
+                           srgb_eotf(p[2] / 255.0));
+        const glm::dvec3 d = drive.drive(l);
+        uint16_t hv[4];
+        std::memcpy(hv, &out16[i * 8], 8);
+        for (int c = 0; c < 3; ++c) {
+            worst8 =
+                std::max(worst8, std::abs(int(out8[i * 4 + c]) - int(std::lround(255 * d[c]))));
+            worst16 = std::max(worst16, std::fabs(glm::unpackHalf1x16(hv[c]) - srgb_eotf(d[c])));
+        }
+        const bool lit = out8[i * 4] | out8[i * 4 + 1] | out8[i * 4 + 2];
+        EXPECT_EQ(out8[i * 4 + 3], lit ? 255 : 0) << i;
+        if (!(p[0] | p[1] | p[2])) {
+            EXPECT_EQ(std::vector<uint8_t>(&out8[i * 4], &out8[i * 4 + 4]),
+                      std::vector<uint8_t>(4, 0));
+            EXPECT_EQ(hv[0] | hv[1] | hv[2] | hv[3], 0);
+        }
+    }
+    EXPECT_LE(worst8, 1);
+    EXPECT_LT(worst16, 2e-3);
+    // The drive is the colour model's: the camera sees 700 DN/s per unit radiance over black.
+    const glm::dvec3 l(0.2, 0.3, 0.1);
+    const glm::dvec3 seen = device(drive.drive(l)) - device(glm::dvec3(0.0));
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(seen[c] / (700 * l[c]), 1.0, 0.02) << c;
+}
+
+TEST(LayerDrive, OnlyTheRectangleIsWritten) {
+    const LayerDrive drive(fitted(), 500.0);
+    std::vector<uint8_t> in(8 * 4 * 4, 200), out(in.size(), 7);
+    drive.apply_rgba8(in.data(), 32, out.data(), 32, 2, 1, 5, 3);
+    for (uint32_t y = 0; y < 4; ++y)
+        for (uint32_t x = 0; x < 8; ++x) {
+            const bool inside = x >= 2 && x < 5 && y >= 1 && y < 3;
+            EXPECT_EQ(out[(y * 8 + x) * 4] == 7, !inside) << x << "," << y;
+        }
+}
+
+// The projector drive of a uniform frame on a prop that faces the projector everywhere: the
+// light the colour model says the drive makes, through the optical model, is the target k L.
+TEST_F(Folder, ProjectorDriveMakesTheTargetThroughTheColourModel) {
+    scene::Scene s;
+    s.projector.intrinsics = {64, 40, 100, 100, 31.5, 19.5};
+    const glm::dvec3 radiance(0.4, 0.3, 0.2);
+    ImageRgba32f vi = ImageRgba32f::zeros(64, 40), geometry = ImageRgba32f::zeros(64, 40);
+    for (uint32_t y = 0; y < 40; ++y)
+        for (uint32_t x = 0; x < 64; ++x) {
+            vi.set(x, y, {float(radiance.r), float(radiance.g), float(radiance.b), 1});
+            // g = 2 everywhere (g_ref 2: f = 1), but a quarter of it at the right edge.
+            geometry.set(x, y, {float(x), float(y), x < 48 ? 2.0f : 0.5f, 1});
+        }
+    for (const char* list : {"all", "none", "falloff,albedo"}) {
+        SCOPED_TRACE(list);
+        auto comp = parse_compensation(list);
+        ASSERT_TRUE(comp.ok());
+        auto cal = load_serving_calibration(dir_, *comp);
+        ASSERT_TRUE(cal.ok());
+        auto d = cal->scene_drives(s, vi, geometry);
+        ASSERT_TRUE(d.ok()) << d.error().message;
+        EXPECT_EQ(d->scene_to_signal, 1500);
+        EXPECT_EQ(d->lit, 64u * 40u);
+        EXPECT_EQ(d->g_ref, 2.0);
+        const auto& lv = cal->optics.levels;
+        const glm::dvec3 rho = comp->albedo ? cal->optics.prop_albedo : glm::dvec3(1.0);
+        for (uint32_t x : {10u, 60u}) {
+            const glm::vec4 v = d->projector.at(x, 20);
+            // The light relative to the projector's white, as its colour model predicts it.
+            const glm::dvec3 white = device(glm::dvec3(1.0)) - device(glm::dvec3(0.0));
+            const glm::dvec3 p = (device(glm::dvec3(v)) - device(glm::dvec3(0.0))) / white;
+            const double f = comp->falloff && x >= 48 ? 0.25 : 1.0;
+            for (int c = 0; c < 3; ++c) {
+                const double want = 1500 * radiance[c];
+                const double made =
+                    comp->black_levels
+                        ? f * rho[c] *
+                              (lv.projector_min + (lv.projector_max - lv.projector_min) * p[c])
+                        : f * rho[c] * lv.projector_max * p[c];
+                if (want / (f * rho[c]) < lv.projector_max) {  // not clipped
+                    EXPECT_NEAR(made / want, 1.0, 0.01) << "x " << x << " channel " << c;
+                }
+            }
+        }
+        // The headset: alpha k per unit radiance above its black, hmd_alpha compensated.
+        const double span = comp->black_levels ? lv.hmd_max - lv.hmd_min : lv.hmd_max;
+        EXPECT_NEAR(d->layers->camera_per_radiance(),
+                    (lv.hmd_max - lv.hmd_min) * (comp->hmd_alpha ? 0.4 : 1.0) * 1500 / span, 1e-9);
+    }
+    s.projector.intrinsics.width = 65;
+    EXPECT_FALSE(load_serving_calibration(dir_, {})->scene_drives(s, vi, geometry).ok());
+}
+
+}  // namespace
+}  // namespace hs::calib
