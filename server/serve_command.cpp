@@ -12,6 +12,7 @@
 
 #include <fmt/format.h>
 
+#include "calib/serving.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
 #include "eval_common.hpp"
@@ -25,7 +26,8 @@ namespace {
 const char* kServeHelp =
     "usage: hysar serve [--scene FILE] [--listen HOST:PORT] [--unix PATH] [--token-file FILE]\n"
     "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
-    "                   [--stats-file FILE] [limits...]\n"
+    "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
+    "                   [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
     "                           reloads it (a broken file is reported, the running scene stays)\n"
@@ -38,6 +40,13 @@ const char* kServeHelp =
     "  --asset-root DIR         files a scene may reference lie inside DIR (default: the scene\n"
     "                           file's folder, or the working directory)\n"
     "  --stats-file FILE        write the final stats JSON here on shutdown\n"
+    "  --calibration DIR        calibrated output (docs/CALIBRATION.md): DIR holds projector/,\n"
+    "                           hmd/ (hysar calibrate) and optics.json; the projector frame and\n"
+    "                           every VD layer are sent as device drives (an RGBA8 code is the\n"
+    "                           value the device is sent, not sRGB); a headset of another size\n"
+    "                           than the calibrated one gets an InvalidDisplay error\n"
+    "  --compensation LIST      with --calibration: all (default), none, or a comma-separated\n"
+    "                           list of falloff, albedo, hmd_alpha, black_levels (docs/OPTICS.md)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -51,7 +60,7 @@ const char* kServeHelp =
     "\n"
     "example:\n"
     "  hysar serve --scene room.json --listen 0.0.0.0:7700 --token-file /etc/hysar/token \\\n"
-    "              --admin-token-file /etc/hysar/admin-token\n";
+    "              --admin-token-file /etc/hysar/admin-token --calibration /etc/hysar/cal\n";
 
 std::string random_token() {
     std::random_device rd;
@@ -185,7 +194,9 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--max-viewer-hz",
                                      "--max-batch-viewers",
                                      "--encoder-threads",
-                                     "--tile-codec"});
+                                     "--tile-codec",
+                                     "--calibration",
+                                     "--compensation"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -221,6 +232,15 @@ int run_serve(const std::vector<std::string>& args) {
         info.encoder_threads = uint32_t(n.value());
     else
         return usage_error(n.error().message);
+    calib::Compensation compensation;
+    if (f.has("--compensation")) {
+        if (!f.has("--calibration"))
+            return usage_error("--compensation applies to calibrated output: give --calibration");
+        auto c = calib::parse_compensation(f.get("--compensation", ""));
+        if (!c)
+            return usage_error(c.error().message);
+        compensation = c.value();
+    }
 
     const std::optional<std::string> scene_path =
         f.has("--scene") ? std::optional(f.get("--scene", "")) : std::nullopt;
@@ -240,6 +260,21 @@ int run_serve(const std::vector<std::string>& args) {
     if (!s) {
         std::fprintf(stderr, "hysar serve: %s\n", s.error().message.c_str());
         return 1;
+    }
+    if (f.has("--calibration")) {
+        auto cal = calib::load_serving_calibration(f.get("--calibration", ""), compensation);
+        if (!cal) {
+            std::fprintf(stderr, "hysar serve: --calibration: %s\n", cal.error().message.c_str());
+            return 1;
+        }
+        if (auto r = cal->check_scene(s.value()); !r) {
+            std::fprintf(stderr, "hysar serve: --calibration: %s\n", r.error().message.c_str());
+            return 1;
+        }
+        info.calibration =
+            std::make_shared<const calib::ServingCalibration>(std::move(cal).value());
+        std::printf("calibrated output: %s; RGBA8 frames and layers carry device drive codes\n",
+                    info.calibration->summary().c_str());
     }
     if (f.has("--token-file")) {
         auto t = read_token_file(f.get("--token-file", ""), "--token-file");

@@ -1,5 +1,6 @@
 #include "stream/encoder.hpp"
 
+#include <algorithm>
 #include <chrono>
 
 #include "codec/layer_codec.hpp"
@@ -76,10 +77,16 @@ void Encoder::drain() {
     idle_.wait(lock, [&] { return queue_.empty() && busy_ == 0; });
 }
 
+void Encoder::set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) {
+    std::lock_guard lock(mutex_);
+    drive_ = std::move(drive);
+}
+
 void Encoder::run() {
-    std::vector<uint8_t> scratch;  // packed tiles, reused by this thread
+    LayerScratch scratch;  // reused by this thread
     for (;;) {
         std::shared_ptr<ViewerFrame> frame;
+        std::shared_ptr<const calib::LayerDrive> drive;
         {
             std::unique_lock lock(mutex_);
             cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
@@ -87,9 +94,10 @@ void Encoder::run() {
                 return;  // stopping, and nothing left
             frame = std::move(queue_.front());
             queue_.pop_front();
+            drive = drive_;
             ++busy_;
         }
-        EncodedFrame out = encode(std::move(frame), scratch);
+        EncodedFrame out = encode(std::move(frame), drive.get(), scratch);
         try {
             done_(std::move(out));
         } catch (...) {
@@ -103,7 +111,36 @@ void Encoder::run() {
     }
 }
 
-EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, std::vector<uint8_t>& scratch) {
+void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pixels,
+                         const calib::LayerDrive* drive, protocol::Encoding encoding,
+                         protocol::TileCodec codec, LayerScratch& scratch) {
+    const uint32_t x1 = std::min(pixels.x1, pixels.width), y1 = std::min(pixels.y1, pixels.height);
+    if (!drive || pixels.x0 >= x1 || pixels.y0 >= y1) {
+        codec::append_layer_data(out, pixels, encoding, codec, scratch.tiles);
+        return;
+    }
+    // The rectangle through the headset drive, at the same place in a layer-sized buffer, so
+    // that the tile packer reads it as it would the mapped readback.
+    const bool rgba8 = pixels.format == protocol::PixelFormat::kRgba8;
+    const size_t stride = size_t(pixels.width) * (rgba8 ? 4 : 8);
+    const size_t bytes = stride * pixels.height;
+    if (scratch.driven_bytes < bytes) {
+        scratch.driven.reset(new uint8_t[bytes]);  // not zeroed: only the rectangle is read
+        scratch.driven_bytes = bytes;
+    }
+    uint8_t* dst = scratch.driven.get();
+    if (rgba8)
+        drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, pixels.x0, pixels.y0, x1, y1);
+    else
+        drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, pixels.x0, pixels.y0, x1, y1);
+    codec::LayerPixels driven = pixels;
+    driven.data = dst;
+    driven.stride = stride;
+    codec::append_layer_data(out, driven, encoding, codec, scratch.tiles);
+}
+
+EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
+                             LayerScratch& scratch) {
     EncodedFrame out;
     out.frame = frame;
     ViewerFrame& f = *frame;
@@ -129,7 +166,7 @@ EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, std::vector<uin
         fields.height = f.height;
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
-            codec::append_layer_data(o, f.pixels[e], d.encoding, codec, scratch);
+            append_served_layer(o, f.pixels[e], drive, d.encoding, codec, scratch);
             return true;
         });
         if (err) {

@@ -2,7 +2,8 @@
 // GPU finished writing its readback buffers), encodes both eyes' layers from the mapped memory
 // in place into one buffer per layer (header and payload together, sent as they are), and
 // hands them on. Buffers come from a pool and go back to it when the socket is done with them,
-// so a steady stream allocates nothing large.
+// so a steady stream allocates nothing large. A calibrated server's layers go through the
+// headset drive's lookups first (calib::LayerDrive), into memory the thread keeps.
 #pragma once
 
 #include <condition_variable>
@@ -15,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "calib/serving.hpp"
 #include "gpu/submit_ring.hpp"
 #include "stream/viewer_frame.hpp"
 
@@ -40,6 +42,23 @@ private:
     uint64_t pooled_bytes_ = 0;
 };
 
+// What one encoder thread keeps between layers: the packed tiles, and the driven pixels of a
+// calibrated layer (allocated once, at the largest layer's size; only the rendered rectangle
+// is written and read).
+struct LayerScratch {
+    std::vector<uint8_t> tiles;
+    std::unique_ptr<uint8_t[]> driven;
+    size_t driven_bytes = 0;
+};
+
+// One eye's layer data as the encoder appends it to `out` (after the message's fields):
+// `pixels` in `encoding`, through `drive` first when the server is calibrated (the headset
+// drive of the rendered rectangle, into scratch.driven); `drive` null: the pixels as rendered,
+// at the cost of one pointer test. Thread: the caller's, with its own scratch.
+void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pixels,
+                         const calib::LayerDrive* drive, protocol::Encoding encoding,
+                         protocol::TileCodec codec, LayerScratch& scratch);
+
 // One encoded frame: both eyes' wire frames, or why there are none.
 struct EncodedFrame {
     std::shared_ptr<ViewerFrame> frame;
@@ -62,10 +81,14 @@ public:
     void push(std::shared_ptr<ViewerFrame> frame);
     // Blocks until every pushed frame was handed to `done`.
     void drain();
+    // The headset drive of the frames pushed from now on (null: none). The render thread sets
+    // it with each scene version, after drain(). Thread: any.
+    void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive);
 
 private:
     void run();
-    EncodedFrame encode(std::shared_ptr<ViewerFrame> frame, std::vector<uint8_t>& scratch);
+    EncodedFrame encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
+                        LayerScratch& scratch);
 
     const gpu::SubmitRing& ring_;
     std::shared_ptr<BufferPool> pool_;
@@ -74,6 +97,7 @@ private:
     std::mutex mutex_;
     std::condition_variable cv_, idle_;
     std::deque<std::shared_ptr<ViewerFrame>> queue_;
+    std::shared_ptr<const calib::LayerDrive> drive_;  // under mutex_
     size_t busy_ = 0;
     bool stopping_ = false;
     std::vector<std::thread> threads_;

@@ -2,7 +2,10 @@
 // version (its projector frame once), takes ready viewers from the scheduler round-robin, fills
 // their ViewerFrames through the scene's FrameSource in one submission that it does not wait
 // for, and hands the frames to the encoder threads. A large display renders in a submission of
-// its own, one per turn.
+// its own, one per turn. With a calibration (docs/CALIBRATION.md, "Serving with a
+// calibration") each scene version's projector frame is sent as the projector's drives and the
+// encoder threads get the headset drive's lookups for its layers; a headset of another size
+// than the calibrated one is refused.
 #include <set>
 
 #include <fmt/format.h>
@@ -36,7 +39,7 @@ void Server::Impl::refuse_job(uint32_t session_id, proto::ErrorCode code, const 
 // What the render thread owns.
 class FrameLoop {
 public:
-    explicit FrameLoop(Server::Impl& impl) : s_(impl) {}
+    explicit FrameLoop(Server::Impl& impl) : s_(impl), calibration_(impl.info.calibration.get()) {}
     void run();
 
 private:
@@ -47,8 +50,16 @@ private:
     Result<ViewerFrame*> frame_for(const ViewerJob& job);
     void encoded(EncodedFrame&& done);
     void update_held_bytes();
+    // Whether the scene's VD layers go through the headset drive (a calibration, and a rendered
+    // scene: a captured material's images are drives already).
+    bool calibrated_layers() const { return calibration_ && !current_.captured_material; }
+
+    // The projector frame as drives; the headset drive for the encoder. Render thread.
+    Result<calib::SceneDrives> calibrate(render::Renderer& renderer, const scene::Scene& scene,
+                                         const ImageRgba32f& frame);
 
     Server::Impl& s_;
+    const calib::ServingCalibration* calibration_;  // null: sent as rendered
     std::unique_ptr<gpu::SubmitRing> ring_;
     std::unique_ptr<Encoder> encoder_;
     std::unique_ptr<render::Renderer> renderer_;
@@ -78,8 +89,10 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     ImageRgba32f frame;
     nlohmann::json report;
     double pass_ms = 0, readback_ms = 0;
+    std::shared_ptr<const calib::LayerDrive> layer_drive;
     if (next.captured_material) {
-        // A captured material: the calibrated VI image is the frame; nothing is rendered.
+        // A captured material: the calibrated VI image is the frame; nothing is rendered. Its
+        // images are device drives already, so a calibration has nothing to add.
         frame = codec::drive_as_layer(*next.captured_material->projector_image);
         report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
     } else {
@@ -98,6 +111,24 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
                   {"triangles", proj->report.triangles},
                   {"lights_skipped", proj->report.lights_skipped},
                   {"render_ms", proj->report.render_ms}};
+        if (calibration_) {
+            const auto t_cal = Clock::now();
+            auto drives = calibrate(*r.value(), next, frame);
+            if (!drives) {
+                log::error("render: calibrated output: {}", drives.error().message);
+                return false;
+            }
+            frame = codec::drive_as_layer(drives->projector);
+            layer_drive = drives->layers;
+            report["calibration"] = {
+                {"folder", calibration_->dir.string()},
+                {"compensation", calib::compensation_names(calibration_->compensation)},
+                {"scene_to_signal", drives->scene_to_signal},
+                {"projector_lit_pixels", drives->lit},
+                {"projector_clipped_pixels", drives->clipped},
+                {"hmd_camera_per_radiance", drives->layers->camera_per_radiance()},
+                {"ms", ms_since(t_cal)}};
+        }
     }
     proto::ProjectorFrame pf;
     pf.width = frame.width;
@@ -121,6 +152,8 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     current_ = next;
     source_ = current_.captured_material ? captured_source(*current_.captured_material)
                                          : rendered_source(*renderer_, current_.material.specular);
+    if (encoder_)
+        encoder_->set_layer_drive(std::move(layer_drive));  // drained above: no frame in flight
     {
         std::lock_guard lock(s_.mutex);
         ++s_.projector_renders;
@@ -132,6 +165,21 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     auto shared = std::make_shared<const std::vector<uint8_t>>(std::move(*bytes));
     asio::post(s_.io, [impl = &s_, shared] { impl->publish_projector_frame(shared); });
     return true;
+}
+
+Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene::Scene& next,
+                                                const ImageRgba32f& frame) {
+    // The projector's per-pixel falloff (docs/OPTICS.md), once per scene version.
+    HS_ASSIGN_OR_RETURN(
+        render::RenderResult geometry,
+        r.render_capture_geometry(next.projector.intrinsics, next.projector.pose, std::nullopt));
+    HS_ASSIGN_OR_RETURN(calib::SceneDrives d,
+                        calibration_->scene_drives(next, frame, geometry.image));
+    log::info(
+        "calibrated output: k {:.6g} DN/s per unit radiance, {} of {} lit projector pixels "
+        "clipped",
+        d.scene_to_signal, d.clipped, d.lit);
+    return d;
 }
 
 void FrameLoop::update_held_bytes() {
@@ -283,6 +331,10 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch) {
         std::optional<Refusal> refusal;
         if (!head.ok())
             refusal = Refusal{proto::ErrorCode::kInvalidPose, head.error().message};
+        else if (auto why = calibrated_layers() ? calibration_->check_display(
+                                                      job.display.eye_width, job.display.eye_height)
+                                                : std::nullopt)
+            refusal = Refusal{proto::ErrorCode::kInvalidDisplay, *why};
         else
             refusal = source_->check(job.display);
         Result<ViewerFrame*> frame = static_cast<ViewerFrame*>(nullptr);

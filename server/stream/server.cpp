@@ -286,6 +286,8 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
 
 Result<scene::Scene> Server::Impl::accept_scene(const scene::Scene& s) const {
     HS_TRY(scene::check_scene_limits(s, limits.scene));
+    if (info.calibration)
+        HS_TRY(info.calibration->check_scene(s));
     // rgba8, raw, with the message's fixed fields
     const uint64_t frame_bytes =
         uint64_t(s.projector.intrinsics.width) * s.projector.intrinsics.height * 4 +

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "calib/serving.hpp"
 #include "core/result.hpp"
 #include "gpu/device.hpp"
 #include "protocol/tiles.hpp"
@@ -64,6 +65,10 @@ struct ServerCreateInfo {
     uint32_t encoder_threads = 1;
     // The compressor of sparse-tile layers; nullopt: codec::default_tile_codec.
     std::optional<protocol::TileCodec> tile_codec;
+    // Calibrated output (`hysar serve --calibration`, docs/CALIBRATION.md): the projector frame
+    // and every rendered VD layer are sent as device drives; a scene whose projector or a
+    // headset whose display is not the calibrated size is refused. Null: sent as rendered.
+    std::shared_ptr<const calib::ServingCalibration> calibration;
 };
 
 class Server {
