@@ -1,6 +1,6 @@
 // `hysar calibrate`: the calibration of an installation and the capture of real materials
-// (docs/CALIBRATION.md): patterns, decode, invert, colour, capture, and simulate (the whole
-// chain on the virtual installation, checked against its ground truth).
+// (docs/CALIBRATION.md): patterns, decode, invert, colour, optics, capture, and simulate (the
+// whole chain on the virtual installation, checked against its ground truth).
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -16,6 +16,7 @@
 #include "eval_common.hpp"
 #include "gpu/device.hpp"
 #include "installation/chain.hpp"
+#include "optics/table2.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 
@@ -42,6 +43,11 @@ const char* kHelp =
     "  colour --patterns DIR --captures DIR --exposure-ms MS --calibration DIR\n"
     "         [--model linear|curve]\n"
     "      colour calibration from the captures of DIR/colour: DIR/colour.json\n"
+    "  optics --calibration DIR [--scene FILE] [--viewer NAME] [--params FILE]\n"
+    "      the optical constants `hysar serve --calibration DIR` needs besides DIR/projector/ and\n"
+    "      DIR/hmd/: DIR/optics.json (alpha of the headset profile; k, levels and prop albedo of\n"
+    "      the scene's optics section; --params FILE, as `hysar eval optics --params` reads it,\n"
+    "      gives the installation's measured levels, E and alpha)\n"
     "  capture --projector DIR --hmd DIR --vi FILE --vivd FILE --exposure-ms MS --out DIR\n"
     "          [--scene FILE]\n"
     "          [--angle DEG] [--height NAME] [--noise-floor DN]\n"
@@ -49,8 +55,9 @@ const char* kHelp =
     "      captures: OUT/projector.exr, viewer.exr, vd.exr and OUT/scene.json for hysar serve\n"
     "  simulate [--scene FILE] [--viewer NAME] [--angle DEG] [--height NAME] [--scale S]\n"
     "           [--noise DN] [--model linear|curve] [--bandwidth PX] [--out DIR]\n"
-    "      the whole chain on the virtual installation, checked against its ground truth;\n"
-    "      exit code 1 when a target is missed\n"
+    "      the whole chain on the virtual installation, checked against its ground truth, and\n"
+    "      its scene served on loopback with and without the calibration; --out DIR is a\n"
+    "      calibration folder for hysar serve --calibration; exit code 1 when a target is missed\n"
     "\n"
     "every numeric flag's unit, range and default: docs/LIMITS.md\n";
 
@@ -246,6 +253,45 @@ Result<void> cmd_colour(const Flags& f) {
     return {};
 }
 
+Result<void> cmd_optics(const Flags& f) {
+    HS_ASSIGN_OR_RETURN(std::string dir_s, need(f, "--calibration"));
+    HS_ASSIGN_OR_RETURN(scene::Scene s, load_scene(f));
+    const std::string name = f.get("--viewer", "");
+    const scene::ViewerProfile* v = name.empty() ? &s.viewers.front() : s.find_viewer(name);
+    if (!v)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("--viewer: no headset profile '{}' in the scene", name));
+    calib::OpticalConstants c;
+    c.alpha = v->alpha;
+    c.scene_to_signal = s.optics.scene_to_signal;
+    c.levels = s.optics.levels;
+    c.prop_albedo = s.optics.prop_albedo;
+    c.source = fmt::format("the scene's optics section and its headset profile '{}'", v->name);
+    if (f.has("--params")) {
+        const std::string params = f.get("--params", "");
+        HS_ASSIGN_OR_RETURN(optics::PaperOptics p, optics::load_paper_optics(params));
+        c.levels = p.levels;
+        c.levels.environment = p.environment;
+        c.alpha = p.alpha;
+        c.source = fmt::format(
+            "levels, E and alpha measured in {}; k and the prop's albedo of "
+            "the scene's optics section",
+            params);
+    }
+    const fs::path file = fs::path(dir_s) / "optics.json";
+    HS_TRY(make_dirs(dir_s));
+    HS_TRY(calib::save_optics(file, c));
+    HS_TRY(calib::load_optics(file));  // the checks serving makes
+    std::printf(
+        "wrote %s: alpha %.4g, k %s, P^M %.6g, P^m %.6g, H^M %.6g, H^m %.6g, E %.6g DN/s; "
+        "serve with: hysar serve --calibration %s\n",
+        file.string().c_str(), c.alpha,
+        c.scene_to_signal > 0 ? fmt::format("{:.6g}", c.scene_to_signal).c_str() : "per scene",
+        c.levels.projector_max, c.levels.projector_min, c.levels.hmd_max, c.levels.hmd_min,
+        c.levels.environment, dir_s.c_str());
+    return {};
+}
+
 Result<void> cmd_capture(const Flags& f) {
     HS_ASSIGN_OR_RETURN(std::string pdir, need(f, "--projector"));
     HS_ASSIGN_OR_RETURN(std::string hdir, need(f, "--hmd"));
@@ -343,6 +389,9 @@ int run_calibrate(const std::vector<std::string>& args) {
         return run_subcommand(
             rest, {"--patterns", "--captures", "--calibration", "--exposure-ms", "--model"},
             {kExposureFlag}, cmd_colour);
+    if (step == "optics")
+        return run_subcommand(rest, {"--calibration", "--scene", "--viewer", "--params"}, {},
+                              cmd_optics);
     if (step == "capture")
         return run_subcommand(rest,
                               {"--projector", "--hmd", "--vi", "--vivd", "--exposure-ms", "--out",

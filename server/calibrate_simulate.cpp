@@ -1,5 +1,8 @@
 // `hysar calibrate simulate`: the calibration chain on the virtual installation, every result
-// against its ground truth and its target (docs/CALIBRATION.md, "Targets").
+// against its ground truth and its target (docs/CALIBRATION.md, "Targets"), and the calibrated
+// server on it: the folder it writes, served on loopback with and without --calibration.
+#include <unistd.h>
+
 #include <cstdio>
 #include <filesystem>
 
@@ -12,6 +15,7 @@
 #include "core/plot.hpp"
 #include "gpu/device.hpp"
 #include "installation/chain.hpp"
+#include "installation/served.hpp"
 
 namespace hs::cli {
 
@@ -23,6 +27,9 @@ using nlohmann::json;
 
 // The done-when targets.
 constexpr double kLutMedianPx = 0.5, kLutP95Px = 1.0, kColourDe00 = 1.0, kMr1 = 0.90;
+// Calibrated output: the served capture's mean CIEDE2000 over the VD area and over the prop
+// (camera noise alone costs about 1 and 2: the prop's dark rim is a few DN).
+constexpr double kServedVdDe00 = 3.0, kServedPropDe00 = 3.0;
 
 json map_json(const installation::MapError& e) {
     return {{"pixels", e.pixels},
@@ -47,15 +54,37 @@ std::string verdict(bool ok) {
     return ok ? "ok" : "MISSED";
 }
 
-Result<void> save_device(const fs::path& dir, const installation::DeviceResult& r,
-                         const calib::DecodeOptions& decode) {
-    HS_TRY(make_dirs(dir));
-    HS_TRY(calib::save_lut(dir, r.lut, decode));
-    HS_TRY(write_png(dir / "lut.png", calib::lut_picture(r.lut)));
-    HS_TRY(write_exr(dir / "white.exr", r.calibration.white));
-    HS_TRY(write_exr(dir / "black.exr", r.calibration.black));
-    HS_TRY(calib::save_inverse(dir, r.inverse));
-    return calib::save_colour(dir / "colour.json", r.calibration.colour);
+json served_json(const installation::ServedCapture& c) {
+    return {{"vd_mean_de00", c.vd_mean_de00},
+            {"prop_mean_de00", c.prop_mean_de00},
+            {"rmse_dn", c.rmse_dn},
+            {"vd_pixels", c.vd_pixels},
+            {"prop_pixels", c.prop_pixels},
+            {"mr1", c.areas.mr1.value_or(0.0)},
+            {"mr2", c.areas.mr2.value_or(0.0)},
+            {"reference_again_vd_mean_de00", c.noise_vd_mean_de00},
+            {"reference_again_prop_mean_de00", c.noise_prop_mean_de00}};
+}
+
+// The calibration folder `hysar serve --calibration` reads (in --out, or a temporary folder),
+// and the installation's scene served on loopback with it and without it.
+struct Served {
+    installation::ServedCapture with, without;
+};
+Result<Served> serve_both(gpu::Device& device, const installation::VirtualInstallation& inst,
+                          const installation::ChainReport& rep,
+                          const installation::ChainOptions& co, const fs::path& dir) {
+    HS_TRY(installation::save_calibration(dir, inst, rep.projector, rep.hmd, co));
+    HS_ASSIGN_OR_RETURN(calib::ServingCalibration cal,
+                        calib::load_serving_calibration(dir, calib::Compensation{}));
+    log::info("served: {}", cal.summary());
+    Served s;
+    HS_ASSIGN_OR_RETURN(
+        s.with,
+        installation::serve_and_capture(
+            device, inst, std::make_shared<const calib::ServingCalibration>(std::move(cal))));
+    HS_ASSIGN_OR_RETURN(s.without, installation::serve_and_capture(device, inst, nullptr));
+    return s;
 }
 
 }  // namespace
@@ -85,6 +114,17 @@ Result<void> calibrate_simulate(const Flags& f) {
     HS_ASSIGN_OR_RETURN(
         installation::ChainReport rep,
         installation::run_chain(*inst, co, [](const std::string& line) { log::info("{}", line); }));
+    const bool keep = f.has("--out");
+    const fs::path cal_dir =
+        keep ? fs::path(f.get("--out", ""))
+             : fs::temp_directory_path() / fmt::format("hysar-calibration-{}", ::getpid());
+    auto served = serve_both(*device, *inst, rep, co, cal_dir);
+    if (!keep) {
+        std::error_code ec;
+        fs::remove_all(cal_dir, ec);
+    }
+    if (!served)
+        return served.error();
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
                                                           device->validation_message_count()));
@@ -130,16 +170,29 @@ Result<void> calibrate_simulate(const Flags& f) {
         "over {} prop pixels, VD area mean dE00 {:.2f}\n",
         100 * mr1, verdict(mr1 >= kMr1), 100 * trip.areas.mr2.value_or(0.0), trip.rmse_dn,
         trip.prop_pixels, trip.vd_mean_de00);
+    const auto& sw = served->with;
+    const bool served_ok = sw.vd_mean_de00 <= kServedVdDe00 &&
+                           sw.prop_mean_de00 <= kServedPropDe00 && sw.vd_pixels > 0;
+    if (!served_ok)
+        missed.push_back("served with --calibration");
+    t += fmt::format(
+        "\nserved (hysar serve, RGBA8 sparse layers through loopback), mean dE00 over the VD area "
+        "/ the prop:\n  with --calibration     {:.2f} / {:.2f} (target <= {} / <= {}: {}), RMSE "
+        "{:.2f} DN, MR1 {:.1f} %\n  without --calibration  {:.2f} / {:.2f}, RMSE {:.2f} DN, MR1 "
+        "{:.1f} %\n  a second capture of the reference itself {:.2f} / {:.2f}   ({} VD, {} prop "
+        "pixels)\n",
+        sw.vd_mean_de00, sw.prop_mean_de00, kServedVdDe00, kServedPropDe00, verdict(served_ok),
+        sw.rmse_dn, 100 * sw.areas.mr1.value_or(0.0), served->without.vd_mean_de00,
+        served->without.prop_mean_de00, served->without.rmse_dn,
+        100 * served->without.areas.mr1.value_or(0.0), sw.noise_vd_mean_de00,
+        sw.noise_prop_mean_de00, sw.vd_pixels, sw.prop_pixels);
     t += "time:";
     for (const auto& [stage, sec] : rep.seconds) t += fmt::format(" {} {:.1f} s,", stage, sec);
     t.back() = '\n';
     std::printf("%s", t.c_str());
 
     if (f.has("--out")) {
-        const fs::path out = f.get("--out", "");
-        HS_TRY(make_dirs(out));
-        HS_TRY(save_device(out / "projector", rep.projector, co.decode));
-        HS_TRY(save_device(out / "hmd", rep.hmd, co.decode));
+        const fs::path out = f.get("--out", "");  // projector/, hmd/, optics.json written
         json j = {
             {"installation",
              {{"projector",
@@ -168,20 +221,28 @@ Result<void> calibrate_simulate(const Flags& f) {
                            {"vd_mean_de00", trip.vd_mean_de00},
                            {"projector_clipped", trip.projector_stats.clipped},
                            {"hmd_clipped", trip.hmd_stats.clipped}};
+        j["served"] = {{"with_calibration", served_json(served->with)},
+                       {"without_calibration", served_json(served->without)}};
         for (const auto& [stage, sec] : rep.seconds) j["seconds"][stage] = sec;
         HS_TRY(write_text(out / "report.json", j.dump(2) + "\n"));
         // Reference | re-capture | VD areas (green match, red missing, blue extra).
         HS_TRY(write_png(out / "roundtrip.png",
                          hstack({optics::to_rgba8(trip.reference_vi_vd),
                                  optics::to_rgba8(trip.recapture), trip.areas.map})));
+        // Reference | served with --calibration | without.
+        HS_TRY(write_png(out / "served.png", hstack({optics::to_rgba8(served->with.reference),
+                                                     optics::to_rgba8(served->with.capture),
+                                                     optics::to_rgba8(served->without.capture)})));
         if (io.scale == 1.0) {
             HS_ASSIGN_OR_RETURN(std::string sj, captured_scene_json(f, inst->viewpoint().camera));
             HS_TRY(write_material(out / "material", trip.projector, trip.hmd, trip.vd, sj));
             std::printf("captured material: hysar serve --scene %s\n",
                         (out / "material" / "scene.json").string().c_str());
         }
-        std::printf("wrote %s (report.json, roundtrip.png, projector/, hmd/)\n",
-                    out.string().c_str());
+        std::printf(
+            "wrote %s (report.json, roundtrip.png, served.png, projector/, hmd/, optics.json; "
+            "hysar serve --calibration %s)\n",
+            out.string().c_str(), out.string().c_str());
     }
     if (!missed.empty()) {
         std::string list;

@@ -186,7 +186,8 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::De
                         renderer->render_eye_diffuse(cam.intrinsics, cam.camera));
     HS_ASSIGN_OR_RETURN(render::RenderResult ls,
                         renderer->render_eye(s.material.specular, cam.intrinsics, cam.camera));
-    const double k = sim.scene_to_signal() * vi->alpha_;
+    vi->k_ = sim.scene_to_signal();
+    const double k = vi->k_ * vi->alpha_;
     const double black = optics::effective_levels(s.optics).hmd_min;
     vi->ref_vi_ = scaled(ld.image, k);
     vi->ref_vivd_ = added(vi->ref_vi_, scaled(ls.image, k));

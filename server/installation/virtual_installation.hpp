@@ -97,6 +97,10 @@ public:
     const scene::ViewerProfile& viewer() const { return viewer_; }
     const Options& options() const { return options_; }
     double exposure_ms() const { return scene_.optics.exposure_ms; }
+    // k of the reference: camera DN/s per unit scene radiance without the headset (its target
+    // is alpha k (L_d + L_s) plus the headset's black level, docs/OPTICS.md).
+    double scene_to_signal() const { return k_; }
+    double alpha() const { return alpha_; }
 
 private:
     VirtualInstallation() = default;
@@ -108,7 +112,7 @@ private:
     render::Viewpoint camera_;
     scene::Intrinsics hmd_k_;
     ImageRgba32f geometry_;  // camera view, (u, v) replaced by the distorted projector pixel
-    double g_ref_ = 0, alpha_ = 1;
+    double g_ref_ = 0, alpha_ = 1, k_ = 0;
     double cal_exposure_ms_[2] = {0, 0};
     std::vector<float> proj_x_, proj_y_, hmd_x_, hmd_y_;
     std::vector<float> emit_table_[2][3];  // drive^gamma on a fine grid, per device and channel

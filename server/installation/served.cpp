@@ -1,0 +1,190 @@
+#include "installation/served.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "clients/connection.hpp"
+#include "codec/layer_codec.hpp"
+#include "optics/capture.hpp"
+#include "protocol/tiles.hpp"
+#include "scene/camera.hpp"
+#include "stream/server.hpp"
+
+namespace hs::installation {
+
+namespace {
+
+namespace proto = hs::protocol;
+using Clock = std::chrono::steady_clock;
+
+// The drives a client's panel receives from a frame's or a layer's bytes: each channel's code
+// (RGBA8), or the sRGB encoding of the half float (RGBA16F), as codec::drive_from_layer.
+Result<ImageRgba32f> received_drive(const std::vector<uint8_t>& data, uint32_t w, uint32_t h,
+                                    proto::PixelFormat format, proto::Encoding encoding) {
+    const uint32_t bpp = format == proto::PixelFormat::kRgba8 ? 4 : 8;
+    std::vector<uint8_t> raw;
+    if (encoding == proto::Encoding::kSparseTiles) {
+        auto d = proto::decode_tiles(data, w, h, bpp);
+        if (auto* e = std::get_if<std::string>(&d))
+            return make_error(ErrorCode::kParse, "served layer: " + *e);
+        raw = std::move(std::get<std::vector<uint8_t>>(d));
+    } else {
+        raw = data;
+    }
+    ImageRgba32f px = codec::decode_pixels(raw, w, h, format);
+    if (px.empty())
+        return make_error(ErrorCode::kParse,
+                          fmt::format("served image: {} bytes for {}x{}", raw.size(), w, h));
+    return codec::drive_from_layer(px);
+}
+
+// Waits for a message of type T on `c`; an Error from the server, a closed connection or the
+// time running out is an error.
+template <typename T>
+Result<T> await(client::Connection& c, int timeout_ms, const char* what) {
+    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (Clock::now() < deadline) {
+        auto r = c.receive(500);
+        if (auto* e = std::get_if<std::string>(&r))
+            return make_error(ErrorCode::kIo, fmt::format("waiting for {}: {}", what, *e));
+        if (auto* m = std::get_if<proto::Message>(&r)) {
+            if (auto* t = std::get_if<T>(m))
+                return std::move(*t);
+            if (auto* err = std::get_if<proto::Error>(m))
+                return make_error(ErrorCode::kInvalidArgument,
+                                  fmt::format("waiting for {}: the server answered {}", what,
+                                              client::describe(*err)));
+        }
+    }
+    return make_error(ErrorCode::kIo, fmt::format("no {} within {} ms", what, timeout_ms));
+}
+
+struct Received {
+    ImageRgba32f projector, hmd;
+};
+
+Result<Received> receive_served(const std::string& address, const std::string& token,
+                                const VirtualInstallation& inst, const ServeOptions& o) {
+    auto open = [&]() -> Result<std::unique_ptr<client::Connection>> {
+        auto c = client::Connection::open(address);
+        if (auto* e = std::get_if<std::string>(&c))
+            return make_error(ErrorCode::kIo, *e);
+        return std::move(std::get<std::unique_ptr<client::Connection>>(c));
+    };
+    Received out;
+    HS_ASSIGN_OR_RETURN(auto projector, open());
+    if (auto e = projector->hello(proto::Role::kProjector, token, "virtual-projector"))
+        return make_error(ErrorCode::kIo, "projector hello: " + *e);
+    HS_ASSIGN_OR_RETURN(
+        proto::ProjectorFrame pf,
+        await<proto::ProjectorFrame>(*projector, o.timeout_ms, "the projector frame"));
+    HS_ASSIGN_OR_RETURN(out.projector,
+                        received_drive(pf.data, pf.width, pf.height, pf.format, pf.encoding));
+
+    HS_ASSIGN_OR_RETURN(auto hmd, open());
+    if (auto e = hmd->hello(proto::Role::kHmd, token, "virtual-headset"))
+        return make_error(ErrorCode::kIo, "headset hello: " + *e);
+    // The camera is the eye: the installation's display, the camera's pose, no IPD.
+    const scene::Intrinsics& k = inst.viewpoint().intrinsics;
+    proto::RegisterDisplay d{k.width, k.height, k.fx,     k.fy,       k.cx,
+                             k.cy,    0.0,      o.format, o.encoding, proto::FrameMode::kOnRequest};
+    const scene::Pose& head = inst.viewpoint().camera;
+    const glm::dquat q = head.orientation;
+    proto::Pose pose{1, {head.position.x, head.position.y, head.position.z}, {q.w, q.x, q.y, q.z}};
+    if (!hmd->send(d) || !hmd->send(pose) || !hmd->send(proto::FrameRequest{}))
+        return make_error(ErrorCode::kIo, "headset: " + hmd->last_error());
+    for (;;) {
+        HS_ASSIGN_OR_RETURN(proto::VdLayer l,
+                            await<proto::VdLayer>(*hmd, o.timeout_ms, "the headset's VD layer"));
+        if (l.eye != 0)
+            continue;  // both eyes are the camera's view; the left one is shown
+        HS_ASSIGN_OR_RETURN(out.hmd,
+                            received_drive(l.data, l.width, l.height, l.format, l.encoding));
+        break;
+    }
+    return out;
+}
+
+}  // namespace
+
+calib::OpticalConstants optical_constants(const VirtualInstallation& inst) {
+    const scene::Optics& o = inst.scene().optics;
+    calib::OpticalConstants c;
+    c.alpha = inst.alpha();
+    c.scene_to_signal = inst.scene_to_signal();
+    c.levels = optics::effective_levels(o);
+    c.prop_albedo = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
+    c.source = fmt::format(
+        "virtual installation (hysar calibrate simulate, scale {}): its devices' levels, its "
+        "prop's albedo, its headset's alpha and the k of its reference",
+        inst.options().scale);
+    return c;
+}
+
+Result<void> save_calibration(const std::filesystem::path& dir, const VirtualInstallation& inst,
+                              const DeviceResult& projector, const DeviceResult& hmd,
+                              const ChainOptions& options) {
+    HS_TRY(calib::save_device_directory(dir / "projector", projector.lut, options.decode,
+                                        projector.calibration));
+    HS_TRY(calib::save_device_directory(dir / "hmd", hmd.lut, options.decode, hmd.calibration));
+    return calib::save_optics(dir / "optics.json", optical_constants(inst));
+}
+
+Result<ServedCapture> serve_and_capture(
+    gpu::Device& device, const VirtualInstallation& inst,
+    std::shared_ptr<const calib::ServingCalibration> calibration, const ServeOptions& o) {
+    stream::ServerCreateInfo info;
+    info.port = 0;
+    info.token = "virtual-installation";
+    info.calibration = std::move(calibration);
+    HS_ASSIGN_OR_RETURN(auto server, stream::Server::create(device, inst.scene(), info));
+    std::thread thread([&] { server->run(); });
+    auto got = receive_served(fmt::format("127.0.0.1:{}", server->port()), info.token, inst, o);
+    server->stop();
+    thread.join();
+    if (!got)
+        return got.error();
+
+    ServedCapture out;
+    out.projector = std::move(got->projector);
+    out.hmd = std::move(got->hmd);
+    const auto reference = inst.reference(o.seed);
+    out.reference = reference.vi_vd;
+    HS_ASSIGN_OR_RETURN(out.capture, inst.capture(out.projector, out.hmd, o.seed + 101));
+    const ImageRgba8 ref8 = optics::to_rgba8(out.reference);
+    const ImageRgba8 cap8 = optics::to_rgba8(out.capture);
+    HS_ASSIGN_OR_RETURN(out.areas, optics::vd_areas(ref8, optics::to_rgba8(reference.vi), cap8));
+    const auto& lit = inst.truth_x(Device::kProjector);
+    std::vector<uint8_t> prop(lit.size());
+    double se = 0;
+    for (size_t i = 0; i < lit.size(); ++i) {
+        prop[i] = !std::isnan(lit[i]);
+        if (!prop[i])
+            continue;
+        ++out.prop_pixels;
+        for (int c = 0; c < 3; ++c) {
+            const double d =
+                double(out.capture.pixels[i * 4 + c]) - out.reference.pixels[i * 4 + c];
+            se += d * d;
+        }
+    }
+    out.rmse_dn = out.prop_pixels ? std::sqrt(se / (3.0 * double(out.prop_pixels))) : 0.0;
+    const ImageRgba8 again8 = optics::to_rgba8(inst.reference(o.seed + 202).vi_vd);
+    auto mean_de00 = [&](const ImageRgba8& img, const std::vector<uint8_t>& mask) {
+        auto lab = optics::lab_differences(ref8, img, mask, optics::PixelEncoding::kLinear);
+        return lab.ok() ? lab->s00.mean : NAN;  // the sizes agree by construction
+    };
+    out.prop_mean_de00 = mean_de00(cap8, prop);
+    out.noise_prop_mean_de00 = mean_de00(again8, prop);
+    out.vd_pixels = out.areas.reference_count;
+    if (out.vd_pixels) {
+        out.vd_mean_de00 = mean_de00(cap8, out.areas.reference);
+        out.noise_vd_mean_de00 = mean_de00(again8, out.areas.reference);
+    }
+    return out;
+}
+
+}  // namespace hs::installation
