@@ -1,6 +1,7 @@
 // Google Benchmark suite of the hot paths (built by default, run on request; not part of the
 // test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding,
-// the calibration's kernel regression and CIEDE2000 over an image.
+// the served layer with and without the headset drive of a calibration, the calibration's
+// kernel regression and CIEDE2000 over an image.
 //   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
 #include <array>
 #include <cmath>
@@ -8,13 +9,16 @@
 
 #include <benchmark/benchmark.h>
 
+#include "calib/colour_calib.hpp"
 #include "calib/inverse_map.hpp"
+#include "calib/serving.hpp"
 #include "codec/layer_codec.hpp"
 #include "gpu/device.hpp"
 #include "optics/colour.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
+#include "stream/encoder.hpp"
 
 using namespace hs;
 
@@ -173,6 +177,64 @@ void BM_DecodeLayer(benchmark::State& state) {
     state.SetLabel(state.range(0) == 0 ? "f16 tiles+lz4" : "srgb8 tiles+zstd");
 }
 BENCHMARK(BM_DecodeLayer)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// One eye's layer data as the encoder thread appends it, from the layer's pixels in the wire
+// format (sRGB8 or halves, as in the mapped readback) over the tile-aligned rectangle of its
+// lit pixels, sparse tiles + LZ4 (the server's default). range(0): 0 the encoder's call before
+// calibrated output existed (codec::append_layer_data), 1 the encoder's path without a
+// calibration (stream::append_served_layer, no drive), 2 with the headset drive of a
+// calibration. range(1): 1 sRGB8, 0 f16.
+void BM_ServedLayer(benchmark::State& state) {
+    const auto& img = vd_layer();
+    const auto f = format_of(state.range(1));
+    const std::vector<uint8_t> raw = codec::encode_pixels(img, f);
+    const uint32_t ts = protocol::kDefaultTileSize;
+    uint32_t x0 = img.width, y0 = img.height, x1 = 0, y1 = 0;
+    for (uint32_t y = 0; y < img.height; ++y)
+        for (uint32_t x = 0; x < img.width; ++x) {
+            const glm::vec4 p = img.at(x, y);
+            if (p.r > 0 || p.g > 0 || p.b > 0)
+                x0 = std::min(x0, x), y0 = std::min(y0, y), x1 = std::max(x1, x + 1),
+                y1 = std::max(y1, y + 1);
+        }
+    x0 = x0 / ts * ts, y0 = y0 / ts * ts;
+    x1 = std::min((x1 + ts - 1) / ts * ts, img.width);
+    y1 = std::min((y1 + ts - 1) / ts * ts, img.height);
+    const size_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
+    const codec::LayerPixels px{raw.data(), img.width * bpp, img.width, img.height, f, x0, y0, x1,
+                                y1};
+    // A headset like the virtual installation's: gamma 1.9 / 2.0 / 2.1 with cross-talk.
+    std::vector<calib::ColourSample> samples;
+    const glm::dmat3 m(3200, 250, 70, 140, 3300, 210, 70, 110, 3250);
+    for (const auto& d : calib::colour_patch_drives())
+        samples.push_back(
+            {d, m * glm::dvec3(std::pow(d.r, 1.9), std::pow(d.g, 2.0), std::pow(d.b, 2.1)) +
+                    glm::dvec3(18.0)});
+    const calib::LayerDrive drive(calib::fit_colour(samples, calib::ColourModel::kCurve).value(),
+                                  700.0);
+    const auto codec = codec::default_tile_codec(f);
+    stream::LayerScratch scratch;
+    std::vector<uint8_t> out;
+    for (auto _ : state) {
+        out.clear();
+        if (state.range(0) == 0)
+            codec::append_layer_data(out, px, protocol::Encoding::kSparseTiles, codec,
+                                     scratch.tiles);
+        else
+            stream::append_served_layer(out, px, state.range(0) == 2 ? &drive : nullptr,
+                                        protocol::Encoding::kSparseTiles, codec, scratch);
+        benchmark::DoNotOptimize(out.data());
+    }
+    state.counters["rect_px"] = double(x1 - x0) * double(y1 - y0);
+    state.counters["bytes"] = double(out.size());
+    static const char* kPath[] = {"before calibrated output", "calibration off", "calibration on"};
+    state.SetLabel(std::string(kPath[state.range(0)]) +
+                   (f == protocol::PixelFormat::kRgba8 ? ", srgb8" : ", f16"));
+}
+BENCHMARK(BM_ServedLayer)
+    ->ArgsProduct({{0, 1, 2}, {1, 0}})
+    ->ArgNames({"path", "srgb8"})
+    ->Unit(benchmark::kMillisecond);
 
 // The inverse map of a camera-to-projector LUT (a mild perspective warp with read noise):
 // camera 640x360 at range(0) = 1 or the headset camera 1268x720 at 2, projector 1920x1200.
