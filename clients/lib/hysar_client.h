@@ -40,7 +40,7 @@ typedef enum hysar_status {
     HYSAR_E_INVALID_ARGUMENT = 1, /* a NULL pointer, a malformed address, a value out of range */
     HYSAR_E_CONNECT = 2,          /* the server cannot be reached */
     HYSAR_E_REFUSED = 3,          /* the server refused the session (a wrong token, ...) */
-    HYSAR_E_PROTOCOL = 4,         /* the server sent something that is not HySAR */
+    HYSAR_E_PROTOCOL = 4,         /* reserved: a peer that is not HySAR is HYSAR_E_CONNECT today */
     HYSAR_E_CLOSED = 5,           /* the client was closed, or gave up reconnecting */
     HYSAR_E_NO_MEMORY = 6,
     HYSAR_E_INTERNAL = 7
