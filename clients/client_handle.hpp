@@ -13,6 +13,7 @@
 
 #include "clients/args.hpp"
 #include "clients/lib/hysar_client.h"
+#include "protocol/protocol.hpp"
 
 namespace hs::client {
 
@@ -28,6 +29,20 @@ struct Event : hysar_event {
     Event(const Event&) = delete;
     Event& operator=(const Event&) = delete;
 };
+
+// The protocol's structs as the C API's.
+inline hysar_pose to_c(const protocol::Pose& p) {
+    hysar_pose c{};
+    c.time_ns = p.client_time_ns;
+    std::copy(p.position_m.begin(), p.position_m.end(), c.position_m);
+    std::copy(p.orientation_wxyz.begin(), p.orientation_wxyz.end(), c.orientation_wxyz);
+    return c;
+}
+inline hysar_display to_c(const protocol::RegisterDisplay& d) {
+    return {
+        d.eye_width,          d.eye_height,    d.fx, d.fy, d.cx, d.cy, d.ipd_m, uint32_t(d.format),
+        uint32_t(d.encoding), uint32_t(d.mode)};
+}
 
 // The options of every client about the connection, in its usage text.
 inline constexpr const char* kReconnectUsage =

@@ -105,9 +105,8 @@ public:
 
     // Sends a pose labelled `label`; returns its stamp, or 0 with a line when it was refused.
     uint64_t send(const proto::Pose& pose, const std::string& label) {
-        hysar_pose p{};
-        for (int i = 0; i < 3; ++i) p.position_m[i] = pose.position_m[i];
-        for (int i = 0; i < 4; ++i) p.orientation_wxyz[i] = pose.orientation_wxyz[i];
+        hysar_pose p = to_c(pose);
+        p.time_ns = 0;  // stamped when sent
         uint64_t stamp = 0;
         if (hysar_client_send_pose(client_, &p, &stamp) != HYSAR_OK) {
             std::fprintf(stderr, "hysar-hmd: pose '%s' not sent: %s\n", label.c_str(),
@@ -499,16 +498,7 @@ int hmd_main(int argc, char** argv) {
         return 2;
     }
     hysar_client* client = std::get<ClientPtr>(connected).get();
-    const hysar_display d{display.eye_width,
-                          display.eye_height,
-                          display.fx,
-                          display.fy,
-                          display.cx,
-                          display.cy,
-                          display.ipd_m,
-                          uint32_t(display.format),
-                          uint32_t(display.encoding),
-                          uint32_t(display.mode)};
+    const hysar_display d = to_c(display);
     if (hysar_client_register_display(client, &d) != HYSAR_OK) {
         std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
         return 1;

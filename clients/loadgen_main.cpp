@@ -125,15 +125,14 @@ int loadgen_main(int argc, char** argv) {
     if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
                                 scale, &display))
         args.fail("--profile " + *err);
-    const uint32_t format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
-                                ? HYSAR_FORMAT_RGBA16F
-                                : HYSAR_FORMAT_RGBA8;
-    const uint32_t encoding = args.choice("--encoding", "sparse", {"raw", "sparse"}) == "raw"
-                                  ? HYSAR_ENCODING_RAW
-                                  : HYSAR_ENCODING_SPARSE;
-    const hysar_display hd{display.eye_width, display.eye_height,   display.fx,    display.fy,
-                           display.cx,        display.cy,           display.ipd_m, format,
-                           encoding,          HYSAR_MODE_CONTINUOUS};
+    display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
+                         ? proto::PixelFormat::kRgba16f
+                         : proto::PixelFormat::kRgba8;
+    display.encoding = args.choice("--encoding", "sparse", {"raw", "sparse"}) == "raw"
+                           ? proto::Encoding::kRaw
+                           : proto::Encoding::kSparseTiles;
+    display.mode = proto::FrameMode::kContinuous;
+    const hysar_display hd = to_c(display);
     std::ofstream json_file;
     if (args.has("--json")) {
         const std::string path = args.output_path("--json", "");
@@ -213,10 +212,7 @@ int loadgen_main(int argc, char** argv) {
                     double t = std::chrono::duration<double>(now - start).count();
                     const auto p =
                         orbit_pose(base_deg + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, 0);
-                    hysar_pose hp{};
-                    std::copy(p.position_m.begin(), p.position_m.end(), hp.position_m);
-                    std::copy(p.orientation_wxyz.begin(), p.orientation_wxyz.end(),
-                              hp.orientation_wxyz);
+                    const hysar_pose hp = to_c(p);  // time 0: stamped when sent
                     if (hysar_client_send_pose(client, &hp, nullptr) != HYSAR_OK)
                         return give_up(hysar_last_error());
                     ++r.poses;

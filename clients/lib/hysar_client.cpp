@@ -55,12 +55,10 @@ hysar_status guarded(F&& f) noexcept {
     }
 }
 
-hysar_status from_session(const std::optional<std::string>& err) {
-    if (!err)
+hysar_status from_session(const std::optional<Session::Refusal>& refusal) {
+    if (!refusal)
         return HYSAR_OK;
-    return fail(
-        err->rfind("the client is closed", 0) == 0 ? HYSAR_E_CLOSED : HYSAR_E_INVALID_ARGUMENT,
-        *err);
+    return fail(refusal->closed ? HYSAR_E_CLOSED : HYSAR_E_INVALID_ARGUMENT, refusal->text);
 }
 
 proto::Pose to_proto(const hysar_pose& p) {
@@ -79,7 +77,7 @@ hysar_pose from_proto(const proto::Pose& q) {
     return p;
 }
 
-// A C enum value as the protocol's enum, or an error sentence.
+// A C enum value as the protocol's enum, or nullopt outside [lo, hi].
 template <typename E>
 std::optional<E> enum_value(uint32_t v, uint32_t lo, uint32_t hi) {
     if (v < lo || v > hi)

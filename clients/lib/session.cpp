@@ -137,55 +137,45 @@ std::variant<std::unique_ptr<Connection>, Session::ConnectError> Session::open_s
     }
 }
 
-std::optional<std::string> Session::usable() const {
-    if (closed_ || stop_)
-        return std::string("the client is closed");
-    return std::nullopt;
-}
-
-std::optional<std::string> Session::register_display(const proto::RegisterDisplay& d) {
-    if (auto bad = proto::validate_display(d))
-        return "display: " + *bad;
+template <typename F>
+std::optional<Session::Refusal> Session::queue(F&& change) {
     std::lock_guard lock(mutex_);
-    if (auto bad = usable())
-        return bad;
-    display_ = d;
-    display_sent_ = false;
+    if (closed_ || stop_)
+        return Refusal{true, "the client is closed"};
+    change();
     wake();
     return std::nullopt;
 }
 
-std::optional<std::string> Session::send_pose(proto::Pose& p) {
+std::optional<Session::Refusal> Session::register_display(const proto::RegisterDisplay& d) {
+    if (auto bad = proto::validate_display(d))
+        return Refusal{false, "display: " + *bad};
+    return queue([&] {
+        display_ = d;
+        display_sent_ = false;
+    });
+}
+
+std::optional<Session::Refusal> Session::send_pose(proto::Pose& p) {
     if (p.client_time_ns == 0)
         p.client_time_ns = now_ns();
     if (auto bad = proto::validate_pose(p))
-        return "pose: " + *bad;
-    std::lock_guard lock(mutex_);
-    if (auto bad = usable())
-        return bad;
-    pose_ = p;
-    pose_sent_ = false;
-    wake();
-    return std::nullopt;
+        return Refusal{false, "pose: " + *bad};
+    return queue([&] {
+        pose_ = p;
+        pose_sent_ = false;
+    });
 }
 
-std::optional<std::string> Session::request_frame() {
-    std::lock_guard lock(mutex_);
-    if (auto bad = usable())
-        return bad;
-    frame_wanted_ = true;
-    frame_request_sent_ = false;
-    wake();
-    return std::nullopt;
+std::optional<Session::Refusal> Session::request_frame() {
+    return queue([&] {
+        frame_wanted_ = true;
+        frame_request_sent_ = false;
+    });
 }
 
-std::optional<std::string> Session::request_stats() {
-    std::lock_guard lock(mutex_);
-    if (auto bad = usable())
-        return bad;
-    ++stats_wanted_;
-    wake();
-    return std::nullopt;
+std::optional<Session::Refusal> Session::request_stats() {
+    return queue([&] { ++stats_wanted_; });
 }
 
 std::optional<SessionEvent> Session::poll(int timeout_ms) {

@@ -86,12 +86,16 @@ public:
     Session(const Session&) = delete;
     Session& operator=(const Session&) = delete;
 
-    // Each returns an error sentence when the argument is refused (checked here, as the server
-    // would) or the session is closed.
-    std::optional<std::string> register_display(const protocol::RegisterDisplay& d);
-    std::optional<std::string> send_pose(protocol::Pose& p);  // stamps client_time_ns if 0
-    std::optional<std::string> request_frame();
-    std::optional<std::string> request_stats();
+    // Why a call was refused: its argument (checked here, as the server would), or the session
+    // is closed.
+    struct Refusal {
+        bool closed = false;
+        std::string text;
+    };
+    std::optional<Refusal> register_display(const protocol::RegisterDisplay& d);
+    std::optional<Refusal> send_pose(protocol::Pose& p);  // stamps client_time_ns if 0
+    std::optional<Refusal> request_frame();
+    std::optional<Refusal> request_stats();
 
     // The next event, waiting up to `timeout_ms` (-1 forever); nullopt on timeout. After
     // kClosed has been taken, nullopt at once and closed() is true.
@@ -115,7 +119,10 @@ private:
     void push(SessionEvent e);  // mutex_ held
     void wake();
     void wait_wake(int timeout_ms);
-    std::optional<std::string> usable() const;  // mutex_ held
+    // Applies `change` to what the server must have and wakes the network thread; refused
+    // once the session is closed.
+    template <typename F>
+    std::optional<Refusal> queue(F&& change);
 
     const SessionConfig config_;
     std::unique_ptr<Connection> conn_;  // the network thread's alone once it runs

@@ -5,7 +5,7 @@
 #include <filesystem>
 #include <random>
 
-#include "clients/lib/hysar_client.h"
+#include "clients/client_handle.hpp"
 #include "clients/lib/session.hpp"
 #include "net/net_fixture.hpp"
 
@@ -71,18 +71,13 @@ protected:
         EXPECT_EQ(hysar_client_connect(&c, &raw), HYSAR_OK) << hysar_last_error();
         return Client(raw);
     }
+    // Sparse tiles, so that the layers go through the library's decoder.
     static hysar_display display(uint32_t mode) {
-        const auto d = small_display(proto::PixelFormat::kRgba8, proto::FrameMode(mode));
-        return {d.eye_width,        d.eye_height,          d.fx, d.fy, d.cx, d.cy, d.ipd_m,
-                HYSAR_FORMAT_RGBA8, HYSAR_ENCODING_SPARSE, mode};
+        auto d = small_display(proto::PixelFormat::kRgba8, proto::FrameMode(mode));
+        d.encoding = proto::Encoding::kSparseTiles;
+        return client::to_c(d);
     }
-    static hysar_pose pose(double angle_deg) {
-        const auto p = pose_at(angle_deg, 0);
-        hysar_pose h{};
-        std::copy(p.position_m.begin(), p.position_m.end(), h.position_m);
-        std::copy(p.orientation_wxyz.begin(), p.orientation_wxyz.end(), h.orientation_wxyz);
-        return h;
-    }
+    static hysar_pose pose(double angle_deg) { return client::to_c(pose_at(angle_deg, 0)); }
     // Polls until an event of `kind` (others are counted in `seen`), up to `timeout_ms`. The
     // returned event must be released.
     hysar_event wait_for(hysar_client* c, uint32_t kind, int timeout_ms = 30000,
@@ -227,15 +222,19 @@ TEST_F(ClientLib, TheQueueKeepsTheNewestImagesOnly) {
     const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
     ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
     // Three requests answered one after the other while nobody polls: six layers, two kept.
+    // Each request waits for its answer to begin, so that none is folded into the next.
     for (int k = 0; k < 3; ++k) {
+        hysar_client_info before{};
+        hysar_client_get_info(c.get(), &before);
+        hysar_client_info now = before;
         const hysar_pose p = pose(10.0 * k);
         ASSERT_EQ(hysar_client_send_pose(c.get(), &p, nullptr), HYSAR_OK);
         ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
-        hysar_client_info info{};
-        for (int i = 0; i < 300 && info.bytes_received == 0; ++i) {
+        for (int i = 0; i < 3000 && now.bytes_received == before.bytes_received; ++i) {
             std::this_thread::sleep_for(std::chrono::milliseconds(10));
-            hysar_client_get_info(c.get(), &info);
+            hysar_client_get_info(c.get(), &now);
         }
+        ASSERT_GT(now.bytes_received, before.bytes_received) << "request " << k << " unanswered";
     }
     hysar_client_info info{};
     for (int i = 0; i < 3000 && info.images_dropped < 4; ++i) {

@@ -5,12 +5,14 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <fstream>
 #include <thread>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "clients/connection.hpp"
 #include "gpu/device.hpp"
@@ -66,6 +68,20 @@ inline scene::Scene test_scene() {
     scene::Scene s = scene::default_scene();
     s.projector.intrinsics = {480, 300, 750, 750, 239.5, 149.5};
     return s;
+}
+
+// test_scene() as SceneUpdate JSON, with the material's albedo `albedo` (a scene change).
+inline std::string test_scene_json(std::array<double, 3> albedo) {
+    auto j = nlohmann::json::parse(scene::default_scene_json());
+    j["material"]["albedo"] = albedo;
+    const auto& k = test_scene().projector.intrinsics;
+    j["projector"]["width"] = k.width;
+    j["projector"]["height"] = k.height;
+    j["projector"]["fx"] = k.fx;
+    j["projector"]["fy"] = k.fy;
+    j["projector"]["cx"] = k.cx;
+    j["projector"]["cy"] = k.cy;
+    return j.dump();
 }
 
 // The process's resident set, KiB.

@@ -553,15 +553,7 @@ TEST_F(ProtocolRules, SceneVersionsInWelcomeAndProjectorFrames) {
     hello(*admin, proto::Role::kAdmin);
     ASSERT_TRUE(admin->send(proto::SceneUpdate{"{ not json"}, 40));
     expect_error(*admin, proto::ErrorCode::kSceneRejected, 40);
-    auto j = nlohmann::json::parse(scene::default_scene_json());
-    j["material"]["albedo"] = {0.2, 0.6, 0.9};
-    j["projector"]["width"] = 480;
-    j["projector"]["height"] = 300;
-    j["projector"]["fx"] = 750;
-    j["projector"]["fy"] = 750;
-    j["projector"]["cx"] = 239.5;
-    j["projector"]["cy"] = 149.5;
-    ASSERT_TRUE(admin->send(proto::SceneUpdate{j.dump()}, 41));
+    ASSERT_TRUE(admin->send(proto::SceneUpdate{test_scene_json({0.2, 0.6, 0.9})}, 41));
     auto second = proj->next_a<proto::ProjectorFrame>();
     ASSERT_TRUE(second);
     EXPECT_EQ(second->as<proto::ProjectorFrame>()->scene_version, 2u);

@@ -324,15 +324,7 @@ TEST_F(ServerTest, AdminSceneUpdateRerendersTheProjectorOnce) {
     ASSERT_FALSE(admin->hello(proto::Role::kAdmin, kAdminToken, "admin"));
     ASSERT_TRUE(admin->send(proto::SceneUpdate{"{ not json"}));
     expect_error(*admin, proto::ErrorCode::kSceneRejected, false);
-    auto j = nlohmann::json::parse(scene::default_scene_json());
-    j["material"]["albedo"] = {0.2, 0.6, 0.9};
-    j["projector"]["width"] = 480;
-    j["projector"]["height"] = 300;
-    j["projector"]["fx"] = 750;
-    j["projector"]["fy"] = 750;
-    j["projector"]["cx"] = 239.5;
-    j["projector"]["cy"] = 149.5;
-    ASSERT_TRUE(admin->send(proto::SceneUpdate{j.dump()}));
+    ASSERT_TRUE(admin->send(proto::SceneUpdate{test_scene_json({0.2, 0.6, 0.9})}));
     auto second = receive_a<proto::ProjectorFrame>(*proj);
     ASSERT_TRUE(second);
     EXPECT_EQ(second->scene_version, first->scene_version + 1);
