@@ -1,7 +1,6 @@
 #include "clients/common.hpp"
 
 #include "clients/args.hpp"
-#include "protocol/tiles.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -240,15 +239,6 @@ float half_to_float(uint16_t h) {
     return f;
 }
 }  // namespace
-
-std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t w, uint32_t h,
-                                                           protocol::PixelFormat format,
-                                                           protocol::Encoding encoding,
-                                                           const std::vector<uint8_t>& data) {
-    if (encoding == protocol::Encoding::kRaw)
-        return data;
-    return protocol::decode_tiles(data, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8);
-}
 
 bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::PixelFormat format,
                      std::span<const uint8_t> data) {

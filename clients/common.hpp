@@ -44,12 +44,6 @@ protocol::Pose orbit_pose(double angle_deg, double distance_m, double height_m,
 
 double percentile(std::vector<double> v, double p);
 
-// The raw pixel bytes of a layer or frame in any encoding, or an error sentence.
-std::variant<std::vector<uint8_t>, std::string> raw_pixels(uint32_t width, uint32_t height,
-                                                           protocol::PixelFormat format,
-                                                           protocol::Encoding encoding,
-                                                           const std::vector<uint8_t>& data);
-
 // Writes raw RGBA8 pixels as PNG; RGBA16F ones are tone-mapped (white = 1, sRGB) first.
 bool write_layer_png(const std::string& path, uint32_t width, uint32_t height,
                      protocol::PixelFormat format, std::span<const uint8_t> raw);

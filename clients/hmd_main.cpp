@@ -1,17 +1,14 @@
 // hysar-hmd: a headset client. Registers a display profile, plays a pose trajectory (the
 // paper's view angles, an orbit, or a CSV of timestamped poses) or follows live poses from a
 // tracker (standard input or UDP), writes the received layers.
-#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 
