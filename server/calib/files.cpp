@@ -9,6 +9,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "scene/config.hpp"
+
 namespace hs::calib {
 
 namespace fs = std::filesystem;
@@ -39,7 +41,7 @@ struct FieldError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-constexpr double kMaxDevicePixels = 16384;
+constexpr double kMaxDevicePixels = scene::kMaxImageSide;  // a device side, in pixels
 
 const json& field(const json& j, const std::string& key, const std::string& name) {
     if (!j.is_object() || !j.contains(key))

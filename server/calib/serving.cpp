@@ -42,16 +42,16 @@ std::string size_str(uint32_t w, uint32_t h) {
     return fmt::format("{}x{}", w, h);
 }
 
-// The white minus the black of a colour model (M r(1), r(1) = 1), which must be above 0 in
+// The white minus the black of a colour model, which must be above 0 in
 // every channel for the drive to be defined.
 Result<glm::dvec3> white_span(const ServedDevice& d) {
-    const glm::dvec3 w = d.colour.matrix * glm::dvec3(1.0);
+    const glm::dvec3 w = d.colour.white() - d.colour.offset;
     for (int c = 0; c < 3; ++c)
         if (!(w[c] > 0))
             return make_error(
                 ErrorCode::kParse,
                 fmt::format("{}: the device's white is not above its black in "
-                            "channel {} (primaries x (1, 1, 1) = {:.4g}, {:.4g}, "
+                            "channel {} (white - black = {:.4g}, {:.4g}, "
                             "{:.4g}); recalibrate its colour",
                             (d.dir / "colour.json").string(), "RGB"[c], w.r, w.g, w.b));
     return w;
@@ -138,17 +138,19 @@ LayerDrive::LayerDrive(const ColourCalibration& colour, double camera_per_radian
     for (int c = 0; c < 3; ++c) {
         to_code_[c].resize(kSteps + 1);
         to_half_[c].resize(kSteps + 1);
-        for (uint32_t i = 0; i <= kSteps; ++i) {
-            const double d = colour.unlinearise(glm::dvec3(double(i) / kSteps))[c];
-            to_code_[c][i] = uint8_t(std::lround(255.0 * d));
-            to_half_[c][i] = glm::packHalf1x16(float(srgb_eotf(d)));
+    }
+    for (uint32_t i = 0; i <= kSteps; ++i) {
+        const glm::dvec3 d = colour.unlinearise(glm::dvec3(double(i) / kSteps));
+        for (int c = 0; c < 3; ++c) {
+            to_code_[c][i] = uint8_t(std::lround(255.0 * d[c]));
+            to_half_[c][i] = glm::packHalf1x16(float(srgb_eotf(d[c])));
         }
     }
     half_values();  // made here, not on an encoder thread's first layer
 }
 
 glm::dvec3 LayerDrive::drive(const glm::dvec3& radiance) const {
-    return colour_.unlinearise(glm::inverse(colour_.matrix) * (scale_ * radiance));
+    return colour_.drive_for(colour_.offset + scale_ * radiance);
 }
 
 void LayerDrive::apply_rgba8(const uint8_t* src, size_t src_stride, uint8_t* dst, size_t dst_stride,
@@ -259,19 +261,18 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s, cons
     const ImageRgba32f p =
         optics::projector_drive(o, scaled(vi, out.scene_to_signal), geometry, out.g_ref, 0.0);
     HS_ASSIGN_OR_RETURN(glm::dvec3 w, white_span(projector));
-    const glm::dmat3 a = glm::inverse(projector.colour.matrix);
     out.projector = ImageRgba32f::zeros(k.width, k.height);
     std::atomic<uint64_t> clipped{0}, lit{0};
     parallel_rows(k.height, [&](uint32_t y) {
         uint64_t c_row = 0, l_row = 0;
         for (uint32_t x = 0; x < k.width; ++x) {
             const size_t i = p.index(x, y);
-            const glm::dvec3 r =
-                a * (w * glm::dvec3(p.pixels[i], p.pixels[i + 1], p.pixels[i + 2]));
-            const glm::dvec3 d = projector.colour.unlinearise(r);
-            const bool clip =
-                p.pixels[i + 3] > 0.0f ||
-                glm::any(glm::greaterThan(glm::abs(glm::clamp(r, 0.0, 1.0) - r), glm::dvec3(1e-6)));
+            bool clip = false;
+            const glm::dvec3 d = projector.colour.drive_for(
+                projector.colour.offset +
+                    w * glm::dvec3(p.pixels[i], p.pixels[i + 1], p.pixels[i + 2]),
+                &clip);
+            clip |= p.pixels[i + 3] > 0.0f;
             out.projector.set(x, y, {float(d.r), float(d.g), float(d.b), 0.0f});
             const bool lights = geometry.pixels[i + 3] > 0.5f && geometry.pixels[i + 2] > 0.0f;
             l_row += lights;

@@ -4,6 +4,7 @@
 #include <chrono>
 
 #include "codec/layer_codec.hpp"
+#include "protocol/tiles.hpp"
 
 namespace hs::stream {
 
@@ -125,14 +126,20 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     const size_t stride = size_t(pixels.width) * (rgba8 ? 4 : 8);
     const size_t bytes = stride * pixels.height;
     if (scratch.driven_bytes < bytes) {
-        scratch.driven.reset(new uint8_t[bytes]);  // not zeroed: only the rectangle is read
+        scratch.driven.reset(new uint8_t[bytes]);  // not zeroed: only what is written is read
         scratch.driven_bytes = bytes;
     }
+    // The tile packer reads whole tiles: the drive covers the rectangle rounded out to the tile
+    // grid, so that no byte of the buffer it reads is left unwritten.
+    const uint32_t ts = protocol::kDefaultTileSize;
+    const uint32_t tx0 = pixels.x0 / ts * ts, ty0 = pixels.y0 / ts * ts;
+    const uint32_t tx1 = std::min(pixels.width, (x1 + ts - 1) / ts * ts),
+                   ty1 = std::min(pixels.height, (y1 + ts - 1) / ts * ts);
     uint8_t* dst = scratch.driven.get();
     if (rgba8)
-        drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, pixels.x0, pixels.y0, x1, y1);
+        drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
     else
-        drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, pixels.x0, pixels.y0, x1, y1);
+        drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
     codec::LayerPixels driven = pixels;
     driven.data = dst;
     driven.stride = stride;

@@ -285,6 +285,8 @@ TEST_F(Folder, ProjectorDriveMakesTheTargetThroughTheColourModel) {
         EXPECT_EQ(d->g_ref, 2.0);
         const auto& lv = cal->optics.levels;
         const glm::dvec3 rho = comp->albedo ? cal->optics.prop_albedo : glm::dvec3(1.0);
+        bool some_clip = false;  // a sample the drive cannot reach
+        int checked = 0;         // channels whose light was checked
         for (uint32_t x : {10u, 60u}) {
             const glm::vec4 v = d->projector.at(x, 20);
             // The light relative to the projector's white, as its colour model predicts it.
@@ -300,9 +302,16 @@ TEST_F(Folder, ProjectorDriveMakesTheTargetThroughTheColourModel) {
                         : f * rho[c] * lv.projector_max * p[c];
                 if (want / (f * rho[c]) < lv.projector_max) {  // not clipped
                     EXPECT_NEAR(made / want, 1.0, 0.01) << "x " << x << " channel " << c;
+                    ++checked;
+                } else {
+                    some_clip = true;
                 }
             }
         }
+        // The two samples stand for the two halves of the frame: clipped pixels are counted
+        // exactly when a sample could not be reached, and some light was checked.
+        EXPECT_EQ(d->clipped > 0, some_clip) << d->clipped << " clipped pixels";
+        EXPECT_GT(checked, 0);
         // The headset: alpha k per unit radiance above its black, hmd_alpha compensated.
         const double span = comp->black_levels ? lv.hmd_max - lv.hmd_min : lv.hmd_max;
         EXPECT_NEAR(d->layers->camera_per_radiance(),
