@@ -211,7 +211,10 @@ void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, He
             const auto now = Clock::now();
             if (now >= next_pose) {
                 const double t_s = std::chrono::duration<double>(now - start).count();
-                auto head = head_at(*plan.scene, plan.phase_deg + kOrbitDegPerS * t_s);
+                // Wrapped to [-180, 180]: the viewing angle's range is [-360, 360], and the
+                // orbit goes round more than once.
+                auto head = head_at(*plan.scene,
+                                    std::remainder(plan.phase_deg + kOrbitDegPerS * t_s, 360.0));
                 if (!head) {
                     t.fail(head.error().message);
                     break;

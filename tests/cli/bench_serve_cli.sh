@@ -33,6 +33,7 @@ got = sorted((r["headsets"], r["lp_num_threads"] or 0) for r in rows)
 assert got == [(1, 0), (1, 1), (2, 0), (2, 1)], got
 for r in rows:
     assert r["stereo_layers"] > 0, r
+    assert r["errors"] == 0, r  # a headset that errs stops sending poses: its row is wrong
     assert finite(r["latency_ms_p50"]) and finite(r["latency_ms_p99"]), r
     assert r["latency_ms_p50"] <= r["latency_ms_p99"], r
     assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
