@@ -238,6 +238,13 @@ Result<void> calibrate_simulate(const Flags& f) {
             HS_TRY(write_material(out / "material", trip.projector, trip.hmd, trip.vd, sj));
             std::printf("captured material: hysar serve --scene %s\n",
                         (out / "material" / "scene.json").string().c_str());
+        } else {
+            // A captured material's images are the devices' own size (the scene checks them
+            // against its projector), so a reduced run has none to write.
+            std::printf(
+                "no material/ folder at --scale %g: a captured material is written at full "
+                "resolution only (--scale 1)\n",
+                io.scale);
         }
         std::printf(
             "wrote %s (report.json, roundtrip.png, served.png, projector/, hmd/, optics.json; "
