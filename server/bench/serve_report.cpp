@@ -178,8 +178,7 @@ std::string table(const Report& rep) {
 ImageRgba8 plot(const Report& rep, const std::string& subtitle) {
     int most = 1;
     for (const auto& r : rep.rows) most = std::max(most, r.headsets);
-    // line_plot draws five ticks from lo to hi: 0..4k puts them on whole headset counts, and
-    // 0..4s with a round step s the layer rates on round values.
+    // A fixed range 0..4k (x) and 0..4s (y, s a round step) that line_plot puts nice ticks in.
     const double x_hi = 4.0 * std::ceil(most / 4.0);
     double y_max = 0;
     for (const auto& r : rep.rows) y_max = std::max(y_max, r.per_s_total);

@@ -20,18 +20,42 @@ void fill_rect(ImageRgba8& img, int x, int y, int w, int h, uint8_t r, uint8_t g
         }
 }
 
+namespace {
+// The quads stb_easy_font makes of `text` (4 vertices of 16 bytes each: x, y, z floats and 4
+// colour bytes). It stops at a full buffer without saying so (about 270 bytes per character on
+// average, more for digits such as 8), so the buffer grows until the whole string fitted.
+std::vector<char> font_quads(const std::string& text, int& quads) {
+    std::string t = text;
+    std::vector<char> buf(std::max<size_t>(text.size() * 512, 1024));
+    for (;;) {
+        quads = stb_easy_font_print(0, 0, t.data(), nullptr, buf.data(), int(buf.size()));
+        if (size_t(quads + 1) * 64 < buf.size())
+            return buf;
+        buf.resize(buf.size() * 2);
+    }
+}
+}  // namespace
+
 void draw_text(ImageRgba8& img, int x, int y, const std::string& text, int scale, uint8_t r,
                uint8_t g, uint8_t b) {
-    // stb_easy_font emits axis-aligned quads of 4 vertices (x, y, z floats + 4 colour bytes).
-    std::vector<char> buf(std::max<size_t>(text.size() * 300, 1024));
-    std::string t = text;
-    int quads = stb_easy_font_print(0, 0, t.data(), nullptr, buf.data(), int(buf.size()));
+    int quads = 0;
+    const std::vector<char> buf = font_quads(text, quads);
     for (int q = 0; q < quads; ++q) {
         const float* v0 = reinterpret_cast<const float*>(buf.data() + (q * 4 + 0) * 16);
         const float* v2 = reinterpret_cast<const float*>(buf.data() + (q * 4 + 2) * 16);
         fill_rect(img, x + int(v0[0] * scale), y + int(v0[1] * scale), int((v2[0] - v0[0]) * scale),
                   int((v2[1] - v0[1]) * scale), r, g, b);
     }
+}
+
+int text_width(const std::string& text, int scale) {
+    std::string t = text;
+    return stb_easy_font_width(t.data()) * scale;
+}
+
+int text_height(const std::string& text, int scale) {
+    std::string t = text;
+    return stb_easy_font_height(t.data()) * scale;
 }
 
 ImageRgba8 downscale(const ImageRgba8& img, uint32_t f) {

@@ -7,9 +7,14 @@
 
 namespace hs {
 
-// Draws `text` with its top-left at (x, y), each font pixel `scale` x `scale` image pixels.
+// Draws the whole of `text` with its top-left at (x, y), each font pixel `scale` x `scale` image
+// pixels (stb_easy_font, proportional).
 void draw_text(ImageRgba8& image, int x, int y, const std::string& text, int scale, uint8_t r,
                uint8_t g, uint8_t b);
+
+// The advance of `text` as draw_text draws it, and its height (one line: 12 x scale).
+int text_width(const std::string& text, int scale);
+int text_height(const std::string& text, int scale);
 
 // Fills a rectangle, clipped to the image.
 void fill_rect(ImageRgba8& image, int x, int y, int w, int h, uint8_t r, uint8_t g, uint8_t b);

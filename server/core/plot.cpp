@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 
 #include <fmt/format.h>
@@ -37,23 +38,153 @@ void line(ImageRgba8& img, int x0, int y0, int x1, int y1, Rgb c) {
     }
 }
 
-std::string tick(double v) {
-    if (v == 0)
-        return "0";
-    const double a = std::fabs(v);
-    if (a >= 1e5 || a < 1e-2)
-        return fmt::format("{:.0e}", v);
-    if (a >= 100)
-        return fmt::format("{:.0f}", v);
-    if (a >= 1)
-        return fmt::format("{:.3g}", v);
-    return fmt::format("{:.2g}", v);
+// A tick as the exact decimal m x 10^e.
+struct Decimal {
+    int64_t m = 0;
+    int e = 0;
+    Decimal normalised() const {
+        Decimal d = *this;
+        while (d.m != 0 && d.m % 10 == 0) d.m /= 10, ++d.e;
+        if (d.m == 0)
+            d.e = 0;
+        return d;
+    }
+    // The double nearest m x 10^e (as strtod reads the label).
+    double value() const { return std::strtod(fmt::format("{}e{}", m, e).c_str(), nullptr); }
+};
+
+double pow10(int e) {
+    return std::pow(10.0, e);
 }
+
+AxisTicks labelled_axis(const std::vector<Decimal>& ds, double lo, double hi) {
+    bool scientific = false;
+    for (const auto& d : ds) {
+        const double a = std::fabs(d.value());
+        if (a >= 1e6 || (a > 0 && a < 1e-4))
+            scientific = true;
+    }
+    AxisTicks t{lo, hi, {}};
+    for (const auto& d : ds) {
+        const Decimal n = d.normalised();
+        t.ticks.push_back({n.value(), tick_label(n.m, n.e, scientific)});
+    }
+    return t;
+}
+
+// Ticks k * s * 10^e for a step s in {1, 2, 5}: enclosing [lo, hi] (`fit`) or inside it.
+std::vector<Decimal> linear_decimals(double lo, double hi, bool fit) {
+    const double raw = (hi - lo) / 5.0;
+    const int e0 = int(std::floor(std::log10(raw)));
+    constexpr double kEps = 1e-9;
+    for (int e = e0 - 1; e <= e0 + 2; ++e)
+        for (int s : {1, 2, 5}) {
+            const double step = s * pow10(e);
+            const double k_lo = fit ? std::floor(lo / step + kEps) : std::ceil(lo / step - kEps);
+            const double k_hi = fit ? std::ceil(hi / step - kEps) : std::floor(hi / step + kEps);
+            if (k_hi - k_lo > 6)
+                continue;
+            std::vector<Decimal> ds;
+            for (double k = k_lo; k <= k_hi; ++k) ds.push_back({int64_t(k) * s, e});
+            return ds;
+        }
+    return {};
+}
+}  // namespace
+
+std::string tick_label(int64_t m, int e, bool scientific) {
+    if (m == 0)
+        return "0";
+    const Decimal d = Decimal{m, e}.normalised();
+    const std::string sign = d.m < 0 ? "-" : "";
+    // The digits of |m| (m = INT64_MIN does not occur: ticks are far smaller).
+    const std::string digits = std::to_string(d.m < 0 ? -d.m : d.m);
+    const int n = int(digits.size());
+    if (scientific) {
+        const std::string mantissa = n == 1 ? digits : digits.substr(0, 1) + "." + digits.substr(1);
+        return sign + mantissa + "e" + std::to_string(d.e + n - 1);
+    }
+    if (d.e >= 0)
+        return sign + digits + std::string(size_t(d.e), '0');
+    if (n <= -d.e)
+        return sign + "0." + std::string(size_t(-d.e - n), '0') + digits;
+    return sign + digits.substr(0, size_t(n + d.e)) + "." + digits.substr(size_t(n + d.e));
+}
+
+AxisTicks linear_ticks(double lo, double hi, bool fit) {
+    if (!std::isfinite(lo) || !std::isfinite(hi))
+        lo = 0, hi = 1;
+    if (hi < lo)
+        std::swap(lo, hi);
+    if (hi - lo <= 1e-9 * std::max(std::fabs(lo), std::fabs(hi))) {
+        // One value (or a range below the precision of a label): a range around it.
+        const double v = 0.5 * (lo + hi), half = v != 0 ? 0.1 * std::fabs(v) : 1.0;
+        lo = v - half, hi = v + half;
+    }
+    const auto ds = linear_decimals(lo, hi, fit);
+    if (fit && !ds.empty())
+        return labelled_axis(ds, ds.front().value(), ds.back().value());
+    return labelled_axis(ds, lo, hi);
+}
+
+AxisTicks log_ticks(double lo, double hi, bool fit) {
+    if (!(lo > 0) || !(hi > 0) || !std::isfinite(lo) || !std::isfinite(hi))
+        lo = 1, hi = 10;
+    if (hi < lo)
+        std::swap(lo, hi);
+    if (hi <= lo * (1 + 1e-9))
+        lo /= 2, hi *= 2;
+    lo = std::max(lo, 1e-300), hi = std::min(hi, 1e300);
+    constexpr double kEps = 1e-9;
+    const double a = std::log10(lo), b = std::log10(hi);
+    const int dlo = int(std::floor(a + kEps)), dhi = int(std::ceil(b - kEps));
+    auto axis = [&](const std::vector<Decimal>& ds) {
+        if (fit)
+            return labelled_axis(ds, ds.front().value(), ds.back().value());
+        return labelled_axis(ds, lo, hi);
+    };
+    std::vector<Decimal> ds;
+    if (dhi - dlo >= 3) {  // decades, every n-th over many
+        const int stride = (dhi - dlo + 5) / 6;
+        auto fl = [&](int x) { return int(std::floor(double(x) / stride)) * stride; };
+        auto cl = [&](int x) { return int(std::ceil(double(x) / stride)) * stride; };
+        const int first = fit ? fl(dlo) : cl(int(std::ceil(a - kEps)));
+        const int last = fit ? cl(dhi) : fl(int(std::floor(b + kEps)));
+        for (int d = first; d <= last; d += stride) ds.push_back({1, d});
+        if (ds.size() >= 2)
+            return axis(ds);
+    }
+    // 1, 2, 5 x 10^k.
+    std::vector<Decimal> all;
+    for (int d = dlo - 1; d <= dhi; ++d)
+        for (int s : {1, 2, 5}) all.push_back({s, d});
+    ds.clear();
+    for (size_t i = 0; i < all.size(); ++i) {
+        const double v = all[i].value();
+        const bool inside = v >= lo * (1 - kEps) && v <= hi * (1 + kEps);
+        const bool below =
+            i + 1 < all.size() && all[i + 1].value() > lo * (1 + kEps) && v <= lo * (1 + kEps);
+        const bool above = i > 0 && all[i - 1].value() < hi * (1 - kEps) && v >= hi * (1 - kEps);
+        if (inside || (fit && (below || above)))
+            ds.push_back(all[i]);
+    }
+    if (ds.size() >= 4)
+        return axis(ds);
+    // Too narrow for 1-2-5: a linear step, where its ticks stay positive.
+    const auto lin = linear_decimals(lo, hi, fit);
+    if (lin.size() >= 2 && lin.front().value() > 0)
+        return axis(lin);
+    if (ds.size() >= 2)
+        return axis(ds);
+    return axis({{1, dlo}, {1, dhi > dlo ? dhi : dlo + 1}});
+}
+
+namespace {
 
 struct Frame {
     ImageRgba8 img;
-    int x0, y0, w, h;  // plot area
-    double xlo, xhi, ylo, yhi;
+    int x0, y0, w, h;           // plot area
+    double xlo, xhi, ylo, yhi;  // in axis units: log10 of the data on a log axis
     bool log_y, log_x;
     int px(double x) const {
         const double t = log_x ? std::log10(x) : x;
@@ -65,41 +196,52 @@ struct Frame {
     }
 };
 
-Frame frame(const PlotOptions& o, double xlo, double xhi, double ylo, double yhi, bool x_ticks) {
+double axis_unit(double v, bool log) {
+    return log ? std::log10(v) : v;
+}
+
+// The plot area leaves room for the widest y tick label and half the last x tick label, so no
+// label is cut or drawn over the plot.
+Frame frame(const PlotOptions& o, const AxisTicks* x, const AxisTicks& y) {
+    int widest = 0;
+    for (const auto& t : y.ticks) widest = std::max(widest, text_width(t.label, 1));
+    const int left = std::max(kLeft, widest + 12);
+    const int right = x && !x->ticks.empty()
+                          ? std::max(kRight, text_width(x->ticks.back().label, 1) / 2 + 6)
+                          : kRight;
     Frame f{make_canvas(o.width, o.height, 255),
-            kLeft,
+            left,
             kTop,
-            int(o.width) - kLeft - kRight,
+            std::max(int(o.width) - left - right, 16),
             int(o.height) - kTop - kBottom,
-            xlo,
-            xhi,
-            ylo,
-            yhi,
+            x ? axis_unit(x->lo, o.log_x) : 0.0,
+            x ? axis_unit(x->hi, o.log_x) : 1.0,
+            axis_unit(y.lo, o.log_y),
+            axis_unit(y.hi, o.log_y),
             o.log_y,
-            o.log_x};
+            x && o.log_x};
     if (!(f.xhi > f.xlo))
         f.xhi = f.xlo + 1;
     if (!(f.yhi > f.ylo))
         f.yhi = f.ylo + 1;
     draw_text(f.img, 6, 6, o.title, 2, 20, 20, 20);
     const Rgb axis{60, 60, 60}, grid{225, 225, 225};
-    for (int i = 0; i <= 4; ++i) {
-        const double t = f.ylo + (f.yhi - f.ylo) * i / 4.0;
-        const int y = f.y0 + f.h - 1 - int(std::lround(double(f.h - 1) * i / 4.0));
-        line(f.img, f.x0, y, f.x0 + f.w - 1, y, grid);
-        draw_text(f.img, 2, y - 4, tick(f.log_y ? std::pow(10.0, t) : t), 1, 60, 60, 60);
+    for (const auto& t : y.ticks) {
+        const int py = f.py(t.value);
+        line(f.img, f.x0, py, f.x0 + f.w - 1, py, grid);
+        draw_text(f.img, f.x0 - 6 - text_width(t.label, 1), py - 4, t.label, 1, 60, 60, 60);
     }
-    if (x_ticks)
-        for (int i = 0; i <= 4; ++i) {
-            const double t = f.xlo + (f.xhi - f.xlo) * i / 4.0;
-            const int x = f.x0 + int(std::lround(double(f.w - 1) * i / 4.0));
-            draw_text(f.img, x - 8, f.y0 + f.h + 4, tick(f.log_x ? std::pow(10.0, t) : t), 1, 60,
-                      60, 60);
+    if (x)
+        for (const auto& t : x->ticks) {
+            const int px = f.px(t.value);
+            line(f.img, px, f.y0 + f.h - 1, px, f.y0 + f.h + 2, axis);
+            draw_text(f.img, px - text_width(t.label, 1) / 2, f.y0 + f.h + 6, t.label, 1, 60, 60,
+                      60);
         }
     line(f.img, f.x0, f.y0, f.x0, f.y0 + f.h - 1, axis);
     line(f.img, f.x0, f.y0 + f.h - 1, f.x0 + f.w - 1, f.y0 + f.h - 1, axis);
-    draw_text(f.img, f.x0 + f.w / 2 - int(o.x_label.size()) * 3, int(o.height) - 16, o.x_label, 1,
-              40, 40, 40);
+    draw_text(f.img, f.x0 + f.w / 2 - text_width(o.x_label, 1) / 2, int(o.height) - 16, o.x_label,
+              1, 40, 40, 40);
     draw_text(f.img, 2, f.y0 - 12, o.y_label, 1, 40, 40, 40);
     return f;
 }
@@ -131,28 +273,20 @@ ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
             if (!drawable(s.x[i], s.y[i]))
                 continue;
-            const double y = o.log_y ? std::log10(s.y[i]) : s.y[i];
-            const double x = o.log_x ? std::log10(s.x[i]) : s.x[i];
             if (auto_x)
-                xlo = std::min(xlo, x), xhi = std::max(xhi, x);
+                xlo = std::min(xlo, s.x[i]), xhi = std::max(xhi, s.x[i]);
             if (auto_y)
-                ylo = std::min(ylo, y), yhi = std::max(yhi, y);
+                ylo = std::min(ylo, s.y[i]), yhi = std::max(yhi, s.y[i]);
         }
     if (!std::isfinite(xlo))
-        xlo = 0, xhi = 1;
+        xlo = o.log_x ? 1 : 0, xhi = o.log_x ? 10 : 1;
     if (!std::isfinite(ylo))
-        ylo = 0, yhi = 1;
-    if (!auto_y && o.log_y)
-        ylo = std::log10(std::max(ylo, 1e-300)), yhi = std::log10(std::max(yhi, 1e-300));
-    if (!auto_x && o.log_x)
-        xlo = std::log10(std::max(xlo, 1e-300)), xhi = std::log10(std::max(xhi, 1e-300));
-    if (auto_x && o.log_x && xhi > xlo) {  // a margin so that end labels stay inside
-        const double m = 0.05 * (xhi - xlo);
-        xlo -= m, xhi += m;
-    }
+        ylo = o.log_y ? 1 : 0, yhi = o.log_y ? 10 : 1;
     if (auto_y && !o.log_y)
         ylo = std::min(ylo, 0.0);
-    Frame f = frame(o, xlo, xhi, ylo, yhi, true);
+    const AxisTicks xt = o.log_x ? log_ticks(xlo, xhi, auto_x) : linear_ticks(xlo, xhi, auto_x);
+    const AxisTicks yt = o.log_y ? log_ticks(ylo, yhi, auto_y) : linear_ticks(ylo, yhi, auto_y);
+    Frame f = frame(o, &xt, yt);
     std::vector<std::pair<std::string, Rgb>> items;
     for (const auto& s : series) {
         items.push_back({s.name, s.colour});
@@ -191,11 +325,13 @@ ImageRgba8 bar_plot(const std::vector<std::string>& groups, const std::vector<Ba
             if (std::isfinite(s.values[i]))
                 lo = std::min(lo, s.values[i] - e), hi = std::max(hi, s.values[i] + e);
         }
-    if (o.y_hi > o.y_lo)
+    const bool fixed = o.y_hi > o.y_lo;
+    if (fixed)
         lo = o.y_lo, hi = o.y_hi;
     PlotOptions po = o;
-    po.log_y = false;
-    Frame f = frame(po, 0, double(std::max<size_t>(groups.size(), 1)), lo, hi, false);
+    po.log_y = po.log_x = false;
+    const AxisTicks yt = linear_ticks(lo, hi, !fixed);
+    Frame f = frame(po, nullptr, yt);
     const int zero = f.py(0.0);
     line(f.img, f.x0, zero, f.x0 + f.w - 1, zero, {60, 60, 60});
     const double group_w = double(f.w) / double(std::max<size_t>(groups.size(), 1));
