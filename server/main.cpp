@@ -24,6 +24,8 @@ void usage(FILE* f) {
         "  calibrate  calibration of a real installation and captured materials: patterns,\n"
         "           decode, invert, colour, capture; simulate runs the whole chain on a virtual\n"
         "           installation (hysar calibrate --help)\n"
+        "  admin    a running server: scene push FILE, stats [--watch S], viewers\n"
+        "           (hysar admin --help)\n"
         "\n"
         "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
         "turns on the Vulkan validation layer.\n");
@@ -47,6 +49,8 @@ int main(int argc, char** argv) {
         return hs::cli::run_eval(args);
     if (cmd == "calibrate")
         return hs::cli::run_calibrate(args);
+    if (cmd == "admin")
+        return hs::cli::run_admin(args);
     if (cmd == "--help" || cmd == "-h" || cmd == "help") {
         usage(stdout);
         return 0;

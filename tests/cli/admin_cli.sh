@@ -1,0 +1,101 @@
+#!/usr/bin/env bash
+# `hysar admin` against a running server with two headsets: viewers lists both, stats prints a
+# table (twice with --watch/--count) and --json the server's JSON, scene push applies a changed
+# scene (a newer scene version, and the projector gets its frame), a broken scene file is refused
+# before anything is sent, a scene the server refuses comes back with its error (exit 1), and a
+# wrong token, an unreachable server and bad arguments exit 2 with a sentence.
+set -euo pipefail
+bin="$1" src="$2"
+dir=$(mktemp -d)
+pids=()
+cleanup() { for p in "${pids[@]}"; do kill -KILL "$p" 2>/dev/null || true; done; rm -rf "$dir"; }
+trap cleanup EXIT
+fail() { echo "admin test: $*" >&2; exit 1; }
+(umask 077 && echo "admin-test-viewers" > "$dir/token" && echo "admin-test-admin" > "$dir/admin")
+# The server refuses scenes over 40,000 triangles: the default 256 x 64 dome fits, 512 x 64 not.
+"$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/s.sock" --token-file "$dir/token" \
+  --admin-token-file "$dir/admin" --max-triangles 40000 > "$dir/serve.log" 2>&1 &
+pids+=($!); disown
+for _ in $(seq 200); do [[ -S "$dir/s.sock" ]] && break; sleep 0.1; done
+[[ -S "$dir/s.sock" ]] || { cat "$dir/serve.log"; fail "the server did not start"; }
+"$bin/clients/hysar-loadgen" --connect "unix:$dir/s.sock" --token-file "$dir/token" --viewers 2 \
+  --seconds 0 > "$dir/loadgen.log" 2>&1 &
+pids+=($!); disown
+mkdir "$dir/p"
+"$bin/clients/hysar-projector" --connect "unix:$dir/s.sock" --token-file "$dir/token" --frames 0 \
+  --out "$dir/p" > "$dir/projector.log" 2>&1 &
+pids+=($!); disown
+admin=("$bin/hysar" admin --connect "unix:$dir/s.sock" --token-file "$dir/admin" --timeout-ms 60000)
+
+# Both headsets, each with frames, once they are served.
+for _ in $(seq 100); do
+  out=$("${admin[@]}" viewers)
+  [[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -ge 2 ]] && break
+  sleep 0.2
+done
+echo "$out"
+echo "$out" | head -1 | grep -q "session.*name.*frames.*p50 ms" || fail "viewers: no header"
+[[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -eq 2 ]] || fail "viewers: not two headsets with frames"
+
+out=$("${admin[@]}" stats --watch 0.2 --count 2)
+[[ $(echo "$out" | grep -c "^scene version") -eq 2 ]] || { echo "$out"; fail "stats --watch 0.2 --count 2: not two tables"; }
+echo "$out" | grep -q "^stage pass ms (mean) *[0-9]" || { echo "$out"; fail "stats: no pass cost"; }
+"${admin[@]}" stats --json | python3 -c "
+import json, sys
+s = json.load(sys.stdin)
+assert s['scene_version'] == 1, s['scene_version']
+assert sum(1 for v in s['viewers'] if v['frames'] > 0) == 2, s['viewers']
+" || fail "stats --json"
+
+# A changed scene: applied, and the projector receives version 2.
+python3 - "$src/configs/exp1-room.json" "$dir/room2.json" "$dir/big.json" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+s["name"] = "admin test, version 2"
+json.dump(s, open(sys.argv[2], "w"))
+s["prop"]["segments"] = 512
+json.dump(s, open(sys.argv[3], "w"))
+PY
+out=$("${admin[@]}" scene push "$dir/room2.json")
+echo "$out"
+echo "$out" | grep -q "applied: scene version 2 (was 1)" || fail "scene push: not applied as version 2"
+for _ in $(seq 100); do compgen -G "$dir/p/projector_v2*" > /dev/null && break; sleep 0.1; done
+compgen -G "$dir/p/projector_v2*" > /dev/null || fail "the projector did not receive version 2"
+
+# Refused by the server (over its --max-triangles): exit 1 with the server's sentence.
+set +e
+out=$("${admin[@]}" scene push "$dir/big.json" 2>&1); rc=$?
+set -e
+echo "$out"
+[[ $rc -eq 1 ]] || fail "a scene over the server's limits: exit $rc, expected 1"
+echo "$out" | grep -q "the server refused the scene: .*triangles" || fail "no server refusal naming the triangles"
+
+# Refused here: broken JSON never reaches the server (its version stays 2).
+echo '{"schema_version": 1, "prop": ' > "$dir/broken.json"
+set +e
+out=$("${admin[@]}" scene push "$dir/broken.json" 2>&1); rc=$?
+set -e
+echo "$out"
+[[ $rc -eq 2 ]] || fail "a broken scene file: exit $rc, expected 2"
+echo "$out" | grep -q "scene push $dir/broken.json: " || fail "the refusal does not name the file"
+v=$("${admin[@]}" stats --json | python3 -c "import json, sys; print(json.load(sys.stdin)['scene_version'])")
+[[ $v -eq 2 ]] || fail "scene version $v after the refused pushes, expected 2"
+
+# Wrong token, no server, bad arguments: exit 2, one sentence each.
+expect2() {
+  local what="$1" pattern="$2"; shift 2
+  set +e; out=$("$@" 2>&1); rc=$?; set -e
+  [[ $rc -eq 2 ]] || { echo "$out"; fail "$what: exit $rc, expected 2"; }
+  echo "$out" | grep -q "$pattern" || { echo "$out"; fail "$what: no '$pattern'"; }
+}
+expect2 "the viewers' token as admin" "refused the admin session" \
+  "$bin/hysar" admin --connect "unix:$dir/s.sock" --token-file "$dir/token" viewers
+expect2 "no server" "^hysar admin: --connect: " \
+  "$bin/hysar" admin --connect "unix:$dir/none.sock" --token-file "$dir/admin" viewers
+expect2 "unknown command" "unknown command 'restart'" "${admin[@]}" restart
+expect2 "no command" "no command" "${admin[@]}"
+expect2 "scene push without a file" "scene push needs one FILE" "${admin[@]}" scene push
+expect2 "--watch on viewers" "go with the stats command" "${admin[@]}" viewers --watch 1
+expect2 "--watch 0" "\-\-watch: '0' is outside \[0.2, 3600\]" "${admin[@]}" stats --watch 0
+"$bin/hysar" admin --help | grep -q "^usage: hysar admin" || fail "--help"
+echo "admin test: viewers, stats, scene push and every refusal as documented"
