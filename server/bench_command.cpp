@@ -23,6 +23,7 @@
 #include "bench/stability.hpp"
 #include "codec/layer_codec.hpp"
 #include "commands.hpp"
+#include "core/figure.hpp"
 #include "core/log.hpp"
 #include "eval_common.hpp"
 #include "protocol/tiles.hpp"
@@ -43,14 +44,15 @@ const char* kBenchHelp =
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
     "             pixel, point against area lights, HDR format, layer encoding) against the\n"
     "             double-precision reference: RMSE, mean CIEDE2000, render and encode ms, bytes;\n"
-    "             writes DIR/accuracy.csv and DIR/accuracy.png (default DIR: accuracy-out) and\n"
-    "             prints the table. --quick: a quarter of the resolution, fewer settings\n"
+    "             writes DIR/accuracy.csv, DIR/accuracy.png and .svg (default DIR: accuracy-out)\n"
+    "             and prints the table. --quick: a quarter of the resolution, fewer settings\n"
     "  encoding   VD layers of the default scene (HoloLens resolution, every Fig. 7 model and\n"
     "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
     "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n"
     "  serve      the served path (an in-process server, N headsets on loopback) against\n"
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
-    "             writes DIR/bench-serve.json and DIR/bench-serve.png (default out/bench-serve)\n"
+    "             writes DIR/bench-serve.json, DIR/bench-serve.png and .svg (default\n"
+    "             out/bench-serve)\n"
     "  stability  the hard-case table (docs/STABILITY.md): per formula and regime, the GPU's\n"
     "             shading code against the double reference, max error in relative terms and\n"
     "             ulps for fp32 and the half-float layer, with each regime's tolerance; writes\n"
@@ -68,7 +70,7 @@ const char* kServeHelp =
     "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
     "  hemisphere at 64 x 32), then `hysar serve` in-process on loopback with N headsets\n"
     "  (one thread and connection each, poses at 60 Hz on an orbit, continuous mode).\n"
-    "  Prints a table, writes DIR/bench-serve.json and DIR/bench-serve.png.\n"
+    "  Prints a table, writes DIR/bench-serve.json, DIR/bench-serve.png and .svg.\n"
     "\n"
     "  --headsets LIST      served rows, headsets per row (default 1,8,32)\n"
     "  --seconds S          measured seconds per row (default 10), after a warm-up of 1 s\n"
@@ -368,12 +370,13 @@ int bench_accuracy(const std::string& scene_path, const std::string& out_dir, bo
         std::fprintf(stderr, "hysar bench: cannot write %s\n", (dir / "accuracy.csv").c_str());
         return 1;
     }
-    if (auto w = write_png(dir / "accuracy.png", bench::accuracy_plot(rep.value())); !w) {
+    if (auto w = write_figure(dir / "accuracy.png", bench::accuracy_plot(rep.value())); !w) {
         std::fprintf(stderr, "hysar bench: %s\n", w.error().message.c_str());
         return 1;
     }
-    std::printf("%s\nwrote %s and %s\n", bench::accuracy_table(rep.value()).c_str(),
-                (dir / "accuracy.csv").c_str(), (dir / "accuracy.png").c_str());
+    std::printf("%s\nwrote %s, %s and %s\n", bench::accuracy_table(rep.value()).c_str(),
+                (dir / "accuracy.csv").c_str(), (dir / "accuracy.png").c_str(),
+                (dir / "accuracy.svg").c_str());
     return 0;
 }
 

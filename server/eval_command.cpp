@@ -13,6 +13,7 @@
 #include <glm/trigonometric.hpp>
 
 #include "commands.hpp"
+#include "core/figure.hpp"
 #include "core/log.hpp"
 #include "core/plot.hpp"
 #include "eval_common.hpp"
@@ -395,7 +396,7 @@ std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& 
     return s;
 }
 
-ImageRgba8 fig12_plot(const std::vector<CompareRow>& rows) {
+Figure fig12_plot(const std::vector<CompareRow>& rows) {
     static const Rgb kColours[] = {{40, 90, 220}, {220, 40, 40}, {230, 180, 20}, {60, 160, 60}};
     std::vector<BarSeries> bars;
     std::vector<Series> hist;
@@ -417,7 +418,7 @@ ImageRgba8 fig12_plot(const std::vector<CompareRow>& rows) {
     PlotOptions po;
     po.title = "Lab difference to the reference (mean, sd)";
     po.y_label = "capture - reference";
-    ImageRgba8 left = bar_plot({"L*", "a*", "b*"}, bars, po);
+    Figure left = bar_plot({"L*", "a*", "b*"}, bars, po);
     PlotOptions ph;
     ph.title = "Delta E 2000 over the VD area";
     ph.x_label = "Delta E 2000";
@@ -514,8 +515,9 @@ Result<void> eval_compare(const Flags& f) {
     }
     std::printf("%s", compare_text(rows).c_str());
     HS_TRY(write_text(out / "compare.csv", compare_csv(rows, "")));
-    HS_TRY(write_png(out / "lab.png", fig12_plot(rows)));
-    std::printf("wrote %s/compare.csv, lab.png and map_<name>.png\n", out.string().c_str());
+    HS_TRY(write_figure(out / "lab.png", fig12_plot(rows)));
+    std::printf("wrote %s/compare.csv, lab.png, lab.svg and map_<name>.png\n",
+                out.string().c_str());
     return {};
 }
 

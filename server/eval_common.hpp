@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/figure.hpp"
 #include "core/result.hpp"
 #include "optics/metrics.hpp"
 #include "optics/resolution.hpp"
@@ -95,7 +96,7 @@ struct CompareRow {
 std::string compare_text(const std::vector<CompareRow>& rows);
 std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& viewpoint);
 // Fig. 12: mean +- sd of dL, da, db per method, and Delta E 2000 histograms.
-ImageRgba8 fig12_plot(const std::vector<CompareRow>& rows);
+Figure fig12_plot(const std::vector<CompareRow>& rows);
 
 // `hysar eval report` (server/report_command.cpp).
 Result<void> eval_report(const Flags& flags);

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/draw.hpp"
+#include "core/figure.hpp"
 #include "core/log.hpp"
 #include "core/plot.hpp"
 #include "eval_common.hpp"
@@ -24,11 +25,12 @@ namespace {
 const double kExposuresMs[] = {250.0, 125.0, 33.0};  // Sec. 4.4
 constexpr double kIgnoreBelow = 20.0;                // Sec. 4.4: residuals 0-20 left out
 
-ImageRgba8 labelled(const ImageRgba8& img, const std::string& label, uint32_t factor = 2) {
+// An image, downscaled, under a one-line label.
+Figure labelled(const ImageRgba8& img, const std::string& label, uint32_t factor = 2) {
     ImageRgba8 small = downscale(img, factor);
-    ImageRgba8 out = make_canvas(small.width, small.height + 16, 255);
-    blit(out, small, 0, 16);
-    draw_text(out, 2, 3, label, 1, 20, 20, 20);
+    Figure out = blank_figure(small.width, small.height + 16);
+    out.raster(0, 16, std::move(small));
+    out.text(2, 3, label, 1, {20, 20, 20}, Figure::Anchor::kStart, "label");
     return out;
 }
 
@@ -55,12 +57,16 @@ struct Report {
         html += "<h2>" + html_escape(title) + "</h2>\n<p>" + text + "</p>\n";
     }
     void pre(const std::string& text) { html += "<pre>" + html_escape(text) + "</pre>\n"; }
-    Result<void> figure(const std::string& file, const ImageRgba8& img, const std::string& caption,
+    // Writes FILE (.png) and its .svg, and shows the PNG with a link to the SVG.
+    Result<void> figure(const std::string& file, const Figure& fig, const std::string& caption,
                         const std::string& csv = "") {
-        HS_TRY(write_png(out / file, img));
-        html += fmt::format("<figure><img src=\"{}\"><figcaption>{}{}</figcaption></figure>\n",
-                            file, caption,
-                            csv.empty() ? "" : fmt::format(" Data: <a href=\"{0}\">{0}</a>.", csv));
+        HS_TRY(write_figure(out / file, fig));
+        const std::string svg = fs::path(file).replace_extension(".svg").string();
+        html += fmt::format(
+            "<figure><img src=\"{}\"><figcaption>{}{} <a "
+            "href=\"{}\">SVG</a>.</figcaption></figure>\n",
+            file, caption, csv.empty() ? "" : fmt::format(" Data: <a href=\"{0}\">{0}</a>.", csv),
+            svg);
         return {};
     }
 };
@@ -135,7 +141,7 @@ Result<void> eval_report(const Flags& flags) {
     // Fig. 7-style sheet of HySAR captures.
     log::info("[2/6] viewpoint sheet");
     {
-        std::vector<ImageRgba8> top, bottom;
+        std::vector<Figure> top, bottom;
         for (double a : s.viewing.angles_deg) {
             HS_ASSIGN_OR_RETURN(auto vp, render::viewing_viewpoint(s, *viewer, a, height));
             HS_ASSIGN_OR_RETURN(auto sv, sim.capture(render::DisplayMode::kHySAR, vp));
@@ -203,7 +209,7 @@ Result<void> eval_report(const Flags& flags) {
     // Fig. 9: dynamic range of the specular residuals.
     log::info("[4/6] Fig. 9: residual histograms at 250, 125, 33 ms");
     {
-        std::vector<ImageRgba8> rows;
+        std::vector<Figure> rows;
         std::string csv = "exposure_ms,mode,channel,bin_lo,bin_hi,count\n";
         const char* channel_names[] = {"red", "green", "blue"};
         const double full = std::ldexp(1.0, int(s.optics.bits)) - 1.0;
@@ -218,7 +224,7 @@ Result<void> eval_report(const Flags& flags) {
                 auto rh, optics::specular_residual(hy.capture.dn, dif.capture.dn, kIgnoreBelow));
             HS_ASSIGN_OR_RETURN(
                 auto rs, optics::specular_residual(sar.capture.dn, dif.capture.dn, kIgnoreBelow));
-            std::vector<ImageRgba8> cells{
+            std::vector<Figure> cells{
                 labelled(optics::to_rgba8(hy.capture.dn), fmt::format("HySAR {} ms", ms), 4),
                 labelled(optics::to_rgba8(rh.image), "HySAR residual", 4),
                 labelled(optics::to_rgba8(sar.capture.dn), fmt::format("SAR {} ms", ms), 4),
@@ -265,12 +271,12 @@ Result<void> eval_report(const Flags& flags) {
     // Figs. 11 and 12: VD areas and colour differences at two viewpoints.
     log::info("[5/6] Figs. 11 and 12: two viewpoints, HySAR, SAR (baked at the first), HMD-only");
     {
-        std::vector<ImageRgba8> fig11_rows;
+        std::vector<Figure> fig11_rows;
         std::string csv;
         std::vector<CompareRow> first_rows;
         for (const auto* vp : {&v1, &v2}) {
             std::vector<CompareRow> rows;
-            std::vector<ImageRgba8> captures, maps;
+            std::vector<Figure> captures, maps;
             HS_ASSIGN_OR_RETURN(auto hy, sim_sar.capture(render::DisplayMode::kHySAR, *vp));
             const ImageRgba8 ref = optics::to_rgba8(hy.target_dn);
             const ImageRgba8 ref_vi = optics::to_rgba8(hy.target_vi_dn);

@@ -537,12 +537,12 @@ std::string accuracy_table(const AccuracyReport& rep) {
     return out;
 }
 
-ImageRgba8 accuracy_plot(const AccuracyReport& rep) {
+Figure accuracy_plot(const AccuracyReport& rep) {
     std::vector<std::string> knobs;
     for (const auto& r : rep.rows)
         if (std::find(knobs.begin(), knobs.end(), r.knob) == knobs.end())
             knobs.push_back(r.knob);
-    std::vector<ImageRgba8> panels;
+    std::vector<Figure> panels;
     for (const auto& knob : knobs) {
         Series all{"setting", {}, {}, {70, 110, 200}, true};
         all.lines = false;
@@ -569,9 +569,9 @@ ImageRgba8 accuracy_plot(const AccuracyReport& rep) {
         po.width = 520, po.height = 340;
         panels.push_back(line_plot({front, all}, po));
     }
-    std::vector<ImageRgba8> rows_of_panels;
+    std::vector<Figure> rows_of_panels;
     for (size_t i = 0; i < panels.size(); i += 2)
-        rows_of_panels.push_back(hstack(std::vector<ImageRgba8>(
+        rows_of_panels.push_back(hstack(std::vector<Figure>(
             panels.begin() + i, panels.begin() + std::min(panels.size(), i + 2))));
     return vstack(rows_of_panels);
 }

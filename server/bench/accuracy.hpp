@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/figure.hpp"
 #include "core/image.hpp"
 #include "core/result.hpp"
 #include "gpu/device.hpp"
@@ -63,6 +64,6 @@ double hemisphere_geometric_error_mm(const scene::Hemisphere& hemisphere);
 
 std::string accuracy_csv(const AccuracyReport& report);
 std::string accuracy_table(const AccuracyReport& report);
-ImageRgba8 accuracy_plot(const AccuracyReport& report);
+Figure accuracy_plot(const AccuracyReport& report);
 
 }  // namespace hs::bench

@@ -25,6 +25,7 @@
 
 #include "clients/connection.hpp"
 #include "core/check.hpp"
+#include "core/figure.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
 #include "render/renderer.hpp"
@@ -817,9 +818,9 @@ int run_serve_bench(const ServeBenchOptions& o) {
         return fail("cannot write " + json_path.string());
     const std::string subtitle = fmt::format("{} {}x{}, {} {}", profile->name, k.width, k.height,
                                              format_name(o.format), encoding_name(o.encoding));
-    if (auto w = write_png(png_path, plot(rep, subtitle)); !w)
+    if (auto w = write_figure(png_path, plot(rep, subtitle)); !w)
         return fail(w.error().message);
-    std::printf("wrote %s and %s\n", json_path.c_str(), png_path.c_str());
+    std::printf("wrote %s, %s and bench-serve.svg\n", json_path.c_str(), png_path.c_str());
     for (const auto& r : rep.rows)
         if (r.stereo_layers == 0)
             return fail(fmt::format("{} with {} headset(s) received no stereo layer{}",

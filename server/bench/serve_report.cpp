@@ -175,7 +175,7 @@ std::string table(const Report& rep) {
     return out;
 }
 
-ImageRgba8 plot(const Report& rep, const std::string& subtitle) {
+Figure plot(const Report& rep, const std::string& subtitle) {
     int most = 1;
     for (const auto& r : rep.rows) most = std::max(most, r.headsets);
     // A fixed range 0..4k (x) and 0..4s (y, s a round step) that line_plot puts nice ticks in.

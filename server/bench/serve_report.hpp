@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/serve_bench.hpp"
+#include "core/figure.hpp"
 #include "core/image.hpp"
 
 namespace hs::bench {
@@ -45,7 +46,7 @@ ServedRow row_of(const nlohmann::json& j);
 // The printed table with its legend.
 std::string table(const Report& rep);
 // Stereo layers per second against headsets, the baselines as horizontal lines.
-ImageRgba8 plot(const Report& rep, const std::string& subtitle);
+Figure plot(const Report& rep, const std::string& subtitle);
 nlohmann::json report_json(const Report& rep);
 
 }  // namespace hs::bench

@@ -144,6 +144,21 @@ Result<void> write_png(const std::filesystem::path& path, const ImageRgba8& imag
     return {};
 }
 
+Result<std::vector<uint8_t>> encode_png(const ImageRgba8& image) {
+    if (image.width == 0 || image.height == 0)
+        return make_error(ErrorCode::kInvalidArgument, "refusing to encode an empty image");
+    std::vector<uint8_t> bytes;
+    auto append = [](void* context, void* data, int size) {
+        auto* out = static_cast<std::vector<uint8_t>*>(context);
+        const auto* p = static_cast<const uint8_t*>(data);
+        out->insert(out->end(), p, p + size);
+    };
+    if (!stbi_write_png_to_func(append, &bytes, int(image.width), int(image.height), 4,
+                                image.pixels.data(), int(image.width * 4)))
+        return make_error(ErrorCode::kIo, "could not encode PNG");
+    return bytes;
+}
+
 Result<ImageRgba8> read_png(const std::filesystem::path& path) {
     int w = 0, h = 0, n = 0;
     unsigned char* data = stbi_load(path.c_str(), &w, &h, &n, 4);

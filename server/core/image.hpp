@@ -60,6 +60,8 @@ uint8_t srgb8(float linear);
 
 Result<void> write_png(const std::filesystem::path& path, const ImageRgba8& image);
 Result<ImageRgba8> read_png(const std::filesystem::path& path);
+// The PNG file's bytes, in memory.
+Result<std::vector<uint8_t>> encode_png(const ImageRgba8& image);
 
 // OpenEXR with 32-bit float R, G, B channels: the lossless linear-radiance file.
 Result<void> write_exr(const std::filesystem::path& path, const ImageRgba32f& image);

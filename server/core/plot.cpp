@@ -8,35 +8,12 @@
 #include <fmt/format.h>
 
 #include "core/draw.hpp"
+#include "core/figure.hpp"
 
 namespace hs {
 
 namespace {
 constexpr int kLeft = 64, kRight = 16, kTop = 38, kBottom = 44;
-
-void put(ImageRgba8& img, int x, int y, Rgb c) {
-    if (x < 0 || y < 0 || x >= int(img.width) || y >= int(img.height))
-        return;
-    uint8_t* p = &img.pixels[(size_t(y) * img.width + x) * 4];
-    p[0] = c.r, p[1] = c.g, p[2] = c.b, p[3] = 255;
-}
-
-void line(ImageRgba8& img, int x0, int y0, int x1, int y1, Rgb c) {
-    const int dx = std::abs(x1 - x0), dy = -std::abs(y1 - y0);
-    const int sx = x0 < x1 ? 1 : -1, sy = y0 < y1 ? 1 : -1;
-    int err = dx + dy;
-    for (int guard = 0; guard < 100000; ++guard) {
-        put(img, x0, y0, c);
-        put(img, x0, y0 + 1, c);  // two pixels thick
-        if (x0 == x1 && y0 == y1)
-            break;
-        const int e2 = 2 * err;
-        if (e2 >= dy)
-            err += dy, x0 += sx;
-        if (e2 <= dx)
-            err += dx, y0 += sy;
-    }
-}
 
 // A tick as the exact decimal m x 10^e.
 struct Decimal {
@@ -182,7 +159,7 @@ AxisTicks log_ticks(double lo, double hi, bool fit) {
 namespace {
 
 struct Frame {
-    ImageRgba8 img;
+    Figure fig;
     int x0, y0, w, h;           // plot area
     double xlo, xhi, ylo, yhi;  // in axis units: log10 of the data on a log axis
     bool log_y, log_x;
@@ -209,7 +186,7 @@ Frame frame(const PlotOptions& o, const AxisTicks* x, const AxisTicks& y) {
     const int right = x && !x->ticks.empty()
                           ? std::max(kRight, text_width(x->ticks.back().label, 1) / 2 + 6)
                           : kRight;
-    Frame f{make_canvas(o.width, o.height, 255),
+    Frame f{blank_figure(o.width, o.height),
             left,
             kTop,
             std::max(int(o.width) - left - right, 16),
@@ -224,25 +201,27 @@ Frame frame(const PlotOptions& o, const AxisTicks* x, const AxisTicks& y) {
         f.xhi = f.xlo + 1;
     if (!(f.yhi > f.ylo))
         f.yhi = f.ylo + 1;
-    draw_text(f.img, 6, 6, o.title, 2, 20, 20, 20);
-    const Rgb axis{60, 60, 60}, grid{225, 225, 225};
+    Figure& g = f.fig;
+    g.panels.push_back({f.x0, f.y0, f.w, f.h, o.title, f.log_x, f.log_y, {}, {}});
+    g.current_panel = 0;
+    g.text(6, 6, o.title, 2, {20, 20, 20}, Figure::Anchor::kStart, "title");
+    const Rgb axis{60, 60, 60}, grid{225, 225, 225}, label{60, 60, 60};
     for (const auto& t : y.ticks) {
         const int py = f.py(t.value);
-        line(f.img, f.x0, py, f.x0 + f.w - 1, py, grid);
-        draw_text(f.img, f.x0 - 6 - text_width(t.label, 1), py - 4, t.label, 1, 60, 60, 60);
+        g.line(f.x0, py, f.x0 + f.w - 1, py, grid);
+        g.text(f.x0 - 6, py - 4, t.label, 1, label, Figure::Anchor::kEnd, "tick-y");
     }
     if (x)
         for (const auto& t : x->ticks) {
             const int px = f.px(t.value);
-            line(f.img, px, f.y0 + f.h - 1, px, f.y0 + f.h + 2, axis);
-            draw_text(f.img, px - text_width(t.label, 1) / 2, f.y0 + f.h + 6, t.label, 1, 60, 60,
-                      60);
+            g.line(px, f.y0 + f.h - 1, px, f.y0 + f.h + 2, axis);
+            g.text(px, f.y0 + f.h + 6, t.label, 1, label, Figure::Anchor::kMiddle, "tick-x");
         }
-    line(f.img, f.x0, f.y0, f.x0, f.y0 + f.h - 1, axis);
-    line(f.img, f.x0, f.y0 + f.h - 1, f.x0 + f.w - 1, f.y0 + f.h - 1, axis);
-    draw_text(f.img, f.x0 + f.w / 2 - text_width(o.x_label, 1) / 2, int(o.height) - 16, o.x_label,
-              1, 40, 40, 40);
-    draw_text(f.img, 2, f.y0 - 12, o.y_label, 1, 40, 40, 40);
+    g.line(f.x0, f.y0, f.x0, f.y0 + f.h - 1, axis);
+    g.line(f.x0, f.y0 + f.h - 1, f.x0 + f.w - 1, f.y0 + f.h - 1, axis);
+    g.text(f.x0 + f.w / 2, int(o.height) - 16, o.x_label, 1, {40, 40, 40}, Figure::Anchor::kMiddle,
+           "axis-label");
+    g.text(2, f.y0 - 12, o.y_label, 1, {40, 40, 40}, Figure::Anchor::kStart, "axis-label");
     return f;
 }
 
@@ -251,15 +230,15 @@ void legend(Frame& f, const std::vector<std::pair<std::string, Rgb>>& items) {
     for (const auto& [name, c] : items) {
         if (name.empty())
             continue;
-        const int x = f.x0 + f.w - 8 - int(name.size()) * 6 - 14;
-        fill_rect(f.img, x, y + 1, 10, 6, c.r, c.g, c.b);
-        draw_text(f.img, x + 14, y, name, 1, 30, 30, 30);
+        const int x = f.x0 + f.w - 8 - text_width(name, 1) - 14;
+        f.fig.box(x, y + 1, 10, 6, c);
+        f.fig.text(x + 14, y, name, 1, {30, 30, 30}, Figure::Anchor::kStart, "legend");
         y += 12;
     }
 }
 }  // namespace
 
-ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
+Figure line_plot(const std::vector<Series>& series, const PlotOptions& o) {
     double xlo = o.x_lo, xhi = o.x_hi, ylo = o.y_lo, yhi = o.y_hi;
     const bool auto_x = !(xhi > xlo), auto_y = !(yhi > ylo);
     if (auto_x)
@@ -278,46 +257,64 @@ ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& o) {
             if (auto_y)
                 ylo = std::min(ylo, s.y[i]), yhi = std::max(yhi, s.y[i]);
         }
+    const bool any = std::isfinite(xlo) && std::isfinite(ylo);
     if (!std::isfinite(xlo))
         xlo = o.log_x ? 1 : 0, xhi = o.log_x ? 10 : 1;
     if (!std::isfinite(ylo))
         ylo = o.log_y ? 1 : 0, yhi = o.log_y ? 10 : 1;
+    const double data_ylo = ylo;
     if (auto_y && !o.log_y)
         ylo = std::min(ylo, 0.0);
     const AxisTicks xt = o.log_x ? log_ticks(xlo, xhi, auto_x) : linear_ticks(xlo, xhi, auto_x);
     const AxisTicks yt = o.log_y ? log_ticks(ylo, yhi, auto_y) : linear_ticks(ylo, yhi, auto_y);
     Frame f = frame(o, &xt, yt);
+    if (any && auto_x)
+        f.fig.panels[0].x_data = {xlo, xhi};
+    if (any && auto_y)
+        f.fig.panels[0].y_data = {data_ylo, yhi};
     std::vector<std::pair<std::string, Rgb>> items;
     for (const auto& s : series) {
         items.push_back({s.name, s.colour});
-        bool have = false;
-        int lx = 0, ly = 0;
+        std::vector<std::pair<int, int>> run;
+        auto flush = [&] {
+            if (s.lines && run.size() > 1)
+                f.fig.path(run, s.colour);
+            run.clear();
+        };
+        std::vector<Figure::Item> labels;
+        std::vector<std::pair<int, int>> markers;
         for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
             if (!drawable(s.x[i], s.y[i])) {
-                have = false;
+                flush();
                 continue;
             }
             const int x = std::clamp(f.px(s.x[i]), f.x0, f.x0 + f.w - 1);
             const int y = std::clamp(f.py(s.y[i]), f.y0, f.y0 + f.h - 1);
-            if (have && s.lines)
-                line(f.img, lx, ly, x, y, s.colour);
+            run.push_back({x, y});
             if (s.markers)
-                fill_rect(f.img, x - 2, y - 2, 5, 5, s.colour.r, s.colour.g, s.colour.b);
+                markers.push_back({x, y});
             if (i < s.labels.size() && !s.labels[i].empty()) {
-                const int tw = int(s.labels[i].size()) * 6;  // the font's advance at scale 1
-                const int tx = x + 5 + tw <= f.x0 + f.w ? x + 5 : x - 5 - tw;
-                draw_text(f.img, tx, y - 10 < f.y0 ? y + 4 : y - 10, s.labels[i], 1, s.colour.r / 2,
-                          s.colour.g / 2, s.colour.b / 2);
+                const int tw = text_width(s.labels[i], 1);
+                const bool right = x + 5 + tw <= f.x0 + f.w;
+                Figure::Item t;
+                t.x = right ? x + 5 : x - 5, t.y = y - 10 < f.y0 ? y + 4 : y - 10;
+                t.text = s.labels[i];
+                t.colour = {uint8_t(s.colour.r / 2), uint8_t(s.colour.g / 2),
+                            uint8_t(s.colour.b / 2)};
+                t.anchor = right ? Figure::Anchor::kStart : Figure::Anchor::kEnd;
+                labels.push_back(std::move(t));
             }
-            lx = x, ly = y, have = true;
         }
+        flush();
+        for (const auto& [x, y] : markers) f.fig.box(x - 2, y - 2, 5, 5, s.colour);
+        for (const auto& t : labels) f.fig.text(t.x, t.y, t.text, 1, t.colour, t.anchor, "point");
     }
     legend(f, items);
-    return f.img;
+    return f.fig;
 }
 
-ImageRgba8 bar_plot(const std::vector<std::string>& groups, const std::vector<BarSeries>& series,
-                    const PlotOptions& o) {
+Figure bar_plot(const std::vector<std::string>& groups, const std::vector<BarSeries>& series,
+                const PlotOptions& o) {
     double lo = 0, hi = 0;
     for (const auto& s : series)
         for (size_t i = 0; i < s.values.size(); ++i) {
@@ -332,37 +329,40 @@ ImageRgba8 bar_plot(const std::vector<std::string>& groups, const std::vector<Ba
     po.log_y = po.log_x = false;
     const AxisTicks yt = linear_ticks(lo, hi, !fixed);
     Frame f = frame(po, nullptr, yt);
+    if (!fixed)
+        f.fig.panels[0].y_data = {lo, hi};
+    Figure& g = f.fig;
     const int zero = f.py(0.0);
-    line(f.img, f.x0, zero, f.x0 + f.w - 1, zero, {60, 60, 60});
+    g.line(f.x0, zero, f.x0 + f.w - 1, zero, {60, 60, 60});
     const double group_w = double(f.w) / double(std::max<size_t>(groups.size(), 1));
     const double bar_w = group_w * 0.8 / double(std::max<size_t>(series.size(), 1));
+    const Rgb whisker{20, 20, 20};
     std::vector<std::pair<std::string, Rgb>> items;
-    for (size_t g = 0; g < groups.size(); ++g) {
-        const int gx = f.x0 + int(g * group_w);
-        draw_text(f.img, gx + int(group_w / 2) - int(groups[g].size()) * 3, f.y0 + f.h + 4,
-                  groups[g], 1, 40, 40, 40);
+    for (size_t gi = 0; gi < groups.size(); ++gi) {
+        const int gx = f.x0 + int(gi * group_w);
+        g.text(gx + int(group_w / 2), f.y0 + f.h + 4, groups[gi], 1, {40, 40, 40},
+               Figure::Anchor::kMiddle, "group");
         for (size_t s = 0; s < series.size(); ++s) {
-            if (g >= series[s].values.size() || !std::isfinite(series[s].values[g]))
+            if (gi >= series[s].values.size() || !std::isfinite(series[s].values[gi]))
                 continue;
-            const Rgb c = series[s].colour;
             const int x = gx + int(group_w * 0.1 + s * bar_w);
-            const int y = f.py(series[s].values[g]);
-            fill_rect(f.img, x, std::min(y, zero), std::max(int(bar_w) - 2, 1),
-                      std::abs(y - zero) + 1, c.r, c.g, c.b);
-            if (g < series[s].errors.size()) {
-                const double e = std::fabs(series[s].errors[g]);
+            const int y = f.py(series[s].values[gi]);
+            g.box(x, std::min(y, zero), std::max(int(bar_w) - 2, 1), std::abs(y - zero) + 1,
+                  series[s].colour);
+            if (gi < series[s].errors.size()) {
+                const double e = std::fabs(series[s].errors[gi]);
                 const int cx = x + int(bar_w / 2) - 1;
-                const int ya = std::clamp(f.py(series[s].values[g] + e), f.y0, f.y0 + f.h - 1);
-                const int yb = std::clamp(f.py(series[s].values[g] - e), f.y0, f.y0 + f.h - 1);
-                line(f.img, cx, ya, cx, yb, {20, 20, 20});
-                line(f.img, cx - 3, ya, cx + 3, ya, {20, 20, 20});
-                line(f.img, cx - 3, yb, cx + 3, yb, {20, 20, 20});
+                const int ya = std::clamp(f.py(series[s].values[gi] + e), f.y0, f.y0 + f.h - 1);
+                const int yb = std::clamp(f.py(series[s].values[gi] - e), f.y0, f.y0 + f.h - 1);
+                g.line(cx, ya, cx, yb, whisker);
+                g.line(cx - 3, ya, cx + 3, ya, whisker);
+                g.line(cx - 3, yb, cx + 3, yb, whisker);
             }
         }
     }
     for (const auto& s : series) items.push_back({s.name, s.colour});
     legend(f, items);
-    return f.img;
+    return f.fig;
 }
 
 ImageRgba8 hstack(const std::vector<ImageRgba8>& images, uint32_t gap) {

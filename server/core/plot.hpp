@@ -1,18 +1,16 @@
-// Simple charts drawn into 8-bit images: line plots (histograms, error against time) and
-// grouped bar charts with error bars. Axes, ticks, labels and a legend; no dependencies.
+// Simple charts: line plots (histograms, error against time) and grouped bar charts with error
+// bars. Axes, ticks, labels and a legend; each plot is a Figure (core/figure.hpp), which
+// write_figure writes as a PNG and an SVG; no dependencies.
 #pragma once
 
 #include <cstdint>
 #include <string>
 #include <vector>
 
+#include "core/figure.hpp"
 #include "core/image.hpp"
 
 namespace hs {
-
-struct Rgb {
-    uint8_t r = 0, g = 0, b = 0;
-};
 
 struct Series {
     std::string name;
@@ -53,17 +51,18 @@ AxisTicks log_ticks(double lo, double hi, bool fit = true);
 // The exact label of m x 10^e: "0.025" / "2500", or with `scientific` "2.5e-2" / "2.5e3".
 std::string tick_label(int64_t m, int e, bool scientific);
 
-ImageRgba8 line_plot(const std::vector<Series>& series, const PlotOptions& options);
+Figure line_plot(const std::vector<Series>& series, const PlotOptions& options);
 
 struct BarSeries {
     std::string name;
     std::vector<double> values, errors;  // one per group; errors drawn as +- whiskers
     Rgb colour;
 };
-ImageRgba8 bar_plot(const std::vector<std::string>& groups, const std::vector<BarSeries>& series,
-                    const PlotOptions& options);
+Figure bar_plot(const std::vector<std::string>& groups, const std::vector<BarSeries>& series,
+                const PlotOptions& options);
 
-// Side by side, top-aligned, on a white canvas with `gap` pixels between.
+// Images side by side, top-aligned, on a white canvas with `gap` pixels between (figures:
+// core/figure.hpp).
 ImageRgba8 hstack(const std::vector<ImageRgba8>& images, uint32_t gap = 8);
 ImageRgba8 vstack(const std::vector<ImageRgba8>& images, uint32_t gap = 8);
 

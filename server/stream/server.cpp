@@ -7,6 +7,7 @@
 
 #include "codec/layer_codec.hpp"
 #include "core/log.hpp"
+#include "gpu/driver_info.hpp"
 #include "protocol/schema.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
@@ -68,6 +69,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
         return make_error(ErrorCode::kInvalidArgument,
                           "the admin token must differ from the viewers' token");
     auto impl = std::make_unique<Impl>(device, info);
+    impl->driver_info = gpu::driver_info(device);
     impl->scheduler.set_options(
         {std::max<uint32_t>(info.limits.max_batch_viewers, 1), double(info.limits.max_viewer_hz)});
     impl->encoder_threads = std::clamp<uint32_t>(info.encoder_threads, 1, 64);
@@ -364,6 +366,11 @@ void Server::Impl::remove_session(uint32_t id) {
 
 void Server::Impl::publish_projector_frame(Bytes frame) {
     projector_frame = frame;
+    {
+        std::lock_guard lock(mutex);
+        current_projector_frame = frame;
+        ++projector_frames_published;
+    }
     for (auto& [id, s] : sessions)
         if (s->is_projector())
             s->send(frame, nullptr, 0, true);
@@ -386,6 +393,15 @@ void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
     auto pending = std::make_shared<Pending>();
     const uint64_t group = next_layer_group++;
     const auto handed = Clock::now();
+    if (info.keep_latest_layers) {
+        // Two pointers, swapped under the lock: the previous frame's buffers go back to the pool
+        // once their writes are done.
+        std::lock_guard lock(mutex);
+        if (auto si = session_info.find(id); si != session_info.end()) {
+            si->second.latest_layers = layers;
+            si->second.latest_group = group;
+        }
+    }
     for (auto& layer : layers) {
         session->send(
             std::move(layer),
@@ -428,6 +444,10 @@ nlohmann::json FrameStats::json() const {
               {"pass", stage(pass)},
               {"encode", stage(encode)},
               {"send", stage(send)}}}};
+}
+
+ServerSnapshot Server::snapshot() const {
+    return impl_->snapshot();
 }
 
 nlohmann::json Server::stats() const {

@@ -19,6 +19,7 @@
 #include "render/renderer.hpp"
 #include "scene/config.hpp"
 #include "scene/scene.hpp"
+#include "stream/snapshot.hpp"
 
 namespace hs::stream {
 
@@ -69,6 +70,11 @@ struct ServerCreateInfo {
     // and every rendered VD layer are sent as device drives; a scene whose projector or a
     // headset whose display is not the calibrated size is refused. Null: sent as rendered.
     std::shared_ptr<const calib::ServingCalibration> calibration;
+    // Keeps each headset's latest delivered frame (its two encoded layers) for snapshot(), so a
+    // watcher can show what it sees (`hysar serve --admin-listen`): one frame per headset, held
+    // by reference (the buffer that went to the socket), released when it leaves. Off: nothing
+    // is kept and delivering a frame costs nothing more.
+    bool keep_latest_layers = false;
 };
 
 class Server {
@@ -93,6 +99,9 @@ public:
     // Per-viewer frames, latency and bytes (departed viewers too), projector renders, passes,
     // effects, timings, what the server holds in memory, refusals. Never throws. Thread: any.
     nlohmann::json stats() const;
+    // The figures a watcher shows, typed, with the latest layers and projector frame by
+    // reference; taken under the server's lock, never waits on a frame. Thread: any.
+    ServerSnapshot snapshot() const;
 
     struct Impl;
 

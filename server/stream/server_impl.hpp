@@ -19,6 +19,7 @@
 #include "stream/encoder.hpp"
 #include "stream/scheduler.hpp"
 #include "stream/server.hpp"
+#include "stream/token.hpp"
 
 namespace hs::stream {
 
@@ -38,8 +39,6 @@ inline constexpr int kErrorCodes = 16;  // ErrorCode values counted in the stats
 
 uint64_t now_ns();
 double ms_since(Clock::time_point t);
-// Compares every byte whatever the first difference, so timing says nothing of the token.
-bool same_token(const std::string& a, const std::string& b);
 double percentile(std::vector<double> v, double p);
 const char* role_name(protocol::Role r);
 // The wire bytes of a message the server sends; nullopt (logged) when the encoder refuses it.
@@ -123,6 +122,7 @@ struct Server::Impl {
     std::thread render_thread;
     std::atomic<bool> stopping{false};
     uint16_t bound_port = 0;  // set once before run(); read from any thread
+    std::string driver_info;  // the device's driver, name and version; set once in create()
 
     // Network thread only.
     std::map<uint32_t, std::shared_ptr<Session>> sessions;
@@ -159,9 +159,15 @@ struct Server::Impl {
         std::string name;  // valid UTF-8 (checked at decode)
         proto::Role role = proto::Role::kHmd;
         std::shared_ptr<const SessionCounters> counters;
+        Clock::time_point joined = Clock::now();
+        // keep_latest_layers: its latest delivered frame (left, right) and that frame's group.
+        std::array<Bytes, 2> latest_layers;
+        uint64_t latest_group = 0;
     };
     std::map<uint32_t, SessionInfo> session_info;
-    std::deque<nlohmann::json> departed;  // the last kDepartedViewers viewers' final figures
+    Bytes current_projector_frame;  // for snapshot(); the network thread's projector_frame
+    uint64_t projector_frames_published = 0;  // numbers current_projector_frame
+    std::deque<nlohmann::json> departed;      // the last kDepartedViewers viewers' final figures
     uint64_t sessions_total = 0;
 
     Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i), limits(info.limits) {}
@@ -190,6 +196,7 @@ struct Server::Impl {
     void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
     void remove_session(uint32_t id);
     nlohmann::json stats() const;
+    ServerSnapshot snapshot() const;  // snapshot.cpp
 };
 
 }  // namespace hs::stream

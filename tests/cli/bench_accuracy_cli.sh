@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# `hysar bench accuracy --quick`: writes a CSV with a row per setting and a PNG, prints the
-# table; a missing scene and a bad option are refused with a message naming them.
+# `hysar bench accuracy --quick`: writes a CSV with a row per setting, a PNG and an SVG whose
+# tick labels cover the CSV's data (check_figure_svg.py), prints the table; a missing scene and a bad option are refused with a message naming them.
 # `hysar bench stability`: writes its CSV and markdown table, exits 0 with every case within
 # tolerance (the table itself is asserted by the GPU test Stability.*), refuses a folder it
 # cannot create.
@@ -20,6 +20,7 @@ done
 awk -F, 'NR > 1 && !($6 ~ /^[0-9.e+-]+$/ && $8 ~ /^[0-9.]+$/ && $9 ~ /^[0-9.]+$/) { print "bad row: " $0; bad = 1 } END { exit bad }' "$csv"
 grep -q 'pareto' "$out/table.txt"
 [[ $(head -c 8 "$out/acc/accuracy.png" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]
+python3 "$(dirname "$0")/check_figure_svg.py" "$out/acc/accuracy.svg" --accuracy-csv "$csv" --plots 8
 grep -q 'reference: exact hemisphere' "$out/progress.txt"
 if "$hysar" bench accuracy --quick --scene /nonexistent.json --out "$out/x" 2> "$out/err.txt"; then
     echo "a missing scene was accepted"; exit 1

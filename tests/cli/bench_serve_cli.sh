@@ -44,6 +44,7 @@ assert m["vulkan_device"] and m["cores"] >= 1 and m["date"], m
 print("bench serve: %d rows, JSON as documented" % len(rows))
 PY
 [[ $(head -c 8 "$out/bs/bench-serve.png" | od -An -tx1 | tr -d ' \n') == 89504e470d0a1a0a ]]
+python3 "$(dirname "$0")/check_figure_svg.py" "$out/bs/bench-serve.svg" --plots 1
 grep -q '^served ' "$out/table.txt"
 grep -q '^lean script ' "$out/table.txt"
 [[ $(grep -c 'headset(s):' "$out/progress.txt") -eq 4 ]]
