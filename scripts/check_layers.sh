@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
-# outside server/calib/, no libusb outside clients/usb_enumerate.cpp.
+# outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
+# server/admin/ (and its tests), and hs_admin's links as docs/ARCHITECTURE.md draws them: it
+# reads the server through its snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol),
+# never the GPU or the renderer; only the hysar executable links it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -15,5 +18,17 @@ cv=$(grep -rn '#include <opencv2' server clients --include='*.cpp' --include='*.
 if [[ -n "$cv" ]]; then echo "layers: OpenCV outside server/calib/:"; echo "$cv"; fail=1; fi
 usb=$(grep -rnE '#include <libusb|\blibusb_[a-z_]+\(' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^clients/usb_enumerate\.cpp:' || true)
 if [[ -n "$usb" ]]; then echo "layers: libusb outside clients/usb_enumerate.cpp:"; echo "$usb"; fail=1; fi
+http=$(grep -rn '#include <httplib' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server|tests)/admin/' || true)
+if [[ -n "$http" ]]; then echo "layers: cpp-httplib outside server/admin/:"; echo "$http"; fail=1; fi
+adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
+if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
+adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)
+for lib in $(echo "$adm_links" | grep -oE '\bhs_[a-z_]+' | grep -v '^hs_admin$'); do
+  case "$lib" in hs_stream|hs_codec|hs_protocol|hs_core) ;;
+    *) echo "layers: hs_admin links $lib (allowed: hs_stream, hs_codec, hs_protocol, hs_core)"; fail=1 ;;
+  esac
+done
+users=$(grep -rln 'hs_admin\b' --include=CMakeLists.txt . 2>/dev/null | grep -vE '^\./(build[^/]*|server/admin|tests)/|^\./CMakeLists\.txt$' || true)
+if [[ -n "$users" ]]; then echo "layers: hs_admin linked outside the hysar executable and its tests:"; echo "$users"; fail=1; fi
 if [[ $fail -ne 0 ]]; then exit 1; fi
 echo "layers: module boundaries hold"
