@@ -7,11 +7,14 @@
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <thread>
+#include <tuple>
 
 #include <fmt/format.h>
 
+#include "admin/admin_server.hpp"
 #include "calib/serving.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
@@ -27,7 +30,7 @@ const char* kServeHelp =
     "usage: hysar serve [--scene FILE] [--listen HOST:PORT] [--unix PATH] [--token-file FILE]\n"
     "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
     "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
-    "                   [limits...]\n"
+    "                   [--admin-listen [HOST:]PORT] [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
     "                           reloads it (a broken file is reported, the running scene stays)\n"
@@ -40,6 +43,11 @@ const char* kServeHelp =
     "  --asset-root DIR         files a scene may reference lie inside DIR (default: the scene\n"
     "                           file's folder, or the working directory)\n"
     "  --stats-file FILE        write the final stats JSON here on shutdown\n"
+    "  --admin-listen [HOST:]PORT  an HTTP endpoint for watching the server: Prometheus text at\n"
+    "                           /metrics, a live dashboard at / (docs/OPERATIONS.md); a bare\n"
+    "                           port means 127.0.0.1, 0 any free port; every request carries\n"
+    "                           the viewers' token ('Authorization: Bearer TOKEN'); off unless\n"
+    "                           given\n"
     "  --calibration DIR        calibrated output (docs/CALIBRATION.md): DIR holds projector/,\n"
     "                           hmd/ (hysar calibrate) and optics.json; the projector frame and\n"
     "                           every VD layer are sent as device drives (an RGBA8 code is the\n"
@@ -180,6 +188,7 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--asset-root",
                                      "--device",
                                      "--stats-file",
+                                     "--admin-listen",
                                      "--max-sessions",
                                      "--max-pending",
                                      "--handshake-timeout-ms",
@@ -217,6 +226,16 @@ int run_serve(const std::vector<std::string>& args) {
             return usage_error(r.error().message);
     if (auto r = parse_limits(f, info.limits); !r)
         return usage_error(r.error().message);
+    std::optional<admin::AdminOptions> admin_options;
+    if (f.has("--admin-listen")) {
+        auto a = admin::parse_admin_listen(f.get("--admin-listen", ""));
+        if (!a)
+            return usage_error(a.error().message);
+        admin_options = admin::AdminOptions{};
+        std::tie(admin_options->host, admin_options->port) = a.value();
+        // The dashboard shows each headset's latest layers: keep one frame per headset.
+        info.keep_latest_layers = true;
+    }
     if (f.has("--tile-codec")) {
         const std::string c = f.get("--tile-codec", "");
         if (c == "lz4")
@@ -309,6 +328,22 @@ int run_serve(const std::vector<std::string>& args) {
         "serving '%s' on %s:%u%s (device: %s)%s\n", s.value().name.c_str(), info.host.c_str(),
         server.value()->port(), info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
         device.value()->name().c_str(), info.admin_token.empty() ? "; admin role disabled" : "");
+    std::unique_ptr<admin::AdminServer> admin_endpoint;
+    if (admin_options) {
+        admin_options->token = info.token;
+        stream::Server* watched = server.value().get();
+        auto a =
+            admin::AdminServer::start(*admin_options, [watched] { return watched->snapshot(); });
+        if (!a) {
+            std::fprintf(stderr, "hysar serve: %s\n", a.error().message.c_str());
+            return 1;
+        }
+        admin_endpoint = std::move(a).value();
+        std::printf(
+            "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
+            "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
+            admin_options->host.c_str(), admin_endpoint->port());
+    }
     std::fflush(stdout);
     struct sigaction stop_action {
     }, reload_action{};
@@ -342,6 +377,7 @@ int run_serve(const std::vector<std::string>& args) {
     srv.run();
     g_stop.store(true);
     watcher.join();
+    admin_endpoint.reset();  // it reads the server: stopped before the server goes
     auto stats = srv.stats();
     if (f.has("--stats-file")) {
         std::ofstream out(f.get("--stats-file", ""));

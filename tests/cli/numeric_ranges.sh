@@ -46,6 +46,10 @@ refused --listen 127.0.0.1:80abc "[0, 65535]" "$hysar" "${S[@]}" --listen 127.0.
 refused --listen 127.0.0.1:70000 "[0, 65535]" "$hysar" "${S[@]}" --listen 127.0.0.1:70000
 refused --listen 127.0.0.1:-1 "[0, 65535]" "$hysar" "${S[@]}" --listen 127.0.0.1:-1
 refused --listen 127.0.0.1 "[0, 65535]" "$hysar" "${S[@]}" --listen 127.0.0.1
+refused --admin-listen 70000 "[0, 65535]" "$hysar" "${S[@]}" --admin-listen 70000
+refused --admin-listen 127.0.0.1:9100x "[0, 65535]" "$hysar" "${S[@]}" --admin-listen 127.0.0.1:9100x
+refused --admin-listen 127.0.0.1:-1 "[0, 65535]" "$hysar" "${S[@]}" --admin-listen 127.0.0.1:-1
+refused --admin-listen nan "[0, 65535]" "$hysar" "${S[@]}" --admin-listen nan
 refused --max-sessions 0 "[1, 65536]" "$hysar" "${S[@]}" --max-sessions 0
 refused --max-sessions 1e3 "[1, 65536]" "$hysar" "${S[@]}" --max-sessions 1e3
 refused --max-pending nan "[1, 65536]" "$hysar" "${S[@]}" --max-pending nan
