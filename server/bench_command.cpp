@@ -44,7 +44,7 @@ const char* kBenchHelp =
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
     "             pixel, point against area lights, HDR format, layer encoding) against the\n"
     "             double-precision reference: RMSE, mean CIEDE2000, render and encode ms, bytes;\n"
-    "             writes DIR/accuracy.csv, DIR/accuracy.png and .svg (default DIR: accuracy-out)\n"
+    "             writes DIR/accuracy.csv, DIR/accuracy.png and .svg (default DIR: out/accuracy)\n"
     "             and prints the table. --quick: a quarter of the resolution, fewer settings\n"
     "  encoding   VD layers of the default scene (HoloLens resolution, every Fig. 7 model and\n"
     "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
@@ -418,7 +418,7 @@ int run_bench(const std::vector<std::string>& args) {
     }
     int repeats = args[0] == "accuracy" ? 7 : 5;
     bool quick = false;
-    std::string json, scene_path, out_dir = "accuracy-out";
+    std::string json, scene_path, out_dir = "out/accuracy";
     for (size_t i = 1; i < args.size(); ++i) {
         if (args[i] == "--repeats" && i + 1 < args.size()) {
             auto n = parse_integer("--repeats", args[++i], 1, 1000);
