@@ -225,8 +225,8 @@ void Server::Impl::start_session(Socket socket) {
             return a->created() < b->created();
         });
         ++pending_evicted;
-        log::info("session {}: closed to make room ({} connections waiting for Hello)",
-                  oldest->id(), pending.size());
+        log::for_session(oldest->id())
+            .info("closed to make room ({} connections waiting for Hello)", pending.size());
         oldest->close();
     }
     auto session = std::make_shared<Session>(*this, std::move(socket), id);
@@ -357,7 +357,7 @@ void Server::Impl::remove_session(uint32_t id) {
     if (counters)
         scheduler.wake();  // the render thread frees its targets
     if (was_authed)
-        log::info("session {} left", id);
+        log::for_session(id).info("left");
     if (stopping && sessions.empty()) {
         shutdown_timer.cancel();
         io.stop();

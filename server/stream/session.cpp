@@ -36,8 +36,8 @@ void Session::send(Bytes bytes, std::function<void(bool)> on_done, uint64_t laye
     }
     const bool bounded = layer_group == 0 && !replaces_projector;
     if (bounded && other_bytes_ + bytes->size() > srv_.limits.max_queued_bytes) {
-        log::warn("session {} ({}): {} bytes queued and not reading; closing it", id_, name_,
-                  other_bytes_);
+        log::for_session(id_, name_)
+            .warn("{} bytes queued and not reading; closing it", other_bytes_);
         if (on_done)
             on_done(false);
         close();
@@ -57,7 +57,7 @@ void Session::send(std::vector<uint8_t> bytes) {
 
 void Session::error(proto::ErrorCode code, const std::string& message, bool then_close,
                     uint32_t sequence) {
-    log::info("session {} ({}): error {}: {}", id_, name_, int(code), message);
+    log::for_session(id_, name_).info("error {}: {}", int(code), message);
     srv_.refused(code);
     // make_error fits any text to the Error's limit (valid UTF-8, at most 1000 bytes).
     auto bytes = wire(proto::make_error(code, message), sequence);
@@ -130,7 +130,7 @@ void Session::guarded(F&& f) {
     try {
         f();
     } catch (const std::exception& e) {
-        log::error("session {} ({}): internal error: {}", id_, name_, e.what());
+        log::for_session(id_, name_).error("internal error: {}", e.what());
         srv_.refused(proto::ErrorCode::kInternal);
         close();
     }
@@ -238,7 +238,7 @@ void Session::hello(const proto::Hello& hello, uint32_t seq) {
         srv_.session_info[id_] = {name_, role_, counters_};
         ++srv_.sessions_total;
     }
-    log::info("session {}: {} '{}' joined", id_, role_name(role_), name_);
+    log::for_session(id_).info("{} '{}' joined", role_name(role_), name_);
     if (auto b = wire(proto::Welcome{id_, now_ns(), version}, seq))
         send(std::move(*b));
     if (role_ == proto::Role::kProjector && srv_.projector_frame)
