@@ -125,14 +125,19 @@ inline std::string strip_trailing_space(std::string s) {
 class Args {
 public:
     // `with_value`: options that take a value; `flags`: options that do not. --help (or -h)
-    // prints `usage` to stdout and exits 0; anything else unknown is a usage error.
+    // prints `usage` to stdout and exits 0; so does --version with `version` (clients/version.hpp)
+    // when it is given; anything else unknown is a usage error.
     Args(int argc, char** argv, std::set<std::string> with_value, std::set<std::string> flags,
-         const char* usage)
+         const char* usage, const char* version = nullptr)
         : usage_(usage) {
         for (int i = 1; i < argc; ++i) {
             std::string a = argv[i];
             if (a == "--help" || a == "-h") {
                 std::fputs(usage, stdout);
+                std::exit(0);
+            }
+            if (version != nullptr && a == "--version") {
+                std::fputs(version, stdout);
                 std::exit(0);
             }
             if (flags.count(a)) {

@@ -18,6 +18,7 @@
 #include "clients/connection.hpp"
 #include "clients/pose_input.hpp"
 #include "clients/usb_cli.hpp"
+#include "clients/version.hpp"
 #include "clients/window.hpp"
 
 using namespace hs;
@@ -68,7 +69,8 @@ static const std::string kUsage =
         "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
         "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
         "                   (0..86400; 0: until SIGINT or SIGTERM); exit 1 when the bus cannot\n"
-        "                   be watched (no bus, or libusb without hot-plug support)\n") +
+        "                   be watched (no bus, or libusb without hot-plug support)\n"
+        "  --version        print the version, git commit and build type, and exit\n") +
     kReconnectUsage +
     "\n"
     "Exit status: 0 ok; 1 the run failed (an Error from the server, reconnecting gave up, no\n"
@@ -388,7 +390,8 @@ int hmd_main(int argc, char** argv) {
                            "--clear-after-ms",
                            "--retries",
                            "--backoff-ms"},
-              {"--window", "--list-devices"}, kUsage.c_str());
+              {"--window", "--list-devices"}, kUsage.c_str(),
+              HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile =
         args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json");

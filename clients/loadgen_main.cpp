@@ -21,6 +21,7 @@
 #include "clients/client_handle.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
+#include "clients/version.hpp"
 
 using namespace hs::client;
 namespace proto = hs::protocol;
@@ -40,7 +41,8 @@ static const std::string kUsage =
         "  --scale S     resolution multiplier of the profile (default 0.25)\n"
         "  --json FILE   also write the results as JSON\n"
         "  --out DIR     write each headset's last layer pair as loadgen-I_left.png, "
-        "_right.png\n") +
+        "_right.png\n"
+        "  --version     print the version, git commit and build type, and exit\n") +
     kReconnectUsage +
     "\n"
     "Exit status: 0 ok; 1 any headset saw an error or received no layer; 2 bad arguments or no\n"
@@ -108,7 +110,7 @@ int loadgen_main(int argc, char** argv) {
               {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds",
                "--frames", "--profile", "--scale", "--format", "--encoding", "--json", "--out",
                "--retries", "--backoff-ms"},
-              {}, kUsage.c_str());
+              {}, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-loadgen"));
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))

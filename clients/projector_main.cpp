@@ -9,6 +9,7 @@
 #include "clients/client_handle.hpp"
 #include "clients/common.hpp"
 #include "clients/connection.hpp"
+#include "clients/version.hpp"
 #include "clients/window.hpp"
 
 using namespace hs::client;
@@ -31,7 +32,8 @@ static const std::string kUsage =
         "  --window        show each frame in a window (GLFW); with --monitor N, full-screen on\n"
         "                  monitor N; while the server is away the window keeps the last frame\n"
         "  --screenshot F  with --window: save what the window shows after the last frame as "
-        "PNG\n") +
+        "PNG\n"
+        "  --version       print the version, git commit and build type, and exit\n") +
     kReconnectUsage +
     "\n"
     "Exit status: 0 ok; 1 the run failed (no frame in time, reconnecting gave up, a bad frame,\n"
@@ -45,7 +47,7 @@ int projector_main(int argc, char** argv) {
     Args args(argc, argv,
               {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name",
                "--monitor", "--screenshot", "--retries", "--backoff-ms"},
-              {"--window"}, kUsage.c_str());
+              {"--window"}, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-projector"));
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))

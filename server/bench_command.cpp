@@ -400,6 +400,11 @@ int run_bench(const std::vector<std::string>& args) {
         }
         return bench::run_serve_bench(o);
     }
+    for (const auto& a : args)
+        if (a == "--help" || a == "-h") {  // `hysar bench STEP --help`: the help covers each step
+            std::fputs(kBenchHelp, stdout);
+            return 0;
+        }
     if (args[0] == "stability") {
         std::string out_dir = "out/stability";
         bool float64 = true;

@@ -373,6 +373,11 @@ int run_calibrate(const std::vector<std::string>& args) {
     }
     const std::string step = args[0];
     const std::vector<std::string> rest(args.begin() + 1, args.end());
+    for (const auto& a : rest)
+        if (a == "--help" || a == "-h") {  // `hysar calibrate STEP --help`: the help covers each
+            std::fputs(kHelp, stdout);
+            return 0;
+        }
     if (step == "patterns")
         return run_subcommand(rest, {"--size", "--out", "--ramp", "--grid"},
                               {kSizeFlag, kRampFlag, kGridFlag}, cmd_patterns);

@@ -529,6 +529,11 @@ int run_eval(const std::vector<std::string>& args) {
         return args.empty() ? 2 : 0;
     }
     const std::vector<std::string> rest(args.begin() + 1, args.end());
+    for (const auto& a : rest)
+        if (a == "--help" || a == "-h") {  // `hysar eval STEP --help`: the help covers each step
+            std::fputs(kEvalHelp, stdout);
+            return 0;
+        }
     if (args[0] == "optics")
         return run_subcommand(rest, {"--params", "--out"}, eval_optics);
     if (args[0] == "resolution")

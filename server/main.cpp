@@ -1,10 +1,18 @@
-// `hysar`: the HySAR render server's command line.
+// `hysar`: the HySAR render server's command line. The global options (--log-level,
+// --log-format, --version) are taken out of the arguments here, wherever they stand, before a
+// subcommand's own parser sees the rest.
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
+#include "core/log.hpp"
+#include "gpu/device.hpp"
+#include "gpu/driver_info.hpp"
+#include "hysar_version.hpp"
 
 namespace {
 void usage(FILE* f) {
@@ -27,18 +35,131 @@ void usage(FILE* f) {
         "  admin    a running server: scene push FILE, stats [--watch S], viewers\n"
         "           (hysar admin --help)\n"
         "\n"
+        "options of every command (before or after it):\n"
+        "  --log-level debug|info|warn|error|off   the lowest level logged (default info)\n"
+        "  --log-format text|json   text lines, or one JSON object per line for log shippers\n"
+        "  --version                the version, git commit, build type and Vulkan device\n"
+        "\n"
         "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
-        "turns on the Vulkan validation layer.\n");
+        "turns on the Vulkan validation layer, HYSAR_LOG_LEVEL and HYSAR_LOG_FORMAT are the\n"
+        "defaults of --log-level and --log-format (docs/OPERATIONS.md, \"Logs\").\n");
+}
+
+// What --version prints: the build, then the device the server would use (the same choice:
+// HYSAR_DEVICE), or why there is none.
+int print_version() {
+    std::printf("hysar %s\ncommit: %s\nbuild type: %s\n", HYSAR_VERSION, HYSAR_GIT_COMMIT,
+                HYSAR_BUILD_TYPE);
+    std::fflush(stdout);
+    hs::gpu::DeviceCreateInfo info = hs::gpu::device_info_from_environment();
+    info.validation = false;  // the device is only named
+    const char* env = std::getenv("HYSAR_DEVICE");
+    const std::string choice = env && *env ? env : "auto";
+    auto device = hs::gpu::Device::create(info);
+    if (!device.ok()) {
+        std::printf("vulkan device: none (HYSAR_DEVICE=%s): %s\n", choice.c_str(),
+                    device.error().message.c_str());
+        return 0;
+    }
+    std::printf("vulkan device: %s (%s; HYSAR_DEVICE=%s)\nvulkan driver: %s\n",
+                device.value()->name().c_str(), device.value()->is_cpu() ? "cpu" : "gpu",
+                choice.c_str(), hs::gpu::driver_info(*device.value()).c_str());
+    return 0;
+}
+
+// The global options taken out of `args`. A bad value or variable is a sentence naming it.
+struct GlobalOptions {
+    hs::log::Level level = hs::log::Level::kInfo;
+    hs::log::Format format = hs::log::Format::kText;
+    bool version = false;
+};
+
+std::optional<std::string> level_from(const std::string& where, const std::string& v,
+                                      GlobalOptions& o) {
+    auto l = hs::log::parse_level(v);
+    if (!l)
+        return where + ": '" + v + "' is not a log level (expected one of " +
+               hs::log::level_names() + ")";
+    o.level = *l;
+    return std::nullopt;
+}
+
+std::optional<std::string> format_from(const std::string& where, const std::string& v,
+                                       GlobalOptions& o) {
+    auto f = hs::log::parse_format(v);
+    if (!f)
+        return where + ": '" + v + "' is not a log format (expected one of " +
+               hs::log::format_names() + ")";
+    o.format = *f;
+    return std::nullopt;
+}
+
+std::optional<std::string> take_global_options(std::vector<std::string>& args, GlobalOptions& o) {
+    if (const char* e = std::getenv("HYSAR_LOG_LEVEL"); e && *e)
+        if (auto err = level_from("HYSAR_LOG_LEVEL", e, o))
+            return err;
+    if (const char* e = std::getenv("HYSAR_LOG_FORMAT"); e && *e)
+        if (auto err = format_from("HYSAR_LOG_FORMAT", e, o))
+            return err;
+    std::vector<std::string> rest;
+    for (size_t i = 0; i < args.size(); ++i) {
+        const std::string& a = args[i];
+        if (a == "--version") {
+            o.version = true;
+            continue;
+        }
+        bool taken = false;
+        for (const char* flag : {"--log-level", "--log-format"}) {
+            const std::string f = flag;
+            std::string value;
+            if (a == f) {
+                if (i + 1 >= args.size())
+                    return f + " needs a value (" +
+                           (f == "--log-level" ? hs::log::level_names() : hs::log::format_names()) +
+                           ")";
+                value = args[++i];
+            } else if (a.rfind(f + "=", 0) == 0) {
+                value = a.substr(f.size() + 1);
+            } else {
+                continue;
+            }
+            auto err = f == "--log-level" ? level_from(f, value, o) : format_from(f, value, o);
+            if (err)
+                return err;
+            taken = true;
+            break;
+        }
+        if (!taken)
+            rest.push_back(a);
+    }
+    args = std::move(rest);
+    return std::nullopt;
 }
 }  // namespace
 
 int main(int argc, char** argv) {
-    if (argc < 2) {
+    std::vector<std::string> all(argv + 1, argv + argc);
+    GlobalOptions global;
+    if (auto err = take_global_options(all, global)) {
+        std::fprintf(stderr, "hysar: %s\n", err->c_str());
+        return 2;
+    }
+    hs::log::set_level(global.level);
+    hs::log::set_format(global.format);
+    if (auto err = hs::gpu::check_device_environment()) {
+        std::fprintf(stderr, "hysar: %s\n", err->c_str());
+        return 2;
+    }
+    if (global.version)
+        return print_version();
+    if (all.empty()) {
         usage(stderr);
         return 2;
     }
-    std::string cmd = argv[1];
-    std::vector<std::string> args(argv + 2, argv + argc);
+    std::string cmd = all[0];
+    std::vector<std::string> args(all.begin() + 1, all.end());
+    hs::log::debug("hysar {} (commit {}, {}): {}", HYSAR_VERSION, HYSAR_GIT_COMMIT,
+                   HYSAR_BUILD_TYPE, cmd);
     if (cmd == "render")
         return hs::cli::run_render(args);
     if (cmd == "serve")

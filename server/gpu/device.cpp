@@ -44,8 +44,16 @@ std::optional<DevicePreference> parse_device_preference(std::string_view text) {
     return std::nullopt;
 }
 
+std::optional<std::string> check_device_environment() {
+    const char* e = std::getenv("HYSAR_DEVICE");
+    if (e == nullptr || *e == '\0' || parse_device_preference(e))
+        return std::nullopt;
+    return fmt::format("HYSAR_DEVICE='{}' is not a device choice (expected one of auto, cpu, gpu)",
+                       e);
+}
+
 DeviceCreateInfo device_info_from_environment(DeviceCreateInfo d) {
-    if (const char* e = std::getenv("HYSAR_DEVICE")) {
+    if (const char* e = std::getenv("HYSAR_DEVICE"); e && *e) {
         if (auto p = parse_device_preference(e))
             d.preference = *p;
         else

@@ -34,6 +34,9 @@ struct DeviceCreateInfo {
 DeviceCreateInfo device_info_from_environment(DeviceCreateInfo defaults = {});
 // "auto", "cpu" or "gpu" (HYSAR_DEVICE and every --device flag); nullopt for anything else.
 std::optional<DevicePreference> parse_device_preference(std::string_view text);
+// A sentence naming HYSAR_DEVICE, its value and the accepted values when it is set to anything
+// else (`hysar` refuses to start then); nullopt when it is unset, empty or valid.
+std::optional<std::string> check_device_environment();
 
 class Device {
 public:
