@@ -57,6 +57,39 @@ double fov_deg(const nlohmann::json& j, const char* key) {
 
 }  // namespace
 
+std::vector<std::string> config_dirs() {
+    std::vector<std::string> dirs;
+    std::error_code ec;
+    const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+    if (!ec && exe.has_parent_path())
+        dirs.push_back(
+            (exe.parent_path() / ".." / "share" / "hysar" / "configs").lexically_normal().string());
+    dirs.push_back(HYSAR_CONFIG_DIR);
+    return dirs;
+}
+
+ConfigFile find_config(const std::string& relative) {
+    std::string tried;
+    for (const auto& dir : config_dirs()) {
+        const std::string path = (std::filesystem::path(dir) / relative).string();
+        std::error_code ec;
+        if (std::filesystem::exists(path, ec))
+            return {path, ""};
+        tried += (tried.empty() ? "" : ", ") + path;
+    }
+    return {"", "no " + relative + " in the installed or the source tree's configs (tried " +
+                    tried + ")"};
+}
+
+std::string profile_option(const Args& args) {
+    if (args.has("--profile"))
+        return args.get("--profile", "");
+    const ConfigFile found = find_config("devices/hololens.json");
+    if (found.path.empty())
+        args.fail("no default headset profile: " + found.error + "; give --profile FILE");
+    return found.path;
+}
+
 std::optional<std::string> load_profile(const std::string& path, double scale,
                                         protocol::RegisterDisplay* d) {
     std::error_code ec;

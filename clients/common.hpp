@@ -34,6 +34,23 @@ std::variant<std::vector<TimedPose>, std::string> load_pose_csv(const std::strin
 // Creates the output folder `dir` (and its parents); an error sentence when it cannot.
 std::optional<std::string> make_output_dir(const std::string& dir);
 
+// The folders the clients' default files (headset profiles, the known-headset table) are looked
+// for in, in order: <exe_dir>/../share/hysar/configs (an installed tree: bin/ beside share/),
+// then the source tree's configs/ (a run from the build tree). <exe_dir> is /proc/self/exe's.
+std::vector<std::string> config_dirs();
+
+// `relative` (e.g. "devices/hololens.json") under the first of config_dirs() that holds it.
+struct ConfigFile {
+    std::string path;   // empty when no folder holds it
+    std::string error;  // then: a sentence naming every path tried
+};
+ConfigFile find_config(const std::string& relative);
+
+class Args;
+// --profile, or else the default headset profile devices/hololens.json (find_config); a usage
+// error naming the paths tried when there is none.
+std::string profile_option(const Args& args);
+
 // A pose at `eye` looking at `target` (world frame, +y up), stamped `t_ns`.
 protocol::Pose look_at_pose(std::array<double, 3> eye, std::array<double, 3> target, uint64_t t_ns);
 

@@ -39,7 +39,8 @@ static const std::string kUsage =
         "                 [--device-table DIR]\n"
         "\n"
         "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
-        "  --profile FILE   headset profile (default configs/devices/hololens.json)\n"
+        "  --profile FILE   headset profile (default devices/hololens.json in the configs:\n"
+        "                   ../share/hysar/configs beside the binary, else the source tree's)\n"
         "  --scale S        resolution multiplier of the profile (default 1)\n"
         "  --angles LIST    view angles in degrees around the target (default -40,-20,0,20,40)\n"
         "  --orbit SECONDS  orbit the target once in SECONDS, a pose every 50 ms (continuous)\n"
@@ -63,8 +64,9 @@ static const std::string kUsage =
         "  --summary FILE   also write the run's figures as JSON\n"
         "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
         "                   --profile, with a message; two different ones: an error naming both)\n"
-        "  --device-table DIR  profiles with the USB ids of known headsets (default\n"
-        "                   configs/devices; configs/devices/README.md says how to add one)\n"
+        "  --device-table DIR  profiles with the USB ids of known headsets (default the devices/\n"
+        "                   folder of the configs, as for --profile; configs/devices/README.md\n"
+        "                   says how to add one)\n"
         "  --list-devices   print the attached USB devices, mark the known headsets and their\n"
         "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
         "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
@@ -393,8 +395,7 @@ int hmd_main(int argc, char** argv) {
               {"--window", "--list-devices"}, kUsage.c_str(),
               HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
-    const std::string configured_profile =
-        args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json");
+    const std::string configured_profile = profile_option(args);
     if (wants_usb_command(args))
         return run_usb_command(args, configured_profile);
     // Everything on the command line is checked before the network is touched.

@@ -38,6 +38,8 @@ static const std::string kUsage =
         "  --rate HZ     poses per second per headset (default 30); the server renders the latest\n"
         "  --seconds S   how long to run (default 5; 0: until SIGINT or SIGTERM, or --frames)\n"
         "  --frames N    stop once every headset has N layer pairs (default 0: no limit)\n"
+        "  --profile F   headset profile (default devices/hololens.json in the configs:\n"
+        "                ../share/hysar/configs beside the binary, else the source tree's)\n"
         "  --scale S     resolution multiplier of the profile (default 0.25)\n"
         "  --json FILE   also write the results as JSON\n"
         "  --out DIR     write each headset's last layer pair as loadgen-I_left.png, "
@@ -124,8 +126,7 @@ int loadgen_main(int argc, char** argv) {
         std::fprintf(stderr, "hysar-loadgen: --seconds 0: running until SIGINT or SIGTERM\n");
     proto::RegisterDisplay display;
     const double scale = args.number("--scale", 0.25, 0.01, 8);
-    if (auto err = load_profile(args.get("--profile", HYSAR_CONFIG_DIR "/devices/hololens.json"),
-                                scale, &display))
+    if (auto err = load_profile(profile_option(args), scale, &display))
         args.fail("--profile " + *err);
     display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
                          ? proto::PixelFormat::kRgba16f

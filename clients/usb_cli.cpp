@@ -17,7 +17,13 @@ extern "C" void on_stop_signal(int) {
 }
 
 std::vector<KnownHeadset> read_table(const Args& args) {
-    const std::string dir = args.get("--device-table", default_device_table());
+    std::string dir = args.get("--device-table", "");
+    if (!args.has("--device-table")) {
+        const ConfigFile found = find_config("devices");
+        if (found.path.empty())
+            args.fail("the known-headset table: " + found.error + "; give --device-table DIR");
+        dir = found.path;
+    }
     auto table = load_headset_table(dir);
     if (auto* e = std::get_if<std::string>(&table))
         args.fail("--device-table " + *e);
@@ -136,7 +142,8 @@ int watch_devices(const Args& args, const std::vector<KnownHeadset>& table) {
 }  // namespace
 
 std::string default_device_table() {
-    return HYSAR_CONFIG_DIR "/devices";
+    const ConfigFile table = find_config("devices");
+    return table.path.empty() ? config_dirs().front() + "/devices" : table.path;
 }
 
 bool wants_usb_command(const Args& args) {

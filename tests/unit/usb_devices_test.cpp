@@ -251,4 +251,22 @@ TEST(UsbTable, ShippedProfilesAreValid) {
     }
 }
 
+// The clients' default files: the installed tree beside the binary, then the source tree; a file
+// in neither is an error that names every path tried.
+TEST(ConfigFiles, DefaultsComeFromTheInstalledThenTheSourceTree) {
+    const auto dirs = config_dirs();
+    ASSERT_EQ(dirs.size(), 2u);
+    EXPECT_EQ(std::filesystem::path(dirs[0]).filename(), "configs");
+    EXPECT_EQ(std::filesystem::path(dirs[0]).parent_path().filename(), "hysar");
+    EXPECT_EQ(std::filesystem::path(dirs[1]), std::filesystem::path(HYSAR_SOURCE_DIR "/configs"));
+    const ConfigFile found = find_config("devices/hololens.json");
+    EXPECT_EQ(found.path, HYSAR_SOURCE_DIR "/configs/devices/hololens.json");
+    EXPECT_EQ(found.error, "");
+    const ConfigFile missing = find_config("devices/no-such-headset.json");
+    EXPECT_EQ(missing.path, "");
+    for (const auto& d : dirs)
+        EXPECT_NE(missing.error.find(d + "/devices/no-such-headset.json"), std::string::npos)
+            << missing.error;
+}
+
 }  // namespace
