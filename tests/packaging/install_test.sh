@@ -21,7 +21,12 @@ for f in bin/hysar bin/hysar-hmd bin/hysar-projector bin/hysar-loadgen \
          share/doc/hysar/examples/c/hmd_example.c; do
   [[ -e "$prefix/$f" ]] || fail "$f is not installed"
 done
-# Nothing installed points back into the trees it came from.
+# No installed program or library looks for its libraries in the trees it came from.
+for f in "$prefix"/bin/* "$prefix"/lib/*.so.1; do
+  rpath=$(readelf -d "$f" | grep -E "RUNPATH|RPATH" || true)
+  if [[ "$rpath" == *"$src"* || "$rpath" == *"$bin"* ]]; then fail "$f: $rpath names the source or build tree"; fi
+done
+# No installed text file points back into the trees it came from.
 if grep -rlI -e "$src" -e "$bin" "$prefix/bin" "$prefix/lib" "$prefix/share/hysar" 2>/dev/null | grep -q .; then
   fail "installed files name the source or build tree: $(grep -rlI -e "$src" -e "$bin" "$prefix/bin" "$prefix/lib" "$prefix/share/hysar" | head -3)"
 fi
