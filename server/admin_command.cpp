@@ -200,6 +200,26 @@ const json& sub(const json& j, const char* key) {
     return j.is_object() && j.contains(key) ? j[key] : kNull;
 }
 
+// A client-chosen name as a terminal may show it: at most `max_chars` characters, cut between
+// characters, with control characters (C0, DEL, C1; an escape sequence could rewrite the
+// screen) shown as '?'. The server sends names as well-formed UTF-8.
+std::string printable(const std::string& s, size_t max_chars) {
+    std::string out;
+    size_t chars = 0;
+    for (size_t i = 0; i < s.size() && chars < max_chars; ++chars) {
+        const auto c = static_cast<unsigned char>(s[i]);
+        const size_t n = c < 0x80 ? 1 : c < 0xe0 ? 2 : c < 0xf0 ? 3 : 4;
+        const bool c1 =
+            n == 2 && c == 0xc2 && i + 1 < s.size() && static_cast<unsigned char>(s[i + 1]) < 0xa0;
+        if (c < 0x20 || c == 0x7f || c1 || i + n > s.size())
+            out += '?';
+        else
+            out.append(s, i, n);
+        i += std::min(n, s.size() - i);
+    }
+    return out;
+}
+
 // A number as a table shows it: "-" when absent.
 std::string cell(const json& j, const char* key, const char* fmt_spec = "{}") {
     const json& v = sub(j, key);
@@ -224,7 +244,7 @@ std::string viewers_table(const json& stats) {
         ++n;
         out +=
             fmt::format("{:>8} {:<20} {:>9} {:>8} {:>9} {:>9} {:>11} {:>12}\n", cell(v, "session"),
-                        cell(v, "name").substr(0, 20), cell(v, "connected"), cell(v, "frames"),
+                        printable(cell(v, "name"), 20), cell(v, "connected"), cell(v, "frames"),
                         cell(v, "latency_ms_p50", "{:.1f}"), cell(v, "latency_ms_p95", "{:.1f}"),
                         cell(v, "superseded_poses"), cell(v, "bytes_sent"));
     }

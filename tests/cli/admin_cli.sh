@@ -25,6 +25,22 @@ mkdir "$dir/p"
 "$bin/clients/hysar-projector" --connect "unix:$dir/s.sock" --token-file "$dir/token" --frames 0 \
   --out "$dir/p" > "$dir/projector.log" 2>&1 &
 pids+=($!); disown
+# A headset whose name carries a terminal escape sequence (a client of its own making): the
+# table must show it as text, never pass the escape to the terminal.
+python3 - "$dir/s.sock" "$dir/token" <<'PY' > "$dir/raw.log" 2>&1 &
+import socket, struct, sys, time
+def frame(t, payload):
+    return struct.pack("<IHHII", 0x52535948, 1, t, len(payload), 0) + payload
+def s16(b):
+    return struct.pack("<H", len(b)) + b
+token = open(sys.argv[2], "rb").read().strip()
+s = socket.socket(socket.AF_UNIX)
+s.connect(sys.argv[1])
+s.sendall(frame(1, bytes([2]) + s16(token) + s16(b"\x1b[2Jevil\xc2\x9b")))
+s.sendall(frame(3, struct.pack("<IIdddddBBB", 320, 180, 300.0, 300.0, 160.0, 90.0, 0.063, 1, 2, 1)))
+time.sleep(600)
+PY
+pids+=($!); disown
 admin=("$bin/hysar" admin --connect "unix:$dir/s.sock" --token-file "$dir/admin" --timeout-ms 60000)
 
 # Both headsets, each with frames, once they are served.
@@ -36,6 +52,8 @@ done
 echo "$out"
 echo "$out" | head -1 | grep -q "session.*name.*frames.*p50 ms" || fail "viewers: no header"
 [[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -eq 2 ]] || fail "viewers: not two headsets with frames"
+echo "$out" | grep -q "?\[2Jevil?" || fail "viewers: the escaped name is not shown as ?[2Jevil?"
+if echo "$out" | grep -q $'\x1b'; then fail "viewers: an escape character reached the terminal"; fi
 
 out=$("${admin[@]}" stats --watch 0.2 --count 2)
 [[ $(echo "$out" | grep -c "^scene version") -eq 2 ]] || { echo "$out"; fail "stats --watch 0.2 --count 2: not two tables"; }
