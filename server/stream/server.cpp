@@ -450,6 +450,14 @@ ServerSnapshot Server::snapshot() const {
     return impl_->snapshot();
 }
 
+LatestFrame Server::latest_layer(uint32_t viewer, int eye) const {
+    return impl_->latest_layer(viewer, eye);
+}
+
+LatestFrame Server::latest_projector_frame() const {
+    return impl_->latest_projector_frame();
+}
+
 nlohmann::json Server::stats() const {
     try {
         return impl_->stats();

@@ -102,6 +102,12 @@ public:
     // The figures a watcher shows, typed, with the latest layers and projector frame by
     // reference; taken under the server's lock, never waits on a frame. Thread: any.
     ServerSnapshot snapshot() const;
+    // What a thumbnail needs and no more: headset `viewer`'s latest delivered layer (`eye` 0
+    // left, 1 right; with keep_latest_layers) or the current projector frame, by reference, with
+    // the sequence that names it; only the pointer is copied under the server's lock. Empty when
+    // there is none. Thread: any.
+    LatestFrame latest_layer(uint32_t viewer, int eye) const;
+    LatestFrame latest_projector_frame() const;
 
     struct Impl;
 

@@ -196,7 +196,9 @@ struct Server::Impl {
     void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
     void remove_session(uint32_t id);
     nlohmann::json stats() const;
-    ServerSnapshot snapshot() const;  // snapshot.cpp
+    ServerSnapshot snapshot() const;                           // snapshot.cpp
+    LatestFrame latest_layer(uint32_t viewer, int eye) const;  // snapshot.cpp
+    LatestFrame latest_projector_frame() const;                // snapshot.cpp
 };
 
 }  // namespace hs::stream

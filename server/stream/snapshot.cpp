@@ -1,6 +1,9 @@
 // Server::snapshot(): the figures of stats() as one typed struct for a watcher on another
-// thread (server/admin/). Copies numbers and shared pointers only; nothing is decoded or
-// formatted under the lock.
+// thread (server/admin/). Copies numbers and shared pointers only under the server's lock;
+// the latency percentiles are sorted from the scheduler's copy before it is taken, and nothing
+// is decoded or formatted under it.
+#include <algorithm>
+
 #include "protocol/protocol.hpp"
 #include "stream/server.hpp"
 #include "stream/server_impl.hpp"
@@ -11,6 +14,13 @@ namespace {
 
 StageTotals totals(const StageCost& c) {
     return {c.n, c.sum};
+}
+
+// The p-quantile of an ascending `v` (0 when empty), chosen as percentile() chooses it.
+double quantile_of_sorted(const std::vector<double>& v, double p) {
+    if (v.empty())
+        return 0.0;
+    return v[std::min(v.size() - 1, size_t(p * (v.size() - 1) + 0.5))];
 }
 
 }  // namespace
@@ -31,6 +41,24 @@ ServerSnapshot Server::Impl::snapshot() const {
     s.pooled_layer_bytes = buffers->pooled_bytes();
     s.device = device.name();
     s.driver = driver_info;
+    // Per viewer, what needs no lock: the counters are our own copy, sorted here.
+    s.viewers.reserve(counters.size());
+    for (auto& [id, c] : counters) {
+        ViewerSnapshot v;
+        v.session = id;
+        v.frames = c.frames;
+        v.frames_dropped = c.dropped;
+        v.superseded_poses = c.superseded_poses;
+        v.bytes_sent = c.bytes_sent;
+        v.in_flight = c.in_flight;
+        std::sort(c.latency_ms.begin(), c.latency_ms.end());
+        v.latency_ms_p50 = quantile_of_sorted(c.latency_ms, 0.5);
+        v.latency_ms_p99 = quantile_of_sorted(c.latency_ms, 0.99);
+        v.latency_samples = c.latency_ms.size();
+        s.viewers.push_back(std::move(v));
+    }
+    // Under the server's lock (deliver() takes it on the network thread for every frame):
+    // numbers, names and pointers only.
     std::lock_guard lock(mutex);
     const auto now = Clock::now();
     for (const auto& [id, si] : session_info) {
@@ -48,18 +76,8 @@ ServerSnapshot Server::Impl::snapshot() const {
                 break;
         }
     }
-    for (const auto& [id, c] : counters) {
-        ViewerSnapshot v;
-        v.session = id;
-        v.frames = c.frames;
-        v.frames_dropped = c.dropped;
-        v.superseded_poses = c.superseded_poses;
-        v.bytes_sent = c.bytes_sent;
-        v.in_flight = c.in_flight;
-        v.latency_ms_p50 = percentile(c.latency_ms, 0.5);
-        v.latency_ms_p99 = percentile(c.latency_ms, 0.99);
-        v.latency_samples = c.latency_ms.size();
-        if (auto si = session_info.find(id); si != session_info.end()) {
+    for (auto& v : s.viewers) {
+        if (auto si = session_info.find(v.session); si != session_info.end()) {
             v.name = si->second.name;
             v.layers_replaced = si->second.counters->layers_replaced;
             v.queued_bytes = si->second.counters->queued_bytes;
@@ -68,7 +86,6 @@ ServerSnapshot Server::Impl::snapshot() const {
             v.layer_sequence = si->second.latest_group;
             for (const auto& l : v.layers) s.latest_layer_bytes += l ? l->size() : 0;
         }
-        s.viewers.push_back(std::move(v));
     }
     s.sessions_total = sessions_total;
     s.scene_version = scene_version;
@@ -90,6 +107,23 @@ ServerSnapshot Server::Impl::snapshot() const {
     s.projector_readback = {pc.frames, pc.readback_sum};
     s.projector_encode = {pc.frames, pc.encode_sum};
     return s;
+}
+
+LatestFrame Server::Impl::latest_layer(uint32_t viewer, int eye) const {
+    if (eye < 0 || eye > 1)
+        return {};
+    std::lock_guard lock(mutex);
+    auto si = session_info.find(viewer);
+    if (si == session_info.end() || !si->second.latest_layers[size_t(eye)])
+        return {};
+    return {si->second.latest_layers[size_t(eye)], si->second.latest_group};
+}
+
+LatestFrame Server::Impl::latest_projector_frame() const {
+    std::lock_guard lock(mutex);
+    if (!current_projector_frame)
+        return {};
+    return {current_projector_frame, projector_frames_published};
 }
 
 }  // namespace hs::stream

@@ -1,6 +1,7 @@
 // What a watcher of a running server (the admin HTTP endpoint, server/admin/) reads: one typed
-// copy of the server's figures taken under its lock in one go, so that the watcher formats,
-// decodes and encodes on its own thread and never holds the render or the network thread up.
+// copy of the server's figures taken in one go, and the latest pictures by reference. Under the
+// server's lock only numbers and pointers are copied; the watcher sorts, formats, decodes and
+// encodes on its own thread, so the render and the network thread wait at most for that copy.
 #pragma once
 
 #include <array>
@@ -14,6 +15,14 @@ namespace hs::stream {
 
 // An encoded frame as it went to the sockets (a pooled wire buffer: header and payload).
 using Bytes = std::shared_ptr<const std::vector<uint8_t>>;
+
+// One picture a watcher shows (Server::latest_layer, Server::latest_projector_frame): an
+// encoded frame as it went to the sockets and the sequence number that names it; null and 0
+// when there is none.
+struct LatestFrame {
+    Bytes frame;
+    uint64_t sequence = 0;
+};
 
 // One stage's cost since start: how many times it ran and their sum (ms).
 struct StageTotals {
