@@ -332,8 +332,11 @@ int run_serve(const std::vector<std::string>& args) {
     if (admin_options) {
         admin_options->token = info.token;
         stream::Server* watched = server.value().get();
-        auto a =
-            admin::AdminServer::start(*admin_options, [watched] { return watched->snapshot(); });
+        auto a = admin::AdminServer::start(
+            *admin_options,
+            {[watched] { return watched->snapshot(); },
+             [watched](uint32_t viewer, int eye) { return watched->latest_layer(viewer, eye); },
+             [watched] { return watched->latest_projector_frame(); }});
         if (!a) {
             std::fprintf(stderr, "hysar serve: %s\n", a.error().message.c_str());
             return 1;

@@ -1,15 +1,20 @@
 // The admin HTTP endpoint of `hysar serve --admin-listen [HOST:]PORT` (docs/OPERATIONS.md,
 // "Watching a running server"): Prometheus text at /metrics, a live dashboard at /, its JSON at
 // /api/viewers, thumbnails of each headset's latest layers and of the projector frame. It runs
-// on threads of its own and reads the server only through a snapshot function, so it never
-// holds up the render or the network thread. The only code that sees the HTTP library.
+// on threads of its own and reads the server only through the functions of AdminSource, which
+// copy numbers and pointers under the server's lock and nothing more. One request per
+// connection, a deadline per connection and a bound on connections held, so that slow or many
+// clients cost a bounded number of threads and file descriptors. The only code that sees the
+// HTTP library. Meant for loopback or a trusted network.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
 
+#include "admin/thumbnails.hpp"
 #include "core/result.hpp"
 #include "stream/snapshot.hpp"
 
@@ -21,17 +26,34 @@ struct AdminOptions {
     // Every request but the dashboard's page itself (which holds no figures) must carry
     // `Authorization: Bearer <token>`; compared in constant time.
     std::string token;
-    uint32_t threads = 4;           // HTTP worker threads
+    uint32_t threads = 8;  // HTTP worker threads: connections served at once
+    // Connections accepted beyond those being served, waiting for a worker; one more is
+    // answered 503 and closed at once (hysar_admin_connections_refused_total).
+    uint32_t max_waiting = 32;
+    // A connection serves one request (no keep-alive) and must be read and answered within
+    // `deadline_s`, each read or write within `io_timeout_s`; then it is closed.
+    uint32_t io_timeout_s = 2;
+    uint32_t deadline_s = 5;
     uint32_t thumbnail_side = 256;  // a headset layer's thumbnail, longer side, pixels
     uint32_t projector_side = 480;  // the projector frame's thumbnail
+    // A thumbnail is served from the cache until it is this old, newer frame or not.
+    std::chrono::milliseconds thumbnail_min_interval = kThumbnailMinInterval;
+};
+
+// How the endpoint reads the server (stream::Server's functions of the same names): all three
+// must be set. Called on the endpoint's threads.
+struct AdminSource {
+    std::function<stream::ServerSnapshot()> snapshot;
+    // Headset `viewer`'s latest layer (`eye` 0 left, 1 right); empty when there is none.
+    std::function<stream::LatestFrame(uint32_t viewer, int eye)> latest_layer;
+    std::function<stream::LatestFrame()> latest_projector_frame;
 };
 
 class AdminServer {
 public:
-    using SnapshotFn = std::function<stream::ServerSnapshot()>;
     // Binds (an error names the address) and starts serving on its own threads.
     static Result<std::unique_ptr<AdminServer>> start(const AdminOptions& options,
-                                                      SnapshotFn snapshot);
+                                                      AdminSource source);
     ~AdminServer();  // stops and joins
     AdminServer(const AdminServer&) = delete;
     AdminServer& operator=(const AdminServer&) = delete;

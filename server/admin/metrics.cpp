@@ -225,11 +225,15 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
     for (const auto& [kind, n] : memory)
         w.sample("hysar_memory_bytes", fmt::format("kind=\"{}\"", kind), n);
     w.family("hysar_admin_thumbnails_encoded_total", "counter",
-             "Thumbnail PNGs made by this endpoint (once per frame asked for).");
+             "Thumbnail PNGs made by this endpoint (at most once per frame and per 250 ms).");
     w.sample("hysar_admin_thumbnails_encoded_total", "", admin.thumbnails_encoded);
     w.family("hysar_admin_unauthorized_total", "counter",
              "Requests to this endpoint refused for want of the token.");
     w.sample("hysar_admin_unauthorized_total", "", admin.unauthorized);
+    w.family("hysar_admin_connections_refused_total", "counter",
+             "Connections to this endpoint answered 503 and closed: every worker busy and too "
+             "many waiting.");
+    w.sample("hysar_admin_connections_refused_total", "", admin.connections_refused);
     w.family("hysar_gpu_info", "gauge", "The Vulkan device the server renders on and its driver.");
     w.sample(
         "hysar_gpu_info",

@@ -38,9 +38,10 @@ private:
 
 // What the admin endpoint itself holds and did, reported beside the server's figures.
 struct AdminFigures {
-    uint64_t thumbnail_bytes = 0;     // PNGs cached
-    uint64_t thumbnails_encoded = 0;  // PNGs made since start
-    uint64_t unauthorized = 0;        // requests refused for want of the token
+    uint64_t thumbnail_bytes = 0;      // PNGs cached
+    uint64_t thumbnails_encoded = 0;   // PNGs made since start
+    uint64_t unauthorized = 0;         // requests refused for want of the token
+    uint64_t connections_refused = 0;  // connections answered 503: the endpoint was full
 };
 
 // The Prometheus text exposition format (version 0.0.4): # HELP and # TYPE per family, the

@@ -1,9 +1,13 @@
 // The admin HTTP endpoint (server/admin/) against an in-process server on loopback: the token
 // is required, /metrics is valid Prometheus text (a strict parser below) whose figures follow
 // the frames served, and the thumbnails are PNGs made from the very layers the headsets got.
+#include <arpa/inet.h>
 #include <gtest/gtest-spi.h>
 #include <httplib.h>
+#include <netinet/in.h>
 #include <stb_image.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <map>
 #include <regex>
@@ -200,12 +204,19 @@ protected:
             return;
         admin::AdminOptions o;
         o.token = kToken;
-        auto a = admin::AdminServer::start(o, [s = server_.get()] { return s->snapshot(); });
+        o.thumbnail_min_interval = std::chrono::milliseconds(0);  // every new frame, a new PNG
+        admin_options(o);
+        stream::Server* s = server_.get();
+        auto a = admin::AdminServer::start(
+            o, {[s] { return s->snapshot(); },
+                [s](uint32_t viewer, int eye) { return s->latest_layer(viewer, eye); },
+                [s] { return s->latest_projector_frame(); }});
         ASSERT_TRUE(a.ok()) << a.error().message;
         admin_ = std::move(a).value();
         http_ = std::make_unique<httplib::Client>("127.0.0.1", admin_->port());
         http_->set_read_timeout(30);
     }
+    virtual void admin_options(admin::AdminOptions&) {}
     void TearDown() override {
         http_.reset();
         admin_.reset();
@@ -278,7 +289,9 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
               1.0);
     EXPECT_FALSE(before.samples.back().labels["driver"].empty());
 
-    auto hmd = headset(small_display(proto::PixelFormat::kRgba8), "hmd \"one\"\\");
+    // A name meant to break out of a label, a JSON string or the page's HTML.
+    const std::string hostile = "<img src=x onerror=alert(1)> \"one\"\\";
+    auto hmd = headset(small_display(proto::PixelFormat::kRgba8), hostile);
     ASSERT_TRUE(hmd);
     // A refused Hello: error 6, counted by code.
     auto intruder = connect();
@@ -286,13 +299,18 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     EXPECT_TRUE(intruder->hello(proto::Role::kHmd, "not-the-token", "intruder"));
     for (uint64_t t = 1; t <= 3; ++t)
         ASSERT_EQ(one_frame(*hmd, 10.0 * double(t), 100 + t).size(), 2u);
+    auto raw = get("/metrics");
+    ASSERT_TRUE(raw && raw->status == 200);
+    // Escaped as the text format wants it: \" and \\ in the label, nothing raw.
+    EXPECT_NE(raw->body.find(R"(name="<img src=x onerror=alert(1)> \"one\"\\")"), std::string::npos)
+        << raw->body;
     auto after = metrics();
     const auto views = after.samples;
     std::string id;
     for (const auto& s : views)
         if (s.name == "hysar_viewer_info") {
             id = s.labels.at("viewer");
-            EXPECT_EQ(s.labels.at("name"), "hmd \"one\"\\");
+            EXPECT_EQ(s.labels.at("name"), hostile);
         }
     ASSERT_FALSE(id.empty()) << "no hysar_viewer_info";
     EXPECT_GE(after.get("hysar_viewer_frames_total", {{"viewer", id}}), 3.0);
@@ -315,14 +333,21 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     ASSERT_TRUE(api && api->status == 200);
     auto j = nlohmann::json::parse(api->body);
     ASSERT_EQ(j["viewers"].size(), 1u);
+    // JSON-escaped text: the page shows it with textContent, never as HTML.
+    EXPECT_EQ(j["viewers"][0]["name"].get<std::string>(), hostile);
+    EXPECT_NE(api->body.find(R"("<img src=x onerror=alert(1)> \"one\"\\")"), std::string::npos)
+        << api->body;
     EXPECT_EQ(std::to_string(j["viewers"][0]["id"].get<uint32_t>()), id);
     EXPECT_GE(j["viewers"][0]["frames"].get<uint64_t>(), 3u);
     EXPECT_GT(j["viewers"][0]["layer_sequence"].get<uint64_t>(), 0u);
 
     // The headset leaves: its series go, and so do the layers kept for it.
     hmd.reset();
-    for (int i = 0; i < 100 && server_->snapshot().sessions_headset > 0; ++i)
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (server_->snapshot().sessions_headset > 0) {
+        ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "the headset never left";
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
     auto gone = metrics();
     EXPECT_TRUE(std::isnan(gone.get("hysar_viewer_frames_total", {{"viewer", id}})));
     EXPECT_EQ(gone.get("hysar_memory_bytes", {{"kind", "latest_layers"}}), 0.0);
@@ -397,6 +422,137 @@ TEST_F(AdminTest, ThumbnailsAreTheLayersAndTheProjectorFrameScaledDown) {
     auto unknown = get("/viewer/999/left.png");
     ASSERT_TRUE(unknown);
     EXPECT_EQ(unknown->status, 404);
+}
+
+// With a minimum interval (an hour here, so that nothing depends on timing), a newer frame does
+// not make a new thumbnail: however many dashboards ask, a picture costs at most one PNG per
+// interval.
+class AdminThrottledTest : public AdminTest {
+protected:
+    void admin_options(admin::AdminOptions& o) override {
+        o.thumbnail_min_interval = std::chrono::hours(1);
+    }
+};
+
+TEST_F(AdminThrottledTest, AThumbnailYoungerThanTheIntervalIsServedEvenWhenANewerFrameExists) {
+    auto hmd = headset(small_display(proto::PixelFormat::kRgba8), "hmd");
+    ASSERT_TRUE(hmd);
+    ASSERT_EQ(one_frame(*hmd, 0.0, 11).size(), 2u);
+    const auto v = server_->snapshot().viewers.at(0);
+    const std::string path = "/viewer/" + std::to_string(v.session) + "/left.png";
+    auto first = get(path);
+    ASSERT_TRUE(first && first->status == 200);
+    ASSERT_EQ(one_frame(*hmd, 30.0, 12).size(), 2u);
+    ASSERT_GT(server_->snapshot().viewers.at(0).layer_sequence, v.layer_sequence);
+    auto second = get(path);
+    ASSERT_TRUE(second && second->status == 200);
+    EXPECT_EQ(second->body, first->body);
+    EXPECT_EQ(metrics().get("hysar_admin_thumbnails_encoded_total"), 1.0);
+}
+
+// A thumbnail cache on a clock of the test's own.
+struct FakeClock {
+    std::shared_ptr<admin::ThumbnailCache::Clock::time_point> t =
+        std::make_shared<admin::ThumbnailCache::Clock::time_point>();
+    admin::ThumbnailCache::Now now() const {
+        return [t = t] { return *t; };
+    }
+    void advance(std::chrono::milliseconds d) { *t += d; }
+};
+
+stream::LatestFrame a_layer(uint64_t sequence, uint8_t level) {
+    proto::VdLayer l;
+    l.width = 8;
+    l.height = 4;
+    l.format = proto::PixelFormat::kRgba8;
+    l.encoding = proto::Encoding::kRaw;
+    l.data.assign(size_t(l.width) * l.height * 4, level);
+    return {std::make_shared<const std::vector<uint8_t>>(frame_bytes(l, proto::Side::kServer)),
+            sequence};
+}
+
+TEST(AdminThumbnailCache, ANewFrameIsEncodedOnlyOncePerInterval) {
+    FakeClock clock;
+    admin::ThumbnailCache cache(256, admin::kThumbnailMinInterval, clock.now());
+    auto a = cache.get("1/0", a_layer(1, 10));
+    ASSERT_TRUE(a.ok()) << a.error().message;
+    clock.advance(std::chrono::milliseconds(100));
+    auto b = cache.get("1/0", a_layer(2, 200));  // newer, but the PNG is 100 ms old
+    ASSERT_TRUE(b.ok());
+    EXPECT_EQ(b.value(), a.value());
+    EXPECT_EQ(cache.encoded(), 1u);
+    clock.advance(admin::kThumbnailMinInterval);
+    auto c = cache.get("1/0", a_layer(2, 200));
+    ASSERT_TRUE(c.ok());
+    EXPECT_NE(*c.value(), *a.value());
+    EXPECT_EQ(cache.encoded(), 2u);
+    clock.advance(std::chrono::hours(1));
+    auto d = cache.get("1/0", a_layer(2, 200));  // the same frame: never made again
+    ASSERT_TRUE(d.ok());
+    EXPECT_EQ(d.value(), c.value());
+    EXPECT_EQ(cache.encoded(), 2u);
+}
+
+TEST(AdminThumbnailCache, PicturesNobodyAsksForGo) {
+    FakeClock clock;
+    admin::ThumbnailCache cache(256, admin::kThumbnailMinInterval, clock.now());
+    ASSERT_TRUE(cache.get("1/0", a_layer(1, 10)).ok());
+    ASSERT_TRUE(cache.get("1/1", a_layer(1, 10)).ok());
+    ASSERT_TRUE(cache.get("2/0", a_layer(2, 20)).ok());
+    EXPECT_EQ(cache.entries(), 3u);
+    cache.forget("1/1");  // its viewer left: the route's 404 forgets it
+    EXPECT_EQ(cache.entries(), 2u);
+    // Viewer 1 left without anyone looking at /metrics or /api/viewers; viewer 2 is still
+    // watched: the next ask of viewer 2's picture drops viewer 1's.
+    clock.advance(admin::kThumbnailUnusedExpiry / 2);
+    ASSERT_TRUE(cache.get("2/0", a_layer(2, 20)).ok());
+    clock.advance(admin::kThumbnailUnusedExpiry / 2 + std::chrono::seconds(1));
+    ASSERT_TRUE(cache.get("2/0", a_layer(2, 20)).ok());
+    EXPECT_EQ(cache.entries(), 1u);
+    EXPECT_EQ(cache.bytes(), cache.get("2/0", a_layer(2, 20)).value()->size());
+}
+
+// One worker, one connection allowed to wait, and clients that never send anything: the next
+// connection is answered 503 at once instead of queueing behind them, and counted.
+class AdminFullTest : public AdminTest {
+protected:
+    void admin_options(admin::AdminOptions& o) override {
+        o.threads = 1;
+        o.max_waiting = 1;
+        o.io_timeout_s = 600;  // the idle clients hold their places for the whole test
+        o.deadline_s = 600;
+    }
+    int idle_client() {
+        const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+        sockaddr_in a{};
+        a.sin_family = AF_INET;
+        a.sin_port = htons(admin_->port());
+        a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        EXPECT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+        return fd;
+    }
+};
+
+TEST_F(AdminFullTest, ConnectionsBeyondTheWorkersAndTheWaitingAreRefusedAtOnce) {
+    const int held[2] = {idle_client(), idle_client()};  // one served, one waiting
+    auto r = get("/metrics");
+    ASSERT_TRUE(r) << httplib::to_string(r.error());
+    EXPECT_EQ(r->status, 503);
+    EXPECT_NE(r->body.find("busy"), std::string::npos) << r->body;
+    for (int fd : held) ::close(fd);
+    // The held connections closed, the worker is free again.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    for (;;) {
+        auto ok = get("/metrics");
+        ASSERT_TRUE(ok);
+        if (ok->status == 200) {
+            EXPECT_GE(parse_exposition(ok->body).get("hysar_admin_connections_refused_total"), 1.0);
+            break;
+        }
+        EXPECT_EQ(ok->status, 503);
+        ASSERT_LT(std::chrono::steady_clock::now(), deadline) << "the endpoint stays full";
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
 }
 
 TEST(AdminListen, ABarePortMeansLoopbackAndBadValuesAreNamed) {
