@@ -43,10 +43,10 @@ PY
 pids+=($!); disown
 admin=("$bin/hysar" admin --connect "unix:$dir/s.sock" --token-file "$dir/admin" --timeout-ms 60000)
 
-# Both headsets, each with frames, once they are served.
-for _ in $(seq 100); do
+# Both headsets with frames and the raw client's headset, once they are all there (60 s at most).
+for _ in $(seq 300); do
   out=$("${admin[@]}" viewers)
-  [[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -ge 2 ]] && break
+  [[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -ge 2 ]] && echo "$out" | grep -q "evil" && break
   sleep 0.2
 done
 echo "$out"
