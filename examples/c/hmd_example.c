@@ -66,8 +66,8 @@ int main(int argc, char** argv) {
             break;
         /* Then, until the next frame is due (~30 Hz), whatever the library has decoded. */
         const uint64_t next_frame = hysar_now_ns() + 33000000;
-        for (uint64_t now = hysar_now_ns(); now < next_frame && s == HYSAR_OK;
-             now = hysar_now_ns()) {
+        for (uint64_t now = hysar_now_ns();
+             now < next_frame && s == HYSAR_OK && pairs < pairs_wanted; now = hysar_now_ns()) {
             hysar_event e;
             if ((s = hysar_client_poll(client, (int32_t)((next_frame - now) / 1000000), &e)) !=
                 HYSAR_OK)

@@ -114,7 +114,7 @@ def main(argv):
                 return 1
             # Then, until the next frame is due (~30 Hz), whatever the library has decoded.
             next_frame = lib.hysar_now_ns() + 33_000_000
-            while (now := lib.hysar_now_ns()) < next_frame:
+            while (now := lib.hysar_now_ns()) < next_frame and pairs < pairs_wanted:
                 e = Event()
                 if lib.hysar_client_poll(client, (next_frame - now) // 1_000_000, C.byref(e)) != OK:
                     print("hmd_example.py: poll:", err(), file=sys.stderr)
