@@ -25,8 +25,8 @@ mkdir "$dir/p"
 "$bin/clients/hysar-projector" --connect "unix:$dir/s.sock" --token-file "$dir/token" --frames 0 \
   --out "$dir/p" > "$dir/projector.log" 2>&1 &
 pids+=($!); disown
-# A headset whose name carries a terminal escape sequence (a client of its own making): the
-# table must show it as text, never pass the escape to the terminal.
+# A headset whose name carries a terminal escape sequence and a newline (a client of its own
+# making): the server's log and the table must show them as text, never pass them on.
 python3 - "$dir/s.sock" "$dir/token" <<'PY' > "$dir/raw.log" 2>&1 &
 import socket, struct, sys, time
 def frame(t, payload):
@@ -36,7 +36,7 @@ def s16(b):
 token = open(sys.argv[2], "rb").read().strip()
 s = socket.socket(socket.AF_UNIX)
 s.connect(sys.argv[1])
-s.sendall(frame(1, bytes([2]) + s16(token) + s16(b"\x1b[2Jevil\xc2\x9b")))
+s.sendall(frame(1, bytes([2]) + s16(token) + s16(b"\x1b[2Jevil\xc2\x9b\nFORGED")))
 s.sendall(frame(3, struct.pack("<IIdddddBBB", 320, 180, 300.0, 300.0, 160.0, 90.0, 0.063, 1, 2, 1)))
 time.sleep(600)
 PY
@@ -54,6 +54,9 @@ echo "$out" | head -1 | grep -q "session.*name.*frames.*p50 ms" || fail "viewers
 [[ $(echo "$out" | awk 'NR > 1 && $4 > 0' | wc -l) -eq 2 ]] || fail "viewers: not two headsets with frames"
 echo "$out" | grep -q "?\[2Jevil?" || fail "viewers: the escaped name is not shown as ?[2Jevil?"
 if echo "$out" | grep -q $'\x1b'; then fail "viewers: an escape character reached the terminal"; fi
+# The server itself keeps the name's control characters out of its log: no forged line.
+grep -q "'?\[2Jevil??FORGED' joined" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve log: the name is not shown as ?[2Jevil??FORGED"; }
+if grep -q "^FORGED" "$dir/serve.log" || grep -q $'\x1b' "$dir/serve.log"; then fail "serve log: the name's newline or escape reached the log"; fi
 
 out=$("${admin[@]}" stats --watch 0.2 --count 2)
 [[ $(echo "$out" | grep -c "^scene version") -eq 2 ]] || { echo "$out"; fail "stats --watch 0.2 --count 2: not two tables"; }
