@@ -140,6 +140,22 @@ std::string sanitize_utf8(std::string_view s) {
     return out;
 }
 
+std::string printable_utf8(std::string_view s) {
+    const std::string clean = sanitize_utf8(s);
+    std::string out;
+    out.reserve(clean.size());
+    for (size_t i = 0; i < clean.size(); ++i) {
+        const auto c = static_cast<unsigned char>(clean[i]);
+        if (c == 0xc2 && i + 1 < clean.size() && static_cast<unsigned char>(clean[i + 1]) < 0xa0) {
+            out += '?';  // U+0080..U+009F
+            ++i;
+        } else {
+            out += c < 0x20 || c == 0x7f ? '?' : char(c);
+        }
+    }
+    return out;
+}
+
 std::string truncate_utf8(std::string_view s, size_t max_bytes) {
     if (s.size() <= max_bytes)
         return std::string(s);

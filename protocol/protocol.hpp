@@ -150,6 +150,10 @@ std::variant<Message, DecodeError> decode_frame(std::span<const uint8_t> bytes, 
 bool is_valid_utf8(std::string_view s);
 // `s` with every ill-formed sequence replaced by U+FFFD: safe to put in JSON or a log.
 std::string sanitize_utf8(std::string_view s);
+// `s` sanitized as sanitize_utf8 does, with every control character (C0, DEL, C1) replaced by
+// '?': a client's text as a log line, a terminal or a table may show it (no forged line, no
+// escape sequence).
+std::string printable_utf8(std::string_view s);
 // The longest prefix of `s` of at most `max_bytes` bytes that does not end inside a UTF-8
 // sequence (`s` valid UTF-8 gives valid UTF-8).
 std::string truncate_utf8(std::string_view s, size_t max_bytes);

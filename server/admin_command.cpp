@@ -120,7 +120,7 @@ public:
         conn_ = std::move(std::get<std::unique_ptr<Connection>>(c));
         if (auto e = conn_->hello(proto::Role::kAdmin, token, "hysar-admin", nullptr,
                                   std::min(timeout_ms, 10000)))
-            throw Failure{2, "the server refused the admin session: " + *e};
+            throw Failure{2, "admin session: " + *e};
     }
 
     // The server's stats JSON (StatsRequest, then its Stats).
@@ -200,24 +200,16 @@ const json& sub(const json& j, const char* key) {
     return j.is_object() && j.contains(key) ? j[key] : kNull;
 }
 
-// A client-chosen name as a terminal may show it: at most `max_chars` characters, cut between
-// characters, with control characters (C0, DEL, C1; an escape sequence could rewrite the
-// screen) shown as '?'. The server sends names as well-formed UTF-8.
+// A client-chosen name as a terminal may show it: control characters as '?' (the server
+// does the same at Hello; an older one may not), cut to `max_chars` between characters.
 std::string printable(const std::string& s, size_t max_chars) {
-    std::string out;
-    size_t chars = 0;
-    for (size_t i = 0; i < s.size() && chars < max_chars; ++chars) {
-        const auto c = static_cast<unsigned char>(s[i]);
-        const size_t n = c < 0x80 ? 1 : c < 0xe0 ? 2 : c < 0xf0 ? 3 : 4;
-        const bool c1 =
-            n == 2 && c == 0xc2 && i + 1 < s.size() && static_cast<unsigned char>(s[i + 1]) < 0xa0;
-        if (c < 0x20 || c == 0x7f || c1 || i + n > s.size())
-            out += '?';
-        else
-            out.append(s, i, n);
-        i += std::min(n, s.size() - i);
+    const std::string p = proto::printable_utf8(s);
+    size_t end = 0;
+    for (size_t chars = 0; end < p.size() && chars < max_chars; ++chars) {
+        ++end;  // past the lead byte, then its continuation bytes
+        while (end < p.size() && (static_cast<unsigned char>(p[end]) & 0xc0) == 0x80) ++end;
     }
-    return out;
+    return p.substr(0, end);
 }
 
 // A number as a table shows it: "-" when absent.

@@ -213,26 +213,6 @@ void Session::frame_done() {
     handle(std::get<proto::Message>(m));
 }
 
-namespace {
-// A client-chosen name as the logs, the stats and the dashboard show it: control characters
-// (C0, DEL, C1) become '?', so a name cannot start a forged log line or send a terminal escape.
-// The decoder has already refused ill-formed UTF-8.
-std::string printable_name(const std::string& s) {
-    std::string out;
-    out.reserve(s.size());
-    for (size_t i = 0; i < s.size(); ++i) {
-        const auto c = static_cast<unsigned char>(s[i]);
-        if (c == 0xc2 && i + 1 < s.size() && static_cast<unsigned char>(s[i + 1]) < 0xa0) {
-            out += '?';  // U+0080..U+009F
-            ++i;
-        } else {
-            out += c < 0x20 || c == 0x7f ? '?' : char(c);
-        }
-    }
-    return out;
-}
-}  // namespace
-
 void Session::hello(const proto::Hello& hello, uint32_t seq) {
     const bool admin = hello.role == proto::Role::kAdmin;
     if (admin && srv_.info.admin_token.empty())
@@ -250,7 +230,8 @@ void Session::hello(const proto::Hello& hello, uint32_t seq) {
                      seq);
     authed_ = true;
     role_ = hello.role;
-    name_ = printable_name(hello.client_name);
+    // Shown in logs, stats and the dashboard: control characters as '?' (PROTOCOL.md, Hello).
+    name_ = proto::printable_utf8(hello.client_name);
     uint32_t version;
     {
         std::lock_guard lock(srv_.mutex);

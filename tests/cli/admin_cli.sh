@@ -83,40 +83,29 @@ echo "$out" | grep -q "applied: scene version 2 (was 1)" || fail "scene push: no
 for _ in $(seq 100); do compgen -G "$dir/p/projector_v2*" > /dev/null && break; sleep 0.1; done
 compgen -G "$dir/p/projector_v2*" > /dev/null || fail "the projector did not receive version 2"
 
+# The refusals, each a case of tests/cli/case_lib.sh (exit status and the sentence on stderr).
+source "$src/tests/cli/case_lib.sh"
+set +e  # a case's command may fail: expect judges its status
+cd "$dir"
 # Refused by the server (over its --max-triangles): exit 1 with the server's sentence.
-set +e
-out=$("${admin[@]}" scene push "$dir/big.json" 2>&1); rc=$?
-set -e
-echo "$out"
-[[ $rc -eq 1 ]] || fail "a scene over the server's limits: exit $rc, expected 1"
-echo "$out" | grep -q "the server refused the scene: .*triangles" || fail "no server refusal naming the triangles"
-
+expect "a scene over the server's limits" 1 err "the server refused the scene: .*triangles" \
+  "${admin[@]}" scene push "$dir/big.json"
 # Refused here: broken JSON never reaches the server (its version stays 2).
 echo '{"schema_version": 1, "prop": ' > "$dir/broken.json"
-set +e
-out=$("${admin[@]}" scene push "$dir/broken.json" 2>&1); rc=$?
-set -e
-echo "$out"
-[[ $rc -eq 2 ]] || fail "a broken scene file: exit $rc, expected 2"
-echo "$out" | grep -q "scene push $dir/broken.json: " || fail "the refusal does not name the file"
+expect "a broken scene file" 2 err "scene push $dir/broken.json: .*malformed JSON" \
+  "${admin[@]}" scene push "$dir/broken.json"
 v=$("${admin[@]}" stats --json | python3 -c "import json, sys; print(json.load(sys.stdin)['scene_version'])")
 [[ $v -eq 2 ]] || fail "scene version $v after the refused pushes, expected 2"
-
 # Wrong token, no server, bad arguments: exit 2, one sentence each.
-expect2() {
-  local what="$1" pattern="$2"; shift 2
-  set +e; out=$("$@" 2>&1); rc=$?; set -e
-  [[ $rc -eq 2 ]] || { echo "$out"; fail "$what: exit $rc, expected 2"; }
-  echo "$out" | grep -q "$pattern" || { echo "$out"; fail "$what: no '$pattern'"; }
-}
-expect2 "the viewers' token as admin" "refused the admin session" \
+expect "the viewers' token as admin" 2 err "admin session: the server refused the session: unauthorized" \
   "$bin/hysar" admin --connect "unix:$dir/s.sock" --token-file "$dir/token" viewers
-expect2 "no server" "^hysar admin: --connect: " \
+expect "no server" 2 err "^hysar admin: --connect: " \
   "$bin/hysar" admin --connect "unix:$dir/none.sock" --token-file "$dir/admin" viewers
-expect2 "unknown command" "unknown command 'restart'" "${admin[@]}" restart
-expect2 "no command" "no command" "${admin[@]}"
-expect2 "scene push without a file" "scene push needs one FILE" "${admin[@]}" scene push
-expect2 "--watch on viewers" "go with the stats command" "${admin[@]}" viewers --watch 1
-expect2 "--watch 0" "\-\-watch: '0' is outside \[0.2, 3600\]" "${admin[@]}" stats --watch 0
+expect "unknown command" 2 err "unknown command 'restart'" "${admin[@]}" restart
+expect "no command" 2 err "no command" "${admin[@]}"
+expect "scene push without a file" 2 err "scene push needs one FILE" "${admin[@]}" scene push
+expect "--watch on viewers" 2 err "go with the stats command" "${admin[@]}" viewers --watch 1
+expect "--watch 0" 2 err "--watch: '0' is outside \[0\.2, 3600\]" "${admin[@]}" stats --watch 0
+finish || fail "a refusal is not as documented"
 "$bin/hysar" admin --help | grep -q "^usage: hysar admin" || fail "--help"
 echo "admin test: viewers, stats, scene push and every refusal as documented"

@@ -550,6 +550,17 @@ TEST(Utf8, SanitizeReplacesEachMaximalSubpart) {
         EXPECT_TRUE(is_valid_utf8(sanitize_utf8(s)));
 }
 
+TEST(Utf8, PrintableReplacesControlCharacters) {
+    // C0 (ESC, newline, NUL), DEL and C1 (U+0085, U+009B) become '?'; U+00A0 and other text stay.
+    EXPECT_EQ(printable_utf8(std::string("\x1b[2J\nx\0y\x7f", 9)), "?[2J?x?y?");
+    EXPECT_EQ(printable_utf8("a\xC2\x85"
+                             "b\xC2\x9B"
+                             "c\xC2\xA0\xC3\xA9"),
+              "a?b?c\xC2\xA0\xC3\xA9");
+    EXPECT_EQ(printable_utf8("a\xC2"), "a\xEF\xBF\xBD");  // sanitized first: still valid UTF-8
+    EXPECT_EQ(printable_utf8("plain name-1"), "plain name-1");
+}
+
 TEST(Utf8, TruncateKeepsCharactersWhole) {
     EXPECT_EQ(truncate_utf8("abc", 5), "abc");
     EXPECT_EQ(truncate_utf8("abc", 2), "ab");
