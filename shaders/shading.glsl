@@ -154,5 +154,10 @@ void hs_light(vec4 position_or_direction, vec3 irradiance, vec3 p, vec3 n, float
 }
 
 // Radiance as a half-float layer carries it: NaN as 0, clamped to [0, 65504] (the largest
-// finite half rather than Inf; radiance is never negative, whatever reached the shader).
-vec3 hs_half_layer(vec3 sum) { return clamp(mix(sum, vec3(0.0), isnan(sum)), 0.0, 65504.0); }
+// finite half rather than Inf; radiance is never negative, whatever reached the shader). What
+// is not above 0 becomes +0 by a select: clamp may keep -0, whose half (0x8000) is not the
+// empty pixel's bits, so a black pixel would count as covered.
+vec3 hs_half_layer(vec3 sum) {
+    vec3 v = min(mix(sum, vec3(0.0), isnan(sum)), vec3(65504.0));
+    return mix(vec3(0.0), v, greaterThan(v, vec3(0.0)));
+}

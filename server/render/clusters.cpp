@@ -50,7 +50,42 @@ double max_channel(const glm::dvec3& v) {
 
 }  // namespace
 
-ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster) {
+namespace {
+
+// The bounds of triangles [first, last) of `mesh` (its index buffer in cluster order).
+Cluster bound_triangles(const scene::Mesh& mesh, size_t first, size_t last) {
+    Cluster cl;
+    cl.first_index = uint32_t(3 * first);
+    cl.index_count = uint32_t(3 * (last - first));
+    glm::dvec3 blo(1e300), bhi(-1e300), nsum(0.0);
+    for (size_t i = 3 * first; i < 3 * last; ++i) {
+        const glm::dvec3 p = mesh.positions[mesh.indices[i]];
+        blo = glm::min(blo, p);
+        bhi = glm::max(bhi, p);
+        nsum += glm::normalize(glm::dvec3(mesh.normals[mesh.indices[i]]));
+    }
+    cl.centre = 0.5 * (blo + bhi);
+    double r2 = 0;
+    for (size_t i = 3 * first; i < 3 * last; ++i) {
+        const glm::dvec3 d = glm::dvec3(mesh.positions[mesh.indices[i]]) - cl.centre;
+        r2 = std::max(r2, glm::dot(d, d));
+    }
+    // Widened by a relative 1e-6: the vertices are floats, the bounds doubles.
+    cl.radius = std::sqrt(r2) * (1.0 + 1e-6) + 1e-9;
+    const double nlen = glm::length(nsum);
+    if (nlen > 1e-9) {
+        cl.cone_axis = nsum / nlen;
+        double a = 0;
+        for (size_t i = 3 * first; i < 3 * last; ++i)
+            a = std::max(a, angle_between(cl.cone_axis, glm::dvec3(mesh.normals[mesh.indices[i]])));
+        cl.cone_angle = a + kSlack;
+    }
+    return cl;
+}
+
+}  // namespace
+
+ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster, uint32_t per_group) {
     ClusteredMesh out;
     const size_t tris = mesh.indices.size() / 3;
     glm::dvec3 lo(1e300), hi(-1e300);
@@ -77,37 +112,13 @@ ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster) {
     mesh.indices.swap(indices);
 
     per_cluster = std::max<uint32_t>(per_cluster, 1);
-    for (size_t first = 0; first < tris; first += per_cluster) {
-        const size_t last = std::min(tris, first + per_cluster);
-        Cluster cl;
-        cl.first_index = uint32_t(3 * first);
-        cl.index_count = uint32_t(3 * (last - first));
-        glm::dvec3 blo(1e300), bhi(-1e300), nsum(0.0);
-        for (size_t i = 3 * first; i < 3 * last; ++i) {
-            const glm::dvec3 p = mesh.positions[mesh.indices[i]];
-            blo = glm::min(blo, p);
-            bhi = glm::max(bhi, p);
-            nsum += glm::normalize(glm::dvec3(mesh.normals[mesh.indices[i]]));
-        }
-        cl.centre = 0.5 * (blo + bhi);
-        double r2 = 0;
-        for (size_t i = 3 * first; i < 3 * last; ++i) {
-            const glm::dvec3 d = glm::dvec3(mesh.positions[mesh.indices[i]]) - cl.centre;
-            r2 = std::max(r2, glm::dot(d, d));
-        }
-        // Widened by a relative 1e-6: the vertices are floats, the bounds doubles.
-        cl.radius = std::sqrt(r2) * (1.0 + 1e-6) + 1e-9;
-        const double nlen = glm::length(nsum);
-        if (nlen > 1e-9) {
-            cl.cone_axis = nsum / nlen;
-            double a = 0;
-            for (size_t i = 3 * first; i < 3 * last; ++i)
-                a = std::max(
-                    a, angle_between(cl.cone_axis, glm::dvec3(mesh.normals[mesh.indices[i]])));
-            cl.cone_angle = a + kSlack;
-        }
-        out.clusters.push_back(cl);
-    }
+    per_group = std::max<uint32_t>(per_group, 1);
+    for (size_t first = 0; first < tris; first += per_cluster)
+        out.clusters.push_back(bound_triangles(mesh, first, std::min(tris, first + per_cluster)));
+    const size_t group_tris = size_t(per_cluster) * per_group;
+    for (size_t first = 0; first < tris; first += group_tris)
+        out.groups.push_back(bound_triangles(mesh, first, std::min(tris, first + group_tris)));
+    out.clusters_per_group = per_group;
     out.mesh = std::move(mesh);
     return out;
 }
@@ -136,19 +147,13 @@ std::vector<ClusteredMesh> prop_levels(const scene::Prop& prop, const scene::Mes
             err = std::max(err, h.radius - std::abs(glm::dot(a - h.centre, n)));
         }
         // Scaled about the centre so that every plane lies at least a radius away: the mesh
-        // then encloses the dome, and the shader finds the exact point on the sphere. A ray
-        // runs at most `chord` through the shell between them, so the point it shades lies
-        // within that of the triangle it rasterises.
+        // then encloses the dome, and the shader finds the exact point on the sphere.
         err *= 1.0 + 1e-6;
         const double scale = h.radius / (h.radius - err);
         for (auto& p : m.positions) p = glm::vec3(h.centre + (glm::dvec3(p) - h.centre) * scale);
         const double outer = h.radius * scale;
-        const double chord = std::sqrt(outer * outer - h.radius * h.radius);
         ClusteredMesh level = cluster_mesh(std::move(m));
-        for (auto& c : level.clusters) {
-            c.radius += chord;
-            c.cone_angle += std::asin(std::min(1.0, chord / h.radius));
-        }
+        level.shell = {h.radius, outer};
         level.surface_error_m = outer - h.radius;
         level.segments = s;
         level.rings = r;
@@ -303,13 +308,50 @@ double light_bound(const Cluster& cl, const ViewBound& vb, const scene::Light& l
 
 }  // namespace
 
-uint64_t cluster_light_mask(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
+// On a shell level, a ray that crosses the cluster's triangle at s
+// meets the sphere (centre c, radius R) at q = s + t d further on, where the angle theta
+// between q's normal and the direction back to the eye is below 90 degrees. In the triangle
+// c, q, s the angle at q is pi - theta and |c - s| lies in [R, outer], so
+//   t^2 + 2 t R cos(theta) <= outer^2 - R^2 = chord^2,  sin(phi) = t sin(theta) / |c - s|,
+// with phi the angle at c between q and s. Both grow with theta; at 90 degrees t = chord and
+// phi = asin(chord / R), the bound for any eye. So the shaded points lie within t of the
+// cluster's sphere and their normals within phi of its cone, with theta bounded from the
+// cone, the eye and that widest widening. A cluster seen face-on thus strays by about the
+// shell's thickness (half a pixel), not by the chord (several pixels at a coarse level).
+Cluster shaded_bounds(const Cluster& cl, const Shell& shell, const glm::dvec3& eye) {
+    if (!(shell.sphere_radius > 0))
+        return cl;
+    const double R = shell.sphere_radius;
+    const double chord2 = std::max(0.0, shell.outer_radius * shell.outer_radius - R * R);
+    const double chord = std::sqrt(chord2);
+    const double phi_any = std::asin(std::min(1.0, chord / R));
+    double t = chord, phi = phi_any;
+    if (cl.cone_angle + phi_any < kHalfPi) {
+        const double alpha_v = spread_towards(cl.centre, cl.radius + chord, eye, 0.0);
+        const double theta =
+            angle_between(cl.cone_axis, eye - cl.centre) + cl.cone_angle + phi_any + alpha_v;
+        if (alpha_v < kHalfPi && theta < kHalfPi) {
+            const double c = std::cos(theta), sn = std::sin(theta);
+            // The root of t^2 + 2 R c t - chord^2 without the cancellation of -Rc + sqrt(...).
+            t = std::min(chord, chord2 / (R * c + std::sqrt(R * R * c * c + chord2)));
+            phi = std::asin(std::min(1.0, t * sn / R));
+        }
+    }
+    Cluster w = cl;
+    w.radius += t * (1.0 + 1e-6);
+    w.cone_angle += phi + kSlack;
+    return w;
+}
+
+uint64_t cluster_light_mask(const Cluster& rasterised, const Shell& shell, const glm::dvec3& eye,
+                            const VdBound& b) {
     const size_t n = std::min<size_t>(b.lights.size(), 64);
     const uint64_t all = n >= 64 ? ~uint64_t(0) : (uint64_t(1) << n) - 1;
     if (b.emission)
         return all == 0 ? 1 : all;  // emission lights every covered pixel
     if (b.spec.model == scene::SpecularModel::kNone || max_channel(b.spec.colour) <= 0 || n == 0)
         return 0;
+    const Cluster cl = shaded_bounds(rasterised, shell, eye);
     const ViewBound vb = view_bound(cl, eye);
     if (vb.unbounded)
         return all;
@@ -327,8 +369,9 @@ uint64_t cluster_light_mask(const Cluster& cl, const glm::dvec3& eye, const VdBo
     return total >= b.threshold ? mask : 0;
 }
 
-bool cluster_may_light(const Cluster& cl, const glm::dvec3& eye, const VdBound& b) {
-    return cluster_light_mask(cl, eye, b) != 0;
+bool cluster_may_light(const Cluster& cl, const Shell& shell, const glm::dvec3& eye,
+                       const VdBound& b) {
+    return cluster_light_mask(cl, shell, eye, b) != 0;
 }
 
 PixelRect unite(const PixelRect& a, const PixelRect& b) {

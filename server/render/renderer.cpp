@@ -493,16 +493,30 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         mask_scratch_.assign(level.clusters.size(), 0);
         const uint64_t all_lights =
             lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
+        // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
+        // otherwise each cluster on its own, needing at most the group's lights.
         PixelRect rect;
-        for (size_t c = 0; c < level.clusters.size(); ++c) {
-            const Cluster& cl_ = level.clusters[c];
-            rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
-            if (rect_scratch_[c].empty())
+        const size_t per_group = level.clusters_per_group;
+        for (size_t g = 0; g < level.groups.size(); ++g) {
+            const Cluster& group = level.groups[g];
+            if (project_sphere(group.centre, group.radius, k, r.eye, info_.near_m).empty())
                 continue;
-            mask_scratch_[c] =
-                r.sparse ? cluster_light_mask(cl_, r.eye.position, bound) : all_lights | 1;
-            if (mask_scratch_[c] != 0)
-                rect = unite(rect, rect_scratch_[c]);
+            const uint64_t group_mask =
+                r.sparse ? cluster_light_mask(group, level.shell, r.eye.position, bound)
+                         : all_lights | 1;
+            const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
+            for (size_t c = g * per_group; c < end; ++c) {
+                const Cluster& cl_ = level.clusters[c];
+                rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
+                if (rect_scratch_[c].empty() || group_mask == 0)
+                    continue;
+                mask_scratch_[c] =
+                    r.sparse
+                        ? cluster_light_mask(cl_, level.shell, r.eye.position, bound) & group_mask
+                        : group_mask;
+                if (mask_scratch_[c] != 0)
+                    rect = unite(rect, rect_scratch_[c]);
+            }
         }
         if (!r.sparse)
             rect = {0, 0, k.width, k.height};

@@ -1,6 +1,7 @@
 // The sparse VD path's bound must be conservative: wherever the double-precision reference puts
 // light above the quantisation step on a cluster, cluster_may_light says so. Checked by brute
-// force over every cluster of every level of the default hemisphere, for every specular model,
+// force over every cluster and group of every level of the default hemisphere (with its shell's
+// widening for the eye), for every specular model,
 // many eyes, and lights from far away to a few millimetres off the surface.
 #include <cmath>
 #include <random>
@@ -94,8 +95,10 @@ TEST(Clusters, BoundNeverMissesLight) {
             bound.lights = lights;
             bound.threshold = render::layer_threshold(true);
             const auto& level = levels[size_t(trial) % levels.size()];
-            for (const auto& cl : level.clusters) {
-                const bool may = render::cluster_may_light(cl, eye, bound);
+            std::vector<render::Cluster> tested = level.clusters;
+            tested.insert(tested.end(), level.groups.begin(), level.groups.end());
+            for (const auto& cl : tested) {
+                const bool may = render::cluster_may_light(cl, level.shell, eye, bound);
                 const double peak = brute_force_peak(level, cl, h, spec, lights, eye);
                 ++checked;
                 lit += may;
@@ -109,6 +112,69 @@ TEST(Clusters, BoundNeverMissesLight) {
     }
     // The bound must also cull: a test of a bound that says "lit" everywhere proves nothing.
     EXPECT_GT(culled, checked / 4) << lit << " lit of " << checked;
+}
+
+// What shaded_bounds promises, point by point: every sphere point a pixel of a cluster's
+// facing triangles shades lies within the bounds' sphere, with its normal within their cone;
+// checked for every cluster and group of every level from eyes at grazing and face-on angles.
+// The bounds must also be tighter than the widest widening where the eye sees a cluster
+// face-on, or the per-eye bound buys nothing.
+TEST(Clusters, ShadedPointsLieWithinTheShadedBounds) {
+    const scene::Scene s = scene::default_scene();
+    const auto& h = s.prop.hemisphere;
+    auto finest = scene::build_prop_mesh(s.prop);
+    ASSERT_TRUE(finest.ok());
+    const auto levels = render::prop_levels(s.prop, finest.value());
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    size_t points = 0, tighter = 0, bounded = 0;
+    for (size_t li = 0; li < levels.size(); ++li) {
+        const auto& level = levels[li];
+        ASSERT_GT(level.shell.outer_radius, level.shell.sphere_radius) << "level " << li;
+        std::vector<render::Cluster> tested = level.clusters;
+        tested.insert(tested.end(), level.groups.begin(), level.groups.end());
+        for (int e = 0; e < 4; ++e) {
+            const double az = 6.2831853 * u(rng), el = 1.5 * u(rng);
+            const glm::dvec3 eye =
+                h.centre + (0.3 + 1.2 * u(rng)) * glm::dvec3(std::cos(el) * std::cos(az),
+                                                             std::sin(el),
+                                                             std::cos(el) * std::sin(az));
+            for (size_t ci = 0; ci < tested.size(); ci += 1 + li) {
+                const auto& cl = tested[ci];
+                const render::Cluster b = render::shaded_bounds(cl, level.shell, eye);
+                const render::Cluster any = render::shaded_bounds(cl, level.shell, cl.centre);
+                if (b.cone_angle < 1.0) {
+                    ++bounded;
+                    tighter += b.cone_angle < any.cone_angle && b.radius < any.radius;
+                }
+                const auto& m = level.mesh;
+                for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
+                    const glm::dvec3 p0 = m.positions[m.indices[i]],
+                                     p1 = m.positions[m.indices[i + 1]],
+                                     p2 = m.positions[m.indices[i + 2]];
+                    if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
+                        continue;
+                    for (int k = 0; k < 6; ++k) {
+                        double w0 = u(rng), w1 = u(rng);
+                        if (w0 + w1 > 1)
+                            w0 = 1 - w0, w1 = 1 - w1;
+                        const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0));
+                        if (!q)
+                            continue;
+                        ++points;
+                        EXPECT_LE(glm::length(*q - b.centre), b.radius)
+                            << "level " << li << " cluster " << ci;
+                        const glm::dvec3 n = glm::normalize(*q - h.centre);
+                        const double angle = std::atan2(glm::length(glm::cross(n, b.cone_axis)),
+                                                        glm::dot(n, b.cone_axis));
+                        EXPECT_LE(angle, b.cone_angle) << "level " << li << " cluster " << ci;
+                    }
+                }
+            }
+        }
+    }
+    EXPECT_GT(points, 10000u);
+    EXPECT_GT(tighter, bounded / 4) << tighter << " of " << bounded;
 }
 
 TEST(Clusters, LevelsEncloseTheDomeWithinTheirError) {
