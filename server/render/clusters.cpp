@@ -168,8 +168,9 @@ size_t select_level(std::span<const ClusteredMesh> levels, const glm::dvec3& eye
                     double max_error_px) {
     if (levels.empty())
         return 0;
-    // The prop's bounds: the union of the finest level's clusters.
-    const auto& finest = levels.front().clusters;
+    // The prop's bounds: the union of the finest level's groups (each holds its triangles).
+    const auto& finest =
+        levels.front().groups.empty() ? levels.front().clusters : levels.front().groups;
     glm::dvec3 lo(1e300), hi(-1e300);
     for (const auto& c : finest) {
         lo = glm::min(lo, c.centre - c.radius);
@@ -384,8 +385,13 @@ PixelRect unite(const PixelRect& a, const PixelRect& b) {
 
 PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
                          const scene::Pose& camera, double near_m) {
+    return project_sphere(centre, radius, k, scene::frame_from_world(camera), near_m);
+}
+
+PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
+                         const glm::dmat4& frame_from_world, double near_m) {
     const PixelRect all{0, 0, k.width, k.height};
-    const glm::dvec3 q = glm::dvec3(scene::frame_from_world(camera) * glm::dvec4(centre, 1.0));
+    const glm::dvec3 q = glm::dvec3(frame_from_world * glm::dvec4(centre, 1.0));
     const double depth = -q.z;
     if (depth + radius <= near_m)
         return {};  // wholly behind the near plane

@@ -7,6 +7,7 @@
 #include <span>
 #include <vector>
 
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "scene/scene.hpp"
@@ -135,6 +136,9 @@ PixelRect unite(const PixelRect& a, const PixelRect& b);
 // it.
 PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
                          const scene::Pose& camera, double near_m);
+// The same with the camera's scene::frame_from_world(camera), made once for many spheres.
+PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
+                         const glm::dmat4& frame_from_world, double near_m);
 // `r` grown to whole tiles of `tile` pixels, clipped to the image.
 PixelRect align_to_tiles(const PixelRect& r, uint32_t tile, uint32_t width, uint32_t height);
 

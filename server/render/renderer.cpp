@@ -495,19 +495,24 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
         // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
         // otherwise each cluster on its own, needing at most the group's lights.
+        // A dark group's clusters need their rectangles only as occluders (a prop that is not
+        // convex).
         PixelRect rect;
         const size_t per_group = level.clusters_per_group;
+        const glm::dmat4 view = scene::frame_from_world(r.eye);
         for (size_t g = 0; g < level.groups.size(); ++g) {
             const Cluster& group = level.groups[g];
-            if (project_sphere(group.centre, group.radius, k, r.eye, info_.near_m).empty())
+            if (project_sphere(group.centre, group.radius, k, view, info_.near_m).empty())
                 continue;
             const uint64_t group_mask =
                 r.sparse ? cluster_light_mask(group, level.shell, r.eye.position, bound)
                          : all_lights | 1;
+            if (group_mask == 0 && convex_)
+                continue;
             const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
             for (size_t c = g * per_group; c < end; ++c) {
                 const Cluster& cl_ = level.clusters[c];
-                rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, r.eye, info_.near_m);
+                rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, view, info_.near_m);
                 if (rect_scratch_[c].empty() || group_mask == 0)
                     continue;
                 mask_scratch_[c] =
