@@ -57,6 +57,10 @@ const char* error_code_name(protocol::ErrorCode code) {
             return "invalid UTF-8";
         case E::kTimeout:
             return "timeout";
+        case E::kKicked:
+            return "kicked";
+        case E::kNoSuchSession:
+            return "no such session";
     }
     return nullptr;
 }

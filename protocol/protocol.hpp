@@ -53,8 +53,10 @@ enum class ErrorCode : uint16_t {
     kSceneRejected = 11,   // SceneUpdate JSON did not parse into a scene
     kServerBusy = 12,
     kInternal = 13,
-    kInvalidUtf8 = 14,  // a string field is not valid UTF-8
-    kTimeout = 15,      // no Hello in time, idle too long, or a frame left half-sent
+    kInvalidUtf8 = 14,    // a string field is not valid UTF-8
+    kTimeout = 15,        // no Hello in time, idle too long, or a frame left half-sent
+    kKicked = 16,         // an operator closed this session (Kick): do not reconnect on your own
+    kNoSuchSession = 17,  // Kick named no other open session
 };
 
 // Who sends a message: each type may be sent by the client, the server, or both

@@ -1,6 +1,6 @@
 // `hysar admin`: a running server seen and changed from a terminal, over the protocol's admin
 // role (protocol/PROTOCOL.md): push a scene (checked here first, then the server's answer),
-// the server's stats and its viewers as tables.
+// the server's stats and its viewers as tables, and close a headset's session (Kick).
 #include <unistd.h>
 #include <algorithm>
 #include <chrono>
@@ -44,6 +44,10 @@ constexpr const char* kUsage =
     "                         server's stats JSON as it is\n"
     "  viewers                one row per headset: frames, pose-to-layer p50/p95, superseded\n"
     "                         poses, bytes sent\n"
+    "  kick VIEWER            close a headset's session (Kick): VIEWER is its session id or its\n"
+    "       [--reason TEXT]   name as `viewers` shows them; the headset is told why (error 16)\n"
+    "                         and its client does not reconnect on its own. Waits until the\n"
+    "                         server no longer lists it\n"
     "\n"
     "  --connect ADDR         HOST:PORT or unix:PATH (default 127.0.0.1:7700)\n"
     "  --token-file F         the admin token: the first line of F (the server's\n"
@@ -53,7 +57,8 @@ constexpr const char* kUsage =
     "exit status: 0 done; 1 the server refused or did not answer in time; 2 bad arguments,\n"
     "an unreachable server or a refused token.\n"
     "example: hysar admin --connect 127.0.0.1:7700 --token-file /etc/hysar/admin-token \\\n"
-    "             scene push room.json\n";
+    "             scene push room.json\n"
+    "         hysar admin --token-file /etc/hysar/admin-token kick 12 --reason 'lens check'\n";
 
 // A usage error or an unreachable server: exit 2. A refused or unanswered request: exit 1.
 struct Failure {
@@ -73,8 +78,8 @@ struct Parsed {
 };
 
 Parsed parse(const std::vector<std::string>& args) {
-    static const std::set<std::string> with_value = {"--connect",    "--token-file", "--token",
-                                                     "--timeout-ms", "--watch",      "--count"};
+    static const std::set<std::string> with_value = {
+        "--connect", "--token-file", "--token", "--timeout-ms", "--watch", "--count", "--reason"};
     static const std::set<std::string> switches = {"--json"};
     Parsed p;
     for (size_t i = 0; i < args.size(); ++i) {
@@ -155,6 +160,28 @@ public:
         throw Failure{1, fmt::format("the server did not apply the scene within {} ms (still "
                                      "version {})",
                                      timeout_ms_, before)};
+    }
+
+    // Sends Kick for `session` and waits until the server no longer lists it among its
+    // headsets. A refusal (error 17: no such session; 7: not admin) is a Failure.
+    void kick(uint32_t session, const std::string& reason) {
+        send(proto::Kick{session, reason});
+        const auto deadline =
+            std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms_);
+        for (;;) {
+            // Answered in order: an Error for the Kick comes before this Stats.
+            const json s = stats();
+            bool listed = false;
+            const json& list = s.contains("viewers") ? s["viewers"] : json();
+            for (const json& v : list.is_array() ? list : json::array())
+                listed |= v.value("session", 0u) == session && v.value("connected", true);
+            if (!listed)
+                return;
+            if (std::chrono::steady_clock::now() >= deadline)
+                throw Failure{1, fmt::format("the server still lists session {} after {} ms",
+                                             session, timeout_ms_)};
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
     }
 
 private:
@@ -245,6 +272,31 @@ std::string viewers_table(const json& stats) {
     return out;
 }
 
+// The headset `what` names in the stats: its session id (digits) or its name, which must be
+// one headset's alone. Returns its id and name.
+std::pair<uint32_t, std::string> find_viewer(const json& stats, const std::string& what) {
+    const json& list = sub(stats, "viewers");
+    const bool is_id =
+        !what.empty() && what.size() <= 10 &&
+        std::all_of(what.begin(), what.end(), [](char c) { return c >= '0' && c <= '9'; });
+    std::vector<std::pair<uint32_t, std::string>> found;
+    for (const json& v : list.is_array() ? list : json::array()) {
+        if (!v.value("connected", true))
+            continue;
+        const uint32_t id = v.value("session", 0u);
+        const std::string name = v.value("name", std::string());
+        if (is_id ? std::to_string(id) == what : name == what)
+            found.emplace_back(id, name);
+    }
+    if (found.size() == 1)
+        return found.front();
+    if (found.empty())
+        throw Failure{1, fmt::format("no connected headset has {} '{}' (see hysar admin viewers)",
+                                     is_id ? "session id" : "the name", printable(what, 64))};
+    throw Failure{1, fmt::format("{} headsets are named '{}': give the session id", found.size(),
+                                 printable(what, 64))};
+}
+
 std::string stats_table(const json& s) {
     std::string out;
     auto row = [&](const std::string& what, const std::string& value) {
@@ -279,17 +331,30 @@ int run(const std::vector<std::string>& args) {
     const int timeout_ms = int(a.integer("--timeout-ms", 30000, 100, 600000));
     const auto& w = p.words;
     if (w.empty())
-        throw Failure{2, "no command (scene push FILE, stats, viewers; see hysar admin --help)"};
+        throw Failure{2,
+                      "no command (scene push FILE, stats, viewers, kick VIEWER; see hysar "
+                      "admin --help)"};
     const bool push = w.size() >= 2 && w[0] == "scene" && w[1] == "push";
     const bool stats = w[0] == "stats" && w.size() == 1;
     const bool viewers = w[0] == "viewers" && w.size() == 1;
+    const bool kick = w[0] == "kick";
     if (push && w.size() != 3)
         throw Failure{2, "scene push needs one FILE (hysar admin scene push room.json)"};
-    if (!push && !stats && !viewers) {
+    if (kick && w.size() != 2)
+        throw Failure{2, "kick needs one VIEWER, its session id or name (hysar admin kick 12)"};
+    if (!push && !stats && !viewers && !kick) {
         std::string words;
         for (const auto& x : w) words += (words.empty() ? "" : " ") + x;
-        throw Failure{2, "unknown command '" + words + "' (scene push FILE, stats, viewers)"};
+        throw Failure{2, "unknown command '" + words +
+                             "' (scene push FILE, stats, viewers, kick "
+                             "VIEWER)"};
     }
+    if (p.options.count("--reason") && !kick)
+        throw Failure{2, "--reason goes with the kick command"};
+    const std::string reason = a.get("--reason", "");
+    if (reason.size() > proto::kMaxErrorMessageBytes)
+        throw Failure{2, fmt::format("--reason: at most {} bytes, got {}",
+                                     proto::kMaxErrorMessageBytes, reason.size())};
     if ((p.options.count("--watch") || p.options.count("--count") || p.options.count("--json")) &&
         !stats)
         throw Failure{2, "--watch, --count and --json go with the stats command"};
@@ -318,6 +383,12 @@ int run(const std::vector<std::string>& args) {
     }
     if (viewers) {
         std::fputs(viewers_table(session.stats()).c_str(), stdout);
+        return 0;
+    }
+    if (kick) {
+        const auto [id, name] = find_viewer(session.stats(), w[1]);
+        session.kick(id, reason);
+        std::printf("closed session %u (%s)\n", id, printable(name, 64).c_str());
         return 0;
     }
     std::signal(SIGINT, on_stop);

@@ -100,7 +100,8 @@ typedef enum hysar_event_kind {
     HYSAR_EVENT_PROJECTOR_FRAME = 4, /* a projector frame: scene_version, image */
     HYSAR_EVENT_SERVER_ERROR = 5,    /* an Error from the server: error_code, text */
     HYSAR_EVENT_STATS = 6,           /* the answer to hysar_client_request_stats(): text (JSON) */
-    HYSAR_EVENT_CLOSED = 7           /* no more events: closed, or reconnecting gave up (text) */
+    HYSAR_EVENT_CLOSED = 7           /* no more events: closed, closed by an operator (error 16:
+                                        never reconnected), or reconnecting gave up (text) */
 } hysar_event_kind;
 
 typedef struct hysar_image {

@@ -399,7 +399,7 @@ void Session::run() {
             if (stop_)
                 break;
         }
-        std::string lost;
+        std::string lost, kicked;
         if (!send_pending()) {
             lost = conn_->last_error();
         } else {
@@ -446,12 +446,26 @@ void Session::run() {
                     } else if (std::holds_alternative<proto::Bye>(*m)) {
                         lost = "the server ended the session (Bye)";
                     } else {
+                        // An operator's Kick (error 16) ends the session for good: no reconnect.
+                        const auto* err = std::get_if<proto::Error>(&*m);
+                        if (err && err->code == proto::ErrorCode::kKicked)
+                            kicked = "closed by the server: " + describe(*err);
                         handle(std::move(*m), last_received_ns_);
                     }
-                    if (!lost.empty())
+                    if (!lost.empty() || !kicked.empty())
                         break;
                 }
             }
+        }
+        if (!kicked.empty()) {
+            std::lock_guard lock(mutex_);
+            info_.connected = false;
+            closed_ = true;
+            SessionEvent e;
+            e.kind = SessionEvent::Kind::kClosed;
+            e.text = kicked;
+            push(std::move(e));
+            break;
         }
         if (!lost.empty() && !reconnect(lost))
             break;

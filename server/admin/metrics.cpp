@@ -4,6 +4,8 @@
 
 #include <fmt/format.h>
 
+#include "protocol/protocol.hpp"
+
 namespace hs::admin {
 
 namespace {
@@ -17,10 +19,12 @@ constexpr auto kForget = std::chrono::seconds(60);
 // Protocol error codes (PROTOCOL.md, "Errors") as label values.
 const char* error_name(int code) {
     static const char* const kNames[] = {
-        "other",        "bad_magic",    "bad_version",     "unknown_type",
-        "too_large",    "malformed",    "unauthorized",    "forbidden",
-        "out_of_order", "invalid_pose", "invalid_display", "scene_rejected",
-        "server_busy",  "internal",     "invalid_utf8",    "timeout"};
+        "other",           "bad_magic",      "bad_version",    "unknown_type", "too_large",
+        "malformed",       "unauthorized",   "forbidden",      "out_of_order", "invalid_pose",
+        "invalid_display", "scene_rejected", "server_busy",    "internal",     "invalid_utf8",
+        "timeout",         "kicked",         "no_such_session"};
+    static_assert(std::size(kNames) == size_t(protocol::ErrorCode::kNoSuchSession) + 1,
+                  "a protocol error code without a label");
     return code >= 0 && code < int(std::size(kNames)) ? kNames[code] : "other";
 }
 

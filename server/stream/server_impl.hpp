@@ -35,7 +35,8 @@ inline constexpr size_t kKeepReceiveBuffer = 65536;
 // Departed viewers whose figures the stats keep (the most recent).
 inline constexpr size_t kDepartedViewers = 1024;
 inline constexpr uint32_t kMaxAcceptBackoffMs = 1000;
-inline constexpr int kErrorCodes = 16;  // ErrorCode values counted in the stats
+// ErrorCode values counted in the stats: every code this version sends.
+inline constexpr int kErrorCodes = int(proto::ErrorCode::kNoSuchSession) + 1;
 
 uint64_t now_ns();
 double ms_since(Clock::time_point t);

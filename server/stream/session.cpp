@@ -289,6 +289,8 @@ void Session::handle(const proto::Message& msg) {
                     srv_.scheduler.request_frame(id_);
             } else if constexpr (std::is_same_v<T, proto::SceneUpdate>) {
                 scene_update(m, seq);
+            } else if constexpr (std::is_same_v<T, proto::Kick>) {
+                kick(m, seq);
             } else if constexpr (std::is_same_v<T, proto::StatsRequest>) {
                 auto b = wire(proto::Stats{srv_.stats().dump(
                                   -1, ' ', false, nlohmann::json::error_handler_t::replace)},
@@ -323,6 +325,25 @@ void Session::scene_update(const proto::SceneUpdate& m, uint32_t seq) {
     if (!accepted)
         return error(proto::ErrorCode::kSceneRejected, accepted.error().message, false, seq);
     srv_.queue_scene(std::move(accepted).value(), id_, seq);
+}
+
+void Session::kick(const proto::Kick& m, uint32_t seq) {
+    if (role_ != proto::Role::kAdmin)
+        return error(proto::ErrorCode::kForbidden, "only an admin session may close another", false,
+                     seq);
+    auto it = srv_.sessions.find(m.session_id);
+    if (m.session_id == id_ || it == srv_.sessions.end() || it->second->closed_ ||
+        it->second->closing_since_)
+        return error(proto::ErrorCode::kNoSuchSession,
+                     fmt::format("no other open session has id {}", m.session_id), false, seq);
+    const std::string reason = proto::printable_utf8(m.reason);
+    log::for_session(id_, name_)
+        .info("closing session {} ({}) at an operator's request: {}", m.session_id,
+              it->second->name_, reason.empty() ? "no reason given" : reason);
+    it->second->error(proto::ErrorCode::kKicked,
+                      reason.empty() ? "an operator closed this session"
+                                     : "an operator closed this session: " + reason,
+                      true, 0);
 }
 
 void Session::write_next() {

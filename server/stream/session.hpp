@@ -68,6 +68,8 @@ private:
     void hello(const proto::Hello& hello, uint32_t seq);
     void handle(const proto::Message& msg);
     void scene_update(const proto::SceneUpdate& m, uint32_t seq);
+    // An admin's Kick: the named session gets error 16 and is closed (PROTOCOL.md, Kick).
+    void kick(const proto::Kick& m, uint32_t seq);
     void write_next();
 
     // Drops queued frames that `pred` picks, except the one being written.

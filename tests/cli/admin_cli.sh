@@ -2,8 +2,9 @@
 # `hysar admin` against a running server with two headsets: viewers lists both, stats prints a
 # table (twice with --watch/--count) and --json the server's JSON, scene push applies a changed
 # scene (a newer scene version, and the projector gets its frame), a broken scene file is refused
-# before anything is sent, a scene the server refuses comes back with its error (exit 1), and a
-# wrong token, an unreachable server and bad arguments exit 2 with a sentence.
+# before anything is sent, a scene the server refuses comes back with its error (exit 1), kick
+# closes one headset (the other is served on), and a wrong token, an unreachable server and bad
+# arguments exit 2 with a sentence.
 set -euo pipefail
 bin="$1" src="$2"
 dir=$(mktemp -d)
@@ -106,6 +107,22 @@ expect "no command" 2 err "no command" "${admin[@]}"
 expect "scene push without a file" 2 err "scene push needs one FILE" "${admin[@]}" scene push
 expect "--watch on viewers" 2 err "go with the stats command" "${admin[@]}" viewers --watch 1
 expect "--watch 0" 2 err "--watch: '0' is outside \[0\.2, 3600\]" "${admin[@]}" stats --watch 0
+# kick: a headset by name, told why (the server's log says who asked and why); again, it is
+# gone; bad arguments.
+expect "kick by name" 0 all "^closed session [0-9]+ \(loadgen-1\)" \
+  "${admin[@]}" kick loadgen-1 --reason "lens check"
+expect "kick of a closed session" 1 err "no connected headset has the name 'loadgen-1'" \
+  "${admin[@]}" kick loadgen-1
+expect "kick without a viewer" 2 err "kick needs one VIEWER" "${admin[@]}" kick
+expect "--reason on viewers" 2 err "--reason goes with the kick command" \
+  "${admin[@]}" viewers --reason x
 finish || fail "a refusal is not as documented"
+grep -q "closing session [0-9]* (loadgen-1) at an operator's request: lens check" "$dir/serve.log" ||
+  fail "kick: the server's log does not say who was closed and why"
+out=$("${admin[@]}" viewers)
+[[ $(echo "$out" | awk '$2 == "loadgen-1" && $3 == "yes"' | wc -l) -eq 0 ]] ||
+  fail "kick: loadgen-1 is still connected: $out"
+[[ $(echo "$out" | awk '$2 == "loadgen-0" && $3 == "yes"' | wc -l) -eq 1 ]] ||
+  fail "kick: loadgen-0 was not served on: $out"
 "$bin/hysar" admin --help | grep -q "^usage: hysar admin" || fail "--help"
-echo "admin test: viewers, stats, scene push and every refusal as documented"
+echo "admin test: viewers, stats, scene push, kick and every refusal as documented"

@@ -1,11 +1,13 @@
 // libhysar-client through its C API against a real server (lavapipe, validation on): the first
 // session, layers with their pose, a server that goes away and comes back (the display, the last
 // pose and an unanswered FrameRequest are sent again without the application doing anything),
-// giving up, the bounded queue, and bad arguments.
+// giving up, an operator's Kick (no reconnect), the bounded queue, and bad arguments.
 #include <filesystem>
 #include <random>
+#include <thread>
 
 #include "clients/client_handle.hpp"
+#include "clients/connection.hpp"
 #include "clients/lib/session.hpp"
 #include "net/net_fixture.hpp"
 
@@ -212,6 +214,41 @@ TEST_F(ClientLib, GivesUpAfterTheAttemptsItWasAllowed) {
     const hysar_pose p = pose(0);
     EXPECT_EQ(hysar_client_send_pose(c.get(), &p, nullptr), HYSAR_E_CLOSED);
     EXPECT_STRNE(hysar_last_error(), "");
+}
+
+// An operator's Kick (error 16) ends the session for good: the library reports the error and
+// CLOSED with the reason, and does not reconnect though it may reconnect forever.
+TEST_F(ClientLib, AKickedClientDoesNotReconnect) {
+    hysar_client_config cfg = config();
+    ASSERT_EQ(cfg.reconnect_attempts, -1);  // forever
+    auto c = connect(cfg);
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    hysar_client_info info{};
+    ASSERT_EQ(hysar_client_get_info(c.get(), &info), HYSAR_OK);
+    ASSERT_NE(info.session_id, 0u);
+
+    auto opened = client::Connection::open(address_);
+    ASSERT_TRUE(std::holds_alternative<std::unique_ptr<client::Connection>>(opened));
+    auto admin = std::move(std::get<std::unique_ptr<client::Connection>>(opened));
+    ASSERT_FALSE(admin->hello(proto::Role::kAdmin, kAdminToken, "operator"));
+    ASSERT_TRUE(admin->send(proto::Kick{info.session_id, "lens check"}, 1));
+
+    e = wait_for(c.get(), HYSAR_EVENT_SERVER_ERROR);
+    EXPECT_EQ(e.error_code, uint32_t(proto::ErrorCode::kKicked));
+    hysar_event_release(&e);
+    e = wait_for(c.get(), HYSAR_EVENT_CLOSED);
+    EXPECT_NE(std::string(e.text).find("lens check"), std::string::npos) << e.text;
+    hysar_event_release(&e);
+    hysar_event after;
+    EXPECT_EQ(hysar_client_poll(c.get(), 0, &after), HYSAR_E_CLOSED);
+    ASSERT_EQ(hysar_client_get_info(c.get(), &info), HYSAR_OK);
+    EXPECT_EQ(info.reconnects, 0u);
+    EXPECT_EQ(info.connected, 0u);
+    // Nor later: the server still counts the admin alone.
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    EXPECT_EQ(server_->stats()["sessions"], 1);
 }
 
 TEST_F(ClientLib, TheQueueKeepsTheNewestImagesOnly) {

@@ -609,6 +609,50 @@ TEST_F(ProtocolRules, ByeClosesBothWays) {
     EXPECT_TRUE(b->wait_closed());
 }
 
+// PROTOCOL.md, Kick: only an admin may close another session; the named session gets error 16
+// (sequence 0, the reason in its message) and is closed, the Kick is not answered, and a Kick
+// naming no other open session (none, the admin itself, one already closed) is error 17 with
+// the admin's session open.
+TEST_F(ProtocolRules, KickClosesTheNamedSessionOnly) {
+    auto a = headset_peer(small_display());
+    auto b = headset_peer(small_display());
+    auto admin = peer();
+    const auto welcome = hello(*admin, proto::Role::kAdmin);
+    ASSERT_TRUE(welcome);
+    const uint32_t id_admin = welcome->as<proto::Welcome>()->session_id;
+    ASSERT_TRUE(eventually([](const auto& s) { return s["viewers"].size() == 2; }));
+    std::vector<uint32_t> ids;  // sessions are numbered as they connect: a's is the lower
+    const auto now = stats();
+    for (const auto& v : now["viewers"]) ids.push_back(v["session"].get<uint32_t>());
+    ASSERT_EQ(ids.size(), 2u);
+    const uint32_t id_a = std::min(ids[0], ids[1]);
+
+    ASSERT_TRUE(b->send(proto::Kick{id_a, "not mine"}, 4));  // a headset may not
+    expect_error(*b, proto::ErrorCode::kForbidden, 4, "admin");
+    ASSERT_TRUE(admin->send(proto::Kick{id_admin, ""}, 5));  // nor close itself
+    expect_error(*admin, proto::ErrorCode::kNoSuchSession, 5, "no other open session");
+    ASSERT_TRUE(admin->send(proto::Kick{999999, ""}, 6));
+    expect_error(*admin, proto::ErrorCode::kNoSuchSession, 6, "999999");
+
+    ASSERT_TRUE(admin->send(proto::Kick{id_a, "lens check"}, 7));
+    std::vector<Frame> seen;
+    EXPECT_TRUE(a->wait_closed(20000, &seen)) << "the kicked session stayed open";
+    bool told = false;
+    for (const auto& f : seen)
+        if (const auto* e = f.as<proto::Error>()) {
+            EXPECT_EQ(int(e->code), int(proto::ErrorCode::kKicked));
+            EXPECT_EQ(f.header.sequence, 0u);
+            EXPECT_NE(e->message.find("lens check"), std::string::npos) << e->message;
+            told = true;
+        }
+    EXPECT_TRUE(told) << "the kicked session was not told why";
+    expect_pong(*admin, 8);                              // the Kick itself was not answered
+    ASSERT_TRUE(admin->send(proto::Kick{id_a, ""}, 9));  // gone now
+    expect_error(*admin, proto::ErrorCode::kNoSuchSession, 9);
+    expect_pong(*b, 10);  // the other headset is served on
+    EXPECT_TRUE(eventually([](const auto& s) { return s["sessions"] == 2; }));
+}
+
 // PROTOCOL.md §Rules.Framing: frames the server cannot take are answered with their error
 // (sequence echoed) and the connection is closed: an unknown type, a payload over its type's
 // limit, a type only the server sends, a payload that does not decode.

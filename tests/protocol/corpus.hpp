@@ -217,7 +217,8 @@ inline std::vector<Message> samples() {
             Ping{77},
             Pong{77, 88},
             Error{ErrorCode::kInvalidPose, "pose quaternion is not unit length"},
-            Bye{0}};
+            Bye{0},
+            Kick{7, "lens check"}};
 }
 
 // Frames `sender` could send that its peer must refuse (see CorpusFrame), for every message
@@ -389,7 +390,7 @@ inline std::vector<CorpusFrame> malformed_frames(Side sender = Side::kClient) {
     add("version 2", patched(4, {2, 0}), ErrorCode::kBadVersion);
     add("version 0xFFFF", patched(4, {0xff, 0xff}), ErrorCode::kBadVersion);
     add("type 0", patched(6, {0, 0}), ErrorCode::kUnknownType);
-    add("type 15", patched(6, {15, 0}), ErrorCode::kUnknownType);
+    add("type 16", patched(6, {16, 0}), ErrorCode::kUnknownType);
     add("type 0xFFFF", patched(6, {0xff, 0xff}), ErrorCode::kUnknownType);
     add("a header cut to 8 bytes", std::vector<uint8_t>(ping.begin(), ping.begin() + 8),
         ErrorCode::kMalformed, true);

@@ -157,7 +157,7 @@ TEST(Protocol, DefaultsAndAggregatesFollowTheTable) {
     static_assert(std::is_same_v<decltype(VdLayer::data), std::vector<uint8_t>>);
     static_assert(std::is_same_v<decltype(Welcome::server_time_ns), uint64_t>);
     static_assert(std::is_same_v<std::variant_alternative_t<0, Message>, Hello>);
-    static_assert(std::variant_size_v<Message> == 14);
+    static_assert(std::variant_size_v<Message> == 15);
     // The variant's order is the type ids' order.
     for (const Message& m : every_message()) EXPECT_EQ(size_t(type_of(m)), m.index() + 1);
 }
@@ -203,7 +203,7 @@ TEST(Protocol, RejectsUnknownType) {
     b[6] = 0;  // type 0 is not a message either
     EXPECT_EQ(decode_error(b).code, ErrorCode::kUnknownType);
     EXPECT_FALSE(may_send(MessageType(0), Side::kClient));
-    EXPECT_FALSE(max_payload(15));
+    EXPECT_FALSE(max_payload(16));
 }
 
 TEST(Protocol, RejectsOversizePayloadFromTheHeaderAlone) {
@@ -250,7 +250,7 @@ TEST(Protocol, DecoderRejectsWrongDirection) {
             EXPECT_EQ(std::get<DecodeError>(h).code, ErrorCode::kForbidden);
         }
     }
-    EXPECT_EQ(checked, 10);  // 4 server-only types, 6 client-only types
+    EXPECT_EQ(checked, 11);  // 4 server-only types, 7 client-only types
     VdLayer l;
     l.width = l.height = 1;
     l.data = {1, 2, 3, 4};
