@@ -162,7 +162,7 @@ Result<void> parse_listen(const std::string& v, stream::ServerCreateInfo& info) 
         return make_error(
             ErrorCode::kInvalidArgument,
             fmt::format("--listen: '{}' is not HOST:PORT with a port in [0, 65535]", v));
-    info.host = v.substr(0, colon);
+    info.host = admin::unbracketed(v.substr(0, colon));
     info.port = uint16_t(*port);
     return {};
 }
@@ -324,10 +324,11 @@ int run_serve(const std::vector<std::string>& args) {
         std::fprintf(stderr, "hysar serve: %s\n", server.error().message.c_str());
         return 1;
     }
-    std::printf(
-        "serving '%s' on %s:%u%s (device: %s)%s\n", s.value().name.c_str(), info.host.c_str(),
-        server.value()->port(), info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
-        device.value()->name().c_str(), info.admin_token.empty() ? "; admin role disabled" : "");
+    std::printf("serving '%s' on %s:%u%s (device: %s)%s\n", s.value().name.c_str(),
+                admin::bracketed(info.host).c_str(), server.value()->port(),
+                info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
+                device.value()->name().c_str(),
+                info.admin_token.empty() ? "; admin role disabled" : "");
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (admin_options) {
         admin_options->token = info.token;
@@ -345,7 +346,7 @@ int run_serve(const std::vector<std::string>& args) {
         std::printf(
             "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
             "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
-            admin_options->host.c_str(), admin_endpoint->port());
+            admin::bracketed(admin_options->host).c_str(), admin_endpoint->port());
     }
     std::fflush(stdout);
     struct sigaction stop_action {

@@ -403,9 +403,20 @@ Result<std::unique_ptr<AdminServer>> AdminServer::start(const AdminOptions& opti
     return std::unique_ptr<AdminServer>(new AdminServer(std::move(impl)));
 }
 
+std::string unbracketed(const std::string& host) {
+    return host.size() >= 2 && host.front() == '[' && host.back() == ']'
+               ? host.substr(1, host.size() - 2)
+               : host;
+}
+
+std::string bracketed(const std::string& host) {
+    return host.find(':') != std::string::npos ? "[" + host + "]" : host;
+}
+
 Result<std::pair<std::string, uint16_t>> parse_admin_listen(const std::string& value) {
     const auto colon = value.rfind(':');
-    const std::string host = colon == std::string::npos ? "127.0.0.1" : value.substr(0, colon);
+    const std::string host =
+        colon == std::string::npos ? "127.0.0.1" : unbracketed(value.substr(0, colon));
     const std::string port = colon == std::string::npos ? value : value.substr(colon + 1);
     uint32_t p = 0;
     bool ok = !port.empty() && port.size() <= 5 && !host.empty();

@@ -66,7 +66,12 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-// "[HOST:]PORT" of --admin-listen: a bare port means 127.0.0.1. An error names the value.
+// "[HOST:]PORT" of --admin-listen: a bare port means 127.0.0.1; an IPv6 HOST may be written in
+// brackets ([::1]:9100) or bare (::1:9100). An error names the value.
 Result<std::pair<std::string, uint16_t>> parse_admin_listen(const std::string& value);
+// `host` without the brackets of an IPv6 address written as [ADDRESS].
+std::string unbracketed(const std::string& host);
+// `host` as HOST:PORT and URLs write it: an IPv6 address in brackets.
+std::string bracketed(const std::string& host);
 
 }  // namespace hs::admin

@@ -555,7 +555,7 @@ TEST_F(AdminFullTest, ConnectionsBeyondTheWorkersAndTheWaitingAreRefusedAtOnce) 
     }
 }
 
-TEST(AdminListen, ABarePortMeansLoopbackAndBadValuesAreNamed) {
+TEST(AdminListen, ABarePortMeansLoopbackIPv6MayBeBracketedAndBadValuesAreNamed) {
     auto a = admin::parse_admin_listen("9100");
     ASSERT_TRUE(a.ok());
     EXPECT_EQ(a.value().first, "127.0.0.1");
@@ -564,7 +564,21 @@ TEST(AdminListen, ABarePortMeansLoopbackAndBadValuesAreNamed) {
     ASSERT_TRUE(b.ok());
     EXPECT_EQ(b.value().first, "0.0.0.0");
     EXPECT_EQ(b.value().second, 0);
-    for (const char* bad : {"", "x", "70000", "127.0.0.1:", ":9100", "1.2.3.4:-1", "9100 "}) {
+    auto v6 = admin::parse_admin_listen("[::1]:9100");
+    ASSERT_TRUE(v6.ok());
+    EXPECT_EQ(v6.value().first, "::1");
+    EXPECT_EQ(v6.value().second, 9100);
+    auto bare6 = admin::parse_admin_listen("::1:9101");
+    ASSERT_TRUE(bare6.ok());
+    EXPECT_EQ(bare6.value().first, "::1");
+    EXPECT_EQ(bare6.value().second, 9101);
+    EXPECT_EQ(admin::unbracketed("[fe80::1]"), "fe80::1");
+    EXPECT_EQ(admin::unbracketed("127.0.0.1"), "127.0.0.1");
+    EXPECT_EQ(admin::unbracketed("[]"), "");
+    EXPECT_EQ(admin::bracketed("::1"), "[::1]");
+    EXPECT_EQ(admin::bracketed("0.0.0.0"), "0.0.0.0");
+    for (const char* bad :
+         {"", "x", "70000", "127.0.0.1:", ":9100", "1.2.3.4:-1", "9100 ", "[]:9100"}) {
         auto r = admin::parse_admin_listen(bad);
         ASSERT_FALSE(r.ok()) << bad;
         EXPECT_NE(r.error().message.find(std::string("'") + bad + "'"), std::string::npos);
