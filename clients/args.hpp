@@ -23,6 +23,8 @@
 #include <variant>
 #include <vector>
 
+#include "clients/tls.hpp"
+
 namespace hs::client {
 
 // A usage error: thrown by Args::fail, reported by run_main as "PROGRAM: message", exit 2.
@@ -269,6 +271,28 @@ public:
         for (unsigned char ch : t)
             if (ch < 0x20 || ch == 0x7f)
                 fail(where + ": the token contains a control character");
+        return t;
+    }
+
+    // The TLS options (--tls, --tls-ca FILE, --tls-fingerprint SHA256; either value implies
+    // --tls), checked: the CA file readable, the pin well formed. Their strings live in the
+    // result, so a config may point at them while it lives.
+    TlsOptions tls_options() const {
+        TlsOptions t;
+        t.enabled = has("--tls") || has("--tls-ca") || has("--tls-fingerprint");
+        if (has("--tls-ca")) {
+            t.ca_file = get("--tls-ca", "");
+            std::ifstream in(t.ca_file);
+            if (t.ca_file.empty() || !in)
+                fail("--tls-ca '" + t.ca_file + "': cannot read the file");
+        }
+        if (has("--tls-fingerprint")) {
+            std::string why;
+            auto f = normalise_fingerprint(get("--tls-fingerprint", ""), &why);
+            if (!f)
+                fail("--tls-fingerprint: " + why);
+            t.fingerprint = *f;
+        }
         return t;
     }
 

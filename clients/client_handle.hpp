@@ -8,6 +8,7 @@
 #include <csignal>
 #include <cstdio>
 #include <memory>
+#include <set>
 #include <string>
 #include <variant>
 
@@ -45,17 +46,32 @@ inline hysar_display to_c(const protocol::RegisterDisplay& d) {
 }
 
 // The options of every client about the connection, in its usage text.
-inline constexpr const char* kReconnectUsage =
+inline constexpr const char* kConnectionUsage =
     "  --retries N      reconnect attempts after the connection is lost (default -1: forever;\n"
     "                   0: exit at once); each waits a jittered back-off that doubles from\n"
     "                   --backoff-ms up to 5 s, then Hello, the display and the last pose go "
     "again\n"
-    "  --backoff-ms MS  the first back-off (1..60000, default 250)\n";
+    "  --backoff-ms MS  the first back-off (1..60000, default 250)\n"
+    "  --tls            TLS to a server started with --tls-cert/--tls-key (TCP addresses);\n"
+    "                   its certificate checked against the system's trusted CAs\n"
+    "  --tls-ca FILE    trust this CA, or the server's self-signed certificate (PEM); the\n"
+    "                   certificate must name the host or IP connected to; implies --tls\n"
+    "  --tls-fingerprint SHA256  pin the server certificate's SHA-256 (as `hysar serve` prints\n"
+    "                   it, AB:CD:...); alone, the pin decides; implies --tls\n";
+// The options above: value options, then flags, to add to a program's Args.
+inline const std::set<std::string> kConnectionOptions = {"--retries", "--backoff-ms", "--tls-ca",
+                                                         "--tls-fingerprint"};
+inline const std::set<std::string> kConnectionFlags = {"--tls"};
+// `a` and `b` together.
+inline std::set<std::string> with(std::set<std::string> a, const std::set<std::string>& b) {
+    a.insert(b.begin(), b.end());
+    return a;
+}
 
 // The configuration of a client from its options (address and token already checked).
 inline hysar_client_config client_config(Args& args, const std::string& address,
                                          const std::string& token, const std::string& name,
-                                         uint32_t role) {
+                                         uint32_t role, const TlsOptions& tls) {
     hysar_client_config c;
     hysar_client_config_init(&c);
     c.address = address.c_str();
@@ -65,6 +81,11 @@ inline hysar_client_config client_config(Args& args, const std::string& address,
     c.reconnect_attempts = int32_t(args.integer("--retries", -1, -1, 1000000));
     c.reconnect_initial_ms = uint32_t(args.integer("--backoff-ms", 250, 1, 60000));
     c.reconnect_max_ms = std::max<uint32_t>(c.reconnect_initial_ms, 5000);
+    c.tls = tls.enabled ? 1 : 0;
+    c.tls_ca_file = tls.ca_file.empty() ? nullptr : tls.ca_file.c_str();
+    c.tls_fingerprint = tls.fingerprint.empty() ? nullptr : tls.fingerprint.c_str();
+    if (tls.enabled && address.rfind("unix:", 0) == 0)
+        args.fail("--tls: '" + address + "' is a Unix socket, which is local and speaks plain");
     return c;
 }
 

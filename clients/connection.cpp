@@ -146,11 +146,15 @@ std::optional<std::string> connect_within(int fd, const sockaddr* sa, socklen_t 
 }  // namespace
 
 std::variant<std::unique_ptr<Connection>, std::string> Connection::open(const std::string& address,
-                                                                        int timeout_ms) {
+                                                                        int timeout_ms,
+                                                                        const TlsOptions& tls) {
     auto parsed = parse_address(address);
     if (auto* e = std::get_if<std::string>(&parsed))
         return "'" + address + "': " + *e;
     const Address& a = std::get<Address>(parsed);
+    if (a.unix_socket && tls.enabled)
+        return "'" + address + "': TLS is for TCP addresses; a Unix socket is local and " +
+               "guarded by its file permissions (the server speaks plain on it)";
     if (a.unix_socket) {
         sockaddr_un sa{};
         sa.sun_family = AF_UNIX;
@@ -182,7 +186,15 @@ std::variant<std::unique_ptr<Connection>, std::string> Connection::open(const st
             ::freeaddrinfo(res);
             int one = 1;
             ::setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
-            return std::unique_ptr<Connection>(new Connection(fd));
+            if (!tls.enabled)
+                return std::unique_ptr<Connection>(new Connection(fd));
+            auto channel = TlsChannel::handshake(fd, tls, a.host, timeout_ms);
+            if (auto* e = std::get_if<std::string>(&channel)) {
+                ::close(fd);
+                return address + ": " + *e;
+            }
+            return std::unique_ptr<Connection>(
+                new Connection(fd, std::move(std::get<std::unique_ptr<TlsChannel>>(channel))));
         }
         last = *err;
         ::close(fd);
@@ -196,6 +208,7 @@ Connection::~Connection() {
 }
 
 void Connection::close() {
+    tls_.reset();
     if (fd_ >= 0)
         ::close(fd_);
     fd_ = -1;
@@ -206,6 +219,24 @@ bool Connection::send_bytes(const void* data, size_t n) {
     if (fd_ < 0) {
         last_error_ = "the connection is closed";
         return false;
+    }
+    while (n > 0 && tls_) {
+        const long w = tls_->write(p, n);
+        if (w == TlsChannel::kWouldBlock) {
+            pollfd pfd{fd_, tls_->wanted_events(), 0};
+            if (::poll(&pfd, 1, -1) < 0 && errno != EINTR) {
+                last_error_ = std::string("the connection was lost: poll: ") + std::strerror(errno);
+                return false;
+            }
+            continue;
+        }
+        if (w <= 0) {
+            last_error_ = "the connection was lost: " +
+                          (w == TlsChannel::kClosed ? std::string("closed") : tls_->error());
+            return false;
+        }
+        p += w;
+        n -= size_t(w);
     }
     while (n > 0) {
         ssize_t w = ::send(fd_, p, n, MSG_NOSIGNAL);
@@ -236,6 +267,30 @@ bool Connection::fill(size_t want, int timeout_ms) {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
     if (inbox_.size() < want)
         inbox_.resize(want);  // grows once per frame size; never shrinks between frames
+    while (inbox_len_ < want && tls_) {
+        // Decrypted bytes may wait inside OpenSSL: read first, poll only when it would block.
+        const long r = tls_->read(inbox_.data() + inbox_len_, want - inbox_len_);
+        if (r > 0) {
+            inbox_len_ += size_t(r);
+            bytes_read_ += uint64_t(r);
+            continue;
+        }
+        if (r != TlsChannel::kWouldBlock) {
+            if (r == TlsChannel::kFailed)
+                lost_why_ = tls_->error();
+            close();
+            return false;
+        }
+        const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                 deadline - std::chrono::steady_clock::now())
+                                 .count());
+        pollfd pfd{fd_, tls_->wanted_events(), 0};
+        const int rc = ::poll(&pfd, 1, std::max(left, 0));
+        if (rc < 0 && errno == EINTR)
+            continue;
+        if (rc <= 0)
+            return false;
+    }
     while (inbox_len_ < want) {
         const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
                                  deadline - std::chrono::steady_clock::now())
@@ -264,21 +319,33 @@ std::variant<std::monostate, protocol::Message, std::string> Connection::receive
         return std::string(inbox_len_ == 0 ? "the connection is closed"
                                            : "the connection closed inside a frame");
     // Bytes that arrived before a timeout stay in inbox_: a frame is never cut by a short wait.
-    if (!fill(protocol::kHeaderBytes, timeout_ms))
-        return fd_ < 0 ? std::string(inbox_len_ == 0 ? "the server closed the connection"
-                                                     : "the connection closed inside a frame")
-                       : std::variant<std::monostate, protocol::Message, std::string>{};
+    if (!fill(protocol::kHeaderBytes, timeout_ms)) {
+        if (fd_ >= 0)
+            return {};
+        if (!lost_why_.empty())
+            return "the connection was lost: " + lost_why_;
+        return std::string(inbox_len_ == 0 ? "the server closed the connection"
+                                           : "the connection closed inside a frame");
+    }
     auto h = protocol::decode_header(
         std::span<const uint8_t>(inbox_.data(), protocol::kHeaderBytes), protocol::Side::kServer);
     if (auto* e = std::get_if<protocol::DecodeError>(&h)) {
         close();  // the stream is out of step: nothing after this can be framed
         inbox_len_ = 0;
+        // A TLS record (alert 0x15 or handshake 0x16, version 3.x) where a frame should be.
+        if ((inbox_[0] == 0x15 || inbox_[0] == 0x16) && inbox_[1] == 0x03)
+            return std::string(
+                "the server speaks TLS on this port: connect with --tls (and "
+                "--tls-ca or --tls-fingerprint)");
         return "bad header from the server: " + describe(protocol::Error{e->code, e->message});
     }
     const auto& header = std::get<protocol::Header>(h);
-    if (!fill(protocol::kHeaderBytes + header.payload_bytes, timeout_ms))
-        return fd_ < 0 ? std::string("the connection closed inside a frame")
-                       : std::variant<std::monostate, protocol::Message, std::string>{};
+    if (!fill(protocol::kHeaderBytes + header.payload_bytes, timeout_ms)) {
+        if (fd_ >= 0)
+            return {};
+        return "the connection closed inside a frame" +
+               (lost_why_.empty() ? std::string() : ": " + lost_why_);
+    }
     auto m = protocol::decode_payload(
         header,
         std::span<const uint8_t>(inbox_.data() + protocol::kHeaderBytes, header.payload_bytes));

@@ -8,6 +8,7 @@
 #include <variant>
 #include <vector>
 
+#include "clients/tls.hpp"
 #include "protocol/protocol.hpp"
 
 namespace hs::client {
@@ -31,10 +32,11 @@ std::string describe(const protocol::Error& error);
 
 class Connection {
 public:
-    // "HOST:PORT", or "unix:PATH". Gives up connecting after `timeout_ms`. Returns an error
-    // sentence on failure.
+    // "HOST:PORT", or "unix:PATH". Gives up connecting (and the TLS handshake, when
+    // `tls.enabled`; TCP only) after `timeout_ms`. Returns an error sentence on failure.
     static std::variant<std::unique_ptr<Connection>, std::string> open(const std::string& address,
-                                                                       int timeout_ms = 10000);
+                                                                       int timeout_ms = 10000,
+                                                                       const TlsOptions& tls = {});
     ~Connection();
     Connection(const Connection&) = delete;
     Connection& operator=(const Connection&) = delete;
@@ -58,18 +60,26 @@ public:
                                      int timeout_ms = 10000);
     void close();
     int fd() const { return fd_; }
+    // Received bytes already inside the connection (TLS decrypted them) that a poll on fd()
+    // would not report: read them with receive(0) before waiting.
+    bool has_buffered() const { return tls_ && tls_->has_pending(); }
+    // "TLSv1.3 TLS_AES_256_GCM_SHA384", or "" without TLS.
+    std::string tls_description() const { return tls_ ? tls_->describe() : ""; }
     // Bytes received on this connection.
     uint64_t bytes_read() const { return bytes_read_; }
 
 private:
-    explicit Connection(int fd) : fd_(fd) {}
+    explicit Connection(int fd, std::unique_ptr<TlsChannel> tls = nullptr)
+        : fd_(fd), tls_(std::move(tls)) {}
     // Reads until `want` bytes of the current frame are in inbox_, or `timeout_ms` passed
     // (false; what arrived stays), or the connection closed (false, fd_ -1).
     bool fill(size_t want, int timeout_ms);
     static constexpr size_t kKeptInboxBytes = size_t(16) << 20;
     int fd_ = -1;
-    std::vector<uint8_t> inbox_;  // the frame being read: header, then payload
-    size_t inbox_len_ = 0;        // bytes of it received
+    std::unique_ptr<TlsChannel> tls_;  // null: plain bytes on fd_
+    std::string lost_why_;             // why a TLS connection was closed, when not by the server
+    std::vector<uint8_t> inbox_;       // the frame being read: header, then payload
+    size_t inbox_len_ = 0;             // bytes of it received
     uint64_t bytes_read_ = 0;
     std::string last_error_;
 };

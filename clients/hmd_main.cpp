@@ -35,6 +35,7 @@ static const std::string kUsage =
         "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS]\n"
         "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
         "                 [--retries N] [--backoff-ms MS]\n"
+        "                 [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
         "       hysar-hmd --list-devices | --watch-devices SECONDS [--profile FILE]\n"
         "                 [--device-table DIR]\n"
         "\n"
@@ -73,7 +74,7 @@ static const std::string kUsage =
         "                   (0..86400; 0: until SIGINT or SIGTERM); exit 1 when the bus cannot\n"
         "                   be watched (no bus, or libusb without hot-plug support)\n"
         "  --version        print the version, git commit and build type, and exit\n") +
-    kReconnectUsage +
+    kConnectionUsage +
     "\n"
     "Exit status: 0 ok; 1 the run failed (an Error from the server, reconnecting gave up, no\n"
     "layers); 2 bad arguments or no first session (server unreachable or the token refused).\n"
@@ -367,33 +368,16 @@ int follow_live_poses(Run& run, PoseSource& source, int64_t limit, double stale_
 }
 
 int hmd_main(int argc, char** argv) {
-    Args args(argc, argv, {"--connect",
-                           "--token",
-                           "--token-file",
-                           "--profile",
-                           "--scale",
-                           "--angles",
-                           "--orbit",
-                           "--csv",
-                           "--distance",
-                           "--height",
-                           "--target",
-                           "--format",
-                           "--encoding",
-                           "--name",
-                           "--out",
-                           "--summary",
-                           "--poses",
-                           "--frames",
-                           "--stale-ms",
-                           "--device",
-                           "--device-table",
-                           "--watch-devices",
-                           "--clear-after-ms",
-                           "--retries",
-                           "--backoff-ms"},
-              {"--window", "--list-devices"}, kUsage.c_str(),
-              HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
+    Args args(
+        argc, argv,
+        with(kConnectionOptions,
+             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
+              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
+              "--target",       "--format",        "--encoding",      "--name",     "--out",
+              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
+              "--device-table", "--watch-devices", "--clear-after-ms"}),
+        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
+        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile = profile_option(args);
     if (wants_usb_command(args))
@@ -403,6 +387,7 @@ int hmd_main(int argc, char** argv) {
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
         args.fail("--connect '" + address + "': " + *bad);
     const std::string token = args.token(proto::kMaxTokenBytes);
+    const TlsOptions tls = args.tls_options();
     proto::RegisterDisplay display;
     const double scale = args.number("--scale", 1.0, 0.01, 8.0);
     if (auto err = load_profile(choose_profile(args, configured_profile), scale, &display))
@@ -479,7 +464,8 @@ int hmd_main(int argc, char** argv) {
         if (!summary_file)
             args.fail("--summary '" + path + "': cannot write: " + std::strerror(errno));
     }
-    const hysar_client_config config = client_config(args, address, token, name, HYSAR_ROLE_HMD);
+    const hysar_client_config config =
+        client_config(args, address, token, name, HYSAR_ROLE_HMD, tls);
     const bool stills = !args.has("--orbit") && !args.has("--csv") && !live;
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
 

@@ -33,6 +33,7 @@ static const std::string kUsage =
         "                     --rate HZ --seconds S [--frames N] [--profile FILE] [--scale S]\n"
         "                     [--format rgba8|rgba16f] [--encoding raw|sparse] [--json FILE]\n"
         "                     [--out DIR] [--retries N] [--backoff-ms MS]\n"
+        "                     [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
         "\n"
         "  --viewers N   simulated headsets, each on its own connection (default 1)\n"
         "  --rate HZ     poses per second per headset (default 30); the server renders the latest\n"
@@ -45,7 +46,7 @@ static const std::string kUsage =
         "  --out DIR     write each headset's last layer pair as loadgen-I_left.png, "
         "_right.png\n"
         "  --version     print the version, git commit and build type, and exit\n") +
-    kReconnectUsage +
+    kConnectionUsage +
     "\n"
     "Exit status: 0 ok; 1 any headset saw an error or received no layer; 2 bad arguments or no\n"
     "session (server unreachable, closed, or refused the token).\n"
@@ -109,15 +110,16 @@ std::variant<uint64_t, std::string> read_superseded(hysar_client_config config) 
 
 int loadgen_main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--viewers", "--rate", "--seconds",
-               "--frames", "--profile", "--scale", "--format", "--encoding", "--json", "--out",
-               "--retries", "--backoff-ms"},
-              {}, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-loadgen"));
+              with(kConnectionOptions, {"--connect", "--token", "--token-file", "--viewers",
+                                        "--rate", "--seconds", "--frames", "--profile", "--scale",
+                                        "--format", "--encoding", "--json", "--out"}),
+              kConnectionFlags, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-loadgen"));
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
         args.fail("--connect '" + address + "': " + *bad);
     const std::string token = args.token(proto::kMaxTokenBytes);
+    const TlsOptions tls = args.tls_options();
     const int n = int(args.integer("--viewers", 1, 1, 1024));
     const double rate = args.number("--rate", 30, 0.1, 1000),
                  seconds = args.number("--seconds", 5, 0, 86400);
@@ -147,7 +149,8 @@ int loadgen_main(int argc, char** argv) {
     if (args.has("--out"))
         if (auto err = make_output_dir(out.string()))
             args.fail("--out " + *err);
-    const hysar_client_config base = client_config(args, address, token, "loadgen", HYSAR_ROLE_HMD);
+    const hysar_client_config base =
+        client_config(args, address, token, "loadgen", HYSAR_ROLE_HMD, tls);
     // One session first, so that an unreachable server or a wrong token is one clear line and
     // exit 2 rather than the same error from every headset.
     {

@@ -21,6 +21,7 @@ static const std::string kUsage =
         "                       [--frames N] [--timeout SECONDS] [--name NAME] [--window]\n"
         "                       [--monitor N] [--screenshot FILE] [--retries N] [--backoff-ms "
         "MS]\n"
+        "                       [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
         "\n"
         "  --connect ADDR  HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
         "  --out DIR       where frames are written as projector_v<scene version>.png (default\n"
@@ -34,7 +35,7 @@ static const std::string kUsage =
         "  --screenshot F  with --window: save what the window shows after the last frame as "
         "PNG\n"
         "  --version       print the version, git commit and build type, and exit\n") +
-    kReconnectUsage +
+    kConnectionUsage +
     "\n"
     "Exit status: 0 ok; 1 the run failed (no frame in time, reconnecting gave up, a bad frame,\n"
     "an Error from the server); 2 bad arguments or no first session (server unreachable or the\n"
@@ -45,14 +46,16 @@ namespace {
 
 int projector_main(int argc, char** argv) {
     Args args(argc, argv,
-              {"--connect", "--token", "--token-file", "--out", "--frames", "--timeout", "--name",
-               "--monitor", "--screenshot", "--retries", "--backoff-ms"},
-              {"--window"}, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-projector"));
+              with(kConnectionOptions, {"--connect", "--token", "--token-file", "--out", "--frames",
+                                        "--timeout", "--name", "--monitor", "--screenshot"}),
+              with(kConnectionFlags, {"--window"}), kUsage.c_str(),
+              HYSAR_CLIENT_VERSION_TEXT("hysar-projector"));
     // Everything on the command line is checked before the network is touched.
     const std::string address = args.get("--connect", "127.0.0.1:7700");
     if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
         args.fail("--connect '" + address + "': " + *bad);
     const std::string token = args.token(proto::kMaxTokenBytes);
+    const TlsOptions tls = args.tls_options();
     const std::string name = args.text("--name", "projector", proto::kMaxNameBytes);
     const int64_t frames_wanted = args.integer("--frames", 1, 0, 1000000000);
     const int timeout_ms = int(args.number("--timeout", 60, 0.1, 1e6) * 1000);
@@ -66,7 +69,7 @@ int projector_main(int argc, char** argv) {
     if (auto err = make_output_dir(out.string()))
         args.fail("--out " + *err);
     const hysar_client_config config =
-        client_config(args, address, token, name, HYSAR_ROLE_PROJECTOR);
+        client_config(args, address, token, name, HYSAR_ROLE_PROJECTOR, tls);
 
     std::unique_ptr<ImageWindow> window;
     if (args.has("--window")) {

@@ -31,7 +31,7 @@ using nlohmann::json;
 
 constexpr const char* kUsage =
     "usage: hysar admin [--connect ADDR] (--token-file F | --token T) [--timeout-ms MS]\n"
-    "                   COMMAND\n"
+    "                   [--tls | --tls-ca FILE | --tls-fingerprint SHA256] COMMAND\n"
     "\n"
     "  A running `hysar serve`, as its admin role (the server's --admin-token-file).\n"
     "\n"
@@ -53,6 +53,10 @@ constexpr const char* kUsage =
     "  --token-file F         the admin token: the first line of F (the server's\n"
     "                         --admin-token-file); --token T gives it on the command line\n"
     "  --timeout-ms MS        how long to wait for the server (default 30000; 100..600000)\n"
+    "  --tls, --tls-ca FILE, --tls-fingerprint SHA256\n"
+    "                         TLS to a server started with --tls-cert, as the clients speak it\n"
+    "                         (hysar-hmd --help): the system's CAs, a CA file, or a pinned\n"
+    "                         certificate\n"
     "\n"
     "exit status: 0 done; 1 the server refused or did not answer in time; 2 bad arguments,\n"
     "an unreachable server or a refused token.\n"
@@ -79,8 +83,9 @@ struct Parsed {
 
 Parsed parse(const std::vector<std::string>& args) {
     static const std::set<std::string> with_value = {
-        "--connect", "--token-file", "--token", "--timeout-ms", "--watch", "--count", "--reason"};
-    static const std::set<std::string> switches = {"--json"};
+        "--connect", "--token-file", "--token",  "--timeout-ms",     "--watch",
+        "--count",   "--reason",     "--tls-ca", "--tls-fingerprint"};
+    static const std::set<std::string> switches = {"--json", "--tls"};
     Parsed p;
     for (size_t i = 0; i < args.size(); ++i) {
         const std::string& a = args[i];
@@ -107,19 +112,22 @@ hs::client::Args as_client_args(const Parsed& p, std::vector<std::string>& stora
         if (k == "--json")
             continue;
         storage.push_back(k);
+        if (k == "--tls")
+            continue;
         storage.push_back(v);
         keys.insert(k);
     }
     std::vector<char*> argv;
     for (auto& s : storage) argv.push_back(s.data());
-    return hs::client::Args(int(argv.size()), argv.data(), keys, {}, kUsage);
+    return hs::client::Args(int(argv.size()), argv.data(), keys, {"--tls"}, kUsage);
 }
 
 class AdminSession {
 public:
-    AdminSession(const std::string& address, const std::string& token, int timeout_ms)
+    AdminSession(const std::string& address, const std::string& token, int timeout_ms,
+                 const hs::client::TlsOptions& tls)
         : timeout_ms_(timeout_ms) {
-        auto c = Connection::open(address, std::min(timeout_ms, 10000));
+        auto c = Connection::open(address, std::min(timeout_ms, 10000), tls);
         if (auto* e = std::get_if<std::string>(&c))
             throw Failure{2, "--connect: " + *e};
         conn_ = std::move(std::get<std::unique_ptr<Connection>>(c));
@@ -375,7 +383,7 @@ int run(const std::vector<std::string>& args) {
         scene_text = text.str();
     }
     const std::string token = a.read_token("--token", "--token-file", proto::kMaxTokenBytes, true);
-    AdminSession session(address, token, timeout_ms);
+    AdminSession session(address, token, timeout_ms, a.tls_options());
     if (push) {
         const auto [before, after] = session.push_scene(scene_text);
         std::printf("scene %s applied: scene version %u (was %u)\n", w[2].c_str(), after, before);

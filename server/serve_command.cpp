@@ -30,7 +30,8 @@ const char* kServeHelp =
     "usage: hysar serve [--scene FILE] [--listen HOST:PORT] [--unix PATH] [--token-file FILE]\n"
     "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
     "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
-    "                   [--admin-listen [HOST:]PORT] [limits...]\n"
+    "                   [--admin-listen [HOST:]PORT] [--tls-cert FILE --tls-key FILE]\n"
+    "                   [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
     "                           reloads it (a broken file is reported, the running scene stays)\n"
@@ -55,6 +56,10 @@ const char* kServeHelp =
     "                           than the calibrated one gets an InvalidDisplay error\n"
     "  --compensation LIST      with --calibration: all (default), none, or a comma-separated\n"
     "                           list of falloff, albedo, hmd_alpha, black_levels (docs/OPTICS.md)\n"
+    "  --tls-cert FILE          TLS on the TCP address: the PEM certificate (chain); clients\n"
+    "                           connect with --tls-ca or --tls-fingerprint (the start-up line\n"
+    "                           prints it); the Unix socket stays plain (docs/OPERATIONS.md)\n"
+    "  --tls-key FILE           its PEM private key (mode 600 or 640)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -87,9 +92,9 @@ extern "C" void on_reload_signal(int) {
     g_reload.store(true);
 }
 
-// The first line of a token file, without trailing whitespace or CR. A file that others may
-// read is refused: the token is the installation's only lock.
-Result<std::string> read_token_file(const std::string& path, const char* flag) {
+// A secret's file (a token, a TLS private key): a regular file that others may neither read
+// nor write.
+Result<void> check_secret_file(const std::string& path, const char* flag) {
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
         return make_error(ErrorCode::kIo, fmt::format("{} {}: cannot read the file", flag, path));
@@ -98,6 +103,13 @@ Result<std::string> read_token_file(const std::string& path, const char* flag) {
                           fmt::format("{} {}: others may read or write it (mode {:o}); run "
                                       "`chmod 600 {}`",
                                       flag, path, st.st_mode & 0777, path));
+    return {};
+}
+
+// The first line of a token file, without trailing whitespace or CR. A file that others may
+// read is refused: the token is the installation's only lock.
+Result<std::string> read_token_file(const std::string& path, const char* flag) {
+    HS_TRY(check_secret_file(path, flag));
     std::ifstream in(path);
     std::string token;
     if (!in || !std::getline(in, token))
@@ -205,7 +217,9 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--encoder-threads",
                                      "--tile-codec",
                                      "--calibration",
-                                     "--compensation"});
+                                     "--compensation",
+                                     "--tls-cert",
+                                     "--tls-key"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -314,6 +328,16 @@ int run_serve(const std::vector<std::string>& args) {
         }
         info.admin_token = t.value();
     }
+    if (f.has("--tls-cert") != f.has("--tls-key"))
+        return usage_error("TLS needs both --tls-cert and --tls-key");
+    if (f.has("--tls-key")) {
+        if (auto r = check_secret_file(f.get("--tls-key", ""), "--tls-key"); !r) {
+            std::fprintf(stderr, "hysar serve: %s\n", r.error().message.c_str());
+            return 1;
+        }
+        info.tls_cert_file = f.get("--tls-cert", "");
+        info.tls_key_file = f.get("--tls-key", "");
+    }
     auto device = gpu::Device::create(di);
     if (!device) {
         std::fprintf(stderr, "hysar serve: %s\n", device.error().message.c_str());
@@ -329,6 +353,9 @@ int run_serve(const std::vector<std::string>& args) {
                 info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
                 device.value()->name().c_str(),
                 info.admin_token.empty() ? "; admin role disabled" : "");
+    if (const std::string tls = server.value()->tls_summary(); !tls.empty())
+        std::printf("TLS on %s:%u: %s\n", admin::bracketed(info.host).c_str(),
+                    server.value()->port(), tls.c_str());
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (admin_options) {
         admin_options->token = info.token;

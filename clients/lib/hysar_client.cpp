@@ -167,13 +167,15 @@ hysar_status hysar_client_connect(const hysar_client_config* c, hysar_client** o
         if (!c || !out)
             return fail(HYSAR_E_INVALID_ARGUMENT, "config and out must not be NULL");
         *out = nullptr;
-        // A config from a newer header is longer; one from an older one would be shorter than
-        // every field this library reads.
-        if (c->struct_size < sizeof(hysar_client_config))
+        // A config from a newer header is longer; one from 1.0's ends at queue_limit (its TLS
+        // fields are not read); anything shorter was not made by hysar_client_config_init.
+        constexpr size_t kSize10 = offsetof(hysar_client_config, queue_limit) + sizeof(uint32_t);
+        if (c->struct_size < kSize10)
             return fail(HYSAR_E_INVALID_ARGUMENT,
                         "config.struct_size is " + std::to_string(c->struct_size) +
-                            ", expected at least " + std::to_string(sizeof(hysar_client_config)) +
+                            ", expected at least " + std::to_string(kSize10) +
                             " (call hysar_client_config_init first)");
+        const bool has_tls = c->struct_size >= sizeof(hysar_client_config);
         if (!c->address || !c->token)
             return fail(HYSAR_E_INVALID_ARGUMENT, "config.address and config.token are required");
         SessionConfig sc;
@@ -187,6 +189,17 @@ hysar_status hysar_client_connect(const hysar_client_config* c, hysar_client** o
         sc.reconnect_attempts = c->reconnect_attempts;
         sc.keepalive_ms = int(std::min<uint32_t>(c->keepalive_ms, 1u << 30));
         sc.queue_limit = c->queue_limit;
+        if (has_tls) {
+            sc.tls.ca_file = c->tls_ca_file ? c->tls_ca_file : "";
+            sc.tls.enabled = c->tls != 0 || c->tls_ca_file || c->tls_fingerprint;
+            if (c->tls_fingerprint) {
+                std::string why;
+                auto f = hs::client::normalise_fingerprint(c->tls_fingerprint, &why);
+                if (!f)
+                    return fail(HYSAR_E_INVALID_ARGUMENT, "config.tls_fingerprint: " + why);
+                sc.tls.fingerprint = *f;
+            }
+        }
         if (auto bad = hs::client::check_config(sc))
             return fail(HYSAR_E_INVALID_ARGUMENT, "config." + *bad);
         auto s = Session::connect(std::move(sc));

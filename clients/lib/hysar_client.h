@@ -33,7 +33,7 @@ extern "C" {
 #endif
 
 /* The version of this API; hysar_client_api_version() returns the library's. */
-#define HYSAR_CLIENT_API_VERSION 1
+#define HYSAR_CLIENT_API_VERSION 2
 
 typedef enum hysar_status {
     HYSAR_OK = 0,
@@ -69,6 +69,13 @@ typedef struct hysar_client_config {
     int32_t reconnect_attempts;    /* -1: forever (default); 0: never; N: give up after N */
     uint32_t keepalive_ms;         /* a Ping after this long without sending (default 20000) */
     uint32_t queue_limit;          /* undelivered images kept; older ones dropped (default 8) */
+    /* Since 1.1 (a config of 1.0's size, which ends at queue_limit, is still taken: no TLS).
+     * TLS to a server started with --tls-cert/--tls-key; TCP addresses only. */
+    uint32_t tls;                /* 1: TLS (implied by either field below); 0: plain (default) */
+    const char* tls_ca_file;     /* PEM CA (or the self-signed certificate) the server's must
+                                    chain to, its name or IP the address's; NULL: the system's */
+    const char* tls_fingerprint; /* the server certificate's SHA-256 ("AB:CD:..." as `hysar serve`
+                                    prints it); NULL: not pinned; alone, the pin decides */
 } hysar_client_config;
 
 /* A headset's display: per-eye pixels and pinhole intrinsics (OpenCV convention: u right,

@@ -54,6 +54,16 @@ std::optional<std::string> check_config(const SessionConfig& c) {
                    std::to_string(r.lo) + ", " + std::to_string(r.hi) + "]";
     if (c.queue_limit < 1 || c.queue_limit > 1024)
         return "queue_limit: " + std::to_string(c.queue_limit) + " is outside [1, 1024]";
+    if (c.tls.enabled && c.address.rfind("unix:", 0) == 0)
+        return "tls: a Unix socket is local and speaks plain; TLS is for HOST:PORT addresses";
+    if (!c.tls.fingerprint.empty()) {
+        std::string why;
+        const auto f = normalise_fingerprint(c.tls.fingerprint, &why);
+        if (!f)
+            return "tls_fingerprint: " + why;
+        if (*f != c.tls.fingerprint)
+            return "tls_fingerprint: not in the form normalise_fingerprint gives";
+    }
     return std::nullopt;
 }
 
@@ -106,7 +116,7 @@ Session::~Session() {
 
 std::variant<std::unique_ptr<Connection>, Session::ConnectError> Session::open_session(
     uint32_t* session_id, uint32_t* version) {
-    auto c = Connection::open(config_.address, config_.connect_timeout_ms);
+    auto c = Connection::open(config_.address, config_.connect_timeout_ms, config_.tls);
     if (auto* e = std::get_if<std::string>(&c))
         return ConnectError{false, *e};
     auto conn = std::move(std::get<std::unique_ptr<Connection>>(c));
@@ -419,7 +429,11 @@ void Session::run() {
             const uint64_t ping_at = last_sent_ns_ + keepalive_ns;
             const uint64_t until_ping = ping_at - std::min(now_ns(), ping_at);
             pollfd fds[2] = {{conn_->fd(), POLLIN, 0}, {wake_fd_, POLLIN, 0}};
-            const int rc = ::poll(fds, 2, int(until_ping / 1000000) + 1);
+            int rc = ::poll(fds, 2, conn_->has_buffered() ? 0 : int(until_ping / 1000000) + 1);
+            if (conn_->has_buffered()) {  // TLS holds decrypted bytes the socket does not show
+                fds[0].revents |= POLLIN;
+                rc = std::max(rc, 1);
+            }
             if (rc > 0 && (fds[1].revents & POLLIN)) {
                 uint64_t v;
                 [[maybe_unused]] auto n = ::read(wake_fd_, &v, sizeof v);

@@ -36,6 +36,7 @@ struct SessionConfig {
     int reconnect_attempts = -1;  // -1 forever, 0 never
     int keepalive_ms = 20000;
     size_t queue_limit = 8;  // undelivered images; the oldest is dropped past it
+    TlsOptions tls;          // TCP only; the fingerprint as normalise_fingerprint makes it
 };
 
 // Checks a configuration; an error sentence naming the field when it is not usable.

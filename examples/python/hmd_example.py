@@ -17,7 +17,8 @@ class Config(C.Structure):
                 ("name", C.c_char_p), ("role", C.c_uint32), ("connect_timeout_ms", C.c_uint32),
                 ("reconnect_initial_ms", C.c_uint32), ("reconnect_max_ms", C.c_uint32),
                 ("reconnect_attempts", C.c_int32), ("keepalive_ms", C.c_uint32),
-                ("queue_limit", C.c_uint32)]
+                ("queue_limit", C.c_uint32), ("tls", C.c_uint32), ("tls_ca_file", C.c_char_p),
+                ("tls_fingerprint", C.c_char_p)]
 
 
 class Display(C.Structure):

@@ -77,6 +77,12 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     if (!checked)
         return checked.error();
     impl->initial_scene = scene;
+    if (info.tls_cert_file.empty() != info.tls_key_file.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          "TLS needs both --tls-cert and --tls-key (or neither)");
+    if (!info.tls_cert_file.empty()) {
+        HS_ASSIGN_OR_RETURN(impl->tls, make_tls_context(info.tls_cert_file, info.tls_key_file));
+    }
     try {
         asio::ip::tcp::endpoint ep(asio::ip::make_address(info.host), info.port);
         impl->tcp_acceptor.open(ep.protocol());
@@ -100,6 +106,14 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
 
 uint16_t Server::port() const {
     return impl_->bound_port;
+}
+
+std::string Server::tls_summary() const {
+    const TlsContext& t = impl_->tls;
+    if (!t.context)
+        return "";
+    return fmt::format("SHA-256 fingerprint {}, subject {}, valid until {}", t.fingerprint,
+                       t.subject, t.not_after);
 }
 
 void Server::stop() {
@@ -169,7 +183,7 @@ void Server::Impl::accept_tcp() {
         accept_backoff_ms = 0;
         asio::error_code ignored;
         s.set_option(asio::ip::tcp::no_delay(true), ignored);
-        start_session(Socket(std::move(s)));
+        start_session(Socket(std::move(s)), tls.context != nullptr);
         accept_tcp();
     });
 }
@@ -182,7 +196,7 @@ void Server::Impl::accept_unix() {
             if (ec)
                 return accept_failed("Unix socket", ec, unix_retry, &Impl::accept_unix);
             accept_backoff_ms = 0;
-            start_session(Socket(std::move(s)));
+            start_session(Socket(std::move(s)), false);
             accept_unix();
         });
 }
@@ -211,7 +225,7 @@ void Server::Impl::accept_failed(const char* which, const asio::error_code& ec,
     });
 }
 
-void Server::Impl::start_session(Socket socket) {
+void Server::Impl::start_session(Socket socket, bool with_tls) {
     ++accepted;
     const uint32_t id = next_session_id++;
     // Connections still owing their Hello have a small cap of their own: the oldest makes room,
@@ -229,7 +243,8 @@ void Server::Impl::start_session(Socket socket) {
             .info("closed to make room ({} connections waiting for Hello)", pending.size());
         oldest->close();
     }
-    auto session = std::make_shared<Session>(*this, std::move(socket), id);
+    auto session = std::make_shared<Session>(*this, std::move(socket), id,
+                                             with_tls ? tls.context.get() : nullptr);
     sessions[id] = session;
     session->start();
 }

@@ -75,6 +75,9 @@ struct ServerCreateInfo {
     // by reference (the buffer that went to the socket), released when it leaves. Off: nothing
     // is kept and delivering a frame costs nothing more.
     bool keep_latest_layers = false;
+    // TLS on the TCP listener (`--tls-cert/--tls-key`): PEM certificate chain and private key,
+    // both or neither. The Unix socket stays plain (local, guarded by its file mode).
+    std::string tls_cert_file, tls_key_file;
 };
 
 class Server {
@@ -87,6 +90,9 @@ public:
 
     // The bound TCP port. Thread: any.
     uint16_t port() const;
+    // With TLS: "SHA-256 fingerprint AB:CD:..., subject /CN=..., valid until ..." for the
+    // start-up line (clients pin the fingerprint); "" without. Thread: any.
+    std::string tls_summary() const;
     // Serves until stop(): the calling thread runs the network loop; a render thread is started
     // and joined. Thread: one caller.
     void run();

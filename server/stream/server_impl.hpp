@@ -14,11 +14,13 @@
 #include <thread>
 
 #include <asio.hpp>
+#include <asio/ssl.hpp>
 
 #include "render/renderer.hpp"
 #include "stream/encoder.hpp"
 #include "stream/scheduler.hpp"
 #include "stream/server.hpp"
+#include "stream/tls.hpp"
 #include "stream/token.hpp"
 
 namespace hs::stream {
@@ -116,6 +118,7 @@ struct Server::Impl {
     ServerCreateInfo info;
     const ServerLimits& limits;
     asio::io_context io;
+    TlsContext tls;  // context null: no TLS
     asio::ip::tcp::acceptor tcp_acceptor{io};
     std::unique_ptr<asio::local::stream_protocol::acceptor> unix_acceptor;
     asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
@@ -177,7 +180,8 @@ struct Server::Impl {
     // An accept failed (EMFILE, ENFILE, ENOBUFS...): logged, retried with back-off.
     void accept_failed(const char* which, const asio::error_code& ec, asio::steady_timer& timer,
                        void (Impl::*retry)());
-    void start_session(Socket socket);
+    // `tls`: the connection came through the TCP listener and TLS is on.
+    void start_session(Socket socket, bool tls);
     void sweep();
     void begin_shutdown();
     void refused(proto::ErrorCode code) {

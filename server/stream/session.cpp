@@ -9,13 +9,75 @@
 
 namespace hs::stream {
 
-Session::Session(Server::Impl& srv, Socket socket, uint32_t id)
+Session::Session(Server::Impl& srv, Socket socket, uint32_t id, asio::ssl::context* tls)
     : srv_(srv),
       socket_(std::move(socket)),
       id_(id),
       created_(Clock::now()),
       last_receive_(created_),
-      counters_(std::make_shared<SessionCounters>()) {}
+      counters_(std::make_shared<SessionCounters>()) {
+    if (tls)
+        tls_ = std::make_unique<asio::ssl::stream<Socket>>(std::move(socket_), *tls);
+}
+
+void Session::start() {
+    if (!tls_)
+        return read_some();
+    // The first byte tells a TLS ClientHello (a handshake record, 0x16) from a plain client,
+    // which is told in its own protocol why it is refused instead of seeing the line drop.
+    auto self = shared_from_this();
+    raw().async_receive(asio::buffer(chunk_.data(), 1), asio::socket_base::message_peek,
+                        [this, self](asio::error_code ec, size_t n) {
+                            guarded([&] {
+                                if (closed_)
+                                    return;
+                                if (ec || n == 0)
+                                    return close();
+                                if (chunk_[0] == 0x16)
+                                    return handshake();
+                                refuse_plain();
+                            });
+                        });
+}
+
+void Session::refuse_plain() {
+    log::for_session(id_).info("a client without TLS on the TLS port: refused");
+    srv_.refused(proto::ErrorCode::kUnauthorized);
+    auto bytes = wire(proto::make_error(proto::ErrorCode::kUnauthorized,
+                                        "this server speaks TLS on this port: connect with --tls "
+                                        "(and --tls-ca or --tls-fingerprint)"));
+    if (!bytes)
+        return close();
+    auto held = std::make_shared<std::vector<uint8_t>>(std::move(*bytes));
+    auto self = shared_from_this();
+    stop_reading();
+    asio::async_write(raw(), asio::buffer(*held),
+                      [this, self, held](asio::error_code, size_t) { guarded([&] { close(); }); });
+}
+
+void Session::handshake() {
+    auto self = shared_from_this();
+    tls_->async_handshake(asio::ssl::stream_base::server, [this, self](asio::error_code ec) {
+        guarded([&] {
+            if (closed_)
+                return;
+            if (ec) {
+                // A plain client on a TLS port, a client that does not trust this certificate,
+                // a scanner: the connection ends here, before any frame.
+                log::for_session(id_).info(
+                    "TLS handshake failed: {}{}", ec.message(),
+                    ec.message().find("wrong version number") != std::string::npos
+                        ? " (a client without --tls?)"
+                        : "");
+                return close();
+            }
+            tls_ready_ = true;
+            read_some();
+            if (!queue_.empty() && !writing_)
+                write_next();
+        });
+    });
+}
 
 void Session::send(Bytes bytes, std::function<void(bool)> on_done, uint64_t layer_group,
                    bool replaces_projector) {
@@ -89,6 +151,11 @@ void Session::check_deadlines(Clock::time_point now) {
     }
     if (!authed_ && over(created_, l.handshake_timeout_ms)) {
         ++srv_.timeouts;
+        if (tls_ && !tls_ready_) {  // no Error can be sent before TLS is up
+            log::for_session(id_).info("no TLS handshake within {} ms of connecting",
+                                       l.handshake_timeout_ms);
+            return close();
+        }
         return error(proto::ErrorCode::kTimeout,
                      fmt::format("no Hello within {} ms of connecting", l.handshake_timeout_ms),
                      true, 0);
@@ -113,8 +180,8 @@ void Session::close() {
         return;
     closed_ = true;
     asio::error_code ec;
-    socket_.shutdown(asio::socket_base::shutdown_both, ec);
-    socket_.close(ec);
+    raw().shutdown(asio::socket_base::shutdown_both, ec);
+    raw().close(ec);
     auto queue = std::move(queue_);
     queue_.clear();
     for (auto& q : queue)
@@ -148,16 +215,18 @@ void Session::release_receive_buffer() {
 
 void Session::read_some() {
     auto self = shared_from_this();
-    socket_.async_read_some(asio::buffer(chunk_), [this, self](asio::error_code ec, size_t n) {
-        guarded([&] {
-            if (closed_)
-                return;
-            if (ec)
-                return close();
-            last_receive_ = Clock::now();
-            consume(chunk_.data(), n);
-            if (!closed_ && !closing_since_)
-                read_some();
+    with_stream([&](auto& stream) {
+        stream.async_read_some(asio::buffer(chunk_), [this, self](asio::error_code ec, size_t n) {
+            guarded([&] {
+                if (closed_)
+                    return;
+                if (ec)
+                    return close();
+                last_receive_ = Clock::now();
+                consume(chunk_.data(), n);
+                if (!closed_ && !closing_since_)
+                    read_some();
+            });
         });
     });
 }
@@ -186,7 +255,13 @@ void Session::consume(const uint8_t* p, size_t n) {
 bool Session::on_header() {
     auto h = proto::decode_header(header_, proto::Side::kClient);
     if (auto* e = std::get_if<proto::DecodeError>(&h)) {
-        error(e->code, e->message, true, e->sequence);
+        // A TLS ClientHello (a handshake record, version 3.x) on a connection without TLS.
+        const bool tls_hello = !tls_ && header_[0] == 0x16 && header_[1] == 0x03;
+        error(e->code,
+              tls_hello ? "a TLS handshake on a connection without TLS (this server listens "
+                          "plain here: connect without --tls, or start it with --tls-cert)"
+                        : e->message,
+              true, e->sequence);
         return false;
     }
     hdr_ = std::get<proto::Header>(h);
@@ -353,23 +428,29 @@ void Session::write_next() {
             close();
         return;
     }
+    if (tls_ && !tls_ready_) {  // written once the handshake is done (start)
+        writing_ = false;
+        return;
+    }
     writing_ = true;
     auto self = shared_from_this();
-    asio::async_write(socket_, asio::buffer(*queue_.front().bytes),
-                      [this, self](asio::error_code ec, size_t) {
-                          guarded([&] {
-                              if (closed_)
-                                  return;
-                              if (ec)
-                                  return close();
-                              Out done = std::move(queue_.front());
-                              queue_.pop_front();
-                              forget(done);
-                              if (done.on_done)
-                                  done.on_done(true);
-                              write_next();
+    with_stream([&](auto& stream) {
+        asio::async_write(stream, asio::buffer(*queue_.front().bytes),
+                          [this, self](asio::error_code ec, size_t) {
+                              guarded([&] {
+                                  if (closed_)
+                                      return;
+                                  if (ec)
+                                      return close();
+                                  Out done = std::move(queue_.front());
+                                  queue_.pop_front();
+                                  forget(done);
+                                  if (done.on_done)
+                                      done.on_done(true);
+                                  write_next();
+                              });
                           });
-                      });
+    });
 }
 
 template <typename Pred>

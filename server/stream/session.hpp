@@ -14,9 +14,10 @@ namespace hs::stream {
 
 class Session : public std::enable_shared_from_this<Session> {
 public:
-    Session(Server::Impl& srv, Socket socket, uint32_t id);
+    // `tls`: handshake as a TLS server with this context before anything is read; null: plain.
+    Session(Server::Impl& srv, Socket socket, uint32_t id, asio::ssl::context* tls = nullptr);
 
-    void start() { read_some(); }
+    void start();
     uint32_t id() const { return id_; }
     bool authed() const { return authed_; }
     bool is_projector() const { return authed_ && role_ == proto::Role::kProjector; }
@@ -71,6 +72,20 @@ private:
     // An admin's Kick: the named session gets error 16 and is closed (PROTOCOL.md, Kick).
     void kick(const proto::Kick& m, uint32_t seq);
     void write_next();
+    // TLS: the server's handshake, then reading; or, for a client that sent no ClientHello,
+    // an Error in the plain protocol, then closing.
+    void handshake();
+    void refuse_plain();
+    // The socket under TLS, or the plain one.
+    Socket& raw() { return tls_ ? tls_->next_layer() : socket_; }
+    // Calls `f` with the stream that carries frames: the TLS stream or the socket.
+    template <typename F>
+    void with_stream(F&& f) {
+        if (tls_)
+            f(*tls_);
+        else
+            f(socket_);
+    }
 
     // Drops queued frames that `pred` picks, except the one being written.
     template <typename Pred>
@@ -78,7 +93,9 @@ private:
     void forget(const Out& o);
 
     Server::Impl& srv_;
-    Socket socket_;
+    Socket socket_;                                   // moved into tls_ when TLS is on
+    std::unique_ptr<asio::ssl::stream<Socket>> tls_;  // null: plain
+    bool tls_ready_ = false;                          // the TLS handshake finished
     const uint32_t id_;
     const Clock::time_point created_;
     Clock::time_point last_receive_;

@@ -9,10 +9,12 @@
 #include <string.h>
 
 #if defined(__LP64__)
-_Static_assert(sizeof(hysar_client_config) == 64, "hysar_client_config layout changed");
+_Static_assert(sizeof(hysar_client_config) == 80, "hysar_client_config layout changed");
 _Static_assert(offsetof(hysar_client_config, address) == 8, "config.address moved");
 _Static_assert(offsetof(hysar_client_config, role) == 32, "config.role moved");
 _Static_assert(offsetof(hysar_client_config, queue_limit) == 56, "config.queue_limit moved");
+_Static_assert(offsetof(hysar_client_config, tls) == 60, "config.tls moved");
+_Static_assert(offsetof(hysar_client_config, tls_fingerprint) == 72, "config.tls_fingerprint moved");
 _Static_assert(sizeof(hysar_display) == 64, "hysar_display layout changed");
 _Static_assert(offsetof(hysar_display, fx) == 8, "display.fx moved");
 _Static_assert(offsetof(hysar_display, mode) == 56, "display.mode moved");
@@ -25,7 +27,7 @@ _Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
 _Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
 _Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
 #endif
-_Static_assert(HYSAR_CLIENT_API_VERSION == 1, "API version");
+_Static_assert(HYSAR_CLIENT_API_VERSION == 2, "API version");
 
 static int failures = 0;
 #define CHECK(cond)                                                                           \
@@ -66,6 +68,24 @@ int main(int argc, char** argv) {
     config.connect_timeout_ms = 2000;
     CHECK(hysar_client_connect(&config, &client) == HYSAR_E_CONNECT);
     CHECK(strstr(hysar_last_error(), argv[2]) != NULL);
+    /* TLS: off by default; a Unix socket never speaks it; a malformed pin is named. */
+    CHECK(config.tls == 0 && config.tls_ca_file == NULL && config.tls_fingerprint == NULL);
+    config.tls = 1;
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(strstr(hysar_last_error(), "Unix socket") != NULL);
+    config.tls = 0;
+    config.tls_fingerprint = "AB:CD";
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(strstr(hysar_last_error(), "tls_fingerprint") != NULL);
+    /* A config of 1.0's size (it ended at queue_limit: 64 bytes on LP64) is still taken and its
+     * TLS fields are not read: the garbage pin above is ignored. */
+    config.struct_size = 64;
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_CONNECT);
+    config.struct_size = 56;
+    CHECK(hysar_client_connect(&config, &client) == HYSAR_E_INVALID_ARGUMENT);
+    CHECK(strstr(hysar_last_error(), "struct_size") != NULL);
+    config.struct_size = sizeof config;
+    config.tls_fingerprint = NULL;
 
     hysar_display display;
     CHECK(hysar_display_from_profile(argv[1], 0.5, &display) == HYSAR_OK);
