@@ -4,6 +4,7 @@
 // exception escape to std::terminate.
 #pragma once
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
@@ -23,6 +24,7 @@
 #include <variant>
 #include <vector>
 
+#include "cli/options.hpp"
 #include "clients/tls.hpp"
 
 namespace hs::client {
@@ -126,14 +128,17 @@ inline std::string strip_trailing_space(std::string s) {
 
 class Args {
 public:
-    // `with_value`: options that take a value; `flags`: options that do not. --help (or -h)
-    // prints `usage` to stdout and exits 0; so does --version with `version` (clients/version.hpp)
-    // when it is given; anything else unknown is a usage error.
-    Args(int argc, char** argv, std::set<std::string> with_value, std::set<std::string> flags,
-         const char* usage, const char* version = nullptr)
+    // `with_value`: options that take a value; `flags`: options that do not (cli/options.hpp
+    // reads them: "--key value" or "--key=value"; given twice, the last value counts). --help
+    // (or -h) prints `usage` to stdout and exits 0; so does --version with `version`
+    // (clients/version.hpp) when it is given; anything else unknown is a usage error.
+    Args(int argc, char** argv, const std::set<std::string>& with_value,
+         const std::set<std::string>& flags, const char* usage, const char* version = nullptr)
         : usage_(usage) {
-        for (int i = 1; i < argc; ++i) {
-            std::string a = argv[i];
+        const std::vector<std::string> list(argv + std::min(argc, 1), argv + argc);
+        for (const auto& a : list) {
+            if (a == "--")
+                break;
             if (a == "--help" || a == "-h") {
                 std::fputs(usage, stdout);
                 std::exit(0);
@@ -142,18 +147,12 @@ public:
                 std::fputs(version, stdout);
                 std::exit(0);
             }
-            if (flags.count(a)) {
-                values_[a] = "1";
-            } else if (with_value.count(a)) {
-                if (i + 1 >= argc)
-                    fail(a + " needs a value (see --help)");
-                values_[a] = argv[++i];
-            } else if (a.rfind("-", 0) == 0) {
-                fail("unknown option '" + a + "' (see --help)");
-            } else {
-                fail("unexpected argument '" + a + "' (options are --key value; see --help)");
-            }
         }
+        auto parsed = options::parse(
+            list, {{with_value.begin(), with_value.end()}, {flags.begin(), flags.end()}});
+        if (auto* e = std::get_if<std::string>(&parsed))
+            fail(*e + " (see --help)");
+        for (const auto& [k, v] : std::get<options::Parsed>(parsed).values) values_[k] = v.back();
     }
     [[noreturn]] void fail(const std::string& msg) const { throw UsageError(msg); }
     const char* usage() const { return usage_; }

@@ -2,7 +2,8 @@
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
 # outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
-# server/admin/ (and its tests), and hs_admin's links as docs/ARCHITECTURE.md draws them: it
+# server/admin/ (and its tests), no CLI11 outside cli/options.cpp, no OpenSSL outside the two
+# tls.cpp files, and hs_admin's links as docs/ARCHITECTURE.md draws them: it
 # reads the server through its snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol),
 # never the GPU or the renderer; only the hysar executable links it.
 set -euo pipefail
@@ -20,6 +21,10 @@ usb=$(grep -rnE '#include <libusb|\blibusb_[a-z_]+\(' server clients tests --inc
 if [[ -n "$usb" ]]; then echo "layers: libusb outside clients/usb_enumerate.cpp:"; echo "$usb"; fail=1; fi
 http=$(grep -rn '#include <httplib' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server|tests)/admin/' || true)
 if [[ -n "$http" ]]; then echo "layers: cpp-httplib outside server/admin/:"; echo "$http"; fail=1; fi
+cli11=$(grep -rn '#include <CLI/' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^cli/options\.cpp:' || true)
+if [[ -n "$cli11" ]]; then echo "layers: CLI11 outside cli/options.cpp (programs read options through cli/options.hpp):"; echo "$cli11"; fail=1; fi
+tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server/stream/tls\.cpp|clients/tls\.cpp):' || true)
+if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
 adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
 if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
 adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)

@@ -11,7 +11,7 @@ PACKAGES=(
   clang-format libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev libglfw3-dev libgl-dev xvfb xauth
   libusb-1.0-0-dev
   libopencv-dev libopencv-contrib-dev
-  libspdlog-dev libcpp-httplib-dev libssl-dev openssl chromium chromium-driver python3-selenium
+  libspdlog-dev libcpp-httplib-dev libssl-dev openssl libcli11-dev chromium chromium-driver python3-selenium
 )
 
 missing=()

@@ -16,6 +16,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "cli/options.hpp"
 #include "clients/args.hpp"
 #include "clients/connection.hpp"
 #include "commands.hpp"
@@ -82,25 +83,16 @@ struct Parsed {
 };
 
 Parsed parse(const std::vector<std::string>& args) {
-    static const std::set<std::string> with_value = {
-        "--connect", "--token-file", "--token",  "--timeout-ms",     "--watch",
-        "--count",   "--reason",     "--tls-ca", "--tls-fingerprint"};
-    static const std::set<std::string> switches = {"--json", "--tls"};
+    auto parsed =
+        options::parse(args, {{"--connect", "--token-file", "--token", "--timeout-ms", "--watch",
+                               "--count", "--reason", "--tls-ca", "--tls-fingerprint"},
+                              {"--json", "--tls"},
+                              /*positionals=*/true});
+    if (auto* e = std::get_if<std::string>(&parsed))
+        throw Failure{2, *e + " (see hysar admin --help)"};
     Parsed p;
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        if (switches.count(a)) {
-            p.options[a] = "1";
-        } else if (with_value.count(a)) {
-            if (i + 1 >= args.size())
-                throw Failure{2, a + " needs a value (see hysar admin --help)"};
-            p.options[a] = args[++i];
-        } else if (a.rfind("--", 0) == 0) {
-            throw Failure{2, "unknown option '" + a + "' (see hysar admin --help)"};
-        } else {
-            p.words.push_back(a);
-        }
-    }
+    for (auto& [k, v] : std::get<options::Parsed>(parsed).values) p.options[k] = v.back();
+    p.words = std::get<options::Parsed>(parsed).positionals;
     return p;
 }
 

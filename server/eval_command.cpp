@@ -1,5 +1,6 @@
 // `hysar eval`: paper eqs. (5)-(6) and Table 2, resolution (Sec. 4.3), the real-material
 // metrics of Sec. 5.2 on any captures, and the whole evaluation as a report.
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include <fmt/format.h>
 #include <glm/trigonometric.hpp>
 
+#include "cli/options.hpp"
 #include "commands.hpp"
 #include "core/figure.hpp"
 #include "core/log.hpp"
@@ -39,28 +41,21 @@ const std::vector<std::string>& Flags::all(const std::string& f) const {
 Result<Flags> parse_flags(const std::vector<std::string>& args,
                           const std::vector<std::string>& with_value,
                           const std::vector<std::string>& switches) {
+    auto parsed = options::parse(args, {with_value, switches});
+    if (auto* e = std::get_if<std::string>(&parsed)) {
+        std::string list;
+        for (const auto& x : with_value) list += " " + x;
+        for (const auto& x : switches) list += " " + x;
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            e->rfind("unknown option", 0) == 0 && e->find("did you mean") == std::string::npos
+                ? fmt::format("{} (expected one of:{})", *e, list)
+                : *e);
+    }
     Flags f;
-    auto in = [](const std::vector<std::string>& v, const std::string& s) {
-        for (const auto& x : v)
-            if (x == s)
-                return true;
-        return false;
-    };
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        if (in(switches, a)) {
-            f.values[a];
-        } else if (in(with_value, a)) {
-            if (i + 1 >= args.size())
-                return make_error(ErrorCode::kInvalidArgument, fmt::format("{} needs a value", a));
-            f.values[a].push_back(args[++i]);
-        } else {
-            std::string list;
-            for (const auto& x : with_value) list += " " + x;
-            for (const auto& x : switches) list += " " + x;
-            return make_error(ErrorCode::kInvalidArgument,
-                              fmt::format("unknown option '{}' (expected one of:{})", a, list));
-        }
+    for (auto& [k, v] : std::get<options::Parsed>(parsed).values) {
+        const bool is_switch = std::find(switches.begin(), switches.end(), k) != switches.end();
+        f.values[k] = is_switch ? std::vector<std::string>{} : std::move(v);
     }
     return f;
 }

@@ -1,6 +1,6 @@
 // `hysar`: the HySAR render server's command line. The global options (--log-level,
-// --log-format, --version) are taken out of the arguments here, wherever they stand, before a
-// subcommand's own parser sees the rest.
+// --log-format, --version) are taken out of the arguments here (cli/options.hpp), wherever they
+// stand, before a subcommand's own parser sees the rest.
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cli/options.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
 #include "gpu/device.hpp"
@@ -101,37 +102,27 @@ std::optional<std::string> take_global_options(std::vector<std::string>& args, G
     if (const char* e = std::getenv("HYSAR_LOG_FORMAT"); e && *e)
         if (auto err = format_from("HYSAR_LOG_FORMAT", e, o))
             return err;
-    std::vector<std::string> rest;
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        if (a == "--version") {
-            o.version = true;
-            continue;
-        }
-        bool taken = false;
-        for (const char* flag : {"--log-level", "--log-format"}) {
-            const std::string f = flag;
-            std::string value;
-            if (a == f) {
-                if (i + 1 >= args.size())
-                    return f + " needs a value (" +
-                           (f == "--log-level" ? hs::log::level_names() : hs::log::format_names()) +
-                           ")";
-                value = args[++i];
-            } else if (a.rfind(f + "=", 0) == 0) {
-                value = a.substr(f.size() + 1);
-            } else {
-                continue;
-            }
-            auto err = f == "--log-level" ? level_from(f, value, o) : format_from(f, value, o);
-            if (err)
-                return err;
-            taken = true;
-            break;
-        }
-        if (!taken)
-            rest.push_back(a);
+    // Taken out wherever they stand; the rest, in its order, is the command's.
+    auto parsed = hs::options::parse(args, {{"--log-level", "--log-format"},
+                                            {"--version"},
+                                            /*positionals=*/false,
+                                            /*pass_through=*/true});
+    if (auto* e = std::get_if<std::string>(&parsed)) {
+        if (e->rfind("--log-level needs", 0) == 0)
+            return *e + " (" + hs::log::level_names() + ")";
+        if (e->rfind("--log-format needs", 0) == 0)
+            return *e + " (" + hs::log::format_names() + ")";
+        return *e;
     }
+    auto& p = std::get<hs::options::Parsed>(parsed);
+    o.version = p.values.count("--version") > 0;
+    if (auto it = p.values.find("--log-level"); it != p.values.end())
+        if (auto err = level_from("--log-level", it->second.back(), o))
+            return err;
+    if (auto it = p.values.find("--log-format"); it != p.values.end())
+        if (auto err = format_from("--log-format", it->second.back(), o))
+            return err;
+    std::vector<std::string> rest = std::move(p.positionals);
     args = std::move(rest);
     return std::nullopt;
 }
