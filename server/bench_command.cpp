@@ -58,7 +58,11 @@ const char* kBenchHelp =
     "             ulps for fp32 and the half-float layer, with each regime's tolerance; writes\n"
     "             DIR/stability.csv and DIR/stability.md (default out/stability); exit 1 when a\n"
     "             case is outside its tolerance. --no-float64: the shaders a device without\n"
-    "             shaderFloat64 runs\n";
+    "             shaderFloat64 runs\n"
+    "\n"
+    "examples: hysar bench accuracy --quick\n"
+    "          hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline ./lean.sh\n"
+    "          hysar bench encoding --repeats 5 --json out/encoding.json\n";
 
 const char* kServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"

@@ -59,7 +59,10 @@ const char* kHelp =
     "      its scene served on loopback with and without the calibration; --out DIR is a\n"
     "      calibration folder for hysar serve --calibration; exit code 1 when a target is missed\n"
     "\n"
-    "every numeric flag's unit, range and default: docs/LIMITS.md\n";
+    "every numeric flag's unit, range and default: docs/LIMITS.md\n"
+    "\n"
+    "examples: hysar calibrate simulate --scale 0.5 --out out/cal\n"
+    "          hysar calibrate patterns --size 1920x1200 --out cal/projector-patterns\n";
 
 Result<std::string> need(const Flags& f, const std::string& flag) {
     if (!f.has(flag))

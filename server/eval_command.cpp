@@ -440,7 +440,10 @@ const char* kEvalHelp =
     "  report      [--scene FILE] [--params FILE] [--viewer NAME] [--out DIR]\n"
     "              all of the above on the simulated installation: out/report/index.html\n"
     "\n"
-    "--threshold: 8-bit code values in [0, 255]; every numeric flag's range: docs/LIMITS.md\n";
+    "--threshold: 8-bit code values in [0, 255]; every numeric flag's range: docs/LIMITS.md\n"
+    "\n"
+    "examples: hysar eval optics --out out/optics\n"
+    "          hysar eval report --out out/report\n";
 
 Result<void> eval_optics(const Flags& flags) {
     HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));

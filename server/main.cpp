@@ -43,7 +43,9 @@ void usage(FILE* f) {
         "\n"
         "environment: HYSAR_DEVICE=auto|cpu|gpu picks the Vulkan device, HYSAR_VALIDATION=1\n"
         "turns on the Vulkan validation layer, HYSAR_LOG_LEVEL and HYSAR_LOG_FORMAT are the\n"
-        "defaults of --log-level and --log-format (docs/OPERATIONS.md, \"Logs\").\n");
+        "defaults of --log-level and --log-format (docs/OPERATIONS.md, \"Logs\").\n"
+        "\n"
+        "example: hysar render --out out/render   (the embedded room, Fig. 7 viewpoints)\n");
 }
 
 // What --version prints: the build, then the device the server would use (the same choice:

@@ -54,7 +54,9 @@ const char* kRenderHelp =
     "\n"
     "writes DIR/projector.png (+.exr), DIR/vd/<model>_<angle>_<height>_<eye>.png (+.exr),\n"
     "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the "
-    "reference,\nand whether that is within the stated tolerance).\n";
+    "reference,\nand whether that is within the stated tolerance).\n"
+    "\n"
+    "example: hysar render --angles -40,0,40 --model ward --out out/ward --check\n";
 
 struct Options {
     std::optional<fs::path> scene;

@@ -9,7 +9,7 @@ found among them, so that a help text the reading no longer understands fails th
 of shrinking the walk.
 
 For each of `hysar`, every command, every leaf and the three clients: `--help` exits 0 and prints
-a usage line on stdout; `--version` exits 0 and prints the project's version and a commit line.
+a usage line and an example on stdout; `--version` exits 0 and prints the project's version and a commit line.
 For `hysar` also `--version` before the command, and `--log-level`/`--log-format` after it.
 
 Usage: help_version_cli.py BUILD_DIR
@@ -73,6 +73,8 @@ def check_help(cmd, label):
         fail(f"{label} --help", f"exit status {rc}, expected 0", out, err)
     elif not re.search(r"^usage: \S", out, re.M | re.I):
         fail(f"{label} --help", "no usage line on stdout", out, err)
+    elif not re.search(r"^examples?:\s+\S*(hysar|hysar-\w+) ", out, re.M | re.I):
+        fail(f"{label} --help", "no example (a line 'example: hysar ...')", out, err)
     return out
 
 
