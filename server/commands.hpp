@@ -12,5 +12,6 @@ int run_bench(const std::vector<std::string>& args);
 int run_eval(const std::vector<std::string>& args);
 int run_calibrate(const std::vector<std::string>& args);
 int run_admin(const std::vector<std::string>& args);
+int run_cluster(const std::vector<std::string>& args);
 
 }  // namespace hs::cli

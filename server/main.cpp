@@ -35,6 +35,8 @@ void usage(FILE* f) {
         "           installation (hysar calibrate --help)\n"
         "  admin    a running server: scene push FILE, stats [--watch S], viewers\n"
         "           (hysar admin --help)\n"
+        "  cluster  render nodes behind one address: cluster config prints the HAProxy\n"
+        "           configuration (hysar cluster --help)\n"
         "\n"
         "options of every command (before or after it):\n"
         "  --log-level debug|info|warn|error|off   the lowest level logged (default info)\n"
@@ -165,6 +167,8 @@ int main(int argc, char** argv) {
         return hs::cli::run_calibrate(args);
     if (cmd == "admin")
         return hs::cli::run_admin(args);
+    if (cmd == "cluster")
+        return hs::cli::run_cluster(args);
     if (cmd == "--help" || cmd == "-h" || cmd == "help") {
         usage(stdout);
         return 0;

@@ -31,6 +31,7 @@ const char* kServeHelp =
     "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
     "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
     "                   [--admin-listen [HOST:]PORT] [--tls-cert FILE --tls-key FILE]\n"
+    "                   [--agent-port PORT [--drain-file PATH]]\n"
     "                   [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
@@ -60,6 +61,11 @@ const char* kServeHelp =
     "                           connect with --tls-ca or --tls-fingerprint (the start-up line\n"
     "                           prints it); the Unix socket stays plain (docs/OPERATIONS.md)\n"
     "  --tls-key FILE           its PEM private key (mode 600 or 640)\n"
+    "  --agent-port PORT        answer HAProxy's agent-check on this port of the --listen host:\n"
+    "                           'ready up NN%' from the render load, 'drain', 'down' (hysar\n"
+    "                           cluster config; docs/CLUSTER.md)\n"
+    "  --drain-file PATH        with --agent-port: answer 'drain' while PATH exists (touch it\n"
+    "                           to send new headsets elsewhere, remove it to take them again)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -219,7 +225,9 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--calibration",
                                      "--compensation",
                                      "--tls-cert",
-                                     "--tls-key"});
+                                     "--tls-key",
+                                     "--agent-port",
+                                     "--drain-file"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -328,6 +336,17 @@ int run_serve(const std::vector<std::string>& args) {
         }
         info.admin_token = t.value();
     }
+    if (f.has("--agent-port")) {
+        auto a = parse_count(f, "--agent-port", 0, 1, 65535);
+        if (!a)
+            return usage_error(a.error().message);
+        info.agent_port = uint16_t(a.value());
+    }
+    if (f.has("--drain-file")) {
+        if (!f.has("--agent-port"))
+            return usage_error("--drain-file goes with --agent-port");
+        info.drain_file = f.get("--drain-file", "");
+    }
     if (f.has("--tls-cert") != f.has("--tls-key"))
         return usage_error("TLS needs both --tls-cert and --tls-key");
     if (f.has("--tls-key")) {
@@ -353,6 +372,11 @@ int run_serve(const std::vector<std::string>& args) {
                 info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
                 device.value()->name().c_str(),
                 info.admin_token.empty() ? "; admin role disabled" : "");
+    if (const uint16_t agent = server.value()->agent_port(); agent != 0)
+        std::printf("agent-check on %s:%u%s\n", admin::bracketed(info.host).c_str(), agent,
+                    info.drain_file.empty()
+                        ? ""
+                        : (" (drain while " + info.drain_file + " exists)").c_str());
     if (const std::string tls = server.value()->tls_summary(); !tls.empty())
         std::printf("TLS on %s:%u: %s\n", admin::bracketed(info.host).c_str(),
                     server.value()->port(), tls.c_str());

@@ -230,6 +230,17 @@ void FrameLoop::run() {
         std::vector<ViewerJob> batch;
         try {
             batch = large_.empty() ? s_.scheduler.wait_for_batch() : s_.scheduler.take_batch();
+            // Busy from here to the end of the turn: the load the agent-check reports.
+            const auto busy_from = Clock::now();
+            struct BusyTime {
+                std::atomic<uint64_t>& total;
+                Clock::time_point from;
+                ~BusyTime() {
+                    total += uint64_t(
+                        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - from)
+                            .count());
+                }
+            } busy_time{s_.render_busy_ns, busy_from};
             std::optional<Server::Impl::PendingScene> next;
             {
                 std::lock_guard lock(s_.mutex);

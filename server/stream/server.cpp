@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <filesystem>
 
 #include <fmt/format.h>
 
+#include "cluster/gateway.hpp"
 #include "codec/layer_codec.hpp"
 #include "core/log.hpp"
 #include "gpu/driver_info.hpp"
@@ -90,6 +92,14 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
         impl->tcp_acceptor.bind(ep);
         impl->tcp_acceptor.listen();
         impl->bound_port = impl->tcp_acceptor.local_endpoint().port();
+        if (info.agent_port != 0) {
+            asio::ip::tcp::endpoint agent(asio::ip::make_address(info.host), info.agent_port);
+            impl->agent_acceptor = std::make_unique<asio::ip::tcp::acceptor>(impl->io);
+            impl->agent_acceptor->open(agent.protocol());
+            impl->agent_acceptor->set_option(asio::socket_base::reuse_address(true));
+            impl->agent_acceptor->bind(agent);
+            impl->agent_acceptor->listen();
+        }
         if (!info.unix_path.empty()) {
             ::unlink(info.unix_path.c_str());
             impl->unix_acceptor = std::make_unique<asio::local::stream_protocol::acceptor>(
@@ -98,7 +108,8 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     } catch (const std::exception& e) {
         return make_error(
             ErrorCode::kIo,
-            fmt::format("cannot listen on {}:{}{}: {}", info.host, info.port,
+            fmt::format("cannot listen on {}:{}{}{}: {}", info.host, info.port,
+                        info.agent_port ? fmt::format(" / agent port {}", info.agent_port) : "",
                         info.unix_path.empty() ? "" : " / " + info.unix_path, e.what()));
     }
     return std::unique_ptr<Server>(new Server(std::move(impl)));
@@ -106,6 +117,10 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
 
 uint16_t Server::port() const {
     return impl_->bound_port;
+}
+
+uint16_t Server::agent_port() const {
+    return impl_->agent_acceptor ? impl_->agent_acceptor->local_endpoint().port() : 0;
 }
 
 std::string Server::tls_summary() const {
@@ -134,6 +149,8 @@ void Server::run() {
     impl_->accept_tcp();
     if (impl_->unix_acceptor)
         impl_->accept_unix();
+    if (impl_->agent_acceptor)
+        impl_->accept_agent();
     impl_->sweep();
     // A handler's exception ends only its session (Session::guarded); anything that still
     // escapes is logged and the loop goes on.
@@ -199,6 +216,40 @@ void Server::Impl::accept_unix() {
             start_session(Socket(std::move(s)), false);
             accept_unix();
         });
+}
+
+std::string Server::Impl::agent_line() {
+    cluster::NodeLoad load;
+    load.stopping = stopping.load();
+    std::error_code ec;
+    load.draining = !info.drain_file.empty() && std::filesystem::exists(info.drain_file, ec);
+    for (const auto& [id, s] : sessions) load.sessions += s->authed() ? 1 : 0;
+    load.max_sessions = limits.max_sessions;
+    const auto now = Clock::now();
+    const uint64_t busy = render_busy_ns.load();
+    const double wall_ns =
+        double(std::chrono::duration_cast<std::chrono::nanoseconds>(now - agent_at).count());
+    load.render_busy = wall_ns > 0 ? double(busy - agent_busy_ns) / wall_ns : 0.0;
+    agent_busy_ns = busy;
+    agent_at = now;
+    return cluster::agent_reply(load);
+}
+
+void Server::Impl::accept_agent() {
+    agent_acceptor->async_accept([this](asio::error_code ec, asio::ip::tcp::socket s) {
+        if (!agent_acceptor->is_open())
+            return;
+        if (!ec) {
+            auto sock = std::make_shared<asio::ip::tcp::socket>(std::move(s));
+            auto line = std::make_shared<std::string>(agent_line());
+            asio::async_write(*sock, asio::buffer(*line), [sock, line](asio::error_code, size_t) {
+                asio::error_code ignored;
+                sock->shutdown(asio::socket_base::shutdown_both, ignored);
+                sock->close(ignored);
+            });
+        }
+        accept_agent();
+    });
 }
 
 void Server::Impl::accept_failed(const char* which, const asio::error_code& ec,

@@ -78,6 +78,11 @@ struct ServerCreateInfo {
     // TLS on the TCP listener (`--tls-cert/--tls-key`): PEM certificate chain and private key,
     // both or neither. The Unix socket stays plain (local, guarded by its file mode).
     std::string tls_cert_file, tls_key_file;
+    // HAProxy's agent-check on this TCP port of `host` (0: none): each connection is answered
+    // with one line, "up NN%", "drain" or "down" (cluster/gateway.hpp, docs/CLUSTER.md), and
+    // closed. While `drain_file` exists the node answers "drain".
+    uint16_t agent_port = 0;
+    std::string drain_file;
 };
 
 class Server {
@@ -93,6 +98,8 @@ public:
     // With TLS: "SHA-256 fingerprint AB:CD:..., subject /CN=..., valid until ..." for the
     // start-up line (clients pin the fingerprint); "" without. Thread: any.
     std::string tls_summary() const;
+    // The bound agent-check port (0: none). Thread: any.
+    uint16_t agent_port() const;
     // Serves until stop(): the calling thread runs the network loop; a render thread is started
     // and joined. Thread: one caller.
     void run();

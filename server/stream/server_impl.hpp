@@ -121,6 +121,8 @@ struct Server::Impl {
     TlsContext tls;  // context null: no TLS
     asio::ip::tcp::acceptor tcp_acceptor{io};
     std::unique_ptr<asio::local::stream_protocol::acceptor> unix_acceptor;
+    // HAProxy's agent-check (`--agent-port`): a line about this node's load per connection.
+    std::unique_ptr<asio::ip::tcp::acceptor> agent_acceptor;
     asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
     Scheduler scheduler;
     std::thread render_thread;
@@ -135,6 +137,8 @@ struct Server::Impl {
     uint64_t next_layer_group = 1;                 // tags the layers of one delivered frame
     Bytes projector_frame;                         // the encoded frame of the current scene
     std::map<uint32_t, uint64_t> target_bytes_of;  // reserved render-target bytes per viewer
+    uint64_t agent_busy_ns = 0;                    // render_busy_ns at the last agent reply
+    Clock::time_point agent_at = Clock::now();     // and when it was sent
 
     // Any thread.
     std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};
@@ -142,6 +146,7 @@ struct Server::Impl {
     std::shared_ptr<BufferPool> buffers = std::make_shared<BufferPool>();  // layer bytes
     uint32_t encoder_threads = 1;                                          // set before run()
     std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};
+    std::atomic<uint64_t> render_busy_ns{0};  // the render thread's time not waiting for work
 
     // Shared between threads under `mutex`.
     mutable std::mutex mutex;
@@ -177,6 +182,9 @@ struct Server::Impl {
     Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i), limits(info.limits) {}
     void accept_tcp();
     void accept_unix();
+    void accept_agent();
+    // The agent-check line (cluster::agent_reply) for this moment.
+    std::string agent_line();
     // An accept failed (EMFILE, ENFILE, ENOBUFS...): logged, retried with back-off.
     void accept_failed(const char* which, const asio::error_code& ec, asio::steady_timer& timer,
                        void (Impl::*retry)());
