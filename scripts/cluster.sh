@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Two render nodes behind HAProxy on loopback (docs/CLUSTER.md), each with its own ports and temp
+# folder: a projector, a headset and four load-generating headsets go through the gateway's one
+# address; HAProxy's table shows where each landed; everything is stopped by PID at the end.
+# The scene bus (NATS JetStream) is not built yet: both nodes serve the embedded scene.
+# Usage: scripts/cluster.sh [BUILD_DIR]   (default build/; scripts/setup.sh builds it and installs
+# haproxy). Leaves its pictures in out/cluster/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin="${1:-build}"
+[[ -x "$bin/hysar" ]] || { echo "cluster.sh: no $bin/hysar (run scripts/setup.sh)" >&2; exit 1; }
+command -v haproxy > /dev/null || { echo "cluster.sh: haproxy is not installed (scripts/setup.sh)" >&2; exit 1; }
+dir=$(mktemp -d)
+out=out/cluster
+mkdir -p "$out"
+pids=()
+stop_all() { for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; rm -rf "$dir"; }
+trap stop_all EXIT
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+gw=$(free_port)
+(umask 077 && head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/token")
+
+nodes=()
+for n in a b; do
+  port=$(free_port); agent=$(free_port)
+  mkdir -p "$dir/$n"
+  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --agent-port "$agent" \
+    --drain-file "$dir/$n/drain" --token-file "$dir/token" --stats-file "$dir/$n/stats.json" \
+    > "$dir/$n/serve.log" 2>&1 &
+  pids+=($!)
+  nodes+=(--node "$n=127.0.0.1:$port,agent=$agent")
+  echo "node $n: 127.0.0.1:$port, agent-check on $agent (pid $!)"
+done
+"$bin/hysar" cluster config --listen "127.0.0.1:$gw" --admin-socket "$dir/haproxy.sock" "${nodes[@]}" \
+  --out "$dir/haproxy.cfg" > /dev/null
+haproxy -c -q -f "$dir/haproxy.cfg"
+haproxy -db -f "$dir/haproxy.cfg" > "$dir/haproxy.log" 2>&1 &
+pids+=($!)
+echo "gateway: 127.0.0.1:$gw (haproxy pid $!)"
+
+show() {
+  python3 - "$dir/haproxy.sock" <<'PY'
+import socket, sys
+s = socket.socket(socket.AF_UNIX)
+s.connect(sys.argv[1])
+s.sendall(b"show stat\n")
+data = b""
+while chunk := s.recv(65536):
+    data += chunk
+print(f"{'backend':<14}{'node':<6}{'status':<16}{'weight':>7}{'sessions':>10}")
+for row in data.decode().splitlines():
+    f = row.split(",")
+    if len(f) > 18 and f[1] in ("a", "b"):
+        print(f"{f[0]:<14}{f[1]:<6}{f[17]:<16}{f[18]:>7}{f[4]:>10}")
+PY
+}
+for _ in $(seq 100); do
+  [[ -S "$dir/haproxy.sock" ]] && [[ $(show | grep -c " UP ") -ge 4 ]] && break
+  sleep 0.2
+done
+
+common=(--connect "127.0.0.1:$gw" --token-file "$dir/token")
+"$bin/clients/hysar-projector" "${common[@]}" --frames 1 --out "$out"
+"$bin/clients/hysar-hmd" "${common[@]}" --angles -20,20 --scale 0.25 --name through-gateway --out "$out"
+echo "four headsets for 5 s through the gateway:"
+"$bin/clients/hysar-loadgen" "${common[@]}" --viewers 4 --rate 15 --seconds 5 --scale 0.25 \
+  > "$dir/loadgen.log" 2>&1 &
+loadgen=$!
+sleep 3
+show
+wait "$loadgen" || { cat "$dir/loadgen.log"; exit 1; }
+grep -E "layers/s total|latency p50" "$dir/loadgen.log"
+echo "pictures in $out/; stopping the nodes and the gateway"
