@@ -3,7 +3,7 @@
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
 # outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
 # server/admin/ (and its tests), no CLI11 outside cli/options.cpp, no OpenSSL outside the two
-# tls.cpp files, and hs_admin's links as docs/ARCHITECTURE.md draws them: it
+# tls.cpp files, no NATS client outside server/cluster/scene_bus.cpp, and hs_admin's links as docs/ARCHITECTURE.md draws them: it
 # reads the server through its snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol),
 # never the GPU or the renderer; only the hysar executable links it.
 set -euo pipefail
@@ -25,6 +25,8 @@ cli11=$(grep -rn '#include <CLI/' server clients tests cli --include='*.cpp' --i
 if [[ -n "$cli11" ]]; then echo "layers: CLI11 outside cli/options.cpp (programs read options through cli/options.hpp):"; echo "$cli11"; fail=1; fi
 tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server/stream/tls\.cpp|clients/tls\.cpp):' || true)
 if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
+nats=$(grep -rnE '#include <nats' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^server/cluster/scene_bus\.cpp:' || true)
+if [[ -n "$nats" ]]; then echo "layers: nats.h outside server/cluster/scene_bus.cpp:"; echo "$nats"; fail=1; fi
 adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
 if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
 adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)

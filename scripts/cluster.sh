@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
-# Two render nodes behind HAProxy on loopback (docs/CLUSTER.md), each with its own ports and temp
-# folder: a projector, a headset and four load-generating headsets go through the gateway's one
-# address; HAProxy's table shows where each landed; everything is stopped by PID at the end.
-# The scene bus (NATS JetStream) is not built yet: both nodes serve the embedded scene.
+# nats-server with JetStream, two render nodes sharing its scene, and HAProxy in front of them,
+# on loopback (docs/CLUSTER.md), each with its own ports and temp folders: a projector, a headset
+# and four load-generating headsets go through the gateway's one address; HAProxy's table shows
+# where each landed; a scene pushed to one node is served by both; everything is stopped by PID.
 # Usage: scripts/cluster.sh [BUILD_DIR]   (default build/; scripts/setup.sh builds it and installs
-# haproxy). Leaves its pictures in out/cluster/.
+# haproxy and nats-server). Leaves its pictures in out/cluster/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin="${1:-build}"
 [[ -x "$bin/hysar" ]] || { echo "cluster.sh: no $bin/hysar (run scripts/setup.sh)" >&2; exit 1; }
-command -v haproxy > /dev/null || { echo "cluster.sh: haproxy is not installed (scripts/setup.sh)" >&2; exit 1; }
+for tool in haproxy nats-server; do
+  command -v $tool > /dev/null || { echo "cluster.sh: $tool is not installed (scripts/setup.sh)" >&2; exit 1; }
+done
 dir=$(mktemp -d)
 out=out/cluster
 mkdir -p "$out"
@@ -18,17 +20,25 @@ stop_all() { for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
 trap stop_all EXIT
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 gw=$(free_port)
-(umask 077 && head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/token")
+(umask 077 && head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/token" &&
+  head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/admin-token")
+np=$(free_port)
+nats-server -js -a 127.0.0.1 -p "$np" -sd "$dir/jetstream" > "$dir/nats.log" 2>&1 &
+pids+=($!)
+echo "scene bus: nats://127.0.0.1:$np (nats-server pid $!)"
+for _ in $(seq 100); do grep -q "Server is ready" "$dir/nats.log" && break; sleep 0.1; done
 
 nodes=()
 for n in a b; do
   port=$(free_port); agent=$(free_port)
   mkdir -p "$dir/$n"
   LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --agent-port "$agent" \
-    --drain-file "$dir/$n/drain" --token-file "$dir/token" --stats-file "$dir/$n/stats.json" \
-    > "$dir/$n/serve.log" 2>&1 &
+    --drain-file "$dir/$n/drain" --token-file "$dir/token" --admin-token-file "$dir/admin-token" \
+    --cluster "nats://127.0.0.1:$np" --node-id "$n" > "$dir/$n/serve.log" 2>&1 &
   pids+=($!)
+  for _ in $(seq 100); do grep -q "^serving" "$dir/$n/serve.log" && break; sleep 0.1; done
   nodes+=(--node "$n=127.0.0.1:$port,agent=$agent")
+  eval "port_$n=$port"
   echo "node $n: 127.0.0.1:$port, agent-check on $agent (pid $!)"
 done
 "$bin/hysar" cluster config --listen "127.0.0.1:$gw" --admin-socket "$dir/haproxy.sock" "${nodes[@]}" \
@@ -70,4 +80,9 @@ sleep 3
 show
 wait "$loadgen" || { cat "$dir/loadgen.log"; exit 1; }
 grep -E "layers/s total|latency p50" "$dir/loadgen.log"
+echo "a scene pushed to node a (the room renamed), served by both:"
+sed 's/"name": "HySAR experiment 1 room[^"]*"/"name": "the room, pushed once"/' configs/exp1-room.json > "$dir/room.json"
+"$bin/hysar" admin --connect "127.0.0.1:$port_a" --token-file "$dir/admin-token" scene push "$dir/room.json"
+sleep 1
+for n in a b; do echo "  node $n: $(grep -E "scene version [0-9]+:" "$dir/$n/serve.log" | tail -n 1 | sed 's/.*info  //')"; done
 echo "pictures in $out/; stopping the nodes and the gateway"

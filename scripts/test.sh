@@ -16,9 +16,9 @@ jobs=$(nproc 2>/dev/null || echo 2)
 CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_SANITIZE=ON \
   -DHYSAR_WERROR=ON -DHYSAR_FUZZ_SECONDS="${HYSAR_FUZZ_SECONDS:-30}" >/dev/null
 cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs_fuzz_seeds hs_net_tests hysar \
-  hysar-loadgen hs_client_lib_tests
+  hysar-loadgen hysar-hmd hysar-projector hs_client_lib_tests hs_scene_bus_tests
 (cd build-san && ctest --output-on-failure --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
-  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|ClientLib|net\.scale)')
+  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|ClientLib|net\.scale|net\.tls|net\.cluster|cluster\.)')
 
 # The server's loopback and reliability tests once more under ThreadSanitizer; tests/tsan.supp
 # lists the suppressions (the Vulkan driver only) and why.

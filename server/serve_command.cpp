@@ -16,6 +16,7 @@
 
 #include "admin/admin_server.hpp"
 #include "calib/serving.hpp"
+#include "cluster/scene_bus.hpp"
 #include "commands.hpp"
 #include "core/log.hpp"
 #include "eval_common.hpp"
@@ -32,6 +33,7 @@ const char* kServeHelp =
     "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
     "                   [--admin-listen [HOST:]PORT] [--tls-cert FILE --tls-key FILE]\n"
     "                   [--agent-port PORT [--drain-file PATH]]\n"
+    "                   [--cluster nats://HOST:PORT --node-id ID]\n"
     "                   [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
@@ -66,6 +68,11 @@ const char* kServeHelp =
     "                           cluster config; docs/CLUSTER.md)\n"
     "  --drain-file PATH        with --agent-port: answer 'drain' while PATH exists (touch it\n"
     "                           to send new headsets elsewhere, remove it to take them again)\n"
+    "  --cluster nats://HOST:PORT  the scene bus (NATS JetStream): the scene is the bucket's\n"
+    "                           key 'scene', its revision the scene version on every node; a\n"
+    "                           node starts on the bus's scene (or puts its own when there is\n"
+    "                           none), SceneUpdate and SIGHUP write through it (docs/CLUSTER.md)\n"
+    "  --node-id ID             with --cluster: this node's name (heartbeats on node.ID)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -227,7 +234,9 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--tls-cert",
                                      "--tls-key",
                                      "--agent-port",
-                                     "--drain-file"});
+                                     "--drain-file",
+                                     "--cluster",
+                                     "--node-id"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;
@@ -347,6 +356,60 @@ int run_serve(const std::vector<std::string>& args) {
             return usage_error("--drain-file goes with --agent-port");
         info.drain_file = f.get("--drain-file", "");
     }
+    std::unique_ptr<cluster::SceneBus> bus;
+    if (f.has("--cluster") != f.has("--node-id"))
+        return usage_error("--cluster and --node-id go together");
+    if (f.has("--cluster")) {
+        const std::string node_id = f.get("--node-id", "");
+        if (node_id.empty() || node_id.size() > 64 ||
+            node_id.find_first_not_of(
+                "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") !=
+                std::string::npos)
+            return usage_error("--node-id: 1 to 64 of A-Z a-z 0-9 _ -");
+        auto b = cluster::SceneBus::connect({f.get("--cluster", ""), node_id});
+        if (!b) {
+            std::fprintf(stderr, "hysar serve: %s\n", b.error().message.c_str());
+            return 1;
+        }
+        bus = std::move(b).value();
+        // The bus's scene wins; with none there yet, this node's becomes version 1.
+        auto current = bus->current();
+        std::string own_json;
+        if (scene_path) {
+            std::ifstream in(*scene_path, std::ios::binary);
+            own_json.assign(std::istreambuf_iterator<char>(in), {});
+        } else {
+            own_json = std::string(scene::default_scene_json());
+        }
+        if (current.ok() && current->first == 0) {
+            auto w = bus->write(0, own_json);
+            if (w.error == cluster::BusError::kNone)
+                current = std::pair<uint64_t, std::string>{w.revision, own_json};
+            else
+                current = bus->current();  // another node put its scene first
+        }
+        if (!current || current->first == 0 || current->first > 0xffffffffu) {
+            std::fprintf(stderr, "hysar serve: --cluster: cannot read the bus's scene: %s\n",
+                         current ? "no usable version" : current.error().message.c_str());
+            return 1;
+        }
+        auto bus_scene = scene::parse_scene(
+            current->second, fmt::format("the bus's scene version {}", current->first),
+            info.asset_root, info.asset_root, info.limits.scene);
+        if (!bus_scene) {
+            std::fprintf(stderr, "hysar serve: --cluster: %s\n", bus_scene.error().message.c_str());
+            return 1;
+        }
+        s = std::move(bus_scene);
+        info.initial_scene_version = uint32_t(current->first);
+        cluster::SceneBus* b_ptr = bus.get();
+        info.publish_scene = [b_ptr](uint32_t applied, const std::string& json) {
+            const auto w = b_ptr->write(applied, json);
+            return w.error == cluster::BusError::kNone ? std::string() : w.message;
+        };
+        std::printf("cluster: node '%s' on %s, scene version %u\n", node_id.c_str(),
+                    f.get("--cluster", "").c_str(), info.initial_scene_version);
+    }
     if (f.has("--tls-cert") != f.has("--tls-key"))
         return usage_error("TLS needs both --tls-cert and --tls-key");
     if (f.has("--tls-key")) {
@@ -380,6 +443,22 @@ int run_serve(const std::vector<std::string>& args) {
     if (const std::string tls = server.value()->tls_summary(); !tls.empty())
         std::printf("TLS on %s:%u: %s\n", admin::bracketed(info.host).c_str(),
                     server.value()->port(), tls.c_str());
+    if (bus) {
+        // Every node (this one's writes too) applies what the watch delivers, if newer.
+        stream::Server* watched = server.value().get();
+        bus->watch([watched](uint64_t revision, const std::string& json) {
+            if (revision > 0xffffffffu ||
+                !cluster::SceneBus::newer(revision, watched->bus_version()))
+                return;
+            if (auto r = watched->apply_scene_version(json, uint32_t(revision)); !r)
+                log::error(
+                    "scene bus: version {} cannot be served here: {}; the running scene "
+                    "stays",
+                    revision, r.error().message);
+            else
+                log::info("scene bus: version {} arrived", revision);
+        });
+    }
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (admin_options) {
         admin_options->token = info.token;
@@ -412,12 +491,31 @@ int run_serve(const std::vector<std::string>& args) {
     std::signal(SIGPIPE, SIG_IGN);
     stream::Server& srv = *server.value();
     std::thread watcher([&] {
+        auto beat = std::chrono::steady_clock::now();
         while (!g_stop.load()) {
+            if (bus && std::chrono::steady_clock::now() - beat > std::chrono::seconds(2)) {
+                beat = std::chrono::steady_clock::now();
+                bus->heartbeat(nlohmann::json{
+                    {"node", f.get("--node-id", "")},
+                    {"scene_version", srv.scene_version()},
+                    {"port",
+                     srv.port()}}.dump());
+            }
             if (g_reload.exchange(false)) {
                 if (!scene_path) {
                     log::warn("SIGHUP: the server runs the embedded scene; nothing to reload");
                 } else if (auto next = load(); !next) {
                     log::error("SIGHUP: {}; the running scene stays", next.error().message);
+                } else if (bus) {
+                    // A cluster: the file goes through the bus like a SceneUpdate.
+                    std::ifstream in(*scene_path, std::ios::binary);
+                    const std::string text(std::istreambuf_iterator<char>(in), {});
+                    const auto w = bus->write(srv.bus_version(), text);
+                    if (w.error != cluster::BusError::kNone)
+                        log::error("SIGHUP: {}", w.message);
+                    else
+                        log::info("SIGHUP: {} written to the scene bus as version {}", *scene_path,
+                                  w.revision);
                 } else if (auto r = srv.update_scene(next.value()); !r) {
                     log::error("SIGHUP: {}: {}; the running scene stays", *scene_path,
                                r.error().message);
@@ -432,6 +530,7 @@ int run_serve(const std::vector<std::string>& args) {
     srv.run();
     g_stop.store(true);
     watcher.join();
+    bus.reset();             // its watch calls the server: stopped before the server goes
     admin_endpoint.reset();  // it reads the server: stopped before the server goes
     auto stats = srv.stats();
     if (f.has("--stats-file")) {

@@ -247,9 +247,10 @@ void FrameLoop::run() {
                 next.swap(s_.pending_scene);
             }
             if (next) {
-                if (rebuild(next->scene, version + 1)) {
+                const uint32_t v = next->version ? next->version : version + 1;
+                if (rebuild(next->scene, v)) {
                     std::lock_guard lock(s_.mutex);
-                    s_.scene_version = ++version;
+                    s_.scene_version = version = v;
                     log::info("scene version {}: '{}'", version, current_.name);
                 } else if (next->session != 0) {
                     asio::post(s_.io, [impl = &s_, id = next->session, seq = next->sequence] {

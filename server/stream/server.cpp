@@ -11,6 +11,7 @@
 #include "core/log.hpp"
 #include "gpu/driver_info.hpp"
 #include "protocol/schema.hpp"
+#include "scene/config.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
 
@@ -79,6 +80,8 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     if (!checked)
         return checked.error();
     impl->initial_scene = scene;
+    impl->scene_version = std::max<uint32_t>(1, info.initial_scene_version);
+    impl->bus_version = impl->scene_version;
     if (info.tls_cert_file.empty() != info.tls_key_file.empty())
         return make_error(ErrorCode::kInvalidArgument,
                           "TLS needs both --tls-cert and --tls-key (or neither)");
@@ -164,6 +167,7 @@ void Server::run() {
     impl_->scheduler.stop();
     if (impl_->render_thread.joinable())
         impl_->render_thread.join();
+    for (auto& t : impl_->bus_writers) t.join();
     if (!impl_->info.unix_path.empty())
         ::unlink(impl_->info.unix_path.c_str());
 }
@@ -370,7 +374,8 @@ Result<scene::Scene> Server::Impl::accept_scene(const scene::Scene& s) const {
     return s;
 }
 
-void Server::Impl::queue_scene(scene::Scene s, uint32_t session, uint32_t sequence) {
+void Server::Impl::queue_scene(scene::Scene s, uint32_t session, uint32_t sequence,
+                               uint32_t version) {
     {
         std::lock_guard lock(mutex);
         if (pending_scene && pending_scene->session != 0)
@@ -378,9 +383,50 @@ void Server::Impl::queue_scene(scene::Scene s, uint32_t session, uint32_t sequen
                 answer(id, proto::ErrorCode::kSceneRejected,
                        "replaced by a newer scene before it was applied", seq);
             });
-        pending_scene = PendingScene{std::move(s), session, sequence};
+        pending_scene = PendingScene{std::move(s), session, sequence, version};
     }
     scheduler.wake();
+}
+
+void Server::Impl::publish_scene(std::string json, uint32_t session, uint32_t sequence) {
+    uint32_t applied;
+    {
+        std::lock_guard lock(mutex);
+        applied = bus_version;
+    }
+    bus_writers.emplace_back([this, json = std::move(json), session, sequence, applied] {
+        const std::string refused = info.publish_scene(applied, json);
+        if (!refused.empty())
+            asio::post(io, [this, session, sequence, refused] {
+                answer(session, proto::ErrorCode::kSceneRejected, refused, sequence);
+            });
+    });
+}
+
+Result<void> Server::apply_scene_version(const std::string& json, uint32_t version) {
+    {
+        std::lock_guard lock(impl_->mutex);
+        if (version <= impl_->bus_version)
+            return {};
+        // Taken even if it cannot be built here: this node's next write is based on it.
+        impl_->bus_version = version;
+    }
+    HS_ASSIGN_OR_RETURN(auto s, scene::parse_scene(json, fmt::format("scene version {}", version),
+                                                   impl_->info.asset_root, impl_->info.asset_root,
+                                                   impl_->limits.scene));
+    HS_ASSIGN_OR_RETURN(auto accepted, impl_->accept_scene(s));
+    impl_->queue_scene(std::move(accepted), 0, 0, version);
+    return {};
+}
+
+uint32_t Server::bus_version() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->bus_version;
+}
+
+uint32_t Server::scene_version() const {
+    std::lock_guard lock(impl_->mutex);
+    return impl_->scene_version;
 }
 
 void Server::Impl::answer(uint32_t id, proto::ErrorCode code, std::string message, uint32_t seq) {

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -83,6 +84,14 @@ struct ServerCreateInfo {
     // closed. While `drain_file` exists the node answers "drain".
     uint16_t agent_port = 0;
     std::string drain_file;
+    // A cluster's scene bus (docs/CLUSTER.md). The version the initial scene has there (1 on a
+    // single machine), and what a SceneUpdate becomes once it passed this server's checks:
+    // `publish_scene(applied_version, json)` writes it to the bus (compare-and-set on the version
+    // this node applied) and returns "" or the sentence the admin gets; it runs on a thread of its
+    // own. The scene then arrives through apply_scene_version like every node's. Null: a
+    // SceneUpdate is applied here, as on a single machine.
+    uint32_t initial_scene_version = 1;
+    std::function<std::string(uint32_t applied_version, const std::string& json)> publish_scene;
 };
 
 class Server {
@@ -100,6 +109,14 @@ public:
     std::string tls_summary() const;
     // The bound agent-check port (0: none). Thread: any.
     uint16_t agent_port() const;
+    // A scene delivered by the cluster's bus as `version`: parsed against the asset root and
+    // limits, then applied as that version if it is newer than the applied or queued one
+    // (older or equal: ignored, true). An error when it cannot be used here. Thread: any.
+    Result<void> apply_scene_version(const std::string& json, uint32_t version);
+    // The scene version this server serves, and the newest it took from a cluster's bus (the
+    // same, or newer while that one is being built). Thread: any.
+    uint32_t scene_version() const;
+    uint32_t bus_version() const;
     // Serves until stop(): the calling thread runs the network loop; a render thread is started
     // and joined. Thread: one caller.
     void run();

@@ -155,10 +155,14 @@ struct Server::Impl {
         scene::Scene scene;
         uint32_t session = 0;  // who asked (0: a reload), answered if it cannot be built
         uint32_t sequence = 0;
+        uint32_t version = 0;  // the bus's version for it; 0: the next one
     };
     std::optional<PendingScene> pending_scene;
     std::vector<uint32_t> released_viewers;  // whose render targets the render thread frees
     uint32_t scene_version = 1;
+    // The newest version taken from a cluster's bus (queued, being built or served): what this
+    // node's writes compare-and-set on and what a delivered version must exceed.
+    uint32_t bus_version = 1;
     uint64_t projector_renders = 0;
     nlohmann::json last_projector_report;
     double projector_ms_total = 0;
@@ -200,8 +204,11 @@ struct Server::Impl {
     // limits (its render-target bytes then reserved), else the error to answer.
     std::optional<proto::Error> admit_display(uint32_t id, const proto::RegisterDisplay& d);
     Result<scene::Scene> accept_scene(const scene::Scene& s) const;
-    void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence);
-    void render_loop();  // the render thread (frame_loop.cpp)
+    void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence, uint32_t version = 0);
+    // SceneUpdate with a bus: info.publish_scene on a writer thread, its refusal answered.
+    void publish_scene(std::string json, uint32_t session, uint32_t sequence);
+    std::vector<std::thread> bus_writers;  // network thread; joined when run() ends
+    void render_loop();                    // the render thread (frame_loop.cpp)
     void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
     void publish_projector_frame(Bytes frame);
     // Network thread: a frame's two layers to the session's queue (latest frame wins).

@@ -399,6 +399,8 @@ void Session::scene_update(const proto::SceneUpdate& m, uint32_t seq) {
     auto accepted = srv_.accept_scene(s.value());
     if (!accepted)
         return error(proto::ErrorCode::kSceneRejected, accepted.error().message, false, seq);
+    if (srv_.info.publish_scene)  // a cluster: every node applies it from the bus
+        return srv_.publish_scene(m.scene_json, id_, seq);
     srv_.queue_scene(std::move(accepted).value(), id_, seq);
 }
 

@@ -1,0 +1,130 @@
+#!/usr/bin/env bash
+# Render nodes sharing one scene through NATS JetStream (hysar serve --cluster, docs/CLUSTER.md),
+# on loopback: counts and orders, not frame rates; each step bounded.
+#   1. 5 SceneUpdates back to back, to either node: both apply strictly increasing versions and
+#      end on the same one; the projector receives the final version;
+#   2. two admins racing: both nodes still end on one version, and a refused push is the
+#      conflict ("scene changed concurrently, now version N");
+#   3. nats-server stopped: layers keep flowing, SceneUpdate gets the bus error; after its
+#      restart, an update reaches both nodes;
+#   4. a third node started late serves the latest version from its first Welcome.
+set -euo pipefail
+bin="$1"
+dir=$(mktemp -d)
+pids=()
+nats=""
+cleanup() {
+  for p in "${pids[@]}" $nats; do kill -KILL "$p" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  rm -rf "$dir"
+}
+trap cleanup EXIT
+fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 12 "$f"; done; exit 1; }
+command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
+(umask 077 && echo "bus-test-token" > "$dir/token" && echo "bus-test-admin" > "$dir/admin")
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+np=$(free_port)
+url="nats://127.0.0.1:$np"
+start_nats() {
+  nats-server -js -a 127.0.0.1 -p "$np" -sd "$dir/js" >> "$dir/nats.log" 2>&1 &
+  nats=$!
+  for _ in $(seq 100); do grep -q "Server is ready" "$dir/nats.log" && return 0; sleep 0.1; done
+  fail "nats-server did not start"
+}
+start_node() {  # NAME
+  local port; port=$(free_port)
+  eval "port_$1=$port"
+  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
+    --admin-token-file "$dir/admin" --cluster "$url" --node-id "$1" > "$dir/node-$1.log" 2>&1 &
+  pids+=($!)
+  for _ in $(seq 200); do grep -q "^serving" "$dir/node-$1.log" && return 0; sleep 0.1; done
+  fail "node $1 did not start"
+}
+push() {  # NODE: the room file with a new name, through that node
+  sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"
+  "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
+    --timeout-ms 20000 scene push "$dir/room-$2.json"
+}
+applied() { grep -oE "scene version [0-9]+:" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
+last_applied() { applied "$1" | awk '{print $NF}'; }
+increasing() { python3 -c "import sys; v=[int(x) for x in sys.argv[1:]]; sys.exit(0 if all(a<b for a,b in zip(v,v[1:])) else 1)" $(applied "$1"); }
+within() {
+  local end=$(( $(date +%s%N) + $1 * 1000000000 ))
+  while (( $(date +%s%N) < end )); do eval "$2" && return 0; sleep 0.1; done
+  return 1
+}
+src="$(cd "$(dirname "$0")/../.." && pwd)"
+
+start_nats
+start_node a
+start_node b
+grep -q "scene version 1$" "$dir/node-a.log" || fail "the first node did not put version 1"
+grep -q "scene version 1$" "$dir/node-b.log" || fail "the second node did not start on version 1"
+mkdir "$dir/p"
+"$bin/clients/hysar-projector" --connect "127.0.0.1:$port_a" --token-file "$dir/token" --frames 0 \
+  --out "$dir/p" > "$dir/projector.log" 2>&1 &
+pids+=($!)
+"$bin/clients/hysar-loadgen" --connect "127.0.0.1:$port_b" --token-file "$dir/token" --viewers 2 \
+  --rate 10 --seconds 0 --scale 0.2 > "$dir/loadgen.log" 2>&1 &
+pids+=($!)
+
+# 1. Five updates back to back, alternating nodes.
+for i in 1 2 3 4 5; do
+  node=$([[ $((i % 2)) == 1 ]] && echo a || echo b)
+  push "$node" "$i" > "$dir/push.log" 2>&1 || fail "push $i through $node: $(cat "$dir/push.log")"
+done
+within 10 '[[ "$(last_applied a)" == 6 && "$(last_applied b)" == 6 ]]' \
+  || fail "the nodes did not both reach version 6: a: $(applied a); b: $(applied b)"
+increasing a && increasing b || fail "versions not strictly increasing: a: $(applied a); b: $(applied b)"
+within 10 '[[ -e "$dir/p/projector_v6.png" ]]' || fail "the projector did not receive version 6"
+echo "5 updates: a applied $(applied a); b applied $(applied b); projector at v6"
+
+# 2. Two admins racing from the same version.
+( rc=0; push a race-a > "$dir/race-a.log" 2>&1 || rc=$?; echo $rc > "$dir/race-a.rc" ) &
+ra=$!
+( rc=0; push b race-b > "$dir/race-b.log" 2>&1 || rc=$?; echo $rc > "$dir/race-b.rc" ) &
+rb=$!
+wait "$ra" "$rb"
+for n in a b; do
+  if [[ "$(cat "$dir/race-$n.rc")" != 0 ]]; then
+    grep -q "scene changed concurrently, now version" "$dir/race-$n.log" \
+      || fail "the racing push through $n failed without the conflict error: $(cat "$dir/race-$n.log")"
+    echo "race: the push through $n lost: $(grep -o 'scene changed concurrently.*' "$dir/race-$n.log")"
+  fi
+done
+within 10 '[[ "$(last_applied a)" == "$(last_applied b)" ]]' \
+  || fail "after the race the nodes differ: a: $(applied a); b: $(applied b)"
+increasing a && increasing b || fail "versions not strictly increasing: a: $(applied a); b: $(applied b)"
+before_outage=$(last_applied a)
+
+# 3. The bus goes away: layers go on, a push gets the bus error; back, pushes reach both nodes.
+frames() {
+  "$bin/hysar" admin --connect "127.0.0.1:$port_b" --token-file "$dir/admin" stats --json \
+    | python3 -c "import json,sys; print(sum(v.get('frames',0) for v in json.load(sys.stdin).get('viewers',[])))"
+}
+kill -TERM "$nats"; wait "$nats" 2>/dev/null || true; nats=""
+sleep 0.5
+f0=$(frames)
+if out=$(push a outage 2>&1); then fail "a push during the outage was taken: $out"; fi
+grep -q "scene bus is unavailable" <<< "$out" || fail "the push during the outage: $out"
+sleep 1
+f1=$(frames)
+(( f1 > f0 )) || fail "no layers during the bus outage ($f0 -> $f1 frames)"
+echo "bus down: push refused ($(grep -o 'the scene bus is unavailable[^;]*' <<< "$out")); frames $f0 -> $f1"
+start_nats
+restarted=$(date +%s%N)
+within 15 'push b after > "$dir/push.log" 2>&1' || fail "no push went through after the bus came back: $(cat "$dir/push.log")"
+want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
+(( want > before_outage )) || fail "the push after the outage gave version $want (was $before_outage)"
+within 10 '[[ "$(last_applied a)" == "$want" && "$(last_applied b)" == "$want" ]]' \
+  || fail "after the bus came back the nodes are not both at $want: a: $(applied a); b: $(applied b)"
+echo "bus back: version $want on both nodes; the first push through $(( ($(date +%s%N) - restarted) / 1000000 )) ms after the restart"
+
+# 4. A late node serves the latest version from its first Welcome.
+start_node c
+grep -q "scene version $want$" "$dir/node-c.log" || fail "the late node did not start on version $want: $(head -3 "$dir/node-c.log")"
+"$bin/clients/hysar-projector" --connect "127.0.0.1:$port_c" --token-file "$dir/token" --frames 1 \
+  --out "$dir/pc" > "$dir/late-projector.log" 2>&1 || fail "projector on the late node"
+[[ -e "$dir/pc/projector_v$want.png" ]] || fail "the late node's projector frame is not v$want: $(ls "$dir/pc")"
+echo "late node: version $want at start; nodes applied a: $(applied a); b: $(applied b); c: $(applied c)"
+echo "scene bus: ordered versions on every node, conflict, outage and catch-up behave"
