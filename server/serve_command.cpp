@@ -495,11 +495,14 @@ int run_serve(const std::vector<std::string>& args) {
         while (!g_stop.load()) {
             if (bus && std::chrono::steady_clock::now() - beat > std::chrono::seconds(2)) {
                 beat = std::chrono::steady_clock::now();
-                bus->heartbeat(nlohmann::json{
-                    {"node", f.get("--node-id", "")},
-                    {"scene_version", srv.scene_version()},
-                    {"port",
-                     srv.port()}}.dump());
+                const auto st = srv.stats();
+                bus->heartbeat(
+                    nlohmann::json{{"node", f.get("--node-id", "")},
+                                   {"scene_version", srv.scene_version()},
+                                   {"port", srv.port()},
+                                   {"sessions", st.value("sessions", nlohmann::json())},
+                                   {"viewers", st.value("viewers", nlohmann::json::array()).size()}}
+                        .dump());
             }
             if (g_reload.exchange(false)) {
                 if (!scene_path) {

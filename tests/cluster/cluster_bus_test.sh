@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Render nodes sharing one scene through NATS JetStream (hysar serve --cluster, docs/CLUSTER.md),
 # on loopback: counts and orders, not frame rates; each step bounded.
+#   0. each node's heartbeat on node.<id> carries its version and load;
 #   1. 5 SceneUpdates back to back, to either node: both apply strictly increasing versions and
 #      end on the same one; the projector receives the final version;
 #   2. two admins racing: both nodes still end on one version, and a refused push is the
@@ -67,6 +68,28 @@ pids+=($!)
 "$bin/clients/hysar-loadgen" --connect "127.0.0.1:$port_b" --token-file "$dir/token" --viewers 2 \
   --rate 10 --seconds 0 --scale 0.2 > "$dir/loadgen.log" 2>&1 &
 pids+=($!)
+
+# 0. Heartbeats: each node publishes its version and load on node.<id> (NATS text protocol).
+python3 - "$np" > "$dir/heartbeats.txt" <<'PY' || fail "no heartbeat from both nodes within 6 s"
+import json, socket, sys, time
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=6)
+s.sendall(b'CONNECT {"verbose":false}\r\nSUB node.* 1\r\n')
+f = s.makefile("rb")
+seen, end = {}, time.time() + 6
+while len(seen) < 2 and time.time() < end:
+    line = f.readline().decode().strip()
+    if line.startswith("PING"):
+        s.sendall(b"PONG\r\n")
+    if not line.startswith("MSG"):
+        continue
+    payload = json.loads(f.read(int(line.split()[-1]) + 2)[:-2])
+    seen[payload["node"]] = payload
+assert set(seen) == {"a", "b"}, seen
+for n, p in sorted(seen.items()):
+    assert p["scene_version"] == 1 and p["port"] > 0 and "sessions" in p, p
+    print(n, json.dumps(p))
+PY
+echo "heartbeats: $(tr '\n' ' ' < "$dir/heartbeats.txt")"
 
 # 1. Five updates back to back, alternating nodes.
 for i in 1 2 3 4 5; do
