@@ -183,8 +183,23 @@ echo "bus back: version $want on both nodes; the first push through $(( ($(date 
 # 4. A late node serves the latest version from its first Welcome.
 start_node c
 grep -q "scene version $want$" "$dir/node-c.log" || fail "the late node did not start on version $want: $(head -3 "$dir/node-c.log")"
+welcome=$(python3 - "$port_c" "$dir/token" <<'PY'
+import socket, struct, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=10)
+token = open(sys.argv[2], "rb").read().strip()
+hello = bytes([2]) + struct.pack("<H", len(token)) + token + struct.pack("<H", 4) + b"late"
+s.sendall(struct.pack("<IHHII", 0x52535948, 1, 1, len(hello), 1) + hello)
+h = b""
+while len(h) < 16 + 16:
+    h += s.recv(64)
+_, _, t, n, _ = struct.unpack("<IHHII", h[:16])
+assert t == 2, f"no Welcome (type {t})"
+print(struct.unpack("<IQI", h[16:32])[2])
+PY
+) || fail "no Welcome from the late node"
+[[ "$welcome" == "$want" ]] || fail "the late node's Welcome says version $welcome, expected $want"
 "$bin/clients/hysar-projector" --connect "127.0.0.1:$port_c" --token-file "$dir/token" --frames 1 \
   --out "$dir/pc" > "$dir/late-projector.log" 2>&1 || fail "projector on the late node"
 [[ -e "$dir/pc/projector_v$want.png" ]] || fail "the late node's projector frame is not v$want: $(ls "$dir/pc")"
-echo "late node: version $want at start; nodes applied a: $(applied a); b: $(applied b); c: $(applied c)"
+echo "late node: version $want at start and in its Welcome; nodes applied a: $(applied a); b: $(applied b); c: $(applied c)"
 echo "scene bus: ordered versions on every node, conflict, outage and catch-up behave"
