@@ -17,7 +17,7 @@ namespace {
 const char* kClusterHelp =
     "usage: hysar cluster config --node ID=HOST:PORT[,agent=PORT] [--node ...]\n"
     "                            [--listen HOST:PORT] [--agent-port PORT]\n"
-    "                            [--admin-socket PATH] [--out FILE]\n"
+    "                            [--admin-socket PATH] [--tls-pem FILE] [--out FILE]\n"
     "\n"
     "  Prints a HAProxy configuration (haproxy 2.6, mode tcp) that puts the render nodes behind\n"
     "  one address: it accepts only a HySAR Hello, sends the projector to the first node (the\n"
@@ -32,6 +32,9 @@ const char* kClusterHelp =
     "  --listen HOST:PORT     the gateway's address (default 0.0.0.0:7700)\n"
     "  --agent-port PORT      the agent port of nodes without ',agent=' (default 7800)\n"
     "  --admin-socket PATH    HAProxy's runtime API socket (show stat, set server ...)\n"
+    "  --tls-pem FILE         TLS at the gateway: FILE holds the certificate chain and its key\n"
+    "                         (cat tls.pem tls.key); clients connect with --tls, --tls-ca or\n"
+    "                         --tls-fingerprint; the nodes behind it speak plain\n"
     "  --out FILE             write the configuration here instead of stdout\n"
     "\n"
     "example: hysar cluster config --node a=10.0.0.11:7700 --node b=10.0.0.12:7700 \\\n"
@@ -51,7 +54,8 @@ int run_cluster(const std::vector<std::string>& args) {
             return 0;
         }
     auto parsed = options::parse(
-        args, {{"--node", "--listen", "--agent-port", "--admin-socket", "--out"}, {}, true});
+        args,
+        {{"--node", "--listen", "--agent-port", "--admin-socket", "--tls-pem", "--out"}, {}, true});
     if (auto* e = std::get_if<std::string>(&parsed))
         return usage_error(*e + " (see hysar cluster --help)");
     const auto& p = std::get<options::Parsed>(parsed);
@@ -84,6 +88,9 @@ int run_cluster(const std::vector<std::string>& args) {
         o.listen_port = uint16_t(*port);
     }
     o.admin_socket = value("--admin-socket");
+    o.tls_pem = value("--tls-pem");
+    if (!o.tls_pem.empty() && !std::ifstream(o.tls_pem))
+        return usage_error("--tls-pem " + o.tls_pem + ": cannot read the file");
     if (auto it = p.values.find("--node"); it != p.values.end())
         for (const auto& text : it->second) {
             auto n = cluster::parse_node(text, agent_port);

@@ -112,7 +112,8 @@ Result<std::string> haproxy_config(const GatewayOptions& o) {
     line("    option redispatch 1");
     line("");
     line("frontend hysar");
-    line(fmt::format("    bind {}", endpoint(o.listen_host, o.listen_port)));
+    line(fmt::format("    bind {}{}", endpoint(o.listen_host, o.listen_port),
+                     o.tls_pem.empty() ? "" : " ssl crt " + o.tls_pem + " ssl-min-ver TLSv1.2"));
     line(fmt::format("    tcp-request inspect-delay {}ms", o.inspect_ms));
     line("    # A Hello's first 17 bytes: magic \"HYSR\", version, type 1, payload length,");
     line("    # sequence, then the role (1 projector, 2 headset, 3 admin). PROTOCOL.md, Frame.");

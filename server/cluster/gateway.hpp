@@ -25,6 +25,10 @@ struct GatewayOptions {
     // HAProxy's runtime API socket (`show stat`, `set server`); empty: none.
     std::string admin_socket;
     uint32_t inspect_ms = 5000;  // how long a connection may take to send its Hello's first bytes
+    // TLS at the gateway: a PEM holding the certificate chain and its key (HAProxy's `crt`);
+    // clients connect with --tls, HAProxy reads the Hello inside TLS, the nodes behind it speak
+    // plain. Empty: plain.
+    std::string tls_pem;
     uint32_t agent_inter_ms = 1000;
 };
 

@@ -7,7 +7,9 @@
 #   4. kill -9 of a node: every headset is on the other within 3 s, and each one that was on
 #      the dead node got layers after its reconnect;
 #   5. SIGSTOP of a node (gone without a reset): HAProxy marks it down and its headsets are
-#      served by the other.
+#      served by the other;
+#   6. TLS terminated at the gateway (--tls-pem): a headset over TLS is served by plain nodes, a
+#      plain client is refused.
 # The projector goes to the first node. Needs haproxy (scripts/setup.sh installs it).
 set -euo pipefail
 bin="$1"
@@ -140,4 +142,29 @@ echo "SIGSTOP a: marked down, headsets on b after $(( ($(date +%s%N) - stopped) 
 kill -TERM "$third"
 wait "$third" || fail "loadgen (third) exit $?"
 kill -CONT "$node_a"
-echo "cluster gateway: split, drain, kill -9 and SIGSTOP behave"
+within 15 '[[ "$(status a)" == UP ]]' || fail "a did not come back after SIGCONT: $(stat | tr '\n' ' ')"
+
+# 6. TLS at the gateway (--tls-pem): a headset pinning the gateway's certificate is served by a
+#    node that speaks plain; a plain client is refused by HAProxy.
+openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -days 2 -subj /CN=gateway \
+  -addext "subjectAltName=IP:127.0.0.1" -keyout "$dir/gw.key" -out "$dir/gw.crt" 2>/dev/null
+(umask 077 && cat "$dir/gw.crt" "$dir/gw.key" > "$dir/gw.pem")
+tgw=$(free_port)
+"$bin/hysar" cluster config --listen "127.0.0.1:$tgw" --tls-pem "$dir/gw.pem" \
+  --node "a=127.0.0.1:$pa,agent=$aa" --node "b=127.0.0.1:$pb,agent=$ab" --out "$dir/tls.cfg" > /dev/null
+haproxy -c -f "$dir/tls.cfg" > "$dir/tls-check.log" 2>&1 || fail "haproxy -c refused the TLS configuration"
+haproxy -db -f "$dir/tls.cfg" > "$dir/haproxy-tls.log" 2>&1 &
+pids+=($!)
+within 10 'python3 -c "import socket; socket.create_connection((\"127.0.0.1\", $tgw), timeout=1)" 2> /dev/null' \
+  || fail "the TLS gateway did not listen"
+sleep 2  # its first health checks
+"$bin/clients/hysar-hmd" --connect "127.0.0.1:$tgw" --tls-ca "$dir/gw.crt" --token-file "$dir/token" \
+  --angles 0 --scale 0.2 --name tls-gw --out "$dir/tls-out" --retries 0 > "$dir/tls-hmd.log" 2>&1 \
+  || fail "a headset through the TLS gateway"
+ls "$dir"/tls-out/tls-gw_*left*.png > /dev/null || fail "no layer through the TLS gateway"
+if "$bin/clients/hysar-hmd" --connect "127.0.0.1:$tgw" --token-file "$dir/token" --angles 0 \
+    --scale 0.2 --retries 0 --out "$dir/plain-out" > "$dir/plain-hmd.log" 2>&1; then
+  fail "a plain client was served by the TLS gateway"
+fi
+echo "TLS gateway: served a headset over TLS to plain nodes; refused a plain client ($(tail -n 1 "$dir/plain-hmd.log"))"
+echo "cluster gateway: split, drain, kill -9, SIGSTOP and TLS behave"

@@ -49,6 +49,13 @@ TEST(Gateway, ConfigurationRoutesHellosAndRefusesDuplicates) {
                      "rise 2 agent-check agent-port 7800 agent-inter 1000ms "
                      "on-marked-down shutdown-sessions backup"),
               std::string::npos);
+    EXPECT_NE(t.find("    bind 0.0.0.0:7700\n"), std::string::npos);  // plain by default
+    o.tls_pem = "/etc/hysar/gateway.pem";
+    auto tls = haproxy_config(o);
+    ASSERT_TRUE(tls.ok());
+    EXPECT_NE(tls->find("bind 0.0.0.0:7700 ssl crt /etc/hysar/gateway.pem ssl-min-ver TLSv1.2"),
+              std::string::npos);
+    o.tls_pem.clear();
     o.nodes.push_back({"a", "10.0.0.3", 7700, 7800});
     EXPECT_FALSE(haproxy_config(o).ok());  // id twice
     o.nodes.back() = {"c", "10.0.0.1", 7700, 7801};
