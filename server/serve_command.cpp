@@ -381,9 +381,11 @@ int run_serve(const std::vector<std::string>& args) {
         } else {
             own_json = std::string(scene::default_scene_json());
         }
+        bool own = false;
         if (current.ok() && current->first == 0) {
             auto w = bus->write(0, own_json);
-            if (w.error == cluster::BusError::kNone)
+            own = w.error == cluster::BusError::kNone;
+            if (own)
                 current = std::pair<uint64_t, std::string>{w.revision, own_json};
             else
                 current = bus->current();  // another node put its scene first
@@ -400,8 +402,18 @@ int run_serve(const std::vector<std::string>& args) {
             std::fprintf(stderr, "hysar serve: --cluster: %s\n", bus_scene.error().message.c_str());
             return 1;
         }
+        if (info.calibration)
+            if (auto r = info.calibration->check_scene(bus_scene.value()); !r) {
+                std::fprintf(stderr, "hysar serve: --calibration: the bus's scene: %s\n",
+                             r.error().message.c_str());
+                return 1;
+            }
         s = std::move(bus_scene);
         info.initial_scene_version = uint32_t(current->first);
+        if (!own)
+            std::printf("cluster: serving the bus's scene '%s' (version %u)%s\n",
+                        s.value().name.c_str(), info.initial_scene_version,
+                        scene_path ? "; --scene is used only when the bus has none" : "");
         cluster::SceneBus* b_ptr = bus.get();
         info.publish_scene = [b_ptr](uint32_t applied, const std::string& json) {
             const auto w = b_ptr->write(applied, json);
