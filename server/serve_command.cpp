@@ -257,6 +257,24 @@ int run_serve(const std::vector<std::string>& args) {
             return usage_error(r.error().message);
     if (auto r = parse_limits(f, info.limits); !r)
         return usage_error(r.error().message);
+    if (f.has("--agent-port")) {
+        auto a = parse_count(f, "--agent-port", 0, 1, 65535);
+        if (!a)
+            return usage_error(a.error().message);
+        info.agent_port = uint16_t(a.value());
+    }
+    if (f.has("--drain-file")) {
+        if (!f.has("--agent-port"))
+            return usage_error("--drain-file goes with --agent-port");
+        info.drain_file = f.get("--drain-file", "");
+    }
+    if (f.has("--cluster") != f.has("--node-id"))
+        return usage_error("--cluster and --node-id go together");
+    if (const std::string id = f.get("--node-id", "-");
+        id.empty() || id.size() > 64 ||
+        id.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") !=
+            std::string::npos)
+        return usage_error("--node-id: '" + id + "' is not 1 to 64 of A-Z a-z 0-9 _ -");
     std::optional<admin::AdminOptions> admin_options;
     if (f.has("--admin-listen")) {
         auto a = admin::parse_admin_listen(f.get("--admin-listen", ""));
@@ -345,27 +363,9 @@ int run_serve(const std::vector<std::string>& args) {
         }
         info.admin_token = t.value();
     }
-    if (f.has("--agent-port")) {
-        auto a = parse_count(f, "--agent-port", 0, 1, 65535);
-        if (!a)
-            return usage_error(a.error().message);
-        info.agent_port = uint16_t(a.value());
-    }
-    if (f.has("--drain-file")) {
-        if (!f.has("--agent-port"))
-            return usage_error("--drain-file goes with --agent-port");
-        info.drain_file = f.get("--drain-file", "");
-    }
     std::unique_ptr<cluster::SceneBus> bus;
-    if (f.has("--cluster") != f.has("--node-id"))
-        return usage_error("--cluster and --node-id go together");
     if (f.has("--cluster")) {
         const std::string node_id = f.get("--node-id", "");
-        if (node_id.empty() || node_id.size() > 64 ||
-            node_id.find_first_not_of(
-                "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") !=
-                std::string::npos)
-            return usage_error("--node-id: 1 to 64 of A-Z a-z 0-9 _ -");
         auto b = cluster::SceneBus::connect({f.get("--cluster", ""), node_id});
         if (!b) {
             std::fprintf(stderr, "hysar serve: %s\n", b.error().message.c_str());

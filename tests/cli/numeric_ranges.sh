@@ -58,6 +58,11 @@ refused --frame-timeout-ms 5 "[10, 86400000]" "$hysar" "${S[@]}" --frame-timeout
 refused --max-eye-pixels 1e300 "[1, 67108864]" "$hysar" "${S[@]}" --max-eye-pixels 1e300
 refused --max-viewer-hz 1.5 "[0, 1000]" "$hysar" "${S[@]}" --max-viewer-hz 1.5
 refused --encoder-threads 65 "[1, 64]" "$hysar" "${S[@]}" --encoder-threads 65
+refused --agent-port 0 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 0
+refused --agent-port 1e3 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 1e3
+
+# hysar cluster config
+refused --agent-port 70000 "[1, 65535]" "$hysar" cluster config --node a=h:1 --agent-port 70000
 refused --max-triangles 99999999999999999999 "[2, 4294967296]" "$hysar" "${S[@]}" --max-triangles 99999999999999999999
 
 # hysar bench serve, encoding, accuracy
