@@ -141,25 +141,37 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
             "the scene bus is unavailable (" + why + "); the running scene stays"};
 }
 
-void SceneBus::watch(std::function<void(uint64_t, const std::string&)> on_scene) {
-    on_scene_ = std::move(on_scene);
-    thread_ = std::thread([this] { watch_loop(); });
+namespace {
+
+kvWatcher* make_watcher(kvStore* kv) {
+    kvWatcher* w = nullptr;
+    kvWatchOptions wo;
+    kvWatchOptions_Init(&wo);
+    wo.IgnoreDeletes = true;
+    return kvStore_Watch(&w, kv, kKey, &wo) == NATS_OK ? w : nullptr;
 }
 
-void SceneBus::watch_loop() {
+}  // namespace
+
+void SceneBus::watch(std::function<void(uint64_t, const std::string&)> on_scene) {
+    on_scene_ = std::move(on_scene);
+    // Made here, so that every write after watch() returns is delivered after the latest one.
+    kvWatcher* first = make_watcher(s_->kv);
+    thread_ = std::thread([this, first] { watch_loop(first); });
+}
+
+void SceneBus::watch_loop(void* first) {
+    kvWatcher* w = static_cast<kvWatcher*>(first);
     while (!stop_) {
-        kvWatcher* w = nullptr;
-        kvWatchOptions wo;
-        kvWatchOptions_Init(&wo);
-        wo.IgnoreDeletes = true;
-        natsStatus s = kvStore_Watch(&w, s_->kv, kKey, &wo);
-        if (s != NATS_OK) {
+        if (!w)
+            w = make_watcher(s_->kv);
+        if (!w) {
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             continue;
         }
         while (!stop_) {
             kvEntry* e = nullptr;
-            s = kvWatcher_Next(&e, w, 200);
+            const natsStatus s = kvWatcher_Next(&e, w, 200);
             if (s == NATS_TIMEOUT)
                 continue;
             if (s != NATS_OK)
@@ -171,7 +183,10 @@ void SceneBus::watch_loop() {
             kvEntry_Destroy(e);
         }
         kvWatcher_Destroy(w);
+        w = nullptr;
     }
+    if (w)
+        kvWatcher_Destroy(w);
 }
 
 void SceneBus::heartbeat(const std::string& json) {

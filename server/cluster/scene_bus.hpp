@@ -45,8 +45,9 @@ public:
     Result<std::pair<uint64_t, std::string>> current();
     // Writes `json` if the bucket's revision is still `applied` (0: only if there is none yet).
     BusWrite write(uint64_t applied, const std::string& json);
-    // Starts delivering every revision of the scene (the latest first, then each new one) to
-    // `on_scene` on the bus's thread, until destruction; the watch is made again after an outage.
+    // Starts delivering every revision of the scene (the latest when this is called first, then
+    // each new one) to `on_scene` on the bus's thread, until destruction; the watch is made
+    // again after an outage.
     void watch(std::function<void(uint64_t revision, const std::string& json)> on_scene);
     // Publishes `json` on node.<id> (best effort).
     void heartbeat(const std::string& json);
@@ -58,7 +59,8 @@ public:
 private:
     struct State;
     explicit SceneBus(std::unique_ptr<State> s);
-    void watch_loop();
+    // `first`: the watcher watch() made (a kvWatcher*, kept out of this header), or null.
+    void watch_loop(void* first);
     std::unique_ptr<State> s_;
     std::function<void(uint64_t, const std::string&)> on_scene_;
     std::atomic<bool> stop_{false};
