@@ -21,7 +21,7 @@ ErrorStats compare_images(const ImageRgba32f& a, const ImageRgba32f& ref,
         for (int c = 0; c < 3; ++c) {
             s.non_finite += !std::isfinite(p[c]);
             s.negative += p[c] < 0.0f;
-            s.saturated += p[c] >= kHalfMax && !(q[c] >= kHalfMax);
+            s.saturated += p[c] == float(kHalfMax) && !(q[c] >= kHalfMax);
         }
         const bool ca = p[3] > 0.5f, cr = q[3] > 0.5f;
         if (!ca && !cr)

@@ -18,7 +18,9 @@ struct ErrorStats {
     size_t interior_pixels = 0;
     size_t non_finite = 0;  // NaN or inf channels in `image`
     size_t negative = 0;    // channels of `image` below 0
-    size_t saturated = 0;   // channels of `image` at or above kHalfMax where the reference is below
+    // channels of `image` equal to kHalfMax (what a half target's clamp writes) where the
+    // reference is below it; an fp32 image's values above kHalfMax are values, not a clamp
+    size_t saturated = 0;
 };
 
 // The largest finite half float: what a 16-bit float target holds at most (docs/SHADING.md).
