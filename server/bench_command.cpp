@@ -68,7 +68,8 @@ const char* kServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
     "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
-    "                         [--lp-threads N,M] [--quick]\n"
+    "                         [--lp-threads N,M] [--encoder-threads N]\n"
+    "                         [--max-batch-viewers N] [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
     "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
@@ -85,6 +86,8 @@ const char* kServeHelp =
     "  --out DIR            default out/bench-serve\n"
     "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
     "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
+    "  --encoder-threads N  the server's encoder threads (default 1, as hysar serve)\n"
+    "  --max-batch-viewers N  viewers per submission (default 8, as hysar serve)\n"
     "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
     "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
     "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
@@ -127,8 +130,10 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             continue;
         }
         static const char* const kValued[] = {
-            "--headsets", "--seconds",       "--profile",    "--format", "--encoding",  "--scene",
-            "--out",      "--lean-baseline", "--lp-threads", "--frames", "--child-json"};
+            "--headsets",         "--seconds", "--profile",    "--format",
+            "--encoding",         "--scene",   "--out",        "--lean-baseline",
+            "--lp-threads",       "--frames",  "--child-json", "--encoder-threads",
+            "--max-batch-viewers"};
         if (std::find_if(std::begin(kValued), std::end(kValued),
                          [&](const char* f) { return a == f; }) == std::end(kValued))
             return "unknown option '" + a + "' (see hysar bench serve --help)";
@@ -150,6 +155,16 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             if (!n)
                 return n.error().message;
             o.baseline_frames = int(*n), have_frames = true;
+        } else if (a == "--encoder-threads") {
+            auto n = parse_integer(a, v, 1, 64);
+            if (!n)
+                return n.error().message;
+            o.encoder_threads = uint32_t(*n);
+        } else if (a == "--max-batch-viewers") {
+            auto n = parse_integer(a, v, 1, 64);
+            if (!n)
+                return n.error().message;
+            o.max_batch_viewers = uint32_t(*n);
         } else if (a == "--lp-threads") {
             auto l = int_list(a, v, 1, 256);
             if (!l)

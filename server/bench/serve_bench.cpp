@@ -460,6 +460,8 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     const int most = *std::max_element(o.headsets.begin(), o.headsets.end());
     info.limits.max_pending = std::max<uint32_t>(info.limits.max_pending, uint32_t(most) + 8);
     info.limits.max_sessions = std::max<uint32_t>(info.limits.max_sessions, uint32_t(most) + 8);
+    info.limits.max_batch_viewers = o.max_batch_viewers;
+    info.encoder_threads = o.encoder_threads;
     auto server = stream::Server::create(device, scene, info);
     if (!server)
         return server.error();
@@ -800,6 +802,8 @@ int run_serve_bench(const ServeBenchOptions& o) {
                    {"pose_rate_hz", o.pose_rate_hz},
                    {"baseline_frames", o.baseline_frames},
                    {"lp_threads", o.lp_threads},
+                   {"encoder_threads", o.encoder_threads},
+                   {"max_batch_viewers", o.max_batch_viewers},
                    {"quick", o.quick}};
     j["notes"] = {
         "stage_ms_mean: the server's cost_ms.viewer_vd means over the row (from the difference "

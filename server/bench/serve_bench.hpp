@@ -53,6 +53,8 @@ struct ServeBenchOptions {
     std::string out_dir = "out/bench-serve";
     std::string lean_baseline_command;  // run through the shell when non-empty
     std::vector<int> lp_threads;        // LP_NUM_THREADS values for the repeated served rows
+    uint32_t encoder_threads = 1;       // the server's, as `hysar serve --encoder-threads`
+    uint32_t max_batch_viewers = 8;     // as `hysar serve --max-batch-viewers`
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.

@@ -10,7 +10,8 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 command -v python3 > /dev/null || { echo "python3 is needed to read the JSON"; exit 1; }
 
-if ! "$hysar" bench serve --quick --out "$out/bs" --lp-threads 1 \
+if ! "$hysar" bench serve --quick --out "$out/bs" --lp-threads 1 --encoder-threads 2 \
+        --max-batch-viewers 4 \
         --lean-baseline 'echo lean_stereo_ms=40.00 lean_stereo_per_s=25.0 seg=64x32' \
         > "$out/table.txt" 2> "$out/progress.txt"; then
     cat "$out/progress.txt" "$out/table.txt"
@@ -39,6 +40,8 @@ for r in rows:
     assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
     for k in ("served_over_full", "served_over_lean", "served_over_lean_script"):
         assert finite(r[k]) and r[k] > 0, (k, r)
+c = j["config"]
+assert c["encoder_threads"] == 2 and c["max_batch_viewers"] == 4, c
 m = j["machine"]
 assert m["vulkan_device"] and m["cores"] >= 1 and m["date"], m
 print("bench serve: %d rows, JSON as documented" % len(rows))
@@ -65,6 +68,8 @@ bad --seconds --seconds
 bad --format --format png
 bad --encoding --encoding zip
 bad --lp-threads --lp-threads x
+bad --encoder-threads --encoder-threads 0
+bad --max-batch-viewers --max-batch-viewers 65
 bad --bogus --bogus
 bad --profile --profile no-such-headset --quick
 echo "bench serve: files, rows and errors as documented"
