@@ -71,11 +71,13 @@ TEST_F(Accuracy, MoreTessellationNeverIncreasesGeometricError) {
         EXPECT_LT(t[i].geometric_error_mm, t[i - 1].geometric_error_mm) << t[i].setting;
     }
     // The dome is ray-cast inside the mesh: the tessellation moves no shaded point, so the error
-    // is the same at every tessellation (within 5 %), and so is the per-view level of detail's.
-    for (const auto& r : t) EXPECT_NEAR(r.rmse, t.front().rmse, 0.05 * t.front().rmse) << r.setting;
+    // (~3e-5, the half-float output's rounding) is the same at every tessellation within 10 %,
+    // and so is the per-view level of detail's. Measured: within 5 % on lavapipe, 5.8 % and
+    // 6.3 % on an NVIDIA H100 (driver 580), whose rounding of the same pixels differs.
+    for (const auto& r : t) EXPECT_NEAR(r.rmse, t.front().rmse, 0.10 * t.front().rmse) << r.setting;
     const auto lod = knob("level-of-detail");
     ASSERT_EQ(lod.size(), 2u);
-    EXPECT_NEAR(lod[1].rmse, lod[0].rmse, 0.05 * lod[0].rmse);
+    EXPECT_NEAR(lod[1].rmse, lod[0].rmse, 0.10 * lod[0].rmse);
     EXPECT_TRUE(lod[1].is_default);
 }
 
