@@ -54,5 +54,6 @@ using DescriptorPoolHandle = Handle<VkDescriptorPool, vkDestroyDescriptorPool>;
 using CommandPoolHandle = Handle<VkCommandPool, vkDestroyCommandPool>;
 using FenceHandle = Handle<VkFence, vkDestroyFence>;
 using SamplerHandle = Handle<VkSampler, vkDestroySampler>;
+using QueryPoolHandle = Handle<VkQueryPool, vkDestroyQueryPool>;
 
 }  // namespace hs::gpu

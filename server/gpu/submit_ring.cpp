@@ -28,6 +28,26 @@ Result<std::unique_ptr<SubmitRing>> SubmitRing::create(Device& dev, uint32_t slo
     sci.pNext = &tci;
     HS_VK_TRY(vkCreateSemaphore(dev.vk(), &sci, nullptr, &r->timeline_));
     dev.set_name(VK_OBJECT_TYPE_SEMAPHORE, uint64_t(r->timeline_), name + ".timeline");
+    // Timestamps, where the queue family writes them.
+    uint32_t families = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(dev.physical(), &families, nullptr);
+    std::vector<VkQueueFamilyProperties> fp(families);
+    vkGetPhysicalDeviceQueueFamilyProperties(dev.physical(), &families, fp.data());
+    VkPhysicalDeviceProperties props;
+    vkGetPhysicalDeviceProperties(dev.physical(), &props);
+    const uint32_t bits =
+        dev.queue_family() < families ? fp[dev.queue_family()].timestampValidBits : 0;
+    if (bits > 0 && props.limits.timestampPeriod > 0) {
+        VkQueryPoolCreateInfo qci{VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO};
+        qci.queryType = VK_QUERY_TYPE_TIMESTAMP;
+        qci.queryCount = 2 * slots;
+        VkQueryPool qp;
+        HS_VK_TRY(vkCreateQueryPool(dev.vk(), &qci, nullptr, &qp));
+        r->queries_ = QueryPoolHandle(dev.vk(), qp);
+        dev.set_name(VK_OBJECT_TYPE_QUERY_POOL, uint64_t(qp), name + ".timestamps");
+        r->timestamp_mask_ = bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << bits) - 1;
+        r->ns_per_tick_ = double(props.limits.timestampPeriod);
+    }
     return r;
 }
 
@@ -42,16 +62,28 @@ Result<uint64_t> SubmitRing::submit(const char* label,
                                     const std::function<void(CommandList&)>& record) {
     const uint64_t value = submitted_.load() + 1;
     const size_t slot = size_t(value % buffers_.size());
-    HS_TRY(wait(slot_value_[slot]));  // the command buffer's previous submission is done
+    uint64_t previous;
+    {
+        std::lock_guard lock(mutex_);
+        previous = slot_value_[slot];
+    }
+    HS_TRY(wait(previous));  // the command buffer's previous submission is done
     VkCommandBuffer cmd = buffers_[slot];
     HS_VK_TRY(vkResetCommandBuffer(cmd, 0));
     VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     HS_VK_TRY(vkBeginCommandBuffer(cmd, &bi));
+    const VkQueryPool qp = queries_.get();
+    if (qp) {
+        vkCmdResetQueryPool(cmd, qp, uint32_t(2 * slot), 2);
+        vkCmdWriteTimestamp2(cmd, VK_PIPELINE_STAGE_2_TOP_OF_PIPE_BIT, qp, uint32_t(2 * slot));
+    }
     device_.begin_label(cmd, label);
     CommandList list(device_, cmd);
     record(list);
     device_.end_label(cmd);
+    if (qp)
+        vkCmdWriteTimestamp2(cmd, VK_PIPELINE_STAGE_2_ALL_COMMANDS_BIT, qp, uint32_t(2 * slot + 1));
     HS_VK_TRY(vkEndCommandBuffer(cmd));
     VkCommandBufferSubmitInfo cbi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_SUBMIT_INFO};
     cbi.commandBuffer = cmd;
@@ -64,8 +96,16 @@ Result<uint64_t> SubmitRing::submit(const char* label,
     si.pCommandBufferInfos = &cbi;
     si.signalSemaphoreInfoCount = 1;
     si.pSignalSemaphoreInfos = &signal;
-    HS_TRY(device_.queue_submit(si));
-    slot_value_[slot] = value;
+    {
+        // Before the submission that resets this slot's queries reaches the device.
+        std::lock_guard lock(mutex_);
+        slot_value_[slot] = value;
+    }
+    if (auto r = device_.queue_submit(si); !r) {
+        std::lock_guard lock(mutex_);
+        slot_value_[slot] = previous;  // never signalled: nobody may wait for it
+        return r.error();
+    }
     submitted_.store(value);
     return value;
 }
@@ -79,6 +119,21 @@ Result<void> SubmitRing::wait(uint64_t value) const {
     wi.pValues = &value;
     HS_VK_TRY(vkWaitSemaphores(device_.vk(), &wi, UINT64_MAX));
     return {};
+}
+
+std::optional<double> SubmitRing::device_ms(uint64_t value) const {
+    if (!queries_.get() || value == 0 || completed() < value)
+        return std::nullopt;
+    const size_t slot = size_t(value % buffers_.size());
+    std::lock_guard lock(mutex_);
+    if (slot_value_[slot] != value)
+        return std::nullopt;  // reused since
+    uint64_t ticks[2] = {0, 0};
+    if (vkGetQueryPoolResults(device_.vk(), queries_.get(), uint32_t(2 * slot), 2, sizeof ticks,
+                              ticks, sizeof(uint64_t), VK_QUERY_RESULT_64_BIT) != VK_SUCCESS)
+        return std::nullopt;
+    const uint64_t d = (ticks[1] - ticks[0]) & timestamp_mask_;
+    return double(d) * ns_per_tick_ * 1e-6;
 }
 
 uint64_t SubmitRing::completed() const {

@@ -159,6 +159,7 @@ EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, const calib::La
         }
         t0 = std::chrono::steady_clock::now();
         out.gpu_ms = ms_between(f.submitted, t0);
+        out.device_ms = ring_.device_ms(f.timeline);
     }
     const auto& d = f.job.display;
     const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(f.format));

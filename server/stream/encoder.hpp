@@ -63,8 +63,10 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
 struct EncodedFrame {
     std::shared_ptr<ViewerFrame> frame;
     std::array<Bytes, 2> layers;
-    std::string error;     // non-empty: nothing to send
-    double gpu_ms = 0;     // submitted -> the GPU finished (as the encoder saw it)
+    std::string error;  // non-empty: nothing to send
+    double gpu_ms = 0;  // submitted -> the GPU finished (as the encoder saw it)
+    // The device's own time on the frame's submission (timestamps); unset where not known.
+    std::optional<double> device_ms;
     double encode_ms = 0;  // both layers, CPU
 };
 

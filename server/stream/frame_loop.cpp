@@ -423,6 +423,8 @@ void FrameLoop::encoded(EncodedFrame&& done) {
             st.layers += 2;
             st.bytes += layers[0]->size() + layers[1]->size();
             st.pass.add(done.gpu_ms);
+            if (done.device_ms)
+                st.device.add(*done.device_ms);
             st.encode.add(done.encode_ms / 2.0);
         }
     }

@@ -554,6 +554,7 @@ nlohmann::json FrameStats::json() const {
             {"stages_ms",
              {{"queue", stage(queue)},
               {"pass", stage(pass)},
+              {"device", stage(device)},
               {"encode", stage(encode)},
               {"send", stage(send)}}}};
 }
@@ -644,11 +645,13 @@ nlohmann::json Server::Impl::stats() const {
                 {"last",
                  {{"queue", fs.queue.last},
                   {"pass", fs.pass.last},
+                  {"device", fs.device.last},
                   {"encode", fs.encode.last},
                   {"send", fs.send.last}}},
                 {"mean",
                  {{"queue", fs.queue.mean()},
                   {"pass", fs.pass.mean()},
+                  {"device", fs.device.mean()},
                   {"encode", fs.encode.mean()},
                   {"send", fs.send.mean()}}}}}}},
             {"frames", fs.json()}};

@@ -99,8 +99,10 @@ struct FrameStats {
     uint64_t pixels_rendered = 0;
     // Stages: queue = taken from the scheduler to submitted (culling and recording, per
     // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
-    // frame); encode = per layer, CPU; send = handed to the socket to written (per layer).
-    StageCost queue, pass, encode, send;
+    // frame); device = the device's own time on the frame's submission, from its timestamps
+    // (per frame; the pass less device is time spent waiting behind other submissions);
+    // encode = per layer, CPU; send = handed to the socket to written (per layer).
+    StageCost queue, pass, device, encode, send;
     nlohmann::json last_report;
     void add_plan(const render::Renderer::LayerPlan& p) {
         layers_black += p.rect.empty() ? 1 : 0;
