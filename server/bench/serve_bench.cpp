@@ -291,9 +291,15 @@ void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, He
 struct CostSnapshot {
     double frames = 0;
     std::map<std::string, double> sums;
+    std::optional<double> render_busy_ns;
+    uint64_t at_ns = 0;
 };
 CostSnapshot cost_snapshot(const json& stats) {
     CostSnapshot s;
+    s.at_ns = client::now_ns();
+    if (stats.is_object() && stats.contains("render_busy_ns") &&
+        stats["render_busy_ns"].is_number())
+        s.render_busy_ns = stats["render_busy_ns"].get<double>();
     if (!stats.is_object() || !stats.contains("cost_ms") || !stats["cost_ms"].is_object())
         return s;
     const json& cost = stats["cost_ms"];
@@ -434,6 +440,9 @@ ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const Ser
         r.bytes_per_layer = double(bytes) / double(r.eye_layers);
     if (r.stereo_layers > 0)
         r.cpu_ms_per_stereo_layer = (cpu1 - cpu0) * 1000.0 / double(r.stereo_layers);
+    if (c0.render_busy_ns && c1.render_busy_ns && c1.at_ns > c0.at_ns)
+        r.render_thread_busy =
+            (*c1.render_busy_ns - *c0.render_busy_ns) / double(c1.at_ns - c0.at_ns);
     settle(server);
     return r;
 }
@@ -492,13 +501,14 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
         const int h = o.headsets[i];
         ServedRow r = serve_row(srv, scene, o, d, info.token, h);
         r.lp_num_threads = lp;
-        fmt::print(stderr,
-                   "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
-                   "latency p50 {} ms, warm-up {:.1f} s, {} error(s){}\n",
-                   lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
-                   r.per_s_per_headset,
-                   r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-", r.warmup_s,
-                   r.errors, r.first_error.empty() ? "" : "; the first: " + r.first_error);
+        fmt::print(
+            stderr,
+            "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
+            "latency p50 {} ms, render thread busy {}, warm-up {:.1f} s, {} error(s){}\n",
+            lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
+            r.per_s_per_headset, r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
+            r.render_thread_busy ? fmt::format("{:.0f} %", 100 * *r.render_thread_busy) : "-",
+            r.warmup_s, r.errors, r.first_error.empty() ? "" : "; the first: " + r.first_error);
         std::fflush(stderr);
         rows.push_back(std::move(r));
     }
@@ -813,7 +823,10 @@ int run_serve_bench(const ServeBenchOptions& o) {
         "layer; it includes the in-process headset clients",
         "latency: client receive time of a frame's second eye layer minus the send time of the "
         "pose it was rendered from",
-        "bytes_per_layer: wire bytes per eye layer, header included"};
+        "bytes_per_layer: wire bytes per eye layer, header included",
+        "render_thread_busy: the share of the row's wall time the server's render thread spent "
+        "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "
+        "a free command buffer); near 1 it is the bound"};
     std::printf("%s", table(rep).c_str());
     const fs::path json_path = dir / "bench-serve.json", png_path = dir / "bench-serve.png";
     std::ofstream out(json_path);

@@ -81,6 +81,7 @@ struct ServedRow {
     std::map<std::string, double> stage_ms;
     std::optional<double> bytes_per_layer;          // wire bytes per eye layer (header included)
     std::optional<double> cpu_ms_per_stereo_layer;  // this process: server and clients
+    std::optional<double> render_thread_busy;       // share of the row's wall time, 0..1
     uint64_t headsets_without_layers = 0;
     uint64_t errors = 0;
     std::string first_error;

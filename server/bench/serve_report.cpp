@@ -82,6 +82,7 @@ json row_json(const ServedRow& r) {
             {"stage_ms_mean", stages},
             {"bytes_per_layer", opt(r.bytes_per_layer)},
             {"cpu_ms_per_stereo_layer", opt(r.cpu_ms_per_stereo_layer)},
+            {"render_thread_busy", opt(r.render_thread_busy)},
             {"headsets_without_layers", r.headsets_without_layers},
             {"errors", r.errors},
             {"first_error", r.first_error}};
@@ -106,6 +107,7 @@ ServedRow row_of(const json& j) {
                 r.stage_ms[k] = v.get<double>();
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
     r.cpu_ms_per_stereo_layer = opt_of(j, "cpu_ms_per_stereo_layer");
+    r.render_thread_busy = opt_of(j, "render_thread_busy");
     r.headsets_without_layers = j.value("headsets_without_layers", uint64_t(0));
     r.errors = j.value("errors", uint64_t(0));
     r.first_error = j.value("first_error", std::string());

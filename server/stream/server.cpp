@@ -614,6 +614,8 @@ nlohmann::json Server::Impl::stats() const {
     const auto& fs = frame_stats;
     return {{"scene_version", scene_version},
             {"projector_renders", projector_renders},
+            // The render thread's time from taking a batch to the end of its turn, since start.
+            {"render_busy_ns", render_busy_ns.load()},
             {"sessions", session_info.size()},
             {"sessions_total", sessions_total},
             {"viewers", viewers},

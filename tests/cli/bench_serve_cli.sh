@@ -38,6 +38,8 @@ for r in rows:
     assert finite(r["latency_ms_p50"]) and finite(r["latency_ms_p99"]), r
     assert r["latency_ms_p50"] <= r["latency_ms_p99"], r
     assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
+    assert finite(r["render_thread_busy"]) and 0 < r["render_thread_busy"] <= 1.05, r
+    assert finite(r["stage_ms_mean"]["device"]) and r["stage_ms_mean"]["device"] > 0, r
     for k in ("served_over_full", "served_over_lean", "served_over_lean_script"):
         assert finite(r[k]) and r[k] > 0, (k, r)
 c = j["config"]
