@@ -4,6 +4,7 @@
 #include <array>
 #include <chrono>
 #include <cstring>
+#include <thread>
 #include <tuple>
 
 #include <fmt/format.h>
@@ -18,10 +19,11 @@
 
 namespace hs::render {
 
-namespace {
 bool has_emission(const scene::Scene& s) {
     return s.material.emission.r > 0 || s.material.emission.g > 0 || s.material.emission.b > 0;
 }
+
+namespace {
 bool is_lit(const scene::Light& l) {
     const glm::dvec3 e = l.colour * l.intensity;
     return e.r > 0 || e.g > 0 || e.b > 0;
@@ -133,6 +135,12 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
     HS_ASSIGN_OR_RETURN(r->albedo_texture_,
                         gpu::Texture::create(device, tex, "material.albedo_texture"));
+    const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
+    const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
+                         : device.is_cpu()          ? 0
+                                                    : cores - 1;
+    if (planners > 0)
+        r->planners_ = std::make_unique<WorkerPool>(unsigned(planners));
     return r;
 }
 
@@ -453,176 +461,6 @@ std::string Renderer::vd_skip_reason(const scene::Specular& spec) const {
     if (!(spec.colour.r > 0 || spec.colour.g > 0 || spec.colour.b > 0))
         return "the specular colour is black and there is no emission";
     return "every light is black and there is no emission";
-}
-
-namespace {
-bool overlaps(const PixelRect& a, const PixelRect& b) {
-    return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
-}
-}  // namespace
-
-Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
-    gpu::CommandList& cl, std::span<const LayerRequest> reqs) {
-    std::vector<LayerPlan> plans(reqs.size());
-    for (size_t i = 0; i < reqs.size(); ++i) {
-        const LayerRequest& r = reqs[i];
-        const auto& k = r.intrinsics;
-        LayerPlan& plan = plans[i];
-        plan.lights_skipped = lights_skipped_;
-        if (!r.target || r.target->width() != k.width || r.target->height() != k.height ||
-            r.target->format() != layer_target_format(r.encoding))
-            return make_error(ErrorCode::kInvalidArgument,
-                              fmt::format("layer target must be {}x{} {}", k.width, k.height,
-                                          gpu::to_string(layer_target_format(r.encoding))));
-        if (!has_vd_term(r.spec)) {
-            plan.skipped_because = vd_skip_reason(r.spec);
-            continue;
-        }
-        plan.level = level_for(k, r.eye);
-        const ClusteredMesh& level = levels_[plan.level];
-        plan.clusters_total = uint32_t(level.clusters.size());
-        VdBound bound;
-        bound.spec = r.spec;
-        bound.lights = lit_;
-        bound.emission = has_emission(scene_);
-        bound.point_falloff = scene_.effects.point_light_falloff;
-        bound.threshold = layer_threshold(r.encoding == LayerEncoding::kSrgb8);
-        // Per cluster: the pixels it may cover (empty: out of view) and the lights it needs
-        // (0: dark).
-        rect_scratch_.assign(level.clusters.size(), PixelRect{});
-        mask_scratch_.assign(level.clusters.size(), 0);
-        const uint64_t all_lights =
-            lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
-        // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
-        // otherwise each cluster on its own, needing at most the group's lights.
-        // A dark group's clusters need their rectangles only as occluders (a prop that is not
-        // convex).
-        PixelRect rect;
-        const size_t per_group = level.clusters_per_group;
-        const glm::dmat4 view = scene::frame_from_world(r.eye);
-        for (size_t g = 0; g < level.groups.size(); ++g) {
-            const Cluster& group = level.groups[g];
-            if (project_sphere(group.centre, group.radius, k, view, info_.near_m).empty())
-                continue;
-            const uint64_t group_mask =
-                r.sparse ? cluster_light_mask(group, level.shell, r.eye.position, bound)
-                         : all_lights | 1;
-            if (group_mask == 0 && convex_)
-                continue;
-            const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
-            for (size_t c = g * per_group; c < end; ++c) {
-                const Cluster& cl_ = level.clusters[c];
-                rect_scratch_[c] = project_sphere(cl_.centre, cl_.radius, k, view, info_.near_m);
-                if (rect_scratch_[c].empty() || group_mask == 0)
-                    continue;
-                mask_scratch_[c] =
-                    r.sparse
-                        ? cluster_light_mask(cl_, level.shell, r.eye.position, bound) & group_mask
-                        : group_mask;
-                if (mask_scratch_[c] != 0)
-                    rect = unite(rect, rect_scratch_[c]);
-            }
-        }
-        if (!r.sparse)
-            rect = {0, 0, k.width, k.height};
-        plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
-        if (plan.rect.empty()) {
-            plan.skipped_because = "nothing view-dependent in view";
-            continue;
-        }
-        if (!r.indices || r.indices->size() < layer_index_bytes())
-            return make_error(ErrorCode::kInvalidArgument,
-                              "a layer request needs an index buffer of layer_index_bytes()");
-        const gpu::Area area{plan.rect.x0, plan.rect.y0, plan.rect.x1 - plan.rect.x0,
-                             plan.rect.y1 - plan.rect.y0};
-        const gpu::GpuPush push = push_for(k, r.eye);
-        // The drawn clusters' indices, gathered: one draw call each for the occluders and the
-        // lit clusters (on lavapipe a draw call costs more than the triangles it skips).
-        auto* gathered = static_cast<uint32_t*>(r.indices->mapped());
-        const uint32_t* source = level.mesh.indices.data();
-        uint32_t written = 0;
-        auto gather = [&](auto pick) {
-            const uint32_t first = written;
-            uint32_t count = 0;
-            for (size_t c = 0; c < level.clusters.size(); ++c) {
-                if (!pick(c))
-                    continue;
-                const Cluster& cc = level.clusters[c];
-                std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
-                written += cc.index_count;
-                ++count;
-            }
-            return std::make_tuple(first, written - first, count);
-        };
-        auto [occ_first, occ_count, occ_clusters] = gather([&](size_t c) {
-            // A dark cluster in front of a lit one must still hide it (a prop that is not
-            // convex): drawn black, where it overlaps the lit rectangle.
-            if (convex_ || !r.sparse || mask_scratch_[c] != 0)
-                return false;
-            return overlaps(rect_scratch_[c], plan.rect);
-        });
-        // The lit clusters grouped by the lights they need: one draw per group, each
-        // evaluating only its lights (a handful of groups; past kMaxLightGroups, one group
-        // with every light any of them needs).
-        constexpr size_t kMaxLightGroups = 8;
-        order_scratch_.clear();
-        for (size_t c = 0; c < level.clusters.size(); ++c)
-            if (mask_scratch_[c] != 0)
-                order_scratch_.push_back(uint32_t(c));
-        std::stable_sort(order_scratch_.begin(), order_scratch_.end(), [&](uint32_t a, uint32_t b) {
-            return mask_scratch_[a] < mask_scratch_[b];
-        });
-        size_t groups = 0;
-        uint64_t union_mask = 0;
-        for (size_t i = 0; i < order_scratch_.size(); ++i) {
-            union_mask |= mask_scratch_[order_scratch_[i]];
-            groups +=
-                i == 0 || mask_scratch_[order_scratch_[i]] != mask_scratch_[order_scratch_[i - 1]];
-        }
-        if (groups > kMaxLightGroups)
-            for (uint32_t c : order_scratch_) mask_scratch_[c] = union_mask;
-        struct Group {
-            uint64_t mask;
-            uint32_t first, count;
-        };
-        std::array<Group, kMaxLightGroups> group_list{};
-        size_t group_count = 0;
-        const uint32_t lit_first = written;
-        for (size_t i = 0; i < order_scratch_.size(); ++i) {
-            const uint32_t c = order_scratch_[i];
-            const Cluster& cc = level.clusters[c];
-            if (group_count == 0 || group_list[group_count - 1].mask != mask_scratch_[c])
-                group_list[group_count++] = {mask_scratch_[c], written, 0};
-            std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
-            written += cc.index_count;
-            group_list[group_count - 1].count += cc.index_count;
-        }
-        const uint32_t lit_count = written - lit_first;
-        plan.clusters_occluding = occ_clusters;
-        plan.clusters_lit = uint32_t(order_scratch_.size());
-        plan.triangles = (occ_count + lit_count) / 3;
-        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area);
-        cl.bind_mesh(streams(plan.level), *r.indices);
-        if (occ_count > 0) {
-            HS_ASSIGN_OR_RETURN(Variant * occ,
-                                variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
-            cl.bind(occ->pipeline);
-            cl.push_constants(occ->pipeline, &push, sizeof(push));
-            cl.draw_range(occ_first, occ_count);
-        }
-        for (size_t g = 0; g < group_count; ++g) {
-            HS_ASSIGN_OR_RETURN(Variant * lit,
-                                vd_variant(r.spec, 1 + int(r.encoding), group_list[g].mask));
-            gpu::GpuPush gp = push;
-            gp.light_mask =
-                glm::uvec4(uint32_t(group_list[g].mask), uint32_t(group_list[g].mask >> 32), 0, 0);
-            cl.bind(lit->pipeline);
-            cl.push_constants(lit->pipeline, &gp, sizeof(gp));
-            cl.draw_range(group_list[g].first, group_list[g].count);
-        }
-        cl.end_render_and_read_back(*r.target, area);
-    }
-    return plans;
 }
 
 Result<std::vector<Renderer::LayerPlan>> Renderer::render_layers(

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/image.hpp"
+#include "core/worker_pool.hpp"
 #include "gpu/commands.hpp"
 #include "gpu/device.hpp"
 #include "gpu/pipeline.hpp"
@@ -46,7 +47,15 @@ struct RendererCreateInfo {
     // draws use one pipeline that skips lights by a push-constant mask, which on lavapipe still
     // costs every light for every pixel.
     uint32_t max_light_variants = 64;
+    // Threads that plan a batch's VD layers (cull clusters, gather indices) beside the caller,
+    // one layer each, before the layers are recorded in order. -1: none on a CPU device (its
+    // cores rasterise), min(cores, 8) - 1 on a GPU (where planning bounds the served path,
+    // README "On a GPU"); 0 or more: this many.
+    int planning_threads = -1;
 };
+
+// Whether the scene's material emits (any channel of its emission above 0).
+bool has_emission(const scene::Scene& s);
 
 // How a VD layer is stored in its target: the bytes the wire carries (PROTOCOL.md, VdLayer).
 enum class LayerEncoding { kSrgb8, kHalf };
@@ -223,11 +232,28 @@ private:
     std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
     uint32_t lights_skipped_ = 0;
     bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
-    // Per cluster, reused by record_layers: the pixels it may cover (empty: out of view) and
-    // the lights it must evaluate (0: dark).
-    std::vector<PixelRect> rect_scratch_;
-    std::vector<uint64_t> mask_scratch_;
-    std::vector<uint32_t> order_scratch_;     // lit clusters grouped by light mask
+    // One VD layer's plan (record_layers), kept per request slot and reused: per cluster the
+    // pixels it may cover (empty: out of view) and the lights it must evaluate (0: dark), the
+    // lit clusters grouped by light mask, and the draws that record it.
+    struct LayerWork {
+        std::vector<PixelRect> rects;
+        std::vector<uint64_t> masks;
+        std::vector<uint32_t> order;
+        LayerPlan plan;
+        std::string error;  // the request is invalid: record_layers returns this
+        bool draw = false;
+        PixelRect rect;
+        uint32_t occ_first = 0, occ_count = 0;
+        struct Group {
+            uint64_t mask;
+            uint32_t first, count;
+        };
+        std::vector<Group> groups;
+    };
+    // Fills `w` for request `r`: everything but the recording. Thread: any, one per `w`.
+    void plan_layer(const LayerRequest& r, LayerWork& w) const;
+    std::vector<LayerWork> layer_work_;
+    std::unique_ptr<WorkerPool> planners_;    // null: plan on the caller
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;

@@ -337,3 +337,69 @@ TEST_F(SparseLayers, WhatCanOnlyBeBlackRecordsNoPass) {
 }
 
 }  // namespace
+
+namespace {
+
+// Planning a batch's layers on threads (the default on a GPU) changes nothing: the same plans
+// and the same bytes as planning on the caller, for a batch of eyes at different poses, models
+// and encodings, on the convex dome and on two domes (occluders), including a request that is
+// invalid (the first invalid one's error comes back either way).
+TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
+    for (const bool domes : {false, true}) {
+        const scene::Scene s = domes ? two_domes() : scene::default_scene();
+        render::RendererCreateInfo one, many;
+        one.planning_threads = 0;
+        many.planning_threads = 3;
+        auto r1 = render::Renderer::create(device(), s, one);
+        auto r4 = render::Renderer::create(device(), s, many);
+        ASSERT_TRUE(r1.ok() && r4.ok());
+        const auto k = small_eye(4);
+        const char* presets[] = {"phong", "ward-aniso", "kajiya-kay", "blinn-phong"};
+        std::vector<Request> reqs;
+        std::vector<gpu::RenderTarget> t1, t4;
+        constexpr int kEyes = 12;
+        for (int i = 0; i < kEyes; ++i) {
+            const auto enc = i % 3 ? render::LayerEncoding::kSrgb8 : render::LayerEncoding::kHalf;
+            const auto fmt = render::layer_target_format(enc);
+            t1.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt, "a").value());
+            t4.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt, "b").value());
+            const auto head = scene::viewing_pose(s.viewing, -40.0 + 80.0 * i / (kEyes - 1),
+                                                  s.viewing.heights_m.at("M"))
+                                  .value();
+            reqs.push_back({s.specular_presets.at(presets[i % 4]), k,
+                            scene::eye_poses(head, 0.063)[i % 2], enc, nullptr, i % 5 != 4});
+        }
+        auto with = [&](std::vector<gpu::RenderTarget>& t) {
+            std::vector<Request> own = reqs;
+            for (size_t i = 0; i < own.size(); ++i) own[i].target = &t[i];
+            return own;
+        };
+        auto p1 = (*r1)->render_layers(with(t1));
+        auto p4 = (*r4)->render_layers(with(t4));
+        ASSERT_TRUE(p1.ok() && p4.ok());
+        size_t lit = 0;
+        for (int i = 0; i < kEyes; ++i) {
+            SCOPED_TRACE(std::string(domes ? "two domes" : "dome") + ", eye " + std::to_string(i));
+            const Plan &a = (*p1)[i], &b = (*p4)[i];
+            EXPECT_EQ(a.rect.x0, b.rect.x0);
+            EXPECT_EQ(a.rect.y1, b.rect.y1);
+            EXPECT_EQ(a.clusters_lit, b.clusters_lit);
+            EXPECT_EQ(a.clusters_occluding, b.clusters_occluding);
+            EXPECT_EQ(a.triangles, b.triangles);
+            const auto va = layer_values(t1[i], a), vb = layer_values(t4[i], b);
+            EXPECT_EQ(va, vb);
+            lit += lit_values(va) > 100;
+        }
+        EXPECT_GE(lit, size_t(kEyes / 2)) << "most eyes must show a highlight";
+        // An invalid request (a target of the wrong size) in the middle: the same error.
+        auto bad = with(t4);
+        auto small = gpu::RenderTarget::create(device(), 8, 8, gpu::ColorFormat::kRgba8Unorm, "s");
+        bad[5].target = &small.value();
+        auto e1 = (*r1)->render_layers(bad), e4 = (*r4)->render_layers(bad);
+        ASSERT_FALSE(e1.ok());
+        ASSERT_FALSE(e4.ok());
+        EXPECT_EQ(e1.error().message, e4.error().message);
+    }
+}
+
+}  // namespace

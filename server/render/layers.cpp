@@ -1,0 +1,192 @@
+// The served path's VD layers (Renderer::record_layers): each layer is planned on its own,
+// in parallel where the renderer has planning threads (cull the clusters against the view and
+// the lights' bound, gather the drawn clusters' indices into the request's index buffer, group
+// them by the lights they need), then all are recorded in request order into one command list.
+#include <algorithm>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "render/renderer.hpp"
+#include "scene/camera.hpp"
+
+namespace hs::render {
+
+namespace {
+bool overlaps(const PixelRect& a, const PixelRect& b) {
+    return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
+}
+constexpr size_t kMaxLightGroups = 8;
+}  // namespace
+
+void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
+    const auto& k = r.intrinsics;
+    LayerPlan& plan = w.plan;
+    plan = LayerPlan{};
+    w.error.clear();
+    w.draw = false;
+    w.groups.clear();
+    plan.lights_skipped = lights_skipped_;
+    if (!r.target || r.target->width() != k.width || r.target->height() != k.height ||
+        r.target->format() != layer_target_format(r.encoding)) {
+        w.error = fmt::format("layer target must be {}x{} {}", k.width, k.height,
+                              gpu::to_string(layer_target_format(r.encoding)));
+        return;
+    }
+    if (!has_vd_term(r.spec)) {
+        plan.skipped_because = vd_skip_reason(r.spec);
+        return;
+    }
+    plan.level = level_for(k, r.eye);
+    const ClusteredMesh& level = levels_[plan.level];
+    plan.clusters_total = uint32_t(level.clusters.size());
+    VdBound bound;
+    bound.spec = r.spec;
+    bound.lights = lit_;
+    bound.emission = has_emission(scene_);
+    bound.point_falloff = scene_.effects.point_light_falloff;
+    bound.threshold = layer_threshold(r.encoding == LayerEncoding::kSrgb8);
+    // Per cluster: the pixels it may cover (empty: out of view) and the lights it needs
+    // (0: dark).
+    auto& rects = w.rects;
+    auto& masks = w.masks;
+    rects.assign(level.clusters.size(), PixelRect{});
+    masks.assign(level.clusters.size(), 0);
+    const uint64_t all_lights = lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
+    // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
+    // otherwise each cluster on its own, needing at most the group's lights.
+    // A dark group's clusters need their rectangles only as occluders (a prop that is not
+    // convex).
+    PixelRect rect;
+    const size_t per_group = level.clusters_per_group;
+    const glm::dmat4 view = scene::frame_from_world(r.eye);
+    for (size_t g = 0; g < level.groups.size(); ++g) {
+        const Cluster& group = level.groups[g];
+        if (project_sphere(group.centre, group.radius, k, view, info_.near_m).empty())
+            continue;
+        const uint64_t group_mask =
+            r.sparse ? cluster_light_mask(group, level.shell, r.eye.position, bound)
+                     : all_lights | 1;
+        if (group_mask == 0 && convex_)
+            continue;
+        const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
+        for (size_t c = g * per_group; c < end; ++c) {
+            const Cluster& cl = level.clusters[c];
+            rects[c] = project_sphere(cl.centre, cl.radius, k, view, info_.near_m);
+            if (rects[c].empty() || group_mask == 0)
+                continue;
+            masks[c] = r.sparse
+                           ? cluster_light_mask(cl, level.shell, r.eye.position, bound) & group_mask
+                           : group_mask;
+            if (masks[c] != 0)
+                rect = unite(rect, rects[c]);
+        }
+    }
+    if (!r.sparse)
+        rect = {0, 0, k.width, k.height};
+    plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
+    if (plan.rect.empty()) {
+        plan.skipped_because = "nothing view-dependent in view";
+        return;
+    }
+    if (!r.indices || r.indices->size() < layer_index_bytes()) {
+        w.error = "a layer request needs an index buffer of layer_index_bytes()";
+        return;
+    }
+    // The drawn clusters' indices, gathered: one draw call each for the occluders and the
+    // lit clusters (on lavapipe a draw call costs more than the triangles it skips).
+    auto* gathered = static_cast<uint32_t*>(r.indices->mapped());
+    const uint32_t* source = level.mesh.indices.data();
+    uint32_t written = 0;
+    // A dark cluster in front of a lit one must still hide it (a prop that is not convex):
+    // drawn black, where it overlaps the lit rectangle.
+    w.occ_first = written;
+    uint32_t occ_clusters = 0;
+    if (!convex_ && r.sparse)
+        for (size_t c = 0; c < level.clusters.size(); ++c) {
+            if (masks[c] != 0 || !overlaps(rects[c], plan.rect))
+                continue;
+            const Cluster& cc = level.clusters[c];
+            std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
+            written += cc.index_count;
+            ++occ_clusters;
+        }
+    w.occ_count = written - w.occ_first;
+    // The lit clusters grouped by the lights they need: one draw per group, each evaluating
+    // only its lights (a handful of groups; past kMaxLightGroups, one group with every light
+    // any of them needs).
+    auto& order = w.order;
+    order.clear();
+    for (size_t c = 0; c < level.clusters.size(); ++c)
+        if (masks[c] != 0)
+            order.push_back(uint32_t(c));
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t a, uint32_t b) { return masks[a] < masks[b]; });
+    size_t distinct = 0;
+    uint64_t union_mask = 0;
+    for (size_t i = 0; i < order.size(); ++i) {
+        union_mask |= masks[order[i]];
+        distinct += i == 0 || masks[order[i]] != masks[order[i - 1]];
+    }
+    if (distinct > kMaxLightGroups)
+        for (uint32_t c : order) masks[c] = union_mask;
+    const uint32_t lit_first = written;
+    for (uint32_t c : order) {
+        const Cluster& cc = level.clusters[c];
+        if (w.groups.empty() || w.groups.back().mask != masks[c])
+            w.groups.push_back({masks[c], written, 0});
+        std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
+        written += cc.index_count;
+        w.groups.back().count += cc.index_count;
+    }
+    const uint32_t lit_count = written - lit_first;
+    plan.clusters_occluding = occ_clusters;
+    plan.clusters_lit = uint32_t(order.size());
+    plan.triangles = (w.occ_count + lit_count) / 3;
+    w.draw = true;
+}
+
+Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
+    gpu::CommandList& cl, std::span<const LayerRequest> reqs) {
+    if (layer_work_.size() < reqs.size())
+        layer_work_.resize(reqs.size());
+    const auto plan_one = [&](size_t i) { plan_layer(reqs[i], layer_work_[i]); };
+    if (planners_)
+        planners_->run(reqs.size(), plan_one);
+    else
+        for (size_t i = 0; i < reqs.size(); ++i) plan_one(i);
+    std::vector<LayerPlan> plans(reqs.size());
+    for (size_t i = 0; i < reqs.size(); ++i) {
+        const LayerRequest& r = reqs[i];
+        LayerWork& w = layer_work_[i];
+        if (!w.error.empty())
+            return make_error(ErrorCode::kInvalidArgument, w.error);
+        plans[i] = w.plan;
+        if (!w.draw)
+            continue;
+        const PixelRect& pr = w.plan.rect;
+        const gpu::Area area{pr.x0, pr.y0, pr.x1 - pr.x0, pr.y1 - pr.y0};
+        const gpu::GpuPush push = push_for(r.intrinsics, r.eye);
+        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area);
+        cl.bind_mesh(streams(w.plan.level), *r.indices);
+        if (w.occ_count > 0) {
+            HS_ASSIGN_OR_RETURN(Variant * occ,
+                                variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
+            cl.bind(occ->pipeline);
+            cl.push_constants(occ->pipeline, &push, sizeof(push));
+            cl.draw_range(w.occ_first, w.occ_count);
+        }
+        for (const auto& g : w.groups) {
+            HS_ASSIGN_OR_RETURN(Variant * lit, vd_variant(r.spec, 1 + int(r.encoding), g.mask));
+            gpu::GpuPush gp = push;
+            gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
+            cl.bind(lit->pipeline);
+            cl.push_constants(lit->pipeline, &gp, sizeof(gp));
+            cl.draw_range(g.first, g.count);
+        }
+        cl.end_render_and_read_back(*r.target, area);
+    }
+    return plans;
+}
+
+}  // namespace hs::render
