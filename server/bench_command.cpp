@@ -69,7 +69,7 @@ const char* kServeHelp =
     "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
-    "                         [--max-batch-viewers N] [--quick]\n"
+    "                         [--max-batch-viewers N] [--planning-threads N] [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
     "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
@@ -88,6 +88,8 @@ const char* kServeHelp =
     "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
     "  --encoder-threads N  the server's encoder threads (default 1, as hysar serve)\n"
     "  --max-batch-viewers N  viewers per submission (default 8, as hysar serve)\n"
+    "  --planning-threads N threads planning a batch's layers (default as hysar serve: 0 on\n"
+    "                       lavapipe, cores - 1 up to 7 on a GPU)\n"
     "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
     "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
     "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
@@ -129,11 +131,20 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             quick = true;
             continue;
         }
-        static const char* const kValued[] = {
-            "--headsets",         "--seconds", "--profile",    "--format",
-            "--encoding",         "--scene",   "--out",        "--lean-baseline",
-            "--lp-threads",       "--frames",  "--child-json", "--encoder-threads",
-            "--max-batch-viewers"};
+        static const char* const kValued[] = {"--headsets",
+                                              "--seconds",
+                                              "--profile",
+                                              "--format",
+                                              "--encoding",
+                                              "--scene",
+                                              "--out",
+                                              "--lean-baseline",
+                                              "--lp-threads",
+                                              "--frames",
+                                              "--child-json",
+                                              "--encoder-threads",
+                                              "--planning-threads",
+                                              "--max-batch-viewers"};
         if (std::find_if(std::begin(kValued), std::end(kValued),
                          [&](const char* f) { return a == f; }) == std::end(kValued))
             return "unknown option '" + a + "' (see hysar bench serve --help)";
@@ -165,6 +176,11 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             if (!n)
                 return n.error().message;
             o.max_batch_viewers = uint32_t(*n);
+        } else if (a == "--planning-threads") {
+            auto n = parse_integer(a, v, 0, 64);
+            if (!n)
+                return n.error().message;
+            o.planning_threads = int(*n);
         } else if (a == "--lp-threads") {
             auto l = int_list(a, v, 1, 256);
             if (!l)

@@ -83,6 +83,8 @@ const char* kServeHelp =
     "  --max-projector-pixels N (16000000)\n"
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
     "  --encoder-threads N (1)           --tile-codec lz4|zstd|none (lz4)\n"
+    "  --planning-threads N (0 on lavapipe, cores - 1 up to 7 on a GPU): threads that plan a\n"
+    "                      batch's layers beside the render thread\n"
     "\n"
     "example:\n"
     "  hysar serve --scene room.json --listen 0.0.0.0:7700 --token-file /etc/hysar/token \\\n"
@@ -228,6 +230,7 @@ int run_serve(const std::vector<std::string>& args) {
                                      "--max-viewer-hz",
                                      "--max-batch-viewers",
                                      "--encoder-threads",
+                                     "--planning-threads",
                                      "--tile-codec",
                                      "--calibration",
                                      "--compensation",
@@ -300,6 +303,12 @@ int run_serve(const std::vector<std::string>& args) {
         info.encoder_threads = uint32_t(n.value());
     else
         return usage_error(n.error().message);
+    if (f.has("--planning-threads")) {
+        if (auto n = parse_count(f, "--planning-threads", 0, 0, 64); n)
+            info.renderer.planning_threads = int(n.value());
+        else
+            return usage_error(n.error().message);
+    }
     calib::Compensation compensation;
     if (f.has("--compensation")) {
         if (!f.has("--calibration"))

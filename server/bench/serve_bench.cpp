@@ -470,6 +470,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.limits.max_pending = std::max<uint32_t>(info.limits.max_pending, uint32_t(most) + 8);
     info.limits.max_sessions = std::max<uint32_t>(info.limits.max_sessions, uint32_t(most) + 8);
     info.limits.max_batch_viewers = o.max_batch_viewers;
+    info.renderer.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
     auto server = stream::Server::create(device, scene, info);
     if (!server)
@@ -814,6 +815,7 @@ int run_serve_bench(const ServeBenchOptions& o) {
                    {"lp_threads", o.lp_threads},
                    {"encoder_threads", o.encoder_threads},
                    {"max_batch_viewers", o.max_batch_viewers},
+                   {"planning_threads", o.planning_threads},
                    {"quick", o.quick}};
     j["notes"] = {
         "stage_ms_mean: the server's cost_ms.viewer_vd means over the row (from the difference "

@@ -55,6 +55,7 @@ struct ServeBenchOptions {
     std::vector<int> lp_threads;        // LP_NUM_THREADS values for the repeated served rows
     uint32_t encoder_threads = 1;       // the server's, as `hysar serve --encoder-threads`
     uint32_t max_batch_viewers = 8;     // as `hysar serve --max-batch-viewers`
+    int planning_threads = -1;          // as `hysar serve --planning-threads`; -1: its default
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.

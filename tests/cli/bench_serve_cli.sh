@@ -72,6 +72,7 @@ bad --encoding --encoding zip
 bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 0
 bad --max-batch-viewers --max-batch-viewers 65
+bad --planning-threads --planning-threads 65
 bad --bogus --bogus
 bad --profile --profile no-such-headset --quick
 echo "bench serve: files, rows and errors as documented"
