@@ -86,7 +86,8 @@ const char* kServeHelp =
     "  --out DIR            default out/bench-serve\n"
     "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
     "                       lean_stereo_per_s=<x> become a row and a ratio column\n"
-    "  --encoder-threads N  the server's encoder threads (default 1, as hysar serve)\n"
+    "  --encoder-threads N  the server's encoder threads (default as hysar serve: 1 on\n"
+    "                       lavapipe, half the cores up to 8 on a GPU)\n"
     "  --max-batch-viewers N  viewers per submission (default 8, as hysar serve)\n"
     "  --planning-threads N threads planning a batch's layers (default as hysar serve: 0 on\n"
     "                       lavapipe, cores - 1 up to 7 on a GPU)\n"
@@ -167,7 +168,7 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
                 return n.error().message;
             o.baseline_frames = int(*n), have_frames = true;
         } else if (a == "--encoder-threads") {
-            auto n = parse_integer(a, v, 1, 64);
+            auto n = parse_integer(a, v, 0, 64);
             if (!n)
                 return n.error().message;
             o.encoder_threads = uint32_t(*n);

@@ -82,7 +82,8 @@ const char* kServeHelp =
     "  --large-display-pixels N (2097152) --max-triangles N (1048576)\n"
     "  --max-projector-pixels N (16000000)\n"
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
-    "  --encoder-threads N (1)           --tile-codec lz4|zstd|none (lz4)\n"
+    "  --encoder-threads N (0: 1 on lavapipe, half the cores up to 8 on a GPU)\n"
+    "  --tile-codec lz4|zstd|none (lz4)\n"
     "  --planning-threads N (0 on lavapipe, cores - 1 up to 7 on a GPU): threads that plan a\n"
     "                      batch's layers beside the render thread\n"
     "\n"
@@ -299,7 +300,7 @@ int run_serve(const std::vector<std::string>& args) {
         else
             return usage_error("--tile-codec: expected lz4, zstd or none, got '" + c + "'");
     }
-    if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 1, 64); n)
+    if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 0, 64); n)
         info.encoder_threads = uint32_t(n.value());
     else
         return usage_error(n.error().message);

@@ -53,7 +53,7 @@ struct ServeBenchOptions {
     std::string out_dir = "out/bench-serve";
     std::string lean_baseline_command;  // run through the shell when non-empty
     std::vector<int> lp_threads;        // LP_NUM_THREADS values for the repeated served rows
-    uint32_t encoder_threads = 1;       // the server's, as `hysar serve --encoder-threads`
+    uint32_t encoder_threads = 0;       // the server's, as `hysar serve --encoder-threads`
     uint32_t max_batch_viewers = 8;     // as `hysar serve --max-batch-viewers`
     int planning_threads = -1;          // as `hysar serve --planning-threads`; -1: its default
     bool quick = false;

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <filesystem>
+#include <thread>
 
 #include <fmt/format.h>
 
@@ -75,7 +76,10 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     impl->driver_info = gpu::driver_info(device);
     impl->scheduler.set_options(
         {std::max<uint32_t>(info.limits.max_batch_viewers, 1), double(info.limits.max_viewer_hz)});
-    impl->encoder_threads = std::clamp<uint32_t>(info.encoder_threads, 1, 64);
+    impl->encoder_threads = info.encoder_threads > 0 ? std::min<uint32_t>(info.encoder_threads, 64)
+                            : device.is_cpu()
+                                ? 1
+                                : std::clamp(std::thread::hardware_concurrency() / 2, 1u, 8u);
     auto checked = impl->accept_scene(scene);
     if (!checked)
         return checked.error();

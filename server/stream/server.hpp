@@ -63,8 +63,10 @@ struct ServerCreateInfo {
     ServerLimits limits;
     render::RendererCreateInfo renderer;
     // Threads that encode layers beside the render thread (docs/ARCHITECTURE.md measures the
-    // split of the cores between them and lavapipe's rasteriser threads).
-    uint32_t encoder_threads = 1;
+    // split of the cores between them and lavapipe's rasteriser threads). 0: 1 on a CPU device
+    // (lavapipe's rasteriser needs the cores), half the cores up to 8 on a GPU (README, "On a
+    // GPU": 4, 8 and 12 measured on 16 cores).
+    uint32_t encoder_threads = 0;
     // The compressor of sparse-tile layers; nullopt: codec::default_tile_codec.
     std::optional<protocol::TileCodec> tile_codec;
     // Calibrated output (`hysar serve --calibration`, docs/CALIBRATION.md): the projector frame

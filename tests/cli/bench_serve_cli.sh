@@ -70,7 +70,7 @@ bad --seconds --seconds
 bad --format --format png
 bad --encoding --encoding zip
 bad --lp-threads --lp-threads x
-bad --encoder-threads --encoder-threads 0
+bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 65
 bad --planning-threads --planning-threads 65
 bad --bogus --bogus

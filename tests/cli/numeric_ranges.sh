@@ -57,7 +57,8 @@ refused --idle-timeout-ms inf "[0, 86400000]" "$hysar" "${S[@]}" --idle-timeout-
 refused --frame-timeout-ms 5 "[10, 86400000]" "$hysar" "${S[@]}" --frame-timeout-ms 5
 refused --max-eye-pixels 1e300 "[1, 67108864]" "$hysar" "${S[@]}" --max-eye-pixels 1e300
 refused --max-viewer-hz 1.5 "[0, 1000]" "$hysar" "${S[@]}" --max-viewer-hz 1.5
-refused --encoder-threads 65 "[1, 64]" "$hysar" "${S[@]}" --encoder-threads 65
+refused --encoder-threads 65 "[0, 64]" "$hysar" "${S[@]}" --encoder-threads 65
+refused --planning-threads 65 "[0, 64]" "$hysar" "${S[@]}" --planning-threads 65
 refused --agent-port 0 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 0
 refused --agent-port 1e3 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 1e3
 
