@@ -20,14 +20,14 @@ cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs
 (cd build-san && ctest --output-on-failure --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
   ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure --timeout 600 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ProtocolDoc|ClientLib|net\.scale|net\.tls|net\.cluster|cluster\.)')
 
-# The server's loopback and reliability tests once more under ThreadSanitizer; tests/tsan.supp
-# lists the suppressions (the Vulkan driver only) and why.
+# The server's loopback and reliability tests, and the render thread's worker pool, once more
+# under ThreadSanitizer; tests/tsan.supp lists the suppressions (the Vulkan driver only) and why.
 CC=clang CXX=clang++ cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_TSAN=ON \
   -DHYSAR_WERROR=ON >/dev/null
-cmake --build build-tsan -j "$jobs" --target hs_net_tests hs_client_lib_tests
+cmake --build build-tsan -j "$jobs" --target hs_net_tests hs_client_lib_tests hs_unit_tests
 (cd build-tsan &&
   TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/../tests/tsan.supp" \
-    ctest --output-on-failure --timeout 900 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ClientLib)')
+    ctest --output-on-failure --timeout 900 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ClientLib|WorkerPool)')
 
 cd build
 ctest --output-on-failure -j "$jobs" --timeout 900
