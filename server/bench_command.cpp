@@ -12,6 +12,7 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <variant>
 #include <vector>
 
@@ -152,6 +153,14 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
         if (i + 1 >= args.size())
             return a + " wants a value";
         const std::string& v = args[++i];
+        // A whole number in [lo, hi] into `field`; on a bad one, the sentence naming the flag.
+        const auto count = [&](int64_t lo, int64_t hi, auto& field) -> std::optional<std::string> {
+            auto n = parse_integer(a, v, lo, hi);
+            if (!n)
+                return n.error().message;
+            field = static_cast<std::remove_reference_t<decltype(field)>>(*n);
+            return std::nullopt;
+        };
         if (a == "--headsets") {
             auto l = int_list(a, v, 1, 256);
             if (!l)
@@ -168,20 +177,14 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
                 return n.error().message;
             o.baseline_frames = int(*n), have_frames = true;
         } else if (a == "--encoder-threads") {
-            auto n = parse_integer(a, v, 0, 64);
-            if (!n)
-                return n.error().message;
-            o.encoder_threads = uint32_t(*n);
+            if (auto bad = count(0, 64, o.encoder_threads))
+                return *bad;
         } else if (a == "--max-batch-viewers") {
-            auto n = parse_integer(a, v, 1, 64);
-            if (!n)
-                return n.error().message;
-            o.max_batch_viewers = uint32_t(*n);
+            if (auto bad = count(1, 64, o.max_batch_viewers))
+                return *bad;
         } else if (a == "--planning-threads") {
-            auto n = parse_integer(a, v, 0, 64);
-            if (!n)
-                return n.error().message;
-            o.planning_threads = int(*n);
+            if (auto bad = count(0, 64, o.planning_threads))
+                return *bad;
         } else if (a == "--lp-threads") {
             auto l = int_list(a, v, 1, 256);
             if (!l)
