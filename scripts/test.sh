@@ -24,7 +24,7 @@ cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs
 # under ThreadSanitizer; tests/tsan.supp lists the suppressions (the Vulkan driver only) and why.
 CC=clang CXX=clang++ cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHYSAR_TSAN=ON \
   -DHYSAR_WERROR=ON >/dev/null
-cmake --build build-tsan -j "$jobs" --target hs_net_tests hs_client_lib_tests hs_unit_tests
+cmake --build build-tsan -j "$jobs" --target hs_net_tests hs_client_lib_tests hs_worker_pool_tests
 (cd build-tsan &&
   TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/../tests/tsan.supp" \
     ctest --output-on-failure --timeout 900 -R '^(ServerTest|Loopback|Reliability|IdleTimeout|ProtocolRules|ClientLib|WorkerPool)')
