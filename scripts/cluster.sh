@@ -49,20 +49,9 @@ pids+=($!)
 echo "gateway: 127.0.0.1:$gw (haproxy pid $!)"
 
 show() {
-  python3 - "$dir/haproxy.sock" <<'PY'
-import socket, sys
-s = socket.socket(socket.AF_UNIX)
-s.connect(sys.argv[1])
-s.sendall(b"show stat\n")
-data = b""
-while chunk := s.recv(65536):
-    data += chunk
-print(f"{'backend':<14}{'node':<6}{'status':<16}{'weight':>7}{'sessions':>10}")
-for row in data.decode().splitlines():
-    f = row.split(",")
-    if len(f) > 18 and f[1] in ("a", "b"):
-        print(f"{f[0]:<14}{f[1]:<6}{f[17]:<16}{f[18]:>7}{f[4]:>10}")
-PY
+  python3 scripts/haproxy_stat.py "$dir/haproxy.sock" |
+    awk 'BEGIN {printf "%-14s%-6s%-16s%7s%10s\n", "backend", "node", "status", "weight", "sessions"}
+         {printf "%-14s%-6s%-16s%7s%10s\n", $1, $2, $3, $4, $5}'
 }
 for _ in $(seq 100); do
   [[ -S "$dir/haproxy.sock" ]] && [[ $(show | grep -c " UP ") -ge 4 ]] && break

@@ -180,7 +180,7 @@ std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
             if (auto bad = count(0, 64, o.encoder_threads))
                 return *bad;
         } else if (a == "--max-batch-viewers") {
-            if (auto bad = count(1, 64, o.max_batch_viewers))
+            if (auto bad = count(1, 1024, o.max_batch_viewers))
                 return *bad;
         } else if (a == "--planning-threads") {
             if (auto bad = count(0, 64, o.planning_threads))

@@ -334,6 +334,13 @@ int run_serve(const std::vector<std::string>& args) {
             return scene::default_scene();
         return scene::load_scene_file(*scene_path, info.asset_root, info.limits.scene);
     };
+    // The scene as the bus stores it: the --scene file's text, or the embedded scene's.
+    auto scene_text = [&]() -> std::string {
+        if (!scene_path)
+            return std::string(scene::default_scene_json());
+        std::ifstream in(*scene_path, std::ios::binary);
+        return {std::istreambuf_iterator<char>(in), {}};
+    };
     auto s = load();
     if (!s) {
         std::fprintf(stderr, "hysar serve: %s\n", s.error().message.c_str());
@@ -384,13 +391,7 @@ int run_serve(const std::vector<std::string>& args) {
         bus = std::move(b).value();
         // The bus's scene wins; with none there yet, this node's becomes version 1.
         auto current = bus->current();
-        std::string own_json;
-        if (scene_path) {
-            std::ifstream in(*scene_path, std::ios::binary);
-            own_json.assign(std::istreambuf_iterator<char>(in), {});
-        } else {
-            own_json = std::string(scene::default_scene_json());
-        }
+        const std::string own_json = scene_text();
         bool own = false;
         if (current.ok() && current->first == 0) {
             auto w = bus->write(0, own_json);
@@ -533,9 +534,7 @@ int run_serve(const std::vector<std::string>& args) {
                     log::error("SIGHUP: {}; the running scene stays", next.error().message);
                 } else if (bus) {
                     // A cluster: the file goes through the bus like a SceneUpdate.
-                    std::ifstream in(*scene_path, std::ios::binary);
-                    const std::string text(std::istreambuf_iterator<char>(in), {});
-                    const auto w = bus->write(srv.bus_version(), text);
+                    const auto w = bus->write(srv.bus_version(), scene_text());
                     if (w.error != cluster::BusError::kNone)
                         log::error("SIGHUP: {}", w.message);
                     else

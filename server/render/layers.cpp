@@ -99,8 +99,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     const uint32_t* source = level.mesh.indices.data();
     uint32_t written = 0;
     // A dark cluster in front of a lit one must still hide it (a prop that is not convex):
-    // drawn black, where it overlaps the lit rectangle.
-    w.occ_first = written;
+    // drawn black, where it overlaps the lit rectangle. They come first in the index buffer.
     uint32_t occ_clusters = 0;
     if (!convex_ && r.sparse)
         for (size_t c = 0; c < level.clusters.size(); ++c) {
@@ -111,7 +110,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
             written += cc.index_count;
             ++occ_clusters;
         }
-    w.occ_count = written - w.occ_first;
+    w.occ_count = written;
     // The lit clusters grouped by the lights they need: one draw per group, each evaluating
     // only its lights (a handful of groups; past kMaxLightGroups, one group with every light
     // any of them needs).
@@ -174,7 +173,7 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
                                 variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
             cl.bind(occ->pipeline);
             cl.push_constants(occ->pipeline, &push, sizeof(push));
-            cl.draw_range(w.occ_first, w.occ_count);
+            cl.draw_range(0, w.occ_count);
         }
         for (const auto& g : w.groups) {
             HS_ASSIGN_OR_RETURN(Variant * lit, vd_variant(r.spec, 1 + int(r.encoding), g.mask));

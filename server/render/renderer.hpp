@@ -243,7 +243,7 @@ private:
         std::string error;  // the request is invalid: record_layers returns this
         bool draw = false;
         PixelRect rect;
-        uint32_t occ_first = 0, occ_count = 0;
+        uint32_t occ_count = 0;  // the occluders' indices, first in the index buffer
         struct Group {
             uint64_t mask;
             uint32_t first, count;

@@ -171,7 +171,7 @@ void Server::run() {
     impl_->scheduler.stop();
     if (impl_->render_thread.joinable())
         impl_->render_thread.join();
-    for (auto& t : impl_->bus_writers) t.join();
+    for (auto& w : impl_->bus_writers) w.thread.join();
     if (!impl_->info.unix_path.empty())
         ::unlink(impl_->info.unix_path.c_str());
 }
@@ -398,13 +398,22 @@ void Server::Impl::publish_scene(std::string json, uint32_t session, uint32_t se
         std::lock_guard lock(mutex);
         applied = bus_version;
     }
-    bus_writers.emplace_back([this, json = std::move(json), session, sequence, applied] {
+    std::erase_if(bus_writers, [](BusWriter& w) {
+        if (!w.done->load())
+            return false;
+        w.thread.join();
+        return true;
+    });
+    auto done = std::make_shared<std::atomic<bool>>(false);
+    std::thread t([this, json = std::move(json), session, sequence, applied, done] {
         const std::string refused = info.publish_scene(applied, json);
         if (!refused.empty())
             asio::post(io, [this, session, sequence, refused] {
                 answer(session, proto::ErrorCode::kSceneRejected, refused, sequence);
             });
+        done->store(true);
     });
+    bus_writers.push_back({std::move(t), std::move(done)});
 }
 
 Result<void> Server::apply_scene_version(const std::string& json, uint32_t version) {

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <atomic>
+#include <memory>
 #include <chrono>
 #include <deque>
 #include <map>
@@ -209,8 +210,14 @@ struct Server::Impl {
     void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence, uint32_t version = 0);
     // SceneUpdate with a bus: info.publish_scene on a writer thread, its refusal answered.
     void publish_scene(std::string json, uint32_t session, uint32_t sequence);
-    std::vector<std::thread> bus_writers;  // network thread; joined when run() ends
-    void render_loop();                    // the render thread (frame_loop.cpp)
+    // One per SceneUpdate in flight (each write ends within the bus's timeout); the finished
+    // ones are joined at the next publish_scene and the rest when run() ends. Network thread.
+    struct BusWriter {
+        std::thread thread;
+        std::shared_ptr<std::atomic<bool>> done;
+    };
+    std::vector<BusWriter> bus_writers;
+    void render_loop();  // the render thread (frame_loop.cpp)
     void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
     void publish_projector_frame(Bytes frame);
     // Network thread: a frame's two layers to the session's queue (latest frame wins).

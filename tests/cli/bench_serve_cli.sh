@@ -71,7 +71,7 @@ bad --format --format png
 bad --encoding --encoding zip
 bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 65
-bad --max-batch-viewers --max-batch-viewers 65
+bad --max-batch-viewers --max-batch-viewers 1025
 bad --planning-threads --planning-threads 65
 bad --bogus --bogus
 bad --profile --profile no-such-headset --quick

@@ -115,16 +115,22 @@ Tolerance read_bounds(const json& t) {
             t.at("rmse").at("rel").get<double>(), t.at("rmse").at("abs").get<double>()};
 }
 
+// The manifest, read once for the tests that need its top-level fields.
+const json& manifest() {
+    static const json m = read_manifest();
+    return m;
+}
+
 // Renders from a driver other than the goldens' (golden.json "other_driver") are held to its
 // bounds: rasterisation's sub-pixel precision and fp32 transcendentals legitimately differ.
 bool generating_driver() {
-    const json m = read_manifest();
+    const json& m = manifest();
     const std::string family = m.at("other_driver").at("generating_device_contains");
     return device().name().find(family) != std::string::npos;
 }
 
 Tolerance other_driver_tolerance() {
-    const json m = read_manifest();
+    const json& m = manifest();
     const json& o = m.at("other_driver");
     only_keys(o, "golden.json other_driver",
               {"generating_device_contains", "max_abs", "rmse", "silhouette_fraction", "measured",

@@ -13,6 +13,7 @@
 # The projector goes to the first node. Needs haproxy (scripts/setup.sh installs it).
 set -euo pipefail
 bin="$1"
+haproxy_stat="$(cd "$(dirname "$0")/../../scripts" && pwd)/haproxy_stat.py"
 dir=$(mktemp -d)
 pids=()
 cleanup() {
@@ -43,19 +44,8 @@ pids+=($!)
 
 # HAProxy's view: "SERVER SESSIONS STATUS" per render node (spaces in the status as '_'), from its runtime API.
 stat() {
-  python3 - "$dir/haproxy.sock" <<'PY'
-import socket, sys
-s = socket.socket(socket.AF_UNIX)
-s.connect(sys.argv[1])
-s.sendall(b"show stat\n")
-data = b""
-while chunk := s.recv(65536):
-    data += chunk
-for row in data.decode().splitlines():
-    f = row.split(",")
-    if len(f) > 17 and f[0] == "render_nodes" and f[1] in ("a", "b"):
-        print(f[1], f[4], f[17].replace(" ", "_"))
-PY
+  python3 "$haproxy_stat" "$dir/haproxy.sock" render_nodes |
+    awk '{print $2, $5, $3}'
 }
 sessions() { stat | awk -v n="$1" '$1 == n {print $2}'; }
 status() { stat | awk -v n="$1" '$1 == n {print $3}'; }
