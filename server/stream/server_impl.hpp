@@ -6,10 +6,10 @@
 
 #include <array>
 #include <atomic>
-#include <memory>
 #include <chrono>
 #include <deque>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <thread>
