@@ -12,7 +12,8 @@ Area whole(const RenderTarget& t, Area a) {
 }
 }  // namespace
 
-void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* label, Area area) {
+void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* label, Area area,
+                               bool with_depth) {
     area = whole(t, area);
     device_.begin_label(cmd_, label);
     // Contents are always cleared, so the previous layout (and any earlier readback) is dropped.
@@ -20,12 +21,14 @@ void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* lab
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_PIPELINE_STAGE_2_COPY_BIT, 0,
                   VK_PIPELINE_STAGE_2_COLOR_ATTACHMENT_OUTPUT_BIT,
                   VK_ACCESS_2_COLOR_ATTACHMENT_WRITE_BIT);
-    image_barrier(
-        cmd_, t.depth(), VK_IMAGE_ASPECT_DEPTH_BIT, VK_IMAGE_LAYOUT_UNDEFINED,
-        VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL, VK_PIPELINE_STAGE_2_LATE_FRAGMENT_TESTS_BIT, 0,
-        VK_PIPELINE_STAGE_2_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_2_LATE_FRAGMENT_TESTS_BIT,
-        VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
-            VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_READ_BIT);
+    if (with_depth)
+        image_barrier(cmd_, t.depth(), VK_IMAGE_ASPECT_DEPTH_BIT, VK_IMAGE_LAYOUT_UNDEFINED,
+                      VK_IMAGE_LAYOUT_DEPTH_ATTACHMENT_OPTIMAL,
+                      VK_PIPELINE_STAGE_2_LATE_FRAGMENT_TESTS_BIT, 0,
+                      VK_PIPELINE_STAGE_2_EARLY_FRAGMENT_TESTS_BIT |
+                          VK_PIPELINE_STAGE_2_LATE_FRAGMENT_TESTS_BIT,
+                      VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT |
+                          VK_ACCESS_2_DEPTH_STENCIL_ATTACHMENT_READ_BIT);
     VkRenderingAttachmentInfo color{VK_STRUCTURE_TYPE_RENDERING_ATTACHMENT_INFO};
     color.imageView = t.color_view();
     color.imageLayout = VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL;
@@ -43,7 +46,7 @@ void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* lab
     ri.layerCount = 1;
     ri.colorAttachmentCount = 1;
     ri.pColorAttachments = &color;
-    ri.pDepthAttachment = &depth;
+    ri.pDepthAttachment = with_depth ? &depth : nullptr;
     vkCmdBeginRendering(cmd_, &ri);
     VkViewport vp{0, 0, float(t.width()), float(t.height()), 0.0f, 1.0f};
     VkRect2D sc{{int32_t(area.x), int32_t(area.y)}, {area.width, area.height}};

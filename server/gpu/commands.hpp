@@ -18,9 +18,12 @@ class CommandList {
 public:
     CommandList(Device& device, VkCommandBuffer cmd) : device_(device), cmd_(cmd) {}
 
-    // Starts rendering into `area` of `target` (cleared to `clear` and depth 1 there; the rest
-    // of the target is undefined), under a debug label.
-    void begin_render(RenderTarget& target, glm::vec4 clear, const char* label, Area area = {});
+    // Starts rendering into `area` of `target` (cleared to `clear` and, with `depth`, depth 1
+    // there; the rest of the target is undefined), under a debug label. Without `depth` the
+    // target's depth attachment is not used: the pipelines bound must be made without one
+    // (GraphicsPipelineInfo::depth).
+    void begin_render(RenderTarget& target, glm::vec4 clear, const char* label, Area area = {},
+                      bool depth = true);
     void bind(const GraphicsPipeline& pipeline);
     void push_constants(const GraphicsPipeline& pipeline, const void* data, uint32_t size);
     // The vertex streams of GraphicsPipeline's fixed layout.

@@ -155,8 +155,8 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
     VkPipelineDepthStencilStateCreateInfo ds{
         VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
-    ds.depthTestEnable = VK_TRUE;
-    ds.depthWriteEnable = VK_TRUE;
+    ds.depthTestEnable = info.depth ? VK_TRUE : VK_FALSE;
+    ds.depthWriteEnable = info.depth ? VK_TRUE : VK_FALSE;
     ds.depthCompareOp = VK_COMPARE_OP_LESS;
     VkPipelineColorBlendAttachmentState cb{};
     cb.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
@@ -173,7 +173,7 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     VkPipelineRenderingCreateInfo rci{VK_STRUCTURE_TYPE_PIPELINE_RENDERING_CREATE_INFO};
     rci.colorAttachmentCount = 1;
     rci.pColorAttachmentFormats = &color_format;
-    rci.depthAttachmentFormat = VK_FORMAT_D32_SFLOAT;
+    rci.depthAttachmentFormat = info.depth ? VK_FORMAT_D32_SFLOAT : VK_FORMAT_UNDEFINED;
 
     VkGraphicsPipelineCreateInfo gci{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
     gci.pNext = &rci;

@@ -32,12 +32,17 @@ struct GraphicsPipelineInfo {
     SpecConstants spec;  // applied to the fragment stage
     ColorFormat color_format = ColorFormat::kRgba16Float;
     uint32_t push_constant_bytes = 0;  // vertex + fragment stages
-    std::string name;                  // debug name
+    // A D32 depth attachment, tested and written (less). Without one, fragments land in draw
+    // order: for geometry no part of which can hide another as drawn (a convex prop, back
+    // faces culled), which then saves the depth buffer's clear, tests and writes.
+    bool depth = true;
+    std::string name;  // debug name
 };
 
 // Vertex input is fixed: binding 0 positions (vec3), 1 normals (vec3), 2 tangents (vec3),
 // 3 UVs (vec2). Descriptor set 0: a uniform buffer at binding 0 and a combined image sampler
-// at binding 1 (fragment stage). Depth test on, back faces culled (counter-clockwise is front).
+// at binding 1 (fragment stage). Depth test as GraphicsPipelineInfo::depth says, back faces
+// culled (counter-clockwise is front).
 class GraphicsPipeline {
 public:
     static Result<GraphicsPipeline> create(Device& device, const GraphicsPipelineInfo& info);

@@ -166,7 +166,7 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         const PixelRect& pr = w.plan.rect;
         const gpu::Area area{pr.x0, pr.y0, pr.x1 - pr.x0, pr.y1 - pr.y0};
         const gpu::GpuPush push = push_for(r.intrinsics, r.eye);
-        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area);
+        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area, uses_depth());
         cl.bind_mesh(streams(w.plan.level), *r.indices);
         if (w.occ_count > 0) {
             HS_ASSIGN_OR_RETURN(Variant * occ,

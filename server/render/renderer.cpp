@@ -223,8 +223,9 @@ Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int
 }
 
 Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Variant v,
-                                                   const gpu::GraphicsPipelineInfo& pi,
+                                                   gpu::GraphicsPipelineInfo pi,
                                                    const gpu::GpuScene& block) {
+    pi.depth = uses_depth();
     HS_ASSIGN_OR_RETURN(v.pipeline, gpu::GraphicsPipeline::create(device_, pi));
     ++pipelines_built_;
     HS_ASSIGN_OR_RETURN(v.scene_block,
@@ -340,7 +341,7 @@ uint32_t Renderer::level_for(const scene::Intrinsics& k, const scene::Pose& pose
 
 void Renderer::record(gpu::CommandList& cl, const Variant& v, gpu::RenderTarget& t,
                       const gpu::GpuPush& push, const char* label, uint32_t level) const {
-    cl.begin_render(t, glm::vec4(0.0f), label);
+    cl.begin_render(t, glm::vec4(0.0f), label, {}, uses_depth());
     cl.bind(v.pipeline);
     cl.push_constants(v.pipeline, &push, sizeof(push));
     cl.draw_indexed(streams(level), buffers_[level].indices,

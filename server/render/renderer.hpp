@@ -203,8 +203,8 @@ private:
     }
     Result<Variant*> geometry_variant(std::optional<double> sheen_exponent);
     // Builds the pipeline and its scene block, and keeps the variant under `key`.
-    Result<Variant*> build_variant(const std::string& key, Variant v,
-                                   const gpu::GraphicsPipelineInfo& pi, const gpu::GpuScene& block);
+    Result<Variant*> build_variant(const std::string& key, Variant v, gpu::GraphicsPipelineInfo pi,
+                                   const gpu::GpuScene& block);
     // The slot-th target of this size and format (a batch needs one per eye).
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot = 0);
     Result<gpu::RenderTarget*> target(uint32_t w, uint32_t h, uint32_t slot,
@@ -232,6 +232,10 @@ private:
     std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
     uint32_t lights_skipped_ = 0;
     bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
+    // Whether the passes test depth. The analytic dome's do not: being convex, no front face
+    // hides another, and every fragment shades the point its own ray hits, so which triangle
+    // covers a pixel (at a level's seams, or where clusters' triangles meet) does not change it.
+    bool uses_depth() const { return !convex_; }
     // One VD layer's plan (record_layers), kept per request slot and reused: per cluster the
     // pixels it may cover (empty: out of view) and the lights it must evaluate (0: dark), the
     // lit clusters grouped by light mask, and the draws that record it.
