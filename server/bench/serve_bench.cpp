@@ -93,8 +93,9 @@ Result<BaselineFigure> full_frame_baseline(gpu::Device& device, const scene::Sce
     const auto enc = render::LayerEncoding::kSrgb8;
     std::array<gpu::RenderTarget, 2> targets;
     for (auto& t : targets) {
-        auto made = gpu::RenderTarget::create(device, k.width, k.height,
-                                              render::layer_target_format(enc), "baseline.eye");
+        auto made =
+            gpu::RenderTarget::create(device, k.width, k.height, render::layer_target_format(enc),
+                                      "baseline.eye", renderer.value()->uses_depth());
         if (!made)
             return made.error();
         t = std::move(made).value();

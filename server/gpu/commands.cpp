@@ -15,6 +15,7 @@ Area whole(const RenderTarget& t, Area a) {
 void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* label, Area area,
                                bool with_depth) {
     area = whole(t, area);
+    HS_CHECK(!with_depth || t.has_depth(), "a pass with depth needs a target with a depth buffer");
     device_.begin_label(cmd_, label);
     // Contents are always cleared, so the previous layout (and any earlier readback) is dropped.
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED,

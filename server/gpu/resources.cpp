@@ -202,7 +202,7 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
 }
 
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
-                                          const std::string& name) {
+                                          const std::string& name, bool with_depth) {
     if (w == 0 || h == 0 || w > 16384 || h > 16384)
         return make_error(
             ErrorCode::kInvalidArgument,
@@ -215,15 +215,17 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
                                                VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT |
                                                    VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
                                                VK_IMAGE_ASPECT_COLOR_BIT, name + ".color"));
-    HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
-                                               VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
-                                               VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth"));
     t.color_mem_ = std::move(color.mem);
     t.color_ = std::move(color.image);
     t.color_view_ = std::move(color.view);
-    t.depth_mem_ = std::move(depth.mem);
-    t.depth_ = std::move(depth.image);
-    t.depth_view_ = std::move(depth.view);
+    if (with_depth) {
+        HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
+                                                   VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
+                                                   VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth"));
+        t.depth_mem_ = std::move(depth.mem);
+        t.depth_ = std::move(depth.image);
+        t.depth_view_ = std::move(depth.view);
+    }
     HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
                                                     BufferUsage::kReadback, name + ".readback"));
     return t;

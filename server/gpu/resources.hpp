@@ -62,11 +62,13 @@ private:
     SamplerHandle sampler_;
 };
 
-// A colour attachment, a depth attachment and a readback buffer of one size and format.
+// A colour attachment, a depth attachment (unless made without one) and a readback buffer of
+// one size and format.
 class RenderTarget {
 public:
     static Result<RenderTarget> create(Device& device, uint32_t width, uint32_t height,
-                                       ColorFormat format, const std::string& name);
+                                       ColorFormat format, const std::string& name,
+                                       bool with_depth = true);
     RenderTarget() = default;
     RenderTarget(RenderTarget&&) noexcept = default;
     RenderTarget& operator=(RenderTarget&&) noexcept = default;
@@ -76,6 +78,7 @@ public:
     ColorFormat format() const { return format_; }
     VkImage color() const { return color_.get(); }
     VkImageView color_view() const { return color_view_.get(); }
+    bool has_depth() const { return depth_.get() != VK_NULL_HANDLE; }
     VkImage depth() const { return depth_.get(); }
     VkImageView depth_view() const { return depth_view_.get(); }
     VkBuffer readback() const { return readback_.vk(); }

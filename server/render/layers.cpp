@@ -33,6 +33,11 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
                               gpu::to_string(layer_target_format(r.encoding)));
         return;
     }
+    if (uses_depth() && !r.target->has_depth()) {
+        w.error =
+            "this scene's prop is drawn with a depth test: its layer targets need a depth buffer";
+        return;
+    }
     if (!has_vd_term(r.spec)) {
         plan.skipped_because = vd_skip_reason(r.spec);
         return;

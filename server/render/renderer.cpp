@@ -305,10 +305,10 @@ Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slo
     auto key = std::make_tuple(w, h, slot, int(format));
     if (auto it = targets_.find(key); it != targets_.end())
         return &it->second;
-    HS_ASSIGN_OR_RETURN(auto t,
-                        gpu::RenderTarget::create(
-                            device_, w, h, format,
-                            fmt::format("target.{}x{}.{}.{}", w, h, slot, gpu::to_string(format))));
+    HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, format,
+                                                          fmt::format("target.{}x{}.{}.{}", w, h,
+                                                                      slot, gpu::to_string(format)),
+                                                          uses_depth()));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
@@ -376,14 +376,16 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
     return r;
 }
 
-uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat format) {
+uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat format,
+                                    bool with_depth) {
     const uint64_t px = uint64_t(w) * h;
-    return px * (2 * gpu::bytes_per_pixel(format) + 4);  // colour + readback, D32 depth
+    return px * (2 * gpu::bytes_per_pixel(format) + (with_depth ? 4 : 0));  // + D32 depth
 }
 
 uint64_t Renderer::target_bytes() const {
     uint64_t n = 0;
-    for (const auto& [key, t] : targets_) n += target_bytes_for(t.width(), t.height(), t.format());
+    for (const auto& [key, t] : targets_)
+        n += target_bytes_for(t.width(), t.height(), t.format(), t.has_depth());
     return n;
 }
 

@@ -168,8 +168,15 @@ public:
 
     // Device and host bytes held by the pooled render targets.
     uint64_t target_bytes() const;
-    // What one render target of this size holds: colour, depth and readback buffer, bytes.
-    static uint64_t target_bytes_for(uint32_t width, uint32_t height, gpu::ColorFormat format);
+    // What one render target of this size holds: colour, depth (if it has one) and readback
+    // buffer, bytes.
+    static uint64_t target_bytes_for(uint32_t width, uint32_t height, gpu::ColorFormat format,
+                                     bool with_depth = true);
+    // Whether this scene's passes test depth; targets for them need a depth buffer only then.
+    // The analytic dome's do not: being convex, no front face hides another, and every
+    // fragment shades the point its own ray hits, so which triangle covers a pixel (at a
+    // level's seams, or where clusters' triangles meet) does not change it.
+    bool uses_depth() const { return !convex_; }
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
@@ -232,10 +239,6 @@ private:
     std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
     uint32_t lights_skipped_ = 0;
     bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
-    // Whether the passes test depth. The analytic dome's do not: being convex, no front face
-    // hides another, and every fragment shades the point its own ray hits, so which triangle
-    // covers a pixel (at a level's seams, or where clusters' triangles meet) does not change it.
-    bool uses_depth() const { return !convex_; }
     // One VD layer's plan (record_layers), kept per request slot and reused: per cluster the
     // pixels it may cover (empty: out of view) and the lights it must evaluate (0: dark), the
     // lit clusters grouped by light mask, and the draws that record it.

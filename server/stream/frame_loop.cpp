@@ -304,10 +304,13 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const auto& d = job.display;
     auto& slot = frames_[job.session_id];
     const uint64_t index_bytes = renderer_->layer_index_bytes();
+    const bool depth = renderer_->uses_depth();
     if (slot && slot->width == d.eye_width && slot->height == d.eye_height &&
-        slot->format == d.format && slot->indices[0].size() >= index_bytes)
+        slot->format == d.format && slot->indices[0].size() >= index_bytes &&
+        slot->targets[0].has_depth() == depth)
         return slot.get();
-    // A new display: new targets (the old frame, if the encoder still holds it, lives on
+    // A new display, or a scene that needs a depth buffer where the last did not (or the
+    // other way round): new targets (the old frame, if the encoder still holds it, lives on
     // until it is done).
     auto f = std::make_shared<ViewerFrame>();
     f->viewer = job.session_id;
@@ -316,15 +319,16 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->format = d.format;
     const gpu::ColorFormat cf = render::layer_target_format(encoding_of(d.format));
     for (size_t e = 0; e < 2; ++e) {
-        HS_ASSIGN_OR_RETURN(f->targets[e], gpu::RenderTarget::create(
-                                               s_.device, d.eye_width, d.eye_height, cf,
-                                               fmt::format("viewer{}.eye{}", job.session_id, e)));
+        HS_ASSIGN_OR_RETURN(
+            f->targets[e],
+            gpu::RenderTarget::create(s_.device, d.eye_width, d.eye_height, cf,
+                                      fmt::format("viewer{}.eye{}", job.session_id, e), depth));
         HS_ASSIGN_OR_RETURN(
             f->indices[e],
             gpu::Buffer::create(s_.device, index_bytes, gpu::BufferUsage::kIndex,
                                 fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
     }
-    f->target_bytes = 2 * render::Renderer::target_bytes_for(d.eye_width, d.eye_height, cf);
+    f->target_bytes = 2 * render::Renderer::target_bytes_for(d.eye_width, d.eye_height, cf, depth);
     f->index_bytes = 2 * index_bytes;
     slot = std::move(f);
     update_held_bytes();

@@ -343,6 +343,8 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
                         d.eye_width, d.eye_height,
                         d.format == proto::PixelFormat::kRgba8 ? "rgba8" : "rgba16f", worst,
                         frame_limit)};
+    // Reserved with a depth buffer whatever the running scene: a new scene may need one (the
+    // dome's targets have none, so they hold less than this).
     const uint64_t need = 2 * render::Renderer::target_bytes_for(
                                   d.eye_width, d.eye_height,
                                   render::layer_target_format(d.format == proto::PixelFormat::kRgba8

@@ -187,6 +187,48 @@ TEST_F(SparseLayers, SparseEqualsFullOnTheHardCases) {
     EXPECT_GT(culled_somewhere, cases.size()) << "no case culled a cluster";
 }
 
+// The dome's passes have no depth test (it is convex and each fragment shades its own ray's
+// hit), so the server makes its layer targets without a depth buffer: the layer is the same in
+// either target. A prop that is not convex needs the depth test, and a target without a depth
+// buffer is refused there with a message, not drawn wrong.
+TEST_F(SparseLayers, OnlyAPropThatIsNotConvexNeedsADepthBuffer) {
+    const scene::Scene s = scene::default_scene();
+    const auto head = scene::viewing_pose(s.viewing, 20.0, 1.10).value();
+    const auto eye = scene::eye_poses(head, 0.063)[0];
+    const auto k = small_eye(2);
+    const auto enc = render::LayerEncoding::kSrgb8;
+    const auto fmt = render::layer_target_format(enc);
+    auto with = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "with").value();
+    auto without =
+        gpu::RenderTarget::create(device(), k.width, k.height, fmt, "without", false).value();
+    EXPECT_TRUE(with.has_depth());
+    EXPECT_FALSE(without.has_depth());
+
+    auto dome = make_renderer(s);
+    ASSERT_TRUE(dome);
+    EXPECT_FALSE(dome->uses_depth());
+    auto plans = dome->render_layers(std::vector<Request>{
+        {s.material.specular, k, eye, enc, &with}, {s.material.specular, k, eye, enc, &without}});
+    ASSERT_TRUE(plans.ok()) << plans.error().message;
+    const auto a = layer_values(with, (*plans)[0]), b = layer_values(without, (*plans)[1]);
+    EXPECT_GT(lit_values(a), 0);
+    EXPECT_EQ(a, b);
+
+    const scene::Scene domes = two_domes();
+    auto mesh = make_renderer(domes);
+    ASSERT_TRUE(mesh);
+    EXPECT_TRUE(mesh->uses_depth());
+    auto refused =
+        mesh->render_layers(std::vector<Request>{{domes.material.specular, k, eye, enc, &without}});
+    ASSERT_FALSE(refused.ok());
+    EXPECT_NE(refused.error().message.find("need a depth buffer"), std::string::npos)
+        << refused.error().message;
+    auto drawn =
+        mesh->render_layers(std::vector<Request>{{domes.material.specular, k, eye, enc, &with}});
+    ASSERT_TRUE(drawn.ok()) << drawn.error().message;
+    EXPECT_GT(lit_values(layer_values(with, (*drawn)[0])), 0);
+}
+
 // The pipelines compiled for a draw's lights and the one that skips lights by a push-constant
 // mask (used past max_light_variants) draw the same layer, on the default scene, where clusters
 // need different subsets of its three lights.
