@@ -35,10 +35,18 @@ TEST_F(ServerTest, ProjectorFrameIsRenderedOnceForEveryProjector) {
     EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 1u);
 }
 
-class HeadsetCount : public ServerTest, public ::testing::WithParamInterface<int> {};
+// Parameters: headsets, and the server's encoder threads (0: its default; with several, a
+// frame's two eyes are encoded on different threads and must still reach their own headset).
+class HeadsetCount : public ServerTest,
+                     public ::testing::WithParamInterface<std::tuple<int, uint32_t>> {
+protected:
+    void configure(stream::ServerCreateInfo& info) override {
+        info.encoder_threads = std::get<1>(GetParam());
+    }
+};
 
 TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
-    const int n = GetParam();
+    const int n = std::get<0>(GetParam());
     const auto display = small_display();
     std::vector<std::unique_ptr<Connection>> hmds;
     for (int i = 0; i < n; ++i) hmds.push_back(headset(display, "hmd-" + std::to_string(i)));
@@ -108,7 +116,9 @@ TEST_P(HeadsetCount, EveryHeadsetGetsLayersForItsOwnPose) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Loopback, HeadsetCount, ::testing::Values(1, 4, 16));
+INSTANTIATE_TEST_SUITE_P(Loopback, HeadsetCount,
+                         ::testing::Values(std::tuple(1, 0u), std::tuple(4, 0u), std::tuple(16, 0u),
+                                           std::tuple(1, 3u), std::tuple(16, 3u)));
 
 // A captured material (docs/CALIBRATION.md): the projector gets the calibrated VI image, a
 // headset at the capture pose the VD image, any other pose black; nothing is rendered.
