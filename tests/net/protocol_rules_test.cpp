@@ -814,4 +814,47 @@ TEST_F(ProtocolRulesLimits, AClientThatDoesNotReadIsClosed) {
         << "a client that never reads kept its session";
 }
 
+// PROTOCOL.md §Rules.LatestPose: in continuous mode a headset gets at most max_viewer_hz frames
+// a second however fast its poses come (20 here; the small display renders many times
+// faster), and the frames keep following its poses; §Rules.Ping: the server sends no Ping.
+class ProtocolRulesRate : public ProtocolRules {
+protected:
+    static constexpr uint32_t kHz = 20;
+    void configure(stream::ServerCreateInfo& info) override { info.limits.max_viewer_hz = kHz; }
+};
+
+TEST_F(ProtocolRulesRate, ContinuousFramesKeepToTheViewerRate) {
+    auto p = headset_peer(small_display(proto::PixelFormat::kRgba8, proto::FrameMode::kContinuous));
+    const auto start = SteadyClock::now();
+    const auto window = std::chrono::seconds(2);
+    int pairs = 0, pings = 0;
+    uint64_t t = 0, last_pose = 0;
+    // A pose every 2 ms for the whole window, reading whatever arrives in between.
+    while (SteadyClock::now() - start < window) {
+        ++t;
+        ASSERT_TRUE(p->send(pose_at(-20.0 + 0.01 * double(t % 4000), t)));
+        while (auto f = p->next(2)) {
+            pings += f->as<proto::Ping>() != nullptr;
+            const auto* l = f->as<proto::VdLayer>();
+            if (!l || l->eye != 1)
+                continue;
+            EXPECT_GE(l->pose_time_ns, last_pose) << "an older pose after a newer one";
+            last_pose = l->pose_time_ns;
+            pairs += SteadyClock::now() - start < window;
+        }
+    }
+    // Frames start at most every 1 / kHz s, the first at once: 2 s hold at most 2 kHz + 1 of
+    // them; one more for a frame started just before the window's end and counted in it.
+    EXPECT_LE(pairs, int(2 * kHz + 2)) << "more than " << kHz << " frames a second";
+    // The poses stop: a frame of the last one comes (however slow the machine).
+    for (;;) {
+        auto f = p->next_a<proto::VdLayer>();
+        ASSERT_TRUE(f) << "no frame of the last pose";
+        if (f->as<proto::VdLayer>()->pose_time_ns == t)
+            break;
+    }
+    EXPECT_GT(t, uint64_t(4 * pairs)) << "the poses did not come faster than the frames";
+    EXPECT_EQ(pings, 0) << "the server sent Ping";
+}
+
 }  // namespace
