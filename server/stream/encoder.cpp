@@ -72,7 +72,8 @@ void Encoder::push(std::shared_ptr<ViewerFrame> frame) {
         queue_.push_back({frame, 0});
         queue_.push_back({std::move(frame), 1});
     }
-    cv_.notify_all();
+    cv_.notify_one();  // a thread for each eye
+    cv_.notify_one();
 }
 
 void Encoder::drain() {
