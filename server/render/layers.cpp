@@ -159,12 +159,14 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         planners_->run(reqs.size(), plan_one);
     else
         for (size_t i = 0; i < reqs.size(); ++i) plan_one(i);
+    // An invalid request fails the batch before anything is recorded.
+    for (size_t i = 0; i < reqs.size(); ++i)
+        if (!layer_work_[i].error.empty())
+            return make_error(ErrorCode::kInvalidArgument, layer_work_[i].error);
     std::vector<LayerPlan> plans(reqs.size());
     for (size_t i = 0; i < reqs.size(); ++i) {
         const LayerRequest& r = reqs[i];
-        LayerWork& w = layer_work_[i];
-        if (!w.error.empty())
-            return make_error(ErrorCode::kInvalidArgument, w.error);
+        const LayerWork& w = layer_work_[i];
         plans[i] = w.plan;
         if (!w.draw)
             continue;

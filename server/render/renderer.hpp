@@ -135,6 +135,7 @@ public:
         uint32_t lights_skipped = 0;
     };
     // Records the layers' passes into `cl` (the caller submits). Plans are in request order.
+    // An invalid request is an error for the whole batch, and then nothing is recorded.
     Result<std::vector<LayerPlan>> record_layers(gpu::CommandList& cl,
                                                  std::span<const LayerRequest> requests);
     // record_layers, submitted and waited for.
@@ -249,7 +250,6 @@ private:
         LayerPlan plan;
         std::string error;  // the request is invalid: record_layers returns this
         bool draw = false;
-        PixelRect rect;
         uint32_t occ_count = 0;  // the occluders' indices, first in the index buffer
         struct Group {
             uint64_t mask;

@@ -66,13 +66,10 @@ Encoder::~Encoder() {
 }
 
 void Encoder::push(std::shared_ptr<ViewerFrame> frame) {
-    frame->eyes_pending.store(2, std::memory_order_relaxed);
     {
         std::lock_guard lock(mutex_);
-        queue_.push_back({frame, 0});
-        queue_.push_back({std::move(frame), 1});
+        queue_.push_back(std::move(frame));
     }
-    cv_.notify_one();  // a thread for each eye
     cv_.notify_one();
 }
 
@@ -89,29 +86,24 @@ void Encoder::set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) {
 void Encoder::run() {
     LayerScratch scratch;  // reused by this thread
     for (;;) {
-        Job job;
+        std::shared_ptr<ViewerFrame> frame;
         std::shared_ptr<const calib::LayerDrive> drive;
         {
             std::unique_lock lock(mutex_);
             cv_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
             if (queue_.empty())
                 return;  // stopping, and nothing left
-            job = std::move(queue_.front());
+            frame = std::move(queue_.front());
             queue_.pop_front();
             drive = drive_;
             ++busy_;
         }
-        encode_eye(*job.frame, job.eye, drive.get(), scratch);
-        // The second eye to finish hands the frame on; the decrement orders the other eye's
-        // writes before this thread's reads.
-        if (job.frame->eyes_pending.fetch_sub(1, std::memory_order_acq_rel) == 1) {
-            try {
-                done_(finish(std::move(job.frame)));
-            } catch (...) {
-                // done_ counts and posts; a failure there must not take the thread down.
-            }
+        EncodedFrame out = encode(std::move(frame), drive.get(), scratch);
+        try {
+            done_(std::move(out));
+        } catch (...) {
+            // done_ counts and posts; a failure there must not take the thread down.
         }
-        job.frame.reset();
         {
             std::lock_guard lock(mutex_);
             --busy_;
@@ -154,15 +146,16 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     codec::append_layer_data(out, driven, encoding, codec, scratch.tiles);
 }
 
-void Encoder::encode_eye(ViewerFrame& f, uint8_t e, const calib::LayerDrive* drive,
-                         LayerScratch& scratch) {
-    ViewerFrame::EyeEncoding& out = f.eyes[e];
-    out = {};
+EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
+                             LayerScratch& scratch) {
+    EncodedFrame out;
+    out.frame = frame;
+    ViewerFrame& f = *frame;
     auto t0 = std::chrono::steady_clock::now();
     if (f.timeline != 0) {
         if (auto r = ring_.wait(f.timeline); !r.ok()) {
             out.error = r.error().message;
-            return;
+            return out;
         }
         t0 = std::chrono::steady_clock::now();
         out.gpu_ms = ms_between(f.submitted, t0);
@@ -170,44 +163,27 @@ void Encoder::encode_eye(ViewerFrame& f, uint8_t e, const calib::LayerDrive* dri
     }
     const auto& d = f.job.display;
     const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(f.format));
-    protocol::VdLayer fields;
-    fields.frame_id = f.job.frame_id;
-    fields.pose_time_ns = f.job.pose.client_time_ns;
-    fields.eye = e;
-    fields.format = f.format;
-    fields.encoding = d.encoding;
-    fields.width = f.width;
-    fields.height = f.height;
-    std::vector<uint8_t> buf = pool_->take();
-    auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
-        append_served_layer(o, f.pixels[e], drive, d.encoding, codec, scratch);
-        return true;
-    });
-    if (err) {
-        out.error = err->message;
-        return;
+    for (uint8_t e = 0; e < 2; ++e) {
+        protocol::VdLayer fields;
+        fields.frame_id = f.job.frame_id;
+        fields.pose_time_ns = f.job.pose.client_time_ns;
+        fields.eye = e;
+        fields.format = f.format;
+        fields.encoding = d.encoding;
+        fields.width = f.width;
+        fields.height = f.height;
+        std::vector<uint8_t> buf = pool_->take();
+        auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
+            append_served_layer(o, f.pixels[e], drive, d.encoding, codec, scratch);
+            return true;
+        });
+        if (err) {
+            out.error = err->message;
+            return out;
+        }
+        out.layers[e] = pool_->share(std::move(buf));
     }
-    out.bytes = pool_->share(std::move(buf));
     out.encode_ms = ms_between(t0, std::chrono::steady_clock::now());
-}
-
-EncodedFrame Encoder::finish(std::shared_ptr<ViewerFrame> frame) {
-    EncodedFrame out;
-    ViewerFrame& f = *frame;
-    out.frame = std::move(frame);
-    for (auto& eye : f.eyes) {
-        if (out.error.empty() && !eye.error.empty())
-            out.error = std::move(eye.error);
-        // The GPU's time as the first eye to see the submission complete saw it.
-        if (eye.gpu_ms > 0)
-            out.gpu_ms = out.gpu_ms > 0 ? std::min(out.gpu_ms, eye.gpu_ms) : eye.gpu_ms;
-        if (!out.device_ms)
-            out.device_ms = eye.device_ms;
-        out.encode_ms += eye.encode_ms;
-    }
-    if (out.error.empty())
-        for (size_t e = 0; e < 2; ++e) out.layers[e] = std::move(f.eyes[e].bytes);
-    for (auto& eye : f.eyes) eye = {};  // nothing kept past the frame: the bytes are the socket's
     return out;
 }
 

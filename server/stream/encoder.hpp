@@ -1,11 +1,9 @@
-// The encoder threads: each takes one eye of a submitted ViewerFrame, waits for its timeline
-// value (the GPU finished writing its readback buffers), encodes that eye's layer from the
-// mapped memory in place into one buffer (header and payload together, sent as they are); the
-// thread that finishes a frame's second eye hands both on. With two or more threads a frame's
-// eyes are encoded at once, so a headset's layers wait for one eye's encoding, not two. Buffers
-// come from a pool and go back to it when the socket is done with them, so a steady stream
-// allocates nothing large. A calibrated server's layers go through the headset drive's lookups
-// first (calib::LayerDrive), into memory the thread keeps.
+// The encoder threads: each takes a submitted ViewerFrame, waits for its timeline value (the
+// GPU finished writing its readback buffers), encodes both eyes' layers from the mapped memory
+// in place into one buffer per layer (header and payload together, sent as they are), and
+// hands them on. Buffers come from a pool and go back to it when the socket is done with them,
+// so a steady stream allocates nothing large. A calibrated server's layers go through the
+// headset drive's lookups first (calib::LayerDrive), into memory the thread keeps.
 #pragma once
 
 #include <condition_variable>
@@ -69,14 +67,13 @@ struct EncodedFrame {
     double gpu_ms = 0;  // submitted -> the GPU finished (as the encoder saw it)
     // The device's own time on the frame's submission (timestamps); unset where not known.
     std::optional<double> device_ms;
-    double encode_ms = 0;  // both layers, CPU (the sum of the two eyes' encoding)
+    double encode_ms = 0;  // both layers, CPU
 };
 
 class Encoder {
 public:
     using Done = std::function<void(EncodedFrame&&)>;
-    // `threads` encoder threads; `done` is called on them, once per pushed frame, when both
-    // of its eyes are encoded.
+    // `threads` encoder threads; `done` is called on them, once per pushed frame.
     Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
             std::optional<protocol::TileCodec> codec, Done done);
     ~Encoder();  // encodes what is queued, then joins
@@ -91,16 +88,9 @@ public:
     void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive);
 
 private:
-    struct Job {
-        std::shared_ptr<ViewerFrame> frame;
-        uint8_t eye = 0;
-    };
     void run();
-    // Encodes `eye` of the job's frame into frame->eyes[eye].
-    void encode_eye(ViewerFrame& frame, uint8_t eye, const calib::LayerDrive* drive,
-                    LayerScratch& scratch);
-    // Both eyes done: the frame as `done` receives it.
-    static EncodedFrame finish(std::shared_ptr<ViewerFrame> frame);
+    EncodedFrame encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
+                        LayerScratch& scratch);
 
     const gpu::SubmitRing& ring_;
     std::shared_ptr<BufferPool> pool_;
@@ -108,7 +98,7 @@ private:
     Done done_;
     std::mutex mutex_;
     std::condition_variable cv_, idle_;
-    std::deque<Job> queue_;
+    std::deque<std::shared_ptr<ViewerFrame>> queue_;
     std::shared_ptr<const calib::LayerDrive> drive_;  // under mutex_
     size_t busy_ = 0;
     bool stopping_ = false;

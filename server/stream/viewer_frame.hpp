@@ -8,13 +8,10 @@
 #pragma once
 
 #include <array>
-#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
-#include <optional>
 #include <string>
-#include <vector>
 
 #include "codec/layer_codec.hpp"
 #include "gpu/resources.hpp"
@@ -40,17 +37,6 @@ struct ViewerFrame {
     std::chrono::steady_clock::time_point taken, submitted;
     // Keeps the pixels a captured material's frame points at alive while it is encoded.
     std::shared_ptr<const void> keep_alive;
-
-    // Written by the encoder threads, one eye each (stream/encoder.hpp): the last of the two
-    // to finish hands the frame on.
-    struct EyeEncoding {
-        std::shared_ptr<const std::vector<uint8_t>> bytes;
-        std::string error;
-        double gpu_ms = 0, encode_ms = 0;
-        std::optional<double> device_ms;
-    };
-    std::array<EyeEncoding, 2> eyes;
-    std::atomic<int> eyes_pending{0};
 };
 
 }  // namespace hs::stream
