@@ -37,7 +37,8 @@ static const std::string kUsage =
         "                 [--retries N] [--backoff-ms MS]\n"
         "                 [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
         "       hysar-hmd --list-devices | --watch-devices SECONDS [--profile FILE]\n"
-        "                 [--device-table DIR]\n"
+        "                 [--device-table DIR] [--devices-dir DIR]\n"
+        "       hysar-hmd --add-device VID:PID --profile NAME [--devices-dir DIR]\n"
         "\n"
         "  --connect ADDR   HOST:PORT or unix:PATH of hysar serve (default 127.0.0.1:7700)\n"
         "  --profile FILE   headset profile (default devices/hololens.json in the configs:\n"
@@ -68,6 +69,12 @@ static const std::string kUsage =
         "  --device-table DIR  profiles with the USB ids of known headsets (default the devices/\n"
         "                   folder of the configs, as for --profile; configs/devices/README.md\n"
         "                   says how to add one)\n"
+        "  --devices-dir DIR  local device entries read beside the table (default\n"
+        "                   /etc/hysar/devices, when it exists)\n"
+        "  --add-device VID:PID  with --profile NAME: map the USB ids lsusb shows (04b8:0d12)\n"
+        "                   to the table's profile NAME in a new entry of --devices-dir, checked\n"
+        "                   and read back; --device auto then finds the headset. Prints the udev\n"
+        "                   line for a client run without root\n"
         "  --list-devices   print the attached USB devices, mark the known headsets and their\n"
         "                   profiles, and exit 0 (also with no USB bus or no permission to it)\n"
         "  --watch-devices SECONDS  report known headsets arriving and leaving for SECONDS\n"
@@ -368,16 +375,33 @@ int follow_live_poses(Run& run, PoseSource& source, int64_t limit, double stale_
 }
 
 int hmd_main(int argc, char** argv) {
-    Args args(
-        argc, argv,
-        with(kConnectionOptions,
-             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
-              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
-              "--target",       "--format",        "--encoding",      "--name",     "--out",
-              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
-              "--device-table", "--watch-devices", "--clear-after-ms"}),
-        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
-        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
+    Args args(argc, argv, with(kConnectionOptions, {"--connect",
+                                                    "--token",
+                                                    "--token-file",
+                                                    "--profile",
+                                                    "--scale",
+                                                    "--angles",
+                                                    "--orbit",
+                                                    "--csv",
+                                                    "--distance",
+                                                    "--height",
+                                                    "--target",
+                                                    "--format",
+                                                    "--encoding",
+                                                    "--name",
+                                                    "--out",
+                                                    "--summary",
+                                                    "--poses",
+                                                    "--frames",
+                                                    "--stale-ms",
+                                                    "--device",
+                                                    "--device-table",
+                                                    "--watch-devices",
+                                                    "--clear-after-ms",
+                                                    "--add-device",
+                                                    "--devices-dir"}),
+              with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
+              HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile = profile_option(args);
     if (wants_usb_command(args))

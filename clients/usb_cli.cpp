@@ -1,7 +1,9 @@
 #include "clients/usb_cli.hpp"
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 
 #include "clients/common.hpp"
@@ -16,18 +18,45 @@ extern "C" void on_stop_signal(int) {
     g_stop = 1;
 }
 
-std::vector<KnownHeadset> read_table(const Args& args) {
-    std::string dir = args.get("--device-table", "");
-    if (!args.has("--device-table")) {
-        const ConfigFile found = find_config("devices");
-        if (found.path.empty())
-            args.fail("the known-headset table: " + found.error + "; give --device-table DIR");
-        dir = found.path;
+// The local folder to read beside the shipped table: --devices-dir (which must exist), else the
+// default one when it exists, else none ("").
+std::string local_dir_to_read(const Args& args) {
+    if (args.has("--devices-dir")) {
+        const std::string dir = args.get("--devices-dir", "");
+        std::error_code ec;
+        if (dir.empty() || !std::filesystem::is_directory(dir, ec))
+            args.fail("--devices-dir '" + dir +
+                      "' is not a folder (hysar-hmd --add-device makes it; leave the option out "
+                      "to read " +
+                      kLocalDevicesDir + " when it exists)");
+        return dir;
     }
-    auto table = load_headset_table(dir);
-    if (auto* e = std::get_if<std::string>(&table))
-        args.fail("--device-table " + *e);
+    std::error_code ec;
+    return std::filesystem::is_directory(kLocalDevicesDir, ec) ? kLocalDevicesDir : "";
+}
+
+// The shipped table's folder: --device-table, or the configs' devices/ folder.
+std::string shipped_dir(const Args& args) {
+    if (args.has("--device-table"))
+        return args.get("--device-table", "");
+    const ConfigFile found = find_config("devices");
+    if (found.path.empty())
+        args.fail("the known-headset table: " + found.error + "; give --device-table DIR");
+    return found.path;
+}
+
+// The shipped table with the local folder `local_dir` ("": none).
+std::vector<KnownHeadset> read_table(const Args& args, const std::string& local_dir) {
+    auto table = load_device_table(shipped_dir(args), local_dir);
+    if (auto* e = std::get_if<std::string>(&table)) {
+        // Say which folder the file at fault belongs to.
+        const bool local = !local_dir.empty() && e->rfind("'" + local_dir, 0) == 0;
+        args.fail((local ? "--devices-dir (the local device entries) " : "--device-table ") + *e);
+    }
     return std::get<std::vector<KnownHeadset>>(std::move(table));
+}
+std::vector<KnownHeadset> read_table(const Args& args) {
+    return read_table(args, local_dir_to_read(args));
 }
 
 size_t profiles_with_ids(const std::vector<KnownHeadset>& table) {
@@ -61,9 +90,10 @@ int list_devices(const Args& args, const std::vector<KnownHeadset>& table,
     } else {
         std::printf("USB devices: %zu\n", devices.size());
     }
+    const UsbIdNames ids = load_system_usb_ids();
     size_t unreadable = 0;
     for (size_t d = 0; d < devices.size(); ++d) {
-        std::string line = "  " + describe_usb(devices[d]);
+        std::string line = "  " + describe_usb(devices[d], &ids);
         for (const auto& m : matches)
             if (m.device == d)
                 line += "  <- known headset: " + headset_name(table[m.headset], m.what) +
@@ -76,6 +106,15 @@ int list_devices(const Args& args, const std::vector<KnownHeadset>& table,
             "(%zu of %zu devices could not be opened to read their names, most likely no "
             "permission to the USB bus: they are known by their ids)\n",
             unreadable, devices.size());
+    if (!devices.empty()) {
+        if (ids.file.empty())
+            std::printf(
+                "(no usb.ids list on this machine: install the usb.ids package to see the "
+                "devices' names in [ ])\n");
+        else
+            std::printf("(names in [ ] from %s%s)\n", ids.file.c_str(),
+                        ids.version.empty() ? "" : (", version " + ids.version).c_str());
+    }
     const DeviceChoice choice = choose_headset(devices, table, matches);
     if (choice.headset) {
         std::printf("Known headset attached: --device auto uses the profile %s\n",
@@ -86,10 +125,106 @@ int list_devices(const Args& args, const std::vector<KnownHeadset>& table,
     } else {
         std::printf(
             "No known headset attached (%zu of %zu profiles in the table list USB ids): "
-            "%s\nTo add a headset, copy a profile and put the ids lsusb shows for it in "
-            "its \"usb\" array (configs/devices/README.md).\n",
+            "%s\nTo add a headset: hysar-hmd --add-device VID:PID --profile NAME, with the ids "
+            "listed above (configs/devices/README.md).\n",
             profiles_with_ids(table), table.size(), keep.c_str());
     }
+    return 0;
+}
+
+// "2026-11-26": today's date in UTC.
+std::string today_utc() {
+    const std::time_t now = std::time(nullptr);
+    std::tm tm{};
+    gmtime_r(&now, &tm);
+    char b[16];
+    std::strftime(b, sizeof b, "%Y-%m-%d", &tm);
+    return b;
+}
+
+// The table index of --profile's NAME (or of the table's file it names), or a usage error.
+size_t profile_to_add_to(const Args& args, const std::vector<KnownHeadset>& table,
+                         const std::string& local_dir) {
+    if (!args.has("--profile"))
+        args.fail("--add-device needs --profile NAME: the profile the headset uses");
+    const std::string given = args.get("--profile", "");
+    for (size_t h = 0; h < table.size(); ++h)
+        if (table[h].name == given)
+            return h;
+    std::error_code ec;
+    for (size_t h = 0; h < table.size(); ++h)
+        if (std::filesystem::equivalent(given, table[h].path, ec) && !ec)
+            return h;
+    std::string names;
+    for (const auto& h : table) names += (names.empty() ? "" : ", ") + h.name;
+    args.fail("--profile '" + given + "': not a profile of the table (" + names +
+              "); a headset without a profile needs its profile NAME.json in " + local_dir +
+              " first (configs/devices/README.md)");
+}
+
+// --add-device VID:PID --profile NAME [--devices-dir DIR]: writes the local device entry, reads
+// the table back with it, and prints the udev line for a client run without root.
+int add_device(const Args& args) {
+    for (const char* other : {"--list-devices", "--watch-devices", "--device"})
+        if (args.has(other))
+            args.fail(std::string("give --add-device or ") + other + ", not both");
+    auto ids = parse_usb_pair(args.get("--add-device", ""));
+    if (auto* e = std::get_if<std::string>(&ids))
+        args.fail("--add-device " + *e);
+    const auto [vendor, product] = std::get<std::pair<uint16_t, uint16_t>>(ids);
+    const std::string local_dir = args.get("--devices-dir", kLocalDevicesDir);
+    if (local_dir.empty())
+        args.fail("--devices-dir: the value is empty");
+    std::error_code ec;
+    if (std::filesystem::exists(local_dir, ec) && !std::filesystem::is_directory(local_dir, ec))
+        args.fail("--devices-dir '" + local_dir + "' is not a folder");
+    const auto table =
+        read_table(args, std::filesystem::is_directory(local_dir, ec) ? local_dir : "");
+    const size_t h = profile_to_add_to(args, table, local_dir);
+    protocol::RegisterDisplay display;
+    if (auto err = load_profile(table[h].path, 1.0, &display))
+        args.fail("--profile " + *err);
+    for (const auto& other : table)
+        for (const auto& m : other.usb)
+            if (m.vendor == vendor && m.product == product)
+                args.fail(
+                    "--add-device " + usb_id(vendor, product) + " is in the table already: '" +
+                    m.file + "' maps it to the profile " + other.name +
+                    (m.file.rfind(local_dir, 0) == 0 ? " (remove that file to change it)" : ""));
+    const UsbIdNames names = load_system_usb_ids();
+    const std::string listed = names.name(vendor, product);
+    const std::string what =
+        listed.empty() ? table[h].name + " (" + usb_id(vendor, product) + ", added on site)"
+                       : listed;
+    const std::string source =
+        "added on site with hysar-hmd --add-device on " + today_utc() +
+        (listed.empty() ? "" : "; name from " + names.file + " " + names.version);
+    const WrittenEntry written =
+        write_device_entry(local_dir, vendor, product, table[h].name, what, source);
+    if (!written.error.empty()) {
+        std::fprintf(stderr, "hysar-hmd: --add-device: %s%s\n", written.error.c_str(),
+                     args.has("--devices-dir") ? ""
+                                               : " (run as root, or give --devices-dir DIR and "
+                                                 "pass it to --device auto too)");
+        return 1;
+    }
+    // Read back what --device auto will read; a table that no longer loads keeps no entry.
+    auto back = load_device_table(shipped_dir(args), local_dir);
+    if (auto* e = std::get_if<std::string>(&back)) {
+        std::filesystem::remove(written.path, ec);
+        args.fail("--add-device: the table with the new entry does not load (" + *e +
+                  "); nothing was added");
+    }
+    std::printf(
+        "Added %s (%s) -> profile %s: %s\n"
+        "--device auto picks the profile %s when the device is attached%s.\n"
+        "For a client run without root, put this line in "
+        "/etc/udev/rules.d/71-hysar-local.rules,\nthen run: udevadm control --reload && "
+        "udevadm trigger\n%s\n",
+        usb_id(vendor, product).c_str(), what.c_str(), table[h].name.c_str(), written.path.c_str(),
+        table[h].path.c_str(),
+        args.has("--devices-dir") ? (" (with --devices-dir " + local_dir + ")").c_str() : "",
+        udev_rule_line(vendor, product).c_str());
     return 0;
 }
 
@@ -107,12 +242,13 @@ int watch_devices(const Args& args, const std::vector<KnownHeadset>& table) {
     std::signal(SIGINT, on_stop_signal);
     std::signal(SIGTERM, on_stop_signal);
     size_t arrivals = 0, departures = 0;
+    const UsbIdNames ids = load_system_usb_ids();
     auto report = [&](const UsbEvent& ev) {
         const auto matches = match_headsets({ev.device}, table);
         if (matches.empty()) {
             if (!ev.present)  // what was attached before the watch is not news
                 std::printf("%s (not a known headset): %s\n", ev.arrived ? "arrived" : "left",
-                            describe_usb(ev.device).c_str());
+                            describe_usb(ev.device, &ids).c_str());
         } else {
             for (const auto& m : matches)
                 std::printf("%s: %s  %s  profile %s\n",
@@ -147,10 +283,12 @@ std::string default_device_table() {
 }
 
 bool wants_usb_command(const Args& args) {
-    return args.has("--list-devices") || args.has("--watch-devices");
+    return args.has("--list-devices") || args.has("--watch-devices") || args.has("--add-device");
 }
 
 int run_usb_command(const Args& args, const std::string& configured) {
+    if (args.has("--add-device"))
+        return add_device(args);
     if (args.has("--list-devices") && args.has("--watch-devices"))
         args.fail("give --list-devices or --watch-devices, not both");
     const auto table = read_table(args);
@@ -164,10 +302,11 @@ int run_usb_command(const Args& args, const std::string& configured) {
 
 std::string choose_profile(const Args& args, const std::string& configured) {
     if (!args.has("--device")) {
-        if (args.has("--device-table"))
-            args.fail(
-                "--device-table is read by --device auto, --list-devices and "
-                "--watch-devices only");
+        for (const char* table_option : {"--device-table", "--devices-dir"})
+            if (args.has(table_option))
+                args.fail(std::string(table_option) +
+                          " is read by --device auto, --list-devices, --watch-devices and "
+                          "--add-device only");
         return configured;
     }
     args.choice("--device", "auto", {"auto"});

@@ -1,5 +1,6 @@
 // hysar-hmd's USB options (usb_devices.hpp does the work): --list-devices, --watch-devices S,
-// --device auto and --device-table DIR. Bad values are usage errors (Args::fail, exit 2).
+// --device auto, --device-table DIR, --add-device VID:PID and --devices-dir DIR. Bad values are
+// usage errors (Args::fail, exit 2).
 #pragma once
 
 #include <string>
@@ -11,15 +12,24 @@ namespace hs::client {
 // The table of known headsets when --device-table is not given.
 std::string default_device_table();
 
-// True when the command line asks for --list-devices or --watch-devices: run_usb_command then
-// does all the work, without a token or a server.
+// The local device entries read beside the shipped table when --devices-dir is not given (and
+// only when the folder exists); --add-device writes there.
+inline constexpr const char* kLocalDevicesDir = "/etc/hysar/devices";
+
+// True when the command line asks for --list-devices, --watch-devices or --add-device:
+// run_usb_command then does all the work, without a token or a server.
 bool wants_usb_command(const Args& args);
 
 // --list-devices: prints the attached USB devices, marks the known headsets and the profile each
 // implies, and says which profile a run would use; exit status 0, also without a USB bus or
 // without permission to it (a line says so). --watch-devices S: reports known headsets arriving
 // and leaving for S seconds (0: until SIGINT or SIGTERM); exit status 0, or 1 with one line when
-// the bus cannot be watched. `configured_profile` is --profile or its default.
+// the bus cannot be watched. --add-device VID:PID --profile NAME [--devices-dir DIR]: writes a
+// local device entry mapping the ids to the table's profile NAME (usb_devices.hpp,
+// write_device_entry), reads the table back with it, prints where and the udev line that lets a
+// client without root open the device; exit 0, 2 for a bad VID:PID, an unknown profile or ids
+// the table has already, 1 when the file cannot be written. `configured_profile` is --profile
+// or its default.
 int run_usb_command(const Args& args, const std::string& configured_profile);
 
 // The profile a run uses: `configured_profile`, or with --device auto the profile of the one
