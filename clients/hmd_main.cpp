@@ -375,33 +375,16 @@ int follow_live_poses(Run& run, PoseSource& source, int64_t limit, double stale_
 }
 
 int hmd_main(int argc, char** argv) {
-    Args args(argc, argv, with(kConnectionOptions, {"--connect",
-                                                    "--token",
-                                                    "--token-file",
-                                                    "--profile",
-                                                    "--scale",
-                                                    "--angles",
-                                                    "--orbit",
-                                                    "--csv",
-                                                    "--distance",
-                                                    "--height",
-                                                    "--target",
-                                                    "--format",
-                                                    "--encoding",
-                                                    "--name",
-                                                    "--out",
-                                                    "--summary",
-                                                    "--poses",
-                                                    "--frames",
-                                                    "--stale-ms",
-                                                    "--device",
-                                                    "--device-table",
-                                                    "--watch-devices",
-                                                    "--clear-after-ms",
-                                                    "--add-device",
-                                                    "--devices-dir"}),
-              with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
-              HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
+    Args args(
+        argc, argv,
+        with(with(kConnectionOptions, kAddDeviceOptions),
+             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
+              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
+              "--target",       "--format",        "--encoding",      "--name",     "--out",
+              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
+              "--device-table", "--watch-devices", "--clear-after-ms"}),
+        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
+        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile = profile_option(args);
     if (wants_usb_command(args))

@@ -3,6 +3,7 @@
 // usage errors (Args::fail, exit 2).
 #pragma once
 
+#include <set>
 #include <string>
 
 #include "clients/args.hpp"
@@ -15,6 +16,9 @@ std::string default_device_table();
 // The local device entries read beside the shipped table when --devices-dir is not given (and
 // only when the folder exists); --add-device writes there.
 inline constexpr const char* kLocalDevicesDir = "/etc/hysar/devices";
+
+// The options with a value that --add-device brings to hysar-hmd's option list.
+inline const std::set<std::string> kAddDeviceOptions = {"--add-device", "--devices-dir"};
 
 // True when the command line asks for --list-devices, --watch-devices or --add-device:
 // run_usb_command then does all the work, without a token or a server.
