@@ -16,6 +16,7 @@ for f in bin/hysar bin/hysar-hmd bin/hysar-projector bin/hysar-loadgen \
          lib/libhysar-client.so.1 lib/pkgconfig/hysar-client.pc include/hysar_client.h \
          share/hysar/configs/exp1-room.json share/hysar/configs/devices/hololens.json \
          share/hysar/hysar.env.example lib/systemd/system/hysar.service \
+         lib/udev/rules.d/70-hysar-headsets.rules \
          share/doc/hysar/README.md share/doc/hysar/LICENSE share/doc/hysar/CITATION.cff \
          share/doc/hysar/docs/OPERATIONS.md share/doc/hysar/protocol/PROTOCOL.md \
          share/doc/hysar/examples/c/hmd_example.c; do
