@@ -193,9 +193,9 @@ int add_device(const Args& args) {
                     (m.file.rfind(local_dir, 0) == 0 ? " (remove that file to change it)" : ""));
     const UsbIdNames names = load_system_usb_ids();
     const std::string listed = names.name(vendor, product);
+    // The profile's name and what usb.ids calls the device: the headset as the operator knows it.
     const std::string what =
-        listed.empty() ? table[h].name + " (" + usb_id(vendor, product) + ", added on site)"
-                       : listed;
+        table[h].name + " (" + (listed.empty() ? usb_id(vendor, product) : listed) + ")";
     const std::string source =
         "added on site with hysar-hmd --add-device on " + today_utc() +
         (listed.empty() ? "" : "; name from " + names.file + " " + names.version);
