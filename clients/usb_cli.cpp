@@ -51,7 +51,7 @@ std::vector<KnownHeadset> read_table(const Args& args, const std::string& local_
     if (auto* e = std::get_if<std::string>(&table)) {
         // Say which folder the file at fault belongs to.
         const bool local = !local_dir.empty() && e->rfind("'" + local_dir, 0) == 0;
-        args.fail((local ? "--devices-dir (the local device entries) " : "--device-table ") + *e);
+        args.fail((local ? "local device entries: " : "--device-table ") + *e);
     }
     return std::get<std::vector<KnownHeadset>>(std::move(table));
 }

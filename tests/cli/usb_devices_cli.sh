@@ -86,9 +86,9 @@ check add-same-id-again 2 "--add-device 1234:0001 is in the table already: 'loca
   "$hmd" --add-device 1234:0001 --profile hololens --devices-dir local
 check list-with-local 0 "USB devices|No USB devices listed" "$hmd" --list-devices --devices-dir local
 mkdir -p broken-local && echo '{ "profile": ' > broken-local/usb-1234-0002.json
-check local-broken-list 2 "--devices-dir \(the local device entries\) '.*broken-local/usb-1234-0002.json': not valid JSON" \
+check local-broken-list 2 "local device entries: '.*broken-local/usb-1234-0002.json': not valid JSON" \
   "$hmd" --list-devices --devices-dir broken-local
-check local-broken-auto 2 "--devices-dir \(the local device entries\) '.*broken-local/usb-1234-0002.json': not valid JSON" \
+check local-broken-auto 2 "local device entries: '.*broken-local/usb-1234-0002.json': not valid JSON" \
   "$hmd" --device auto --devices-dir broken-local --token t --connect 127.0.0.1:1 --angles 0
 check local-broken-add 2 "broken-local/usb-1234-0002.json': not valid JSON" \
   "$hmd" --add-device 1234:0003 --profile hololens --devices-dir broken-local
