@@ -232,11 +232,13 @@ int watch_devices(const Args& args, const std::vector<KnownHeadset>& table) {
     const double seconds = args.number("--watch-devices", 0, 0, 86400);
     const std::string how_long =
         seconds > 0 ? "for " + format_number(seconds) + " s" : "until SIGINT (Ctrl-C) or SIGTERM";
+    const std::string local = local_dir_to_read(args);
     std::printf(
-        "Watching the USB bus %s: known headsets are the %zu of %zu profiles in %s with "
+        "Watching the USB bus %s: known headsets are the %zu of %zu profiles in %s%s with "
         "USB ids; other devices are shown as they come and go.\n",
         how_long.c_str(), profiles_with_ids(table), table.size(),
-        args.get("--device-table", default_device_table()).c_str());
+        args.get("--device-table", default_device_table()).c_str(),
+        local.empty() ? "" : (" and " + local).c_str());
     std::fflush(stdout);
     g_stop = 0;
     std::signal(SIGINT, on_stop_signal);

@@ -24,7 +24,10 @@ inline const std::set<std::string> kAddDeviceOptions = {"--add-device", "--devic
 // run_usb_command then does all the work, without a token or a server.
 bool wants_usb_command(const Args& args);
 
-// --list-devices: prints the attached USB devices, marks the known headsets and the profile each
+// The table is the shipped one (--device-table, or the configs' devices/ folder) with the local
+// folder beside it (--devices-dir, else kLocalDevicesDir when it exists; usb_devices.hpp,
+// load_device_table). --list-devices: prints the attached USB devices with their names from the
+// system's usb.ids (load_system_usb_ids), marks the known headsets and the profile each
 // implies, and says which profile a run would use; exit status 0, also without a USB bus or
 // without permission to it (a line says so). --watch-devices S: reports known headsets arriving
 // and leaving for S seconds (0: until SIGINT or SIGTERM); exit status 0, or 1 with one line when
@@ -37,8 +40,9 @@ bool wants_usb_command(const Args& args);
 int run_usb_command(const Args& args, const std::string& configured_profile);
 
 // The profile a run uses: `configured_profile`, or with --device auto the profile of the one
-// known headset attached (a line on stderr says which, or why the configured one is kept). Two
-// different known headsets attached, or a broken table, are usage errors naming them.
+// known headset attached in the table with the local folder (a line on stderr says which, or why
+// the configured one is kept). Two different known headsets attached, or a broken table or
+// local entry, are usage errors naming them.
 std::string choose_profile(const Args& args, const std::string& configured_profile);
 
 }  // namespace hs::client
