@@ -25,9 +25,9 @@
 
 #include "clients/connection.hpp"
 #include "core/check.hpp"
-#include "core/figure.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "plot/figure.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"

@@ -6,7 +6,7 @@
 
 #include <fmt/format.h>
 
-#include "core/plot.hpp"
+#include "plot/plot.hpp"
 
 namespace hs::bench {
 

@@ -10,8 +10,8 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/serve_bench.hpp"
-#include "core/figure.hpp"
 #include "core/image.hpp"
+#include "plot/figure.hpp"
 
 namespace hs::bench {
 
