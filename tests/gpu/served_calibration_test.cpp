@@ -15,8 +15,8 @@
 #include "calib/serving.hpp"
 #include "clients/connection.hpp"
 #include "gpu_fixture.hpp"
-#include "installation/served.hpp"
 #include "scene/camera.hpp"
+#include "served_installation/served.hpp"
 #include "stream/server.hpp"
 
 using namespace hs;

@@ -1,4 +1,4 @@
-#include "bench/serve_report.hpp"
+#include "serve_bench/serve_report.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "installation/served.hpp"
+#include "served_installation/served.hpp"
 
 #include <chrono>
 #include <cmath>

@@ -1,5 +1,5 @@
-#include "bench/serve_bench.hpp"
-#include "bench/serve_report.hpp"
+#include "serve_bench/serve_bench.hpp"
+#include "serve_bench/serve_report.hpp"
 
 #include <spawn.h>
 #include <sys/resource.h>
