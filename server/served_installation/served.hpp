@@ -1,8 +1,9 @@
 // Calibrated output on the virtual installation (docs/CALIBRATION.md, "Serving with a
 // calibration"): the calibration folder the chain's results make, and the served path end to
-// end. A loopback server (stream::Server, as `hysar serve` runs it) sends the projector frame
-// and one headset's VD layers; their bytes, decoded as a client's panel receives them, are shown
-// on the virtual devices, and the camera's capture is compared with the reference object's.
+// end. A loopback server (stream/loopback.hpp: the server as `hysar serve` runs it) sends the
+// projector frame and one headset's VD layers; their bytes, decoded as a client's panel receives
+// them, are shown on the virtual devices, and the camera's capture is compared with the reference
+// object's.
 #pragma once
 
 #include <filesystem>
