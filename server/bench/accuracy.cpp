@@ -9,8 +9,8 @@
 #include <glm/geometric.hpp>
 
 #include "codec/layer_codec.hpp"
-#include "core/plot.hpp"
 #include "optics/colour.hpp"
+#include "plot/plot.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"

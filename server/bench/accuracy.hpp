@@ -6,10 +6,10 @@
 #include <string>
 #include <vector>
 
-#include "core/figure.hpp"
 #include "core/image.hpp"
 #include "core/result.hpp"
 #include "gpu/device.hpp"
+#include "plot/figure.hpp"
 #include "scene/scene.hpp"
 
 namespace hs::bench {

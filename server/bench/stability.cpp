@@ -245,52 +245,55 @@ ProbeCase as_gpu_inputs(const ProbeCase& c) {
     return r;
 }
 
-std::vector<StabilityRegime> stability_regimes(bool float64) {
-    using M = scene::SpecularModel;
+namespace {
+
+// The table as it is built: each regime's cases as the GPU receives them (fp32 inputs).
+struct RegimeTable {
     std::vector<StabilityRegime> t;
-    auto add = [&](std::string formula, std::string regime, scene::Specular spec,
-                   std::vector<ProbeCase> cases, double rel, double abs) {
+    void add(std::string formula, std::string regime, scene::Specular spec,
+             std::vector<ProbeCase> cases, double rel, double abs) {
         for (auto& c : cases) c = as_gpu_inputs(c);
         t.push_back({std::move(formula), std::move(regime), spec, std::move(cases), rel, abs});
-    };
-    const std::vector<std::pair<std::string, scene::Specular>> models = {
-        {"phong", model(M::kPhong, 40)},
-        {"blinn-phong", model(M::kBlinnPhong, 160)},
-        {"ward", model(M::kWard, 0, 0.12, 0.12)},
-        {"ward-aniso", model(M::kWard, 0, 0.3, 0.06)},
-        {"kajiya-kay", model(M::kKajiyaKay, 60)}};
-    // Every model in its ordinary and its hard regimes. Tolerances: the classic lobes 2e-3
-    // relative (a cosine's fp32 rounding, 6e-8, times the exponent) and 1e-6 absolute; Ward 1 %
-    // and 1e-4 of its peak (docs/SHADING.md).
-    for (const auto& [name, s] : models) {
-        const bool ward = s.model == M::kWard;
-        const double rel = ward ? 1e-2 : 2e-3, abs = (ward ? 1e-4 : 1e-6) * peak_factor(s);
-        add(name, "peak and around it, tilted frames", s, peak_cases(s), rel, abs);
-        add(name, "grazing light, n.l -> 0+", s, grazing_cases(true, {1e-1, 1e-3, 1e-5, 1e-7}), rel,
-            abs);
-        add(name, "grazing view, n.v -> 0+", s, grazing_cases(false, {1e-1, 1e-3, 1e-5}), rel, abs);
-        add(
-            name, "light or view below the surface, n.l or n.v -> 0-", s,
-            [] {
-                auto a = grazing_cases(true, {-1e-7, -1e-3, -0.5});
-                auto b = grazing_cases(false, {-1e-7, -1e-3, -0.5});
-                a.insert(a.end(), b.begin(), b.end());
-                return a;
-            }(),
-            rel, abs);
-        add(name, "half vector at the pole; l = -v", s, pole_cases(), rel, abs);
-        if (s.uses_tangent())
-            add(name, "tangent axis along the normal (fallback axis)", s, tangent_singular_cases(s),
-                rel, abs);
     }
-    // Exponents 1 and 10^4 (4095 is the largest applied by squaring, docs/SHADING.md).
+};
+
+using Models = std::vector<std::pair<std::string, scene::Specular>>;
+
+// Every model in its ordinary and its hard regimes. Tolerances: the classic lobes 2e-3
+// relative (a cosine's fp32 rounding, 6e-8, times the exponent) and 1e-6 absolute; Ward 1 %
+// and 1e-4 of its peak (docs/SHADING.md).
+void add_model_regimes(RegimeTable& t, const Models& models) {
+    for (const auto& [name, s] : models) {
+        const bool ward = s.model == scene::SpecularModel::kWard;
+        const double rel = ward ? 1e-2 : 2e-3, abs = (ward ? 1e-4 : 1e-6) * peak_factor(s);
+        t.add(name, "peak and around it, tilted frames", s, peak_cases(s), rel, abs);
+        t.add(name, "grazing light, n.l -> 0+", s, grazing_cases(true, {1e-1, 1e-3, 1e-5, 1e-7}),
+              rel, abs);
+        t.add(name, "grazing view, n.v -> 0+", s, grazing_cases(false, {1e-1, 1e-3, 1e-5}), rel,
+              abs);
+        auto below = grazing_cases(true, {-1e-7, -1e-3, -0.5});
+        auto below_v = grazing_cases(false, {-1e-7, -1e-3, -0.5});
+        below.insert(below.end(), below_v.begin(), below_v.end());
+        t.add(name, "light or view below the surface, n.l or n.v -> 0-", s, std::move(below), rel,
+              abs);
+        t.add(name, "half vector at the pole; l = -v", s, pole_cases(), rel, abs);
+        if (s.uses_tangent())
+            t.add(name, "tangent axis along the normal (fallback axis)", s,
+                  tangent_singular_cases(s), rel, abs);
+    }
+}
+
+// Exponents 1 and 10^4 (4095 is the largest applied by squaring, docs/SHADING.md); Ward's
+// roughness from 10 down to 1e-6 (1e-5 and below with fp64 shaders only) and anisotropy ratios
+// up to 10^4.
+void add_exponent_regimes(RegimeTable& t, bool float64) {
+    using M = scene::SpecularModel;
     for (auto m : {M::kPhong, M::kBlinnPhong, M::kKajiyaKay})
         for (double e : {1.0, 4095.0, 1e4}) {
             const auto s = model(m, e);
-            add(std::string(scene::to_string(m)), fmt::format("exponent {:g}", e), s, peak_cases(s),
-                e > 100 ? 1e-2 : 2e-3, 1e-6);
+            t.add(std::string(scene::to_string(m)), fmt::format("exponent {:g}", e), s,
+                  peak_cases(s), e > 100 ? 1e-2 : 2e-3, 1e-6);
         }
-    // Ward's roughness from 10 down to 1e-6 and anisotropy ratios up to 10^4.
     std::vector<std::pair<double, double>> rough = {{10, 10},     {1, 1},     {1e-2, 1e-2},
                                                     {1e-4, 1e-4}, {1e-3, 10}, {10, 1e-3}};
     if (float64)
@@ -298,42 +301,48 @@ std::vector<StabilityRegime> stability_regimes(bool float64) {
             rough.push_back(r);
     for (auto [ax, ay] : rough) {
         const auto s = model(M::kWard, 0, ax, ay);
-        add(ax == ay ? "ward" : "ward-aniso", fmt::format("alpha {:g} x {:g}", ax, ay), s,
-            peak_cases(s), 1e-2, 1e-4 * peak_factor(s));
+        t.add(ax == ay ? "ward" : "ward-aniso", fmt::format("alpha {:g} x {:g}", ax, ay), s,
+              peak_cases(s), 1e-2, 1e-4 * peak_factor(s));
     }
-    // Lights: a point light on the surface point, 1e-9 m and 1e9 m from it; intensity 0 and 1e30
-    // (the scene format allows up to 1e12); albedo and k_s 0 and 1. Lambert and the falloff are
-    // exact but for fp32 rounding: 1e-5 relative.
-    // Lights without a specular term (L_s = 0): Lambert and the falloff are exact but for fp32
-    // rounding, 1e-5 relative. A point light on the surface point, 1e-9 m and 1e9 m from it;
-    // intensity 0 and 1e30 (the scene format allows up to 1e12); albedo and k_s 0 and 1.
+}
+
+// Lights without a specular term (L_s = 0): Lambert and the falloff are exact but for fp32
+// rounding, 1e-5 relative. A point light on the surface point, 1e-9 m and 1e9 m from it;
+// intensity 0 and 1e30 (the scene format allows up to 1e12); albedo and k_s 0 and 1. Then the
+// half-float layer: overflow (clamped to 65504), its subnormal range (6e-8 to 6e-5), and fp32
+// subnormal irradiance (a GPU may flush it to 0: 1e-38 absolute).
+void add_light_and_range_regimes(RegimeTable& t) {
+    using M = scene::SpecularModel;
     const auto none = model(M::kNone, 1);
-    add("point light", "on the surface point (d = 0: l = n, 1 / d_min^2)", none,
-        point_light_cases(0.0, 1e-3), 1e-5, 1e-7);
-    add("point light", "d = 1e-9 m (below d_min)", none, point_light_cases(1e-9, 1e-3), 1e-5, 1e-7);
-    add("point light", "d = 1e9 m, intensity 1e12", none, point_light_cases(1e9, 1e12), 1e-5,
-        1e-12);
-    add("lambert", "intensity 0", none, scaled(none, 0, 1, 1), 1e-5, 0);
-    add("lambert", "irradiance 1e30 (beyond the scene limit)", none, scaled(none, 1e30, 1, 1), 1e-5,
-        0);
-    add("lambert", "albedo 0", none, scaled(none, 1, 0, 1), 1e-5, 0);
-    add("lambert", "albedo 1", none, scaled(none, 1, 1, 1), 1e-5, 1e-7);
+    t.add("point light", "on the surface point (d = 0: l = n, 1 / d_min^2)", none,
+          point_light_cases(0.0, 1e-3), 1e-5, 1e-7);
+    t.add("point light", "d = 1e-9 m (below d_min)", none, point_light_cases(1e-9, 1e-3), 1e-5,
+          1e-7);
+    t.add("point light", "d = 1e9 m, intensity 1e12", none, point_light_cases(1e9, 1e12), 1e-5,
+          1e-12);
+    t.add("lambert", "intensity 0", none, scaled(none, 0, 1, 1), 1e-5, 0);
+    t.add("lambert", "irradiance 1e30 (beyond the scene limit)", none, scaled(none, 1e30, 1, 1),
+          1e-5, 0);
+    t.add("lambert", "albedo 0", none, scaled(none, 1, 0, 1), 1e-5, 0);
+    t.add("lambert", "albedo 1", none, scaled(none, 1, 1, 1), 1e-5, 1e-7);
     const auto phong = model(M::kPhong, 40);
-    add("phong", "k_s 0", phong, scaled(phong, 1, 1, 0), 2e-3, 1e-6);
-    // The half-float layer: overflow (clamped to 65504), its subnormal range (6e-8 to 6e-5), and
-    // fp32 subnormal irradiance (a GPU may flush it to 0: 1e-38 absolute).
+    t.add("phong", "k_s 0", phong, scaled(phong, 1, 1, 0), 2e-3, 1e-6);
     for (double E : {1e4, 1e5, 1e6, 1e8})
-        add("half layer", "overflow: radiance 1e3 to 1e8 (clamped to 65504)", phong,
-            scaled(phong, E, 1, 1), 2e-3, 1e-6 * E);
+        t.add("half layer", "overflow: radiance 1e3 to 1e8 (clamped to 65504)", phong,
+              scaled(phong, E, 1, 1), 2e-3, 1e-6 * E);
     for (double E : {3e-5, 1e-6, 1e-7})
-        add("half layer", "subnormal half: radiance 1e-8 to 6e-5", phong, scaled(phong, E, 1, 1),
-            2e-3, 1e-6 * E);
-    add("fp32", "subnormal irradiance 1e-40", phong, scaled(phong, 1e-40, 1, 1), 2e-3, 1e-38);
-    // NaN and Inf in every input field: what a GPU makes of them is undefined, but the layer it
-    // sends is finite (NaN -> 0, clamped to [0, 65504]). The edge refuses them first (scene files,
-    // protocol messages and command lines: docs/LIMITS.md).
+        t.add("half layer", "subnormal half: radiance 1e-8 to 6e-5", phong, scaled(phong, E, 1, 1),
+              2e-3, 1e-6 * E);
+    t.add("fp32", "subnormal irradiance 1e-40", phong, scaled(phong, 1e-40, 1, 1), 2e-3, 1e-38);
+}
+
+// NaN and Inf in every input field: what a GPU makes of them is undefined, but the layer it
+// sends is finite (NaN -> 0, clamped to [0, 65504]). The edge refuses them first (scene files,
+// protocol messages and command lines: docs/LIMITS.md).
+void add_non_finite_regimes(RegimeTable& t, const Models& models) {
     const double nan = std::numeric_limits<double>::quiet_NaN(),
                  inf = std::numeric_limits<double>::infinity();
+    const auto phong = model(scene::SpecularModel::kPhong, 40);
     auto field_cases = [&](double bad, auto set) {
         std::vector<ProbeCase> cs;
         for (auto c : point_light_cases(0.5, 1.0)) {
@@ -360,18 +369,35 @@ std::vector<StabilityRegime> stability_regimes(bool float64) {
     for (const auto& [field, set] : fields)
         for (const auto& [name, s] : models)
             for (double bad : {nan, inf, -inf}) {
-                add("every model", "NaN, +Inf or -Inf in " + field, s, field_cases(bad, set), 0, 0);
-                t.back().non_finite_input = true;
+                t.add("every model", "NaN, +Inf or -Inf in " + field, s, field_cases(bad, set), 0,
+                      0);
+                t.t.back().non_finite_input = true;
             }
     for (const auto& [name, s0] : models)
         for (double bad : {nan, inf, -inf}) {
             scene::Specular s = s0;
-            (s.model == M::kWard ? s.alpha_x : s.exponent) = bad;
-            add("every model", "NaN, +Inf or -Inf in the exponent or roughness", s, peak_cases(s0),
-                0, 0);
-            t.back().non_finite_input = true;
+            (s.model == scene::SpecularModel::kWard ? s.alpha_x : s.exponent) = bad;
+            t.add("every model", "NaN, +Inf or -Inf in the exponent or roughness", s,
+                  peak_cases(s0), 0, 0);
+            t.t.back().non_finite_input = true;
         }
-    return t;
+}
+
+}  // namespace
+
+std::vector<StabilityRegime> stability_regimes(bool float64) {
+    using M = scene::SpecularModel;
+    const Models models = {{"phong", model(M::kPhong, 40)},
+                           {"blinn-phong", model(M::kBlinnPhong, 160)},
+                           {"ward", model(M::kWard, 0, 0.12, 0.12)},
+                           {"ward-aniso", model(M::kWard, 0, 0.3, 0.06)},
+                           {"kajiya-kay", model(M::kKajiyaKay, 60)}};
+    RegimeTable t;
+    add_model_regimes(t, models);
+    add_exponent_regimes(t, float64);
+    add_light_and_range_regimes(t);
+    add_non_finite_regimes(t, models);
+    return std::move(t.t);
 }
 
 Result<std::vector<StabilityRow>> run_stability(gpu::Device& device,

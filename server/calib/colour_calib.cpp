@@ -143,7 +143,9 @@ glm::dvec3 region_mean(const ImageRgba32f& img, const std::vector<uint32_t>& roi
     return s / double(std::max<size_t>(roi.size(), 1));
 }
 
-Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, ColourModel model) {
+namespace {
+
+Result<void> check_samples(const std::vector<ColourSample>& samples) {
     if (samples.size() < 4)
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("colour calibration: {} patch(es); at least 4 are needed "
@@ -161,55 +163,66 @@ Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, C
                                               i, s.drive.x, s.drive.y, s.drive.z, s.camera.x,
                                               s.camera.y, s.camera.z));
     }
-    ColourCalibration cal;
-    cal.model = model;
-    cal.samples = samples.size();
-    if (model == ColourModel::kCurve) {
-        // Black: the mean of the zero-drive patches.
-        glm::dvec3 black(0.0);
-        int nb = 0;
-        for (const auto& s : samples)
-            if (s.drive == glm::dvec3(0.0))
-                black += s.camera, ++nb;
-        if (nb == 0)
-            return make_error(ErrorCode::kInvalidArgument,
-                              "colour calibration: the curve model needs a black patch");
-        black /= double(nb);
-        for (int c = 0; c < 3; ++c) {
-            std::vector<std::pair<double, double>> ramp;  // (drive, camera projected)
-            glm::dvec3 top(0.0);
-            bool have_top = false;
-            for (const auto& s : samples) {
-                glm::dvec3 others = s.drive;
-                others[c] = 0;
-                if (others == glm::dvec3(0.0) && s.drive[c] == 1.0)
-                    top = s.camera - black, have_top = true;
-            }
-            if (!have_top || glm::dot(top, top) <= 0)
-                return make_error(ErrorCode::kInvalidArgument,
-                                  fmt::format("colour calibration: the curve model needs a ramp of "
-                                              "channel {} up to full drive that the camera sees",
-                                              "RGB"[c]));
-            for (const auto& s : samples) {
-                glm::dvec3 others = s.drive;
-                others[c] = 0;
-                if (others == glm::dvec3(0.0) && s.drive[c] > 0)
-                    ramp.push_back(
-                        {s.drive[c], glm::dot(s.camera - black, top) / glm::dot(top, top)});
-            }
-            ramp.push_back({0.0, 0.0});
-            std::sort(ramp.begin(), ramp.end());
-            // Monotone, from (0, 0) to (1, 1): a noisy dip is flattened, never inverted.
-            double run = 0;
-            for (auto& p : ramp) {
-                p.second = std::clamp(p.second, run, 1.0);
-                run = p.second;
-            }
-            ramp.front() = {0.0, 0.0};
-            ramp.back().second = 1.0;
-            cal.response[c] = ramp;
-        }
+    return {};
+}
+
+// Channel c's response of the curve model: its ramp's camera values projected on its full-drive
+// colour (black subtracted), monotone from (0, 0) to (1, 1).
+Result<std::vector<std::pair<double, double>>> response_curve(
+    const std::vector<ColourSample>& samples, const glm::dvec3& black, int c) {
+    std::vector<std::pair<double, double>> ramp;  // (drive, camera projected)
+    glm::dvec3 top(0.0);
+    bool have_top = false;
+    for (const auto& s : samples) {
+        glm::dvec3 others = s.drive;
+        others[c] = 0;
+        if (others == glm::dvec3(0.0) && s.drive[c] == 1.0)
+            top = s.camera - black, have_top = true;
     }
+    if (!have_top || glm::dot(top, top) <= 0)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("colour calibration: the curve model needs a ramp of "
+                                      "channel {} up to full drive that the camera sees",
+                                      "RGB"[c]));
+    for (const auto& s : samples) {
+        glm::dvec3 others = s.drive;
+        others[c] = 0;
+        if (others == glm::dvec3(0.0) && s.drive[c] > 0)
+            ramp.push_back({s.drive[c], glm::dot(s.camera - black, top) / glm::dot(top, top)});
+    }
+    ramp.push_back({0.0, 0.0});
+    std::sort(ramp.begin(), ramp.end());
+    // Monotone, from (0, 0) to (1, 1): a noisy dip is flattened, never inverted.
+    double run = 0;
+    for (auto& p : ramp) {
+        p.second = std::clamp(p.second, run, 1.0);
+        run = p.second;
+    }
+    ramp.front() = {0.0, 0.0};
+    ramp.back().second = 1.0;
+    return ramp;
+}
+
+Result<void> fit_response_curves(const std::vector<ColourSample>& samples, ColourCalibration& cal) {
+    // Black: the mean of the zero-drive patches.
+    glm::dvec3 black(0.0);
+    int nb = 0;
+    for (const auto& s : samples)
+        if (s.drive == glm::dvec3(0.0))
+            black += s.camera, ++nb;
+    if (nb == 0)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "colour calibration: the curve model needs a black patch");
+    black /= double(nb);
+    for (int c = 0; c < 3; ++c) {
+        HS_ASSIGN_OR_RETURN(cal.response[c], response_curve(samples, black, c));
+    }
+    return {};
+}
+
+// The primaries and offset by least squares on the linearised drives, refused when the patches
+// do not span the device's colours.
+Result<void> fit_matrix(const std::vector<ColourSample>& samples, ColourCalibration& cal) {
     const int n = int(samples.size());
     cv::Mat a(n, 4, CV_64F), b(n, 3, CV_64F);
     for (int i = 0; i < n; ++i) {
@@ -239,6 +252,20 @@ Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, C
     if (std::fabs(glm::determinant(cal.matrix)) < 1e-12)
         return make_error(ErrorCode::kInvalidArgument,
                           "colour calibration: the fitted primaries are degenerate");
+    return {};
+}
+
+}  // namespace
+
+Result<ColourCalibration> fit_colour(const std::vector<ColourSample>& samples, ColourModel model) {
+    HS_TRY(check_samples(samples));
+    ColourCalibration cal;
+    cal.model = model;
+    cal.samples = samples.size();
+    if (model == ColourModel::kCurve)
+        HS_TRY(fit_response_curves(samples, cal));
+    HS_TRY(fit_matrix(samples, cal));
+    const int n = int(samples.size());
     double se = 0;
     for (const auto& s : samples) {
         const glm::dvec3 p = cal.predict(s.drive);

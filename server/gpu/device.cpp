@@ -83,37 +83,53 @@ std::vector<std::string> Device::validation_messages() const {
     return messages_;
 }
 
-Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
-    std::unique_ptr<Device> d(new Device());
+namespace {
 
+// Nothing when the validation layer is installed; an error naming the package that has it.
+Result<void> check_validation_layer() {
+    uint32_t n = 0;
+    HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, nullptr));
+    std::vector<VkLayerProperties> props(n);
+    HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, props.data()));
+    for (const auto& p : props)
+        if (!std::strcmp(p.layerName, "VK_LAYER_KHRONOS_validation"))
+            return {};
+    return make_error(ErrorCode::kUnsupported,
+                      "Vulkan validation was requested but VK_LAYER_KHRONOS_validation is not "
+                      "installed (Debian package vulkan-validationlayers)");
+}
+
+// The queue family with graphics and compute, or -1.
+int graphics_compute_family(VkPhysicalDevice pd) {
+    uint32_t qn = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, nullptr);
+    std::vector<VkQueueFamilyProperties> qs(qn);
+    vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, qs.data());
+    for (uint32_t i = 0; i < qn; ++i)
+        if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT))
+            return int(i);
+    return -1;
+}
+
+}  // namespace
+
+Result<void> Device::create_instance(bool validation) {
     uint32_t ext_count = 0;
     HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, nullptr));
     std::vector<VkExtensionProperties> exts(ext_count);
     HS_VK_TRY(vkEnumerateInstanceExtensionProperties(nullptr, &ext_count, exts.data()));
     for (const auto& e : exts)
-        d->debug_utils_ |= !std::strcmp(e.extensionName, VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
+        debug_utils_ |= !std::strcmp(e.extensionName, VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
 
     std::vector<const char*> layers, instance_exts;
-    if (info.validation) {
-        uint32_t n = 0;
-        HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, nullptr));
-        std::vector<VkLayerProperties> props(n);
-        HS_VK_TRY(vkEnumerateInstanceLayerProperties(&n, props.data()));
-        bool found = false;
-        for (const auto& p : props)
-            found |= !std::strcmp(p.layerName, "VK_LAYER_KHRONOS_validation");
-        if (!found) {
-            return make_error(
-                ErrorCode::kUnsupported,
-                "Vulkan validation was requested but VK_LAYER_KHRONOS_validation is not "
-                "installed (Debian package vulkan-validationlayers)");
-        }
-        if (!d->debug_utils_)
+    if (validation) {
+        HS_TRY(check_validation_layer());
+        if (!debug_utils_)
             return make_error(ErrorCode::kUnsupported, "validation needs VK_EXT_debug_utils");
         layers.push_back("VK_LAYER_KHRONOS_validation");
-        d->validation_ = true;
+        validation_ = true;
     }
-    if (d->debug_utils_)
+    if (debug_utils_)
         instance_exts.push_back(VK_EXT_DEBUG_UTILS_EXTENSION_NAME);
 
     VkApplicationInfo app{VK_STRUCTURE_TYPE_APPLICATION_INFO};
@@ -126,7 +142,7 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
                       VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT |
                       VK_DEBUG_UTILS_MESSAGE_TYPE_PERFORMANCE_BIT_EXT;
     mci.pfnUserCallback = &Device::debug_callback;
-    mci.pUserData = d.get();
+    mci.pUserData = this;
 
     VkInstanceCreateInfo ici{VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO};
     ici.pApplicationInfo = &app;
@@ -134,31 +150,35 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     ici.ppEnabledLayerNames = layers.data();
     ici.enabledExtensionCount = uint32_t(instance_exts.size());
     ici.ppEnabledExtensionNames = instance_exts.data();
-    if (d->validation_)
+    if (validation_)
         ici.pNext = &mci;  // also covers instance creation and destruction
-    HS_VK_TRY(vkCreateInstance(&ici, nullptr, &d->instance_));
+    HS_VK_TRY(vkCreateInstance(&ici, nullptr, &instance_));
 
-    if (d->debug_utils_) {
-        d->set_name_fn_ = (PFN_vkSetDebugUtilsObjectNameEXT)vkGetInstanceProcAddr(
-            d->instance_, "vkSetDebugUtilsObjectNameEXT");
-        d->begin_label_fn_ = (PFN_vkCmdBeginDebugUtilsLabelEXT)vkGetInstanceProcAddr(
-            d->instance_, "vkCmdBeginDebugUtilsLabelEXT");
-        d->end_label_fn_ = (PFN_vkCmdEndDebugUtilsLabelEXT)vkGetInstanceProcAddr(
-            d->instance_, "vkCmdEndDebugUtilsLabelEXT");
+    if (debug_utils_) {
+        set_name_fn_ = (PFN_vkSetDebugUtilsObjectNameEXT)vkGetInstanceProcAddr(
+            instance_, "vkSetDebugUtilsObjectNameEXT");
+        begin_label_fn_ = (PFN_vkCmdBeginDebugUtilsLabelEXT)vkGetInstanceProcAddr(
+            instance_, "vkCmdBeginDebugUtilsLabelEXT");
+        end_label_fn_ = (PFN_vkCmdEndDebugUtilsLabelEXT)vkGetInstanceProcAddr(
+            instance_, "vkCmdEndDebugUtilsLabelEXT");
     }
-    if (d->validation_) {
+    if (validation_) {
         auto create = (PFN_vkCreateDebugUtilsMessengerEXT)vkGetInstanceProcAddr(
-            d->instance_, "vkCreateDebugUtilsMessengerEXT");
+            instance_, "vkCreateDebugUtilsMessengerEXT");
         HS_CHECK(create != nullptr,
                  "debug utils advertised but vkCreateDebugUtilsMessengerEXT missing");
-        HS_VK_TRY(create(d->instance_, &mci, nullptr, &d->messenger_));
+        HS_VK_TRY(create(instance_, &mci, nullptr, &messenger_));
     }
+    return {};
+}
 
-    // Pick a physical device: Vulkan 1.3, a graphics+compute queue, and the preferred kind.
+Result<void> Device::pick_physical_device(DevicePreference preference) {
+    // Vulkan 1.3, a graphics+compute queue, and the preferred kind; a discrete GPU before an
+    // integrated one before a CPU device.
     uint32_t pd_count = 0;
-    HS_VK_TRY(vkEnumeratePhysicalDevices(d->instance_, &pd_count, nullptr));
+    HS_VK_TRY(vkEnumeratePhysicalDevices(instance_, &pd_count, nullptr));
     std::vector<VkPhysicalDevice> pds(pd_count);
-    HS_VK_TRY(vkEnumeratePhysicalDevices(d->instance_, &pd_count, pds.data()));
+    HS_VK_TRY(vkEnumeratePhysicalDevices(instance_, &pd_count, pds.data()));
     int best_score = -1;
     std::string seen;
     for (VkPhysicalDevice pd : pds) {
@@ -169,21 +189,10 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
         if (props.apiVersion < VK_API_VERSION_1_3)
             continue;
         const bool cpu = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_CPU;
-        if (info.preference == DevicePreference::kCpu && !cpu)
+        if ((preference == DevicePreference::kCpu && !cpu) ||
+            (preference == DevicePreference::kGpu && cpu))
             continue;
-        if (info.preference == DevicePreference::kGpu && cpu)
-            continue;
-        uint32_t qn = 0;
-        vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, nullptr);
-        std::vector<VkQueueFamilyProperties> qs(qn);
-        vkGetPhysicalDeviceQueueFamilyProperties(pd, &qn, qs.data());
-        int family = -1;
-        for (uint32_t i = 0; i < qn; ++i)
-            if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) &&
-                (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) {
-                family = int(i);
-                break;
-            }
+        const int family = graphics_compute_family(pd);
         if (family < 0)
             continue;
         int score = props.deviceType == VK_PHYSICAL_DEVICE_TYPE_DISCRETE_GPU     ? 3
@@ -192,28 +201,29 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
                                                                                  : 0;
         if (score > best_score) {
             best_score = score;
-            d->physical_ = pd;
-            d->queue_family_ = uint32_t(family);
-            d->name_ = props.deviceName;
-            d->is_cpu_ = cpu;
+            physical_ = pd;
+            queue_family_ = uint32_t(family);
+            name_ = props.deviceName;
+            is_cpu_ = cpu;
         }
     }
-    if (!d->physical_) {
-        const char* want =
-            info.preference == DevicePreference::kCpu
-                ? "a CPU Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)"
-            : info.preference == DevicePreference::kGpu
-                ? "a hardware Vulkan 1.3 GPU"
-                : "any Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)";
-        return make_error(ErrorCode::kUnsupported,
-                          fmt::format("no suitable device: wanted {}; found: {}", want,
-                                      seen.empty() ? "none" : seen));
-    }
-    vkGetPhysicalDeviceMemoryProperties(d->physical_, &d->memory_props_);
+    if (physical_)
+        return {};
+    const char* want = preference == DevicePreference::kCpu
+                           ? "a CPU Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)"
+                       : preference == DevicePreference::kGpu
+                           ? "a hardware Vulkan 1.3 GPU"
+                           : "any Vulkan 1.3 device (install mesa-vulkan-drivers for lavapipe)";
+    return make_error(ErrorCode::kUnsupported,
+                      fmt::format("no suitable device: wanted {}; found: {}", want,
+                                  seen.empty() ? "none" : seen));
+}
 
+Result<void> Device::create_logical_device(bool want_float64) {
+    vkGetPhysicalDeviceMemoryProperties(physical_, &memory_props_);
     float prio = 1.0f;
     VkDeviceQueueCreateInfo qci{VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO};
-    qci.queueFamilyIndex = d->queue_family_;
+    qci.queueFamilyIndex = queue_family_;
     qci.queueCount = 1;
     qci.pQueuePriorities = &prio;
     VkPhysicalDeviceVulkan13Features f13{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_3_FEATURES};
@@ -224,30 +234,38 @@ Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
     f12.timelineSemaphore = VK_TRUE;
     f12.pNext = &f13;
     VkPhysicalDeviceFeatures supported{};
-    vkGetPhysicalDeviceFeatures(d->physical_, &supported);
-    d->float64_ = info.float64 && supported.shaderFloat64 == VK_TRUE;
+    vkGetPhysicalDeviceFeatures(physical_, &supported);
+    float64_ = want_float64 && supported.shaderFloat64 == VK_TRUE;
     VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
-    f2.features.shaderFloat64 = d->float64_ ? VK_TRUE : VK_FALSE;
+    f2.features.shaderFloat64 = float64_ ? VK_TRUE : VK_FALSE;
     f2.pNext = &f12;
     VkDeviceCreateInfo dci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
     dci.pNext = &f2;
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
-    HS_VK_TRY(vkCreateDevice(d->physical_, &dci, nullptr, &d->device_));
-    vkGetDeviceQueue(d->device_, d->queue_family_, 0, &d->queue_);
+    HS_VK_TRY(vkCreateDevice(physical_, &dci, nullptr, &device_));
+    vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
 
     VkCommandPoolCreateInfo pci{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
     pci.flags = VK_COMMAND_POOL_CREATE_TRANSIENT_BIT;
-    pci.queueFamilyIndex = d->queue_family_;
+    pci.queueFamilyIndex = queue_family_;
     VkCommandPool pool;
-    HS_VK_TRY(vkCreateCommandPool(d->device_, &pci, nullptr, &pool));
-    d->pool_ = CommandPoolHandle(d->device_, pool);
+    HS_VK_TRY(vkCreateCommandPool(device_, &pci, nullptr, &pool));
+    pool_ = CommandPoolHandle(device_, pool);
     VkFenceCreateInfo fci{VK_STRUCTURE_TYPE_FENCE_CREATE_INFO};
     VkFence fence;
-    HS_VK_TRY(vkCreateFence(d->device_, &fci, nullptr, &fence));
-    d->fence_ = FenceHandle(d->device_, fence);
-    d->set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), "hysar.command_pool");
-    d->set_name(VK_OBJECT_TYPE_FENCE, uint64_t(fence), "hysar.submit_fence");
+    HS_VK_TRY(vkCreateFence(device_, &fci, nullptr, &fence));
+    fence_ = FenceHandle(device_, fence);
+    set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), "hysar.command_pool");
+    set_name(VK_OBJECT_TYPE_FENCE, uint64_t(fence), "hysar.submit_fence");
+    return {};
+}
+
+Result<std::unique_ptr<Device>> Device::create(const DeviceCreateInfo& info) {
+    std::unique_ptr<Device> d(new Device());
+    HS_TRY(d->create_instance(info.validation));
+    HS_TRY(d->pick_physical_device(info.preference));
+    HS_TRY(d->create_logical_device(info.float64));
     log::debug("vulkan device: {}{}{}", d->name_, d->validation_ ? " (validation on)" : "",
                d->float64_ ? "" : " (no shaderFloat64: fp32 shaders)");
     return d;

@@ -78,6 +78,11 @@ public:
 
 private:
     Device() = default;
+    // The steps of create(), in order: the instance (and the validation messenger), the
+    // physical device by preference, the logical device with its queue, pool and fence.
+    Result<void> create_instance(bool validation);
+    Result<void> pick_physical_device(DevicePreference preference);
+    Result<void> create_logical_device(bool want_float64);
     static VKAPI_ATTR VkBool32 VKAPI_CALL
     debug_callback(VkDebugUtilsMessageSeverityFlagBitsEXT, VkDebugUtilsMessageTypeFlagsEXT,
                    const VkDebugUtilsMessengerCallbackDataEXT*, void*);

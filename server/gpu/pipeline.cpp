@@ -92,6 +92,74 @@ Result<PipelineLayoutHandle> make_layout(Device& dev, VkDescriptorSetLayout set_
     dev.set_name(VK_OBJECT_TYPE_PIPELINE_LAYOUT, uint64_t(layout), name + ".layout");
     return PipelineLayoutHandle(dev.vk(), layout);
 }
+
+// The fixed-function state of every graphics pipeline here: positions, normals, tangents (vec3)
+// and UVs (vec2) in bindings 0-3; triangle lists, back faces culled; a dynamic viewport and
+// scissor; one colour attachment written whole; the depth test and write only with `depth`.
+// The create infos point into the object, so it is neither copied nor moved.
+struct FixedState {
+    VkVertexInputBindingDescription vb[4] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {1, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {2, 12, VK_VERTEX_INPUT_RATE_VERTEX},
+                                             {3, 8, VK_VERTEX_INPUT_RATE_VERTEX}};
+    VkVertexInputAttributeDescription va[4] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {2, 2, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                               {3, 3, VK_FORMAT_R32G32_SFLOAT, 0}};
+    VkPipelineVertexInputStateCreateInfo vi{
+        VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
+    VkPipelineInputAssemblyStateCreateInfo ia{
+        VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
+    VkPipelineViewportStateCreateInfo vp{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
+    VkPipelineRasterizationStateCreateInfo rs{
+        VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
+    VkPipelineMultisampleStateCreateInfo ms{
+        VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
+    VkPipelineDepthStencilStateCreateInfo ds{
+        VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
+    VkPipelineColorBlendAttachmentState cb{};
+    VkPipelineColorBlendStateCreateInfo cbs{
+        VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
+    VkDynamicState dyn[2] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
+    VkPipelineDynamicStateCreateInfo dys{VK_STRUCTURE_TYPE_PIPELINE_DYNAMIC_STATE_CREATE_INFO};
+
+    explicit FixedState(bool depth) {
+        vi.vertexBindingDescriptionCount = 4;
+        vi.pVertexBindingDescriptions = vb;
+        vi.vertexAttributeDescriptionCount = 4;
+        vi.pVertexAttributeDescriptions = va;
+        ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+        vp.viewportCount = 1;
+        vp.scissorCount = 1;
+        rs.polygonMode = VK_POLYGON_MODE_FILL;
+        rs.cullMode = VK_CULL_MODE_BACK_BIT;
+        rs.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
+        rs.lineWidth = 1.0f;
+        ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+        ds.depthTestEnable = depth ? VK_TRUE : VK_FALSE;
+        ds.depthWriteEnable = depth ? VK_TRUE : VK_FALSE;
+        ds.depthCompareOp = VK_COMPARE_OP_LESS;
+        cb.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
+                            VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
+        cbs.attachmentCount = 1;
+        cbs.pAttachments = &cb;
+        dys.dynamicStateCount = 2;
+        dys.pDynamicStates = dyn;
+    }
+    FixedState(const FixedState&) = delete;
+    FixedState& operator=(const FixedState&) = delete;
+
+    void fill(VkGraphicsPipelineCreateInfo& gci) const {
+        gci.pVertexInputState = &vi;
+        gci.pInputAssemblyState = &ia;
+        gci.pViewportState = &vp;
+        gci.pRasterizationState = &rs;
+        gci.pMultisampleState = &ms;
+        gci.pDepthStencilState = &ds;
+        gci.pColorBlendState = &cbs;
+        gci.pDynamicState = &dys;
+    }
+};
 }  // namespace
 
 Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPipelineInfo& info) {
@@ -123,52 +191,7 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     stages[1].module = fs.get();
     stages[1].pName = "main";
     stages[1].pSpecializationInfo = &spec;
-
-    VkVertexInputBindingDescription vb[4] = {{0, 12, VK_VERTEX_INPUT_RATE_VERTEX},
-                                             {1, 12, VK_VERTEX_INPUT_RATE_VERTEX},
-                                             {2, 12, VK_VERTEX_INPUT_RATE_VERTEX},
-                                             {3, 8, VK_VERTEX_INPUT_RATE_VERTEX}};
-    VkVertexInputAttributeDescription va[4] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0},
-                                               {1, 1, VK_FORMAT_R32G32B32_SFLOAT, 0},
-                                               {2, 2, VK_FORMAT_R32G32B32_SFLOAT, 0},
-                                               {3, 3, VK_FORMAT_R32G32_SFLOAT, 0}};
-    VkPipelineVertexInputStateCreateInfo vi{
-        VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO};
-    vi.vertexBindingDescriptionCount = 4;
-    vi.pVertexBindingDescriptions = vb;
-    vi.vertexAttributeDescriptionCount = 4;
-    vi.pVertexAttributeDescriptions = va;
-    VkPipelineInputAssemblyStateCreateInfo ia{
-        VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO};
-    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
-    VkPipelineViewportStateCreateInfo vp{VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO};
-    vp.viewportCount = 1;
-    vp.scissorCount = 1;
-    VkPipelineRasterizationStateCreateInfo rs{
-        VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO};
-    rs.polygonMode = VK_POLYGON_MODE_FILL;
-    rs.cullMode = VK_CULL_MODE_BACK_BIT;
-    rs.frontFace = VK_FRONT_FACE_COUNTER_CLOCKWISE;
-    rs.lineWidth = 1.0f;
-    VkPipelineMultisampleStateCreateInfo ms{
-        VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO};
-    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
-    VkPipelineDepthStencilStateCreateInfo ds{
-        VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO};
-    ds.depthTestEnable = info.depth ? VK_TRUE : VK_FALSE;
-    ds.depthWriteEnable = info.depth ? VK_TRUE : VK_FALSE;
-    ds.depthCompareOp = VK_COMPARE_OP_LESS;
-    VkPipelineColorBlendAttachmentState cb{};
-    cb.colorWriteMask = VK_COLOR_COMPONENT_R_BIT | VK_COLOR_COMPONENT_G_BIT |
-                        VK_COLOR_COMPONENT_B_BIT | VK_COLOR_COMPONENT_A_BIT;
-    VkPipelineColorBlendStateCreateInfo cbs{
-        VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO};
-    cbs.attachmentCount = 1;
-    cbs.pAttachments = &cb;
-    VkDynamicState dyn[] = {VK_DYNAMIC_STATE_VIEWPORT, VK_DYNAMIC_STATE_SCISSOR};
-    VkPipelineDynamicStateCreateInfo dys{VK_STRUCTURE_TYPE_PIPELINE_DYNAMIC_STATE_CREATE_INFO};
-    dys.dynamicStateCount = 2;
-    dys.pDynamicStates = dyn;
+    const FixedState fixed(info.depth);
     VkFormat color_format = to_vk(info.color_format);
     VkPipelineRenderingCreateInfo rci{VK_STRUCTURE_TYPE_PIPELINE_RENDERING_CREATE_INFO};
     rci.colorAttachmentCount = 1;
@@ -179,14 +202,7 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     gci.pNext = &rci;
     gci.stageCount = 2;
     gci.pStages = stages;
-    gci.pVertexInputState = &vi;
-    gci.pInputAssemblyState = &ia;
-    gci.pViewportState = &vp;
-    gci.pRasterizationState = &rs;
-    gci.pMultisampleState = &ms;
-    gci.pDepthStencilState = &ds;
-    gci.pColorBlendState = &cbs;
-    gci.pDynamicState = &dys;
+    fixed.fill(gci);
     gci.layout = p.layout_.get();
     VkPipeline pipeline;
     HS_VK_TRY(vkCreateGraphicsPipelines(dev.vk(), VK_NULL_HANDLE, 1, &gci, nullptr, &pipeline));

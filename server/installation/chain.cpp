@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <random>
 
 #include <fmt/format.h>
@@ -61,18 +62,57 @@ MapError map_error(std::vector<double> d, uint64_t untrue) {
     return e;
 }
 
-Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device dev,
-                                      const ChainOptions& o, const Log& log) {
-    auto say = [&](const std::string& s) {
-        if (log)
-            log(fmt::format("{}: {}", to_string(dev), s));
-    };
-    DeviceResult r;
-    r.device = dev;
+namespace {
+
+using Say = std::function<void(const std::string&)>;
+
+// The camera pixels' decoded device pixels against the true ones.
+MapError lut_map_error(const VirtualInstallation& inst, Device dev, const calib::DeviceLut& lut) {
+    std::vector<double> d;
+    uint64_t untrue = 0;
+    const auto& tx = inst.truth_x(dev);
+    const auto& ty = inst.truth_y(dev);
+    for (size_t i = 0; i < lut.state.size(); ++i) {
+        if (!lut.is_valid(i))
+            continue;
+        if (std::isnan(tx[i])) {
+            ++untrue;
+            continue;
+        }
+        d.push_back(std::hypot(lut.x[i] - tx[i], lut.y[i] - ty[i]));
+    }
+    return map_error(std::move(d), untrue);
+}
+
+// The device pixels' camera pixels, mapped through the truth back to device pixels.
+MapError inverse_map_error(const VirtualInstallation& inst, Device dev,
+                           const calib::InverseMap& inverse) {
     const uint32_t dw = inst.device_width(dev), dh = inst.device_height(dev);
     const uint32_t cw = inst.camera_width(), ch = inst.camera_height();
+    std::vector<double> d;
+    uint64_t untrue = 0;
+    const auto& tx = inst.truth_x(dev);
+    const auto& ty = inst.truth_y(dev);
+    for (uint32_t y = 0; y < dh; ++y)
+        for (uint32_t x = 0; x < dw; ++x) {
+            const size_t i = size_t(y) * dw + x;
+            if (!inverse.valid[i])
+                continue;
+            double fx, fy;
+            if (!calib::sample_map(tx, ty, cw, ch, inverse.x[i], inverse.y[i], fx, fy)) {
+                ++untrue;
+                continue;
+            }
+            d.push_back(std::hypot(fx - x, fy - y));
+        }
+    return map_error(std::move(d), untrue);
+}
 
-    // Gray code.
+// Gray code: the patterns shown and captured, decoded into r.lut; the white and black captures
+// kept as the calibration's (camera DN per second).
+Result<void> decode_device(const VirtualInstallation& inst, Device dev, const ChainOptions& o,
+                           const Say& say, DeviceResult& r) {
+    const uint32_t dw = inst.device_width(dev), dh = inst.device_height(dev);
     HS_ASSIGN_OR_RETURN(calib::PatternSet patterns, calib::gray_code_patterns(dw, dh));
     std::vector<ImageRgba32f> captures;
     for (size_t i = 0; i < patterns.images.size(); ++i) {
@@ -87,69 +127,15 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
     const double per_second = 1000.0 / inst.calibration_exposure_ms(dev);
     r.calibration.white = scaled(captures[captures.size() - 2], per_second);
     r.calibration.black = scaled(captures.back(), per_second);
-    captures.clear();
-    {
-        std::vector<double> d;
-        uint64_t untrue = 0;
-        const auto& tx = inst.truth_x(dev);
-        const auto& ty = inst.truth_y(dev);
-        for (size_t i = 0; i < r.lut.state.size(); ++i) {
-            if (!r.lut.is_valid(i))
-                continue;
-            if (std::isnan(tx[i])) {
-                ++untrue;
-                continue;
-            }
-            d.push_back(std::hypot(r.lut.x[i] - tx[i], r.lut.y[i] - ty[i]));
-        }
-        r.lut_error = map_error(std::move(d), untrue);
-    }
-    say(fmt::format("decoded {} of {} lit camera pixels; error median {:.3f} px, p95 {:.3f} px",
-                    r.lut.valid, r.lut.lit, r.lut_error.median_px, r.lut_error.p95_px));
+    return {};
+}
 
-    // Inverse map.
-    HS_ASSIGN_OR_RETURN(r.inverse, calib::invert_lut(r.lut, o.inverse));
-    {
-        std::vector<double> d;
-        uint64_t untrue = 0;
-        const auto& tx = inst.truth_x(dev);
-        const auto& ty = inst.truth_y(dev);
-        for (uint32_t y = 0; y < dh; ++y)
-            for (uint32_t x = 0; x < dw; ++x) {
-                const size_t i = size_t(y) * dw + x;
-                if (!r.inverse.valid[i])
-                    continue;
-                double fx, fy;
-                if (!calib::sample_map(tx, ty, cw, ch, r.inverse.x[i], r.inverse.y[i], fx, fy)) {
-                    ++untrue;
-                    continue;
-                }
-                d.push_back(std::hypot(fx - x, fy - y));
-            }
-        r.inverse_error = map_error(std::move(d), untrue);
-    }
-    say(
-        fmt::format("inverse map: bandwidth {:.2f} px, {} device pixels in {:.0f} ms; error median "
-                    "{:.3f} px, p95 {:.3f} px",
-                    r.inverse.bandwidth, r.inverse.estimated, r.inverse.ms,
-                    r.inverse_error.median_px, r.inverse_error.p95_px));
-
-    // Colour: the chart read over a small region, both models, checked on other colours.
-    const std::vector<uint32_t> roi = calib::patch_region(r.lut);
-    r.roi_pixels = uint32_t(roi.size());
-    if (roi.empty())
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            fmt::format("{}: no decoded camera pixel to read colour patches over", to_string(dev)));
-    std::vector<calib::ColourSample> samples;
-    const auto drives = calib::colour_patch_drives(o.ramp_steps, o.grid);
-    for (size_t i = 0; i < drives.size(); ++i) {
-        HS_ASSIGN_OR_RETURN(ImageRgba32f c,
-                            show(inst, dev, uniform(dw, dh, drives[i]), o.seed * 7919 + i));
-        samples.push_back({drives[i], calib::region_mean(c, roi) * per_second});
-    }
-    HS_ASSIGN_OR_RETURN(r.linear, calib::fit_colour(samples, calib::ColourModel::kLinear));
-    HS_ASSIGN_OR_RETURN(r.curve, calib::fit_colour(samples, calib::ColourModel::kCurve));
+// Both colour models checked on `check_colours` random colours they were not fitted to: how
+// well each predicts what the camera reads, and how close showing its drive comes.
+Result<void> check_colour_models(const VirtualInstallation& inst, Device dev, const ChainOptions& o,
+                                 const std::vector<uint32_t>& roi, DeviceResult& r) {
+    const uint32_t dw = inst.device_width(dev), dh = inst.device_height(dev);
+    const double per_second = 1000.0 / inst.calibration_exposure_ms(dev);
     std::mt19937_64 rng(o.seed + 17);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     r.linear_check.colours = r.curve_check.colours = o.check_colours;
@@ -170,6 +156,56 @@ Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device de
             chk->apply_max_de00 = std::max(chk->apply_max_de00, q);
         }
     }
+    return {};
+}
+
+// Colour: the chart read over a small region, both models fitted, then checked.
+Result<void> calibrate_colour(const VirtualInstallation& inst, Device dev, const ChainOptions& o,
+                              DeviceResult& r) {
+    const uint32_t dw = inst.device_width(dev), dh = inst.device_height(dev);
+    const double per_second = 1000.0 / inst.calibration_exposure_ms(dev);
+    const std::vector<uint32_t> roi = calib::patch_region(r.lut);
+    r.roi_pixels = uint32_t(roi.size());
+    if (roi.empty())
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("{}: no decoded camera pixel to read colour patches over", to_string(dev)));
+    std::vector<calib::ColourSample> samples;
+    const auto drives = calib::colour_patch_drives(o.ramp_steps, o.grid);
+    for (size_t i = 0; i < drives.size(); ++i) {
+        HS_ASSIGN_OR_RETURN(ImageRgba32f c,
+                            show(inst, dev, uniform(dw, dh, drives[i]), o.seed * 7919 + i));
+        samples.push_back({drives[i], calib::region_mean(c, roi) * per_second});
+    }
+    HS_ASSIGN_OR_RETURN(r.linear, calib::fit_colour(samples, calib::ColourModel::kLinear));
+    HS_ASSIGN_OR_RETURN(r.curve, calib::fit_colour(samples, calib::ColourModel::kCurve));
+    return check_colour_models(inst, dev, o, roi, r);
+}
+
+}  // namespace
+
+Result<DeviceResult> calibrate_device(const VirtualInstallation& inst, Device dev,
+                                      const ChainOptions& o, const Log& log) {
+    const Say say = [&](const std::string& s) {
+        if (log)
+            log(fmt::format("{}: {}", to_string(dev), s));
+    };
+    DeviceResult r;
+    r.device = dev;
+    HS_TRY(decode_device(inst, dev, o, say, r));
+    r.lut_error = lut_map_error(inst, dev, r.lut);
+    say(fmt::format("decoded {} of {} lit camera pixels; error median {:.3f} px, p95 {:.3f} px",
+                    r.lut.valid, r.lut.lit, r.lut_error.median_px, r.lut_error.p95_px));
+
+    HS_ASSIGN_OR_RETURN(r.inverse, calib::invert_lut(r.lut, o.inverse));
+    r.inverse_error = inverse_map_error(inst, dev, r.inverse);
+    say(
+        fmt::format("inverse map: bandwidth {:.2f} px, {} device pixels in {:.0f} ms; error median "
+                    "{:.3f} px, p95 {:.3f} px",
+                    r.inverse.bandwidth, r.inverse.estimated, r.inverse.ms,
+                    r.inverse_error.median_px, r.inverse_error.p95_px));
+
+    HS_TRY(calibrate_colour(inst, dev, o, r));
     say(
         fmt::format("colour: linear model mean dE00 {:.2f} (fit {:.2f}), curve model {:.2f} (fit "
                     "{:.2f}) on {} colours it was not fitted to",

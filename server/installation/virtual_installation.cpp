@@ -69,6 +69,114 @@ DeviceFlaws default_hmd_flaws() {
     return f;
 }
 
+Result<void> VirtualInstallation::scale_devices(const scene::Scene& in, const Options& o) {
+    options_ = o;
+    scene_ = in;
+    scene::Scene& s = scene_;
+    s.captured_material.reset();
+    s.projector.intrinsics = scaled_k(s.projector.intrinsics, o.scale);
+    const scene::ViewerProfile* v = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
+    if (!v)
+        return make_error(
+            ErrorCode::kNotFound,
+            fmt::format("virtual installation: no viewer '{}' in the scene", o.viewer));
+    viewer_ = *v;
+    const scene::Intrinsics eye = scaled_k(scene::eye_intrinsics(viewer_), o.scale);
+    viewer_.has_intrinsics = true;
+    viewer_.intrinsics = eye;
+    viewer_.eye_width = eye.width;
+    viewer_.eye_height = eye.height;
+    for (auto& sv : s.viewers)
+        if (sv.name == viewer_.name)
+            sv = viewer_;
+    alpha_ = viewer_.alpha;
+    hmd_k_ = eye;
+    return {};
+}
+
+void VirtualInstallation::set_calibration_exposures() {
+    const scene::Scene& s = scene_;
+    double f_max = 0;
+    for (size_t i = 0; i < geometry_.pixels.size(); i += 4)
+        if (geometry_.pixels[i + 3] > 0.5f)
+            f_max = std::max(f_max, double(geometry_.pixels[i + 2]) / g_ref_);
+    const scene::DeviceLevels lv = optics::effective_levels(s.optics);
+    const glm::dvec3 rho = s.optics.prop_albedo;
+    const double proj = lv.projector_max * std::max({rho.r, rho.g, rho.b}) * f_max;
+    const double full = 0.85 * (std::pow(2.0, s.optics.bits) - 1);
+    cal_exposure_ms_[0] = 1000.0 * full / (alpha_ * proj + lv.hmd_min);
+    cal_exposure_ms_[1] = 1000.0 * full / (lv.hmd_max + alpha_ * lv.projector_min * f_max);
+}
+
+void VirtualInstallation::map_devices() {
+    const Options& o = options_;
+    // Ground truth through the projector's distortion; the geometry samples the same pixels.
+    const uint32_t cw = camera_.intrinsics.width, ch = camera_.intrinsics.height;
+    const size_t n = size_t(cw) * ch;
+    const auto& pk = scene_.projector.intrinsics;
+    proj_x_.assign(n, NAN);
+    proj_y_.assign(n, NAN);
+    for (size_t i = 0; i < n; ++i) {
+        float* g = &geometry_.pixels[i * 4];
+        if (!(g[3] > 0.5f) || !(g[2] > 0.0f))
+            continue;
+        double du, dv;
+        distort(pk, o.projector, g[0], g[1], du, dv);
+        g[0] = float(du);
+        g[1] = float(dv);
+        if (inside(du, dv, pk.width, pk.height))
+            proj_x_[i] = float(du), proj_y_[i] = float(dv);
+    }
+    // The headset screen as the camera sees it.
+    hmd_x_.assign(n, NAN);
+    hmd_y_.assign(n, NAN);
+    const double roll = glm::radians(o.hmd_roll_deg);
+    const auto& ck = camera_.intrinsics;
+    const auto& hk = hmd_k_;
+    for (uint32_t y = 0; y < ch; ++y)
+        for (uint32_t x = 0; x < cw; ++x) {
+            const double xn = (x - ck.cx) / ck.fx, yn = (y - ck.cy) / ck.fy;
+            const double xr = o.hmd_zoom * (std::cos(roll) * xn - std::sin(roll) * yn);
+            const double yr = o.hmd_zoom * (std::sin(roll) * xn + std::cos(roll) * yn);
+            double du, dv;
+            distort(hk, o.hmd, hk.cx + hk.fx * xr + o.hmd_shift_x,
+                    hk.cy + hk.fy * yr + o.hmd_shift_y, du, dv);
+            if (inside(du, dv, hk.width, hk.height)) {
+                hmd_x_[size_t(y) * cw + x] = float(du);
+                hmd_y_[size_t(y) * cw + x] = float(dv);
+            }
+        }
+    for (int d = 0; d < 2; ++d) {
+        const DeviceFlaws& f = d == 0 ? o.projector : o.hmd;
+        for (int c = 0; c < 3; ++c) {
+            auto& t = emit_table_[d][c];
+            t.resize(kEmitTable + 1);
+            for (uint32_t i = 0; i <= kEmitTable; ++i)
+                t[i] = float(std::pow(double(i) / kEmitTable, f.gamma[c]));
+        }
+    }
+}
+
+Result<void> VirtualInstallation::render_reference(render::Renderer& renderer,
+                                                   double scene_to_signal) {
+    // The reference object: its VI and VD through the headset (alpha, black level) and camera.
+    const scene::Scene& s = scene_;
+    HS_ASSIGN_OR_RETURN(render::RenderResult ld,
+                        renderer.render_eye_diffuse(camera_.intrinsics, camera_.camera));
+    HS_ASSIGN_OR_RETURN(
+        render::RenderResult ls,
+        renderer.render_eye(s.material.specular, camera_.intrinsics, camera_.camera));
+    k_ = scene_to_signal;
+    const double k = k_ * alpha_;
+    const double black = optics::effective_levels(s.optics).hmd_min;
+    ref_vi_ = scaled(ld.image, k);
+    ref_vivd_ = added(ref_vi_, scaled(ls.image, k));
+    for (ImageRgba32f* img : {&ref_vi_, &ref_vivd_})
+        for (size_t i = 0; i < img->pixels.size(); i += 4)
+            for (int c = 0; c < 3; ++c) img->pixels[i + c] += float(black);
+    return {};
+}
+
 Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::Device& device,
                                                                          const scene::Scene& in,
                                                                          const Options& o) {
@@ -82,29 +190,9 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::De
                                       "number",
                                       o.noise_dn));
     std::unique_ptr<VirtualInstallation> vi(new VirtualInstallation());
-    vi->options_ = o;
-    vi->scene_ = in;
+    HS_TRY(vi->scale_devices(in, o));
     scene::Scene& s = vi->scene_;
-    s.captured_material.reset();
-    s.projector.intrinsics = scaled_k(s.projector.intrinsics, o.scale);
-    const scene::ViewerProfile* v = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
-    if (!v)
-        return make_error(
-            ErrorCode::kNotFound,
-            fmt::format("virtual installation: no viewer '{}' in the scene", o.viewer));
-    vi->viewer_ = *v;
-    scene::ViewerProfile& viewer = vi->viewer_;
-    const scene::Intrinsics eye = scaled_k(scene::eye_intrinsics(viewer), o.scale);
-    viewer.has_intrinsics = true;
-    viewer.intrinsics = eye;
-    viewer.eye_width = eye.width;
-    viewer.eye_height = eye.height;
-    for (auto& sv : s.viewers)
-        if (sv.name == viewer.name)
-            sv = viewer;
-    vi->alpha_ = viewer.alpha;
-    vi->hmd_k_ = eye;
-
+    const scene::ViewerProfile& viewer = vi->viewer_;
     HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(device, s, {}));
     HS_ASSIGN_OR_RETURN(vi->camera_, render::viewing_viewpoint(
                                          s, viewer, o.angle_deg,
@@ -121,79 +209,9 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::De
     vi->geometry_ = std::move(geo.image);
     if (o.exposure_ms > 0)
         s.optics.exposure_ms = o.exposure_ms;
-    {
-        double f_max = 0;
-        for (size_t i = 0; i < vi->geometry_.pixels.size(); i += 4)
-            if (vi->geometry_.pixels[i + 3] > 0.5f)
-                f_max = std::max(f_max, double(vi->geometry_.pixels[i + 2]) / vi->g_ref_);
-        const scene::DeviceLevels lv = optics::effective_levels(s.optics);
-        const glm::dvec3 rho = s.optics.prop_albedo;
-        const double proj = lv.projector_max * std::max({rho.r, rho.g, rho.b}) * f_max;
-        const double full = 0.85 * (std::pow(2.0, s.optics.bits) - 1);
-        vi->cal_exposure_ms_[0] = 1000.0 * full / (vi->alpha_ * proj + lv.hmd_min);
-        vi->cal_exposure_ms_[1] =
-            1000.0 * full / (lv.hmd_max + vi->alpha_ * lv.projector_min * f_max);
-    }
-
-    // Ground truth through the projector's distortion; the geometry samples the same pixels.
-    const uint32_t cw = cam.intrinsics.width, ch = cam.intrinsics.height;
-    const size_t n = size_t(cw) * ch;
-    const auto& pk = s.projector.intrinsics;
-    vi->proj_x_.assign(n, NAN);
-    vi->proj_y_.assign(n, NAN);
-    for (size_t i = 0; i < n; ++i) {
-        float* g = &vi->geometry_.pixels[i * 4];
-        if (!(g[3] > 0.5f) || !(g[2] > 0.0f))
-            continue;
-        double du, dv;
-        distort(pk, o.projector, g[0], g[1], du, dv);
-        g[0] = float(du);
-        g[1] = float(dv);
-        if (inside(du, dv, pk.width, pk.height))
-            vi->proj_x_[i] = float(du), vi->proj_y_[i] = float(dv);
-    }
-    // The headset screen as the camera sees it.
-    vi->hmd_x_.assign(n, NAN);
-    vi->hmd_y_.assign(n, NAN);
-    const double roll = glm::radians(o.hmd_roll_deg);
-    const auto& ck = cam.intrinsics;
-    const auto& hk = vi->hmd_k_;
-    for (uint32_t y = 0; y < ch; ++y)
-        for (uint32_t x = 0; x < cw; ++x) {
-            const double xn = (x - ck.cx) / ck.fx, yn = (y - ck.cy) / ck.fy;
-            const double xr = o.hmd_zoom * (std::cos(roll) * xn - std::sin(roll) * yn);
-            const double yr = o.hmd_zoom * (std::sin(roll) * xn + std::cos(roll) * yn);
-            double du, dv;
-            distort(hk, o.hmd, hk.cx + hk.fx * xr + o.hmd_shift_x,
-                    hk.cy + hk.fy * yr + o.hmd_shift_y, du, dv);
-            if (inside(du, dv, hk.width, hk.height)) {
-                vi->hmd_x_[size_t(y) * cw + x] = float(du);
-                vi->hmd_y_[size_t(y) * cw + x] = float(dv);
-            }
-        }
-    for (int d = 0; d < 2; ++d) {
-        const DeviceFlaws& f = d == 0 ? o.projector : o.hmd;
-        for (int c = 0; c < 3; ++c) {
-            auto& t = vi->emit_table_[d][c];
-            t.resize(kEmitTable + 1);
-            for (uint32_t i = 0; i <= kEmitTable; ++i)
-                t[i] = float(std::pow(double(i) / kEmitTable, f.gamma[c]));
-        }
-    }
-
-    // The reference object: its VI and VD through the headset (alpha, black level) and camera.
-    HS_ASSIGN_OR_RETURN(render::RenderResult ld,
-                        renderer->render_eye_diffuse(cam.intrinsics, cam.camera));
-    HS_ASSIGN_OR_RETURN(render::RenderResult ls,
-                        renderer->render_eye(s.material.specular, cam.intrinsics, cam.camera));
-    vi->k_ = sim.scene_to_signal();
-    const double k = vi->k_ * vi->alpha_;
-    const double black = optics::effective_levels(s.optics).hmd_min;
-    vi->ref_vi_ = scaled(ld.image, k);
-    vi->ref_vivd_ = added(vi->ref_vi_, scaled(ls.image, k));
-    for (ImageRgba32f* img : {&vi->ref_vi_, &vi->ref_vivd_})
-        for (size_t i = 0; i < img->pixels.size(); i += 4)
-            for (int c = 0; c < 3; ++c) img->pixels[i + c] += float(black);
+    vi->set_calibration_exposures();
+    vi->map_devices();
+    HS_TRY(vi->render_reference(*renderer, sim.scene_to_signal()));
     return vi;
 }
 

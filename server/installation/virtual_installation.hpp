@@ -105,6 +105,14 @@ public:
 private:
     VirtualInstallation() = default;
     ImageRgba32f expose_ref(const ImageRgba32f& signal, uint64_t seed) const;
+    // The steps of create(), in order: the scene, projector and headset at the installation's
+    // scale; (after the capture geometry) the camera's exposures of the calibration captures;
+    // the true maps from camera pixels to device pixels and the devices' emission tables; the
+    // reference object's signals.
+    Result<void> scale_devices(const scene::Scene& in, const Options& o);
+    void set_calibration_exposures();
+    void map_devices();
+    Result<void> render_reference(render::Renderer& renderer, double scene_to_signal);
 
     Options options_;
     scene::Scene scene_;

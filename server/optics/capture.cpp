@@ -71,8 +71,10 @@ ImageRgba32f expose(const scene::Optics& o, const ImageRgba32f& signal,
     return out;
 }
 
-Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const CaptureGeometry& g,
-                                 const DeviceImages& dev, uint64_t seed) {
+namespace {
+
+Result<void> check_capture_inputs(const scene::Optics& o, double alpha, const CaptureGeometry& g,
+                                  const DeviceImages& dev) {
     const ImageRgba32f& geo = g.camera;
     if (geo.empty())
         return make_error(ErrorCode::kInvalidArgument, "empty capture geometry");
@@ -85,28 +87,42 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
     if (!(alpha >= 0.0 && alpha <= 1.0))
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("alpha must lie in [0, 1], got {}", alpha));
+    return {};
+}
 
+// The names of the effects a capture with these devices and levels composes.
+std::vector<std::string> capture_effects(const scene::Optics& o, const DeviceImages& dev,
+                                         const scene::DeviceLevels& d, bool sheen) {
+    std::vector<std::string> effects{"eq3-composite"};
+    if (dev.projector_present) {
+        effects.push_back("projector");
+        if (o.effects.projector_falloff)
+            effects.push_back("projector-falloff");
+        if (o.effects.prop_albedo)
+            effects.push_back("prop-albedo");
+        if (sheen)
+            effects.push_back("prop-sheen");
+    }
+    if (d.projector_min > 0 || d.hmd_min > 0)
+        effects.push_back("black-levels");
+    if (d.environment > 0)
+        effects.push_back("environment");
+    if (!dev.hmd.empty())
+        effects.push_back("hmd");
+    return effects;
+}
+
+}  // namespace
+
+Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const CaptureGeometry& g,
+                                 const DeviceImages& dev, uint64_t seed) {
+    HS_TRY(check_capture_inputs(o, alpha, g, dev));
+    const ImageRgba32f& geo = g.camera;
     const scene::DeviceLevels d = effective_levels(o);
     const bool sheen = o.effects.prop_sheen && o.prop_sheen > 0;
     const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     Capture cap;
-    cap.effects.push_back("eq3-composite");
-    if (dev.projector_present) {
-        cap.effects.push_back("projector");
-        if (o.effects.projector_falloff)
-            cap.effects.push_back("projector-falloff");
-        if (o.effects.prop_albedo)
-            cap.effects.push_back("prop-albedo");
-        if (sheen)
-            cap.effects.push_back("prop-sheen");
-    }
-    if (d.projector_min > 0 || d.hmd_min > 0)
-        cap.effects.push_back("black-levels");
-    if (d.environment > 0)
-        cap.effects.push_back("environment");
-    if (!dev.hmd.empty())
-        cap.effects.push_back("hmd");
-
+    cap.effects = capture_effects(o, dev, d, sheen);
     cap.signal = ImageRgba32f::zeros(geo.width, geo.height);
     std::vector<uint8_t> clipped(size_t(geo.width) * geo.height, 0);
     for (uint32_t y = 0; y < geo.height; ++y) {

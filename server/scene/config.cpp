@@ -382,21 +382,354 @@ uint64_t hemisphere_triangles(uint64_t segments, uint64_t rings) {
     return rings == 0 ? 0 : segments * (2 * rings - 1);  // a fan at the pole, quads below
 }
 
-Result<Scene> parse_scene_tree(const json& root, const std::string& source,
-                               const std::filesystem::path& base_dir,
-                               const std::filesystem::path& asset_root, const SceneLimits& limits) {
-    Reader r(source);
+// The blocks of a scene file, each read into `s` in the order the file's keys are checked; the
+// first error wins (Reader).
+struct SceneReader {
+    Reader& r;
+    const std::filesystem::path& base_dir;
+    const std::filesystem::path& asset_root;
+    const SceneLimits& limits;
+    Scene& s;
+
     // Resolves a file the scene names; on failure records the error under `key` and returns
     // nothing. The message never tells a path outside the root from a missing file.
-    auto asset = [&](const std::string& key,
-                     const std::string& written) -> std::optional<std::filesystem::path> {
+    std::optional<std::filesystem::path> asset(const std::string& key, const std::string& written) {
         auto real = resolve_asset(written, base_dir, asset_root);
         if (!real) {
             r.fail(key, real.error().message);
             return std::nullopt;
         }
         return real.value();
-    };
+    }
+
+    void hemisphere_prop(const json& p) {
+        s.prop.kind = Prop::Kind::kHemisphere;
+        s.prop.hemisphere.centre = r.vec3(p, "prop", "centre", s.prop.hemisphere.centre);
+        s.prop.hemisphere.radius = r.number(p, "prop", "radius_m", 0.15, 1e-3, 100.0);
+        s.prop.hemisphere.segments = r.integer(p, "prop", "segments", 256, 3, 8192);
+        s.prop.hemisphere.rings = r.integer(p, "prop", "rings", 64, 1, 4096);
+        const uint64_t triangles =
+            hemisphere_triangles(s.prop.hemisphere.segments, s.prop.hemisphere.rings);
+        if (!r.failed() && triangles > limits.max_triangles)
+            r.fail("prop.segments",
+                   fmt::format("segments {} x rings {} make {} triangles (segments x (2 rings "
+                               "- 1)), more than the limit of {} (max_triangles)",
+                               s.prop.hemisphere.segments, s.prop.hemisphere.rings, triangles,
+                               limits.max_triangles));
+    }
+
+    void gltf_prop(const json& p) {
+        s.prop.kind = Prop::Kind::kGltf;
+        const std::string g = r.string(p, "prop", "gltf", std::nullopt);
+        s.prop.gltf_translation = r.vec3(p, "prop", "translation", glm::dvec3(0.0));
+        s.prop.gltf_scale = r.number(p, "prop", "scale", 1.0, 1e-6, 1e6);
+        if (r.failed())
+            return;
+        auto real = asset("prop.gltf", g);
+        if (!real)
+            return;
+        s.prop.gltf_path = real->string();
+        GltfLoadInfo info;
+        info.scale = s.prop.gltf_scale;
+        info.translation = s.prop.gltf_translation;
+        info.asset_root = asset_root.empty() ? base_dir : asset_root;
+        info.max_triangles = limits.max_triangles;
+        auto mesh = load_gltf_mesh(s.prop.gltf_path, info);
+        if (!mesh)
+            r.fail("prop.gltf", as_written(mesh.error().message, s.prop.gltf_path, g));
+        else
+            s.prop.gltf_mesh = std::make_shared<const Mesh>(std::move(mesh).value());
+    }
+
+    void prop(const json& p) {
+        r.only(p, "prop",
+               {"kind", "centre", "radius_m", "segments", "rings", "gltf", "translation", "scale"});
+        std::string kind = r.string(p, "prop", "kind", std::nullopt);
+        if (kind == "hemisphere")
+            hemisphere_prop(p);
+        else if (kind == "gltf")
+            gltf_prop(p);
+        else if (!r.failed())
+            r.fail("prop.kind",
+                   fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
+    }
+
+    void albedo_texture(const json& m) {
+        const std::string t = r.string(m, "material", "albedo_texture", std::nullopt);
+        const char* key = "material.albedo_texture";
+        std::optional<std::filesystem::path> real;
+        if (!r.failed())
+            real = asset(key, t);
+        if (!real)
+            return;
+        s.material.albedo_texture_path = real->string();
+        auto size = png_size(*real);
+        if (!size) {
+            r.fail(key, fmt::format("{} {}", quote_text(t), size.error().message));
+        } else if (size->width > kMaxTextureSide || size->height > kMaxTextureSide) {
+            r.fail(key, fmt::format("{} is {}x{}, more than the limit of {}x{}", quote_text(t),
+                                    size->width, size->height, kMaxTextureSide, kMaxTextureSide));
+        } else if (auto img = read_png(*real); !img) {
+            r.fail(key, as_written(img.error().message, real->string(), t));
+        } else {
+            s.material.albedo_texture = std::make_shared<const ImageRgba8>(std::move(img).value());
+        }
+    }
+
+    void material(const json& m) {
+        r.only(m, "material", {"albedo", "albedo_texture", "specular", "emission"});
+        s.material.albedo = r.vec3(m, "material", "albedo", std::nullopt, 0.0, 1.0);
+        if (m.is_object() && m.contains("albedo_texture"))
+            albedo_texture(m);
+        if (const json* sp = r.member(m, "material", "specular", false))
+            s.material.specular = read_specular(r, *sp, "material.specular");
+        s.material.emission = r.vec3(m, "material", "emission", glm::dvec3(0.0), 0.0, 1e6);
+    }
+
+    void specular_presets(const json& presets) {
+        if (!presets.is_object()) {
+            r.fail("specular_presets", "expected an object of named specular blocks");
+            return;
+        }
+        for (auto it = presets.begin(); it != presets.end(); ++it)
+            s.specular_presets[it.key()] =
+                read_specular(r, it.value(), "specular_presets." + it.key());
+    }
+
+    Light light(const json& lj, const std::string& path) {
+        r.only(
+            lj, path,
+            {"type", "colour", "intensity", "direction", "position", "edge_u", "edge_v", "name"});
+        Light l;
+        std::string type = r.string(lj, path, "type", std::nullopt);
+        l.colour = r.vec3(lj, path, "colour", glm::dvec3(1.0), 0.0, 1e6);
+        l.intensity = r.number(lj, path, "intensity", std::nullopt, 0.0, 1e12);
+        if (type == "directional") {
+            l.type = LightType::kDirectional;
+            l.direction = r.vec3(lj, path, "direction", std::nullopt);
+            if (glm::length(l.direction) < 1e-9)
+                r.fail(path + ".direction", "must not be zero");
+            else
+                l.direction = glm::normalize(l.direction);
+        } else if (type == "point") {
+            l.type = LightType::kPoint;
+            l.position = r.vec3(lj, path, "position", std::nullopt);
+        } else if (type == "rect") {
+            l.type = LightType::kRect;
+            l.position = r.vec3(lj, path, "position", std::nullopt);
+            l.edge_u = r.vec3(lj, path, "edge_u", std::nullopt);
+            l.edge_v = r.vec3(lj, path, "edge_v", std::nullopt);
+            if (!r.failed() && !(glm::length(glm::cross(l.edge_u, l.edge_v)) > 1e-8))
+                r.fail(path + ".edge_u",
+                       "edge_u and edge_v must span a rectangle of at least 1e-8 m^2 "
+                       "(they are zero or parallel)");
+        } else if (!r.failed()) {
+            r.fail(
+                path + ".type",
+                fmt::format("expected \"directional\", \"point\" or \"rect\", got \"{}\"", type));
+        }
+        return l;
+    }
+
+    void lights(const json& ls) {
+        if (!ls.is_array())
+            r.fail("lights", "expected an array");
+        else if (ls.size() > kMaxLights)
+            r.fail("lights",
+                   fmt::format("at most {} lights are supported, got {}", kMaxLights, ls.size()));
+        else
+            for (size_t i = 0; i < ls.size(); ++i)
+                s.lights.push_back(light(ls[i], fmt::format("lights[{}]", i)));
+        if (!r.failed())
+            if (auto placed = check_point_lights(s); !placed.ok())
+                r.fail("lights", placed.error().message);
+    }
+
+    void projector(const json& pj) {
+        r.only(pj, "projector", {"name", "width", "height", "fx", "fy", "cx", "cy", "pose"});
+        Intrinsics& k = s.projector.intrinsics;
+        s.projector.name = r.string(pj, "projector", "name", "projector");
+        k.width = r.integer(pj, "projector", "width", std::nullopt, 1, kMaxImageSide);
+        k.height = r.integer(pj, "projector", "height", std::nullopt, 1, kMaxImageSide);
+        const uint64_t pixels = uint64_t(k.width) * k.height;
+        if (!r.failed() && pixels > limits.max_projector_pixels)
+            r.fail("projector.width",
+                   fmt::format("width {} x height {} = {} pixels, more than the limit of {} "
+                               "(max_projector_pixels)",
+                               k.width, k.height, pixels, limits.max_projector_pixels));
+        k.fx = r.number(pj, "projector", "fx", std::nullopt, 1e-3, 1e7);
+        k.fy = r.number(pj, "projector", "fy", k.fx, 1e-3, 1e7);
+        k.cx = r.number(pj, "projector", "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
+        k.cy = r.number(pj, "projector", "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
+        if (const json* pose = r.member(pj, "projector", "pose", true))
+            s.projector.pose = read_pose(r, *pose, "projector.pose");
+    }
+
+    // A viewer's field of view: from its intrinsics, its diagonal, or its two angles.
+    void viewer_fov(const json& vj, const std::string& path, ViewerProfile& v) {
+        if (vj.is_object() && vj.contains("fx")) {
+            Intrinsics& k = v.intrinsics;
+            v.has_intrinsics = true;
+            k.width = v.eye_width;
+            k.height = v.eye_height;
+            k.fx = r.number(vj, path, "fx", std::nullopt, 1e-3, 1e7);
+            k.fy = r.number(vj, path, "fy", k.fx, 1e-3, 1e7);
+            k.cx = r.number(vj, path, "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
+            k.cy = r.number(vj, path, "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
+            v.fov_x_rad = 2 * std::atan(0.5 * k.width / k.fx);
+            v.fov_y_rad = 2 * std::atan(0.5 * k.height / k.fy);
+        } else if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
+            double d = r.number(vj, path, "fov_diagonal_deg", std::nullopt, 0.1, 179.0);
+            fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad,
+                              &v.fov_y_rad);
+        } else {
+            v.fov_x_rad = glm::radians(r.number(vj, path, "fov_x_deg", std::nullopt, 0.1, 179.0));
+            v.fov_y_rad = glm::radians(r.number(vj, path, "fov_y_deg", std::nullopt, 0.1, 179.0));
+        }
+    }
+
+    ViewerProfile viewer(const json& vj, const std::string& path) {
+        r.only(vj, path,
+               {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg", "fov_diagonal_deg",
+                "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
+        ViewerProfile v;
+        v.name = r.string(vj, path, "name", std::nullopt);
+        v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, kMaxImageSide);
+        v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, kMaxImageSide);
+        viewer_fov(vj, path, v);
+        v.ipd_m = r.number(vj, path, "ipd_m", 0.063, 0.0, 0.2);
+        v.alpha = r.number(vj, path, "alpha", 1.0, 0.0, 1.0);
+        if (!r.failed() && s.find_viewer(v.name))
+            r.fail(path + ".name", fmt::format("duplicate viewer name '{}'", v.name));
+        return v;
+    }
+
+    void viewers(const json& vs) {
+        if (!vs.is_array() || vs.empty()) {
+            r.fail("viewers", "expected a non-empty array of headset profiles");
+            return;
+        }
+        for (size_t i = 0; i < vs.size(); ++i)
+            s.viewers.push_back(viewer(vs[i], fmt::format("viewers[{}]", i)));
+    }
+
+    void viewing_angles(const json& a) {
+        s.viewing.angles_deg.clear();
+        if (!a.is_array() || a.empty()) {
+            r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
+            return;
+        }
+        for (size_t i = 0; i < a.size(); ++i) {
+            const json& x = a[i];
+            const std::string at = fmt::format("viewing.angles_deg[{}]", i);
+            if (!x.is_number()) {
+                r.fail(at, fmt::format("expected a number, got {}", x.type_name()));
+                return;
+            }
+            const double deg = x.get<double>();
+            if (!std::isfinite(deg) || std::abs(deg) > kMaxViewAngleDeg) {
+                r.fail(at, fmt::format("expected a number in [{}, {}], got {}", -kMaxViewAngleDeg,
+                                       kMaxViewAngleDeg, deg));
+                return;
+            }
+            s.viewing.angles_deg.push_back(deg);
+        }
+    }
+
+    void viewing(const json& vw) {
+        r.only(vw, "viewing",
+               {"target", "distance_m", "angles_deg", "heights_m", "default_height"});
+        s.viewing.target = r.vec3(vw, "viewing", "target", s.viewing.target);
+        s.viewing.distance_m =
+            r.number(vw, "viewing", "distance_m", s.viewing.distance_m, 1e-3, 1e4);
+        if (const json* a = r.member(vw, "viewing", "angles_deg", false))
+            viewing_angles(*a);
+        if (const json* h = r.member(vw, "viewing", "heights_m", false)) {
+            s.viewing.heights_m.clear();
+            if (!h->is_object() || h->empty())
+                r.fail("viewing.heights_m", "expected an object of name: height");
+            else
+                for (auto it = h->begin(); it != h->end(); ++it)
+                    s.viewing.heights_m[it.key()] =
+                        r.number(*h, "viewing.heights_m", it.key().c_str(), std::nullopt,
+                                 -kMaxViewHeightM, kMaxViewHeightM);
+        }
+        s.viewing.default_height =
+            r.string(vw, "viewing", "default_height", s.viewing.default_height);
+        if (!r.failed() && !s.viewing.heights_m.count(s.viewing.default_height))
+            r.fail("viewing.default_height",
+                   fmt::format("'{}' is not a key of viewing.heights_m", s.viewing.default_height));
+    }
+
+    // One image of a captured material: an EXR inside the asset root, within the size limits,
+    // every value finite. Null, with the error recorded, otherwise.
+    std::shared_ptr<const ImageRgba32f> captured_image(const json& c, const char* key,
+                                                       std::string* path) {
+        const char* p = "captured_material";
+        const std::string f = r.string(c, p, key, std::nullopt);
+        const std::string where = Reader::join(p, key);
+        if (r.failed())
+            return nullptr;
+        auto real = asset(where, f);
+        if (!real)
+            return nullptr;
+        *path = real->string();
+        auto size = exr_size(*real);
+        if (!size) {
+            r.fail(where, fmt::format("{} {}", quote_text(f), size.error().message));
+            return nullptr;
+        }
+        if (size->width > kMaxImageSide || size->height > kMaxImageSide ||
+            size->width * size->height > kMaxCapturedImagePixels) {
+            r.fail(where, fmt::format("{} is {}x{}, more than the limit of {} pixels a side "
+                                      "and {} pixels",
+                                      quote_text(f), size->width, size->height, kMaxImageSide,
+                                      kMaxCapturedImagePixels));
+            return nullptr;
+        }
+        auto img = read_exr(*real);
+        if (!img) {
+            r.fail(where, as_written(img.error().message, *path, f));
+            return nullptr;
+        }
+        for (float v : img->pixels)
+            if (!std::isfinite(v)) {
+                r.fail(where, quote_text(f) + " has a non-finite value");
+                return nullptr;
+            }
+        return std::make_shared<const ImageRgba32f>(std::move(img).value());
+    }
+
+    void captured_material(const json& c) {
+        const char* p = "captured_material";
+        r.only(c, p,
+               {"projector_image", "viewer_image", "capture_head", "position_tolerance_m",
+                "angle_tolerance_deg", "comment"});
+        CapturedMaterial m;
+        m.projector_image = captured_image(c, "projector_image", &m.projector_image_path);
+        m.viewer_image = captured_image(c, "viewer_image", &m.viewer_image_path);
+        if (const json* h = r.member(c, p, "capture_head", true))
+            m.capture_head = read_pose(r, *h, "captured_material.capture_head");
+        m.position_tolerance_m =
+            r.number(c, p, "position_tolerance_m", m.position_tolerance_m, 0.0, 100.0);
+        m.angle_tolerance_deg =
+            r.number(c, p, "angle_tolerance_deg", m.angle_tolerance_deg, 0.0, 180.0);
+        if (m.projector_image && !r.failed() &&
+            (m.projector_image->width != s.projector.intrinsics.width ||
+             m.projector_image->height != s.projector.intrinsics.height))
+            r.fail("captured_material.projector_image",
+                   fmt::format("{} is {}x{}, the projector is {}x{}",
+                               quote_text(r.string(c, p, "projector_image", std::nullopt)),
+                               m.projector_image->width, m.projector_image->height,
+                               s.projector.intrinsics.width, s.projector.intrinsics.height));
+        s.captured_material = std::move(m);
+    }
+};
+
+Result<Scene> parse_scene_tree(const json& root, const std::string& source,
+                               const std::filesystem::path& base_dir,
+                               const std::filesystem::path& asset_root, const SceneLimits& limits) {
+    Reader r(source);
     Scene s;
     if (!root.is_object())
         return make_error(ErrorCode::kParse,
@@ -410,321 +743,29 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
                                              kSchemaVersion, s.schema_version));
     }
     s.name = r.string(root, "", "name", "unnamed");
-
-    // prop
-    if (const json* p = r.member(root, "", "prop", true)) {
-        r.only(*p, "prop",
-               {"kind", "centre", "radius_m", "segments", "rings", "gltf", "translation", "scale"});
-        std::string kind = r.string(*p, "prop", "kind", std::nullopt);
-        if (kind == "hemisphere") {
-            s.prop.kind = Prop::Kind::kHemisphere;
-            s.prop.hemisphere.centre = r.vec3(*p, "prop", "centre", s.prop.hemisphere.centre);
-            s.prop.hemisphere.radius = r.number(*p, "prop", "radius_m", 0.15, 1e-3, 100.0);
-            s.prop.hemisphere.segments = r.integer(*p, "prop", "segments", 256, 3, 8192);
-            s.prop.hemisphere.rings = r.integer(*p, "prop", "rings", 64, 1, 4096);
-            const uint64_t triangles =
-                hemisphere_triangles(s.prop.hemisphere.segments, s.prop.hemisphere.rings);
-            if (!r.failed() && triangles > limits.max_triangles)
-                r.fail("prop.segments",
-                       fmt::format("segments {} x rings {} make {} triangles (segments x (2 rings "
-                                   "- 1)), more than the limit of {} (max_triangles)",
-                                   s.prop.hemisphere.segments, s.prop.hemisphere.rings, triangles,
-                                   limits.max_triangles));
-        } else if (kind == "gltf") {
-            s.prop.kind = Prop::Kind::kGltf;
-            const std::string g = r.string(*p, "prop", "gltf", std::nullopt);
-            s.prop.gltf_translation = r.vec3(*p, "prop", "translation", glm::dvec3(0.0));
-            s.prop.gltf_scale = r.number(*p, "prop", "scale", 1.0, 1e-6, 1e6);
-            if (!r.failed()) {
-                if (auto real = asset("prop.gltf", g)) {
-                    s.prop.gltf_path = real->string();
-                    GltfLoadInfo info;
-                    info.scale = s.prop.gltf_scale;
-                    info.translation = s.prop.gltf_translation;
-                    info.asset_root = asset_root.empty() ? base_dir : asset_root;
-                    info.max_triangles = limits.max_triangles;
-                    auto mesh = load_gltf_mesh(s.prop.gltf_path, info);
-                    if (!mesh)
-                        r.fail("prop.gltf", as_written(mesh.error().message, s.prop.gltf_path, g));
-                    else
-                        s.prop.gltf_mesh = std::make_shared<const Mesh>(std::move(mesh).value());
-                }
-            }
-        } else if (!r.failed()) {
-            r.fail("prop.kind",
-                   fmt::format("expected \"hemisphere\" or \"gltf\", got \"{}\"", kind));
-        }
-    }
-
-    // material
-    if (const json* m = r.member(root, "", "material", true)) {
-        r.only(*m, "material", {"albedo", "albedo_texture", "specular", "emission"});
-        s.material.albedo = r.vec3(*m, "material", "albedo", std::nullopt, 0.0, 1.0);
-        if (m->is_object() && m->contains("albedo_texture")) {
-            const std::string t = r.string(*m, "material", "albedo_texture", std::nullopt);
-            const char* key = "material.albedo_texture";
-            std::optional<std::filesystem::path> real;
-            if (!r.failed())
-                real = asset(key, t);
-            if (real) {
-                s.material.albedo_texture_path = real->string();
-                auto size = png_size(*real);
-                if (!size) {
-                    r.fail(key, fmt::format("{} {}", quote_text(t), size.error().message));
-                } else if (size->width > kMaxTextureSide || size->height > kMaxTextureSide) {
-                    r.fail(key, fmt::format("{} is {}x{}, more than the limit of {}x{}",
-                                            quote_text(t), size->width, size->height,
-                                            kMaxTextureSide, kMaxTextureSide));
-                } else if (auto img = read_png(*real); !img) {
-                    r.fail(key, as_written(img.error().message, real->string(), t));
-                } else {
-                    s.material.albedo_texture =
-                        std::make_shared<const ImageRgba8>(std::move(img).value());
-                }
-            }
-        }
-        if (const json* sp = r.member(*m, "material", "specular", false)) {
-            s.material.specular = read_specular(r, *sp, "material.specular");
-        }
-        s.material.emission = r.vec3(*m, "material", "emission", glm::dvec3(0.0), 0.0, 1e6);
-    }
-    if (const json* presets = r.member(root, "", "specular_presets", false)) {
-        if (!presets->is_object())
-            r.fail("specular_presets", "expected an object of named specular blocks");
-        else
-            for (auto it = presets->begin(); it != presets->end(); ++it)
-                s.specular_presets[it.key()] =
-                    read_specular(r, it.value(), "specular_presets." + it.key());
-    }
-
-    // lights
-    if (const json* ls = r.member(root, "", "lights", true)) {
-        if (!ls->is_array())
-            r.fail("lights", "expected an array");
-        else if (ls->size() > kMaxLights)
-            r.fail("lights",
-                   fmt::format("at most {} lights are supported, got {}", kMaxLights, ls->size()));
-        else
-            for (size_t i = 0; i < ls->size(); ++i) {
-                const json& lj = (*ls)[i];
-                std::string path = fmt::format("lights[{}]", i);
-                r.only(lj, path,
-                       {"type", "colour", "intensity", "direction", "position", "edge_u", "edge_v",
-                        "name"});
-                Light l;
-                std::string type = r.string(lj, path, "type", std::nullopt);
-                l.colour = r.vec3(lj, path, "colour", glm::dvec3(1.0), 0.0, 1e6);
-                l.intensity = r.number(lj, path, "intensity", std::nullopt, 0.0, 1e12);
-                if (type == "directional") {
-                    l.type = LightType::kDirectional;
-                    l.direction = r.vec3(lj, path, "direction", std::nullopt);
-                    if (glm::length(l.direction) < 1e-9)
-                        r.fail(path + ".direction", "must not be zero");
-                    else
-                        l.direction = glm::normalize(l.direction);
-                } else if (type == "point") {
-                    l.type = LightType::kPoint;
-                    l.position = r.vec3(lj, path, "position", std::nullopt);
-                } else if (type == "rect") {
-                    l.type = LightType::kRect;
-                    l.position = r.vec3(lj, path, "position", std::nullopt);
-                    l.edge_u = r.vec3(lj, path, "edge_u", std::nullopt);
-                    l.edge_v = r.vec3(lj, path, "edge_v", std::nullopt);
-                    if (!r.failed() && !(glm::length(glm::cross(l.edge_u, l.edge_v)) > 1e-8))
-                        r.fail(path + ".edge_u",
-                               "edge_u and edge_v must span a rectangle of at least 1e-8 m^2 "
-                               "(they are zero or parallel)");
-                } else if (!r.failed()) {
-                    r.fail(
-                        path + ".type",
-                        fmt::format("expected \"directional\", \"point\" or \"rect\", got \"{}\"",
-                                    type));
-                }
-                s.lights.push_back(l);
-            }
-        if (!r.failed())
-            if (auto placed = check_point_lights(s); !placed.ok())
-                r.fail("lights", placed.error().message);
-    }
-
-    // projector
-    if (const json* pj = r.member(root, "", "projector", true)) {
-        r.only(*pj, "projector", {"name", "width", "height", "fx", "fy", "cx", "cy", "pose"});
-        Intrinsics& k = s.projector.intrinsics;
-        s.projector.name = r.string(*pj, "projector", "name", "projector");
-        k.width = r.integer(*pj, "projector", "width", std::nullopt, 1, kMaxImageSide);
-        k.height = r.integer(*pj, "projector", "height", std::nullopt, 1, kMaxImageSide);
-        const uint64_t pixels = uint64_t(k.width) * k.height;
-        if (!r.failed() && pixels > limits.max_projector_pixels)
-            r.fail("projector.width",
-                   fmt::format("width {} x height {} = {} pixels, more than the limit of {} "
-                               "(max_projector_pixels)",
-                               k.width, k.height, pixels, limits.max_projector_pixels));
-        k.fx = r.number(*pj, "projector", "fx", std::nullopt, 1e-3, 1e7);
-        k.fy = r.number(*pj, "projector", "fy", k.fx, 1e-3, 1e7);
-        k.cx = r.number(*pj, "projector", "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
-        k.cy = r.number(*pj, "projector", "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
-        if (const json* pose = r.member(*pj, "projector", "pose", true)) {
-            s.projector.pose = read_pose(r, *pose, "projector.pose");
-        }
-    }
-
-    // viewers
-    if (const json* vs = r.member(root, "", "viewers", true)) {
-        if (!vs->is_array() || vs->empty())
-            r.fail("viewers", "expected a non-empty array of headset profiles");
-        else
-            for (size_t i = 0; i < vs->size(); ++i) {
-                const json& vj = (*vs)[i];
-                std::string path = fmt::format("viewers[{}]", i);
-                r.only(vj, path,
-                       {"name", "eye_width", "eye_height", "fov_x_deg", "fov_y_deg",
-                        "fov_diagonal_deg", "fx", "fy", "cx", "cy", "ipd_m", "alpha", "comment"});
-                ViewerProfile v;
-                v.name = r.string(vj, path, "name", std::nullopt);
-                v.eye_width = r.integer(vj, path, "eye_width", std::nullopt, 1, kMaxImageSide);
-                v.eye_height = r.integer(vj, path, "eye_height", std::nullopt, 1, kMaxImageSide);
-                if (vj.is_object() && vj.contains("fx")) {
-                    Intrinsics& k = v.intrinsics;
-                    v.has_intrinsics = true;
-                    k.width = v.eye_width;
-                    k.height = v.eye_height;
-                    k.fx = r.number(vj, path, "fx", std::nullopt, 1e-3, 1e7);
-                    k.fy = r.number(vj, path, "fy", k.fx, 1e-3, 1e7);
-                    k.cx = r.number(vj, path, "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
-                    k.cy = r.number(vj, path, "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
-                    v.fov_x_rad = 2 * std::atan(0.5 * k.width / k.fx);
-                    v.fov_y_rad = 2 * std::atan(0.5 * k.height / k.fy);
-                } else if (vj.is_object() && vj.contains("fov_diagonal_deg")) {
-                    double d = r.number(vj, path, "fov_diagonal_deg", std::nullopt, 0.1, 179.0);
-                    fov_from_diagonal(glm::radians(d), v.eye_width, v.eye_height, &v.fov_x_rad,
-                                      &v.fov_y_rad);
-                } else {
-                    v.fov_x_rad =
-                        glm::radians(r.number(vj, path, "fov_x_deg", std::nullopt, 0.1, 179.0));
-                    v.fov_y_rad =
-                        glm::radians(r.number(vj, path, "fov_y_deg", std::nullopt, 0.1, 179.0));
-                }
-                v.ipd_m = r.number(vj, path, "ipd_m", 0.063, 0.0, 0.2);
-                v.alpha = r.number(vj, path, "alpha", 1.0, 0.0, 1.0);
-                if (!r.failed() && s.find_viewer(v.name))
-                    r.fail(path + ".name", fmt::format("duplicate viewer name '{}'", v.name));
-                s.viewers.push_back(v);
-            }
-    }
-
-    if (const json* vw = r.member(root, "", "viewing", false)) {
-        r.only(*vw, "viewing",
-               {"target", "distance_m", "angles_deg", "heights_m", "default_height"});
-        s.viewing.target = r.vec3(*vw, "viewing", "target", s.viewing.target);
-        s.viewing.distance_m =
-            r.number(*vw, "viewing", "distance_m", s.viewing.distance_m, 1e-3, 1e4);
-        if (const json* a = r.member(*vw, "viewing", "angles_deg", false)) {
-            s.viewing.angles_deg.clear();
-            if (!a->is_array() || a->empty())
-                r.fail("viewing.angles_deg", "expected a non-empty array of numbers");
-            else
-                for (size_t i = 0; i < a->size(); ++i) {
-                    const json& x = (*a)[i];
-                    const std::string at = fmt::format("viewing.angles_deg[{}]", i);
-                    if (!x.is_number()) {
-                        r.fail(at, fmt::format("expected a number, got {}", x.type_name()));
-                        break;
-                    }
-                    const double deg = x.get<double>();
-                    if (!std::isfinite(deg) || std::abs(deg) > kMaxViewAngleDeg) {
-                        r.fail(at, fmt::format("expected a number in [{}, {}], got {}",
-                                               -kMaxViewAngleDeg, kMaxViewAngleDeg, deg));
-                        break;
-                    }
-                    s.viewing.angles_deg.push_back(deg);
-                }
-        }
-        if (const json* h = r.member(*vw, "viewing", "heights_m", false)) {
-            s.viewing.heights_m.clear();
-            if (!h->is_object() || h->empty())
-                r.fail("viewing.heights_m", "expected an object of name: height");
-            else
-                for (auto it = h->begin(); it != h->end(); ++it)
-                    s.viewing.heights_m[it.key()] =
-                        r.number(*h, "viewing.heights_m", it.key().c_str(), std::nullopt,
-                                 -kMaxViewHeightM, kMaxViewHeightM);
-        }
-        s.viewing.default_height =
-            r.string(*vw, "viewing", "default_height", s.viewing.default_height);
-        if (!r.failed() && !s.viewing.heights_m.count(s.viewing.default_height))
-            r.fail("viewing.default_height",
-                   fmt::format("'{}' is not a key of viewing.heights_m", s.viewing.default_height));
-    }
-
+    SceneReader read{r, base_dir, asset_root, limits, s};
+    if (const json* p = r.member(root, "", "prop", true))
+        read.prop(*p);
+    if (const json* m = r.member(root, "", "material", true))
+        read.material(*m);
+    if (const json* presets = r.member(root, "", "specular_presets", false))
+        read.specular_presets(*presets);
+    if (const json* ls = r.member(root, "", "lights", true))
+        read.lights(*ls);
+    if (const json* pj = r.member(root, "", "projector", true))
+        read.projector(*pj);
+    if (const json* vs = r.member(root, "", "viewers", true))
+        read.viewers(*vs);
+    if (const json* vw = r.member(root, "", "viewing", false))
+        read.viewing(*vw);
     if (const json* e = r.member(root, "", "effects", false)) {
         r.only(*e, "effects", {"point_light_falloff"});
         s.effects.point_light_falloff = r.boolean(*e, "effects", "point_light_falloff", true);
     }
-
     if (const json* o = r.member(root, "", "optics", false))
         read_optics(r, *o, &s.optics);
-
-    if (const json* c = r.member(root, "", "captured_material", false)) {
-        const char* p = "captured_material";
-        r.only(*c, p,
-               {"projector_image", "viewer_image", "capture_head", "position_tolerance_m",
-                "angle_tolerance_deg", "comment"});
-        CapturedMaterial m;
-        auto image = [&](const char* key,
-                         std::string* path) -> std::shared_ptr<const ImageRgba32f> {
-            const std::string f = r.string(*c, p, key, std::nullopt);
-            const std::string where = Reader::join(p, key);
-            if (r.failed())
-                return nullptr;
-            auto real = asset(where, f);
-            if (!real)
-                return nullptr;
-            *path = real->string();
-            auto size = exr_size(*real);
-            if (!size) {
-                r.fail(where, fmt::format("{} {}", quote_text(f), size.error().message));
-                return nullptr;
-            }
-            if (size->width > kMaxImageSide || size->height > kMaxImageSide ||
-                size->width * size->height > kMaxCapturedImagePixels) {
-                r.fail(where, fmt::format("{} is {}x{}, more than the limit of {} pixels a side "
-                                          "and {} pixels",
-                                          quote_text(f), size->width, size->height, kMaxImageSide,
-                                          kMaxCapturedImagePixels));
-                return nullptr;
-            }
-            auto img = read_exr(*real);
-            if (!img) {
-                r.fail(where, as_written(img.error().message, *path, f));
-                return nullptr;
-            }
-            for (float v : img->pixels)
-                if (!std::isfinite(v)) {
-                    r.fail(where, quote_text(f) + " has a non-finite value");
-                    return nullptr;
-                }
-            return std::make_shared<const ImageRgba32f>(std::move(img).value());
-        };
-        m.projector_image = image("projector_image", &m.projector_image_path);
-        m.viewer_image = image("viewer_image", &m.viewer_image_path);
-        if (const json* h = r.member(*c, p, "capture_head", true))
-            m.capture_head = read_pose(r, *h, "captured_material.capture_head");
-        m.position_tolerance_m =
-            r.number(*c, p, "position_tolerance_m", m.position_tolerance_m, 0.0, 100.0);
-        m.angle_tolerance_deg =
-            r.number(*c, p, "angle_tolerance_deg", m.angle_tolerance_deg, 0.0, 180.0);
-        if (m.projector_image && !r.failed() &&
-            (m.projector_image->width != s.projector.intrinsics.width ||
-             m.projector_image->height != s.projector.intrinsics.height))
-            r.fail("captured_material.projector_image",
-                   fmt::format("{} is {}x{}, the projector is {}x{}",
-                               quote_text(r.string(*c, p, "projector_image", std::nullopt)),
-                               m.projector_image->width, m.projector_image->height,
-                               s.projector.intrinsics.width, s.projector.intrinsics.height));
-        s.captured_material = std::move(m);
-    }
-
+    if (const json* c = r.member(root, "", "captured_material", false))
+        read.captured_material(*c);
     if (r.failed())
         return r.error();
     return s;

@@ -317,6 +317,42 @@ std::string_view json_part(const std::vector<unsigned char>& bytes, bool binary)
     return {data + 20, length};
 }
 
+// The triangles of the model's default scene (or of every mesh when it has no scene), placed by
+// `info`, within its triangle budget.
+Result<Mesh> mesh_of(const tinygltf::Model& model, const GltfLoadInfo& info,
+                     const std::string& path) {
+    glm::dmat4 root = glm::translate(glm::dmat4(1.0), info.translation) *
+                      glm::scale(glm::dmat4(1.0), glm::dvec3(info.scale));
+    Budget budget;
+    budget.max_triangles = info.max_triangles;
+    int scene_index = -1;
+    if (!model.scenes.empty()) {
+        scene_index = model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size()
+                          ? model.defaultScene
+                          : 0;
+        for (int n : model.scenes[scene_index].nodes)
+            HS_TRY(count_visit(model, n, path, 0, budget));
+    } else {
+        for (size_t m = 0; m < model.meshes.size(); ++m)
+            HS_TRY(count_mesh(model, int(m), path, budget));
+    }
+    Mesh out;
+    try {
+        if (scene_index >= 0) {
+            for (int n : model.scenes[scene_index].nodes)
+                HS_TRY(visit(model, n, root, path, out, 0));
+        } else {
+            for (size_t m = 0; m < model.meshes.size(); ++m)
+                HS_TRY(append_mesh(model, int(m), root, path, out));
+        }
+    } catch (const std::exception& e) {  // std::bad_alloc
+        return gltf_error(path, fmt::format("could not build the mesh: {}", e.what()));
+    }
+    if (out.positions.empty())
+        return gltf_error(path, "the file holds no triangle mesh");
+    return out;
+}
+
 }  // namespace
 
 Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info) {
@@ -374,36 +410,7 @@ Result<Mesh> load_gltf_mesh(const std::string& path, const GltfLoadInfo& info) {
         return gltf_error(path,
                           fmt::format("malformed glTF: {}", err.empty() ? "unknown error" : err));
     }
-    glm::dmat4 root = glm::translate(glm::dmat4(1.0), info.translation) *
-                      glm::scale(glm::dmat4(1.0), glm::dvec3(info.scale));
-    Budget budget;
-    budget.max_triangles = info.max_triangles;
-    int scene_index = -1;
-    if (!model.scenes.empty()) {
-        scene_index = model.defaultScene >= 0 && size_t(model.defaultScene) < model.scenes.size()
-                          ? model.defaultScene
-                          : 0;
-        for (int n : model.scenes[scene_index].nodes)
-            HS_TRY(count_visit(model, n, path, 0, budget));
-    } else {
-        for (size_t m = 0; m < model.meshes.size(); ++m)
-            HS_TRY(count_mesh(model, int(m), path, budget));
-    }
-    Mesh out;
-    try {
-        if (scene_index >= 0) {
-            for (int n : model.scenes[scene_index].nodes)
-                HS_TRY(visit(model, n, root, path, out, 0));
-        } else {
-            for (size_t m = 0; m < model.meshes.size(); ++m)
-                HS_TRY(append_mesh(model, int(m), root, path, out));
-        }
-    } catch (const std::exception& e) {  // std::bad_alloc
-        return gltf_error(path, fmt::format("could not build the mesh: {}", e.what()));
-    }
-    if (out.positions.empty())
-        return gltf_error(path, "the file holds no triangle mesh");
-    return out;
+    return mesh_of(model, info, path);
 }
 
 Result<Mesh> load_gltf_mesh(const std::string& path, double scale, glm::dvec3 translation) {

@@ -6,6 +6,8 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
 
+#include "core/image.hpp"
+
 namespace hs::shading {
 
 namespace {
@@ -103,10 +105,7 @@ void for_each_light_sample(const scene::Light& light, glm::dvec3 p, glm::dvec3 n
 }
 
 glm::dvec3 sample_albedo_texture(const ImageRgba8& tex, glm::dvec2 uv) {
-    auto decode = [](uint8_t c) {  // IEC 61966-2-1 sRGB EOTF
-        double x = c / 255.0;
-        return x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4);
-    };
+    auto decode = [](uint8_t c) { return srgb_eotf(c / 255.0); };  // IEC 61966-2-1 (core/image)
     auto texel = [&](int64_t x, int64_t y) {
         x = ((x % tex.width) + tex.width) % tex.width;  // repeat
         y = std::clamp<int64_t>(y, 0, tex.height - 1);  // clamp to edge

@@ -15,9 +15,9 @@
 #include "calib/serving.hpp"
 #include "clients/connection.hpp"
 #include "gpu_fixture.hpp"
-#include "installation/served.hpp"
 #include "scene/camera.hpp"
-#include "stream/server.hpp"
+#include "served_installation/served.hpp"
+#include "stream/loopback.hpp"
 
 using namespace hs;
 using namespace hs::test;
@@ -142,15 +142,12 @@ TEST_F(ServedCalibration, AHeadsetOfAnotherSizeGetsAClearErrorForItsSessionOnly)
     const auto& v = s.viewers.front();
     const scene::Intrinsics k =
         scene::intrinsics_from_fov(v.eye_width / 8, v.eye_height / 8, v.fov_x_rad, v.fov_y_rad);
-    stream::ServerCreateInfo info;
-    info.port = 0;
+    stream::LoopbackCreateInfo info;
     info.token = "t";
-    info.admin_token = "admin";
     info.calibration =
         std::make_shared<const calib::ServingCalibration>(synthetic(s, k.width, k.height));
-    auto server = stream::Server::create(device(), s, info);
+    auto server = stream::LoopbackServer::start(device(), s, info);
     ASSERT_TRUE(server.ok()) << server.error().message;
-    std::thread thread([&] { (*server)->run(); });
 
     const auto pose = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
     const proto::Pose p{
@@ -200,9 +197,8 @@ TEST_F(ServedCalibration, AHeadsetOfAnotherSizeGetsAClearErrorForItsSessionOnly)
     EXPECT_GT(stats["passes"]["projector"]["calibration"]["projector_lit_pixels"].get<uint64_t>(),
               1000u);
     (*server)->stop();
-    thread.join();
     // And a server is not made for a scene whose projector is not the calibrated one.
-    auto refused = stream::Server::create(device(), other, info);
+    auto refused = stream::LoopbackServer::start(device(), other, info);
     ASSERT_FALSE(refused.ok());
     EXPECT_NE(refused.error().message.find("is 640x400"), std::string::npos);
 }

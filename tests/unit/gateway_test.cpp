@@ -1,7 +1,7 @@
-// cluster/gateway.hpp: node parsing, the HAProxy configuration's refusals and content, and the
+// gateway/gateway.hpp: node parsing, the HAProxy configuration's refusals and content, and the
 // agent-check reply (the weight formula). haproxy itself checks the text in
 // net.cluster_gateway_haproxy.
-#include "cluster/gateway.hpp"
+#include "gateway/gateway.hpp"
 
 #include <gtest/gtest.h>
 

@@ -12,9 +12,9 @@
 
 #include <fmt/format.h>
 
-#include "core/draw.hpp"
-#include "core/figure.hpp"
-#include "core/plot.hpp"
+#include "plot/draw.hpp"
+#include "plot/figure.hpp"
+#include "plot/plot.hpp"
 
 namespace hs {
 namespace {

@@ -1,4 +1,4 @@
-#include "bench/serve_report.hpp"
+#include "serve_bench/serve_report.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include <fmt/format.h>
 
-#include "core/plot.hpp"
+#include "plot/plot.hpp"
 
 namespace hs::bench {
 

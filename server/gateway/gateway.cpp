@@ -1,4 +1,4 @@
-#include "cluster/gateway.hpp"
+#include "gateway/gateway.hpp"
 
 #include <algorithm>
 #include <charconv>

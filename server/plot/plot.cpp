@@ -1,4 +1,4 @@
-#include "core/plot.hpp"
+#include "plot/plot.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -7,8 +7,8 @@
 
 #include <fmt/format.h>
 
-#include "core/draw.hpp"
-#include "core/figure.hpp"
+#include "plot/draw.hpp"
+#include "plot/figure.hpp"
 
 namespace hs {
 

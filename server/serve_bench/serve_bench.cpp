@@ -1,5 +1,5 @@
-#include "bench/serve_bench.hpp"
-#include "bench/serve_report.hpp"
+#include "serve_bench/serve_bench.hpp"
+#include "serve_bench/serve_report.hpp"
 
 #include <spawn.h>
 #include <sys/resource.h>
@@ -25,13 +25,13 @@
 
 #include "clients/connection.hpp"
 #include "core/check.hpp"
-#include "core/figure.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "plot/figure.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
-#include "stream/server.hpp"
+#include "stream/loopback.hpp"
 
 extern char** environ;
 
@@ -175,6 +175,100 @@ struct HeadsetTally {
 constexpr double kOrbitDegPerS = 36.0;  // one turn around the target in 10 s
 constexpr double kMaxWarmupS = 60.0;    // the longest a row waits for every first layer
 
+// A headset's pose at `t_s` seconds on its orbit, sent stamped with its send time (a layer's
+// pose_time_ns is its pose's send time). False, with the tally told, when it cannot be sent.
+bool send_pose(client::Connection& conn, const HeadsetPlan& plan, double t_s, HeadsetTally& t) {
+    // Wrapped to [-180, 180]: the viewing angle's range is [-360, 360], and the orbit goes
+    // round more than once.
+    auto head = head_at(*plan.scene, std::remainder(plan.phase_deg + kOrbitDegPerS * t_s, 360.0));
+    if (!head) {
+        t.fail(head.error().message);
+        return false;
+    }
+    proto::Pose p;
+    const auto& pos = head.value().position;
+    const auto& q = head.value().orientation;
+    p.position_m = {pos.x, pos.y, pos.z};
+    p.orientation_wxyz = {q.w, q.x, q.y, q.z};
+    p.client_time_ns = client::now_ns();
+    if (!conn.send(p)) {
+        t.fail("Pose: " + conn.last_error());
+        return false;
+    }
+    return true;
+}
+
+// The layers a headset receives: counted (bytes, and latency once both eyes of a frame came)
+// while the window is open. `eyes_of_frame` holds the frames with one eye received.
+struct LayerCounter {
+    const HeadsetPlan& plan;
+    const Window& w;
+    HeadsetTally& t;
+    std::map<uint32_t, uint8_t> eyes_of_frame;
+
+    // True when the layer completed a stereo frame.
+    bool count(const proto::VdLayer& layer) {
+        const uint64_t at = client::now_ns();
+        const bool inside = at >= w.start_ns.load() && at < w.end_ns.load();
+        if (inside) {
+            ++t.eye_layers;
+            t.bytes += layer.data.size() + plan.layer_overhead;
+        }
+        uint8_t& eyes = eyes_of_frame[layer.frame_id];
+        eyes |= uint8_t(1u << layer.eye);
+        const bool stereo = eyes == 3;
+        if (stereo) {
+            eyes_of_frame.erase(layer.frame_id);
+            if (inside) {
+                ++t.stereo_layers;
+                t.latency_ms.push_back(double(int64_t(at - layer.pose_time_ns)) * 1e-6);
+            }
+        }
+        while (eyes_of_frame.size() > 64) eyes_of_frame.erase(eyes_of_frame.begin());
+        return stereo;
+    }
+};
+
+// Poses at the plan's rate and the layers in between, until the window closes or the
+// connection fails. `mark_settled` is called at the first stereo layer.
+template <typename OnSettled>
+void pose_and_receive(client::Connection& conn, const HeadsetPlan& plan, const Window& w,
+                      HeadsetTally& t, OnSettled mark_settled) {
+    const auto period = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(1.0 / plan.rate_hz));
+    const Clock::time_point start = Clock::now();
+    Clock::time_point next_pose = start;
+    LayerCounter layers{plan, w, t, {}};
+    while (!w.stop.load()) {
+        const auto now = Clock::now();
+        if (now >= next_pose) {
+            if (!send_pose(conn, plan, std::chrono::duration<double>(now - start).count(), t))
+                break;
+            next_pose += period;
+            if (next_pose < now)  // fell behind (a slow machine): no burst to catch up
+                next_pose = now + period;
+        }
+        // Rounded up: a wait rounded down to 0 ms would spin until the next pose, and 32
+        // spinning headsets take the cores the server is measured on.
+        const auto wait =
+            std::chrono::ceil<std::chrono::milliseconds>(
+                std::min(next_pose - Clock::now(), Clock::duration(std::chrono::milliseconds(20))))
+                .count();
+        auto m = conn.receive(int(std::max<int64_t>(wait, 0)));
+        if (auto* e = std::get_if<std::string>(&m)) {
+            t.fail(*e);
+            break;
+        }
+        auto* msg = std::get_if<proto::Message>(&m);
+        if (!msg)
+            continue;
+        if (auto* err = std::get_if<proto::Error>(msg))
+            t.fail("server error: " + client::describe(*err));
+        else if (auto* layer = std::get_if<proto::VdLayer>(msg); layer && layers.count(*layer))
+            mark_settled();
+    }
+}
+
 // One headset: Hello, RegisterDisplay, then poses at the plan's rate until the window closes,
 // counting the layers that arrive inside it. Layers are decoded as messages, never as pixels.
 void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, HeadsetTally& t) {
@@ -204,77 +298,7 @@ void run_headset(const HeadsetPlan& plan, Window& w, std::atomic<int>& ready, He
         mark_ready();
         while (!w.go.load() && !w.stop.load())
             std::this_thread::sleep_for(std::chrono::milliseconds(1));
-        const auto period = std::chrono::duration_cast<Clock::duration>(
-            std::chrono::duration<double>(1.0 / plan.rate_hz));
-        const Clock::time_point start = Clock::now();
-        Clock::time_point next_pose = start;
-        std::map<uint32_t, uint8_t> eyes_of_frame;  // frames with one eye received
-        while (!w.stop.load()) {
-            const auto now = Clock::now();
-            if (now >= next_pose) {
-                const double t_s = std::chrono::duration<double>(now - start).count();
-                // Wrapped to [-180, 180]: the viewing angle's range is [-360, 360], and the
-                // orbit goes round more than once.
-                auto head = head_at(*plan.scene,
-                                    std::remainder(plan.phase_deg + kOrbitDegPerS * t_s, 360.0));
-                if (!head) {
-                    t.fail(head.error().message);
-                    break;
-                }
-                proto::Pose p;
-                const auto& pos = head.value().position;
-                const auto& q = head.value().orientation;
-                p.position_m = {pos.x, pos.y, pos.z};
-                p.orientation_wxyz = {q.w, q.x, q.y, q.z};
-                // Stamped as it is sent: a layer's pose_time_ns is its pose's send time.
-                p.client_time_ns = client::now_ns();
-                if (!conn.send(p)) {
-                    t.fail("Pose: " + conn.last_error());
-                    break;
-                }
-                next_pose += period;
-                if (next_pose < now)  // fell behind (a slow machine): no burst to catch up
-                    next_pose = now + period;
-            }
-            // Rounded up: a wait rounded down to 0 ms would spin until the next pose, and 32
-            // spinning headsets take the cores the server is measured on.
-            const auto wait = std::chrono::ceil<std::chrono::milliseconds>(
-                                  std::min(next_pose - Clock::now(),
-                                           Clock::duration(std::chrono::milliseconds(20))))
-                                  .count();
-            auto m = conn.receive(int(std::max<int64_t>(wait, 0)));
-            if (auto* e = std::get_if<std::string>(&m)) {
-                t.fail(*e);
-                break;
-            }
-            auto* msg = std::get_if<proto::Message>(&m);
-            if (!msg)
-                continue;
-            if (auto* err = std::get_if<proto::Error>(msg)) {
-                t.fail("server error: " + client::describe(*err));
-                continue;
-            }
-            auto* layer = std::get_if<proto::VdLayer>(msg);
-            if (!layer)
-                continue;
-            const uint64_t at = client::now_ns();
-            const bool inside = at >= w.start_ns.load() && at < w.end_ns.load();
-            if (inside) {
-                ++t.eye_layers;
-                t.bytes += layer->data.size() + plan.layer_overhead;
-            }
-            uint8_t& eyes = eyes_of_frame[layer->frame_id];
-            eyes |= uint8_t(1u << layer->eye);
-            if (eyes == 3) {
-                eyes_of_frame.erase(layer->frame_id);
-                mark_settled();
-                if (inside) {
-                    ++t.stereo_layers;
-                    t.latency_ms.push_back(double(int64_t(at - layer->pose_time_ns)) * 1e-6);
-                }
-            }
-            while (eyes_of_frame.size() > 64) eyes_of_frame.erase(eyes_of_frame.begin());
-        }
+        pose_and_receive(conn, plan, w, t, mark_settled);
         conn.send(proto::Bye{0});
         conn.close();
     } catch (const std::exception& e) {
@@ -339,7 +363,7 @@ std::optional<T> json_at(const json& j, std::initializer_list<const char*> path)
 
 // After a row: every session gone and the render thread idle, so that the next row starts
 // from a quiet server.
-void settle(const stream::Server& server) {
+void settle(const stream::LoopbackServer& server) {
     const auto deadline = Clock::now() + std::chrono::seconds(10);
     while (Clock::now() < deadline &&
            json_at<uint64_t>(server.stats(), {"sessions"}).value_or(0) > 0)
@@ -353,8 +377,9 @@ void settle(const stream::Server& server) {
     }
 }
 
-ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const ServeBenchOptions& o,
-                    const proto::RegisterDisplay& display, const std::string& token, int headsets) {
+std::vector<HeadsetPlan> plan_headsets(const stream::LoopbackServer& server,
+                                       const scene::Scene& scene, const ServeBenchOptions& o,
+                                       const proto::RegisterDisplay& display, int headsets) {
     proto::VdLayer empty;
     empty.encoding = proto::Encoding::kSparseTiles;
     empty.width = empty.height = 1;
@@ -365,8 +390,8 @@ ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const Ser
     std::vector<HeadsetPlan> plans(static_cast<size_t>(headsets));
     for (int i = 0; i < headsets; ++i) {
         auto& p = plans[size_t(i)];
-        p.address = "127.0.0.1:" + std::to_string(server.port());
-        p.token = token;
+        p.address = server.address();
+        p.token = server.token();
         p.name = fmt::format("bench-{}-{}", headsets, i);
         p.display = display;
         p.scene = &scene;
@@ -374,45 +399,53 @@ ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const Ser
         p.rate_hz = o.pose_rate_hz;
         p.layer_overhead = overhead;
     }
-    Window w;
-    std::atomic<int> ready{0};
-    std::vector<HeadsetTally> tallies(static_cast<size_t>(headsets));
-    std::vector<std::thread> threads;
-    for (int i = 0; i < headsets; ++i)
-        threads.emplace_back(run_headset, std::cref(plans[size_t(i)]), std::ref(w), std::ref(ready),
-                             std::ref(tallies[size_t(i)]));
-    const auto connect_deadline = Clock::now() + std::chrono::seconds(60);
-    while (ready.load() < headsets && Clock::now() < connect_deadline)
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    auto sleep_until = [](uint64_t t_ns) {
-        const uint64_t now = client::now_ns();
-        if (t_ns > now)
-            std::this_thread::sleep_for(std::chrono::nanoseconds(t_ns - now));
-    };
-    // Warm-up: warmup_s, and longer while a headset still waits for its first stereo layer
-    // (its targets and the first round over every headset are start-up, not the steady state).
-    const uint64_t go_ns = client::now_ns();
+    return plans;
+}
+
+void sleep_until(uint64_t t_ns) {
+    const uint64_t now = client::now_ns();
+    if (t_ns > now)
+        std::this_thread::sleep_for(std::chrono::nanoseconds(t_ns - now));
+}
+
+// What the main thread measured over one row's window.
+struct RowWindow {
+    uint64_t go_ns = 0, start_ns = 0;  // the headsets set off; the window opened (client clock)
+    CostSnapshot c0, c1;               // the server's costs at the window's start and end
+    double cpu0 = 0, cpu1 = 0;         // this process's CPU seconds at the same moments
+};
+
+// Sets the headsets off, waits out the warm-up (warmup_s, and longer while a headset still
+// waits for its first stereo layer: its targets and the first round over every headset are
+// start-up, not the steady state), then opens the window for o.seconds and closes it.
+RowWindow measure_window(const stream::LoopbackServer& server, const ServeBenchOptions& o,
+                         Window& w, int headsets) {
+    RowWindow m;
+    m.go_ns = client::now_ns();
     w.go = true;
-    sleep_until(go_ns + uint64_t(o.warmup_s * 1e9));
-    const uint64_t warmup_cap = go_ns + uint64_t(kMaxWarmupS * 1e9);
+    sleep_until(m.go_ns + uint64_t(o.warmup_s * 1e9));
+    const uint64_t warmup_cap = m.go_ns + uint64_t(kMaxWarmupS * 1e9);
     while (w.settled.load() < headsets && client::now_ns() < warmup_cap)
         std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    const uint64_t start = client::now_ns();
-    const uint64_t end = start + uint64_t(o.seconds * 1e9);
+    m.start_ns = client::now_ns();
+    const uint64_t end = m.start_ns + uint64_t(o.seconds * 1e9);
     w.end_ns = end;  // before start_ns: the window never reads as open with no end
-    w.start_ns = start;
-    const CostSnapshot c0 = cost_snapshot(server.stats());
-    const double cpu0 = cpu_seconds();
+    w.start_ns = m.start_ns;
+    m.c0 = cost_snapshot(server.stats());
+    m.cpu0 = cpu_seconds();
     sleep_until(end);
-    const double cpu1 = cpu_seconds();
-    const CostSnapshot c1 = cost_snapshot(server.stats());
-    w.stop = true;
-    for (auto& t : threads) t.join();
+    m.cpu1 = cpu_seconds();
+    m.c1 = cost_snapshot(server.stats());
+    return m;
+}
 
+// The row's figures from the headsets' tallies and the window's snapshots.
+ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
+                   const ServeBenchOptions& o, int headsets) {
     ServedRow r;
     r.headsets = headsets;
     r.seconds = o.seconds;
-    r.warmup_s = double(start - go_ns) * 1e-9;
+    r.warmup_s = double(m.start_ns - m.go_ns) * 1e-9;
     std::vector<double> latency;
     uint64_t bytes = 0;
     for (const auto& t : tallies) {
@@ -431,28 +464,43 @@ ServedRow serve_row(stream::Server& server, const scene::Scene& scene, const Ser
         r.latency_p50_ms = percentile_of(latency, 0.5);
         r.latency_p99_ms = percentile_of(latency, 0.99);
     }
-    const double frames = c1.frames - c0.frames;
+    const double frames = m.c1.frames - m.c0.frames;
     if (frames > 0)
-        for (const auto& [stage, sum] : c1.sums) {
-            auto before = c0.sums.find(stage);
-            r.stage_ms[stage] = (sum - (before == c0.sums.end() ? 0.0 : before->second)) / frames;
+        for (const auto& [stage, sum] : m.c1.sums) {
+            auto before = m.c0.sums.find(stage);
+            r.stage_ms[stage] = (sum - (before == m.c0.sums.end() ? 0.0 : before->second)) / frames;
         }
     if (r.eye_layers > 0)
         r.bytes_per_layer = double(bytes) / double(r.eye_layers);
     if (r.stereo_layers > 0)
-        r.cpu_ms_per_stereo_layer = (cpu1 - cpu0) * 1000.0 / double(r.stereo_layers);
-    if (c0.render_busy_ns && c1.render_busy_ns && c1.at_ns > c0.at_ns)
+        r.cpu_ms_per_stereo_layer = (m.cpu1 - m.cpu0) * 1000.0 / double(r.stereo_layers);
+    if (m.c0.render_busy_ns && m.c1.render_busy_ns && m.c1.at_ns > m.c0.at_ns)
         r.render_thread_busy =
-            (*c1.render_busy_ns - *c0.render_busy_ns) / double(c1.at_ns - c0.at_ns);
-    settle(server);
+            (*m.c1.render_busy_ns - *m.c0.render_busy_ns) / double(m.c1.at_ns - m.c0.at_ns);
     return r;
 }
 
-std::string random_token() {
-    std::random_device rd;
-    std::string t;
-    for (int i = 0; i < 4; ++i) t += fmt::format("{:08x}", rd());
-    return t;
+// One row: `headsets` protocol-only headsets on their own threads against the server.
+ServedRow serve_row(const stream::LoopbackServer& server, const scene::Scene& scene,
+                    const ServeBenchOptions& o, const proto::RegisterDisplay& display,
+                    int headsets) {
+    const std::vector<HeadsetPlan> plans = plan_headsets(server, scene, o, display, headsets);
+    Window w;
+    std::atomic<int> ready{0};
+    std::vector<HeadsetTally> tallies(static_cast<size_t>(headsets));
+    std::vector<std::thread> threads;
+    for (int i = 0; i < headsets; ++i)
+        threads.emplace_back(run_headset, std::cref(plans[size_t(i)]), std::ref(w), std::ref(ready),
+                             std::ref(tallies[size_t(i)]));
+    const auto connect_deadline = Clock::now() + std::chrono::seconds(60);
+    while (ready.load() < headsets && Clock::now() < connect_deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const RowWindow m = measure_window(server, o, w, headsets);
+    w.stop = true;
+    for (auto& t : threads) t.join();
+    ServedRow r = row_from(tallies, m, o, headsets);
+    settle(server);
+    return r;
 }
 
 // Starts the server on an ephemeral loopback port, serves one row per headset count (progress
@@ -460,30 +508,16 @@ std::string random_token() {
 Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scene& scene,
                                           const scene::ViewerProfile& profile,
                                           const ServeBenchOptions& o, std::optional<int> lp) {
-    stream::ServerCreateInfo info;
-    info.host = "127.0.0.1";
-    info.port = 0;
-    info.token = random_token();
+    stream::LoopbackCreateInfo info;
     std::error_code ec;
     info.asset_root =
         o.scene_path.empty() ? fs::current_path(ec) : fs::absolute(o.scene_path, ec).parent_path();
     const int most = *std::max_element(o.headsets.begin(), o.headsets.end());
-    info.limits.max_pending = std::max<uint32_t>(info.limits.max_pending, uint32_t(most) + 8);
-    info.limits.max_sessions = std::max<uint32_t>(info.limits.max_sessions, uint32_t(most) + 8);
-    info.limits.max_batch_viewers = o.max_batch_viewers;
-    info.renderer.planning_threads = o.planning_threads;
+    info.clients = uint32_t(most);
+    info.max_batch_viewers = o.max_batch_viewers;
+    info.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
-    auto server = stream::Server::create(device, scene, info);
-    if (!server)
-        return server.error();
-    stream::Server& srv = *server.value();
-    std::thread net([&srv] {
-        try {
-            srv.run();
-        } catch (const std::exception& e) {
-            log::error("bench serve: the server stopped: {}", e.what());
-        }
-    });
+    HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, scene, info));
     const scene::Intrinsics k = scene::eye_intrinsics(profile);
     proto::RegisterDisplay d;
     d.eye_width = k.width, d.eye_height = k.height;
@@ -501,7 +535,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
                                                               *bad);
     for (size_t i = 0; !failure && i < o.headsets.size(); ++i) {
         const int h = o.headsets[i];
-        ServedRow r = serve_row(srv, scene, o, d, info.token, h);
+        ServedRow r = serve_row(*server, scene, o, d, h);
         r.lp_num_threads = lp;
         fmt::print(
             stderr,
@@ -514,8 +548,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
         std::fflush(stderr);
         rows.push_back(std::move(r));
     }
-    srv.stop();
-    net.join();
+    server->stop();
     if (failure)
         return *failure;
     return rows;
@@ -686,6 +719,154 @@ struct QuietLog {
     ~QuietLog() { log::set_level(was); }
 };
 
+// The full-frame and lean baselines of the renderer, and the external lean script when given.
+void measure_baselines(gpu::Device& device, const scene::Scene& sc,
+                       const scene::ViewerProfile& profile, const ServeBenchOptions& o,
+                       Report& rep) {
+    const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    std::fprintf(stderr, "bench serve: %s, %s %ux%u per eye, %s %s; baselines over %d pairs\n",
+                 device.name().c_str(), profile.name.c_str(), k.width, k.height,
+                 format_name(o.format), encoding_name(o.encoding), o.baseline_frames);
+    auto lean = lean_scene(sc);
+    const std::pair<const char*, const scene::Scene*> scenes[] = {
+        {"full frame", &sc}, {"lean", lean ? &lean.value() : nullptr}};
+    for (const auto& [name, scene] : scenes) {
+        Baseline b{name, scene ? tessellation_of(*scene) : "64x32"};
+        auto f = scene ? full_frame_baseline(device, *scene, profile, o.baseline_frames)
+                       : Result<BaselineFigure>(lean.error());
+        if (f) {
+            b.figure = f.value();
+            std::fprintf(stderr,
+                         "bench serve: %s (%s, %llu triangles): %.2f ms per stereo pair (%.2f/s)\n",
+                         name, b.tessellation.c_str(), (unsigned long long)b.figure->triangles,
+                         b.figure->stereo_ms, b.figure->per_s);
+        } else {
+            b.error = f.error().message;
+            std::fprintf(stderr, "bench serve: %s: not measured: %s\n", name, b.error.c_str());
+        }
+        rep.baselines.push_back(std::move(b));
+    }
+    if (o.lean_baseline_command.empty())
+        return;
+    std::fprintf(stderr, "bench serve: running the lean script: %s\n",
+                 o.lean_baseline_command.c_str());
+    rep.lean_external = run_lean_baseline(o.lean_baseline_command);
+    if (rep.lean_external->ok)
+        std::fprintf(stderr, "bench serve: lean script: %.2f ms per stereo pair (%.2f/s)\n",
+                     rep.lean_external->stereo_ms, rep.lean_external->per_s);
+    else
+        std::fprintf(stderr, "bench serve: the lean script failed (%s); carrying on without it\n",
+                     rep.lean_external->error.c_str());
+}
+
+// The rows of the other LP_NUM_THREADS values, each from a child, sorted in beside this
+// process's rows: each headset count's rows together.
+void add_lp_thread_rows(const ServeBenchOptions& o, const fs::path& dir, Report& rep) {
+    for (int lp : o.lp_threads) {
+        std::fprintf(stderr, "bench serve: served rows again with LP_NUM_THREADS=%d\n", lp);
+        auto rows = child_rows(o, lp, dir / fmt::format("lp-threads-{}.json", lp));
+        if (!rows) {
+            rep.variant_errors.push_back(
+                fmt::format("LP_NUM_THREADS={}: {}", lp, rows.error().message));
+            std::fprintf(stderr, "bench serve: LP_NUM_THREADS=%d: %s\n", lp,
+                         rows.error().message.c_str());
+            continue;
+        }
+        rep.rows.insert(rep.rows.end(), rows.value().begin(), rows.value().end());
+    }
+    std::stable_sort(rep.rows.begin(), rep.rows.end(), [](const ServedRow& a, const ServedRow& b) {
+        return a.headsets < b.headsets;
+    });
+}
+
+json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
+                 const scene::ViewerProfile& profile) {
+    const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    return {{"scene", o.scene_path.empty() ? "default (embedded)" : o.scene_path},
+            {"scene_tessellation", tessellation_of(sc)},
+            {"profile", profile.name},
+            {"eye_width", k.width},
+            {"eye_height", k.height},
+            {"format", format_name(o.format)},
+            {"encoding", encoding_name(o.encoding)},
+            {"headsets", o.headsets},
+            {"seconds_per_row", o.seconds},
+            {"warmup_s", o.warmup_s},
+            {"pose_rate_hz", o.pose_rate_hz},
+            {"baseline_frames", o.baseline_frames},
+            {"lp_threads", o.lp_threads},
+            {"encoder_threads", o.encoder_threads},
+            {"max_batch_viewers", o.max_batch_viewers},
+            {"planning_threads", o.planning_threads},
+            {"quick", o.quick}};
+}
+
+const json& report_notes() {
+    static const json notes = {
+        "stage_ms_mean: the server's cost_ms.viewer_vd means over the row (from the difference "
+        "of its means times its frame count at the row's start and end), in the server's own "
+        "unit per stage",
+        "cpu_ms_per_stereo_layer: getrusage(RUSAGE_SELF) user + system over the row per stereo "
+        "layer; it includes the in-process headset clients",
+        "latency: client receive time of a frame's second eye layer minus the send time of the "
+        "pose it was rendered from",
+        "bytes_per_layer: wire bytes per eye layer, header included",
+        "render_thread_busy: the share of the row's wall time the server's render thread spent "
+        "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "
+        "a free command buffer); near 1 it is the bound"};
+    return notes;
+}
+
+// The table on stdout, bench-serve.json and the figure (PNG and SVG) in `dir`. An error line
+// (the exit status 1) when a file cannot be written or a row received no stereo layer.
+int write_report(const Report& rep, const ServeBenchOptions& o, const scene::Scene& sc,
+                 const scene::ViewerProfile& profile, const std::string& device_name,
+                 const fs::path& dir) {
+    auto fail = [](const std::string& what) {
+        std::fprintf(stderr, "hysar bench serve: %s\n", what.c_str());
+        return 1;
+    };
+    json j = report_json(rep);
+    j["machine"] = machine_json(device_name);
+    j["config"] = config_json(o, sc, profile);
+    j["notes"] = report_notes();
+    std::printf("%s", table(rep).c_str());
+    const fs::path json_path = dir / "bench-serve.json", png_path = dir / "bench-serve.png";
+    std::ofstream out(json_path);
+    out << j.dump(2, ' ', false, json::error_handler_t::replace) << "\n";
+    if (!out)
+        return fail("cannot write " + json_path.string());
+    const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    const std::string subtitle = fmt::format("{} {}x{}, {} {}", profile.name, k.width, k.height,
+                                             format_name(o.format), encoding_name(o.encoding));
+    if (auto w = write_figure(png_path, plot(rep, subtitle)); !w)
+        return fail(w.error().message);
+    std::printf("wrote %s, %s and bench-serve.svg\n", json_path.c_str(), png_path.c_str());
+    for (const auto& r : rep.rows)
+        if (r.stereo_layers == 0)
+            return fail(fmt::format("{} with {} headset(s) received no stereo layer{}",
+                                    row_label(r), r.headsets,
+                                    r.first_error.empty() ? "" : " (" + r.first_error + ")"));
+    return 0;
+}
+
+// The viewer profile of --profile (the scene's first when empty); null, with the exit status 2
+// line written, when the scene has none of that name.
+const scene::ViewerProfile* profile_of(const scene::Scene& sc, const ServeBenchOptions& o) {
+    const scene::ViewerProfile* profile = o.profile.empty()
+                                              ? (sc.viewers.empty() ? nullptr : &sc.viewers.front())
+                                              : sc.find_viewer(o.profile);
+    if (!profile) {
+        std::string names;
+        for (const auto& v : sc.viewers) names += (names.empty() ? "" : ", ") + v.name;
+        std::fprintf(stderr,
+                     "hysar bench serve: --profile '%s': the scene has no such viewer profile "
+                     "(it has: %s)\n",
+                     o.profile.c_str(), names.c_str());
+    }
+    return profile;
+}
+
 }  // namespace
 
 int run_serve_bench(const ServeBenchOptions& o) {
@@ -697,18 +878,9 @@ int run_serve_bench(const ServeBenchOptions& o) {
     if (!s)
         return fail("--scene: " + s.error().message);
     const scene::Scene& sc = s.value();
-    const scene::ViewerProfile* profile = o.profile.empty()
-                                              ? (sc.viewers.empty() ? nullptr : &sc.viewers.front())
-                                              : sc.find_viewer(o.profile);
-    if (!profile) {
-        std::string names;
-        for (const auto& v : sc.viewers) names += (names.empty() ? "" : ", ") + v.name;
-        std::fprintf(stderr,
-                     "hysar bench serve: --profile '%s': the scene has no such viewer profile "
-                     "(it has: %s)\n",
-                     o.profile.c_str(), names.c_str());
+    const scene::ViewerProfile* profile = profile_of(sc, o);
+    if (!profile)
         return 2;
-    }
     const fs::path dir(o.out_dir);
     if (o.child_json.empty()) {
         std::error_code ec;
@@ -725,50 +897,8 @@ int run_serve_bench(const ServeBenchOptions& o) {
         if (!device)
             return fail(device.error().message);
         device_name = device.value()->name();
-        if (o.child_json.empty()) {
-            const scene::Intrinsics k = scene::eye_intrinsics(*profile);
-            std::fprintf(stderr,
-                         "bench serve: %s, %s %ux%u per eye, %s %s; baselines over %d pairs\n",
-                         device_name.c_str(), profile->name.c_str(), k.width, k.height,
-                         format_name(o.format), encoding_name(o.encoding), o.baseline_frames);
-            auto lean = lean_scene(sc);
-            const std::pair<const char*, const scene::Scene*> scenes[] = {
-                {"full frame", &sc}, {"lean", lean ? &lean.value() : nullptr}};
-            for (const auto& [name, scene] : scenes) {
-                Baseline b{name, scene ? tessellation_of(*scene) : "64x32"};
-                auto f = scene ? full_frame_baseline(*device.value(), *scene, *profile,
-                                                     o.baseline_frames)
-                               : Result<BaselineFigure>(lean.error());
-                if (f) {
-                    b.figure = f.value();
-                    std::fprintf(stderr,
-                                 "bench serve: %s (%s, %llu triangles): %.2f ms per stereo pair "
-                                 "(%.2f/s)\n",
-                                 name, b.tessellation.c_str(),
-                                 (unsigned long long)b.figure->triangles, b.figure->stereo_ms,
-                                 b.figure->per_s);
-                } else {
-                    b.error = f.error().message;
-                    std::fprintf(stderr, "bench serve: %s: not measured: %s\n", name,
-                                 b.error.c_str());
-                }
-                rep.baselines.push_back(std::move(b));
-            }
-            if (!o.lean_baseline_command.empty()) {
-                std::fprintf(stderr, "bench serve: running the lean script: %s\n",
-                             o.lean_baseline_command.c_str());
-                rep.lean_external = run_lean_baseline(o.lean_baseline_command);
-                if (rep.lean_external->ok)
-                    std::fprintf(stderr,
-                                 "bench serve: lean script: %.2f ms per stereo pair (%.2f/s)\n",
-                                 rep.lean_external->stereo_ms, rep.lean_external->per_s);
-                else
-                    std::fprintf(stderr,
-                                 "bench serve: the lean script failed (%s); carrying on without "
-                                 "it\n",
-                                 rep.lean_external->error.c_str());
-            }
-        }
+        if (o.child_json.empty())
+            measure_baselines(*device.value(), sc, *profile, o, rep);
         auto rows = serve_rows(*device.value(), sc, *profile, o, std::nullopt);
         if (!rows)
             return fail(rows.error().message);
@@ -781,72 +911,8 @@ int run_serve_bench(const ServeBenchOptions& o) {
         out << json{{"rows", rows}}.dump(2) << "\n";
         return out ? 0 : fail("cannot write " + o.child_json);
     }
-    for (int lp : o.lp_threads) {
-        std::fprintf(stderr, "bench serve: served rows again with LP_NUM_THREADS=%d\n", lp);
-        auto rows = child_rows(o, lp, dir / fmt::format("lp-threads-{}.json", lp));
-        if (!rows) {
-            rep.variant_errors.push_back(
-                fmt::format("LP_NUM_THREADS={}: {}", lp, rows.error().message));
-            std::fprintf(stderr, "bench serve: LP_NUM_THREADS=%d: %s\n", lp,
-                         rows.error().message.c_str());
-            continue;
-        }
-        rep.rows.insert(rep.rows.end(), rows.value().begin(), rows.value().end());
-    }
-    // Variants side by side: each headset count's rows together.
-    std::stable_sort(rep.rows.begin(), rep.rows.end(), [](const ServedRow& a, const ServedRow& b) {
-        return a.headsets < b.headsets;
-    });
-
-    const scene::Intrinsics k = scene::eye_intrinsics(*profile);
-    json j = report_json(rep);
-    j["machine"] = machine_json(device_name);
-    j["config"] = {{"scene", o.scene_path.empty() ? "default (embedded)" : o.scene_path},
-                   {"scene_tessellation", tessellation_of(sc)},
-                   {"profile", profile->name},
-                   {"eye_width", k.width},
-                   {"eye_height", k.height},
-                   {"format", format_name(o.format)},
-                   {"encoding", encoding_name(o.encoding)},
-                   {"headsets", o.headsets},
-                   {"seconds_per_row", o.seconds},
-                   {"warmup_s", o.warmup_s},
-                   {"pose_rate_hz", o.pose_rate_hz},
-                   {"baseline_frames", o.baseline_frames},
-                   {"lp_threads", o.lp_threads},
-                   {"encoder_threads", o.encoder_threads},
-                   {"max_batch_viewers", o.max_batch_viewers},
-                   {"planning_threads", o.planning_threads},
-                   {"quick", o.quick}};
-    j["notes"] = {
-        "stage_ms_mean: the server's cost_ms.viewer_vd means over the row (from the difference "
-        "of its means times its frame count at the row's start and end), in the server's own "
-        "unit per stage",
-        "cpu_ms_per_stereo_layer: getrusage(RUSAGE_SELF) user + system over the row per stereo "
-        "layer; it includes the in-process headset clients",
-        "latency: client receive time of a frame's second eye layer minus the send time of the "
-        "pose it was rendered from",
-        "bytes_per_layer: wire bytes per eye layer, header included",
-        "render_thread_busy: the share of the row's wall time the server's render thread spent "
-        "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "
-        "a free command buffer); near 1 it is the bound"};
-    std::printf("%s", table(rep).c_str());
-    const fs::path json_path = dir / "bench-serve.json", png_path = dir / "bench-serve.png";
-    std::ofstream out(json_path);
-    out << j.dump(2, ' ', false, json::error_handler_t::replace) << "\n";
-    if (!out)
-        return fail("cannot write " + json_path.string());
-    const std::string subtitle = fmt::format("{} {}x{}, {} {}", profile->name, k.width, k.height,
-                                             format_name(o.format), encoding_name(o.encoding));
-    if (auto w = write_figure(png_path, plot(rep, subtitle)); !w)
-        return fail(w.error().message);
-    std::printf("wrote %s, %s and bench-serve.svg\n", json_path.c_str(), png_path.c_str());
-    for (const auto& r : rep.rows)
-        if (r.stereo_layers == 0)
-            return fail(fmt::format("{} with {} headset(s) received no stereo layer{}",
-                                    row_label(r), r.headsets,
-                                    r.first_error.empty() ? "" : " (" + r.first_error + ")"));
-    return 0;
+    add_lp_thread_rows(o, dir, rep);
+    return write_report(rep, o, sc, *profile, device_name, dir);
 }
 
 }  // namespace hs::bench

@@ -1,4 +1,4 @@
-#include "core/draw.hpp"
+#include "plot/draw.hpp"
 
 #include <algorithm>
 #include <vector>

@@ -1,8 +1,7 @@
-#include "installation/served.hpp"
+#include "served_installation/served.hpp"
 
 #include <chrono>
 #include <cmath>
-#include <thread>
 
 #include <fmt/format.h>
 
@@ -11,7 +10,7 @@
 #include "optics/capture.hpp"
 #include "protocol/tiles.hpp"
 #include "scene/camera.hpp"
-#include "stream/server.hpp"
+#include "stream/loopback.hpp"
 
 namespace hs::installation {
 
@@ -136,15 +135,12 @@ Result<void> save_calibration(const std::filesystem::path& dir, const VirtualIns
 Result<ServedCapture> serve_and_capture(
     gpu::Device& device, const VirtualInstallation& inst,
     std::shared_ptr<const calib::ServingCalibration> calibration, const ServeOptions& o) {
-    stream::ServerCreateInfo info;
-    info.port = 0;
+    stream::LoopbackCreateInfo info;
     info.token = "virtual-installation";
     info.calibration = std::move(calibration);
-    HS_ASSIGN_OR_RETURN(auto server, stream::Server::create(device, inst.scene(), info));
-    std::thread thread([&] { server->run(); });
-    auto got = receive_served(fmt::format("127.0.0.1:{}", server->port()), info.token, inst, o);
+    HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, inst.scene(), info));
+    auto got = receive_served(server->address(), server->token(), inst, o);
     server->stop();
-    thread.join();
     if (!got)
         return got.error();
 

@@ -1,4 +1,4 @@
-#include "core/figure.hpp"
+#include "plot/figure.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -7,7 +7,7 @@
 
 #include <fmt/format.h>
 
-#include "core/draw.hpp"
+#include "plot/draw.hpp"
 
 namespace hs {
 

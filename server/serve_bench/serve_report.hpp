@@ -9,9 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
-#include "bench/serve_bench.hpp"
-#include "core/figure.hpp"
 #include "core/image.hpp"
+#include "plot/figure.hpp"
+#include "serve_bench/serve_bench.hpp"
 
 namespace hs::bench {
 
