@@ -11,11 +11,13 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "commands.hpp"
+#include "cli/commands.hpp"
+#include "cli/common.hpp"
+#include "cli/flags.hpp"
 #include "core/draw.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
-#include "eval_common.hpp"
+#include "options/options.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
@@ -96,74 +98,71 @@ bool written_as_number(const std::string& s) {
     return head == "nan" || head == "inf";
 }
 
-Result<Options> parse(const std::vector<std::string>& args) {
-    Options o;
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        auto value = [&]() -> Result<std::string> {
-            if (i + 1 >= args.size())
-                return make_error(ErrorCode::kInvalidArgument, fmt::format("{} needs a value", a));
-            return args[++i];
-        };
-        if (a == "--scene") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            o.scene = v;
-        } else if (a == "--out") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            o.out = v;
-        } else if (a == "--angles") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            for (const auto& x : split(v)) {
-                HS_ASSIGN_OR_RETURN(double d, parse_double(a, x, -scene::kMaxViewAngleDeg,
-                                                           scene::kMaxViewAngleDeg));
-                o.angles.push_back(d);
-            }
-            if (o.angles.empty())
-                return make_error(ErrorCode::kInvalidArgument, "--angles: empty list");
-        } else if (a == "--heights") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            o.heights = split(v);
-            for (const auto& h : o.heights)
-                if (written_as_number(h))
-                    HS_TRY(parse_double(a, h, -scene::kMaxViewHeightM, scene::kMaxViewHeightM));
-        } else if (a == "--model") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            o.models = split(v);
-        } else if (a == "--viewer") {
-            HS_ASSIGN_OR_RETURN(o.viewer, value());
-        } else if (a == "--format") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            if (v == "rgba16f")
-                o.format = gpu::ColorFormat::kRgba16Float;
-            else if (v == "rgba32f")
-                o.format = gpu::ColorFormat::kRgba32Float;
-            else if (v == "rgba8")
-                o.format = gpu::ColorFormat::kRgba8Unorm;
-            else
-                return make_error(
-                    ErrorCode::kInvalidArgument,
-                    fmt::format("--format: '{}' is not rgba16f, rgba32f or rgba8", v));
-        } else if (a == "--device") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            o.device_set = true;
-            auto p = gpu::parse_device_preference(v);
-            if (!p)
-                return make_error(ErrorCode::kInvalidArgument,
-                                  fmt::format("--device: '{}' is not auto, cpu or gpu", v));
-            o.device = *p;
-        } else if (a == "--white") {
-            HS_ASSIGN_OR_RETURN(auto v, value());
-            HS_ASSIGN_OR_RETURN(double w, parse_double(a, v, 1e-6, 1e6));
-            o.white = float(w);
-        } else if (a == "--no-reference")
-            o.reference = false;
-        else if (a == "--no-exr")
-            o.exr = false;
-        else if (a == "--check")
-            o.check = true;
-        else
-            return make_error(ErrorCode::kInvalidArgument, fmt::format("unknown option '{}'", a));
+Result<gpu::ColorFormat> color_format(const std::string& v) {
+    if (v == "rgba16f")
+        return gpu::ColorFormat::kRgba16Float;
+    if (v == "rgba32f")
+        return gpu::ColorFormat::kRgba32Float;
+    if (v == "rgba8")
+        return gpu::ColorFormat::kRgba8Unorm;
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("--format: '{}' is not rgba16f, rgba32f or rgba8", v));
+}
+
+// --angles (each time it is given, its items added) and --heights (the last one), checked.
+Result<void> read_views(const Flags& f, Options& o) {
+    for (const auto& v : f.all("--angles")) {
+        for (const auto& x : split(v)) {
+            HS_ASSIGN_OR_RETURN(double d, parse_double("--angles", x, -scene::kMaxViewAngleDeg,
+                                                       scene::kMaxViewAngleDeg));
+            o.angles.push_back(d);
+        }
+        if (o.angles.empty())
+            return make_error(ErrorCode::kInvalidArgument, "--angles: empty list");
     }
+    if (f.has("--heights")) {
+        o.heights = split(f.get("--heights", ""));
+        for (const auto& h : o.heights)
+            if (written_as_number(h))
+                HS_TRY(
+                    parse_double("--heights", h, -scene::kMaxViewHeightM, scene::kMaxViewHeightM));
+    }
+    return {};
+}
+
+Result<Options> parse(const std::vector<std::string>& args) {
+    HS_ASSIGN_OR_RETURN(
+        Flags f, parse_flags(args,
+                             {"--scene", "--out", "--angles", "--heights", "--model", "--viewer",
+                              "--format", "--device", "--white"},
+                             {"--no-reference", "--no-exr", "--check"}));
+    Options o;
+    if (f.has("--scene"))
+        o.scene = f.get("--scene", "");
+    o.out = f.get("--out", o.out.string());
+    HS_TRY(read_views(f, o));
+    if (f.has("--model"))
+        o.models = split(f.get("--model", ""));
+    o.viewer = f.get("--viewer", "");
+    if (f.has("--format")) {
+        HS_ASSIGN_OR_RETURN(o.format, color_format(f.get("--format", "")));
+    }
+    if (f.has("--device")) {
+        const std::string v = f.get("--device", "");
+        o.device_set = true;
+        auto p = gpu::parse_device_preference(v);
+        if (!p)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--device: '{}' is not auto, cpu or gpu", v));
+        o.device = *p;
+    }
+    if (f.has("--white")) {
+        HS_ASSIGN_OR_RETURN(double white, parse_double("--white", f.get("--white", ""), 1e-6, 1e6));
+        o.white = float(white);
+    }
+    o.reference = !f.has("--no-reference");
+    o.exr = !f.has("--no-exr");
+    o.check = f.has("--check");
     return o;
 }
 
@@ -235,57 +234,50 @@ json error_json(const shading::ErrorStats& e, std::vector<std::string>& disagree
     return j;
 }
 
-// Returns how many images disagree with the reference beyond the stated tolerance.
-Result<size_t> run(const Options& o) {
-    const auto t_start = std::chrono::steady_clock::now();
+// What one run renders: the scene, the viewer, the models, the angles and the heights, every
+// name resolved and every number checked before the device is made.
+struct Plan {
     scene::Scene s;
+    const scene::ViewerProfile* viewer = nullptr;
+    std::vector<ModelChoice> models;
+    std::vector<double> angles;
+    std::vector<std::pair<std::string, double>> heights;  // name, metres
+};
+
+Result<Plan> plan_render(const Options& o) {
+    Plan p;
     if (o.scene) {
-        HS_ASSIGN_OR_RETURN(s, scene::load_scene_file(*o.scene));
+        HS_ASSIGN_OR_RETURN(p.s, scene::load_scene_file(*o.scene));
     } else {
-        s = scene::default_scene();
+        p.s = scene::default_scene();
     }
-    const scene::ViewerProfile* viewer =
-        o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
-    if (!viewer)
+    const scene::Scene& s = p.s;
+    p.viewer = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
+    if (!p.viewer)
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("--viewer: the scene has no viewer '{}'", o.viewer));
-    HS_ASSIGN_OR_RETURN(auto models, resolve_models(s, o.models));
-    std::vector<double> angles = o.angles.empty() ? s.viewing.angles_deg : o.angles;
-    std::vector<std::pair<std::string, double>> heights;
+    HS_ASSIGN_OR_RETURN(p.models, resolve_models(s, o.models));
+    p.angles = o.angles.empty() ? s.viewing.angles_deg : o.angles;
     for (const auto& h :
          o.heights.empty() ? std::vector<std::string>{s.viewing.default_height} : o.heights) {
         if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end())
-            heights.push_back(*it);
+            p.heights.push_back(*it);
         else {
             HS_ASSIGN_OR_RETURN(double m, parse_double("--heights", h, -scene::kMaxViewHeightM,
                                                        scene::kMaxViewHeightM));
-            heights.push_back({fmt::format("{:.2f}m", m), m});
+            p.heights.push_back({fmt::format("{:.2f}m", m), m});
         }
     }
+    return p;
+}
 
-    std::error_code ec;
-    fs::create_directories(o.out / "vd", ec);
-    if (ec)
-        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}",
-                                                      o.out.string(), ec.message()));
-
-    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
-    if (o.device_set)
-        di.preference = o.device;
-    HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(di));
-    render::RendererCreateInfo ri;
-    ri.format = o.format;
-    HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(*device, s, ri));
-    log::info(
-        "device: {}; scene: {}; prop mesh: {} triangles; viewer: {} ({}x{} per eye); format: {}",
-        device->name(), s.name, renderer->mesh().indices.size() / 3, viewer->name,
-        viewer->eye_width, viewer->eye_height, gpu::to_string(o.format));
-
+// render.json's head: what was rendered, how, and the stated tolerance.
+json report_head(const Plan& p, const Options& o, const gpu::Device& device) {
     json report;
-    report["scene"] = s.name;
-    report["device"] = device->name();
+    report["scene"] = p.s.name;
+    report["device"] = device.name();
     report["format"] = gpu::to_string(o.format);
-    report["viewer"] = viewer->name;
+    report["viewer"] = p.viewer->name;
     report["white"] = o.white;
     report["tone_map"] = "png = srgb_oetf(clamp(L / white, 0, 1)); docs/SHADING.md";
     report["interior_min_n_dot_v"] = shading::kInteriorMinNdotV;
@@ -293,128 +285,209 @@ Result<size_t> run(const Options& o) {
     report["tolerance"] = {
         {"interior_max", fmt::format("{} * peak + {}", tol.interior_max_rel, tol.interior_max_abs)},
         {"rmse", fmt::format("{} * peak + {}", tol.rmse_rel, tol.rmse_abs)}};
+    return report;
+}
+
+// The images written so far: their entries of render.json and their disagreements.
+struct Written {
+    const Options& o;
     json images = json::array();
     std::vector<std::string> disagreements;
 
-    auto write_pair = [&](const fs::path& stem, const ImageRgba32f& img) -> Result<void> {
+    // STEM.png, tone-mapped, and STEM.exr unless --no-exr.
+    Result<void> pair(const fs::path& stem, const ImageRgba32f& img) const {
         HS_TRY(write_png(fs::path(stem).concat(".png"), tonemap_srgb8(img, o.white)));
         if (o.exr)
             HS_TRY(write_exr(fs::path(stem).concat(".exr"), img));
         return {};
-    };
+    }
+};
 
-    // 1. The projector (VI) frame, rendered once.
-    HS_ASSIGN_OR_RETURN(auto proj, renderer->render_projector());
-    HS_TRY(write_pair(o.out / "projector", proj.image));
+// 1. The projector (VI) frame, rendered once, and its comparison with the reference.
+Result<void> render_projector(render::Renderer& renderer, const Plan& p, Written& w) {
+    HS_ASSIGN_OR_RETURN(auto proj, renderer.render_projector());
+    HS_TRY(w.pair(w.o.out / "projector", proj.image));
     json pj{{"file", "projector.png"},
             {"kind", "projector-vi"},
             {"width", proj.image.width},
             {"height", proj.image.height},
             {"render_ms", proj.report.render_ms},
             {"effects", proj.report.effects}};
-    if (o.reference) {
-        auto ref = shading::reference_projector(s);
+    if (w.o.reference) {
+        auto ref = shading::reference_projector(p.s);
         if (ref)
             pj["error"] = error_json(shading::compare_images(proj.image, ref.value(), {}, 0.0),
-                                     disagreements, "projector.png");
+                                     w.disagreements, "projector.png");
         else
             pj["error"] = ref.error().message;
     }
-    images.push_back(pj);
+    w.images.push_back(pj);
     log::info("projector frame {}x{}: {:.1f} ms", proj.image.width, proj.image.height,
               proj.report.render_ms);
+    return {};
+}
 
-    // 2. VD layers per model, height, angle and eye; 3. the contact sheet (right eye).
-    const scene::Intrinsics k = scene::eye_intrinsics(*viewer);
-    const uint32_t factor = std::max<uint32_t>(1, (viewer->eye_width + 319) / 320);
-    const int cell_w = int(viewer->eye_width / factor), cell_h = int(viewer->eye_height / factor);
-    const int label_w = 200, header_h = 28, gap = 4;
-    const size_t rows_per_height = models.size() + 1;
-    ImageRgba8 sheet =
-        make_canvas(uint32_t(label_w + angles.size() * (cell_w + gap)),
-                    uint32_t(header_h + heights.size() * rows_per_height * (cell_h + gap)), 24);
-    for (size_t a = 0; a < angles.size(); ++a)
-        draw_text(sheet, label_w + int(a) * (cell_w + gap) + cell_w / 2 - 30, 6,
-                  fmt::format("{:+.0f} deg", angles[a]), 2, 230, 230, 230);
+// The contact sheet (right eye): a row of VI per height, then a row per model, a column per
+// angle, each cell an image downscaled by `factor`.
+struct Sheet {
+    static constexpr int kLabelW = 200, kHeaderH = 28, kGap = 4;
+    uint32_t factor = 1;
+    int cell_w = 0, cell_h = 0;
+    size_t rows_per_height = 0;
+    ImageRgba8 image;
 
-    const size_t total = models.size() * heights.size() * angles.size() * 2;
-    size_t done = 0;
-    for (size_t hi = 0; hi < heights.size(); ++hi) {
-        const auto& [hname, hm] = heights[hi];
-        const int row0 = header_h + int(hi * rows_per_height) * (cell_h + gap);
-        draw_text(sheet, 6, row0 + cell_h / 2 - 14, "#0 projector", 2, 230, 230, 230);
-        draw_text(sheet, 6, row0 + cell_h / 2 + 4, fmt::format("(VI) h={}", hname), 2, 160, 160,
-                  160);
-        for (size_t mi = 0; mi < models.size(); ++mi)
-            draw_text(sheet, 6, row0 + int(mi + 1) * (cell_h + gap) + cell_h / 2 - 7,
-                      fmt::format("#{} {}", mi + 1, models[mi].name), 2, 230, 230, 230);
-        for (size_t ai = 0; ai < angles.size(); ++ai) {
-            HS_ASSIGN_OR_RETURN(scene::Pose head, scene::viewing_pose(s.viewing, angles[ai], hm));
-            const auto eyes = scene::eye_poses(head, viewer->ipd_m);
-            // What the right eye sees of the projected VI: the row-0 cell and the base of the
-            // others.
-            HS_ASSIGN_OR_RETURN(auto vi_eye, renderer->render_eye_diffuse(k, eyes[1]));
-            const int x = label_w + int(ai) * (cell_w + gap);
-            blit(sheet, downscale(tonemap_srgb8(vi_eye.image, o.white), factor), x, row0);
-            for (size_t mi = 0; mi < models.size(); ++mi) {
-                for (int e = 0; e < 2; ++e) {
-                    const char* eye_name = e == 0 ? "left" : "right";
-                    HS_ASSIGN_OR_RETURN(auto vd, renderer->render_eye(models[mi].spec, k, eyes[e]));
-                    const std::string stem = fmt::format("{}_{}_{}_{}", models[mi].name,
-                                                         angle_tag(angles[ai]), hname, eye_name);
-                    HS_TRY(write_pair(o.out / "vd" / stem, vd.image));
-                    json ij{{"file", "vd/" + stem + ".png"},
-                            {"kind", "viewer-vd"},
-                            {"model", models[mi].name},
-                            {"specular_model", scene::to_string(models[mi].spec.model)},
-                            {"angle_deg", angles[ai]},
-                            {"height", hname},
-                            {"height_m", hm},
-                            {"eye", eye_name},
-                            {"width", k.width},
-                            {"height_px", k.height},
-                            {"render_ms", vd.report.render_ms},
-                            {"pass_ran", vd.report.ran},
-                            {"effects", vd.report.effects}};
-                    if (!vd.report.ran)
-                        ij["skipped_because"] = vd.report.skipped_because;
-                    std::string err_text = "";
-                    if (o.reference) {
-                        std::vector<float> ndv;
-                        auto ref = shading::reference_viewer(s, models[mi].spec, k, eyes[e], &ndv);
-                        if (ref) {
-                            auto st = shading::compare_images(vd.image, ref.value(), ndv,
-                                                              shading::kInteriorMinNdotV);
-                            ij["error"] = error_json(st, disagreements, "vd/" + stem + ".png");
-                            err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}",
-                                                   st.rmse, st.interior_rmse, st.max_abs);
-                        } else {
-                            ij["error"] = ref.error().message;
-                        }
-                    }
-                    images.push_back(ij);
-                    ++done;
-                    log::info("[{}/{}] {} {:+.0f} deg h={} {}: {:.1f} ms{}", done, total,
-                              models[mi].name, angles[ai], hname, eye_name, vd.report.render_ms,
-                              err_text);
-                    if (e == 1) {
-                        const int y = row0 + int(mi + 1) * (cell_h + gap);
-                        blit(sheet,
-                             downscale(tonemap_srgb8(added(vi_eye.image, vd.image), o.white),
-                                       factor),
-                             x, y);
-                    }
-                }
-            }
+    explicit Sheet(const Plan& p) {
+        const scene::ViewerProfile& v = *p.viewer;
+        factor = std::max<uint32_t>(1, (v.eye_width + 319) / 320);
+        cell_w = int(v.eye_width / factor), cell_h = int(v.eye_height / factor);
+        rows_per_height = p.models.size() + 1;
+        image = make_canvas(
+            uint32_t(kLabelW + p.angles.size() * (cell_w + kGap)),
+            uint32_t(kHeaderH + p.heights.size() * rows_per_height * (cell_h + kGap)), 24);
+        for (size_t a = 0; a < p.angles.size(); ++a)
+            draw_text(image, kLabelW + int(a) * (cell_w + kGap) + cell_w / 2 - 30, 6,
+                      fmt::format("{:+.0f} deg", p.angles[a]), 2, 230, 230, 230);
+    }
+    int row0(size_t height) const {
+        return kHeaderH + int(height * rows_per_height) * (cell_h + kGap);
+    }
+    int x(size_t angle) const { return kLabelW + int(angle) * (cell_w + kGap); }
+    int y(size_t height, size_t model) const {
+        return row0(height) + int(model + 1) * (cell_h + kGap);
+    }
+    void labels(const Plan& p, size_t height) {
+        const int r = row0(height);
+        draw_text(image, 6, r + cell_h / 2 - 14, "#0 projector", 2, 230, 230, 230);
+        draw_text(image, 6, r + cell_h / 2 + 4, fmt::format("(VI) h={}", p.heights[height].first),
+                  2, 160, 160, 160);
+        for (size_t mi = 0; mi < p.models.size(); ++mi)
+            draw_text(image, 6, y(height, mi) + cell_h / 2 - 7,
+                      fmt::format("#{} {}", mi + 1, p.models[mi].name), 2, 230, 230, 230);
+    }
+    void put(const ImageRgba32f& img, float white, int px, int py) {
+        blit(image, downscale(tonemap_srgb8(img, white), factor), px, py);
+    }
+};
+
+// One VD image: where it is seen from, and the model.
+struct EyeView {
+    const ModelChoice& model;
+    double angle_deg;
+    const std::string& height;
+    double height_m;
+    int eye;  // 0 left, 1 right
+    const scene::Pose& pose;
+};
+
+// 2. One VD layer: rendered, written, compared with the reference; its entry in render.json.
+Result<render::RenderResult> render_vd(render::Renderer& renderer, const Plan& p,
+                                       const scene::Intrinsics& k, const EyeView& v, Written& w,
+                                       std::string& err_text) {
+    const char* eye_name = v.eye == 0 ? "left" : "right";
+    HS_ASSIGN_OR_RETURN(auto vd, renderer.render_eye(v.model.spec, k, v.pose));
+    const std::string stem =
+        fmt::format("{}_{}_{}_{}", v.model.name, angle_tag(v.angle_deg), v.height, eye_name);
+    HS_TRY(w.pair(w.o.out / "vd" / stem, vd.image));
+    json ij{{"file", "vd/" + stem + ".png"},
+            {"kind", "viewer-vd"},
+            {"model", v.model.name},
+            {"specular_model", scene::to_string(v.model.spec.model)},
+            {"angle_deg", v.angle_deg},
+            {"height", v.height},
+            {"height_m", v.height_m},
+            {"eye", eye_name},
+            {"width", k.width},
+            {"height_px", k.height},
+            {"render_ms", vd.report.render_ms},
+            {"pass_ran", vd.report.ran},
+            {"effects", vd.report.effects}};
+    if (!vd.report.ran)
+        ij["skipped_because"] = vd.report.skipped_because;
+    err_text.clear();
+    if (w.o.reference) {
+        std::vector<float> ndv;
+        auto ref = shading::reference_viewer(p.s, v.model.spec, k, v.pose, &ndv);
+        if (ref) {
+            auto st =
+                shading::compare_images(vd.image, ref.value(), ndv, shading::kInteriorMinNdotV);
+            ij["error"] = error_json(st, w.disagreements, "vd/" + stem + ".png");
+            err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}", st.rmse,
+                                   st.interior_rmse, st.max_abs);
+        } else {
+            ij["error"] = ref.error().message;
         }
     }
-    HS_TRY(write_png(o.out / "sheet.png", sheet));
-    report["images"] = images;
+    w.images.push_back(ij);
+    return vd;
+}
+
+// 2. and 3.: the VD layers per model, height, angle and eye, into the contact sheet.
+Result<size_t> render_vd_layers(render::Renderer& renderer, const Plan& p, Written& w,
+                                Sheet& sheet) {
+    const scene::Intrinsics k = scene::eye_intrinsics(*p.viewer);
+    const size_t total = p.models.size() * p.heights.size() * p.angles.size() * 2;
+    size_t done = 0;
+    for (size_t hi = 0; hi < p.heights.size(); ++hi) {
+        const auto& [hname, hm] = p.heights[hi];
+        sheet.labels(p, hi);
+        for (size_t ai = 0; ai < p.angles.size(); ++ai) {
+            HS_ASSIGN_OR_RETURN(scene::Pose head,
+                                scene::viewing_pose(p.s.viewing, p.angles[ai], hm));
+            const auto eyes = scene::eye_poses(head, p.viewer->ipd_m);
+            // What the right eye sees of the projected VI: the row-0 cell and the base of the
+            // others.
+            HS_ASSIGN_OR_RETURN(auto vi_eye, renderer.render_eye_diffuse(k, eyes[1]));
+            sheet.put(vi_eye.image, w.o.white, sheet.x(ai), sheet.row0(hi));
+            for (size_t mi = 0; mi < p.models.size(); ++mi)
+                for (int e = 0; e < 2; ++e) {
+                    std::string err_text;
+                    const EyeView view{p.models[mi], p.angles[ai], hname, hm, e, eyes[e]};
+                    HS_ASSIGN_OR_RETURN(auto vd, render_vd(renderer, p, k, view, w, err_text));
+                    ++done;
+                    log::info("[{}/{}] {} {:+.0f} deg h={} {}: {:.1f} ms{}", done, total,
+                              p.models[mi].name, p.angles[ai], hname, e == 0 ? "left" : "right",
+                              vd.report.render_ms, err_text);
+                    if (e == 1)
+                        sheet.put(added(vi_eye.image, vd.image), w.o.white, sheet.x(ai),
+                                  sheet.y(hi, mi));
+                }
+        }
+    }
+    return done;
+}
+
+// Returns how many images disagree with the reference beyond the stated tolerance.
+Result<size_t> run(const Options& o) {
+    const auto t_start = std::chrono::steady_clock::now();
+    HS_ASSIGN_OR_RETURN(Plan p, plan_render(o));
+    std::error_code ec;
+    fs::create_directories(o.out / "vd", ec);
+    if (ec)
+        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}",
+                                                      o.out.string(), ec.message()));
+    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
+    if (o.device_set)
+        di.preference = o.device;
+    HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(di));
+    render::RendererCreateInfo ri;
+    ri.format = o.format;
+    HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(*device, p.s, ri));
+    log::info(
+        "device: {}; scene: {}; prop mesh: {} triangles; viewer: {} ({}x{} per eye); format: {}",
+        device->name(), p.s.name, renderer->mesh().indices.size() / 3, p.viewer->name,
+        p.viewer->eye_width, p.viewer->eye_height, gpu::to_string(o.format));
+    json report = report_head(p, o, *device);
+    Written w{o};
+    HS_TRY(render_projector(*renderer, p, w));
+    Sheet sheet(p);
+    HS_ASSIGN_OR_RETURN(size_t done, render_vd_layers(*renderer, p, w, sheet));
+    HS_TRY(write_png(o.out / "sheet.png", sheet.image));
+    report["images"] = w.images;
     report["projector_renders"] = renderer->projector_render_count();
     report["pipelines_built"] = renderer->pipelines_built();
     report["total_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-    report["disagreements"] = disagreements;
+    report["disagreements"] = w.disagreements;
     std::ofstream(o.out / "render.json") << report.dump(2) << "\n";
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
@@ -423,19 +496,18 @@ Result<size_t> run(const Options& o) {
                 o.out.c_str(), done, report["total_s"].get<double>());
     if (o.reference)
         std::printf("%zu of %zu images disagree with the reference beyond the stated tolerance\n",
-                    disagreements.size(), done + 1);
-    for (const auto& d : disagreements) std::printf("  %s\n", d.c_str());
-    return disagreements.size();
+                    w.disagreements.size(), done + 1);
+    for (const auto& d : w.disagreements) std::printf("  %s\n", d.c_str());
+    return w.disagreements.size();
 }
 
 }  // namespace
 
 int run_render(const std::vector<std::string>& args) {
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            std::fputs(kRenderHelp, stdout);
-            return 0;
-        }
+    if (options::asks_for_help(args)) {
+        std::fputs(kRenderHelp, stdout);
+        return 0;
+    }
     auto opts = parse(args);
     if (!opts) {
         std::fprintf(stderr, "hysar render: %s\n\n%s", opts.error().message.c_str(), kRenderHelp);

@@ -16,10 +16,12 @@
 
 #include "admin/admin_server.hpp"
 #include "calib/serving.hpp"
+#include "cli/commands.hpp"
+#include "cli/common.hpp"
+#include "cli/flags.hpp"
 #include "cluster/scene_bus.hpp"
-#include "commands.hpp"
 #include "core/log.hpp"
-#include "eval_common.hpp"
+#include "options/options.hpp"
 #include "scene/config.hpp"
 #include "stream/server.hpp"
 
@@ -200,67 +202,79 @@ int usage_error(const std::string& message) {
     return 2;
 }
 
-}  // namespace
+// A start-up failure past the options (a file, the device, the bus): exit status 1.
+int start_error(const std::string& message) {
+    std::fprintf(stderr, "hysar serve: %s\n", message.c_str());
+    return 1;
+}
 
-int run_serve(const std::vector<std::string>& args) {
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            std::fputs(kServeHelp, stdout);
-            return 0;
-        }
-    auto parsed = parse_flags(args, {"--scene",
-                                     "--listen",
-                                     "--unix",
-                                     "--token-file",
-                                     "--admin-token-file",
-                                     "--asset-root",
-                                     "--device",
-                                     "--stats-file",
-                                     "--admin-listen",
-                                     "--max-sessions",
-                                     "--max-pending",
-                                     "--handshake-timeout-ms",
-                                     "--idle-timeout-ms",
-                                     "--frame-timeout-ms",
-                                     "--max-eye-pixels",
-                                     "--max-target-mib",
-                                     "--max-queued-mib",
-                                     "--large-display-pixels",
-                                     "--max-triangles",
-                                     "--max-projector-pixels",
-                                     "--max-viewer-hz",
-                                     "--max-batch-viewers",
-                                     "--encoder-threads",
-                                     "--planning-threads",
-                                     "--tile-codec",
-                                     "--calibration",
-                                     "--compensation",
-                                     "--tls-cert",
-                                     "--tls-key",
-                                     "--agent-port",
-                                     "--drain-file",
-                                     "--cluster",
-                                     "--node-id"});
-    if (!parsed) {
-        std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
-        return 2;
+const std::vector<std::string> kServeFlags{"--scene",
+                                           "--listen",
+                                           "--unix",
+                                           "--token-file",
+                                           "--admin-token-file",
+                                           "--asset-root",
+                                           "--device",
+                                           "--stats-file",
+                                           "--admin-listen",
+                                           "--max-sessions",
+                                           "--max-pending",
+                                           "--handshake-timeout-ms",
+                                           "--idle-timeout-ms",
+                                           "--frame-timeout-ms",
+                                           "--max-eye-pixels",
+                                           "--max-target-mib",
+                                           "--max-queued-mib",
+                                           "--large-display-pixels",
+                                           "--max-triangles",
+                                           "--max-projector-pixels",
+                                           "--max-viewer-hz",
+                                           "--max-batch-viewers",
+                                           "--encoder-threads",
+                                           "--planning-threads",
+                                           "--tile-codec",
+                                           "--calibration",
+                                           "--compensation",
+                                           "--tls-cert",
+                                           "--tls-key",
+                                           "--agent-port",
+                                           "--drain-file",
+                                           "--cluster",
+                                           "--node-id"};
+
+// The scene a server starts on and SIGHUP reloads: --scene's file, or the embedded room.
+struct SceneSource {
+    std::optional<std::string> path;
+    std::filesystem::path asset_root;
+    scene::SceneLimits limits;
+
+    Result<scene::Scene> load() const {
+        if (!path)
+            return scene::default_scene();
+        return scene::load_scene_file(*path, asset_root, limits);
     }
-    const Flags& f = parsed.value();
+    // The scene as the bus stores it: the --scene file's text, or the embedded scene's.
+    std::string text() const {
+        if (!path)
+            return std::string(scene::default_scene_json());
+        std::ifstream in(*path, std::ios::binary);
+        return {std::istreambuf_iterator<char>(in), {}};
+    }
+};
+
+// What `hysar serve`'s options ask for, checked: everything the server is made with.
+struct ServeSetup {
     stream::ServerCreateInfo info;
-    info.unix_path = f.get("--unix", "");
-    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
-    if (f.has("--device")) {
-        const std::string d = f.get("--device", "");
-        auto p = gpu::parse_device_preference(d);
-        if (!p)
-            return usage_error(fmt::format("--device: '{}' is not auto, cpu or gpu", d));
-        di.preference = *p;
-    }
-    if (f.has("--listen"))
-        if (auto r = parse_listen(f.get("--listen", ""), info); !r)
-            return usage_error(r.error().message);
-    if (auto r = parse_limits(f, info.limits); !r)
-        return usage_error(r.error().message);
+    gpu::DeviceCreateInfo device = gpu::device_info_from_environment();
+    std::optional<admin::AdminOptions> admin;
+    calib::Compensation compensation;
+    SceneSource scene;
+};
+
+// Who else the server answers: --agent-port, --drain-file, --cluster with --node-id,
+// --admin-listen. Returns an exit status when an option is refused (the refusal printed).
+std::optional<int> read_network(const Flags& f, ServeSetup& s) {
+    stream::ServerCreateInfo& info = s.info;
     if (f.has("--agent-port")) {
         auto a = parse_count(f, "--agent-port", 0, 1, 65535);
         if (!a)
@@ -279,16 +293,21 @@ int run_serve(const std::vector<std::string>& args) {
         id.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-") !=
             std::string::npos)
         return usage_error("--node-id: '" + id + "' is not 1 to 64 of A-Z a-z 0-9 _ -");
-    std::optional<admin::AdminOptions> admin_options;
     if (f.has("--admin-listen")) {
         auto a = admin::parse_admin_listen(f.get("--admin-listen", ""));
         if (!a)
             return usage_error(a.error().message);
-        admin_options = admin::AdminOptions{};
-        std::tie(admin_options->host, admin_options->port) = a.value();
+        s.admin = admin::AdminOptions{};
+        std::tie(s.admin->host, s.admin->port) = a.value();
         // The dashboard shows each headset's latest layers: keep one frame per headset.
         info.keep_latest_layers = true;
     }
+    return std::nullopt;
+}
+
+// How the server renders and encodes: --tile-codec, the thread counts, --compensation.
+std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
+    stream::ServerCreateInfo& info = s.info;
     if (f.has("--tile-codec")) {
         const std::string c = f.get("--tile-codec", "");
         if (c == "lz4")
@@ -310,63 +329,73 @@ int run_serve(const std::vector<std::string>& args) {
         else
             return usage_error(n.error().message);
     }
-    calib::Compensation compensation;
     if (f.has("--compensation")) {
         if (!f.has("--calibration"))
             return usage_error("--compensation applies to calibrated output: give --calibration");
         auto c = calib::parse_compensation(f.get("--compensation", ""));
         if (!c)
             return usage_error(c.error().message);
-        compensation = c.value();
+        s.compensation = c.value();
     }
+    return std::nullopt;
+}
 
-    const std::optional<std::string> scene_path =
-        f.has("--scene") ? std::optional(f.get("--scene", "")) : std::nullopt;
+// Every option of `hysar serve` read and checked, in the order their refusals are reported.
+// Returns an exit status when one is refused (the refusal printed).
+std::optional<int> read_serve_options(const Flags& f, ServeSetup& s) {
+    s.info.unix_path = f.get("--unix", "");
+    if (f.has("--device")) {
+        const std::string d = f.get("--device", "");
+        auto p = gpu::parse_device_preference(d);
+        if (!p)
+            return usage_error(fmt::format("--device: '{}' is not auto, cpu or gpu", d));
+        s.device.preference = *p;
+    }
+    if (f.has("--listen"))
+        if (auto r = parse_listen(f.get("--listen", ""), s.info); !r)
+            return usage_error(r.error().message);
+    if (auto r = parse_limits(f, s.info.limits); !r)
+        return usage_error(r.error().message);
+    if (auto stop = read_network(f, s))
+        return stop;
+    if (auto stop = read_engine(f, s))
+        return stop;
+    SceneSource& src = s.scene;
+    src.path = f.has("--scene") ? std::optional(f.get("--scene", "")) : std::nullopt;
+    src.limits = s.info.limits.scene;
     std::error_code ec;
-    info.asset_root = f.has("--asset-root") ? std::filesystem::path(f.get("--asset-root", ""))
-                      : scene_path ? std::filesystem::absolute(*scene_path, ec).parent_path()
-                                   : std::filesystem::current_path(ec);
-    if (!std::filesystem::is_directory(info.asset_root, ec))
+    src.asset_root = f.has("--asset-root") ? std::filesystem::path(f.get("--asset-root", ""))
+                     : src.path            ? std::filesystem::absolute(*src.path, ec).parent_path()
+                                           : std::filesystem::current_path(ec);
+    s.info.asset_root = src.asset_root;
+    if (!std::filesystem::is_directory(src.asset_root, ec))
         return usage_error(
-            fmt::format("--asset-root: '{}' is not a directory", info.asset_root.string()));
-    auto load = [&]() -> Result<scene::Scene> {
-        if (!scene_path)
-            return scene::default_scene();
-        return scene::load_scene_file(*scene_path, info.asset_root, info.limits.scene);
-    };
-    // The scene as the bus stores it: the --scene file's text, or the embedded scene's.
-    auto scene_text = [&]() -> std::string {
-        if (!scene_path)
-            return std::string(scene::default_scene_json());
-        std::ifstream in(*scene_path, std::ios::binary);
-        return {std::istreambuf_iterator<char>(in), {}};
-    };
-    auto s = load();
-    if (!s) {
-        std::fprintf(stderr, "hysar serve: %s\n", s.error().message.c_str());
-        return 1;
-    }
-    if (f.has("--calibration")) {
-        auto cal = calib::load_serving_calibration(f.get("--calibration", ""), compensation);
-        if (!cal) {
-            std::fprintf(stderr, "hysar serve: --calibration: %s\n", cal.error().message.c_str());
-            return 1;
-        }
-        if (auto r = cal->check_scene(s.value()); !r) {
-            std::fprintf(stderr, "hysar serve: --calibration: %s\n", r.error().message.c_str());
-            return 1;
-        }
-        info.calibration =
-            std::make_shared<const calib::ServingCalibration>(std::move(cal).value());
-        std::printf("calibrated output: %s; RGBA8 frames and layers carry device drive codes\n",
-                    info.calibration->summary().c_str());
-    }
+            fmt::format("--asset-root: '{}' is not a directory", src.asset_root.string()));
+    return std::nullopt;
+}
+
+// --calibration loaded and checked against the scene, into `info`.
+std::optional<int> load_calibration(const Flags& f, const ServeSetup& s, const scene::Scene& scene,
+                                    stream::ServerCreateInfo& info) {
+    if (!f.has("--calibration"))
+        return std::nullopt;
+    auto cal = calib::load_serving_calibration(f.get("--calibration", ""), s.compensation);
+    if (!cal)
+        return start_error("--calibration: " + cal.error().message);
+    if (auto r = cal->check_scene(scene); !r)
+        return start_error("--calibration: " + r.error().message);
+    info.calibration = std::make_shared<const calib::ServingCalibration>(std::move(cal).value());
+    std::printf("calibrated output: %s; RGBA8 frames and layers carry device drive codes\n",
+                info.calibration->summary().c_str());
+    return std::nullopt;
+}
+
+// The viewers' token (--token-file, or a random one, printed) and the admin role's.
+std::optional<int> read_tokens(const Flags& f, stream::ServerCreateInfo& info) {
     if (f.has("--token-file")) {
         auto t = read_token_file(f.get("--token-file", ""), "--token-file");
-        if (!t) {
-            std::fprintf(stderr, "hysar serve: %s\n", t.error().message.c_str());
-            return 1;
-        }
+        if (!t)
+            return start_error(t.error().message);
         info.token = t.value();
     } else {
         info.token = random_token();
@@ -374,134 +403,139 @@ int run_serve(const std::vector<std::string>& args) {
     }
     if (f.has("--admin-token-file")) {
         auto t = read_token_file(f.get("--admin-token-file", ""), "--admin-token-file");
-        if (!t) {
-            std::fprintf(stderr, "hysar serve: %s\n", t.error().message.c_str());
-            return 1;
-        }
+        if (!t)
+            return start_error(t.error().message);
         info.admin_token = t.value();
     }
-    std::unique_ptr<cluster::SceneBus> bus;
-    if (f.has("--cluster")) {
-        const std::string node_id = f.get("--node-id", "");
-        auto b = cluster::SceneBus::connect({f.get("--cluster", ""), node_id});
-        if (!b) {
-            std::fprintf(stderr, "hysar serve: %s\n", b.error().message.c_str());
-            return 1;
-        }
-        bus = std::move(b).value();
-        // The bus's scene wins; with none there yet, this node's becomes version 1.
-        auto current = bus->current();
-        const std::string own_json = scene_text();
-        bool own = false;
-        if (current.ok() && current->first == 0) {
-            auto w = bus->write(0, own_json);
-            own = w.error == cluster::BusError::kNone;
-            if (own)
-                current = std::pair<uint64_t, std::string>{w.revision, own_json};
-            else
-                current = bus->current();  // another node put its scene first
-        }
-        if (!current || current->first == 0 || current->first > 0xffffffffu) {
-            std::fprintf(stderr, "hysar serve: --cluster: cannot read the bus's scene: %s\n",
-                         current ? "no usable version" : current.error().message.c_str());
-            return 1;
-        }
-        auto bus_scene = scene::parse_scene(
-            current->second, fmt::format("the bus's scene version {}", current->first),
-            info.asset_root, info.asset_root, info.limits.scene);
-        if (!bus_scene) {
-            std::fprintf(stderr, "hysar serve: --cluster: %s\n", bus_scene.error().message.c_str());
-            return 1;
-        }
-        if (info.calibration)
-            if (auto r = info.calibration->check_scene(bus_scene.value()); !r) {
-                std::fprintf(stderr, "hysar serve: --calibration: the bus's scene: %s\n",
-                             r.error().message.c_str());
-                return 1;
-            }
-        s = std::move(bus_scene);
-        info.initial_scene_version = uint32_t(current->first);
-        if (!own)
-            std::printf("cluster: serving the bus's scene '%s' (version %u)%s\n",
-                        s.value().name.c_str(), info.initial_scene_version,
-                        scene_path ? "; --scene is used only when the bus has none" : "");
-        cluster::SceneBus* b_ptr = bus.get();
-        info.publish_scene = [b_ptr](uint32_t applied, const std::string& json) {
-            const auto w = b_ptr->write(applied, json);
-            return w.error == cluster::BusError::kNone ? std::string() : w.message;
-        };
-        std::printf("cluster: node '%s' on %s, scene version %u\n", node_id.c_str(),
-                    f.get("--cluster", "").c_str(), info.initial_scene_version);
+    return std::nullopt;
+}
+
+// The bus's scene and its version, or this node's own scene put there when the bus has none.
+// `own` says which.
+Result<std::pair<uint64_t, std::string>> bus_scene_text(cluster::SceneBus& bus,
+                                                        const std::string& own_json, bool& own) {
+    auto current = bus.current();
+    own = false;
+    if (current.ok() && current->first == 0) {
+        auto w = bus.write(0, own_json);
+        own = w.error == cluster::BusError::kNone;
+        if (own)
+            current = std::pair<uint64_t, std::string>{w.revision, own_json};
+        else
+            current = bus.current();  // another node put its scene first
     }
+    if (!current || current->first == 0 || current->first > 0xffffffffu)
+        return make_error(ErrorCode::kIo,
+                          fmt::format("--cluster: cannot read the bus's scene: {}",
+                                      current ? "no usable version" : current.error().message));
+    return current;
+}
+
+// --cluster: joins the scene bus; the bus's scene wins over `scene`, and with none there yet,
+// this node's becomes version 1. Scene updates are then published through it.
+std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scene& scene,
+                                stream::ServerCreateInfo& info,
+                                std::unique_ptr<cluster::SceneBus>& bus) {
+    if (!f.has("--cluster"))
+        return std::nullopt;
+    const std::string node_id = f.get("--node-id", "");
+    auto b = cluster::SceneBus::connect({f.get("--cluster", ""), node_id});
+    if (!b)
+        return start_error(b.error().message);
+    bus = std::move(b).value();
+    bool own = false;
+    auto current = bus_scene_text(*bus, s.scene.text(), own);
+    if (!current)
+        return start_error(current.error().message);
+    auto bus_scene = scene::parse_scene(current->second,
+                                        fmt::format("the bus's scene version {}", current->first),
+                                        info.asset_root, info.asset_root, info.limits.scene);
+    if (!bus_scene)
+        return start_error("--cluster: " + bus_scene.error().message);
+    if (info.calibration)
+        if (auto r = info.calibration->check_scene(bus_scene.value()); !r)
+            return start_error("--calibration: the bus's scene: " + r.error().message);
+    scene = std::move(bus_scene).value();
+    info.initial_scene_version = uint32_t(current->first);
+    if (!own)
+        std::printf("cluster: serving the bus's scene '%s' (version %u)%s\n", scene.name.c_str(),
+                    info.initial_scene_version,
+                    s.scene.path ? "; --scene is used only when the bus has none" : "");
+    cluster::SceneBus* b_ptr = bus.get();
+    info.publish_scene = [b_ptr](uint32_t applied, const std::string& json) {
+        const auto w = b_ptr->write(applied, json);
+        return w.error == cluster::BusError::kNone ? std::string() : w.message;
+    };
+    std::printf("cluster: node '%s' on %s, scene version %u\n", node_id.c_str(),
+                f.get("--cluster", "").c_str(), info.initial_scene_version);
+    return std::nullopt;
+}
+
+// --tls-cert and --tls-key, the key a secret's file.
+std::optional<int> read_tls(const Flags& f, stream::ServerCreateInfo& info) {
     if (f.has("--tls-cert") != f.has("--tls-key"))
         return usage_error("TLS needs both --tls-cert and --tls-key");
     if (f.has("--tls-key")) {
-        if (auto r = check_secret_file(f.get("--tls-key", ""), "--tls-key"); !r) {
-            std::fprintf(stderr, "hysar serve: %s\n", r.error().message.c_str());
-            return 1;
-        }
+        if (auto r = check_secret_file(f.get("--tls-key", ""), "--tls-key"); !r)
+            return start_error(r.error().message);
         info.tls_cert_file = f.get("--tls-cert", "");
         info.tls_key_file = f.get("--tls-key", "");
     }
-    auto device = gpu::Device::create(di);
-    if (!device) {
-        std::fprintf(stderr, "hysar serve: %s\n", device.error().message.c_str());
-        return 1;
-    }
-    auto server = stream::Server::create(*device.value(), s.value(), info);
-    if (!server) {
-        std::fprintf(stderr, "hysar serve: %s\n", server.error().message.c_str());
-        return 1;
-    }
-    std::printf("serving '%s' on %s:%u%s (device: %s)%s\n", s.value().name.c_str(),
-                admin::bracketed(info.host).c_str(), server.value()->port(),
+    return std::nullopt;
+}
+
+// The lines that say where a started server listens.
+void print_started(const stream::Server& server, const stream::ServerCreateInfo& info,
+                   const scene::Scene& scene, const gpu::Device& device) {
+    std::printf("serving '%s' on %s:%u%s (device: %s)%s\n", scene.name.c_str(),
+                admin::bracketed(info.host).c_str(), server.port(),
                 info.unix_path.empty() ? "" : (" and " + info.unix_path).c_str(),
-                device.value()->name().c_str(),
-                info.admin_token.empty() ? "; admin role disabled" : "");
-    if (const uint16_t agent = server.value()->agent_port(); agent != 0)
+                device.name().c_str(), info.admin_token.empty() ? "; admin role disabled" : "");
+    if (const uint16_t agent = server.agent_port(); agent != 0)
         std::printf("agent-check on %s:%u%s\n", admin::bracketed(info.host).c_str(), agent,
                     info.drain_file.empty()
                         ? ""
                         : (" (drain while " + info.drain_file + " exists)").c_str());
-    if (const std::string tls = server.value()->tls_summary(); !tls.empty())
-        std::printf("TLS on %s:%u: %s\n", admin::bracketed(info.host).c_str(),
-                    server.value()->port(), tls.c_str());
-    if (bus) {
-        // Every node (this one's writes too) applies what the watch delivers, if newer.
-        stream::Server* watched = server.value().get();
-        bus->watch([watched](uint64_t revision, const std::string& json) {
-            if (revision > 0xffffffffu ||
-                !cluster::SceneBus::newer(revision, watched->bus_version()))
-                return;
-            if (auto r = watched->apply_scene_version(json, uint32_t(revision)); !r)
-                log::error(
-                    "scene bus: version {} cannot be served here: {}; the running scene "
-                    "stays",
-                    revision, r.error().message);
-            else
-                log::info("scene bus: version {} arrived", revision);
-        });
-    }
-    std::unique_ptr<admin::AdminServer> admin_endpoint;
-    if (admin_options) {
-        admin_options->token = info.token;
-        stream::Server* watched = server.value().get();
-        auto a = admin::AdminServer::start(
-            *admin_options,
-            {[watched] { return watched->snapshot(); },
-             [watched](uint32_t viewer, int eye) { return watched->latest_layer(viewer, eye); },
-             [watched] { return watched->latest_projector_frame(); }});
-        if (!a) {
-            std::fprintf(stderr, "hysar serve: %s\n", a.error().message.c_str());
-            return 1;
-        }
-        admin_endpoint = std::move(a).value();
-        std::printf(
-            "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
-            "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
-            admin::bracketed(admin_options->host).c_str(), admin_endpoint->port());
-    }
-    std::fflush(stdout);
+    if (const std::string tls = server.tls_summary(); !tls.empty())
+        std::printf("TLS on %s:%u: %s\n", admin::bracketed(info.host).c_str(), server.port(),
+                    tls.c_str());
+}
+
+// Every node (this one's writes too) applies what the bus's watch delivers, if newer.
+void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
+    stream::Server* watched = &server;
+    bus.watch([watched](uint64_t revision, const std::string& json) {
+        if (revision > 0xffffffffu || !cluster::SceneBus::newer(revision, watched->bus_version()))
+            return;
+        if (auto r = watched->apply_scene_version(json, uint32_t(revision)); !r)
+            log::error("scene bus: version {} cannot be served here: {}; the running scene stays",
+                       revision, r.error().message);
+        else
+            log::info("scene bus: version {} arrived", revision);
+    });
+}
+
+// The HTTP endpoint of --admin-listen over the server's snapshot and latest images.
+Result<std::unique_ptr<admin::AdminServer>> start_admin(admin::AdminOptions options,
+                                                        const std::string& token,
+                                                        stream::Server& server) {
+    options.token = token;
+    stream::Server* watched = &server;
+    HS_ASSIGN_OR_RETURN(auto endpoint,
+                        admin::AdminServer::start(
+                            options, {[watched] { return watched->snapshot(); },
+                                      [watched](uint32_t viewer, int eye) {
+                                          return watched->latest_layer(viewer, eye);
+                                      },
+                                      [watched] { return watched->latest_projector_frame(); }}));
+    std::printf(
+        "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
+        "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
+        admin::bracketed(options.host).c_str(), endpoint->port());
+    return endpoint;
+}
+
+void install_signal_handlers() {
     struct sigaction stop_action {
     }, reload_action{};
     stop_action.sa_handler = on_stop_signal;
@@ -512,51 +546,55 @@ int run_serve(const std::vector<std::string>& args) {
     sigaction(SIGTERM, &stop_action, nullptr);
     sigaction(SIGHUP, &reload_action, nullptr);
     std::signal(SIGPIPE, SIG_IGN);
-    stream::Server& srv = *server.value();
-    std::thread watcher([&] {
-        auto beat = std::chrono::steady_clock::now();
-        while (!g_stop.load()) {
-            if (bus && std::chrono::steady_clock::now() - beat > std::chrono::seconds(2)) {
-                beat = std::chrono::steady_clock::now();
-                const auto st = srv.stats();
-                bus->heartbeat(
-                    nlohmann::json{{"node", f.get("--node-id", "")},
-                                   {"scene_version", srv.scene_version()},
-                                   {"port", srv.port()},
-                                   {"sessions", st.value("sessions", nlohmann::json())},
-                                   {"viewers", st.value("viewers", nlohmann::json::array()).size()}}
-                        .dump());
-            }
-            if (g_reload.exchange(false)) {
-                if (!scene_path) {
-                    log::warn("SIGHUP: the server runs the embedded scene; nothing to reload");
-                } else if (auto next = load(); !next) {
-                    log::error("SIGHUP: {}; the running scene stays", next.error().message);
-                } else if (bus) {
-                    // A cluster: the file goes through the bus like a SceneUpdate.
-                    const auto w = bus->write(srv.bus_version(), scene_text());
-                    if (w.error != cluster::BusError::kNone)
-                        log::error("SIGHUP: {}", w.message);
-                    else
-                        log::info("SIGHUP: {} written to the scene bus as version {}", *scene_path,
-                                  w.revision);
-                } else if (auto r = srv.update_scene(next.value()); !r) {
-                    log::error("SIGHUP: {}: {}; the running scene stays", *scene_path,
-                               r.error().message);
-                } else {
-                    log::info("SIGHUP: reloading {}", *scene_path);
-                }
-            }
-            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+}
+
+// SIGHUP: the scene file again, through the bus in a cluster, else straight to the server.
+void reload_scene(stream::Server& srv, cluster::SceneBus* bus, const SceneSource& source) {
+    if (!source.path) {
+        log::warn("SIGHUP: the server runs the embedded scene; nothing to reload");
+    } else if (auto next = source.load(); !next) {
+        log::error("SIGHUP: {}; the running scene stays", next.error().message);
+    } else if (bus) {
+        // A cluster: the file goes through the bus like a SceneUpdate.
+        const auto w = bus->write(srv.bus_version(), source.text());
+        if (w.error != cluster::BusError::kNone)
+            log::error("SIGHUP: {}", w.message);
+        else
+            log::info("SIGHUP: {} written to the scene bus as version {}", *source.path,
+                      w.revision);
+    } else if (auto r = srv.update_scene(next.value()); !r) {
+        log::error("SIGHUP: {}: {}; the running scene stays", *source.path, r.error().message);
+    } else {
+        log::info("SIGHUP: reloading {}", *source.path);
+    }
+}
+
+// The signal watcher's loop, beside Server::run: heartbeats on the bus every 2 s, SIGHUP's
+// reloads, and the server stopped on SIGINT or SIGTERM.
+void watch_signals(stream::Server& srv, cluster::SceneBus* bus, const SceneSource& source,
+                   const std::string& node_id) {
+    auto beat = std::chrono::steady_clock::now();
+    while (!g_stop.load()) {
+        if (bus && std::chrono::steady_clock::now() - beat > std::chrono::seconds(2)) {
+            beat = std::chrono::steady_clock::now();
+            const auto st = srv.stats();
+            bus->heartbeat(
+                nlohmann::json{{"node", node_id},
+                               {"scene_version", srv.scene_version()},
+                               {"port", srv.port()},
+                               {"sessions", st.value("sessions", nlohmann::json())},
+                               {"viewers", st.value("viewers", nlohmann::json::array()).size()}}
+                    .dump());
         }
-        srv.stop();
-    });
-    srv.run();
-    g_stop.store(true);
-    watcher.join();
-    bus.reset();             // its watch calls the server: stopped before the server goes
-    admin_endpoint.reset();  // it reads the server: stopped before the server goes
-    auto stats = srv.stats();
+        if (g_reload.exchange(false))
+            reload_scene(srv, bus, source);
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    srv.stop();
+}
+
+// The final stats: to --stats-file, and the summary lines.
+void report_stats(const nlohmann::json& stats, const Flags& f) {
     if (f.has("--stats-file")) {
         std::ofstream out(f.get("--stats-file", ""));
         out << stats.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
@@ -581,7 +619,72 @@ int run_serve(const std::vector<std::string>& args) {
             (unsigned long long)vd.value("frames", uint64_t(0)), vd["mean"].value("queue", 0.0),
             vd["mean"].value("pass", 0.0), vd["mean"].value("encode", 0.0),
             vd["mean"].value("send", 0.0));
+}
+
+// Runs a started server until SIGINT or SIGTERM; the bus and the admin endpoint, which call
+// the server, are stopped before it goes.
+int serve_until_stopped(stream::Server& srv, std::unique_ptr<cluster::SceneBus> bus,
+                        std::unique_ptr<admin::AdminServer> admin_endpoint,
+                        const SceneSource& source, const Flags& f) {
+    std::fflush(stdout);
+    install_signal_handlers();
+    std::thread watcher([&] { watch_signals(srv, bus.get(), source, f.get("--node-id", "")); });
+    srv.run();
+    g_stop.store(true);
+    watcher.join();
+    bus.reset();
+    admin_endpoint.reset();
+    report_stats(srv.stats(), f);
     return 0;
+}
+
+}  // namespace
+
+int run_serve(const std::vector<std::string>& args) {
+    if (options::asks_for_help(args)) {
+        std::fputs(kServeHelp, stdout);
+        return 0;
+    }
+    auto parsed = parse_flags(args, kServeFlags);
+    if (!parsed) {
+        std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
+        return 2;
+    }
+    const Flags& f = parsed.value();
+    ServeSetup setup;
+    if (auto stop = read_serve_options(f, setup))
+        return *stop;
+    stream::ServerCreateInfo& info = setup.info;
+    auto s = setup.scene.load();
+    if (!s)
+        return start_error(s.error().message);
+    std::unique_ptr<cluster::SceneBus> bus;
+    if (auto stop = load_calibration(f, setup, s.value(), info))
+        return *stop;
+    if (auto stop = read_tokens(f, info))
+        return *stop;
+    if (auto stop = join_cluster(f, setup, s.value(), info, bus))
+        return *stop;
+    if (auto stop = read_tls(f, info))
+        return *stop;
+    auto device = gpu::Device::create(setup.device);
+    if (!device)
+        return start_error(device.error().message);
+    auto server = stream::Server::create(*device.value(), s.value(), info);
+    if (!server)
+        return start_error(server.error().message);
+    print_started(*server.value(), info, s.value(), *device.value());
+    if (bus)
+        watch_bus(*bus, *server.value());
+    std::unique_ptr<admin::AdminServer> admin_endpoint;
+    if (setup.admin) {
+        auto a = start_admin(*setup.admin, info.token, *server.value());
+        if (!a)
+            return start_error(a.error().message);
+        admin_endpoint = std::move(a).value();
+    }
+    return serve_until_stopped(*server.value(), std::move(bus), std::move(admin_endpoint),
+                               setup.scene, f);
 }
 
 }  // namespace hs::cli
