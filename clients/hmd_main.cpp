@@ -460,6 +460,18 @@ PoseMode read_pose_mode(const Args& args) {
     return m;
 }
 
+// --window: the window the layers are shown in; false (the failure printed) when it cannot open.
+bool open_window(const std::string& name, const proto::RegisterDisplay& display,
+                 std::unique_ptr<ImageWindow>& window) {
+    auto w = ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
+    if (auto* e = std::get_if<std::string>(&w)) {
+        std::fprintf(stderr, "hysar-hmd: --window: %s\n", e->c_str());
+        return false;
+    }
+    window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
+    return true;
+}
+
 // Writes --summary's JSON to its open file; false (the failure printed) when that fails.
 bool write_summary(std::ofstream& file, const nlohmann::json& summary, const std::string& path) {
     file << summary.dump(2) << "\n";
@@ -524,15 +536,8 @@ int hmd_main(int argc, char** argv) {
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
 
     std::unique_ptr<ImageWindow> window;
-    if (args.has("--window")) {
-        auto w =
-            ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
-        if (auto* e = std::get_if<std::string>(&w)) {
-            std::fprintf(stderr, "hysar-hmd: --window: %s\n", e->c_str());
-            return 2;
-        }
-        window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
-    }
+    if (args.has("--window") && !open_window(name, display, window))
+        return 2;
     auto connected = connect_client(config);
     if (auto* e = std::get_if<std::string>(&connected)) {
         std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
