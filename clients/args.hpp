@@ -1,7 +1,7 @@
-// The option reader shared by the client programs: --key value pairs and --flags, strict number
-// parsing, the token, and the guard around main. Expected bad input ends the program with one
-// line on stderr that names the option and the value, and exit status 2; nothing here lets an
-// exception escape to std::terminate.
+// The option reader shared by the client programs: --key value pairs and --flags, strict numbers
+// (both from options/), the token, and the guard around main. Expected bad input ends the program
+// with one line on stderr that names the option and the value, and exit status 2; nothing here lets
+// an exception escape to std::terminate.
 #pragma once
 
 #include <algorithm>
@@ -24,8 +24,9 @@
 #include <variant>
 #include <vector>
 
-#include "cli/options.hpp"
 #include "clients/tls.hpp"
+#include "options/numbers.hpp"
+#include "options/options.hpp"
 
 namespace hs::client {
 
@@ -35,90 +36,8 @@ public:
     using std::runtime_error::runtime_error;
 };
 
-// "%g" of `v`: a range bound as a person writes it (0.01, 1e+06).
-inline std::string format_number(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%g", v);
-    return b;
-}
-
-// Parses all of `text` as a finite decimal number in [lo, hi] (an optional leading '+'; no
-// spaces, no "nan" or "inf", no trailing characters). Returns the value or a sentence saying what
-// is wrong with it that names the range; locale-independent.
-inline std::variant<double, std::string> parse_number(std::string_view text, double lo, double hi) {
-    const std::string quoted = "'" + std::string(text) + "'";
-    const std::string range = "[" + format_number(lo) + ", " + format_number(hi) + "]";
-    std::string_view s = text;
-    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
-        s.remove_prefix(1);
-    if (s.empty())
-        return text.empty() ? "an empty value is not a number in " + range
-                            : quoted + " is not a number in " + range;
-    double v = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec == std::errc::result_out_of_range)
-        return quoted + " is too large or too small to be a number in " + range;
-    if (ec != std::errc() || end != s.data() + s.size())
-        return quoted + " is not a number in " + range;
-    if (!std::isfinite(v))
-        return quoted + " is not a finite number in " + range;
-    if (v < lo || v > hi)
-        return quoted + " is outside " + range;
-    return v;
-}
-
-// Parses all of `text` as a whole number in [lo, hi].
-inline std::variant<int64_t, std::string> parse_integer(std::string_view text, int64_t lo,
-                                                        int64_t hi) {
-    const std::string quoted = "'" + std::string(text) + "'";
-    const std::string range = "[" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
-    std::string_view s = text;
-    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
-        s.remove_prefix(1);
-    if (s.empty())
-        return text.empty() ? "an empty value is not a whole number in " + range
-                            : quoted + " is not a whole number in " + range;
-    int64_t v = 0;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (ec == std::errc::result_out_of_range)
-        return quoted + " is outside " + range;
-    if (ec != std::errc() || end != s.data() + s.size())
-        return quoted + " is not a whole number in " + range;
-    if (v < lo || v > hi)
-        return quoted + " is outside " + range;
-    return v;
-}
-
-// Parses a comma-separated list of `min_items`..`max_items` numbers, each as parse_number does.
-// An empty item (",," or a trailing comma) is an error.
-inline std::variant<std::vector<double>, std::string> parse_number_list(std::string_view text,
-                                                                        double lo, double hi,
-                                                                        size_t min_items,
-                                                                        size_t max_items) {
-    std::vector<double> out;
-    if (!text.empty()) {
-        size_t start = 0;
-        for (;;) {
-            const size_t comma = text.find(',', start);
-            const std::string_view item =
-                text.substr(start, comma == std::string_view::npos ? comma : comma - start);
-            auto v = parse_number(item, lo, hi);
-            if (auto* e = std::get_if<std::string>(&v))
-                return "item " + std::to_string(out.size() + 1) + ": " + *e;
-            out.push_back(std::get<double>(v));
-            if (comma == std::string_view::npos)
-                break;
-            start = comma + 1;
-        }
-    }
-    if (out.size() < min_items || out.size() > max_items) {
-        const std::string want =
-            min_items == max_items ? std::to_string(min_items)
-                                   : std::to_string(min_items) + " to " + std::to_string(max_items);
-        return "expected " + want + " comma-separated numbers, got " + std::to_string(out.size());
-    }
-    return out;
-}
+// "%g" of a number, as the number reader writes a range's bounds.
+using options::format_number;
 
 // `s` without trailing spaces, tabs, CR and LF.
 inline std::string strip_trailing_space(std::string s) {
@@ -128,7 +47,7 @@ inline std::string strip_trailing_space(std::string s) {
 
 class Args {
 public:
-    // `with_value`: options that take a value; `flags`: options that do not (cli/options.hpp
+    // `with_value`: options that take a value; `flags`: options that do not (options/options.hpp
     // reads them: "--key value" or "--key=value"; given twice, the last value counts). --help
     // (or -h) prints `usage` to stdout and exits 0; so does --version with `version`
     // (clients/version.hpp) when it is given; anything else unknown is a usage error.
@@ -136,17 +55,13 @@ public:
          const std::set<std::string>& flags, const char* usage, const char* version = nullptr)
         : usage_(usage) {
         const std::vector<std::string> list(argv + std::min(argc, 1), argv + argc);
-        for (const auto& a : list) {
-            if (a == "--")
-                break;
-            if (a == "--help" || a == "-h") {
-                std::fputs(usage, stdout);
-                std::exit(0);
-            }
-            if (version != nullptr && a == "--version") {
-                std::fputs(version, stdout);
-                std::exit(0);
-            }
+        if (options::asks_for_help(list)) {
+            std::fputs(usage, stdout);
+            std::exit(0);
+        }
+        if (version != nullptr && options::asks(list, {"--version"})) {
+            std::fputs(version, stdout);
+            std::exit(0);
         }
         auto parsed = options::parse(
             list, {{with_value.begin(), with_value.end()}, {flags.begin(), flags.end()}});
@@ -154,6 +69,10 @@ public:
             fail(*e + " (see --help)");
         for (const auto& [k, v] : std::get<options::Parsed>(parsed).values) values_[k] = v.back();
     }
+    // Options another reader has read (options::parse), each with its last value; a switch's
+    // value does not matter.
+    Args(std::map<std::string, std::string> values, const char* usage)
+        : usage_(usage), values_(std::move(values)) {}
     [[noreturn]] void fail(const std::string& msg) const { throw UsageError(msg); }
     const char* usage() const { return usage_; }
 
@@ -166,7 +85,7 @@ public:
     double number(const std::string& k, double def, double lo, double hi) const {
         if (!has(k))
             return def;
-        auto v = parse_number(get(k, ""), lo, hi);
+        auto v = options::read_number(get(k, ""), lo, hi);
         if (auto* e = std::get_if<std::string>(&v))
             fail(k + ": " + *e);
         return std::get<double>(v);
@@ -175,7 +94,7 @@ public:
     int64_t integer(const std::string& k, int64_t def, int64_t lo, int64_t hi) const {
         if (!has(k))
             return def;
-        auto v = parse_integer(get(k, ""), lo, hi);
+        auto v = options::read_integer(get(k, ""), lo, hi);
         if (auto* e = std::get_if<std::string>(&v))
             fail(k + ": " + *e);
         return std::get<int64_t>(v);
@@ -184,7 +103,7 @@ public:
     std::vector<double> numbers(const std::string& k, const std::string& def, double lo, double hi,
                                 size_t min_items, size_t max_items) const {
         const std::string text = get(k, def);
-        auto v = parse_number_list(text, lo, hi, min_items, max_items);
+        auto v = options::read_number_list(text, lo, hi, min_items, max_items);
         if (auto* e = std::get_if<std::string>(&v))
             fail(k + " '" + text + "': " + *e);
         return std::get<std::vector<double>>(v);

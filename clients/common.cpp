@@ -167,7 +167,7 @@ std::variant<std::vector<TimedPose>, std::string> load_pose_csv(const std::strin
         if (header)
             continue;
         const std::string where = "'" + path + "' line " + std::to_string(n) + ": ";
-        auto v = parse_number_list(std::string_view(row).substr(first), -1e9, 1e9, 8, 8);
+        auto v = options::read_number_list(std::string_view(row).substr(first), -1e9, 1e9, 8, 8);
         if (auto* e = std::get_if<std::string>(&v))
             return where + *e + " (expected t_s,x,y,z,qw,qx,qy,qz)";
         const auto& x = std::get<std::vector<double>>(v);

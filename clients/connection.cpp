@@ -97,7 +97,7 @@ std::variant<Address, std::string> parse_address(const std::string& text) {
         return std::string("no host before the port (expected HOST:PORT or unix:PATH)");
     if (a.port.empty())
         return std::string("no port after ':' (expected HOST:PORT or unix:PATH)");
-    auto port = parse_integer(a.port, 1, 65535);
+    auto port = options::read_integer(a.port, 1, 65535);
     if (auto* e = std::get_if<std::string>(&port))
         return "port " + *e;
     return a;

@@ -374,27 +374,8 @@ int follow_live_poses(Run& run, PoseSource& source, int64_t limit, double stale_
     return 0;
 }
 
-int hmd_main(int argc, char** argv) {
-    Args args(
-        argc, argv,
-        with(with(kConnectionOptions, kAddDeviceOptions),
-             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
-              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
-              "--target",       "--format",        "--encoding",      "--name",     "--out",
-              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
-              "--device-table", "--watch-devices", "--clear-after-ms"}),
-        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
-        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
-    // USB listing and watching: no token, no server.
-    const std::string configured_profile = profile_option(args);
-    if (wants_usb_command(args))
-        return run_usb_command(args, configured_profile);
-    // Everything on the command line is checked before the network is touched.
-    const std::string address = args.get("--connect", "127.0.0.1:7700");
-    if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
-        args.fail("--connect '" + address + "': " + *bad);
-    const std::string token = args.token(proto::kMaxTokenBytes);
-    const TlsOptions tls = args.tls_options();
+// The headset of --profile (or the configured one) at --scale, in --format and --encoding.
+proto::RegisterDisplay read_display(const Args& args, const std::string& configured_profile) {
     proto::RegisterDisplay display;
     const double scale = args.number("--scale", 1.0, 0.01, 8.0);
     if (auto err = load_profile(choose_profile(args, configured_profile), scale, &display))
@@ -403,9 +384,12 @@ int hmd_main(int argc, char** argv) {
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
     const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse"});
     display.encoding = enc == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
-    const std::string name = args.text("--name", "hmd", proto::kMaxNameBytes);
-    if (name.find('/') != std::string::npos)
-        args.fail("--name '" + name + "': no '/' (the name is part of the PNG file names)");
+    return display;
+}
+
+// The poses to send, each checked: --csv's, an --orbit, or the --angles stills (none with
+// --poses, which follows a live source instead).
+std::vector<Step> read_steps(const Args& args, bool live) {
     const double distance = args.number("--distance", 0.8, 0.01, 100),
                  height = args.number("--height", 1.10, -100, 100);
     std::array<double, 3> target{0.0, 0.745, 0.0};
@@ -413,20 +397,6 @@ int hmd_main(int argc, char** argv) {
         auto t = args.numbers("--target", "", -1000, 1000, 3, 3);
         target = {t[0], t[1], t[2]};
     }
-    if (int(args.has("--angles")) + int(args.has("--orbit")) + int(args.has("--csv")) +
-            int(args.has("--poses")) >
-        1)
-        args.fail("give one of --angles, --orbit, --csv and --poses");
-    const bool live = args.has("--poses");
-    if (!live && args.has("--stale-ms"))
-        args.fail("--stale-ms goes with --poses");
-    // -1: the default of the mode (one pass; with --poses, until the input ends).
-    const int64_t frame_limit =
-        args.has("--frames") ? args.integer("--frames", 0, 0, 1000000000) : (live ? 0 : -1);
-    const double stale_ms = args.number("--stale-ms", 500, 10, 600000);
-    if (!args.has("--window") && args.has("--clear-after-ms"))
-        args.fail("--clear-after-ms goes with --window");
-    const int clear_after_ms = int(args.integer("--clear-after-ms", 1000, 1, 600000));
     std::vector<Step> steps;
     if (args.has("--csv")) {
         auto poses = load_pose_csv(args.get("--csv", ""));
@@ -454,6 +424,103 @@ int hmd_main(int argc, char** argv) {
                 "the pose at " +
                 (s.label.empty() ? "t = " + std::to_string(s.t_s) + " s" : "'" + s.label + "'") +
                 " from --distance, --height and --target: " + *bad);
+    return steps;
+}
+
+// --summary's JSON: the run's, and the pose input's counts with --poses.
+nlohmann::json summary_of(const Run& run, const char* mode, PoseSource* source) {
+    nlohmann::json summary = run.summary(mode);
+    if (source) {
+        const auto n = source->counts();
+        summary["pose_input"] = {{"source", source->description()},
+                                 {"lines", n.lines},
+                                 {"poses", n.poses},
+                                 {"bad_lines", n.bad},
+                                 {"out_of_order", n.out_of_order},
+                                 {"superseded", n.superseded}};
+    }
+    return summary;
+}
+
+// How the poses go out (--angles stills, an --orbit or --csv trajectory, or live --poses) and
+// when the run ends.
+struct PoseMode {
+    bool live = false, stills = false;
+    int64_t frame_limit = -1;  // -1: the mode's default (one pass; with --poses, the input's end)
+    double stale_ms = 500;     // --poses: a source silent this long is reported stale
+    const char* name() const { return live ? "poses" : stills ? "angles" : "trajectory"; }
+};
+
+PoseMode read_pose_mode(const Args& args) {
+    if (int(args.has("--angles")) + int(args.has("--orbit")) + int(args.has("--csv")) +
+            int(args.has("--poses")) >
+        1)
+        args.fail("give one of --angles, --orbit, --csv and --poses");
+    PoseMode m;
+    m.live = args.has("--poses");
+    if (!m.live && args.has("--stale-ms"))
+        args.fail("--stale-ms goes with --poses");
+    m.frame_limit =
+        args.has("--frames") ? args.integer("--frames", 0, 0, 1000000000) : (m.live ? 0 : -1);
+    m.stale_ms = args.number("--stale-ms", 500, 10, 600000);
+    m.stills = !args.has("--orbit") && !args.has("--csv") && !m.live;
+    return m;
+}
+
+// --window: the window the layers are shown in; false (the failure printed) when it cannot open.
+bool open_window(const std::string& name, const proto::RegisterDisplay& display,
+                 std::unique_ptr<ImageWindow>& window) {
+    auto w = ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
+    if (auto* e = std::get_if<std::string>(&w)) {
+        std::fprintf(stderr, "hysar-hmd: --window: %s\n", e->c_str());
+        return false;
+    }
+    window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
+    return true;
+}
+
+// Writes --summary's JSON to its open file; false (the failure printed) when that fails.
+bool write_summary(std::ofstream& file, const nlohmann::json& summary, const std::string& path) {
+    file << summary.dump(2) << "\n";
+    file.close();
+    if (!file) {
+        std::fprintf(stderr, "hysar-hmd: --summary '%s': write failed\n", path.c_str());
+        return false;
+    }
+    return true;
+}
+
+int hmd_main(int argc, char** argv) {
+    Args args(
+        argc, argv,
+        with(with(kConnectionOptions, kAddDeviceOptions),
+             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
+              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
+              "--target",       "--format",        "--encoding",      "--name",     "--out",
+              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
+              "--device-table", "--watch-devices", "--clear-after-ms"}),
+        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
+        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
+    // USB listing and watching: no token, no server.
+    const std::string configured_profile = profile_option(args);
+    if (wants_usb_command(args))
+        return run_usb_command(args, configured_profile);
+    // Everything on the command line is checked before the network is touched.
+    const std::string address = args.get("--connect", "127.0.0.1:7700");
+    if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
+        args.fail("--connect '" + address + "': " + *bad);
+    const std::string token = args.token(proto::kMaxTokenBytes);
+    const TlsOptions tls = args.tls_options();
+    proto::RegisterDisplay display = read_display(args, configured_profile);
+    const std::string name = args.text("--name", "hmd", proto::kMaxNameBytes);
+    if (name.find('/') != std::string::npos)
+        args.fail("--name '" + name + "': no '/' (the name is part of the PNG file names)");
+    const PoseMode mode = read_pose_mode(args);
+    const bool live = mode.live, stills = mode.stills;
+    if (!args.has("--window") && args.has("--clear-after-ms"))
+        args.fail("--clear-after-ms goes with --window");
+    const int clear_after_ms = int(args.integer("--clear-after-ms", 1000, 1, 600000));
+    const std::vector<Step> steps = read_steps(args, live);
     const std::filesystem::path out = args.get("--out", "out/hmd");
     if (auto err = make_output_dir(out.string()))
         args.fail("--out " + *err);
@@ -473,19 +540,11 @@ int hmd_main(int argc, char** argv) {
     }
     const hysar_client_config config =
         client_config(args, address, token, name, HYSAR_ROLE_HMD, tls);
-    const bool stills = !args.has("--orbit") && !args.has("--csv") && !live;
     display.mode = stills ? proto::FrameMode::kOnRequest : proto::FrameMode::kContinuous;
 
     std::unique_ptr<ImageWindow> window;
-    if (args.has("--window")) {
-        auto w =
-            ImageWindow::open("hysar-hmd " + name, display.eye_width, display.eye_height / 2, -1);
-        if (auto* e = std::get_if<std::string>(&w)) {
-            std::fprintf(stderr, "hysar-hmd: --window: %s\n", e->c_str());
-            return 2;
-        }
-        window = std::move(std::get<std::unique_ptr<ImageWindow>>(w));
-    }
+    if (args.has("--window") && !open_window(name, display, window))
+        return 2;
     auto connected = connect_client(config);
     if (auto* e = std::get_if<std::string>(&connected)) {
         std::fprintf(stderr, "hysar-hmd: %s\n", e->c_str());
@@ -499,28 +558,13 @@ int hmd_main(int argc, char** argv) {
     }
     stop_on_signals();
     Run run(client, display, name, out, stills || args.has("--out"), window.get(), clear_after_ms);
-    const int rc = live     ? follow_live_poses(run, *source, frame_limit, stale_ms)
-                   : stills ? play_stills(run, steps, frame_limit, client)
-                            : play_trajectory(run, steps, frame_limit);
-    nlohmann::json summary = run.summary(live ? "poses" : stills ? "angles" : "trajectory");
-    if (source) {
-        const auto n = source->counts();
-        summary["pose_input"] = {{"source", source->description()},
-                                 {"lines", n.lines},
-                                 {"poses", n.poses},
-                                 {"bad_lines", n.bad},
-                                 {"out_of_order", n.out_of_order},
-                                 {"superseded", n.superseded}};
-    }
-    if (summary_file.is_open()) {
-        summary_file << summary.dump(2) << "\n";
-        summary_file.close();
-        if (!summary_file) {
-            std::fprintf(stderr, "hysar-hmd: --summary '%s': write failed\n",
-                         args.get("--summary", "").c_str());
-            return 1;
-        }
-    }
+    const int rc = live     ? follow_live_poses(run, *source, mode.frame_limit, mode.stale_ms)
+                   : stills ? play_stills(run, steps, mode.frame_limit, client)
+                            : play_trajectory(run, steps, mode.frame_limit);
+    if (summary_file.is_open() &&
+        !write_summary(summary_file, summary_of(run, mode.name(), source.get()),
+                       args.get("--summary", "")))
+        return 1;
     run.print_line();
     return rc ? rc : run.errors() ? 1 : 0;
 }

@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <thread>
 #include <utility>
 
@@ -108,49 +109,322 @@ std::variant<uint64_t, std::string> read_superseded(hysar_client_config config) 
     return std::string("no Stats within 5 s");
 }
 
+// What the command line asks for, checked before the network is touched.
+struct Run {
+    std::string address, token;
+    TlsOptions tls;
+    int n = 1;                       // headsets
+    double rate = 30, seconds = 5;   // poses per second per headset; 0 s: until a signal
+    int64_t frames = 0;              // layer pairs per headset to stop at; 0: no limit
+    proto::RegisterDisplay display;  // every headset's
+    std::filesystem::path out;       // --out; empty: no pictures
+    std::string json_path;           // --json; empty: none
+};
+
+Run read_options(const Args& args, std::ofstream& json_file) {
+    Run r;
+    r.address = args.get("--connect", "127.0.0.1:7700");
+    if (auto addr = parse_address(r.address); auto* bad = std::get_if<std::string>(&addr))
+        args.fail("--connect '" + r.address + "': " + *bad);
+    r.token = args.token(proto::kMaxTokenBytes);
+    r.tls = args.tls_options();
+    r.n = int(args.integer("--viewers", 1, 1, 1024));
+    r.rate = args.number("--rate", 30, 0.1, 1000);
+    r.seconds = args.number("--seconds", 5, 0, 86400);
+    r.frames = args.integer("--frames", 0, 0, 1000000000);
+    if (r.seconds == 0 && r.frames == 0)
+        std::fprintf(stderr, "hysar-loadgen: --seconds 0: running until SIGINT or SIGTERM\n");
+    const double scale = args.number("--scale", 0.25, 0.01, 8);
+    if (auto err = load_profile(profile_option(args), scale, &r.display))
+        args.fail("--profile " + *err);
+    r.display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
+                           ? proto::PixelFormat::kRgba16f
+                           : proto::PixelFormat::kRgba8;
+    r.display.encoding = args.choice("--encoding", "sparse", {"raw", "sparse"}) == "raw"
+                             ? proto::Encoding::kRaw
+                             : proto::Encoding::kSparseTiles;
+    r.display.mode = proto::FrameMode::kContinuous;
+    if (args.has("--json")) {
+        r.json_path = args.output_path("--json", "");
+        json_file.open(r.json_path);
+        if (!json_file)
+            args.fail("--json '" + r.json_path + "': cannot write: " + std::strerror(errno));
+    }
+    if (args.has("--out")) {
+        r.out = args.get("--out", "");
+        if (auto err = make_output_dir(r.out.string()))
+            args.fail("--out " + *err);
+    }
+    return r;
+}
+
+// The headsets' threads meet here: each counts itself ready once registered (they all start
+// sending together) and finished once done, and stays connected until the main thread has read
+// the server's stats (the server forgets a viewer that leaves).
+struct Rendezvous {
+    int n = 0;
+    std::atomic<int> ready{0}, finished{0};
+    std::atomic<bool> stats_taken{false};
+};
+
+// One headset's counts of itself, each at most once however it ends.
+class ViewerState {
+public:
+    ViewerState(Rendezvous& rv, ViewerResult& r) : rv_(rv), r_(r) {}
+    void ready() {
+        if (!std::exchange(ready_, true))
+            ++rv_.ready;
+    }
+    void finished() {
+        ready();
+        if (!std::exchange(finished_, true))
+            ++rv_.finished;
+    }
+    void fail(const std::string& e) {
+        ++r_.errors;
+        if (r_.first_error.empty())
+            r_.first_error = e;
+    }
+    void give_up(const std::string& e) {
+        finished();
+        fail(e);
+    }
+
+private:
+    Rendezvous& rv_;
+    ViewerResult& r_;
+    bool ready_ = false, finished_ = false;
+};
+
+// One event of a headset's session into its result; an error sentence when it ends the run.
+std::optional<std::string> take_event(const Event& e, bool keep_last, ViewerResult& r,
+                                      ViewerState& state) {
+    if (e.kind == HYSAR_EVENT_LAYER) {
+        ++r.layers;
+        ++r.layers_since_reconnect;
+        if (e.eye == 1)
+            r.latency_ms.push_back(double(int64_t(e.received_ns - e.pose.time_ns)) * 1e-6);
+        if (keep_last && e.eye <= 1) {
+            r.last[e.eye].assign(e.image.pixels, e.image.pixels + e.image.size_bytes);
+            r.last_w[e.eye] = e.image.width, r.last_h[e.eye] = e.image.height;
+            r.last_format = e.image.format;
+        }
+    } else if (e.kind == HYSAR_EVENT_SERVER_ERROR) {
+        state.fail(std::string("server error: ") + e.text);
+    } else if (e.kind == HYSAR_EVENT_CONNECTED) {
+        r.reconnects = e.reconnects;
+        r.layers_since_reconnect = 0;
+    } else if (e.kind == HYSAR_EVENT_CLOSED) {
+        return std::string(e.text);
+    }
+    return std::nullopt;
+}
+
+// Headset `i` sends poses on an orbit of its own at `run.rate` until the time or the frames
+// are up, and takes the layers that come back; an error sentence when the session fails.
+std::optional<std::string> drive_viewer(hysar_client* client, int i, const Run& run,
+                                        ViewerResult& r, ViewerState& state) {
+    const double base_deg = run.n > 1 ? -40.0 + 80.0 * i / (run.n - 1) : 0.0;
+    const Clock::time_point start = Clock::now();
+    const Clock::time_point end = run.seconds > 0
+                                      ? start + std::chrono::duration_cast<Clock::duration>(
+                                                    std::chrono::duration<double>(run.seconds))
+                                      : Clock::time_point::max();
+    const auto period = std::chrono::duration<double>(1.0 / run.rate);
+    auto next_pose = start;
+    for (auto now = Clock::now(); now < end && !stop_requested(); now = Clock::now()) {
+        if (run.frames > 0 && int64_t(r.layers / 2) >= run.frames)
+            break;
+        if (now >= next_pose) {
+            double t = std::chrono::duration<double>(now - start).count();
+            const auto p =
+                orbit_pose(base_deg + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, 0);
+            const hysar_pose hp = to_c(p);  // time 0: stamped when sent
+            if (hysar_client_send_pose(client, &hp, nullptr) != HYSAR_OK)
+                return std::string(hysar_last_error());
+            ++r.poses;
+            next_pose += std::chrono::duration_cast<Clock::duration>(period);
+        }
+        // Rounded up: rounding down would spin for up to a millisecond before each pose.
+        const int wait = int(
+            std::chrono::ceil<std::chrono::milliseconds>(std::min(next_pose, end) - Clock::now())
+                .count());
+        Event e;
+        if (hysar_client_poll(client, std::clamp(wait, 0, 100), &e) != HYSAR_OK)
+            return std::string(hysar_last_error());
+        if (auto closed = take_event(e, !run.out.empty(), r, state))
+            return closed;
+    }
+    r.run_s = std::chrono::duration<double>(Clock::now() - start).count();
+    return std::nullopt;
+}
+
+// Headset `i`'s thread: connects, registers, waits for the others, drives its session.
+void run_viewer(int i, const Run& run, const hysar_client_config& base, Rendezvous& rv,
+                ViewerResult& r) {
+    ViewerState state(rv, r);
+    try {
+        const std::string name = "loadgen-" + std::to_string(i);
+        hysar_client_config config = base;
+        config.name = name.c_str();
+        auto c = connect_client(config);
+        if (auto* e = std::get_if<std::string>(&c))
+            return state.give_up(*e);
+        hysar_client* client = std::get<ClientPtr>(c).get();
+        const hysar_display hd = to_c(run.display);
+        if (hysar_client_register_display(client, &hd) != HYSAR_OK)
+            return state.give_up(hysar_last_error());
+        state.ready();
+        while (rv.ready.load() < rv.n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        if (auto err = drive_viewer(client, i, run, r, state))
+            return state.give_up(*err);
+        hysar_client_info info{};
+        hysar_client_get_info(client, &info);
+        r.bytes = info.bytes_received;  // on the wire
+        state.finished();
+        while (!rv.stats_taken.load()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    } catch (const std::exception& e) {
+        state.fail(std::string("internal error: ") + e.what());
+    }
+    state.finished();
+}
+
+// --out: each headset's last layer pair as loadgen-I_left.png and _right.png; the files that
+// could not be written.
+uint64_t write_last_layers(const std::filesystem::path& out,
+                           const std::vector<ViewerResult>& results) {
+    uint64_t errors = 0;
+    for (size_t i = 0; i < results.size(); ++i)
+        for (int eye = 0; eye < 2; ++eye) {
+            const auto& r = results[i];
+            if (r.last[eye].empty())
+                continue;
+            const std::string file =
+                (out / ("loadgen-" + std::to_string(i) + (eye ? "_right.png" : "_left.png")))
+                    .string();
+            if (!write_layer_png(file, r.last_w[eye], r.last_h[eye],
+                                 proto::PixelFormat(r.last_format), r.last[eye])) {
+                std::fprintf(stderr, "hysar-loadgen: cannot write %s\n", file.c_str());
+                ++errors;
+            }
+        }
+    return errors;
+}
+
+// The run's sums over its headsets.
+struct Totals {
+    std::vector<double> latency_ms;  // every headset's
+    uint64_t layers = 0, bytes = 0, errors = 0, starved = 0, min_layers = UINT64_MAX;
+    uint64_t reconnects = 0, superseded = 0;
+    double elapsed_s = 1e-9;  // the longest time a headset sent poses
+};
+
+Totals sum_up(const std::vector<ViewerResult>& results) {
+    Totals t;
+    for (const auto& r : results) {
+        t.latency_ms.insert(t.latency_ms.end(), r.latency_ms.begin(), r.latency_ms.end());
+        t.layers += r.layers;
+        t.bytes += r.bytes;
+        t.errors += r.errors;
+        t.starved += r.layers == 0;
+        t.reconnects += r.reconnects;
+        t.min_layers = std::min(t.min_layers, r.layers);
+        // The rates are over the time the headsets sent poses (connecting is not part of it).
+        t.elapsed_s = std::max(t.elapsed_s, r.run_s);
+    }
+    return t;
+}
+
+void print_table(const Run& run, const Totals& t, const std::vector<ViewerResult>& results) {
+    const double lps = t.layers / t.elapsed_s;
+    std::printf("\n%-26s %12s\n", "hysar-loadgen", "");
+    std::printf("%-26s %12d\n", "viewers", run.n);
+    std::printf("%-26s %12ux%u\n", "eye resolution", run.display.eye_width, run.display.eye_height);
+    std::printf("%-26s %12.1f\n", "pose rate per viewer (Hz)", run.rate);
+    std::printf("%-26s %12.1f\n", "seconds", t.elapsed_s);
+    std::printf("%-26s %12.1f\n", "layers/s total", lps);
+    std::printf("%-26s %12.2f\n", "layers/s per viewer", lps / run.n);
+    std::printf("%-26s %12.2f\n", "min layers/s of a viewer", t.min_layers / t.elapsed_s);
+    std::printf("%-26s %12.1f\n", "latency p50 (ms)", percentile(t.latency_ms, 0.50));
+    std::printf("%-26s %12.1f\n", "latency p95 (ms)", percentile(t.latency_ms, 0.95));
+    std::printf("%-26s %12.1f\n", "latency p99 (ms)", percentile(t.latency_ms, 0.99));
+    std::printf("%-26s %12.2f\n", "MB/s", t.bytes / t.elapsed_s / 1e6);
+    std::printf("%-26s %12llu\n", "superseded poses", (unsigned long long)t.superseded);
+    std::printf("%-26s %12llu\n", "viewers with no layer", (unsigned long long)t.starved);
+    std::printf("%-26s %12llu\n", "reconnects", (unsigned long long)t.reconnects);
+    std::printf("%-26s %12llu\n", "errors", (unsigned long long)t.errors);
+    for (const auto& r : results)
+        if (!r.first_error.empty())
+            std::printf("  first error: %s\n", r.first_error.c_str());
+}
+
+nlohmann::json results_json(const Run& run, const Totals& t,
+                            const std::vector<ViewerResult>& results) {
+    const double lps = t.layers / t.elapsed_s;
+    nlohmann::json per = nlohmann::json::array();
+    for (size_t i = 0; i < results.size(); ++i)
+        per.push_back({{"viewer", i},
+                       {"layers", results[i].layers},
+                       {"poses", results[i].poses},
+                       {"layers_per_s", results[i].layers / t.elapsed_s},
+                       {"bytes", results[i].bytes},
+                       {"latency_ms_p50", percentile(results[i].latency_ms, 0.5)},
+                       {"reconnects", results[i].reconnects},
+                       {"layers_since_reconnect", results[i].layers_since_reconnect},
+                       {"errors", results[i].errors}});
+    return {{"viewers", run.n},
+            {"rate_hz", run.rate},
+            {"seconds", t.elapsed_s},
+            {"eye_width", run.display.eye_width},
+            {"eye_height", run.display.eye_height},
+            {"layers_per_s", lps},
+            {"layers_per_s_per_viewer", lps / run.n},
+            {"latency_ms",
+             {{"p50", percentile(t.latency_ms, 0.5)},
+              {"p95", percentile(t.latency_ms, 0.95)},
+              {"p99", percentile(t.latency_ms, 0.99)}}},
+            {"bytes_per_s", t.bytes / t.elapsed_s},
+            {"reconnects", t.reconnects},
+            {"superseded_poses", t.superseded},
+            {"errors", t.errors},
+            {"viewers_without_layers", t.starved},
+            {"per_viewer", per}};
+}
+
+// Runs the headsets, each on a thread of its own, until all are finished; then reads the
+// server's stats while they are still connected, and lets them go.
+std::vector<ViewerResult> run_headsets(const Run& run, const hysar_client_config& base,
+                                       uint64_t& superseded) {
+    std::vector<ViewerResult> results(run.n);
+    Rendezvous rv;
+    rv.n = run.n;
+    std::vector<std::thread> threads;
+    for (int i = 0; i < run.n; ++i)
+        threads.emplace_back([&, i] { run_viewer(i, run, base, rv, results[i]); });
+    while (rv.finished.load() < run.n) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    // The server's view: superseded poses per viewer.
+    superseded = 0;
+    auto stats = read_superseded(base);
+    if (auto* e = std::get_if<std::string>(&stats))
+        std::fprintf(stderr, "hysar-loadgen: no server stats (superseded poses shown as 0): %s\n",
+                     e->c_str());
+    else
+        superseded = std::get<uint64_t>(stats);
+    rv.stats_taken = true;
+    for (auto& t : threads) t.join();
+    return results;
+}
+
 int loadgen_main(int argc, char** argv) {
     Args args(argc, argv,
               with(kConnectionOptions, {"--connect", "--token", "--token-file", "--viewers",
                                         "--rate", "--seconds", "--frames", "--profile", "--scale",
                                         "--format", "--encoding", "--json", "--out"}),
               kConnectionFlags, kUsage.c_str(), HYSAR_CLIENT_VERSION_TEXT("hysar-loadgen"));
-    // Everything on the command line is checked before the network is touched.
-    const std::string address = args.get("--connect", "127.0.0.1:7700");
-    if (auto addr = parse_address(address); auto* bad = std::get_if<std::string>(&addr))
-        args.fail("--connect '" + address + "': " + *bad);
-    const std::string token = args.token(proto::kMaxTokenBytes);
-    const TlsOptions tls = args.tls_options();
-    const int n = int(args.integer("--viewers", 1, 1, 1024));
-    const double rate = args.number("--rate", 30, 0.1, 1000),
-                 seconds = args.number("--seconds", 5, 0, 86400);
-    const int64_t frames = args.integer("--frames", 0, 0, 1000000000);
-    if (seconds == 0 && frames == 0)
-        std::fprintf(stderr, "hysar-loadgen: --seconds 0: running until SIGINT or SIGTERM\n");
-    proto::RegisterDisplay display;
-    const double scale = args.number("--scale", 0.25, 0.01, 8);
-    if (auto err = load_profile(profile_option(args), scale, &display))
-        args.fail("--profile " + *err);
-    display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
-                         ? proto::PixelFormat::kRgba16f
-                         : proto::PixelFormat::kRgba8;
-    display.encoding = args.choice("--encoding", "sparse", {"raw", "sparse"}) == "raw"
-                           ? proto::Encoding::kRaw
-                           : proto::Encoding::kSparseTiles;
-    display.mode = proto::FrameMode::kContinuous;
-    const hysar_display hd = to_c(display);
     std::ofstream json_file;
-    if (args.has("--json")) {
-        const std::string path = args.output_path("--json", "");
-        json_file.open(path);
-        if (!json_file)
-            args.fail("--json '" + path + "': cannot write: " + std::strerror(errno));
-    }
-    const std::filesystem::path out = args.get("--out", "");
-    if (args.has("--out"))
-        if (auto err = make_output_dir(out.string()))
-            args.fail("--out " + *err);
+    const Run run = read_options(args, json_file);
     const hysar_client_config base =
-        client_config(args, address, token, "loadgen", HYSAR_ROLE_HMD, tls);
+        client_config(args, run.address, run.token, "loadgen", HYSAR_ROLE_HMD, run.tls);
     // One session first, so that an unreachable server or a wrong token is one clear line and
     // exit 2 rather than the same error from every headset.
     {
@@ -164,209 +438,23 @@ int loadgen_main(int argc, char** argv) {
         }
     }
     stop_on_signals();
-
-    std::vector<ViewerResult> results(n);
-    std::atomic<int> ready{0}, finished{0};
-    std::atomic<bool> stats_taken{false};
-    auto run_viewer = [&](int i) {
-        ViewerResult& r = results[i];
-        // Each headset counts itself ready and finished exactly once, however it ends: the
-        // others wait for `ready`, the main thread for `finished`.
-        bool is_ready = false, is_finished = false;
-        auto mark_ready = [&] {
-            if (!std::exchange(is_ready, true))
-                ++ready;
-        };
-        auto mark_finished = [&] {
-            mark_ready();
-            if (!std::exchange(is_finished, true))
-                ++finished;
-        };
-        auto fail = [&](const std::string& e) {
-            ++r.errors;
-            if (r.first_error.empty())
-                r.first_error = e;
-        };
-        auto give_up = [&](const std::string& e) {
-            mark_finished();
-            fail(e);
-        };
-        try {
-            const std::string name = "loadgen-" + std::to_string(i);
-            hysar_client_config config = base;
-            config.name = name.c_str();
-            auto c = connect_client(config);
-            if (auto* e = std::get_if<std::string>(&c))
-                return give_up(*e);
-            hysar_client* client = std::get<ClientPtr>(c).get();
-            if (hysar_client_register_display(client, &hd) != HYSAR_OK)
-                return give_up(hysar_last_error());
-            mark_ready();
-            while (ready.load() < n) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-            const double base_deg = n > 1 ? -40.0 + 80.0 * i / (n - 1) : 0.0;
-            const Clock::time_point start = Clock::now();
-            const Clock::time_point end = seconds > 0
-                                              ? start + std::chrono::duration_cast<Clock::duration>(
-                                                            std::chrono::duration<double>(seconds))
-                                              : Clock::time_point::max();
-            const auto period = std::chrono::duration<double>(1.0 / rate);
-            auto next_pose = start;
-            for (auto now = Clock::now(); now < end && !stop_requested(); now = Clock::now()) {
-                if (frames > 0 && int64_t(r.layers / 2) >= frames)
-                    break;
-                if (now >= next_pose) {
-                    double t = std::chrono::duration<double>(now - start).count();
-                    const auto p =
-                        orbit_pose(base_deg + 10.0 * std::sin(t), 0.8, 1.10, {0.0, 0.745, 0.0}, 0);
-                    const hysar_pose hp = to_c(p);  // time 0: stamped when sent
-                    if (hysar_client_send_pose(client, &hp, nullptr) != HYSAR_OK)
-                        return give_up(hysar_last_error());
-                    ++r.poses;
-                    next_pose += std::chrono::duration_cast<Clock::duration>(period);
-                }
-                // Rounded up: rounding down would spin for up to a millisecond before each pose.
-                const int wait = int(std::chrono::ceil<std::chrono::milliseconds>(
-                                         std::min(next_pose, end) - Clock::now())
-                                         .count());
-                Event e;
-                if (hysar_client_poll(client, std::clamp(wait, 0, 100), &e) != HYSAR_OK)
-                    return give_up(hysar_last_error());
-                if (e.kind == HYSAR_EVENT_LAYER) {
-                    ++r.layers;
-                    ++r.layers_since_reconnect;
-                    if (e.eye == 1)
-                        r.latency_ms.push_back(double(int64_t(e.received_ns - e.pose.time_ns)) *
-                                               1e-6);
-                    if (args.has("--out") && e.eye <= 1) {
-                        r.last[e.eye].assign(e.image.pixels, e.image.pixels + e.image.size_bytes);
-                        r.last_w[e.eye] = e.image.width, r.last_h[e.eye] = e.image.height;
-                        r.last_format = e.image.format;
-                    }
-                } else if (e.kind == HYSAR_EVENT_SERVER_ERROR) {
-                    fail(std::string("server error: ") + e.text);
-                } else if (e.kind == HYSAR_EVENT_CONNECTED) {
-                    r.reconnects = e.reconnects;
-                    r.layers_since_reconnect = 0;
-                } else if (e.kind == HYSAR_EVENT_CLOSED) {
-                    return give_up(e.text);
-                }
-            }
-            r.run_s = std::chrono::duration<double>(Clock::now() - start).count();
-            hysar_client_info info{};
-            hysar_client_get_info(client, &info);
-            r.bytes = info.bytes_received;  // on the wire
-            // Stay connected until the server's stats are read: it forgets a viewer that leaves.
-            mark_finished();
-            while (!stats_taken.load()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-        } catch (const std::exception& e) {
-            fail(std::string("internal error: ") + e.what());
-        }
-        mark_finished();
-    };
-    std::vector<std::thread> threads;
-    for (int i = 0; i < n; ++i) threads.emplace_back(run_viewer, i);
-    while (finished.load() < n) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    // The rates are over the time the headsets sent poses (connecting is not part of it).
-    double elapsed = 1e-9;
-    for (const auto& r : results) elapsed = std::max(elapsed, r.run_s);
-
-    // The server's view: superseded poses per viewer.
     uint64_t superseded = 0;
-    auto stats = read_superseded(base);
-    if (auto* e = std::get_if<std::string>(&stats))
-        std::fprintf(stderr, "hysar-loadgen: no server stats (superseded poses shown as 0): %s\n",
-                     e->c_str());
-    else
-        superseded = std::get<uint64_t>(stats);
-    stats_taken = true;
-    for (auto& t : threads) t.join();
-    uint64_t out_errors = 0;
-    if (args.has("--out"))
-        for (int i = 0; i < n; ++i)
-            for (int eye = 0; eye < 2; ++eye) {
-                const auto& r = results[i];
-                if (r.last[eye].empty())
-                    continue;
-                const std::string file =
-                    (out / ("loadgen-" + std::to_string(i) + (eye ? "_right.png" : "_left.png")))
-                        .string();
-                if (!write_layer_png(file, r.last_w[eye], r.last_h[eye],
-                                     proto::PixelFormat(r.last_format), r.last[eye])) {
-                    std::fprintf(stderr, "hysar-loadgen: cannot write %s\n", file.c_str());
-                    ++out_errors;
-                }
-            }
-
-    std::vector<double> all;
-    uint64_t layers = 0, bytes = 0, errors = out_errors, starved = 0, min_layers = UINT64_MAX;
-    uint64_t reconnects = 0;
-    for (const auto& r : results) {
-        all.insert(all.end(), r.latency_ms.begin(), r.latency_ms.end());
-        layers += r.layers;
-        bytes += r.bytes;
-        errors += r.errors;
-        starved += r.layers == 0;
-        reconnects += r.reconnects;
-        min_layers = std::min(min_layers, r.layers);
-    }
-    const double lps = layers / elapsed;
-    std::printf("\n%-26s %12s\n", "hysar-loadgen", "");
-    std::printf("%-26s %12d\n", "viewers", n);
-    std::printf("%-26s %12ux%u\n", "eye resolution", display.eye_width, display.eye_height);
-    std::printf("%-26s %12.1f\n", "pose rate per viewer (Hz)", rate);
-    std::printf("%-26s %12.1f\n", "seconds", elapsed);
-    std::printf("%-26s %12.1f\n", "layers/s total", lps);
-    std::printf("%-26s %12.2f\n", "layers/s per viewer", lps / n);
-    std::printf("%-26s %12.2f\n", "min layers/s of a viewer", min_layers / elapsed);
-    std::printf("%-26s %12.1f\n", "latency p50 (ms)", percentile(all, 0.50));
-    std::printf("%-26s %12.1f\n", "latency p95 (ms)", percentile(all, 0.95));
-    std::printf("%-26s %12.1f\n", "latency p99 (ms)", percentile(all, 0.99));
-    std::printf("%-26s %12.2f\n", "MB/s", bytes / elapsed / 1e6);
-    std::printf("%-26s %12llu\n", "superseded poses", (unsigned long long)superseded);
-    std::printf("%-26s %12llu\n", "viewers with no layer", (unsigned long long)starved);
-    std::printf("%-26s %12llu\n", "reconnects", (unsigned long long)reconnects);
-    std::printf("%-26s %12llu\n", "errors", (unsigned long long)errors);
-    for (const auto& r : results)
-        if (!r.first_error.empty())
-            std::printf("  first error: %s\n", r.first_error.c_str());
+    const std::vector<ViewerResult> results = run_headsets(run, base, superseded);
+    const uint64_t out_errors = run.out.empty() ? 0 : write_last_layers(run.out, results);
+    Totals t = sum_up(results);
+    t.errors += out_errors;
+    t.superseded = superseded;
+    print_table(run, t, results);
     if (json_file.is_open()) {
-        nlohmann::json per = nlohmann::json::array();
-        for (size_t i = 0; i < results.size(); ++i)
-            per.push_back({{"viewer", i},
-                           {"layers", results[i].layers},
-                           {"poses", results[i].poses},
-                           {"layers_per_s", results[i].layers / elapsed},
-                           {"bytes", results[i].bytes},
-                           {"latency_ms_p50", percentile(results[i].latency_ms, 0.5)},
-                           {"reconnects", results[i].reconnects},
-                           {"layers_since_reconnect", results[i].layers_since_reconnect},
-                           {"errors", results[i].errors}});
-        nlohmann::json j{{"viewers", n},
-                         {"rate_hz", rate},
-                         {"seconds", elapsed},
-                         {"eye_width", display.eye_width},
-                         {"eye_height", display.eye_height},
-                         {"layers_per_s", lps},
-                         {"layers_per_s_per_viewer", lps / n},
-                         {"latency_ms",
-                          {{"p50", percentile(all, 0.5)},
-                           {"p95", percentile(all, 0.95)},
-                           {"p99", percentile(all, 0.99)}}},
-                         {"bytes_per_s", bytes / elapsed},
-                         {"reconnects", reconnects},
-                         {"superseded_poses", superseded},
-                         {"errors", errors},
-                         {"viewers_without_layers", starved},
-                         {"per_viewer", per}};
-        json_file << j.dump(2) << "\n";
+        json_file << results_json(run, t, results).dump(2) << "\n";
         json_file.close();
         if (!json_file) {
             std::fprintf(stderr, "hysar-loadgen: --json '%s': write failed\n",
-                         args.get("--json", "").c_str());
+                         run.json_path.c_str());
             return 1;
         }
     }
-    return errors || starved ? 1 : 0;
+    return t.errors || t.starved ? 1 : 0;
 }
 
 }  // namespace

@@ -36,7 +36,7 @@ std::variant<std::monostate, LivePose, std::string> parse_pose_line(std::string_
     if (line.size() > kMaxLineBytes)
         return "longer than " + std::to_string(kMaxLineBytes) + " bytes";
     // Commas or blanks between fields: each run of separators becomes one comma (two commas in
-    // a run stay two, an empty field that parse_number_list reports).
+    // a run stay two, an empty field that options::read_number_list reports).
     std::string fields;
     for (size_t i = 0; i < line.size();) {
         if (line[i] != ',' && line[i] != ' ' && line[i] != '\t') {
@@ -48,7 +48,7 @@ std::variant<std::monostate, LivePose, std::string> parse_pose_line(std::string_
             commas += line[i] == ',';
         fields.append(std::max<size_t>(commas, 1), ',');
     }
-    auto v = parse_number_list(fields, -1e15, 1e15, 8, 9);
+    auto v = options::read_number_list(fields, -1e15, 1e15, 8, 9);
     if (auto* e = std::get_if<std::string>(&v))
         return *e + " (expected t_s,x,y,z,qw,qx,qy,qz[,frame_id])";
     const auto& x = std::get<std::vector<double>>(v);
@@ -77,7 +77,7 @@ std::variant<std::unique_ptr<PoseSource>, std::string> PoseSource::open(const st
         host = port_text.substr(0, colon);
         port_text = port_text.substr(colon + 1);
     }
-    auto port = parse_integer(port_text, 0, 65535);
+    auto port = options::read_integer(port_text, 0, 65535);
     if (auto* e = std::get_if<std::string>(&port))
         return "'" + spec + "': port " + *e;
     sockaddr_in addr{};

@@ -44,6 +44,74 @@ static const std::string kUsage =
 
 namespace {
 
+// A projector frame: written to OUT as projector_vN.png and shown in the window. False when
+// the file cannot be written.
+bool take_frame(const Event& e, const std::filesystem::path& out, ImageWindow* window) {
+    const hysar_image& im = e.image;
+    const auto format = proto::PixelFormat(im.format);
+    std::string file = (out / ("projector_v" + std::to_string(e.scene_version) + ".png")).string();
+    if (!write_layer_png(file, im.width, im.height, format, {im.pixels, im.size_bytes})) {
+        std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
+        return false;
+    }
+    std::printf("projector frame v%u %ux%u -> %s\n", e.scene_version, im.width, im.height,
+                file.c_str());
+    std::fflush(stdout);
+    if (window && format == proto::PixelFormat::kRgba8) {
+        std::vector<uint8_t> px(im.pixels, im.pixels + im.size_bytes);
+        for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
+        window->show(px, im.width, im.height);
+    }
+    return true;
+}
+
+// Takes projector frames until `frames_wanted` (0: until stopped), a frame is late by
+// `timeout_ms`, the window is closed or the session ends; the exit status (0 or 1). Server
+// errors are counted in `server_errors` and the frames go on.
+int receive_frames(hysar_client* client, ImageWindow* window, const std::filesystem::path& out,
+                   int64_t frames_wanted, int timeout_ms, int64_t& server_errors) {
+    int64_t frames = 0;
+    auto last_frame = std::chrono::steady_clock::now();
+    // The window is polled every 50 ms whatever the network does: it stays responsive and
+    // keeps showing the last frame while the library reconnects.
+    while (!stop_requested() && (frames_wanted == 0 || frames < frames_wanted)) {
+        Event e;
+        if (hysar_client_poll(client, window ? 50 : 200, &e) != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-projector: %s\n", hysar_last_error());
+            return 1;
+        }
+        if (window && !window->poll())
+            break;
+        if (e.kind == HYSAR_EVENT_NONE) {
+            const auto waited = std::chrono::steady_clock::now() - last_frame;
+            if (frames_wanted != 0 && waited >= std::chrono::milliseconds(timeout_ms)) {
+                std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
+                             format_number(timeout_ms / 1000.0).c_str());
+                return 1;
+            }
+            continue;
+        }
+        if (report_connection("hysar-projector", e))
+            continue;
+        if (e.kind == HYSAR_EVENT_CLOSED) {
+            std::fprintf(stderr, "hysar-projector: %s\n", e.text);
+            return 1;
+        }
+        if (e.kind == HYSAR_EVENT_SERVER_ERROR) {
+            ++server_errors;  // reported, and the exit status says so; frames may still come
+            std::fprintf(stderr, "hysar-projector: server error: %s\n", e.text);
+            continue;
+        }
+        if (e.kind != HYSAR_EVENT_PROJECTOR_FRAME)
+            continue;
+        last_frame = std::chrono::steady_clock::now();
+        if (!take_frame(e, out, window))
+            return 1;
+        ++frames;
+    }
+    return 0;
+}
+
 int projector_main(int argc, char** argv) {
     Args args(argc, argv,
               with(kConnectionOptions, {"--connect", "--token", "--token-file", "--out", "--frames",
@@ -87,64 +155,9 @@ int projector_main(int argc, char** argv) {
     }
     hysar_client* client = std::get<ClientPtr>(connected).get();
     stop_on_signals();
-    int64_t frames = 0, server_errors = 0;
-    int rc = 0;
-    auto last_frame = std::chrono::steady_clock::now();
-    // The window is polled every 50 ms whatever the network does: it stays responsive and
-    // keeps showing the last frame while the library reconnects.
-    while (!stop_requested() && (frames_wanted == 0 || frames < frames_wanted)) {
-        Event e;
-        if (hysar_client_poll(client, window ? 50 : 200, &e) != HYSAR_OK) {
-            std::fprintf(stderr, "hysar-projector: %s\n", hysar_last_error());
-            rc = 1;
-            break;
-        }
-        if (window && !window->poll())
-            break;
-        if (e.kind == HYSAR_EVENT_NONE) {
-            const auto waited = std::chrono::steady_clock::now() - last_frame;
-            if (frames_wanted != 0 && waited >= std::chrono::milliseconds(timeout_ms)) {
-                std::fprintf(stderr, "hysar-projector: no frame within %s s (--timeout)\n",
-                             format_number(timeout_ms / 1000.0).c_str());
-                rc = 1;
-                break;
-            }
-            continue;
-        }
-        if (report_connection("hysar-projector", e))
-            continue;
-        if (e.kind == HYSAR_EVENT_CLOSED) {
-            std::fprintf(stderr, "hysar-projector: %s\n", e.text);
-            rc = 1;
-            break;
-        }
-        if (e.kind == HYSAR_EVENT_SERVER_ERROR) {
-            ++server_errors;  // reported, and the exit status says so; frames may still come
-            std::fprintf(stderr, "hysar-projector: server error: %s\n", e.text);
-            continue;
-        }
-        if (e.kind != HYSAR_EVENT_PROJECTOR_FRAME)
-            continue;
-        last_frame = std::chrono::steady_clock::now();
-        const hysar_image& im = e.image;
-        const auto format = proto::PixelFormat(im.format);
-        std::string file =
-            (out / ("projector_v" + std::to_string(e.scene_version) + ".png")).string();
-        if (!write_layer_png(file, im.width, im.height, format, {im.pixels, im.size_bytes})) {
-            std::fprintf(stderr, "hysar-projector: cannot write %s\n", file.c_str());
-            rc = 1;
-            break;
-        }
-        std::printf("projector frame v%u %ux%u -> %s\n", e.scene_version, im.width, im.height,
-                    file.c_str());
-        std::fflush(stdout);
-        if (window && format == proto::PixelFormat::kRgba8) {
-            std::vector<uint8_t> px(im.pixels, im.pixels + im.size_bytes);
-            for (size_t i = 3; i < px.size(); i += 4) px[i] = 255;
-            window->show(px, im.width, im.height);
-        }
-        ++frames;
-    }
+    int64_t server_errors = 0;
+    const int rc =
+        receive_frames(client, window.get(), out, frames_wanted, timeout_ms, server_errors);
     if (window && !screenshot.empty()) {
         uint32_t w = 0, h = 0;
         auto px = window->read_back(&w, &h);

@@ -2,10 +2,11 @@
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
 # outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
-# server/admin/ (and its tests), no CLI11 outside cli/options.cpp, no OpenSSL outside the two
+# server/admin/ (and its tests), no CLI11 outside options/options.cpp, no argument
+# parsed by hand outside options/ (below), no OpenSSL outside the two
 # tls.cpp files, no NATS client outside server/cluster/scene_bus.cpp, and hs_admin's links as docs/ARCHITECTURE.md draws them: it
 # reads the server through its snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol),
-# never the GPU or the renderer; only the hysar executable links it.
+# never the GPU or the renderer; only the hysar commands' library (server/cli/) links it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -21,8 +22,23 @@ usb=$(grep -rnE '#include <libusb|\blibusb_[a-z_]+\(' server clients tests --inc
 if [[ -n "$usb" ]]; then echo "layers: libusb outside clients/usb_enumerate.cpp:"; echo "$usb"; fail=1; fi
 http=$(grep -rn '#include <httplib' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server|tests)/admin/' || true)
 if [[ -n "$http" ]]; then echo "layers: cpp-httplib outside server/admin/:"; echo "$http"; fail=1; fi
-cli11=$(grep -rn '#include <CLI/' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^cli/options\.cpp:' || true)
-if [[ -n "$cli11" ]]; then echo "layers: CLI11 outside cli/options.cpp (programs read options through cli/options.hpp):"; echo "$cli11"; fail=1; fi
+cli11=$(grep -rn '#include <CLI/' server clients tests options --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^options/options\.cpp:' || true)
+if [[ -n "$cli11" ]]; then echo "layers: CLI11 outside options/options.cpp (programs read options through options/options.hpp):"; echo "$cli11"; fail=1; fi
+# Arguments are read by options/ alone (options/options.hpp, options/numbers.hpp). Outside it, in
+# any program or test: an element of argv compared with a string (strcmp(argv[i], ...),
+# std::string_view(argv[i]) == ..., argv[i] == ...), or a value taken by hand (args[++i]).
+# In the command layer and the clients, which hold no other reason to: an option's name
+# compared with a string ("a == \"--help\""), the shape of a hand-written option loop.
+argv_rx='(str(n)?cmp|strcasecmp)[[:space:]]*\([[:space:]]*argv|(std::)?string(_view)?[[:space:]]*[({][[:space:]]*argv[[:space:]]*\[|argv[[:space:]]*\[[^]]*\][[:space:]]*[!=]=|[!=]=[[:space:]]*argv[[:space:]]*\[|\bargs?[[:space:]]*\[[[:space:]]*\+\+'
+handargv=$(grep -rnE "$argv_rx" server clients tests examples --include='*.cpp' --include='*.hpp' --include='*.c' --include='*.h' 2>/dev/null || true)
+opt_rx='[!=]=[[:space:]]*"--?[A-Za-z]|"--?[A-Za-z][^"]*"[[:space:]]*[!=]='
+handopt=$(grep -rnE "$opt_rx" server/cli server/main.cpp clients --include='*.cpp' --include='*.hpp' 2>/dev/null || true)
+if [[ -n "$handargv$handopt" ]]; then
+  echo "layers: arguments read by hand outside options/ (read them with options/options.hpp):"
+  if [[ -n "$handargv" ]]; then echo "$handargv"; fi
+  if [[ -n "$handopt" ]]; then echo "$handopt"; fi
+  fail=1
+fi
 tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server/stream/tls\.cpp|clients/tls\.cpp):' || true)
 if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
 nats=$(grep -rnE '#include <nats' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^server/cluster/scene_bus\.cpp:' || true)
@@ -35,7 +51,7 @@ for lib in $(echo "$adm_links" | grep -oE '\bhs_[a-z_]+' | grep -v '^hs_admin$')
     *) echo "layers: hs_admin links $lib (allowed: hs_stream, hs_codec, hs_protocol, hs_core)"; fail=1 ;;
   esac
 done
-users=$(grep -rln 'hs_admin\b' --include=CMakeLists.txt . 2>/dev/null | grep -vE '^\./(build[^/]*|server/admin|tests)/|^\./CMakeLists\.txt$' || true)
-if [[ -n "$users" ]]; then echo "layers: hs_admin linked outside the hysar executable and its tests:"; echo "$users"; fail=1; fi
+users=$(grep -rln 'hs_admin\b' --include=CMakeLists.txt . 2>/dev/null | grep -vE '^\./(build[^/]*|server/admin|tests)/|^\./(server/cli/)?CMakeLists\.txt$' || true)
+if [[ -n "$users" ]]; then echo "layers: hs_admin linked outside the hysar commands (server/cli/) and its tests:"; echo "$users"; fail=1; fi
 if [[ $fail -ne 0 ]]; then exit 1; fi
 echo "layers: module boundaries hold"

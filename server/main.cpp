@@ -1,5 +1,5 @@
 // `hysar`: the HySAR render server's command line. The global options (--log-level,
-// --log-format, --version) are taken out of the arguments here (cli/options.hpp), wherever they
+// --log-format, --version) are taken out of the arguments here (options/options.hpp), wherever they
 // stand, before a subcommand's own parser sees the rest.
 #include <cstdio>
 #include <cstdlib>
@@ -8,12 +8,12 @@
 #include <string>
 #include <vector>
 
-#include "cli/options.hpp"
-#include "commands.hpp"
+#include "cli/commands.hpp"
 #include "core/log.hpp"
 #include "gpu/device.hpp"
 #include "gpu/driver_info.hpp"
 #include "hysar_version.hpp"
+#include "options/options.hpp"
 
 namespace {
 void usage(FILE* f) {
@@ -155,21 +155,10 @@ int main(int argc, char** argv) {
     std::vector<std::string> args(all.begin() + 1, all.end());
     hs::log::debug("hysar {} (commit {}, {}): {}", HYSAR_VERSION, HYSAR_GIT_COMMIT,
                    HYSAR_BUILD_TYPE, cmd);
-    if (cmd == "render")
-        return hs::cli::run_render(args);
-    if (cmd == "serve")
-        return hs::cli::run_serve(args);
-    if (cmd == "bench")
-        return hs::cli::run_bench(args);
-    if (cmd == "eval")
-        return hs::cli::run_eval(args);
-    if (cmd == "calibrate")
-        return hs::cli::run_calibrate(args);
-    if (cmd == "admin")
-        return hs::cli::run_admin(args);
-    if (cmd == "cluster")
-        return hs::cli::run_cluster(args);
-    if (cmd == "--help" || cmd == "-h" || cmd == "help") {
+    for (const auto& c : hs::cli::kCommands)
+        if (cmd == c.name)
+            return c.run(args);
+    if (hs::options::asks_for_help({cmd}) || cmd == "help") {
         usage(stdout);
         return 0;
     }

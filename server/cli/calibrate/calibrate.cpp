@@ -10,13 +10,14 @@
 #include <nlohmann/json.hpp>
 
 #include "calib/files.hpp"
-#include "calibrate_common.hpp"
-#include "commands.hpp"
+#include "cli/calibrate/calibrate_common.hpp"
+#include "cli/commands.hpp"
+#include "cli/eval/eval_common.hpp"
 #include "core/log.hpp"
-#include "eval_common.hpp"
 #include "gpu/device.hpp"
 #include "installation/chain.hpp"
 #include "optics/table2.hpp"
+#include "options/options.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 
@@ -370,17 +371,13 @@ Result<void> write_material(const fs::path& out, const ImageRgba32f& projector,
 }
 
 int run_calibrate(const std::vector<std::string>& args) {
-    if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    // `hysar calibrate STEP --help` too: the help covers each step.
+    if (args.empty() || options::asks_for_help(args)) {
         std::fputs(kHelp, args.empty() ? stderr : stdout);
         return args.empty() ? 2 : 0;
     }
     const std::string step = args[0];
     const std::vector<std::string> rest(args.begin() + 1, args.end());
-    for (const auto& a : rest)
-        if (a == "--help" || a == "-h") {  // `hysar calibrate STEP --help`: the help covers each
-            std::fputs(kHelp, stdout);
-            return 0;
-        }
     if (step == "patterns")
         return run_subcommand(rest, {"--size", "--out", "--ramp", "--grid"},
                               {kSizeFlag, kRampFlag, kGridFlag}, cmd_patterns);

@@ -1,21 +1,17 @@
-// Shared pieces of the `hysar eval` subcommands: flags, tables, CSV and the figures' sections.
+// The flags of the `hysar` commands, read with the one option reader (options/options.hpp) and
+// the one number reader (options/numbers.hpp), as Result values: a refusal names the flag, the
+// value and the range ("--white: '1e300' is outside [1e-06, 1e+06]") and ends the command with
+// exit status 2 before any work. Flag code only: no scene, optics or device here.
 #pragma once
 
 #include <cstdint>
-#include <filesystem>
 #include <functional>
 #include <map>
-#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
-#include "core/figure.hpp"
 #include "core/result.hpp"
-#include "optics/metrics.hpp"
-#include "optics/resolution.hpp"
-#include "optics/table2.hpp"
-#include "scene/scene.hpp"
 
 namespace hs::cli {
 
@@ -26,14 +22,13 @@ struct Flags {
     std::string get(const std::string& f, const std::string& def) const;
     const std::vector<std::string>& all(const std::string& f) const;
 };
+// Reads `args` (without the command's words): options of `with_value` take one value each time
+// they appear, `switches` none; anything else is refused, with the known options listed.
 Result<Flags> parse_flags(const std::vector<std::string>& args,
                           const std::vector<std::string>& with_value,
                           const std::vector<std::string>& switches = {});
-// All of `text` as a finite number: an optional leading '+', no spaces, no "nan" or "inf",
-// nothing after the number; locale-independent.
-Result<double> parse_double(const std::string& flag, const std::string& text);
-// The same, refused outside [lo, hi]. Every refusal names the flag, the value and the range:
-// "--white: '1e300' is outside [1e-06, 1e+06]", "--white: 'abc' is not a number in [...]".
+// All of `text` as a finite number in [lo, hi]. Every refusal names the flag, the value and the
+// range: "--white: '1e300' is outside [1e-06, 1e+06]", "--white: 'abc' is not a number in [...]".
 Result<double> parse_double(const std::string& flag, const std::string& text, double lo, double hi);
 // A whole number in [lo, hi] (no exponent, no fraction), refused as parse_double does.
 Result<int64_t> parse_integer(const std::string& flag, const std::string& text, int64_t lo,
@@ -62,43 +57,5 @@ int run_subcommand(const std::vector<std::string>& args, const std::vector<std::
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
                    const std::vector<NumericFlag>& numbers,
                    const std::function<Result<void>(const Flags&)>& body);
-
-Result<optics::PaperOptics> load_params(const Flags& flags);
-Result<scene::Scene> load_scene(const Flags& flags);
-Result<const scene::ViewerProfile*> pick_viewer(const scene::Scene& s, const Flags& flags);
-
-Result<void> write_text(const std::filesystem::path& path, const std::string& text);
-Result<void> make_dirs(const std::filesystem::path& dir);
-
-// Table 2 as text and as CSV; the checks of the printed values as text.
-std::string table2_text(const optics::Table2& t);
-std::string table2_csv(const optics::Table2& t);
-std::string checks_text(const std::vector<optics::Check>& checks);
-
-// Sec. 4.3 for the paper (printed regions, and its geometry rebuilt in `scene`) and for the
-// scene's own devices at its default viewpoint.
-struct ResolutionRow {
-    std::string setup;
-    optics::Density projector, hmd;
-};
-Result<std::vector<ResolutionRow>> resolution_rows(const optics::PaperOptics& paper,
-                                                   const scene::Scene& scene,
-                                                   const scene::ViewerProfile& viewer);
-std::string resolution_text(const std::vector<ResolutionRow>& rows);
-std::string resolution_csv(const std::vector<ResolutionRow>& rows);
-
-// One row of Figs. 11 and 12.
-struct CompareRow {
-    std::string name;
-    optics::VdAreas areas;
-    optics::LabDifferences lab;
-};
-std::string compare_text(const std::vector<CompareRow>& rows);
-std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& viewpoint);
-// Fig. 12: mean +- sd of dL, da, db per method, and Delta E 2000 histograms.
-Figure fig12_plot(const std::vector<CompareRow>& rows);
-
-// `hysar eval report` (server/report_command.cpp).
-Result<void> eval_report(const Flags& flags);
 
 }  // namespace hs::cli

@@ -1,4 +1,4 @@
-#include "cli/options.hpp"
+#include "options/options.hpp"
 
 #include <algorithm>
 
@@ -89,6 +89,21 @@ std::variant<Parsed, std::string> parse(const std::vector<std::string>& args, co
         if (opt->count() > 0)
             out.values[name].assign(opt->count(), "1");
     return out;
+}
+
+bool asks(const std::vector<std::string>& args, std::initializer_list<std::string_view> names) {
+    for (const auto& a : args) {
+        if (a == "--")
+            return false;
+        for (const auto name : names)
+            if (a == name)
+                return true;
+    }
+    return false;
+}
+
+bool asks_for_help(const std::vector<std::string>& args) {
+    return asks(args, {"--help", "-h"});
 }
 
 }  // namespace hs::options

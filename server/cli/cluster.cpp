@@ -5,10 +5,10 @@
 
 #include <fmt/format.h>
 
-#include "cli/options.hpp"
-#include "cluster/gateway.hpp"
-#include "commands.hpp"
-#include "eval_common.hpp"
+#include "cli/commands.hpp"
+#include "cli/flags.hpp"
+#include "gateway/gateway.hpp"
+#include "options/options.hpp"
 
 namespace hs::cli {
 
@@ -48,11 +48,10 @@ int usage_error(const std::string& message) {
 }  // namespace
 
 int run_cluster(const std::vector<std::string>& args) {
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            std::fputs(kClusterHelp, stdout);
-            return 0;
-        }
+    if (options::asks_for_help(args)) {
+        std::fputs(kClusterHelp, stdout);
+        return 0;
+    }
     auto parsed = options::parse(
         args,
         {{"--node", "--listen", "--agent-port", "--admin-socket", "--tls-pem", "--out"}, {}, true});

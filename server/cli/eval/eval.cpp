@@ -13,12 +13,12 @@
 #include <fmt/format.h>
 #include <glm/trigonometric.hpp>
 
-#include "cli/options.hpp"
-#include "commands.hpp"
-#include "core/figure.hpp"
+#include "cli/commands.hpp"
+#include "cli/eval/eval_common.hpp"
 #include "core/log.hpp"
-#include "core/plot.hpp"
-#include "eval_common.hpp"
+#include "options/options.hpp"
+#include "plot/figure.hpp"
+#include "plot/plot.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 #include "scene/mesh.hpp"
@@ -27,232 +27,11 @@ namespace hs::cli {
 
 namespace fs = std::filesystem;
 
-std::string Flags::get(const std::string& f, const std::string& def) const {
-    auto it = values.find(f);
-    return it == values.end() || it->second.empty() ? def : it->second.back();
-}
-
-const std::vector<std::string>& Flags::all(const std::string& f) const {
-    static const std::vector<std::string> none;
-    auto it = values.find(f);
-    return it == values.end() ? none : it->second;
-}
-
-Result<Flags> parse_flags(const std::vector<std::string>& args,
-                          const std::vector<std::string>& with_value,
-                          const std::vector<std::string>& switches) {
-    auto parsed = options::parse(args, {with_value, switches});
-    if (auto* e = std::get_if<std::string>(&parsed)) {
-        std::string list;
-        for (const auto& x : with_value) list += " " + x;
-        for (const auto& x : switches) list += " " + x;
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            e->rfind("unknown option", 0) == 0 && e->find("did you mean") == std::string::npos
-                ? fmt::format("{} (expected one of:{})", *e, list)
-                : *e);
-    }
-    Flags f;
-    for (auto& [k, v] : std::get<options::Parsed>(parsed).values) {
-        const bool is_switch = std::find(switches.begin(), switches.end(), k) != switches.end();
-        f.values[k] = is_switch ? std::vector<std::string>{} : std::move(v);
-    }
-    return f;
-}
-
-namespace {
-
-int run_checked(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                const std::vector<std::string>& switches, const std::vector<NumericFlag>& numbers,
-                const std::function<Result<void>(const Flags&)>& body) {
-    auto flags = parse_flags(args, with_value, switches);
-    Result<void> usable = flags.ok() ? check_numbers(*flags, numbers) : flags.error();
-    if (!usable.ok()) {
-        log::error("{}", usable.error().message);
-        return 2;
-    }
-    if (auto r = body(*flags); !r.ok()) {
-        log::error("{}", r.error().message);
-        return 1;
-    }
-    return 0;
-}
-
-enum class Reading { kNumber, kNotNumber, kNotFinite, kTooLarge };
-
-// `s` as a double: all of it, an optional leading '+', "nan" and "inf" read but not finite.
-Reading read_double(std::string_view s, double& v) {
-    if (s.size() > 1 && s[0] == '+' && s[1] != '-')
-        s.remove_prefix(1);
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (s.empty() || end != s.data() + s.size() ||
-        (ec != std::errc() && ec != std::errc::result_out_of_range))
-        return Reading::kNotNumber;
-    if (ec == std::errc::result_out_of_range) {
-        // Too large, or too small to be told from 0 (strtod says which).
-        v = std::strtod(std::string(s).c_str(), nullptr);
-        return std::isinf(v) ? Reading::kTooLarge : Reading::kNumber;
-    }
-    return std::isfinite(v) ? Reading::kNumber : Reading::kNotFinite;
-}
-
-Error refused(const std::string& flag, const std::string& s, const char* why,
-              const std::string& range) {
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("{}: '{}' {} {}", flag, s, why, range));
-}
-
-Result<std::pair<uint32_t, uint32_t>> parse_size_text(const NumericFlag& spec,
-                                                      const std::string& s) {
-    const size_t x = s.find('x');
-    auto side = [&](const std::string& t) {
-        return parse_integer(spec.flag, t, int64_t(spec.lo), int64_t(spec.hi));
-    };
-    if (x != std::string::npos) {
-        auto w = side(s.substr(0, x)), h = side(s.substr(x + 1));
-        if (w && h)
-            return std::pair{uint32_t(*w), uint32_t(*h)};
-    }
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("{}: '{}' is not WIDTHxHEIGHT with each side a whole number in "
-                                  "[{}, {}]",
-                                  spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
-}
-
-}  // namespace
-
-int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                   const std::function<Result<void>(const Flags&)>& body,
-                   const std::vector<std::string>& switches) {
-    return run_checked(args, with_value, switches, {}, body);
-}
-
-int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
-                   const std::vector<NumericFlag>& numbers,
-                   const std::function<Result<void>(const Flags&)>& body) {
-    return run_checked(args, with_value, {}, numbers, body);
-}
-
-Result<double> parse_double(const std::string& flag, const std::string& s) {
-    double v = 0;
-    switch (read_double(s, v)) {
-        case Reading::kNumber:
-            return v;
-        case Reading::kNotFinite:
-            return make_error(ErrorCode::kInvalidArgument,
-                              fmt::format("{}: '{}' is not a finite number", flag, s));
-        case Reading::kTooLarge:
-            return make_error(ErrorCode::kInvalidArgument,
-                              fmt::format("{}: '{}' is too large to be a number", flag, s));
-        case Reading::kNotNumber:
-            break;
-    }
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("{}: '{}' is not a number", flag, s));
-}
-
-Result<double> parse_double(const std::string& flag, const std::string& s, double lo, double hi) {
-    const std::string range = fmt::format("[{:g}, {:g}]", lo, hi);
-    double v = 0;
-    switch (read_double(s, v)) {
-        case Reading::kNumber:
-            if (v >= lo && v <= hi)
-                return v;
-            return refused(flag, s, "is outside", range);
-        case Reading::kNotFinite:
-            return refused(flag, s, "is not a finite number in", range);
-        case Reading::kTooLarge:
-            return refused(flag, s, "is outside", range);
-        case Reading::kNotNumber:
-            break;
-    }
-    return refused(flag, s, "is not a number in", range);
-}
-
-Result<int64_t> parse_integer(const std::string& flag, const std::string& s, int64_t lo,
-                              int64_t hi) {
-    const std::string range = fmt::format("[{}, {}]", lo, hi);
-    std::string_view t = s;
-    if (t.size() > 1 && t[0] == '+' && t[1] != '-')
-        t.remove_prefix(1);
-    int64_t v = 0;
-    const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-    if (t.empty() || end != t.data() + t.size() ||
-        (ec != std::errc() && ec != std::errc::result_out_of_range))
-        return refused(flag, s, "is not a whole number in", range);
-    if (ec == std::errc::result_out_of_range || v < lo || v > hi)
-        return refused(flag, s, "is outside", range);
-    return v;
-}
-
-Result<double> parse_number(const Flags& f, const NumericFlag& spec, double def) {
-    if (!f.has(spec.flag))
-        return def;
-    const std::string s = f.get(spec.flag, "");
-    if (spec.kind == NumericFlag::kWhole) {
-        HS_ASSIGN_OR_RETURN(int64_t v,
-                            parse_integer(spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
-        return double(v);
-    }
-    return parse_double(spec.flag, s, spec.lo, spec.hi);
-}
-
-Result<std::pair<uint32_t, uint32_t>> parse_size(const Flags& f, const NumericFlag& spec) {
-    return parse_size_text(spec, f.get(spec.flag, ""));
-}
-
-Result<void> check_numbers(const Flags& f, const std::vector<NumericFlag>& specs) {
-    for (const auto& spec : specs)
-        for (const auto& s : f.all(spec.flag)) {
-            if (spec.kind == NumericFlag::kSize) {
-                HS_TRY(parse_size_text(spec, s));
-            } else if (spec.kind == NumericFlag::kWhole) {
-                HS_TRY(parse_integer(spec.flag, s, int64_t(spec.lo), int64_t(spec.hi)));
-            } else {
-                HS_TRY(parse_double(spec.flag, s, spec.lo, spec.hi));
-            }
-        }
-    return {};
-}
-
 Result<optics::PaperOptics> load_params(const Flags& f) {
     if (f.has("--params"))
         return optics::load_paper_optics(f.get("--params", ""));
     return optics::parse_paper_optics(std::string(optics::paper_optics_json()),
                                       "<embedded configs/paper-optics.json>");
-}
-
-Result<scene::Scene> load_scene(const Flags& f) {
-    if (f.has("--scene"))
-        return scene::load_scene_file(f.get("--scene", ""));
-    return scene::default_scene();
-}
-
-Result<const scene::ViewerProfile*> pick_viewer(const scene::Scene& s, const Flags& f) {
-    if (!f.has("--viewer"))
-        return &s.viewers.front();
-    const std::string name = f.get("--viewer", "");
-    if (const auto* v = s.find_viewer(name))
-        return v;
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("--viewer: the scene has no viewer '{}'", name));
-}
-
-Result<void> write_text(const fs::path& path, const std::string& text) {
-    std::ofstream out(path, std::ios::binary);
-    out << text;
-    if (!out)
-        return make_error(ErrorCode::kIo, fmt::format("{}: cannot write", path.string()));
-    return {};
-}
-
-Result<void> make_dirs(const fs::path& dir) {
-    std::error_code ec;
-    fs::create_directories(dir, ec);
-    if (ec)
-        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}",
-                                                      dir.string(), ec.message()));
-    return {};
 }
 
 std::string table2_text(const optics::Table2& t) {
@@ -522,16 +301,12 @@ Result<void> eval_compare(const Flags& f) {
 }  // namespace
 
 int run_eval(const std::vector<std::string>& args) {
-    if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    // `hysar eval STEP --help` too: the help covers each step.
+    if (args.empty() || options::asks_for_help(args)) {
         std::fprintf(args.empty() ? stderr : stdout, "%s", kEvalHelp);
         return args.empty() ? 2 : 0;
     }
     const std::vector<std::string> rest(args.begin() + 1, args.end());
-    for (const auto& a : rest)
-        if (a == "--help" || a == "-h") {  // `hysar eval STEP --help`: the help covers each step
-            std::fputs(kEvalHelp, stdout);
-            return 0;
-        }
     if (args[0] == "optics")
         return run_subcommand(rest, {"--params", "--out"}, eval_optics);
     if (args[0] == "resolution")

@@ -4,9 +4,9 @@
 #include <filesystem>
 #include <string>
 
+#include "cli/eval/eval_common.hpp"
 #include "core/image.hpp"
 #include "core/result.hpp"
-#include "eval_common.hpp"
 #include "scene/scene.hpp"
 
 namespace hs::cli {

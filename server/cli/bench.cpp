@@ -2,7 +2,7 @@
 //   hysar bench encoding: bytes, encode and decode time of VD layers per encoding and codec.
 //   hysar bench accuracy: error against cost of every quality knob (server/bench/accuracy.hpp).
 //   hysar bench serve: what the server serves against full-frame baselines
-//   (server/bench/serve_bench.hpp).
+//   (server/serve_bench/serve_bench.hpp).
 #include <algorithm>
 #include <charconv>
 #include <chrono>
@@ -20,17 +20,19 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/accuracy.hpp"
-#include "bench/serve_bench.hpp"
 #include "bench/stability.hpp"
+#include "cli/commands.hpp"
+#include "cli/common.hpp"
+#include "cli/flags.hpp"
 #include "codec/layer_codec.hpp"
-#include "commands.hpp"
-#include "core/figure.hpp"
 #include "core/log.hpp"
-#include "eval_common.hpp"
+#include "options/options.hpp"
+#include "plot/figure.hpp"
 #include "protocol/tiles.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
+#include "serve_bench/serve_bench.hpp"
 
 namespace hs::cli {
 
@@ -115,111 +117,104 @@ Result<std::vector<int>> int_list(const std::string& flag, const std::string& te
     return out;
 }
 
-// The arguments after `hysar bench serve`; on a bad one, a sentence that names the flag.
-// --child-json is internal (the --lp-threads children).
-std::variant<bench::ServeBenchOptions, std::string> parse_serve_args(
-    const std::vector<std::string>& args) {
-    bench::ServeBenchOptions o;
-    o.args = args;
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            o.args = {"--help"};
-            return o;
-        }
-    bool quick = false, have_headsets = false, have_seconds = false, have_frames = false;
-    for (size_t i = 0; i < args.size(); ++i) {
-        const std::string& a = args[i];
-        if (a == "--quick") {
-            quick = true;
-            continue;
-        }
-        static const char* const kValued[] = {"--headsets",
-                                              "--seconds",
-                                              "--profile",
-                                              "--format",
-                                              "--encoding",
-                                              "--scene",
-                                              "--out",
-                                              "--lean-baseline",
-                                              "--lp-threads",
-                                              "--frames",
-                                              "--child-json",
-                                              "--encoder-threads",
-                                              "--planning-threads",
-                                              "--max-batch-viewers"};
-        if (std::find_if(std::begin(kValued), std::end(kValued),
-                         [&](const char* f) { return a == f; }) == std::end(kValued))
-            return "unknown option '" + a + "' (see hysar bench serve --help)";
-        if (i + 1 >= args.size())
-            return a + " wants a value";
-        const std::string& v = args[++i];
-        // A whole number in [lo, hi] into `field`; on a bad one, the sentence naming the flag.
-        const auto count = [&](int64_t lo, int64_t hi, auto& field) -> std::optional<std::string> {
-            auto n = parse_integer(a, v, lo, hi);
-            if (!n)
-                return n.error().message;
-            field = static_cast<std::remove_reference_t<decltype(field)>>(*n);
-            return std::nullopt;
-        };
-        if (a == "--headsets") {
-            auto l = int_list(a, v, 1, 256);
-            if (!l)
-                return l.error().message;
-            o.headsets = *l, have_headsets = true;
-        } else if (a == "--seconds") {
-            auto s = parse_double(a, v, 0.1, 3600);
-            if (!s)
-                return s.error().message;
-            o.seconds = *s, have_seconds = true;
-        } else if (a == "--frames") {
-            auto n = parse_integer(a, v, 1, 10000);
-            if (!n)
-                return n.error().message;
-            o.baseline_frames = int(*n), have_frames = true;
-        } else if (a == "--encoder-threads") {
-            if (auto bad = count(0, 64, o.encoder_threads))
-                return *bad;
-        } else if (a == "--max-batch-viewers") {
-            if (auto bad = count(1, 1024, o.max_batch_viewers))
-                return *bad;
-        } else if (a == "--planning-threads") {
-            if (auto bad = count(0, 64, o.planning_threads))
-                return *bad;
-        } else if (a == "--lp-threads") {
-            auto l = int_list(a, v, 1, 256);
-            if (!l)
-                return l.error().message;
-            o.lp_threads = *l;
-        } else if (a == "--format") {
-            if (v != "srgb8" && v != "rgba16f")
-                return "--format wants srgb8 or rgba16f, got '" + v + "'";
-            o.format =
-                v == "srgb8" ? protocol::PixelFormat::kRgba8 : protocol::PixelFormat::kRgba16f;
-        } else if (a == "--encoding") {
-            if (v != "tiles" && v != "raw")
-                return "--encoding wants tiles or raw, got '" + v + "'";
-            o.encoding = v == "tiles" ? protocol::Encoding::kSparseTiles : protocol::Encoding::kRaw;
-        } else if (v.empty()) {
-            return a + " wants a non-empty value";
-        } else if (a == "--profile") {
-            o.profile = v;
-        } else if (a == "--scene") {
-            o.scene_path = v;
-        } else if (a == "--out") {
-            o.out_dir = v;
-        } else if (a == "--lean-baseline") {
-            o.lean_baseline_command = v;
-        } else {
-            o.child_json = v;
-        }
+// The arguments of `hysar bench serve` (--child-json is internal: the --lp-threads children).
+const std::vector<std::string> kServeValued{"--headsets",
+                                            "--seconds",
+                                            "--profile",
+                                            "--format",
+                                            "--encoding",
+                                            "--scene",
+                                            "--out",
+                                            "--lean-baseline",
+                                            "--lp-threads",
+                                            "--frames",
+                                            "--child-json",
+                                            "--encoder-threads",
+                                            "--planning-threads",
+                                            "--max-batch-viewers"};
+
+// A whole number in [lo, hi] of `flag`, when it is given, into `field`.
+template <typename T>
+Result<void> read_count(const Flags& f, const char* flag, int64_t lo, int64_t hi, T& field) {
+    if (f.has(flag)) {
+        HS_ASSIGN_OR_RETURN(int64_t n, parse_integer(flag, f.get(flag, ""), lo, hi));
+        field = static_cast<T>(n);
     }
-    if (quick) {
+    return {};
+}
+
+// The numbers of `hysar bench serve`: headset counts, time, threads.
+Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
+    if (f.has("--headsets")) {
+        HS_ASSIGN_OR_RETURN(o.headsets, int_list("--headsets", f.get("--headsets", ""), 1, 256));
+    }
+    if (f.has("--seconds")) {
+        HS_ASSIGN_OR_RETURN(o.seconds,
+                            parse_double("--seconds", f.get("--seconds", ""), 0.1, 3600));
+    }
+    HS_TRY(read_count(f, "--frames", 1, 10000, o.baseline_frames));
+    HS_TRY(read_count(f, "--encoder-threads", 0, 64, o.encoder_threads));
+    HS_TRY(read_count(f, "--max-batch-viewers", 1, 1024, o.max_batch_viewers));
+    HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
+    if (f.has("--lp-threads")) {
+        HS_ASSIGN_OR_RETURN(o.lp_threads,
+                            int_list("--lp-threads", f.get("--lp-threads", ""), 1, 256));
+    }
+    return {};
+}
+
+// The words of `hysar bench serve`: the layer format, encoding, and the paths.
+Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
+    const auto invalid = [](std::string m) {
+        return make_error(ErrorCode::kInvalidArgument, std::move(m));
+    };
+    if (f.has("--format")) {
+        const std::string v = f.get("--format", "");
+        if (v != "srgb8" && v != "rgba16f")
+            return invalid("--format wants srgb8 or rgba16f, got '" + v + "'");
+        o.format = v == "srgb8" ? protocol::PixelFormat::kRgba8 : protocol::PixelFormat::kRgba16f;
+    }
+    if (f.has("--encoding")) {
+        const std::string v = f.get("--encoding", "");
+        if (v != "tiles" && v != "raw")
+            return invalid("--encoding wants tiles or raw, got '" + v + "'");
+        o.encoding = v == "tiles" ? protocol::Encoding::kSparseTiles : protocol::Encoding::kRaw;
+    }
+    const std::pair<const char*, std::string*> paths[] = {
+        {"--profile", &o.profile},
+        {"--scene", &o.scene_path},
+        {"--out", &o.out_dir},
+        {"--lean-baseline", &o.lean_baseline_command},
+        {"--child-json", &o.child_json}};
+    for (const auto& [flag, field] : paths) {
+        if (!f.has(flag))
+            continue;
+        *field = f.get(flag, "");
+        if (field->empty())
+            return invalid(std::string(flag) + " wants a non-empty value");
+    }
+    return {};
+}
+
+// The arguments after `hysar bench serve`; on a bad one, a sentence that names the flag.
+Result<bench::ServeBenchOptions> parse_serve_args(const std::vector<std::string>& args) {
+    HS_ASSIGN_OR_RETURN(Flags f, parse_flags(args, kServeValued, {"--quick"}));
+    bench::ServeBenchOptions o;
+    // The arguments again, each option as "--key value", for the --lp-threads children.
+    for (const auto& [flag, values] : f.values) {
+        if (values.empty())
+            o.args.push_back(flag);
+        for (const auto& v : values) o.args.insert(o.args.end(), {flag, v});
+    }
+    HS_TRY(read_serve_numbers(f, o));
+    HS_TRY(read_serve_words(f, o));
+    if (f.has("--quick")) {
         o.quick = true;
-        if (!have_headsets)
+        if (!f.has("--headsets"))
             o.headsets = {1, 2};
-        if (!have_seconds)
+        if (!f.has("--seconds"))
             o.seconds = 1.5;
-        if (!have_frames)
+        if (!f.has("--frames"))
             o.baseline_frames = 5;
     }
     return o;
@@ -230,6 +225,24 @@ double time_ms(F&& f) {
     auto t0 = std::chrono::steady_clock::now();
     f();
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The layers `hysar bench encoding` encodes: the right eye of the scene's first viewer for every
+// specular preset at every angle of the viewing plan, at its default height.
+std::vector<ImageRgba32f> sample_layers(render::Renderer& renderer, const scene::Scene& s) {
+    const auto& v = s.viewers.front();
+    const auto k = scene::eye_intrinsics(v);
+    std::vector<ImageRgba32f> layers;
+    for (const auto& [name, spec] : s.specular_presets)
+        for (double a : s.viewing.angles_deg) {
+            auto head =
+                scene::viewing_pose(s.viewing, a, s.viewing.heights_m.at(s.viewing.default_height))
+                    .value();
+            auto out = renderer.render_eye(spec, k, scene::eye_poses(head, v.ipd_m)[1]);
+            if (out)
+                layers.push_back(std::move(out->image));
+        }
+    return layers;
 }
 
 int bench_encoding(int repeats, const std::string& json_path) {
@@ -246,16 +259,7 @@ int bench_encoding(int repeats, const std::string& json_path) {
     }
     const auto& v = s.viewers.front();
     const auto k = scene::eye_intrinsics(v);
-    std::vector<ImageRgba32f> layers;
-    for (const auto& [name, spec] : s.specular_presets)
-        for (double a : s.viewing.angles_deg) {
-            auto head =
-                scene::viewing_pose(s.viewing, a, s.viewing.heights_m.at(s.viewing.default_height))
-                    .value();
-            auto out = renderer.value()->render_eye(spec, k, scene::eye_poses(head, v.ipd_m)[1]);
-            if (out)
-                layers.push_back(std::move(out->image));
-        }
+    const std::vector<ImageRgba32f> layers = sample_layers(*renderer.value(), s);
     std::printf("%zu VD layers of %ux%u (%s), %d repeats, device %s\n\n", layers.size(), k.width,
                 k.height, v.name.c_str(), repeats, device.value()->name().c_str());
     std::printf("%-8s %-14s %12s %10s %12s %12s\n", "format", "encoding", "bytes/layer", "ratio",
@@ -419,78 +423,62 @@ int bench_accuracy(const std::string& scene_path, const std::string& out_dir, bo
     return 0;
 }
 
+int bench_serve(const std::vector<std::string>& args) {
+    if (options::asks_for_help(args)) {
+        std::fputs(kServeHelp, stdout);
+        return 0;
+    }
+    auto o = parse_serve_args(args);
+    if (!o) {
+        std::fprintf(stderr, "hysar bench serve: %s\n", o.error().message.c_str());
+        return 2;
+    }
+    return bench::run_serve_bench(*o);
+}
+
+// `hysar bench stability|encoding|accuracy`: the options each takes, read, and the run.
+int bench_offline(const std::string& name, const std::vector<std::string>& args) {
+    Result<Flags> f = make_error(ErrorCode::kInvalidArgument, "");
+    if (name == "stability")
+        f = parse_flags(args, {"--out"}, {"--no-float64"});
+    else if (name == "encoding")
+        f = parse_flags(args, {"--repeats", "--json"});
+    else if (name == "accuracy")
+        f = parse_flags(args, {"--repeats", "--scene", "--out"}, {"--quick"});
+    else {
+        std::fprintf(stderr, "hysar bench: unknown benchmark '%s'\n\n%s", name.c_str(), kBenchHelp);
+        return 2;
+    }
+    if (!f) {
+        std::fprintf(stderr, "hysar bench %s: %s\n\n%s", name.c_str(), f.error().message.c_str(),
+                     kBenchHelp);
+        return 2;
+    }
+    if (name == "stability")
+        return bench_stability(f->get("--out", "out/stability"), !f->has("--no-float64"));
+    auto repeats =
+        parse_number(*f, {"--repeats", 1, 1000, NumericFlag::kWhole}, name == "accuracy" ? 7 : 5);
+    if (!repeats) {
+        std::fprintf(stderr, "hysar bench: %s\n", repeats.error().message.c_str());
+        return 2;
+    }
+    if (name == "encoding")
+        return bench_encoding(int(*repeats), f->get("--json", ""));
+    return bench_accuracy(f->get("--scene", ""), f->get("--out", "out/accuracy"), f->has("--quick"),
+                          int(*repeats));
+}
+
 }  // namespace
 
 int run_bench(const std::vector<std::string>& args) {
-    if (args.empty() || args[0] == "--help" || args[0] == "-h") {
+    if (args.empty() || (args[0] != "serve" && options::asks_for_help(args))) {
         std::fputs(kBenchHelp, args.empty() ? stderr : stdout);
         return args.empty() ? 2 : 0;
     }
-    if (args[0] == "serve") {
-        auto parsed = parse_serve_args(std::vector<std::string>(args.begin() + 1, args.end()));
-        if (auto* bad = std::get_if<std::string>(&parsed)) {
-            std::fprintf(stderr, "hysar bench serve: %s\n", bad->c_str());
-            return 2;
-        }
-        const auto& o = std::get<bench::ServeBenchOptions>(parsed);
-        if (o.args == std::vector<std::string>{"--help"}) {
-            std::fputs(kServeHelp, stdout);
-            return 0;
-        }
-        return bench::run_serve_bench(o);
-    }
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {  // `hysar bench STEP --help`: the help covers each step
-            std::fputs(kBenchHelp, stdout);
-            return 0;
-        }
-    if (args[0] == "stability") {
-        std::string out_dir = "out/stability";
-        bool float64 = true;
-        for (size_t i = 1; i < args.size(); ++i) {
-            if (args[i] == "--out" && i + 1 < args.size()) {
-                out_dir = args[++i];
-            } else if (args[i] == "--no-float64") {
-                float64 = false;
-            } else {
-                std::fprintf(stderr, "hysar bench stability: unknown option '%s'\n\n%s",
-                             args[i].c_str(), kBenchHelp);
-                return 2;
-            }
-        }
-        return bench_stability(out_dir, float64);
-    }
-    int repeats = args[0] == "accuracy" ? 7 : 5;
-    bool quick = false;
-    std::string json, scene_path, out_dir = "out/accuracy";
-    for (size_t i = 1; i < args.size(); ++i) {
-        if (args[i] == "--repeats" && i + 1 < args.size()) {
-            auto n = parse_integer("--repeats", args[++i], 1, 1000);
-            if (!n) {
-                std::fprintf(stderr, "hysar bench: %s\n", n.error().message.c_str());
-                return 2;
-            }
-            repeats = int(*n);
-        } else if (args[i] == "--json" && i + 1 < args.size() && args[0] == "encoding") {
-            json = args[++i];
-        } else if (args[i] == "--scene" && i + 1 < args.size() && args[0] == "accuracy") {
-            scene_path = args[++i];
-        } else if (args[i] == "--out" && i + 1 < args.size() && args[0] == "accuracy") {
-            out_dir = args[++i];
-        } else if (args[i] == "--quick" && args[0] == "accuracy") {
-            quick = true;
-        } else {
-            std::fprintf(stderr, "hysar bench: unknown option '%s'\n\n%s", args[i].c_str(),
-                         kBenchHelp);
-            return 2;
-        }
-    }
-    if (args[0] == "encoding")
-        return bench_encoding(repeats, json);
-    if (args[0] == "accuracy")
-        return bench_accuracy(scene_path, out_dir, quick, repeats);
-    std::fprintf(stderr, "hysar bench: unknown benchmark '%s'\n\n%s", args[0].c_str(), kBenchHelp);
-    return 2;
+    const std::vector<std::string> rest(args.begin() + 1, args.end());
+    if (args[0] == "serve")
+        return bench_serve(rest);
+    return bench_offline(args[0], rest);
 }
 
 }  // namespace hs::cli

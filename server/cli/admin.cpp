@@ -16,10 +16,10 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "cli/options.hpp"
+#include "cli/commands.hpp"
 #include "clients/args.hpp"
 #include "clients/connection.hpp"
-#include "commands.hpp"
+#include "options/options.hpp"
 #include "scene/config.hpp"
 
 namespace hs::cli {
@@ -97,21 +97,8 @@ Parsed parse(const std::vector<std::string>& args) {
 }
 
 // The client option reader's checks (numbers, the token file) on the parsed options.
-hs::client::Args as_client_args(const Parsed& p, std::vector<std::string>& storage) {
-    storage = {"hysar admin"};
-    std::set<std::string> keys;
-    for (const auto& [k, v] : p.options) {
-        if (k == "--json")
-            continue;
-        storage.push_back(k);
-        if (k == "--tls")
-            continue;
-        storage.push_back(v);
-        keys.insert(k);
-    }
-    std::vector<char*> argv;
-    for (auto& s : storage) argv.push_back(s.data());
-    return hs::client::Args(int(argv.size()), argv.data(), keys, {"--tls"}, kUsage);
+hs::client::Args as_client_args(const Parsed& p) {
+    return hs::client::Args(p.options, kUsage);
 }
 
 class AdminSession {
@@ -323,10 +310,50 @@ std::string stats_table(const json& s) {
     return out + "\n" + viewers_table(s);
 }
 
+// `stats`: the server's stats as a table (or JSON lines with --json), every `watch_s` seconds
+// when it is above 0, `count` times when that is above 0, until SIGINT or SIGTERM.
+int watch_stats(AdminSession& session, bool as_json, double watch_s, int64_t count) {
+    std::signal(SIGINT, on_stop);
+    std::signal(SIGTERM, on_stop);
+    const bool tty = ::isatty(STDOUT_FILENO) != 0;
+    for (int64_t n = 1;; ++n) {
+        const json s = session.stats();
+        if (tty && watch_s > 0)
+            std::fputs("\x1b[H\x1b[2J", stdout);  // a refreshing table on a terminal
+        if (as_json)
+            std::printf("%s\n", s.dump().c_str());
+        else
+            std::fputs(stats_table(s).c_str(), stdout);
+        std::fflush(stdout);
+        if (watch_s <= 0 || (count > 0 && n >= count))
+            return 0;
+        const auto until =
+            std::chrono::steady_clock::now() + std::chrono::milliseconds(int64_t(watch_s * 1000));
+        while (!g_stop && std::chrono::steady_clock::now() < until)
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        if (g_stop)
+            return 0;
+        if (!tty)
+            std::fputs("\n", stdout);
+    }
+}
+
+// scene push FILE: the file's text, checked here first against its own folder as the asset
+// root, so that a broken file never reaches the server (which checks it again against its own
+// root and limits).
+std::string checked_scene_text(const std::filesystem::path& file) {
+    auto checked = scene::load_scene_file(file);
+    if (!checked)
+        throw Failure{2, "scene push " + file.string() + ": " + checked.error().message};
+    std::ifstream in(file, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+}
+
 int run(const std::vector<std::string>& args) {
     const Parsed p = parse(args);
-    std::vector<std::string> storage;
-    const hs::client::Args a = as_client_args(p, storage);
+    const hs::client::Args a = as_client_args(p);
     const std::string address = a.get("--connect", "127.0.0.1:7700");
     const int timeout_ms = int(a.integer("--timeout-ms", 30000, 100, 600000));
     const auto& w = p.words;
@@ -361,19 +388,7 @@ int run(const std::vector<std::string>& args) {
     const double watch_s = a.number("--watch", 0, 0.2, 3600);
     const int64_t count = a.integer("--count", 0, 1, 1000000);
 
-    std::string scene_text;
-    if (push) {
-        // Checked here first, against its own folder as the asset root: a broken file never
-        // reaches the server. The server checks it again against its own root and limits.
-        const std::filesystem::path file = w[2];
-        auto checked = scene::load_scene_file(file);
-        if (!checked)
-            throw Failure{2, "scene push " + file.string() + ": " + checked.error().message};
-        std::ifstream in(file, std::ios::binary);
-        std::ostringstream text;
-        text << in.rdbuf();
-        scene_text = text.str();
-    }
+    const std::string scene_text = push ? checked_scene_text(w[2]) : "";
     const std::string token = a.read_token("--token", "--token-file", proto::kMaxTokenBytes, true);
     AdminSession session(address, token, timeout_ms, a.tls_options());
     if (push) {
@@ -391,39 +406,16 @@ int run(const std::vector<std::string>& args) {
         std::printf("closed session %u (%s)\n", id, printable(name, 64).c_str());
         return 0;
     }
-    std::signal(SIGINT, on_stop);
-    std::signal(SIGTERM, on_stop);
-    const bool tty = ::isatty(STDOUT_FILENO) != 0;
-    for (int64_t n = 1;; ++n) {
-        const json s = session.stats();
-        if (tty && watch_s > 0)
-            std::fputs("\x1b[H\x1b[2J", stdout);  // a refreshing table on a terminal
-        if (p.options.count("--json"))
-            std::printf("%s\n", s.dump().c_str());
-        else
-            std::fputs(stats_table(s).c_str(), stdout);
-        std::fflush(stdout);
-        if (watch_s <= 0 || (count > 0 && n >= count))
-            return 0;
-        const auto until =
-            std::chrono::steady_clock::now() + std::chrono::milliseconds(int64_t(watch_s * 1000));
-        while (!g_stop && std::chrono::steady_clock::now() < until)
-            std::this_thread::sleep_for(std::chrono::milliseconds(50));
-        if (g_stop)
-            return 0;
-        if (!tty)
-            std::fputs("\n", stdout);
-    }
+    return watch_stats(session, p.options.count("--json") > 0, watch_s, count);
 }
 
 }  // namespace
 
 int run_admin(const std::vector<std::string>& args) {
-    for (const auto& a : args)
-        if (a == "--help" || a == "-h") {
-            std::fputs(kUsage, stdout);
-            return 0;
-        }
+    if (options::asks_for_help(args)) {
+        std::fputs(kUsage, stdout);
+        return 0;
+    }
     try {
         return run(args);
     } catch (const Failure& f) {

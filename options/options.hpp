@@ -1,13 +1,15 @@
 // The option reader every `hysar` command and client program parses its arguments with: CLI11
 // (Debian libcli11-dev) tokenises and matches them ("--key value", "--key=value", switches,
 // repeated options, positional words where a command takes them, "--" ending the options);
-// the typed checks with their ranges stay with each program (server/eval_common.hpp,
-// clients/args.hpp), whose messages name the flag, the value and the range. Depends on CLI11
-// and the standard library only, so the clients link it too.
+// numbers are read by options/numbers.hpp, and the typed checks with their ranges stay with
+// each program (server/cli/flags.hpp, clients/args.hpp), whose messages name the flag, the value
+// and the range. Depends on CLI11 and the standard library only, so the clients link it too.
 #pragma once
 
+#include <initializer_list>
 #include <map>
 #include <string>
+#include <string_view>
 #include <variant>
 #include <vector>
 
@@ -32,5 +34,12 @@ struct Parsed {
 // Parses `args` (without the program's name) against `spec`. On failure, one sentence: "unknown
 // option '--x'", "--x needs a value", "unexpected argument 'y'", "--w takes no value".
 std::variant<Parsed, std::string> parse(const std::vector<std::string>& args, const Spec& spec);
+
+// Whether one of `names` stands in `args` before any "--". The programs answer --help (and the
+// clients --version) this way before they read the rest, so that the help comes even beside a
+// bad option.
+bool asks(const std::vector<std::string>& args, std::initializer_list<std::string_view> names);
+// "--help" or "-h" in `args`, as asks() finds them.
+bool asks_for_help(const std::vector<std::string>& args);
 
 }  // namespace hs::options

@@ -1,0 +1,529 @@
+// `hysar render`: the projector frame, one VD image per model, angle, height and eye, a
+// Fig. 7-style contact sheet, and render.json (the first entry of the accuracy/cost table).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <sstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.hpp"
+#include "cli/common.hpp"
+#include "cli/flags.hpp"
+#include "core/image.hpp"
+#include "core/log.hpp"
+#include "options/options.hpp"
+#include "plot/draw.hpp"
+#include "render/renderer.hpp"
+#include "scene/camera.hpp"
+#include "scene/config.hpp"
+#include "shading/compare.hpp"
+#include "shading/reference.hpp"
+
+namespace hs::cli {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+const char* kRenderHelp =
+    "usage: hysar render [--scene FILE] [--out DIR] [--angles LIST] [--heights LIST]\n"
+    "                    [--model LIST] [--viewer NAME] [--format rgba16f|rgba32f|rgba8]\n"
+    "                    [--device auto|cpu|gpu] [--white W] [--no-reference] [--no-exr]\n"
+    "                    [--check]\n"
+    "\n"
+    "  --scene FILE     scene JSON (default: the embedded experiment-1 room)\n"
+    "  --out DIR        output folder (default: out/render)\n"
+    "  --angles LIST    view angles in degrees around the prop, comma separated\n"
+    "                   (default: the scene's viewing.angles_deg, -40,-20,0,20,40)\n"
+    "  --heights LIST   eye heights: names from viewing.heights_m (H, M, L) or metres in\n"
+    "                   [-10000, 10000]; an item that starts with a digit, a sign or a point\n"
+    "                   is a number (default: the scene's viewing.default_height)\n"
+    "  --model LIST     specular presets or model names: phong, blinn-phong, ward, ward-aniso,\n"
+    "                   kajiya-kay, none (default: every preset of the scene, Fig. 7 order)\n"
+    "  --viewer NAME    headset profile (default: the scene's first viewer)\n"
+    "  --white W        linear radiance drawn as white in PNG files, in [1e-06, 1e+06]\n"
+    "                   (default 1.0)\n"
+    "  --no-reference   skip the double-precision reference comparison\n"
+    "  --no-exr         write no float EXR files\n"
+    "  --check          exit with status 3 when an image disagrees with the reference beyond the\n"
+    "                   stated tolerance (docs/SHADING.md, \"Agreement with the reference\")\n"
+    "\n"
+    "writes DIR/projector.png (+.exr), DIR/vd/<model>_<angle>_<height>_<eye>.png (+.exr),\n"
+    "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the "
+    "reference,\nand whether that is within the stated tolerance).\n"
+    "\n"
+    "example: hysar render --angles -40,0,40 --model ward --out out/ward --check\n";
+
+struct Options {
+    std::optional<fs::path> scene;
+    fs::path out = "out/render";
+    std::vector<double> angles;
+    std::vector<std::string> heights;
+    std::vector<std::string> models;
+    std::string viewer;
+    gpu::ColorFormat format = gpu::ColorFormat::kRgba16Float;
+    gpu::DevicePreference device = gpu::DevicePreference::kAuto;
+    bool device_set = false;
+    float white = 1.0f;
+    bool reference = true;
+    bool exr = true;
+    bool check = false;
+};
+
+std::vector<std::string> split(const std::string& s) {
+    std::vector<std::string> out;
+    std::stringstream ss(s);
+    std::string item;
+    while (std::getline(ss, item, ','))
+        if (!item.empty())
+            out.push_back(item);
+    return out;
+}
+
+// A --heights item written as a number (a digit, a sign or a point first, or nan, inf) is a
+// height in metres, checked as the flags are read; any other item names a height of the scene.
+bool written_as_number(const std::string& s) {
+    if (s.empty())
+        return false;
+    if ((s[0] >= '0' && s[0] <= '9') || s[0] == '+' || s[0] == '-' || s[0] == '.')
+        return true;
+    std::string head;
+    for (char c : s.substr(0, 3)) head += char(c | 0x20);  // ASCII lower case
+    return head == "nan" || head == "inf";
+}
+
+Result<gpu::ColorFormat> color_format(const std::string& v) {
+    if (v == "rgba16f")
+        return gpu::ColorFormat::kRgba16Float;
+    if (v == "rgba32f")
+        return gpu::ColorFormat::kRgba32Float;
+    if (v == "rgba8")
+        return gpu::ColorFormat::kRgba8Unorm;
+    return make_error(ErrorCode::kInvalidArgument,
+                      fmt::format("--format: '{}' is not rgba16f, rgba32f or rgba8", v));
+}
+
+// --angles (each time it is given, its items added) and --heights (the last one), checked.
+Result<void> read_views(const Flags& f, Options& o) {
+    for (const auto& v : f.all("--angles")) {
+        for (const auto& x : split(v)) {
+            HS_ASSIGN_OR_RETURN(double d, parse_double("--angles", x, -scene::kMaxViewAngleDeg,
+                                                       scene::kMaxViewAngleDeg));
+            o.angles.push_back(d);
+        }
+        if (o.angles.empty())
+            return make_error(ErrorCode::kInvalidArgument, "--angles: empty list");
+    }
+    if (f.has("--heights")) {
+        o.heights = split(f.get("--heights", ""));
+        for (const auto& h : o.heights)
+            if (written_as_number(h))
+                HS_TRY(
+                    parse_double("--heights", h, -scene::kMaxViewHeightM, scene::kMaxViewHeightM));
+    }
+    return {};
+}
+
+Result<Options> parse(const std::vector<std::string>& args) {
+    HS_ASSIGN_OR_RETURN(
+        Flags f, parse_flags(args,
+                             {"--scene", "--out", "--angles", "--heights", "--model", "--viewer",
+                              "--format", "--device", "--white"},
+                             {"--no-reference", "--no-exr", "--check"}));
+    Options o;
+    if (f.has("--scene"))
+        o.scene = f.get("--scene", "");
+    o.out = f.get("--out", o.out.string());
+    HS_TRY(read_views(f, o));
+    if (f.has("--model"))
+        o.models = split(f.get("--model", ""));
+    o.viewer = f.get("--viewer", "");
+    if (f.has("--format")) {
+        HS_ASSIGN_OR_RETURN(o.format, color_format(f.get("--format", "")));
+    }
+    if (f.has("--device")) {
+        const std::string v = f.get("--device", "");
+        o.device_set = true;
+        auto p = gpu::parse_device_preference(v);
+        if (!p)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--device: '{}' is not auto, cpu or gpu", v));
+        o.device = *p;
+    }
+    if (f.has("--white")) {
+        HS_ASSIGN_OR_RETURN(double white, parse_double("--white", f.get("--white", ""), 1e-6, 1e6));
+        o.white = float(white);
+    }
+    o.reference = !f.has("--no-reference");
+    o.exr = !f.has("--no-exr");
+    o.check = f.has("--check");
+    return o;
+}
+
+struct ModelChoice {
+    std::string name;
+    scene::Specular spec;
+};
+
+Result<std::vector<ModelChoice>> resolve_models(const scene::Scene& s,
+                                                const std::vector<std::string>& names) {
+    std::vector<std::string> list = names;
+    if (list.empty()) {
+        for (const char* n : {"phong", "blinn-phong", "ward", "ward-aniso", "kajiya-kay"})
+            if (s.specular_presets.count(n))
+                list.push_back(n);
+        for (const auto& [n, sp] : s.specular_presets)
+            if (std::find(list.begin(), list.end(), n) == list.end())
+                list.push_back(n);
+        if (list.empty())
+            list.push_back(scene::to_string(s.material.specular.model));
+    }
+    std::vector<ModelChoice> out;
+    for (const auto& n : list) {
+        if (auto it = s.specular_presets.find(n); it != s.specular_presets.end()) {
+            out.push_back({n, it->second});
+            continue;
+        }
+        auto model = scene::parse_specular_model(n);
+        if (!model)
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("--model: '{}' is neither a preset of the scene nor a model name", n));
+        scene::Specular sp = s.material.specular;
+        sp.model = model.value();
+        out.push_back({n, sp});
+    }
+    return out;
+}
+
+std::string angle_tag(double a) {
+    return fmt::format("{}{:03d}", a < 0 ? "m" : "p", int(std::lround(std::abs(a))));
+}
+
+json stats_json(const shading::ErrorStats& e) {
+    return json{{"rmse", e.rmse},
+                {"max_abs", e.max_abs},
+                {"interior_rmse", e.interior_rmse},
+                {"interior_max_abs", e.interior_max_abs},
+                {"reference_peak", e.reference_peak},
+                {"pixels", e.pixels},
+                {"interior_pixels", e.interior_pixels},
+                {"non_finite", e.non_finite},
+                {"negative", e.negative},
+                {"saturated", e.saturated}};
+}
+
+// An image's comparison with the reference, and whether it is within the stated tolerance
+// (the interior excludes silhouette pixels, where the tessellated mesh and the exact hemisphere
+// cover different pixels).
+json error_json(const shading::ErrorStats& e, std::vector<std::string>& disagreements,
+                const std::string& file) {
+    json j = stats_json(e);
+    const std::string d = shading::disagreement(e);
+    j["within_tolerance"] = d.empty();
+    if (!d.empty()) {
+        j["disagreement"] = d;
+        disagreements.push_back(file + ": " + d);
+    }
+    return j;
+}
+
+// What one run renders: the scene, the viewer, the models, the angles and the heights, every
+// name resolved and every number checked before the device is made.
+struct Plan {
+    scene::Scene s;
+    const scene::ViewerProfile* viewer = nullptr;
+    std::vector<ModelChoice> models;
+    std::vector<double> angles;
+    std::vector<std::pair<std::string, double>> heights;  // name, metres
+};
+
+Result<Plan> plan_render(const Options& o) {
+    Plan p;
+    if (o.scene) {
+        HS_ASSIGN_OR_RETURN(p.s, scene::load_scene_file(*o.scene));
+    } else {
+        p.s = scene::default_scene();
+    }
+    const scene::Scene& s = p.s;
+    p.viewer = o.viewer.empty() ? &s.viewers.front() : s.find_viewer(o.viewer);
+    if (!p.viewer)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("--viewer: the scene has no viewer '{}'", o.viewer));
+    HS_ASSIGN_OR_RETURN(p.models, resolve_models(s, o.models));
+    p.angles = o.angles.empty() ? s.viewing.angles_deg : o.angles;
+    for (const auto& h :
+         o.heights.empty() ? std::vector<std::string>{s.viewing.default_height} : o.heights) {
+        if (auto it = s.viewing.heights_m.find(h); it != s.viewing.heights_m.end())
+            p.heights.push_back(*it);
+        else {
+            HS_ASSIGN_OR_RETURN(double m, parse_double("--heights", h, -scene::kMaxViewHeightM,
+                                                       scene::kMaxViewHeightM));
+            p.heights.push_back({fmt::format("{:.2f}m", m), m});
+        }
+    }
+    return p;
+}
+
+// render.json's head: what was rendered, how, and the stated tolerance.
+json report_head(const Plan& p, const Options& o, const gpu::Device& device) {
+    json report;
+    report["scene"] = p.s.name;
+    report["device"] = device.name();
+    report["format"] = gpu::to_string(o.format);
+    report["viewer"] = p.viewer->name;
+    report["white"] = o.white;
+    report["tone_map"] = "png = srgb_oetf(clamp(L / white, 0, 1)); docs/SHADING.md";
+    report["interior_min_n_dot_v"] = shading::kInteriorMinNdotV;
+    const shading::Tolerance tol;
+    report["tolerance"] = {
+        {"interior_max", fmt::format("{} * peak + {}", tol.interior_max_rel, tol.interior_max_abs)},
+        {"rmse", fmt::format("{} * peak + {}", tol.rmse_rel, tol.rmse_abs)}};
+    return report;
+}
+
+// The images written so far: their entries of render.json and their disagreements.
+struct Written {
+    const Options& o;
+    json images = json::array();
+    std::vector<std::string> disagreements;
+
+    // STEM.png, tone-mapped, and STEM.exr unless --no-exr.
+    Result<void> pair(const fs::path& stem, const ImageRgba32f& img) const {
+        HS_TRY(write_png(fs::path(stem).concat(".png"), tonemap_srgb8(img, o.white)));
+        if (o.exr)
+            HS_TRY(write_exr(fs::path(stem).concat(".exr"), img));
+        return {};
+    }
+};
+
+// 1. The projector (VI) frame, rendered once, and its comparison with the reference.
+Result<void> render_projector(render::Renderer& renderer, const Plan& p, Written& w) {
+    HS_ASSIGN_OR_RETURN(auto proj, renderer.render_projector());
+    HS_TRY(w.pair(w.o.out / "projector", proj.image));
+    json pj{{"file", "projector.png"},
+            {"kind", "projector-vi"},
+            {"width", proj.image.width},
+            {"height", proj.image.height},
+            {"render_ms", proj.report.render_ms},
+            {"effects", proj.report.effects}};
+    if (w.o.reference) {
+        auto ref = shading::reference_projector(p.s);
+        if (ref)
+            pj["error"] = error_json(shading::compare_images(proj.image, ref.value(), {}, 0.0),
+                                     w.disagreements, "projector.png");
+        else
+            pj["error"] = ref.error().message;
+    }
+    w.images.push_back(pj);
+    log::info("projector frame {}x{}: {:.1f} ms", proj.image.width, proj.image.height,
+              proj.report.render_ms);
+    return {};
+}
+
+// The contact sheet (right eye): a row of VI per height, then a row per model, a column per
+// angle, each cell an image downscaled by `factor`.
+struct Sheet {
+    static constexpr int kLabelW = 200, kHeaderH = 28, kGap = 4;
+    uint32_t factor = 1;
+    int cell_w = 0, cell_h = 0;
+    size_t rows_per_height = 0;
+    ImageRgba8 image;
+
+    explicit Sheet(const Plan& p) {
+        const scene::ViewerProfile& v = *p.viewer;
+        factor = std::max<uint32_t>(1, (v.eye_width + 319) / 320);
+        cell_w = int(v.eye_width / factor), cell_h = int(v.eye_height / factor);
+        rows_per_height = p.models.size() + 1;
+        image = make_canvas(
+            uint32_t(kLabelW + p.angles.size() * (cell_w + kGap)),
+            uint32_t(kHeaderH + p.heights.size() * rows_per_height * (cell_h + kGap)), 24);
+        for (size_t a = 0; a < p.angles.size(); ++a)
+            draw_text(image, kLabelW + int(a) * (cell_w + kGap) + cell_w / 2 - 30, 6,
+                      fmt::format("{:+.0f} deg", p.angles[a]), 2, 230, 230, 230);
+    }
+    int row0(size_t height) const {
+        return kHeaderH + int(height * rows_per_height) * (cell_h + kGap);
+    }
+    int x(size_t angle) const { return kLabelW + int(angle) * (cell_w + kGap); }
+    int y(size_t height, size_t model) const {
+        return row0(height) + int(model + 1) * (cell_h + kGap);
+    }
+    void labels(const Plan& p, size_t height) {
+        const int r = row0(height);
+        draw_text(image, 6, r + cell_h / 2 - 14, "#0 projector", 2, 230, 230, 230);
+        draw_text(image, 6, r + cell_h / 2 + 4, fmt::format("(VI) h={}", p.heights[height].first),
+                  2, 160, 160, 160);
+        for (size_t mi = 0; mi < p.models.size(); ++mi)
+            draw_text(image, 6, y(height, mi) + cell_h / 2 - 7,
+                      fmt::format("#{} {}", mi + 1, p.models[mi].name), 2, 230, 230, 230);
+    }
+    void put(const ImageRgba32f& img, float white, int px, int py) {
+        blit(image, downscale(tonemap_srgb8(img, white), factor), px, py);
+    }
+};
+
+// One VD image: where it is seen from, and the model.
+struct EyeView {
+    const ModelChoice& model;
+    double angle_deg;
+    const std::string& height;
+    double height_m;
+    int eye;  // 0 left, 1 right
+    const scene::Pose& pose;
+};
+
+// 2. One VD layer: rendered, written, compared with the reference; its entry in render.json.
+Result<render::RenderResult> render_vd(render::Renderer& renderer, const Plan& p,
+                                       const scene::Intrinsics& k, const EyeView& v, Written& w,
+                                       std::string& err_text) {
+    const char* eye_name = v.eye == 0 ? "left" : "right";
+    HS_ASSIGN_OR_RETURN(auto vd, renderer.render_eye(v.model.spec, k, v.pose));
+    const std::string stem =
+        fmt::format("{}_{}_{}_{}", v.model.name, angle_tag(v.angle_deg), v.height, eye_name);
+    HS_TRY(w.pair(w.o.out / "vd" / stem, vd.image));
+    json ij{{"file", "vd/" + stem + ".png"},
+            {"kind", "viewer-vd"},
+            {"model", v.model.name},
+            {"specular_model", scene::to_string(v.model.spec.model)},
+            {"angle_deg", v.angle_deg},
+            {"height", v.height},
+            {"height_m", v.height_m},
+            {"eye", eye_name},
+            {"width", k.width},
+            {"height_px", k.height},
+            {"render_ms", vd.report.render_ms},
+            {"pass_ran", vd.report.ran},
+            {"effects", vd.report.effects}};
+    if (!vd.report.ran)
+        ij["skipped_because"] = vd.report.skipped_because;
+    err_text.clear();
+    if (w.o.reference) {
+        std::vector<float> ndv;
+        auto ref = shading::reference_viewer(p.s, v.model.spec, k, v.pose, &ndv);
+        if (ref) {
+            auto st =
+                shading::compare_images(vd.image, ref.value(), ndv, shading::kInteriorMinNdotV);
+            ij["error"] = error_json(st, w.disagreements, "vd/" + stem + ".png");
+            err_text = fmt::format(", rmse {:.2e} (interior {:.2e}), max {:.2e}", st.rmse,
+                                   st.interior_rmse, st.max_abs);
+        } else {
+            ij["error"] = ref.error().message;
+        }
+    }
+    w.images.push_back(ij);
+    return vd;
+}
+
+// 2. and 3.: the VD layers per model, height, angle and eye, into the contact sheet.
+Result<size_t> render_vd_layers(render::Renderer& renderer, const Plan& p, Written& w,
+                                Sheet& sheet) {
+    const scene::Intrinsics k = scene::eye_intrinsics(*p.viewer);
+    const size_t total = p.models.size() * p.heights.size() * p.angles.size() * 2;
+    size_t done = 0;
+    for (size_t hi = 0; hi < p.heights.size(); ++hi) {
+        const auto& [hname, hm] = p.heights[hi];
+        sheet.labels(p, hi);
+        for (size_t ai = 0; ai < p.angles.size(); ++ai) {
+            HS_ASSIGN_OR_RETURN(scene::Pose head,
+                                scene::viewing_pose(p.s.viewing, p.angles[ai], hm));
+            const auto eyes = scene::eye_poses(head, p.viewer->ipd_m);
+            // What the right eye sees of the projected VI: the row-0 cell and the base of the
+            // others.
+            HS_ASSIGN_OR_RETURN(auto vi_eye, renderer.render_eye_diffuse(k, eyes[1]));
+            sheet.put(vi_eye.image, w.o.white, sheet.x(ai), sheet.row0(hi));
+            for (size_t mi = 0; mi < p.models.size(); ++mi)
+                for (int e = 0; e < 2; ++e) {
+                    std::string err_text;
+                    const EyeView view{p.models[mi], p.angles[ai], hname, hm, e, eyes[e]};
+                    HS_ASSIGN_OR_RETURN(auto vd, render_vd(renderer, p, k, view, w, err_text));
+                    ++done;
+                    log::info("[{}/{}] {} {:+.0f} deg h={} {}: {:.1f} ms{}", done, total,
+                              p.models[mi].name, p.angles[ai], hname, e == 0 ? "left" : "right",
+                              vd.report.render_ms, err_text);
+                    if (e == 1)
+                        sheet.put(added(vi_eye.image, vd.image), w.o.white, sheet.x(ai),
+                                  sheet.y(hi, mi));
+                }
+        }
+    }
+    return done;
+}
+
+// Returns how many images disagree with the reference beyond the stated tolerance.
+Result<size_t> run(const Options& o) {
+    const auto t_start = std::chrono::steady_clock::now();
+    HS_ASSIGN_OR_RETURN(Plan p, plan_render(o));
+    std::error_code ec;
+    fs::create_directories(o.out / "vd", ec);
+    if (ec)
+        return make_error(ErrorCode::kIo, fmt::format("{}: cannot create output folder: {}",
+                                                      o.out.string(), ec.message()));
+    gpu::DeviceCreateInfo di = gpu::device_info_from_environment();
+    if (o.device_set)
+        di.preference = o.device;
+    HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(di));
+    render::RendererCreateInfo ri;
+    ri.format = o.format;
+    HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(*device, p.s, ri));
+    log::info(
+        "device: {}; scene: {}; prop mesh: {} triangles; viewer: {} ({}x{} per eye); format: {}",
+        device->name(), p.s.name, renderer->mesh().indices.size() / 3, p.viewer->name,
+        p.viewer->eye_width, p.viewer->eye_height, gpu::to_string(o.format));
+    json report = report_head(p, o, *device);
+    Written w{o};
+    HS_TRY(render_projector(*renderer, p, w));
+    Sheet sheet(p);
+    HS_ASSIGN_OR_RETURN(size_t done, render_vd_layers(*renderer, p, w, sheet));
+    HS_TRY(write_png(o.out / "sheet.png", sheet.image));
+    report["images"] = w.images;
+    report["projector_renders"] = renderer->projector_render_count();
+    report["pipelines_built"] = renderer->pipelines_built();
+    report["total_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    report["disagreements"] = w.disagreements;
+    std::ofstream(o.out / "render.json") << report.dump(2) << "\n";
+    if (device->validation_enabled() && device->validation_message_count() > 0)
+        return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
+                                                          device->validation_message_count()));
+    std::printf("wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n",
+                o.out.c_str(), done, report["total_s"].get<double>());
+    if (o.reference)
+        std::printf("%zu of %zu images disagree with the reference beyond the stated tolerance\n",
+                    w.disagreements.size(), done + 1);
+    for (const auto& d : w.disagreements) std::printf("  %s\n", d.c_str());
+    return w.disagreements.size();
+}
+
+}  // namespace
+
+int run_render(const std::vector<std::string>& args) {
+    if (options::asks_for_help(args)) {
+        std::fputs(kRenderHelp, stdout);
+        return 0;
+    }
+    auto opts = parse(args);
+    if (!opts) {
+        std::fprintf(stderr, "hysar render: %s\n\n%s", opts.error().message.c_str(), kRenderHelp);
+        return 2;
+    }
+    auto r = run(opts.value());
+    if (!r) {
+        std::fprintf(stderr, "hysar render: %s\n", r.error().message.c_str());
+        return 1;
+    }
+    if (opts->check && r.value() > 0) {
+        std::fprintf(stderr, "hysar render: %zu images disagree with the reference (--check)\n",
+                     r.value());
+        return 3;
+    }
+    return 0;
+}
+
+}  // namespace hs::cli
