@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <set>
 #include <string>
 #include <type_traits>
 #include <variant>
@@ -200,11 +201,16 @@ Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
 Result<bench::ServeBenchOptions> parse_serve_args(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(Flags f, parse_flags(args, kServeValued, {"--quick"}));
     bench::ServeBenchOptions o;
-    // The arguments again, each option as "--key value", for the --lp-threads children.
+    // The arguments of an --lp-threads child: these options again, each as "--key value",
+    // less those that only the parent acts on.
     for (const auto& [flag, values] : f.values) {
+        static const std::set<std::string> parent_only{"--lp-threads", "--lean-baseline",
+                                                       "--child-json", "--out"};
+        if (parent_only.count(flag))
+            continue;
         if (values.empty())
-            o.args.push_back(flag);
-        for (const auto& v : values) o.args.insert(o.args.end(), {flag, v});
+            o.child_args.push_back(flag);
+        for (const auto& v : values) o.child_args.insert(o.child_args.end(), {flag, v});
     }
     HS_TRY(read_serve_numbers(f, o));
     HS_TRY(read_serve_words(f, o));

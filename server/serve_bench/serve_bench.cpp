@@ -601,13 +601,7 @@ LeanExternal run_lean_baseline(const std::string& command) {
 Result<std::vector<ServedRow>> child_rows(const ServeBenchOptions& o, int lp,
                                           const fs::path& json_path) {
     std::vector<std::string> argv{"hysar", "bench", "serve"};
-    for (size_t i = 0; i < o.args.size(); ++i) {
-        const std::string& a = o.args[i];
-        if (a == "--lp-threads" || a == "--lean-baseline" || a == "--child-json" || a == "--out")
-            ++i;  // and its value
-        else
-            argv.push_back(a);
-    }
+    argv.insert(argv.end(), o.child_args.begin(), o.child_args.end());
     argv.push_back("--child-json");
     argv.push_back(json_path.string());
     std::vector<std::string> env;

@@ -60,8 +60,9 @@ struct ServeBenchOptions {
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.
     std::string child_json;
-    // The arguments after "serve", as given: the --lp-threads children are run with them.
-    std::vector<std::string> args;
+    // The arguments the --lp-threads children are run with, after "hysar bench serve" (the
+    // command builds them: its options less --lp-threads, --lean-baseline, --child-json, --out).
+    std::vector<std::string> child_args;
 };
 
 // One served row: `headsets` clients for the measured window.
