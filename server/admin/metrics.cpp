@@ -135,10 +135,12 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
                  rate_of(v.session).frames_per_s);
     w.family("hysar_viewer_pose_to_layer_seconds", "gauge",
              "Pose received to both layers written to the socket, per headset, over its last "
-             "(up to 1024) frames: quantile 0.5 and 0.99.");
+             "(up to 1024) frames: quantile 0.5, 0.95 and 0.99.");
     for (const auto& v : s.viewers) {
         w.sample("hysar_viewer_pose_to_layer_seconds",
                  viewer_label(v.session) + ",quantile=\"0.5\"", v.latency_ms_p50 / 1000.0);
+        w.sample("hysar_viewer_pose_to_layer_seconds",
+                 viewer_label(v.session) + ",quantile=\"0.95\"", v.latency_ms_p95 / 1000.0);
         w.sample("hysar_viewer_pose_to_layer_seconds",
                  viewer_label(v.session) + ",quantile=\"0.99\"", v.latency_ms_p99 / 1000.0);
     }
@@ -256,6 +258,7 @@ nlohmann::json viewers_json(const stream::ServerSnapshot& s,
                            {"frames", v.frames},
                            {"frame_rate_hz", r.frames_per_s},
                            {"latency_ms_p50", v.latency_ms_p50},
+                           {"latency_ms_p95", v.latency_ms_p95},
                            {"latency_ms_p99", v.latency_ms_p99},
                            {"bytes_per_s", r.bytes_per_s},
                            {"superseded_poses", v.superseded_poses},
