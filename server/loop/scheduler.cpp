@@ -123,6 +123,7 @@ void Scheduler::rendered(uint32_t id) {
         if (it == slots_.end())
             return;
         it->second.rendering = false;
+        ++it->second.counters.frames;  // counted here, by the network thread, not when taken
     }
     cv_.notify_one();
 }
@@ -158,7 +159,6 @@ std::vector<ViewerJob> Scheduler::take_locked() {
         s.rendering = true;
         s.next_allowed = now + interval;
         ++s.counters.in_flight;
-        ++s.counters.frames;
         last_taken_ = id;
     }
     return batch;

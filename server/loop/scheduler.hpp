@@ -6,9 +6,11 @@
 // The scheduler is the hand-off between two threads, and only these two call it:
 // - the network thread feeds it what the door converted (add_viewer, remove_viewer, set_pose,
 //   request_frame) and what came back from the encoder and the sockets (rendered, complete);
-// - the render thread takes batches (wait_for_batch, take_batch), gives back the jobs it does
-//   not render (rendered) and says which displays a new scene version serves (set_served).
-// Watchers read copies (counters). Every method takes the scheduler's lock and none blocks
+// - the render thread takes batches (wait_for_batch, take_batch) and says which displays a new
+//   scene version serves (set_served); a job it does not render goes back through the network
+//   thread (FrameLoopHost::job_dropped), as an encoded frame does.
+// Watchers read copies (counters), which only the network thread's calls change, but for
+// in_flight, which a job taken counts. Every method takes the scheduler's lock and none blocks
 // under it but wait_for_batch, which waits on it.
 #pragma once
 
@@ -28,7 +30,7 @@ namespace hs::loop {
 inline constexpr uint32_t kMaxInFlight = 2;
 
 struct ViewerCounters {
-    uint64_t frames = 0;            // frames rendered (a frame = both eyes)
+    uint64_t frames = 0;  // frames rendered or given up (a frame = both eyes), at rendered()
     uint64_t superseded_poses = 0;  // poses replaced by a newer one before they were rendered
     uint64_t bytes_sent = 0;
     uint32_t in_flight = 0;
@@ -71,7 +73,7 @@ public:
     // with why (each is told once); they are not scheduled until it can again.
     std::vector<std::pair<uint32_t, std::string>> set_served(ServedDisplays served);
 
-    // Network or render thread: the frame of `session_id` was rendered and encoded (or given
+    // Network thread: the frame of `session_id` was rendered and encoded (or given
     // up): its ViewerFrame is free for the next.
     void rendered(uint32_t session_id);
 

@@ -12,7 +12,7 @@
 #include "scene/scene.hpp"
 
 namespace hs::calib {
-class ServingCalibration;
+struct ServingCalibration;
 }
 
 namespace hs::loop {
