@@ -441,14 +441,13 @@ void Session::kick(const proto::Kick& m, uint32_t seq) {
         return error(proto::ErrorCode::kForbidden, "only an admin session may close another", false,
                      seq);
     auto it = srv_.sessions.find(m.session_id);
-    if (m.session_id == id_ || it == srv_.sessions.end() || it->second->closed_ ||
-        it->second->closing_since_)
+    if (m.session_id == id_ || it == srv_.sessions.end() || !it->second->open())
         return error(proto::ErrorCode::kNoSuchSession,
                      fmt::format("no other open session has id {}", m.session_id), false, seq);
     const std::string reason = proto::printable_utf8(m.reason);
     log::for_session(id_, name_)
         .info("closing session {} ({}) at an operator's request: {}", m.session_id,
-              it->second->name_, reason.empty() ? "no reason given" : reason);
+              it->second->name(), reason.empty() ? "no reason given" : reason);
     it->second->error(proto::ErrorCode::kKicked,
                       reason.empty() ? "an operator closed this session"
                                      : "an operator closed this session: " + reason,

@@ -23,6 +23,9 @@ public:
     bool authed() const { return authed_; }
     bool is_projector() const { return authed_ && role_ == proto::Role::kProjector; }
     Clock::time_point created() const { return created_; }
+    // Neither closed nor closing (reading stopped, its last frames being written).
+    bool open() const { return !closed_ && !closing_since_; }
+    const std::string& name() const { return name_; }  // printable, from Hello
 
     // Queues one encoded frame; `on_done(sent)` runs on the network thread once it is written
     // (true) or dropped (false). Layers (`layer_group` != 0) are bounded by the frames in flight
