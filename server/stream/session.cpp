@@ -10,6 +10,8 @@
 
 namespace hs::stream {
 
+namespace {
+
 // The door: the wire's values as loop's domain types, once per message.
 render::LayerEncoding encoding_of(proto::PixelFormat format) {
     return format == proto::PixelFormat::kRgba8 ? render::LayerEncoding::kSrgb8
@@ -35,6 +37,8 @@ Result<loop::HeadPose> head_pose_of(const proto::Pose& p, Clock::time_point rece
                                          glm::dquat(q[0], q[1], q[2], q[3])));
     return loop::HeadPose{head, p.client_time_ns, received};
 }
+
+}  // namespace
 
 Session::Session(Server::Impl& srv, Socket socket, uint32_t id, asio::ssl::context* tls)
     : srv_(srv),
