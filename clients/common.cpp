@@ -244,13 +244,6 @@ protocol::Pose orbit_pose(double angle_deg, double distance_m, double height_m,
         target, t_ns);
 }
 
-double percentile(std::vector<double> v, double p) {
-    if (v.empty())
-        return 0.0;
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, size_t(p * (v.size() - 1) + 0.5))];
-}
-
 namespace {
 float half_to_float(uint16_t h) {
     uint32_t sign = uint32_t(h >> 15) << 31, exp = (h >> 10) & 31, man = h & 1023, bits;

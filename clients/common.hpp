@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "protocol/protocol.hpp"
+#include "server/core/stats.hpp"
 
 namespace hs::client {
 
@@ -59,7 +60,8 @@ protocol::Pose look_at_pose(std::array<double, 3> eye, std::array<double, 3> tar
 protocol::Pose orbit_pose(double angle_deg, double distance_m, double height_m,
                           std::array<double, 3> target, uint64_t t_ns);
 
-double percentile(std::vector<double> v, double p);
+// One percentile for the server and the clients (server/core/stats.hpp, header-only).
+using hs::percentile;
 
 // Writes raw RGBA8 pixels as PNG; RGBA16F ones are tone-mapped (white = 1, sRGB) first.
 bool write_layer_png(const std::string& path, uint32_t width, uint32_t height,

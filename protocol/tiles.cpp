@@ -13,6 +13,53 @@ namespace {
 // bitmask (one bit per tile, row-major, LSB first), then u32 compressed bytes and the payload.
 constexpr size_t kFixedHeader = 8;
 
+// Whether a tile (cw x ch pixels at x0, y0) holds any non-zero byte.
+inline bool tile_lit(const uint8_t* raw, size_t stride, uint32_t x0, uint32_t y0, uint32_t cw,
+                     uint32_t ch, uint32_t bpp) {
+    const size_t row_bytes = size_t(cw) * bpp;  // a multiple of 4
+    for (uint32_t y = 0; y < ch; ++y) {
+        const uint8_t* row = raw + size_t(y0 + y) * stride + size_t(x0) * bpp;
+        // Eight bytes at a time: most tiles of a VD layer are black.
+        uint64_t acc = 0;
+        size_t i = 0;
+        for (; i + 8 <= row_bytes; i += 8) {
+            uint64_t w;
+            std::memcpy(&w, row + i, 8);
+            acc |= w;
+        }
+        for (; i < row_bytes; ++i) acc |= row[i];
+        if (acc != 0)
+            return true;
+    }
+    return false;
+}
+
+// `packed` through `codec` into `out` from `at` on (resized to fit); the bytes written.
+size_t compress_into(std::vector<uint8_t>& out, size_t at, const std::vector<uint8_t>& packed,
+                     TileCodec codec) {
+    switch (codec) {
+        case TileCodec::kNone:
+            out.resize(at + packed.size());
+            if (!packed.empty())
+                std::memcpy(out.data() + at, packed.data(), packed.size());
+            return packed.size();
+        case TileCodec::kLz4: {
+            const size_t bound = size_t(LZ4_compressBound(int(packed.size())));
+            out.resize(at + bound);
+            const int k = LZ4_compress_default((const char*)packed.data(), (char*)out.data() + at,
+                                               int(packed.size()), int(bound));
+            return size_t(std::max(k, 0));
+        }
+        case TileCodec::kZstd: {
+            const size_t bound = ZSTD_compressBound(packed.size());
+            out.resize(at + bound);
+            const size_t k = ZSTD_compress(out.data() + at, bound, packed.data(), packed.size(), 3);
+            return ZSTD_isError(k) ? 0 : k;
+        }
+    }
+    return 0;
+}
+
 }  // namespace
 
 void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
@@ -37,22 +84,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
         for (uint32_t bx = region.x0; bx < region.x1; ++bx) {
             const uint32_t x0 = bx * ts, y0 = by * ts, cw = std::min<uint32_t>(ts, w - x0),
                            ch = std::min<uint32_t>(ts, h - y0);
-            bool any = false;
-            const size_t row_bytes = size_t(cw) * bpp;  // a multiple of 4
-            for (uint32_t y = 0; y < ch && !any; ++y) {
-                const uint8_t* row = raw + size_t(y0 + y) * stride + size_t(x0) * bpp;
-                // Eight bytes at a time: most tiles of a VD layer are black.
-                uint64_t acc = 0;
-                size_t i = 0;
-                for (; i + 8 <= row_bytes; i += 8) {
-                    uint64_t w;
-                    std::memcpy(&w, row + i, 8);
-                    acc |= w;
-                }
-                for (; i < row_bytes; ++i) acc |= row[i];
-                any = acc != 0;
-            }
-            if (!any)
+            if (!tile_lit(raw, stride, x0, y0, cw, ch, bpp))
                 continue;
             const size_t tile = size_t(by) * tx + bx;
             out[header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
@@ -66,32 +98,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     std::memcpy(out.data() + header_at + 4, &present, 4);
     const size_t len_at = out.size();
     out.resize(len_at + 4);
-    size_t n = 0;
-    switch (codec) {
-        case TileCodec::kNone:
-            out.resize(len_at + 4 + packed.size());
-            if (!packed.empty())
-                std::memcpy(out.data() + len_at + 4, packed.data(), packed.size());
-            n = packed.size();
-            break;
-        case TileCodec::kLz4: {
-            const size_t bound = size_t(LZ4_compressBound(int(packed.size())));
-            out.resize(len_at + 4 + bound);
-            const int k =
-                LZ4_compress_default((const char*)packed.data(), (char*)out.data() + len_at + 4,
-                                     int(packed.size()), int(bound));
-            n = size_t(std::max(k, 0));
-            break;
-        }
-        case TileCodec::kZstd: {
-            const size_t bound = ZSTD_compressBound(packed.size());
-            out.resize(len_at + 4 + bound);
-            const size_t k =
-                ZSTD_compress(out.data() + len_at + 4, bound, packed.data(), packed.size(), 3);
-            n = ZSTD_isError(k) ? 0 : k;
-            break;
-        }
-    }
+    const size_t n = compress_into(out, len_at + 4, packed, codec);
     out.resize(len_at + 4 + n);
     const uint32_t n32 = uint32_t(n);
     std::memcpy(out.data() + len_at, &n32, 4);

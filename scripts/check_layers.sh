@@ -43,6 +43,8 @@ tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='
 if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
 nats=$(grep -rnE '#include <nats' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^server/cluster/scene_bus\.cpp:' || true)
 if [[ -n "$nats" ]]; then echo "layers: nats.h outside server/cluster/scene_bus.cpp:"; echo "$nats"; fail=1; fi
+door=$(grep -rnE '#include "(protocol/|codec/layer_codec\.hpp|stream/)' server/loop --include='*.cpp' --include='*.hpp' || true)
+if [[ -n "$door" ]]; then echo "layers: server/loop/ sees the wire (the session converts at the door; loop/viewer.hpp):"; echo "$door"; fail=1; fi
 adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
 if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
 adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)

@@ -111,15 +111,15 @@ std::map<uint32_t, RateMeter::Rates> RateMeter::update(const stream::ServerSnaps
     return out;
 }
 
-std::string prometheus_text(const stream::ServerSnapshot& s,
-                            const std::map<uint32_t, RateMeter::Rates>& rates,
-                            const AdminFigures& admin) {
-    Writer w;
+namespace {
+
+// Per headset: its name, frames, rates, latency percentiles, bytes, poses and queue.
+void viewer_families(Writer& w, const stream::ServerSnapshot& s,
+                     const std::map<uint32_t, RateMeter::Rates>& rates) {
     const auto rate_of = [&](uint32_t id) {
         auto it = rates.find(id);
         return it == rates.end() ? RateMeter::Rates{} : it->second;
     };
-
     w.family("hysar_viewer_info", "gauge", "A connected headset and the name it gave in Hello.");
     for (const auto& v : s.viewers)
         w.sample("hysar_viewer_info",
@@ -135,10 +135,12 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
                  rate_of(v.session).frames_per_s);
     w.family("hysar_viewer_pose_to_layer_seconds", "gauge",
              "Pose received to both layers written to the socket, per headset, over its last "
-             "(up to 1024) frames: quantile 0.5 and 0.99.");
+             "(up to 1024) frames: quantile 0.5, 0.95 and 0.99.");
     for (const auto& v : s.viewers) {
         w.sample("hysar_viewer_pose_to_layer_seconds",
                  viewer_label(v.session) + ",quantile=\"0.5\"", v.latency_ms_p50 / 1000.0);
+        w.sample("hysar_viewer_pose_to_layer_seconds",
+                 viewer_label(v.session) + ",quantile=\"0.95\"", v.latency_ms_p95 / 1000.0);
         w.sample("hysar_viewer_pose_to_layer_seconds",
                  viewer_label(v.session) + ",quantile=\"0.99\"", v.latency_ms_p99 / 1000.0);
     }
@@ -162,7 +164,10 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
     w.family("hysar_viewer_queued_bytes", "gauge", "Bytes waiting for the headset's socket.");
     for (const auto& v : s.viewers)
         w.sample("hysar_viewer_queued_bytes", viewer_label(v.session), v.queued_bytes);
+}
 
+// The VD path's and the projector frames' stages and totals.
+void frame_families(Writer& w, const stream::ServerSnapshot& s) {
     w.family("hysar_stage_seconds", "summary",
              "Cost of the VD path per stage: queue per batch (culling and recording), pass per "
              "frame (GPU and readback), encode and send per layer.");
@@ -195,7 +200,10 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
     w.sample("hysar_projector_renders_total", "", s.projector_renders);
     w.family("hysar_scene_version", "gauge", "The scene version being served.");
     w.sample("hysar_scene_version", "", uint64_t(s.scene_version));
+}
 
+// Sessions, connections, refusals, memory, this endpoint's own figures and the device.
+void server_families(Writer& w, const stream::ServerSnapshot& s, const AdminFigures& admin) {
     w.family("hysar_sessions", "gauge", "Authenticated sessions open, by role.");
     w.sample("hysar_sessions", "role=\"projector\"", uint64_t(s.sessions_projector));
     w.sample("hysar_sessions", "role=\"headset\"", uint64_t(s.sessions_headset));
@@ -243,6 +251,17 @@ std::string prometheus_text(const stream::ServerSnapshot& s,
         "hysar_gpu_info",
         fmt::format("device=\"{}\",driver=\"{}\"", escape_label(s.device), escape_label(s.driver)),
         uint64_t(1));
+}
+
+}  // namespace
+
+std::string prometheus_text(const stream::ServerSnapshot& s,
+                            const std::map<uint32_t, RateMeter::Rates>& rates,
+                            const AdminFigures& admin) {
+    Writer w;
+    viewer_families(w, s, rates);
+    frame_families(w, s);
+    server_families(w, s, admin);
     return w.take();
 }
 
@@ -256,6 +275,7 @@ nlohmann::json viewers_json(const stream::ServerSnapshot& s,
                            {"frames", v.frames},
                            {"frame_rate_hz", r.frames_per_s},
                            {"latency_ms_p50", v.latency_ms_p50},
+                           {"latency_ms_p95", v.latency_ms_p95},
                            {"latency_ms_p99", v.latency_ms_p99},
                            {"bytes_per_s", r.bytes_per_s},
                            {"superseded_poses", v.superseded_poses},

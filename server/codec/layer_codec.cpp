@@ -11,12 +11,17 @@
 namespace hs::codec {
 
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format) {
-    if (format == protocol::PixelFormat::kRgba8) {
-        std::vector<uint8_t> out = tonemap_srgb8(image, kLayerWhite).pixels;
-        for (size_t i = 0; i < out.size(); i += 4)
-            out[i + 3] = (out[i] | out[i + 1] | out[i + 2]) ? 255 : 0;
-        return out;
-    }
+    return format == protocol::PixelFormat::kRgba8 ? srgb8_pixels(image) : half_pixels(image);
+}
+
+std::vector<uint8_t> srgb8_pixels(const ImageRgba32f& image) {
+    std::vector<uint8_t> out = tonemap_srgb8(image, kLayerWhite).pixels;
+    for (size_t i = 0; i < out.size(); i += 4)
+        out[i + 3] = (out[i] | out[i + 1] | out[i + 2]) ? 255 : 0;
+    return out;
+}
+
+std::vector<uint8_t> half_pixels(const ImageRgba32f& image) {
     std::vector<uint8_t> out(image.pixels.size() * 2);
     for (size_t i = 0; i < image.pixels.size(); i += 4) {
         uint16_t h[4];

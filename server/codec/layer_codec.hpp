@@ -4,19 +4,14 @@
 #include <cstdint>
 #include <vector>
 
+#include "codec/pixels.hpp"
 #include "core/image.hpp"
 #include "protocol/protocol.hpp"
 #include "protocol/tiles.hpp"
 
 namespace hs::codec {
 
-// The documented display white of RGBA8 layers: linear radiance 1.0 maps to 255 (sRGB encoded).
-inline constexpr float kLayerWhite = 1.0f;
-
-// Raw pixel bytes of `image` in `format`: RGBA8 through tonemap_srgb8(image, kLayerWhite),
-// RGBA16F as IEEE half floats of the linear radiance (clamped to 65504). Alpha is 0 exactly
-// where the colour is 0 and full elsewhere (PROTOCOL.md: alpha carries no information for an
-// additive display; this makes black tiles all-zero bytes for the sparse encoding).
+// Raw pixel bytes of `image` in `format`: srgb8_pixels or half_pixels (codec/pixels.hpp).
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format);
 
 // The layer bytes of `raw` pixels in `encoding` (sparse tiles use `codec`).
@@ -61,12 +56,5 @@ void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& pixels,
 // sRGB values back to linear. Returns an empty image when the byte count does not fit.
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t width, uint32_t height,
                            protocol::PixelFormat format);
-
-// Captured materials send device drives (the code a display is sent, [0, 1]) rather than
-// radiance. A client shows layers through the sRGB transfer function, so the drive travels as
-// the radiance srgb_eotf(drive): an RGBA8 layer then carries exactly round(255 drive).
-ImageRgba32f drive_as_layer(const ImageRgba32f& drive);
-// The drive a client's panel receives from decoded layer radiance (srgb_oetf per channel).
-ImageRgba32f drive_from_layer(const ImageRgba32f& radiance);
 
 }  // namespace hs::codec

@@ -19,6 +19,22 @@ bool overlaps(const PixelRect& a, const PixelRect& b) {
 constexpr size_t kMaxLightGroups = 8;
 }  // namespace
 
+bool Renderer::check_layer_request(const LayerRequest& r, LayerWork& w) const {
+    const auto& k = r.intrinsics;
+    if (!r.target || r.target->width() != k.width || r.target->height() != k.height ||
+        r.target->format() != layer_target_format(r.encoding)) {
+        w.error = fmt::format("layer target must be {}x{} {}", k.width, k.height,
+                              gpu::to_string(layer_target_format(r.encoding)));
+        return false;
+    }
+    if (uses_depth() && !r.target->has_depth()) {
+        w.error =
+            "this scene's prop is drawn with a depth test: its layer targets need a depth buffer";
+        return false;
+    }
+    return true;
+}
+
 void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     const auto& k = r.intrinsics;
     LayerPlan& plan = w.plan;
@@ -27,17 +43,8 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     w.draw = false;
     w.groups.clear();
     plan.lights_skipped = lights_skipped_;
-    if (!r.target || r.target->width() != k.width || r.target->height() != k.height ||
-        r.target->format() != layer_target_format(r.encoding)) {
-        w.error = fmt::format("layer target must be {}x{} {}", k.width, k.height,
-                              gpu::to_string(layer_target_format(r.encoding)));
+    if (!check_layer_request(r, w))
         return;
-    }
-    if (uses_depth() && !r.target->has_depth()) {
-        w.error =
-            "this scene's prop is drawn with a depth test: its layer targets need a depth buffer";
-        return;
-    }
     if (!has_vd_term(r.spec)) {
         plan.skipped_because = vd_skip_reason(r.spec);
         return;
@@ -45,6 +52,23 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.level = level_for(k, r.eye);
     const ClusteredMesh& level = levels_[plan.level];
     plan.clusters_total = uint32_t(level.clusters.size());
+    const PixelRect rect = cull_clusters(r, level, w);
+    plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
+    if (plan.rect.empty()) {
+        plan.skipped_because = "nothing view-dependent in view";
+        return;
+    }
+    if (!r.indices || r.indices->size() < layer_index_bytes()) {
+        w.error = "a layer request needs an index buffer of layer_index_bytes()";
+        return;
+    }
+    gather_indices(r, level, w);
+    w.draw = true;
+}
+
+PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& level,
+                                  LayerWork& w) const {
+    const auto& k = r.intrinsics;
     VdBound bound;
     bound.spec = r.spec;
     bound.lights = lit_;
@@ -89,15 +113,13 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     }
     if (!r.sparse)
         rect = {0, 0, k.width, k.height};
-    plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
-    if (plan.rect.empty()) {
-        plan.skipped_because = "nothing view-dependent in view";
-        return;
-    }
-    if (!r.indices || r.indices->size() < layer_index_bytes()) {
-        w.error = "a layer request needs an index buffer of layer_index_bytes()";
-        return;
-    }
+    return rect;
+}
+
+void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
+                              LayerWork& w) const {
+    LayerPlan& plan = w.plan;
+    auto& masks = w.masks;
     // The drawn clusters' indices, gathered: one draw call each for the occluders and the
     // lit clusters (on lavapipe a draw call costs more than the triangles it skips).
     auto* gathered = static_cast<uint32_t*>(r.indices->mapped());
@@ -108,7 +130,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     uint32_t occ_clusters = 0;
     if (!convex_ && r.sparse)
         for (size_t c = 0; c < level.clusters.size(); ++c) {
-            if (masks[c] != 0 || !overlaps(rects[c], plan.rect))
+            if (masks[c] != 0 || !overlaps(w.rects[c], plan.rect))
                 continue;
             const Cluster& cc = level.clusters[c];
             std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
@@ -147,7 +169,6 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.clusters_occluding = occ_clusters;
     plan.clusters_lit = uint32_t(order.size());
     plan.triangles = (w.occ_count + lit_count) / 3;
-    w.draw = true;
 }
 
 Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(

@@ -259,6 +259,15 @@ private:
     };
     // Fills `w` for request `r`: everything but the recording. Thread: any, one per `w`.
     void plan_layer(const LayerRequest& r, LayerWork& w) const;
+    // plan_layer's steps. Whether `r` names a target and buffers it can be recorded into
+    // (w.error says why not).
+    bool check_layer_request(const LayerRequest& r, LayerWork& w) const;
+    // Per cluster of `level`, its rectangle and lights (w.rects, w.masks); the rectangle the lit
+    // clusters cover (the whole layer when not sparse).
+    PixelRect cull_clusters(const LayerRequest& r, const ClusteredMesh& level, LayerWork& w) const;
+    // The drawn clusters' indices into r.indices: the occluders first, then the lit clusters
+    // grouped by light mask (w.groups); the plan's counts.
+    void gather_indices(const LayerRequest& r, const ClusteredMesh& level, LayerWork& w) const;
     std::vector<LayerWork> layer_work_;
     std::unique_ptr<WorkerPool> planners_;    // null: plan on the caller
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request

@@ -27,6 +27,7 @@
 #include "core/check.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "core/stats.hpp"
 #include "plot/figure.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
@@ -45,13 +46,10 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double percentile_of(std::vector<double> v, double p) {
-    if (v.empty())
-        return std::nan("");
-    std::sort(v.begin(), v.end());
-    const double pos = p * double(v.size() - 1);
-    const size_t lo = size_t(std::floor(pos)), hi = std::min(lo + 1, v.size() - 1);
-    return v[lo] + (v[hi] - v[lo]) * (pos - double(lo));
+// The p-quantile as every other view reports it (core/stats.hpp); NaN for no sample, so that
+// an empty row reads as missing rather than as 0 ms.
+double percentile_of(const std::vector<double>& v, double p) {
+    return v.empty() ? std::nan("") : hs::percentile(v, p);
 }
 
 const char* format_name(proto::PixelFormat f) {

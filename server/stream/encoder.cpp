@@ -13,7 +13,24 @@ double ms_between(std::chrono::steady_clock::time_point a,
                   std::chrono::steady_clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
 }
+
+static_assert(loop::kLayerTile == protocol::kDefaultTileSize,
+              "the frame loop grows rendered rectangles to the wire's tile grid");
+
+codec::LayerPixels wire_pixels(const loop::EyePixels& p) {
+    return {p.data, p.stride, p.width, p.height, wire_format(p.encoding), p.x0, p.y0, p.x1, p.y1};
+}
 }  // namespace
+
+protocol::PixelFormat wire_format(render::LayerEncoding encoding) {
+    return encoding == render::LayerEncoding::kSrgb8 ? protocol::PixelFormat::kRgba8
+                                                     : protocol::PixelFormat::kRgba16f;
+}
+
+protocol::Encoding wire_encoding(loop::LayerPacking packing) {
+    return packing == loop::LayerPacking::kRaw ? protocol::Encoding::kRaw
+                                               : protocol::Encoding::kSparseTiles;
+}
 
 std::vector<uint8_t> BufferPool::take() {
     std::lock_guard lock(mutex_);
@@ -65,7 +82,7 @@ Encoder::~Encoder() {
     for (auto& t : threads_) t.join();
 }
 
-void Encoder::push(std::shared_ptr<ViewerFrame> frame) {
+void Encoder::push(std::shared_ptr<loop::ViewerFrame> frame) {
     {
         std::lock_guard lock(mutex_);
         queue_.push_back(std::move(frame));
@@ -86,7 +103,7 @@ void Encoder::set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) {
 void Encoder::run() {
     LayerScratch scratch;  // reused by this thread
     for (;;) {
-        std::shared_ptr<ViewerFrame> frame;
+        std::shared_ptr<loop::ViewerFrame> frame;
         std::shared_ptr<const calib::LayerDrive> drive;
         {
             std::unique_lock lock(mutex_);
@@ -146,11 +163,14 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     codec::append_layer_data(out, driven, encoding, codec, scratch.tiles);
 }
 
-EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
-                             LayerScratch& scratch) {
+EncodedFrame Encoder::encode(std::shared_ptr<loop::ViewerFrame> frame,
+                             const calib::LayerDrive* drive, LayerScratch& scratch) {
+    const loop::ViewerFrame& f = *frame;
     EncodedFrame out;
-    out.frame = frame;
-    ViewerFrame& f = *frame;
+    out.viewer = f.viewer;
+    out.pose_received = f.job.pose.received;
+    out.plans = f.plans;
+    out.batch = f.batch;
     auto t0 = std::chrono::steady_clock::now();
     if (f.timeline != 0) {
         if (auto r = ring_.wait(f.timeline); !r.ok()) {
@@ -161,30 +181,38 @@ EncodedFrame Encoder::encode(std::shared_ptr<ViewerFrame> frame, const calib::La
         out.gpu_ms = ms_between(f.submitted, t0);
         out.device_ms = ring_.device_ms(f.timeline);
     }
-    const auto& d = f.job.display;
-    const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(f.format));
+    if (encode_layers(f, drive, scratch, out))
+        out.encode_ms = ms_between(t0, std::chrono::steady_clock::now());
+    return out;  // the frame is let go here, on this thread
+}
+
+bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive* drive,
+                            LayerScratch& scratch, EncodedFrame& out) {
+    const protocol::PixelFormat format = wire_format(f.encoding);
+    const protocol::Encoding encoding = wire_encoding(f.job.display.packing);
+    const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(format));
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;
         fields.pose_time_ns = f.job.pose.client_time_ns;
         fields.eye = e;
-        fields.format = f.format;
-        fields.encoding = d.encoding;
+        fields.format = format;
+        fields.encoding = encoding;
         fields.width = f.width;
         fields.height = f.height;
+        const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
-            append_served_layer(o, f.pixels[e], drive, d.encoding, codec, scratch);
+            append_served_layer(o, pixels, drive, encoding, codec, scratch);
             return true;
         });
         if (err) {
             out.error = err->message;
-            return out;
+            return false;
         }
         out.layers[e] = pool_->share(std::move(buf));
     }
-    out.encode_ms = ms_between(t0, std::chrono::steady_clock::now());
-    return out;
+    return true;
 }
 
 }  // namespace hs::stream

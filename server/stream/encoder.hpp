@@ -1,9 +1,11 @@
-// The encoder threads: each takes a submitted ViewerFrame, waits for its timeline value (the
-// GPU finished writing its readback buffers), encodes both eyes' layers from the mapped memory
-// in place into one buffer per layer (header and payload together, sent as they are), and
-// hands them on. Buffers come from a pool and go back to it when the socket is done with them,
-// so a steady stream allocates nothing large. A calibrated server's layers go through the
-// headset drive's lookups first (calib::LayerDrive), into memory the thread keeps.
+// The encoder threads, the door on the way out: each takes a submitted ViewerFrame (the frame
+// loop's FrameSink), waits for its timeline value (the GPU finished writing its readback
+// buffers), encodes both eyes' layers from the mapped memory in place into one buffer per layer
+// (header and payload together, sent as they are: the only code besides the session that knows
+// the wire format), lets go of the frame and hands the layers on. Buffers come from a pool and go
+// back to it when the socket is done with them, so a steady stream allocates nothing large. A
+// calibrated server's layers go through the headset drive's lookups first (calib::LayerDrive), into
+// memory the thread keeps.
 #pragma once
 
 #include <condition_variable>
@@ -17,8 +19,10 @@
 #include <vector>
 
 #include "calib/serving.hpp"
+#include "codec/layer_codec.hpp"
 #include "gpu/submit_ring.hpp"
-#include "stream/viewer_frame.hpp"
+#include "loop/frame_loop.hpp"
+#include "loop/viewer_frame.hpp"
 
 namespace hs::stream {
 
@@ -59,9 +63,18 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
                          const calib::LayerDrive* drive, protocol::Encoding encoding,
                          protocol::TileCodec codec, LayerScratch& scratch);
 
-// One encoded frame: both eyes' wire frames, or why there are none.
+// The wire's pixel format and layer encoding of loop's domain values (the door's conversions
+// on the way out; session.cpp has the way in).
+protocol::PixelFormat wire_format(render::LayerEncoding encoding);
+protocol::Encoding wire_encoding(loop::LayerPacking packing);
+
+// One encoded frame: both eyes' wire frames, or why there are none, with what the frame loop
+// and the encoder measured on the way (the frame itself is let go before it is handed on).
 struct EncodedFrame {
-    std::shared_ptr<ViewerFrame> frame;
+    uint32_t viewer = 0;
+    std::chrono::steady_clock::time_point pose_received;
+    std::array<render::Renderer::LayerPlan, 2> plans;
+    std::shared_ptr<const loop::BatchFigures> batch;  // the frame that came first in its batch
     std::array<Bytes, 2> layers;
     std::string error;  // non-empty: nothing to send
     double gpu_ms = 0;  // submitted -> the GPU finished (as the encoder saw it)
@@ -70,27 +83,33 @@ struct EncodedFrame {
     double encode_ms = 0;  // both layers, CPU
 };
 
-class Encoder {
+// Owns its queue (under its lock: the render thread pushes, its threads take) and its threads.
+class Encoder final : public loop::FrameSink {
 public:
     using Done = std::function<void(EncodedFrame&&)>;
-    // `threads` encoder threads; `done` is called on them, once per pushed frame.
+    // `threads` encoder threads; `done` is called on them, once per pushed frame, after the
+    // frame was let go: it hands the result on (a post) and returns.
     Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
             std::optional<protocol::TileCodec> codec, Done done);
-    ~Encoder();  // encodes what is queued, then joins
+    ~Encoder() override;  // encodes what is queued, then joins
     Encoder(const Encoder&) = delete;
     Encoder& operator=(const Encoder&) = delete;
 
-    void push(std::shared_ptr<ViewerFrame> frame);
+    // Render thread.
+    void push(std::shared_ptr<loop::ViewerFrame> frame) override;
     // Blocks until every pushed frame was handed to `done`.
-    void drain();
+    void drain() override;
     // The headset drive of the frames pushed from now on (null: none). The render thread sets
-    // it with each scene version, after drain(). Thread: any.
-    void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive);
+    // it with each scene version, after drain().
+    void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) override;
 
 private:
     void run();
-    EncodedFrame encode(std::shared_ptr<ViewerFrame> frame, const calib::LayerDrive* drive,
+    EncodedFrame encode(std::shared_ptr<loop::ViewerFrame> frame, const calib::LayerDrive* drive,
                         LayerScratch& scratch);
+    // The two layers of `f` into `out.layers`; false (out.error set) when one cannot be.
+    bool encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive* drive,
+                       LayerScratch& scratch, EncodedFrame& out);
 
     const gpu::SubmitRing& ring_;
     std::shared_ptr<BufferPool> pool_;
@@ -98,7 +117,7 @@ private:
     Done done_;
     std::mutex mutex_;
     std::condition_variable cv_, idle_;
-    std::deque<std::shared_ptr<ViewerFrame>> queue_;
+    std::deque<std::shared_ptr<loop::ViewerFrame>> queue_;
     std::shared_ptr<const calib::LayerDrive> drive_;  // under mutex_
     size_t busy_ = 0;
     bool stopping_ = false;

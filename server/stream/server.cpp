@@ -7,9 +7,10 @@
 
 #include <fmt/format.h>
 
-#include "cluster/gateway.hpp"
 #include "codec/layer_codec.hpp"
 #include "core/log.hpp"
+#include "core/stats.hpp"
+#include "gateway/gateway.hpp"
 #include "gpu/driver_info.hpp"
 #include "protocol/schema.hpp"
 #include "scene/config.hpp"
@@ -33,13 +34,6 @@ bool same_token(const std::string& a, const std::string& b) {
     for (size_t i = 0; i < std::max(a.size(), b.size()); ++i)
         diff |= unsigned(uint8_t(i < a.size() ? a[i] : 0) ^ uint8_t(i < b.size() ? b[i] : 0));
     return diff == 0;
-}
-
-double percentile(std::vector<double> v, double p) {
-    if (v.empty())
-        return 0.0;
-    std::sort(v.begin(), v.end());
-    return v[std::min(v.size() - 1, size_t(p * (v.size() - 1) + 0.5))];
 }
 
 const char* role_name(proto::Role r) {
@@ -84,8 +78,11 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     if (!checked)
         return checked.error();
     impl->initial_scene = scene;
-    impl->scene_version = std::max<uint32_t>(1, info.initial_scene_version);
-    impl->bus_version = impl->scene_version;
+    impl->initial_version = std::max<uint32_t>(1, info.initial_scene_version);
+    impl->figures.scene_version = impl->initial_version;
+    impl->bus_version = impl->initial_version;
+    // Registrations before the render thread built the initial scene are judged by it too.
+    (void)impl->scheduler.set_served(loop::ServedDisplays::of(scene, info.calibration.get()));
     if (info.tls_cert_file.empty() != info.tls_key_file.empty())
         return make_error(ErrorCode::kInvalidArgument,
                           "TLS needs both --tls-cert and --tls-key (or neither)");
@@ -324,32 +321,33 @@ void Server::Impl::sweep() {
     });
 }
 
-std::optional<proto::Error> Server::Impl::admit_display(uint32_t id,
-                                                        const proto::RegisterDisplay& d) {
-    const uint64_t pixels = uint64_t(d.eye_width) * d.eye_height;
+std::optional<proto::Error> Server::Impl::admit_display(uint32_t id, const loop::Display& d) {
+    const uint64_t pixels = d.eye_pixels();
     if (pixels > limits.max_eye_pixels)
         return proto::Error{proto::ErrorCode::kInvalidDisplay,
                             fmt::format("{}x{} is {} pixels per eye, over this server's limit of "
                                         "{} (--max-eye-pixels)",
-                                        d.eye_width, d.eye_height, pixels, limits.max_eye_pixels)};
+                                        d.eye.width, d.eye.height, pixels, limits.max_eye_pixels)};
+    const proto::PixelFormat format = wire_format(d.encoding);
     const uint64_t worst =
-        codec::max_layer_payload_bytes(d.eye_width, d.eye_height, d.format, d.encoding);
+        codec::max_layer_payload_bytes(d.eye.width, d.eye.height, format, wire_encoding(d.packing));
     const uint64_t frame_limit = *proto::max_payload(uint16_t(proto::MessageType::kVdLayer));
     if (worst > frame_limit)
         return proto::Error{
             proto::ErrorCode::kInvalidDisplay,
             fmt::format("a {}x{} {} layer can take {} bytes, over the protocol's frame limit of {} "
                         "bytes; use rgba8 or a smaller display",
-                        d.eye_width, d.eye_height,
-                        d.format == proto::PixelFormat::kRgba8 ? "rgba8" : "rgba16f", worst,
+                        d.eye.width, d.eye.height,
+                        format == proto::PixelFormat::kRgba8 ? "rgba8" : "rgba16f", worst,
                         frame_limit)};
+    // What the served scene renders (a captured material's size, a calibrated headset's).
+    if (auto why = scheduler.refusal(d))
+        return proto::Error{proto::ErrorCode::kInvalidDisplay, std::move(*why)};
     // Reserved with a depth buffer whatever the running scene: a new scene may need one (the
     // dome's targets have none, so they hold less than this).
-    const uint64_t need = 2 * render::Renderer::target_bytes_for(
-                                  d.eye_width, d.eye_height,
-                                  render::layer_target_format(d.format == proto::PixelFormat::kRgba8
-                                                                  ? render::LayerEncoding::kSrgb8
-                                                                  : render::LayerEncoding::kHalf));
+    const uint64_t need =
+        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height,
+                                               render::layer_target_format(d.encoding));
     const uint64_t had = target_bytes_of.count(id) ? target_bytes_of[id] : 0;
     const uint64_t others = reserved_target_bytes - had;
     if (others + need > limits.max_target_bytes)
@@ -382,22 +380,19 @@ Result<scene::Scene> Server::Impl::accept_scene(const scene::Scene& s) const {
 
 void Server::Impl::queue_scene(scene::Scene s, uint32_t session, uint32_t sequence,
                                uint32_t version) {
-    {
-        std::lock_guard lock(mutex);
-        if (pending_scene && pending_scene->session != 0)
-            asio::post(io, [this, id = pending_scene->session, seq = pending_scene->sequence] {
-                answer(id, proto::ErrorCode::kSceneRejected,
-                       "replaced by a newer scene before it was applied", seq);
-            });
-        pending_scene = PendingScene{std::move(s), session, sequence, version};
-    }
+    auto replaced = inbox.put_scene({std::move(s), session, sequence, version});
+    if (replaced && replaced->session != 0)
+        asio::post(io, [this, id = replaced->session, seq = replaced->sequence] {
+            answer(id, proto::ErrorCode::kSceneRejected,
+                   "replaced by a newer scene before it was applied", seq);
+        });
     scheduler.wake();
 }
 
 void Server::Impl::publish_scene(std::string json, uint32_t session, uint32_t sequence) {
     uint32_t applied;
     {
-        std::lock_guard lock(mutex);
+        std::lock_guard lock(bus_mutex);
         applied = bus_version;
     }
     std::erase_if(bus_writers, [](BusWriter& w) {
@@ -420,7 +415,7 @@ void Server::Impl::publish_scene(std::string json, uint32_t session, uint32_t se
 
 Result<void> Server::apply_scene_version(const std::string& json, uint32_t version) {
     {
-        std::lock_guard lock(impl_->mutex);
+        std::lock_guard lock(impl_->bus_mutex);
         if (version <= impl_->bus_version)
             return {};
         // Taken even if it cannot be built here: this node's next write is based on it.
@@ -435,19 +430,27 @@ Result<void> Server::apply_scene_version(const std::string& json, uint32_t versi
 }
 
 uint32_t Server::bus_version() const {
-    std::lock_guard lock(impl_->mutex);
+    std::lock_guard lock(impl_->bus_mutex);
     return impl_->bus_version;
 }
 
 uint32_t Server::scene_version() const {
-    std::lock_guard lock(impl_->mutex);
-    return impl_->scene_version;
+    std::lock_guard lock(impl_->figures_mutex);
+    return impl_->figures.scene_version;
 }
 
 void Server::Impl::answer(uint32_t id, proto::ErrorCode code, std::string message, uint32_t seq) {
     auto it = sessions.find(id);
     if (it != sessions.end())
         it->second->error(code, message, false, seq);
+}
+
+uint32_t Server::Impl::session_joined(uint32_t id, const std::string& name, proto::Role role,
+                                      std::shared_ptr<const SessionCounters> counters) {
+    std::lock_guard lock(figures_mutex);
+    figures.session_info[id] = {name, role, std::move(counters)};
+    ++figures.sessions_total;
+    return figures.scene_version;
 }
 
 void Server::Impl::remove_session(uint32_t id) {
@@ -462,45 +465,39 @@ void Server::Impl::remove_session(uint32_t id) {
         target_bytes_of.erase(r);
     }
     {
-        std::lock_guard lock(mutex);
-        auto info_it = session_info.find(id);
+        std::lock_guard lock(figures_mutex);
+        auto info_it = figures.session_info.find(id);
         if (counters) {
-            released_viewers.push_back(id);
-            departed.push_back({{"session", id},
-                                {"name", info_it != session_info.end() ? info_it->second.name : ""},
-                                {"connected", false},
-                                {"frames", counters->frames},
-                                {"frames_dropped", counters->dropped},
-                                {"superseded_poses", counters->superseded_poses},
-                                {"bytes_sent", counters->bytes_sent},
-                                {"latency_ms_p50", percentile(counters->latency_ms, 0.5)},
-                                {"latency_ms_p95", percentile(counters->latency_ms, 0.95)}});
-            if (departed.size() > kDepartedViewers)
-                departed.pop_front();
+            const LatencySummary latency = summarize_latency(counters->latency_ms);
+            ViewerSnapshot gone;
+            gone.session = id;
+            gone.name = info_it != figures.session_info.end() ? info_it->second.name : "";
+            gone.connected = false;
+            gone.frames = counters->frames;
+            gone.frames_dropped = counters->dropped;
+            gone.superseded_poses = counters->superseded_poses;
+            gone.bytes_sent = counters->bytes_sent;
+            gone.latency_ms_p50 = latency.p50;
+            gone.latency_ms_p95 = latency.p95;
+            gone.latency_ms_p99 = latency.p99;
+            gone.latency_samples = latency.samples;
+            figures.departed.push_back(std::move(gone));
+            if (figures.departed.size() > kDepartedViewers)
+                figures.departed.pop_front();
         }
-        if (info_it != session_info.end())
-            session_info.erase(info_it);
+        if (info_it != figures.session_info.end())
+            figures.session_info.erase(info_it);
     }
-    if (counters)
+    if (counters) {
+        inbox.release_viewer(id);
         scheduler.wake();  // the render thread frees its targets
+    }
     if (was_authed)
         log::for_session(id).info("left");
     if (stopping && sessions.empty()) {
         shutdown_timer.cancel();
         io.stop();
     }
-}
-
-void Server::Impl::publish_projector_frame(Bytes frame) {
-    projector_frame = frame;
-    {
-        std::lock_guard lock(mutex);
-        current_projector_frame = frame;
-        ++projector_frames_published;
-    }
-    for (auto& [id, s] : sessions)
-        if (s->is_projector())
-            s->send(frame, nullptr, 0, true);
 }
 
 void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
@@ -523,8 +520,8 @@ void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
     if (info.keep_latest_layers) {
         // Two pointers, swapped under the lock: the previous frame's buffers go back to the pool
         // once their writes are done.
-        std::lock_guard lock(mutex);
-        if (auto si = session_info.find(id); si != session_info.end()) {
+        std::lock_guard lock(figures_mutex);
+        if (auto si = figures.session_info.find(id); si != figures.session_info.end()) {
             si->second.latest_layers = layers;
             si->second.latest_group = group;
         }
@@ -534,8 +531,8 @@ void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
             std::move(layer),
             [this, id, pending, bytes, pose_received, handed](bool sent) {
                 if (sent) {
-                    std::lock_guard lock(mutex);
-                    frame_stats.send.add(ms_since(handed));
+                    std::lock_guard lock(figures_mutex);
+                    figures.frame_stats.send.add(ms_since(handed));
                 }
                 pending->all_sent = pending->all_sent && sent;
                 if (--pending->remaining == 0)
@@ -543,35 +540,6 @@ void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
             },
             group);
     }
-}
-
-nlohmann::json FrameStats::json() const {
-    const double n = double(std::max<uint64_t>(layers, 1));
-    const auto stage = [](const StageCost& c) {
-        return nlohmann::json{{"last", c.last}, {"mean", c.mean()}, {"count", c.n}};
-    };
-    return {{"frames", frames},
-            {"layers", layers},
-            {"bytes", bytes},
-            {"bytes_per_layer", double(bytes) / n},
-            {"submissions", submissions},
-            {"eyes", eyes},
-            {"max_eyes", max_eyes},
-            {"eyes_per_submission", submissions ? double(eyes) / double(submissions) : 0.0},
-            {"large_display_turns", large_turns},
-            {"sparse",
-             {{"layers_black", layers_black},
-              {"clusters_total", clusters_total},
-              {"clusters_lit", clusters_lit},
-              {"clusters_occluding", clusters_occluding},
-              {"triangles", triangles},
-              {"pixels_rendered", pixels_rendered}}},
-            {"stages_ms",
-             {{"queue", stage(queue)},
-              {"pass", stage(pass)},
-              {"device", stage(device)},
-              {"encode", stage(encode)},
-              {"send", stage(send)}}}};
 }
 
 ServerSnapshot Server::snapshot() const {
@@ -595,83 +563,7 @@ nlohmann::json Server::stats() const {
 }
 
 nlohmann::json Server::Impl::stats() const {
-    auto counters = scheduler.counters();
-    std::lock_guard lock(mutex);
-    nlohmann::json viewers = nlohmann::json::array();
-    uint64_t queued = 0, receive = 0, queued_max = 0;
-    for (const auto& [id, info] : session_info) {
-        queued += info.counters->queued_bytes;
-        queued_max = std::max<uint64_t>(queued_max, info.counters->queued_bytes);
-        receive += info.counters->receive_bytes;
-    }
-    for (const auto& [id, c] : counters) {
-        auto info = session_info.find(id);
-        const bool known = info != session_info.end();
-        viewers.push_back(
-            {{"session", id},
-             {"name", known ? proto::sanitize_utf8(info->second.name) : ""},
-             {"connected", true},
-             {"frames", c.frames},
-             {"frames_dropped", c.dropped},
-             {"layers_replaced", known ? info->second.counters->layers_replaced.load() : 0},
-             {"queued_bytes", known ? info->second.counters->queued_bytes.load() : 0},
-             {"superseded_poses", c.superseded_poses},
-             {"bytes_sent", c.bytes_sent},
-             {"in_flight", c.in_flight},
-             {"latency_ms_p50", percentile(c.latency_ms, 0.5)},
-             {"latency_ms_p95", percentile(c.latency_ms, 0.95)}});
-    }
-    for (const auto& d : departed) viewers.push_back(d);
-    nlohmann::json refused = nlohmann::json::object();
-    for (int c = 0; c < kErrorCodes; ++c)
-        if (refusals[size_t(c)])
-            refused[std::to_string(c)] = refusals[size_t(c)].load();
-    const auto& fs = frame_stats;
-    return {{"scene_version", scene_version},
-            {"projector_renders", projector_renders},
-            // The render thread's time from taking a batch to the end of its turn, since start.
-            {"render_busy_ns", render_busy_ns.load()},
-            {"sessions", session_info.size()},
-            {"sessions_total", sessions_total},
-            {"viewers", viewers},
-            {"connections",
-             {{"accepted", accepted.load()},
-              {"accept_errors", accept_errors.load()},
-              {"timeouts", timeouts.load()},
-              {"pending_evicted", pending_evicted.load()}}},
-            {"refusals_by_code", refused},
-            {"memory_bytes",
-             {{"render_targets", held_target_bytes.load()},
-              {"render_targets_reserved", reserved_target_bytes.load()},
-              {"render_targets_budget", limits.max_target_bytes},
-              {"send_queues", queued},
-              {"send_queue_max_session", queued_max},
-              {"receive_buffers", receive},
-              {"index_buffers", held_index_bytes.load()},
-              {"layer_buffers_pooled", buffers->pooled_bytes()}}},
-            {"passes", {{"projector", last_projector_report}, {"viewer", fs.last_report}}},
-            {"timing_ms",
-             {{"vd_pass_mean", fs.pass.mean()},
-              {"vd_encode_mean", fs.encode.mean()},
-              {"projector_total", projector_ms_total},
-              {"vd_layers", fs.layers}}},
-            {"cost_ms",
-             {{"projector", projector_cost.json()},
-              {"viewer_vd",
-               {{"frames", fs.layers},
-                {"last",
-                 {{"queue", fs.queue.last},
-                  {"pass", fs.pass.last},
-                  {"device", fs.device.last},
-                  {"encode", fs.encode.last},
-                  {"send", fs.send.last}}},
-                {"mean",
-                 {{"queue", fs.queue.mean()},
-                  {"pass", fs.pass.mean()},
-                  {"device", fs.device.mean()},
-                  {"encode", fs.encode.mean()},
-                  {"send", fs.send.mean()}}}}}}},
-            {"frames", fs.json()}};
+    return stats_json(snapshot());
 }
 
 }  // namespace hs::stream

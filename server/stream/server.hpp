@@ -1,7 +1,22 @@
-// `hysar serve`: the render server. One network thread (asio) owns every socket and session;
-// one render thread owns the GPU renderer. The projector frame is rendered once per scene
-// version; each headset's VD layers for its latest pose, at most kMaxInFlight frames in flight.
+// `hysar serve`: the render server. The projector frame is rendered once per scene version;
+// each headset's VD layers for its latest pose, at most loop::kMaxInFlight frames in flight.
 // docs/OPERATIONS.md lists every limit, timeout and credential below and how to set it.
+//
+// One owner per stage (docs/ARCHITECTURE.md, "One VD layer, thread by thread"):
+// - The network thread (the caller of run(), asio) owns every socket and session: the door,
+//   where the wire's messages become loop's domain values (loop/viewer.hpp) and where a headset
+//   is admitted or refused, once, at registration. It alone feeds the scheduler (displays,
+//   poses, frame requests; frames rendered and completed) and it is the one producer of the
+//   figures (stats(), snapshot(), and through them /metrics, the dashboard and the admin tool).
+// - The scheduler (loop::Scheduler) is the hand-off from the network thread to the render
+//   thread; only those two call it.
+// - The render thread (loop::FrameLoop) owns the renderer, the scene it serves, the submit
+//   ring and each viewer's frame (loop::ViewerFrame) from taking its job until it pushes it to
+//   the encoder; it hands what it has to say to the network thread as posted values.
+// - The encoder threads (stream::Encoder) own a frame from that push until it is encoded (its
+//   queue is the hand-off); they post the layers, with the frame's figures, to the network
+//   thread, and let go of the frame before they do.
+// - Watchers (stats(), snapshot(), latest_*(): any thread) only copy, under short locks.
 #pragma once
 
 #include <cstdint>

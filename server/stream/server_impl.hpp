@@ -1,7 +1,8 @@
 // The server's insides, shared by its parts (not a public header): server.cpp (lifecycle,
-// accepting, admission, stats), session.cpp (one connection, the only code that speaks the
-// wire format), frame_loop.cpp (the render thread) and encoder.cpp (the encoder threads). Each
-// member says which thread owns it.
+// accepting, admission, stats), session.cpp (one connection: the door, where the wire's messages
+// become loop's domain types), render_host.cpp (what the render thread and the encoder threads
+// hand to the network thread), encoder.cpp (the encoder threads: frames to the wire's layers)
+// and snapshot.cpp (the watchers' copy). Each member says which thread owns it.
 #pragma once
 
 #include <array>
@@ -17,9 +18,10 @@
 #include <asio.hpp>
 #include <asio/ssl.hpp>
 
+#include "loop/frame_loop.hpp"
+#include "loop/scheduler.hpp"
 #include "render/renderer.hpp"
 #include "stream/encoder.hpp"
-#include "stream/scheduler.hpp"
 #include "stream/server.hpp"
 #include "stream/tls.hpp"
 #include "stream/token.hpp"
@@ -43,7 +45,6 @@ inline constexpr int kErrorCodes = int(proto::ErrorCode::kNoSuchSession) + 1;
 
 uint64_t now_ns();
 double ms_since(Clock::time_point t);
-double percentile(std::vector<double> v, double p);
 const char* role_name(protocol::Role r);
 // The wire bytes of a message the server sends; nullopt (logged) when the encoder refuses it.
 std::optional<std::vector<uint8_t>> wire(const protocol::Message& m, uint32_t sequence = 0);
@@ -57,115 +58,35 @@ struct SessionCounters {
 
 class Session;
 
-// Per-frame cost accounting of one pass: the GPU work, the readback and the encoding, as the
-// last frame's figures and the means since start (stats "cost_ms").
-struct PassCost {
-    uint64_t frames = 0;
-    double gpu = 0, readback = 0, encode = 0;  // the last frame's, ms
-    double gpu_sum = 0, readback_sum = 0, encode_sum = 0;
-    void add(double gpu_ms, double readback_ms, double encode_ms) {
-        ++frames;
-        gpu = gpu_ms, readback = readback_ms, encode = encode_ms;
-        gpu_sum += gpu_ms, readback_sum += readback_ms, encode_sum += encode_ms;
-    }
-    nlohmann::json json() const {
-        const double n = double(std::max<uint64_t>(frames, 1));
-        return {
-            {"frames", frames},
-            {"last", {{"pass", gpu}, {"readback", readback}, {"encode", encode}}},
-            {"mean",
-             {{"pass", gpu_sum / n}, {"readback", readback_sum / n}, {"encode", encode_sum / n}}}};
-    }
-};
+// A submission's figures, as its first frame carries them (loop::BatchFigures).
+inline void add_batch(FrameStats& st, const loop::BatchFigures& b) {
+    ++st.submissions;
+    st.eyes += b.eyes;
+    st.max_eyes = std::max(st.max_eyes, b.eyes);
+    st.large_turns += b.large_turn ? 1 : 0;
+    st.queue.add(b.queue_ms);
+    st.last_report = b.report;
+}
 
-// One stage's cost per frame or layer: the last value and the mean, ms.
-struct StageCost {
-    uint64_t n = 0;
-    double last = 0, sum = 0;
-    void add(double ms) {
-        ++n;
-        last = ms;
-        sum += ms;
-    }
-    double mean() const { return n ? sum / double(n) : 0.0; }
-};
+// What the sparse path drew for one layer.
+inline void add_plan(FrameStats& st, const render::Renderer::LayerPlan& p) {
+    st.layers_black += p.rect.empty() ? 1 : 0;
+    st.clusters_total += p.clusters_total;
+    st.clusters_lit += p.clusters_lit;
+    st.clusters_occluding += p.clusters_occluding;
+    st.triangles += p.triangles;
+    st.pixels_rendered += p.rect.area();
+}
 
-// What the VD path did, as one typed record (stats "frames"). Under Impl::mutex.
-struct FrameStats {
-    uint64_t frames = 0, layers = 0, bytes = 0;  // sent to the sockets' queues
-    uint64_t submissions = 0, eyes = 0, max_eyes = 0, large_turns = 0;
-    // Per layer: what the sparse path drew and what it skipped.
-    uint64_t layers_black = 0;  // nothing view-dependent in view: no pass, no readback
-    uint64_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0, triangles = 0;
-    uint64_t pixels_rendered = 0;
-    // Stages: queue = taken from the scheduler to submitted (culling and recording, per
-    // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
-    // frame); device = the device's own time on the frame's submission, from its timestamps
-    // (per frame; the pass less device is time spent waiting behind other submissions);
-    // encode = per layer, CPU; send = handed to the socket to written (per layer).
-    StageCost queue, pass, device, encode, send;
-    nlohmann::json last_report;
-    void add_plan(const render::Renderer::LayerPlan& p) {
-        layers_black += p.rect.empty() ? 1 : 0;
-        clusters_total += p.clusters_total;
-        clusters_lit += p.clusters_lit;
-        clusters_occluding += p.clusters_occluding;
-        triangles += p.triangles;
-        pixels_rendered += p.rect.area();
-    }
-    nlohmann::json json() const;
-};
+// The stats' JSON (Server::stats(): the stats file, StatsRequest), a view of the snapshot.
+nlohmann::json stats_json(const ServerSnapshot& s);
 
-struct Server::Impl {
-    gpu::Device& device;
-    ServerCreateInfo info;
-    const ServerLimits& limits;
-    asio::io_context io;
-    TlsContext tls;  // context null: no TLS
-    asio::ip::tcp::acceptor tcp_acceptor{io};
-    std::unique_ptr<asio::local::stream_protocol::acceptor> unix_acceptor;
-    // HAProxy's agent-check (`--agent-port`): a line about this node's load per connection.
-    std::unique_ptr<asio::ip::tcp::acceptor> agent_acceptor;
-    asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
-    Scheduler scheduler;
-    std::thread render_thread;
-    std::atomic<bool> stopping{false};
-    uint16_t bound_port = 0;  // set once before run(); read from any thread
-    std::string driver_info;  // the device's driver, name and version; set once in create()
-
-    // Network thread only.
-    std::map<uint32_t, std::shared_ptr<Session>> sessions;
-    uint32_t next_session_id = 1;
-    uint32_t accept_backoff_ms = 0;
-    uint64_t next_layer_group = 1;                 // tags the layers of one delivered frame
-    Bytes projector_frame;                         // the encoded frame of the current scene
-    std::map<uint32_t, uint64_t> target_bytes_of;  // reserved render-target bytes per viewer
-    uint64_t agent_busy_ns = 0;                    // render_busy_ns at the last agent reply
-    Clock::time_point agent_at = Clock::now();     // and when it was sent
-
-    // Any thread.
-    std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};
-    std::atomic<uint64_t> reserved_target_bytes{0}, held_target_bytes{0}, held_index_bytes{0};
-    std::shared_ptr<BufferPool> buffers = std::make_shared<BufferPool>();  // layer bytes
-    uint32_t encoder_threads = 1;                                          // set before run()
-    std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};
-    std::atomic<uint64_t> render_busy_ns{0};  // the render thread's time not waiting for work
-
-    // Shared between threads under `mutex`.
-    mutable std::mutex mutex;
-    scene::Scene initial_scene;  // read once by the render thread, which then owns the scene
-    struct PendingScene {
-        scene::Scene scene;
-        uint32_t session = 0;  // who asked (0: a reload), answered if it cannot be built
-        uint32_t sequence = 0;
-        uint32_t version = 0;  // the bus's version for it; 0: the next one
-    };
-    std::optional<PendingScene> pending_scene;
-    std::vector<uint32_t> released_viewers;  // whose render targets the render thread frees
+// The figures the stats, /metrics, the dashboard and the admin tool show. One producer: the
+// network thread writes them (what the render thread and the encoder threads measured arrives
+// there with the frames and the scene versions); stats() and snapshot() copy them, on any
+// thread, under Impl::figures_mutex.
+struct Figures {
     uint32_t scene_version = 1;
-    // The newest version taken from a cluster's bus (queued, being built or served): what this
-    // node's writes compare-and-set on and what a delivered version must exceed.
-    uint32_t bus_version = 1;
     uint64_t projector_renders = 0;
     nlohmann::json last_projector_report;
     double projector_ms_total = 0;
@@ -183,8 +104,72 @@ struct Server::Impl {
     std::map<uint32_t, SessionInfo> session_info;
     Bytes current_projector_frame;  // for snapshot(); the network thread's projector_frame
     uint64_t projector_frames_published = 0;  // numbers current_projector_frame
-    std::deque<nlohmann::json> departed;      // the last kDepartedViewers viewers' final figures
+    std::deque<ViewerSnapshot> departed;      // the last kDepartedViewers viewers' final figures
     uint64_t sessions_total = 0;
+};
+
+// Who owns what: stream/server.hpp says it for the whole server; each member below names its
+// owner. The hand-offs: the scheduler (network -> render: jobs), the loop inbox (network ->
+// render: scenes, departed viewers), the encoder's queue (render -> encoder) and asio::post
+// (render and encoder -> network: FrameLoopHost, render_host.cpp).
+struct Server::Impl final : loop::FrameLoopHost {
+    // Set once in create(), before run(); read by any thread.
+    gpu::Device& device;
+    ServerCreateInfo info;
+    const ServerLimits& limits;
+    std::string driver_info;  // the device's driver, name and version
+    uint16_t bound_port = 0;
+    uint32_t encoder_threads = 1;
+    scene::Scene initial_scene;  // handed to the render thread when it starts
+    uint32_t initial_version = 1;
+
+    // Hand-offs between threads (each locks itself).
+    loop::Scheduler scheduler;  // network thread feeds it; the render thread takes jobs
+    loop::LoopInbox inbox;      // network -> render thread: scenes, departed viewers
+    std::shared_ptr<BufferPool> buffers = std::make_shared<BufferPool>();  // layer bytes
+    std::atomic<bool> stopping{false};
+    std::thread render_thread;
+
+    // Network thread only.
+    asio::io_context io;
+    TlsContext tls;  // context null: no TLS
+    asio::ip::tcp::acceptor tcp_acceptor{io};
+    std::unique_ptr<asio::local::stream_protocol::acceptor> unix_acceptor;
+    // HAProxy's agent-check (`--agent-port`): a line about this node's load per connection.
+    std::unique_ptr<asio::ip::tcp::acceptor> agent_acceptor;
+    asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
+    std::map<uint32_t, std::shared_ptr<Session>> sessions;
+    uint32_t next_session_id = 1;
+    uint32_t accept_backoff_ms = 0;
+    uint64_t next_layer_group = 1;                 // tags the layers of one delivered frame
+    Bytes projector_frame;                         // the encoded frame of the current scene
+    std::map<uint32_t, uint64_t> target_bytes_of;  // reserved render-target bytes per viewer
+    uint64_t agent_busy_ns = 0;                    // render_busy_ns at the last agent reply
+    Clock::time_point agent_at = Clock::now();     // and when it was sent
+    // One per SceneUpdate in flight (each write ends within the bus's timeout); the finished
+    // ones are joined at the next publish_scene and the rest when run() ends.
+    struct BusWriter {
+        std::thread thread;
+        std::shared_ptr<std::atomic<bool>> done;
+    };
+    std::vector<BusWriter> bus_writers;
+
+    // Gauges: one writer each (named), read by any thread.
+    std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};  // net
+    std::array<std::atomic<uint64_t>, kErrorCodes> refusals{};                             // net
+    std::atomic<uint64_t> reserved_target_bytes{0};                                        // net
+    std::atomic<uint64_t> held_target_bytes{0}, held_index_bytes{0};  // render thread
+    std::atomic<uint64_t> render_busy_ns{0};  // render thread: its time not waiting for work
+
+    // The figures (network thread writes, watchers copy).
+    mutable std::mutex figures_mutex;
+    Figures figures;
+
+    // The newest scene version taken from a cluster's bus (queued, being built or served): what
+    // this node's writes compare-and-set on and what a delivered version must exceed. Any
+    // thread, under bus_mutex.
+    mutable std::mutex bus_mutex;
+    uint32_t bus_version = 1;
 
     Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i), limits(info.limits) {}
     void accept_tcp();
@@ -203,31 +188,40 @@ struct Server::Impl {
         const int c = int(code);
         refusals[size_t(c >= 0 && c < kErrorCodes ? c : 0)]++;
     }
-    // A RegisterDisplay that passed the protocol's checks: nullopt when it fits the server's
-    // limits (its render-target bytes then reserved), else the error to answer.
-    std::optional<proto::Error> admit_display(uint32_t id, const proto::RegisterDisplay& d);
+    // A display that passed the protocol's checks: nullopt when it fits the server's limits and
+    // the served scene can render it (its render-target bytes then reserved), else the error to
+    // answer. Network thread.
+    std::optional<proto::Error> admit_display(uint32_t id, const loop::Display& d);
     Result<scene::Scene> accept_scene(const scene::Scene& s) const;
     void queue_scene(scene::Scene s, uint32_t session, uint32_t sequence, uint32_t version = 0);
     // SceneUpdate with a bus: info.publish_scene on a writer thread, its refusal answered.
     void publish_scene(std::string json, uint32_t session, uint32_t sequence);
-    // One per SceneUpdate in flight (each write ends within the bus's timeout); the finished
-    // ones are joined at the next publish_scene and the rest when run() ends. Network thread.
-    struct BusWriter {
-        std::thread thread;
-        std::shared_ptr<std::atomic<bool>> done;
-    };
-    std::vector<BusWriter> bus_writers;
-    void render_loop();  // the render thread (frame_loop.cpp)
-    void refuse_job(uint32_t session_id, proto::ErrorCode code, const std::string& why);
-    void publish_projector_frame(Bytes frame);
-    // Network thread: a frame's two layers to the session's queue (latest frame wins).
-    void deliver(uint32_t session_id, std::array<Bytes, 2> layers, Clock::time_point pose_received);
+    void render_loop();  // the render thread's body (render_host.cpp)
     void answer(uint32_t session_id, proto::ErrorCode code, std::string message, uint32_t seq);
+    // A session passed Hello: counted and shown; returns the scene version to welcome it with.
+    uint32_t session_joined(uint32_t id, const std::string& name, proto::Role role,
+                            std::shared_ptr<const SessionCounters> counters);
     void remove_session(uint32_t id);
     nlohmann::json stats() const;
     ServerSnapshot snapshot() const;                           // snapshot.cpp
     LatestFrame latest_layer(uint32_t viewer, int eye) const;  // snapshot.cpp
     LatestFrame latest_projector_frame() const;                // snapshot.cpp
+
+    // Network thread: what came back from the render and encoder threads (render_host.cpp).
+    void on_scene_built(loop::SceneVersion v);
+    void on_encoded(EncodedFrame done);
+    void on_job_dropped(uint32_t viewer, const std::string& why);
+    // A frame's two layers to the session's queue (latest frame wins).
+    void deliver(uint32_t session_id, std::array<Bytes, 2> layers, Clock::time_point pose_received);
+
+    // loop::FrameLoopHost: called on the render thread (render_host.cpp).
+    std::unique_ptr<loop::FrameSink> make_sink(const gpu::SubmitRing& ring) override;
+    void scene_built(loop::SceneVersion version) override;
+    void scene_failed(const loop::PendingScene& scene) override;
+    void job_dropped(uint32_t viewer, std::string why) override;
+    void held_bytes(uint64_t targets, uint64_t indices) override;
+    void busy(uint64_t ns) override;
+    void cannot_serve() override;
 };
 
 }  // namespace hs::stream

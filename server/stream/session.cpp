@@ -5,9 +5,40 @@
 #include <fmt/format.h>
 
 #include "core/log.hpp"
+#include "scene/camera.hpp"
 #include "scene/config.hpp"
 
 namespace hs::stream {
+
+namespace {
+
+// The door: the wire's values as loop's domain types, once per message.
+render::LayerEncoding encoding_of(proto::PixelFormat format) {
+    return format == proto::PixelFormat::kRgba8 ? render::LayerEncoding::kSrgb8
+                                                : render::LayerEncoding::kHalf;
+}
+
+loop::Display display_of(const proto::RegisterDisplay& d) {
+    loop::Display out;
+    out.eye = {d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
+    out.ipd_m = d.ipd_m;
+    out.encoding = encoding_of(d.format);
+    out.packing = d.encoding == proto::Encoding::kRaw ? loop::LayerPacking::kRaw
+                                                      : loop::LayerPacking::kSparseTiles;
+    out.mode = d.mode == proto::FrameMode::kContinuous ? loop::FrameMode::kContinuous
+                                                       : loop::FrameMode::kOnRequest;
+    return out;
+}
+
+Result<loop::HeadPose> head_pose_of(const proto::Pose& p, Clock::time_point received) {
+    const auto& q = p.orientation_wxyz;
+    HS_ASSIGN_OR_RETURN(scene::Pose head,
+                        scene::make_pose({p.position_m[0], p.position_m[1], p.position_m[2]},
+                                         glm::dquat(q[0], q[1], q[2], q[3])));
+    return loop::HeadPose{head, p.client_time_ns, received};
+}
+
+}  // namespace
 
 Session::Session(Server::Impl& srv, Socket socket, uint32_t id, asio::ssl::context* tls)
     : srv_(srv),
@@ -307,13 +338,7 @@ void Session::hello(const proto::Hello& hello, uint32_t seq) {
     role_ = hello.role;
     // Shown in logs, stats and the dashboard: control characters as '?' (PROTOCOL.md, Hello).
     name_ = proto::printable_utf8(hello.client_name);
-    uint32_t version;
-    {
-        std::lock_guard lock(srv_.mutex);
-        version = srv_.scene_version;
-        srv_.session_info[id_] = {name_, role_, counters_};
-        ++srv_.sessions_total;
-    }
+    const uint32_t version = srv_.session_joined(id_, name_, role_, counters_);
     log::for_session(id_).info("{} '{}' joined", role_name(role_), name_);
     if (auto b = wire(proto::Welcome{id_, now_ns(), version}, seq))
         send(std::move(*b));
@@ -331,28 +356,9 @@ void Session::handle(const proto::Message& msg) {
             if constexpr (std::is_same_v<T, proto::Hello>) {
                 error(proto::ErrorCode::kOutOfOrder, "Hello was already received", false, seq);
             } else if constexpr (std::is_same_v<T, proto::RegisterDisplay>) {
-                if (role_ != proto::Role::kHmd) {
-                    error(proto::ErrorCode::kForbidden,
-                          "only a headset (role hmd) registers a display", false, seq);
-                } else if (auto bad = proto::validate_display(m)) {
-                    error(proto::ErrorCode::kInvalidDisplay, *bad, false, seq);
-                } else if (auto refusal = srv_.admit_display(id_, m)) {
-                    error(refusal->code, refusal->message, false, seq);
-                } else {
-                    registered_ = true;
-                    srv_.scheduler.add_viewer(id_, m);
-                }
+                register_display(m, seq);
             } else if constexpr (std::is_same_v<T, proto::Pose>) {
-                if (role_ != proto::Role::kHmd) {
-                    error(proto::ErrorCode::kForbidden, "only a headset (role hmd) sends poses",
-                          false, seq);
-                } else if (!registered_) {
-                    error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false, seq);
-                } else if (auto bad = proto::validate_pose(m)) {
-                    error(proto::ErrorCode::kInvalidPose, *bad, false, seq);
-                } else {
-                    srv_.scheduler.set_pose(id_, m);
-                }
+                pose(m, seq);
             } else if constexpr (std::is_same_v<T, proto::FrameRequest>) {
                 if (role_ != proto::Role::kHmd)
                     error(proto::ErrorCode::kForbidden, "only a headset (role hmd) requests frames",
@@ -388,6 +394,36 @@ void Session::handle(const proto::Message& msg) {
         msg);
 }
 
+void Session::register_display(const proto::RegisterDisplay& m, uint32_t seq) {
+    if (role_ != proto::Role::kHmd)
+        return error(proto::ErrorCode::kForbidden, "only a headset (role hmd) registers a display",
+                     false, seq);
+    if (auto bad = proto::validate_display(m))
+        return error(proto::ErrorCode::kInvalidDisplay, *bad, false, seq);
+    const loop::Display display = display_of(m);
+    if (auto refusal = srv_.admit_display(id_, display))
+        return error(refusal->code, refusal->message, false, seq);
+    registered_ = true;
+    // The served scene may have changed since admit_display asked: then it is told as a scene
+    // change would tell it (once, sequence 0).
+    if (auto why = srv_.scheduler.add_viewer(id_, display))
+        error(proto::ErrorCode::kInvalidDisplay, *why, false, 0);
+}
+
+void Session::pose(const proto::Pose& m, uint32_t seq) {
+    if (role_ != proto::Role::kHmd)
+        return error(proto::ErrorCode::kForbidden, "only a headset (role hmd) sends poses", false,
+                     seq);
+    if (!registered_)
+        return error(proto::ErrorCode::kOutOfOrder, "Pose before RegisterDisplay", false, seq);
+    if (auto bad = proto::validate_pose(m))
+        return error(proto::ErrorCode::kInvalidPose, *bad, false, seq);
+    auto head = head_pose_of(m, Clock::now());
+    if (!head)
+        return error(proto::ErrorCode::kInvalidPose, head.error().message, false, seq);
+    srv_.scheduler.set_pose(id_, head.value());
+}
+
 void Session::scene_update(const proto::SceneUpdate& m, uint32_t seq) {
     if (role_ != proto::Role::kAdmin)
         return error(proto::ErrorCode::kForbidden, "only an admin session may change the scene",
@@ -409,14 +445,13 @@ void Session::kick(const proto::Kick& m, uint32_t seq) {
         return error(proto::ErrorCode::kForbidden, "only an admin session may close another", false,
                      seq);
     auto it = srv_.sessions.find(m.session_id);
-    if (m.session_id == id_ || it == srv_.sessions.end() || it->second->closed_ ||
-        it->second->closing_since_)
+    if (m.session_id == id_ || it == srv_.sessions.end() || !it->second->open())
         return error(proto::ErrorCode::kNoSuchSession,
                      fmt::format("no other open session has id {}", m.session_id), false, seq);
     const std::string reason = proto::printable_utf8(m.reason);
     log::for_session(id_, name_)
         .info("closing session {} ({}) at an operator's request: {}", m.session_id,
-              it->second->name_, reason.empty() ? "no reason given" : reason);
+              it->second->name(), reason.empty() ? "no reason given" : reason);
     it->second->error(proto::ErrorCode::kKicked,
                       reason.empty() ? "an operator closed this session"
                                      : "an operator closed this session: " + reason,

@@ -1,6 +1,7 @@
 // One client connection: reads frames as their bytes arrive, answers what it may, queues what
-// it sends. The only code that speaks the wire format; it converts to domain calls on the
-// server (Scheduler, admission, scenes). Thread: network, every method.
+// it sends. The door: the only code that reads the wire format, and where each message becomes
+// loop's domain values (loop::Display, loop::HeadPose) and calls on the server (the scheduler,
+// admission, scenes); nothing behind it sees a message. Thread: network, every method.
 #pragma once
 
 #include <functional>
@@ -22,6 +23,9 @@ public:
     bool authed() const { return authed_; }
     bool is_projector() const { return authed_ && role_ == proto::Role::kProjector; }
     Clock::time_point created() const { return created_; }
+    // Neither closed nor closing (reading stopped, its last frames being written).
+    bool open() const { return !closed_ && !closing_since_; }
+    const std::string& name() const { return name_; }  // printable, from Hello
 
     // Queues one encoded frame; `on_done(sent)` runs on the network thread once it is written
     // (true) or dropped (false). Layers (`layer_group` != 0) are bounded by the frames in flight
@@ -68,6 +72,8 @@ private:
     void frame_done();
     void hello(const proto::Hello& hello, uint32_t seq);
     void handle(const proto::Message& msg);
+    void register_display(const proto::RegisterDisplay& m, uint32_t seq);
+    void pose(const proto::Pose& m, uint32_t seq);
     void scene_update(const proto::SceneUpdate& m, uint32_t seq);
     // An admin's Kick: the named session gets error 16 and is closed (PROTOCOL.md, Kick).
     void kick(const proto::Kick& m, uint32_t seq);

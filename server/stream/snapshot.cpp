@@ -1,9 +1,11 @@
-// Server::snapshot(): the figures of stats() as one typed struct for a watcher on another
-// thread (server/admin/). Copies numbers and shared pointers only under the server's lock;
-// the latency percentiles are sorted from the scheduler's copy before it is taken, and nothing
-// is decoded or formatted under it.
+// Server::snapshot(): the server's figures as one typed struct, the one summary that stats(),
+// /metrics, the dashboard and the admin tool show (server/admin/ reads it on threads of its
+// own). Copies numbers and shared pointers only under the figures' lock; the latency
+// percentiles are sorted from the scheduler's copy before it is taken, and nothing is decoded
+// or formatted under it.
 #include <algorithm>
 
+#include "core/stats.hpp"
 #include "protocol/protocol.hpp"
 #include "stream/server.hpp"
 #include "stream/server_impl.hpp"
@@ -16,33 +18,10 @@ StageTotals totals(const StageCost& c) {
     return {c.n, c.sum};
 }
 
-// The p-quantile of an ascending `v` (0 when empty), chosen as percentile() chooses it.
-double quantile_of_sorted(const std::vector<double>& v, double p) {
-    if (v.empty())
-        return 0.0;
-    return v[std::min(v.size() - 1, size_t(p * (v.size() - 1) + 0.5))];
-}
-
-}  // namespace
-
-ServerSnapshot Server::Impl::snapshot() const {
-    // The scheduler's lock first and alone, as stats() does: never both at once.
-    auto counters = scheduler.counters();
-    ServerSnapshot s;
-    s.connections_accepted = accepted.load();
-    s.accept_errors = accept_errors.load();
-    s.timeouts = timeouts.load();
-    s.pending_evicted = pending_evicted.load();
-    for (int c = 0; c < kErrorCodes; ++c)
-        if (const uint64_t n = refusals[size_t(c)].load())
-            s.refusals.emplace_back(c, n);
-    s.render_target_bytes = held_target_bytes.load();
-    s.index_buffer_bytes = held_index_bytes.load();
-    s.pooled_layer_bytes = buffers->pooled_bytes();
-    s.device = device.name();
-    s.driver = driver_info;
-    // Per viewer, what needs no lock: the counters are our own copy, sorted here.
-    s.viewers.reserve(counters.size());
+// The connected headsets from the scheduler's copy of their counters: what needs no lock.
+std::vector<ViewerSnapshot> viewers_of(std::map<uint32_t, loop::ViewerCounters>& counters) {
+    std::vector<ViewerSnapshot> out;
+    out.reserve(counters.size());
     for (auto& [id, c] : counters) {
         ViewerSnapshot v;
         v.session = id;
@@ -51,18 +30,24 @@ ServerSnapshot Server::Impl::snapshot() const {
         v.superseded_poses = c.superseded_poses;
         v.bytes_sent = c.bytes_sent;
         v.in_flight = c.in_flight;
-        std::sort(c.latency_ms.begin(), c.latency_ms.end());
-        v.latency_ms_p50 = quantile_of_sorted(c.latency_ms, 0.5);
-        v.latency_ms_p99 = quantile_of_sorted(c.latency_ms, 0.99);
-        v.latency_samples = c.latency_ms.size();
-        s.viewers.push_back(std::move(v));
+        const LatencySummary latency = summarize_latency(std::move(c.latency_ms));
+        v.latency_ms_p50 = latency.p50;
+        v.latency_ms_p95 = latency.p95;
+        v.latency_ms_p99 = latency.p99;
+        v.latency_samples = latency.samples;
+        out.push_back(std::move(v));
     }
-    // Under the server's lock (deliver() takes it on the network thread for every frame):
-    // numbers, names and pointers only.
-    std::lock_guard lock(mutex);
+    return out;
+}
+
+// The sessions' part of the figures: roles, queues and, per headset, what its session holds.
+void add_sessions(const Figures& f, ServerSnapshot& s) {
     const auto now = Clock::now();
-    for (const auto& [id, si] : session_info) {
+    s.sessions = uint32_t(f.session_info.size());
+    for (const auto& [id, si] : f.session_info) {
         s.send_queue_bytes += si.counters->queued_bytes;
+        s.send_queue_max_session =
+            std::max<uint64_t>(s.send_queue_max_session, si.counters->queued_bytes);
         s.receive_buffer_bytes += si.counters->receive_bytes;
         switch (si.role) {
             case proto::Role::kProjector:
@@ -77,53 +62,92 @@ ServerSnapshot Server::Impl::snapshot() const {
         }
     }
     for (auto& v : s.viewers) {
-        if (auto si = session_info.find(v.session); si != session_info.end()) {
-            v.name = si->second.name;
-            v.layers_replaced = si->second.counters->layers_replaced;
-            v.queued_bytes = si->second.counters->queued_bytes;
-            v.connected_s = std::chrono::duration<double>(now - si->second.joined).count();
-            v.layers = si->second.latest_layers;
-            v.layer_sequence = si->second.latest_group;
-            for (const auto& l : v.layers) s.latest_layer_bytes += l ? l->size() : 0;
-        }
+        auto si = f.session_info.find(v.session);
+        if (si == f.session_info.end())
+            continue;
+        v.name = si->second.name;
+        v.layers_replaced = si->second.counters->layers_replaced;
+        v.queued_bytes = si->second.counters->queued_bytes;
+        v.connected_s = std::chrono::duration<double>(now - si->second.joined).count();
+        v.layers = si->second.latest_layers;
+        v.layer_sequence = si->second.latest_group;
+        for (const auto& l : v.layers) s.latest_layer_bytes += l ? l->size() : 0;
     }
-    s.sessions_total = sessions_total;
-    s.scene_version = scene_version;
-    s.projector_renders = projector_renders;
-    s.projector_frame = current_projector_frame;
-    s.projector_frame_sequence = projector_frames_published;
-    const auto& fs = frame_stats;
+    s.departed.assign(f.departed.begin(), f.departed.end());
+    s.sessions_total = f.sessions_total;
+}
+
+// The VD path's and the projector frames' figures.
+void add_frames(const Figures& f, ServerSnapshot& s) {
+    s.scene_version = f.scene_version;
+    s.projector_renders = f.projector_renders;
+    s.projector_frame = f.current_projector_frame;
+    s.projector_frame_sequence = f.projector_frames_published;
+    const FrameStats& fs = f.frame_stats;
+    s.frame_stats = fs;
     s.vd_frames = fs.frames;
     s.vd_layers = fs.layers;
     s.vd_bytes = fs.bytes;
     s.queue = totals(fs.queue);
     s.pass = totals(fs.pass);
-    // The frame loop adds one value per frame, the mean of its two layers: per layer, that is
-    // two layers of that cost each.
+    // The encoder adds one value per frame, the mean of its two layers: per layer, that is two
+    // layers of that cost each.
     s.encode = {fs.encode.n * 2, fs.encode.sum * 2};
     s.send = totals(fs.send);
-    const auto& pc = projector_cost;
+    const PassCost& pc = f.projector_cost;
+    s.projector_cost = pc;
     s.projector_pass = {pc.frames, pc.gpu_sum};
     s.projector_readback = {pc.frames, pc.readback_sum};
     s.projector_encode = {pc.frames, pc.encode_sum};
+    s.projector_ms_total = f.projector_ms_total;
+    s.projector_report = f.last_projector_report;
+}
+
+}  // namespace
+
+ServerSnapshot Server::Impl::snapshot() const {
+    // The scheduler's lock first and alone: never both at once.
+    auto counters = scheduler.counters();
+    ServerSnapshot s;
+    s.connections_accepted = accepted.load();
+    s.accept_errors = accept_errors.load();
+    s.timeouts = timeouts.load();
+    s.pending_evicted = pending_evicted.load();
+    for (int c = 0; c < kErrorCodes; ++c)
+        if (const uint64_t n = refusals[size_t(c)].load())
+            s.refusals.emplace_back(c, n);
+    s.render_target_bytes = held_target_bytes.load();
+    s.reserved_target_bytes = reserved_target_bytes.load();
+    s.target_budget_bytes = limits.max_target_bytes;
+    s.index_buffer_bytes = held_index_bytes.load();
+    s.pooled_layer_bytes = buffers->pooled_bytes();
+    s.render_busy_ns = render_busy_ns.load();
+    s.device = device.name();
+    s.driver = driver_info;
+    s.viewers = viewers_of(counters);
+    // Under the figures' lock (the network thread takes it for every frame it delivers):
+    // numbers, names, pointers and the two pass reports only.
+    std::lock_guard lock(figures_mutex);
+    add_sessions(figures, s);
+    add_frames(figures, s);
     return s;
 }
 
 LatestFrame Server::Impl::latest_layer(uint32_t viewer, int eye) const {
     if (eye < 0 || eye > 1)
         return {};
-    std::lock_guard lock(mutex);
-    auto si = session_info.find(viewer);
-    if (si == session_info.end() || !si->second.latest_layers[size_t(eye)])
+    std::lock_guard lock(figures_mutex);
+    auto si = figures.session_info.find(viewer);
+    if (si == figures.session_info.end() || !si->second.latest_layers[size_t(eye)])
         return {};
     return {si->second.latest_layers[size_t(eye)], si->second.latest_group};
 }
 
 LatestFrame Server::Impl::latest_projector_frame() const {
-    std::lock_guard lock(mutex);
-    if (!current_projector_frame)
+    std::lock_guard lock(figures_mutex);
+    if (!figures.current_projector_frame)
         return {};
-    return {current_projector_frame, projector_frames_published};
+    return {figures.current_projector_frame, figures.projector_frames_published};
 }
 
 }  // namespace hs::stream

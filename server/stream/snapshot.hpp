@@ -11,6 +11,8 @@
 #include <utility>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 namespace hs::stream {
 
 // An encoded frame as it went to the sockets (a pooled wire buffer: header and payload).
@@ -30,6 +32,49 @@ struct StageTotals {
     double sum_ms = 0;
 };
 
+// One stage's cost per frame or layer: the last value and the mean, ms.
+struct StageCost {
+    uint64_t n = 0;
+    double last = 0, sum = 0;
+    void add(double ms) {
+        ++n;
+        last = ms;
+        sum += ms;
+    }
+    double mean() const { return n ? sum / double(n) : 0.0; }
+};
+
+// Per-frame cost of one pass: the GPU work, the readback and the encoding, as the last frame's
+// figures and the sums since start (stats "cost_ms").
+struct PassCost {
+    uint64_t frames = 0;
+    double gpu = 0, readback = 0, encode = 0;  // the last frame's, ms
+    double gpu_sum = 0, readback_sum = 0, encode_sum = 0;
+    void add(double gpu_ms, double readback_ms, double encode_ms) {
+        ++frames;
+        gpu = gpu_ms, readback = readback_ms, encode = encode_ms;
+        gpu_sum += gpu_ms, readback_sum += readback_ms, encode_sum += encode_ms;
+    }
+};
+
+// What the VD path did, as one typed record (stats "frames").
+struct FrameStats {
+    uint64_t frames = 0, layers = 0, bytes = 0;  // sent to the sockets' queues
+    uint64_t submissions = 0, eyes = 0, max_eyes = 0, large_turns = 0;
+    // Per layer: what the sparse path drew and what it skipped.
+    uint64_t layers_black = 0;  // nothing view-dependent in view: no pass, no readback
+    uint64_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0, triangles = 0;
+    uint64_t pixels_rendered = 0;
+    // Stages: queue = taken from the scheduler to submitted (culling and recording, per
+    // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
+    // frame); device = the device's own time on the frame's submission, from its timestamps
+    // (per frame; the pass less device is time spent waiting behind other submissions);
+    // encode = per layer, CPU (added once per frame as the mean of its two layers); send =
+    // handed to the socket to written (per layer).
+    StageCost queue, pass, device, encode, send;
+    nlohmann::json last_report;  // the latest submission's pass (stats "passes.viewer")
+};
+
 // One connected headset that registered a display.
 struct ViewerSnapshot {
     uint32_t session = 0;
@@ -41,18 +86,26 @@ struct ViewerSnapshot {
     uint64_t layers_replaced = 0;
     uint64_t queued_bytes = 0;
     uint32_t in_flight = 0;
-    // Pose received to both layers written, over the last (up to 1024) frames sent.
-    double latency_ms_p50 = 0, latency_ms_p99 = 0;
+    // Pose received to both layers written, over the last (up to 1024) frames sent: the
+    // percentiles every view reports (summarize_latency, core/stats.hpp).
+    double latency_ms_p50 = 0, latency_ms_p95 = 0, latency_ms_p99 = 0;
     uint64_t latency_samples = 0;
     double connected_s = 0;  // since its Hello
+    bool connected = true;   // false: departed (ServerSnapshot::departed)
     // Its latest delivered frame's two layers (left, right) as encoded frames, with the frame's
     // sequence number (0: none yet); only when ServerCreateInfo::keep_latest_layers is set.
     std::array<Bytes, 2> layers;
     uint64_t layer_sequence = 0;
 };
 
+// Everything the server's figures say, taken in one go by Server::snapshot(), the one summary
+// of them: stats() (the stats file, StatsRequest), /metrics, the dashboard and the admin tool
+// are views of it and report the same percentiles.
 struct ServerSnapshot {
     std::vector<ViewerSnapshot> viewers;  // by session id
+    // The last departed headsets' final figures (no layers, queues or connection time).
+    std::vector<ViewerSnapshot> departed;
+    uint32_t sessions = 0;  // authenticated sessions now, every role
     uint32_t sessions_projector = 0, sessions_headset = 0, sessions_admin = 0;
     uint64_t sessions_total = 0;  // authenticated since start
     uint64_t connections_accepted = 0, accept_errors = 0, timeouts = 0, pending_evicted = 0;
@@ -71,7 +124,15 @@ struct ServerSnapshot {
     uint64_t render_target_bytes = 0, index_buffer_bytes = 0, send_queue_bytes = 0;
     uint64_t receive_buffer_bytes = 0, pooled_layer_bytes = 0;
     uint64_t latest_layer_bytes = 0;  // the layers kept for watchers (ViewerSnapshot::layers)
-    std::string device, driver;       // the Vulkan device and its driver
+    uint64_t reserved_target_bytes = 0, target_budget_bytes = 0, send_queue_max_session = 0;
+    std::string device, driver;  // the Vulkan device and its driver
+    // The render thread's time from taking a batch to the end of its turn, since start (ns).
+    uint64_t render_busy_ns = 0;
+    // The VD path and the projector frames in full (stats "frames", "cost_ms", "passes").
+    FrameStats frame_stats;
+    PassCost projector_cost;
+    double projector_ms_total = 0;
+    nlohmann::json projector_report;  // the latest projector pass
 };
 
 }  // namespace hs::stream

@@ -174,6 +174,13 @@ TEST_F(ServedCalibration, AHeadsetOfAnotherSizeGetsAClearErrorForItsSessionOnly)
                                std::to_string(k.width) + "x" + std::to_string(k.height)),
               std::string::npos)
         << err.message;
+    // Refused at registration (PROTOCOL.md §Rules.Register): the headset has no display, so its
+    // Pose and FrameRequest are out of order, and no error comes per frame.
+    for (int i = 0; i < 2; ++i) {
+        auto order = layer_or_error(*bad);
+        ASSERT_TRUE(order && std::holds_alternative<proto::Error>(*order));
+        EXPECT_EQ(int(std::get<proto::Error>(*order).code), int(proto::ErrorCode::kOutOfOrder));
+    }
     auto l = layer_or_error(*good);
     ASSERT_TRUE(l && std::holds_alternative<proto::VdLayer>(*l));
     // The refused session stays: registered at the calibrated size, it is served.

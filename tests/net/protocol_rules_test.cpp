@@ -692,39 +692,76 @@ TEST_F(ProtocolRules, FramingErrorsCloseTheConnection) {
     }
 }
 
-// A captured material (docs/CALIBRATION.md) serves one display size only.
+// A captured material (docs/CALIBRATION.md) serves one display size only: `d`'s.
+scene::Scene captured_scene(const proto::RegisterDisplay& d) {
+    scene::Scene s = test_scene();
+    scene::CapturedMaterial m;
+    m.projector_image = std::make_shared<const ImageRgba32f>(ImageRgba32f::zeros(480, 300));
+    m.viewer_image =
+        std::make_shared<const ImageRgba32f>(ImageRgba32f::zeros(d.eye_width, d.eye_height));
+    m.capture_head = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
+    s.captured_material = m;
+    return s;
+}
+
 class ProtocolRulesCaptured : public ProtocolRules {
 protected:
-    scene::Scene make_scene() override {
-        scene::Scene s = test_scene();
-        const auto d = small_display();
-        scene::CapturedMaterial m;
-        m.projector_image = std::make_shared<const ImageRgba32f>(ImageRgba32f::zeros(480, 300));
-        m.viewer_image =
-            std::make_shared<const ImageRgba32f>(ImageRgba32f::zeros(d.eye_width, d.eye_height));
-        m.capture_head = scene::viewing_pose(s.viewing, 0.0, 1.10).value();
-        s.captured_material = m;
-        return s;
-    }
+    scene::Scene make_scene() override { return captured_scene(small_display()); }
 };
 
-// PROTOCOL.md §Rules.Register and §Rules.Sequence: a display the scene cannot serve is refused
-// when its frame is due, with error 10 and sequence 0 in place of each pair; the session stays
-// open and is served once it registers a display that fits.
-TEST_F(ProtocolRulesCaptured, ADisplayRefusedAtRenderTimeGetsAnErrorPerFrame) {
+// PROTOCOL.md §Rules.Register: a display the served scene cannot render is refused at
+// registration, with error 10 echoing the RegisterDisplay's sequence; the session keeps no
+// display (its Pose and FrameRequest are error 8), stays open, is never refused frame after
+// frame, and is served once it registers a display that fits. A headset that fits is served.
+TEST_F(ProtocolRulesCaptured, ADisplayTheSceneCannotServeIsRefusedAtRegistration) {
+    auto good = headset_peer(small_display());
     auto other = small_display();
     other.eye_width -= 2, other.cx -= 1;
-    auto p = headset_peer(other);
+    auto p = peer();
+    hello(*p, proto::Role::kHmd);
+    ASSERT_TRUE(p->send(other, 10));
+    expect_error(*p, proto::ErrorCode::kInvalidDisplay, 10, "captured material's VD image");
     ASSERT_TRUE(p->send(pose_at(0, 1), 11));
-    for (uint32_t i = 0; i < 2; ++i) {
-        ASSERT_TRUE(p->send(proto::FrameRequest{}, 12 + i));
-        expect_error(*p, proto::ErrorCode::kInvalidDisplay, 0, "captured");
-    }
+    expect_error(*p, proto::ErrorCode::kOutOfOrder, 11);
+    ASSERT_TRUE(p->send(proto::FrameRequest{}, 12));
+    expect_error(*p, proto::ErrorCode::kOutOfOrder, 12);
     expect_pong(*p, 20);
+    ASSERT_TRUE(good->send(pose_at(0, 3)));
+    ASSERT_TRUE(good->send(proto::FrameRequest{}));
+    EXPECT_EQ(pair_for(*good, 3).size(), 2u);
     ASSERT_TRUE(p->send(small_display()));
     ASSERT_TRUE(p->send(pose_at(0, 2)));
     ASSERT_TRUE(p->send(proto::FrameRequest{}));
     EXPECT_EQ(pair_for(*p, 2).size(), 2u);
+    EXPECT_EQ(stats()["refusals_by_code"].value("10", 0), 1) << "refused once, at registration";
+}
+
+// PROTOCOL.md §Rules.Register: when the scene changes to one that cannot serve a registered
+// display, its headset is told once (error 10, sequence 0) and gets no frames, and no error
+// per frame, until it registers a display that fits; the others are served.
+TEST_F(ProtocolRules, ASceneChangeTellsAHeadsetItCannotServeOnce) {
+    auto other = small_display();
+    other.eye_width -= 2, other.cx -= 1;
+    auto p = headset_peer(other);
+    ASSERT_TRUE(p->send(pose_at(0, 1)));
+    ASSERT_TRUE(p->send(proto::FrameRequest{}));
+    EXPECT_EQ(pair_for(*p, 1).size(), 2u) << "served before the change";
+    ASSERT_TRUE(server_->update_scene(captured_scene(small_display())).ok());
+    expect_error(*p, proto::ErrorCode::kInvalidDisplay, 0, "captured material's VD image");
+    for (uint32_t i = 0; i < 2; ++i) {
+        ASSERT_TRUE(p->send(pose_at(0, 2 + i), 30 + i));
+        ASSERT_TRUE(p->send(proto::FrameRequest{}, 40 + i));
+    }
+    expect_pong(*p, 50);  // nothing about those frames came before it
+    auto good = headset_peer(small_display());
+    ASSERT_TRUE(good->send(pose_at(0, 5)));
+    ASSERT_TRUE(good->send(proto::FrameRequest{}));
+    EXPECT_EQ(pair_for(*good, 5).size(), 2u);
+    expect_pong(*p, 51);  // and none since
+    ASSERT_TRUE(p->send(small_display()));
+    ASSERT_TRUE(p->send(pose_at(0, 6)));
+    ASSERT_TRUE(p->send(proto::FrameRequest{}));
+    EXPECT_EQ(pair_for(*p, 6).size(), 2u);
 }
 
 // The timeouts of §Rules.Limits, made short.

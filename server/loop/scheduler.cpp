@@ -1,8 +1,8 @@
-#include "stream/scheduler.hpp"
+#include "loop/scheduler.hpp"
 
-namespace hs::stream {
+namespace hs::loop {
 
-using SteadyClock = std::chrono::steady_clock;
+using SteadyClock = Clock;
 
 void Scheduler::set_options(SchedulerOptions options) {
     std::lock_guard lock(mutex_);
@@ -10,9 +10,9 @@ void Scheduler::set_options(SchedulerOptions options) {
 }
 
 bool Scheduler::wants(const Slot& s) const {
-    if (!s.pose || s.rendering || s.counters.in_flight >= kMaxInFlight)
+    if (!s.served || !s.pose || s.rendering || s.counters.in_flight >= kMaxInFlight)
         return false;
-    return s.display.mode == protocol::FrameMode::kContinuous ? s.pose_fresh : s.requests > 0;
+    return s.display.mode == FrameMode::kContinuous ? s.pose_fresh : s.requests > 0;
 }
 
 bool Scheduler::ready(const Slot& s, SteadyClock::time_point now) const {
@@ -27,13 +27,37 @@ SteadyClock::time_point Scheduler::next_eligible_locked() const {
     return t;
 }
 
-void Scheduler::add_viewer(uint32_t id, const protocol::RegisterDisplay& d) {
+std::optional<std::string> Scheduler::add_viewer(uint32_t id, const Display& d) {
     std::lock_guard lock(mutex_);
     Slot& s = slots_[id];
     s.display = d;
     s.pose.reset();
     s.pose_fresh = false;
     s.requests = 0;
+    auto why = served_.refusal(d);
+    s.served = !why;
+    return why;
+}
+
+std::optional<std::string> Scheduler::refusal(const Display& d) const {
+    std::lock_guard lock(mutex_);
+    return served_.refusal(d);
+}
+
+std::vector<std::pair<uint32_t, std::string>> Scheduler::set_served(ServedDisplays served) {
+    std::vector<std::pair<uint32_t, std::string>> refused;
+    {
+        std::lock_guard lock(mutex_);
+        served_ = served;
+        for (auto& [id, s] : slots_) {
+            auto why = served_.refusal(s.display);
+            if (why && s.served)
+                refused.emplace_back(id, std::move(*why));
+            s.served = !why;
+        }
+    }
+    cv_.notify_one();  // a viewer served again may be ready
+    return refused;
 }
 
 std::optional<ViewerCounters> Scheduler::remove_viewer(uint32_t id) {
@@ -46,7 +70,7 @@ std::optional<ViewerCounters> Scheduler::remove_viewer(uint32_t id) {
     return c;
 }
 
-bool Scheduler::set_pose(uint32_t id, const protocol::Pose& pose) {
+bool Scheduler::set_pose(uint32_t id, const HeadPose& pose) {
     {
         std::lock_guard lock(mutex_);
         auto it = slots_.find(id);
@@ -56,7 +80,6 @@ bool Scheduler::set_pose(uint32_t id, const protocol::Pose& pose) {
         if (s.pose_fresh)
             ++s.counters.superseded_poses;
         s.pose = pose;
-        s.pose_received = std::chrono::steady_clock::now();
         s.pose_fresh = true;
     }
     cv_.notify_one();
@@ -100,6 +123,7 @@ void Scheduler::rendered(uint32_t id) {
         if (it == slots_.end())
             return;
         it->second.rendering = false;
+        ++it->second.counters.frames;  // counted here, by the network thread, not when taken
     }
     cv_.notify_one();
 }
@@ -128,14 +152,13 @@ std::vector<ViewerJob> Scheduler::take_locked() {
         auto& [id, s] = *it;
         if (!ready(s, now))
             continue;
-        batch.push_back({id, s.next_frame++, s.display, *s.pose, s.pose_received});
+        batch.push_back({id, s.next_frame++, s.display, *s.pose});
         s.pose_fresh = false;
         if (s.requests > 0)
             --s.requests;
         s.rendering = true;
         s.next_allowed = now + interval;
         ++s.counters.in_flight;
-        ++s.counters.frames;
         last_taken_ = id;
     }
     return batch;
@@ -190,4 +213,4 @@ std::map<uint32_t, ViewerCounters> Scheduler::counters() const {
     return out;
 }
 
-}  // namespace hs::stream
+}  // namespace hs::loop

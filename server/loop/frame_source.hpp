@@ -1,5 +1,7 @@
 // What fills a viewer's frame: the scene rendered for each eye's pose, or a captured material's
-// image. The frame loop asks one FrameSource per scene version and never looks inside.
+// image. The frame loop asks one FrameSource per scene version and never looks inside. Which
+// displays a source can fill is decided once, at registration (loop::ServedDisplays): a slot
+// it is given is one it serves.
 #pragma once
 
 #include <memory>
@@ -11,12 +13,11 @@
 #include <nlohmann/json.hpp>
 
 #include "gpu/commands.hpp"
-#include "protocol/protocol.hpp"
+#include "loop/viewer_frame.hpp"
 #include "render/renderer.hpp"
 #include "scene/scene.hpp"
-#include "stream/viewer_frame.hpp"
 
-namespace hs::stream {
+namespace hs::loop {
 
 // One viewer's frame to fill, with the head pose its job's pose names.
 struct FrameSlot {
@@ -24,17 +25,9 @@ struct FrameSlot {
     scene::Pose head;
 };
 
-// Why a job cannot be served: the error to answer it with.
-struct Refusal {
-    protocol::ErrorCode code = protocol::ErrorCode::kInternal;
-    std::string why;
-};
-
 class FrameSource {
 public:
     virtual ~FrameSource() = default;
-    // Whether this source can serve a display of this size (a refusal otherwise).
-    virtual std::optional<Refusal> check(const protocol::RegisterDisplay& display) const = 0;
     // Fills every slot's `pixels` and `plans`; GPU work, if any, is recorded into `cl` (null
     // when uses_gpu() is false). Returns whether anything was recorded.
     virtual Result<bool> fill(gpu::CommandList* cl, std::span<const FrameSlot> slots) = 0;
@@ -53,4 +46,4 @@ std::unique_ptr<FrameSource> rendered_source(render::Renderer& renderer,
 // format once, here.
 std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured);
 
-}  // namespace hs::stream
+}  // namespace hs::loop

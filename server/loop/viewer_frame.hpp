@@ -13,17 +13,39 @@
 #include <memory>
 #include <string>
 
-#include "codec/layer_codec.hpp"
-#include "gpu/resources.hpp"
-#include "render/renderer.hpp"
-#include "stream/scheduler.hpp"
+#include <nlohmann/json.hpp>
 
-namespace hs::stream {
+#include "gpu/resources.hpp"
+#include "loop/viewer.hpp"
+#include "render/renderer.hpp"
+
+namespace hs::loop {
+
+// One eye's layer where its pixels lie (a persistently mapped readback buffer, or a captured
+// image): rows `stride` bytes apart, in `encoding`; only the rectangle [x0, x1) x [y0, y1) is
+// read, the rest of the layer is black.
+struct EyePixels {
+    const uint8_t* data = nullptr;
+    size_t stride = 0;  // bytes
+    uint32_t width = 0, height = 0;
+    render::LayerEncoding encoding = render::LayerEncoding::kSrgb8;
+    uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// One submission's figures (stats "frames"): its viewers' eyes, the time from taking the
+// batch to submitting it (culling and recording), whether it was a large display's own turn,
+// and the source's report of its pass.
+struct BatchFigures {
+    uint64_t eyes = 0;
+    double queue_ms = 0;
+    bool large_turn = false;
+    nlohmann::json report;
+};
 
 struct ViewerFrame {
     uint32_t viewer = 0;
     uint32_t width = 0, height = 0;
-    protocol::PixelFormat format = protocol::PixelFormat::kRgba8;
+    render::LayerEncoding encoding = render::LayerEncoding::kSrgb8;
     std::array<gpu::RenderTarget, 2> targets;  // per eye, in the layer's pixel format
     std::array<gpu::Buffer, 2> indices;        // per eye, the drawn clusters' indices
     uint64_t target_bytes = 0;                 // what the two targets hold
@@ -31,12 +53,15 @@ struct ViewerFrame {
 
     // Per frame, written by the render thread before the frame goes to the encoder.
     ViewerJob job;
-    std::array<codec::LayerPixels, 2> pixels;  // what each eye's layer is made of
+    std::array<EyePixels, 2> pixels;  // what each eye's layer is made of
     std::array<render::Renderer::LayerPlan, 2> plans;
     uint64_t timeline = 0;  // the submission whose completion makes `pixels` valid; 0: none
     std::chrono::steady_clock::time_point taken, submitted;
     // Keeps the pixels a captured material's frame points at alive while it is encoded.
     std::shared_ptr<const void> keep_alive;
+    // What the batch it was rendered in did, carried to the stats on the frame of the batch
+    // that comes first (null on the others): the frame loop writes no stats of its own.
+    std::shared_ptr<const BatchFigures> batch;
 };
 
-}  // namespace hs::stream
+}  // namespace hs::loop

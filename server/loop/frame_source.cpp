@@ -1,38 +1,31 @@
-#include "stream/frame_source.hpp"
+#include "loop/frame_source.hpp"
 
 #include <fmt/format.h>
 
+#include "calib/serving.hpp"
+#include "codec/pixels.hpp"
 #include "scene/camera.hpp"
 
-namespace hs::stream {
+namespace hs::loop {
 
 namespace {
-
-render::LayerEncoding encoding_of(protocol::PixelFormat f) {
-    return f == protocol::PixelFormat::kRgba8 ? render::LayerEncoding::kSrgb8
-                                              : render::LayerEncoding::kHalf;
-}
 
 class Rendered final : public FrameSource {
 public:
     Rendered(render::Renderer& r, const scene::Specular& spec)
         : renderer_(r), spec_(spec), effects_(r.vd_effects(spec)) {}
 
-    std::optional<Refusal> check(const protocol::RegisterDisplay&) const override {
-        return std::nullopt;
-    }
     bool uses_gpu() const override { return true; }
 
     Result<bool> fill(gpu::CommandList* cl, std::span<const FrameSlot> slots) override {
         requests_.clear();
         for (const FrameSlot& s : slots) {
             ViewerFrame& f = *s.frame;
-            const auto& d = f.job.display;
-            const scene::Intrinsics k{d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
+            const Display& d = f.job.display;
             const auto eyes = scene::eye_poses(s.head, d.ipd_m);
             for (size_t e = 0; e < 2; ++e)
-                requests_.push_back({spec_, k, eyes[e], encoding_of(f.format), &f.targets[e], true,
-                                     protocol::kDefaultTileSize, &f.indices[e]});
+                requests_.push_back({spec_, d.eye, eyes[e], f.encoding, &f.targets[e], true,
+                                     kLayerTile, &f.indices[e]});
         }
         HS_ASSIGN_OR_RETURN(auto plans, renderer_.record_layers(*cl, requests_));
         bool recorded = false;
@@ -45,7 +38,7 @@ public:
                 f.pixels[e] = {
                     t.readback_data(), size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
                     t.width(),         t.height(),
-                    f.format,          plan.rect.x0,
+                    f.encoding,        plan.rect.x0,
                     plan.rect.y0,      plan.rect.x1,
                     plan.rect.y1};
                 recorded = recorded || !plan.rect.empty();
@@ -82,20 +75,8 @@ class Captured final : public FrameSource {
 public:
     explicit Captured(const scene::CapturedMaterial& c) : captured_(c) {
         const ImageRgba32f layer = codec::drive_as_layer(*c.viewer_image);
-        srgb8_ = std::make_shared<const std::vector<uint8_t>>(
-            codec::encode_pixels(layer, protocol::PixelFormat::kRgba8));
-        half_ = std::make_shared<const std::vector<uint8_t>>(
-            codec::encode_pixels(layer, protocol::PixelFormat::kRgba16f));
-    }
-
-    std::optional<Refusal> check(const protocol::RegisterDisplay& d) const override {
-        const auto& img = *captured_.viewer_image;
-        if (d.eye_width == img.width && d.eye_height == img.height)
-            return std::nullopt;
-        return Refusal{protocol::ErrorCode::kInvalidDisplay,
-                       fmt::format("the captured material's VD image is {}x{}, this headset's "
-                                   "display is {}x{}",
-                                   img.width, img.height, d.eye_width, d.eye_height)};
+        srgb8_ = std::make_shared<const std::vector<uint8_t>>(codec::srgb8_pixels(layer));
+        half_ = std::make_shared<const std::vector<uint8_t>>(codec::half_pixels(layer));
     }
     bool uses_gpu() const override { return false; }
 
@@ -105,7 +86,7 @@ public:
             near_ =
                 scene::pose_within(s.head, captured_.capture_head, captured_.position_tolerance_m,
                                    captured_.angle_tolerance_deg);
-            const bool srgb8 = f.format == protocol::PixelFormat::kRgba8;
+            const bool srgb8 = f.encoding == render::LayerEncoding::kSrgb8;
             const auto& bytes = srgb8 ? srgb8_ : half_;
             f.keep_alive = bytes;
             for (size_t e = 0; e < 2; ++e) {
@@ -114,7 +95,7 @@ public:
                                size_t(f.width) * (srgb8 ? 4 : 8),
                                f.width,
                                f.height,
-                               f.format,
+                               f.encoding,
                                0,
                                0,
                                near_ ? f.width : 0,
@@ -139,6 +120,31 @@ private:
 
 }  // namespace
 
+ServedDisplays ServedDisplays::of(const scene::Scene& scene,
+                                  const calib::ServingCalibration* calibration) {
+    ServedDisplays s;
+    if (scene.captured_material) {
+        // Its images are device drives already: a calibration has nothing to add to them.
+        s.captured_width_ = scene.captured_material->viewer_image->width;
+        s.captured_height_ = scene.captured_material->viewer_image->height;
+    } else {
+        s.calibration_ = calibration;
+    }
+    return s;
+}
+
+std::optional<std::string> ServedDisplays::refusal(const Display& d) const {
+    if (captured_width_ != 0 &&
+        (d.eye.width != captured_width_ || d.eye.height != captured_height_))
+        return fmt::format(
+            "the captured material's VD image is {}x{}, this headset's display is "
+            "{}x{}",
+            captured_width_, captured_height_, d.eye.width, d.eye.height);
+    if (calibration_)
+        return calibration_->check_display(d.eye.width, d.eye.height);
+    return std::nullopt;
+}
+
 std::unique_ptr<FrameSource> rendered_source(render::Renderer& renderer,
                                              const scene::Specular& spec) {
     return std::make_unique<Rendered>(renderer, spec);
@@ -148,4 +154,4 @@ std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& capt
     return std::make_unique<Captured>(captured);
 }
 
-}  // namespace hs::stream
+}  // namespace hs::loop

@@ -1,0 +1,361 @@
+#include "loop/frame_loop.hpp"
+
+#include <tuple>
+
+#include <fmt/format.h>
+
+#include "codec/pixels.hpp"
+#include "core/log.hpp"
+
+namespace hs::loop {
+
+namespace {
+// Submissions in flight at once (one command buffer each); a fourth waits for the first.
+constexpr uint32_t kSubmissionsInFlight = 3;
+
+double ms_since(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+}  // namespace
+
+std::optional<PendingScene> LoopInbox::put_scene(PendingScene s) {
+    std::lock_guard lock(mutex_);
+    std::optional<PendingScene> replaced = std::move(scene_);
+    scene_ = std::move(s);
+    return replaced;
+}
+
+void LoopInbox::release_viewer(uint32_t viewer) {
+    std::lock_guard lock(mutex_);
+    released_.push_back(viewer);
+}
+
+std::optional<PendingScene> LoopInbox::take_scene() {
+    std::lock_guard lock(mutex_);
+    std::optional<PendingScene> s = std::move(scene_);
+    scene_.reset();
+    return s;
+}
+
+std::vector<uint32_t> LoopInbox::take_released() {
+    std::lock_guard lock(mutex_);
+    return std::exchange(released_, {});
+}
+
+FrameLoop::FrameLoop(const FrameLoopInfo& info, Scheduler& scheduler, LoopInbox& inbox,
+                     FrameLoopHost& host)
+    : info_(info), device_(*info.device), scheduler_(scheduler), inbox_(inbox), host_(host) {}
+
+FrameLoop::~FrameLoop() {
+    if (ring_)
+        (void)ring_->wait_idle();
+    sink_.reset();  // encodes what is queued and joins
+    frames_.clear();
+}
+
+void FrameLoop::run(const scene::Scene& initial, uint32_t version) {
+    auto ring = gpu::SubmitRing::create(device_, kSubmissionsInFlight, "frames");
+    if (!ring)
+        throw std::runtime_error(ring.error().message);
+    ring_ = std::move(ring).value();
+    sink_ = host_.make_sink(*ring_);
+    if (!rebuild(initial, version)) {
+        log::error("render: the initial scene cannot be rendered; stopping");
+        host_.cannot_serve();
+        return;
+    }
+    while (!scheduler_.stopped()) {
+        std::vector<ViewerJob> batch;
+        try {
+            turn(batch, version);
+        } catch (const std::exception& e) {
+            // One failed batch costs its viewers this frame, never the server.
+            log::error("render: {}", e.what());
+            for (const auto& j : batch)
+                host_.job_dropped(j.session_id, "rendering this frame failed");
+        }
+    }
+}
+
+void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
+    batch = large_.empty() ? scheduler_.wait_for_batch() : scheduler_.take_batch();
+    // Busy from here to the end of the turn: the load the agent-check reports.
+    struct BusyTime {
+        FrameLoopHost& host;
+        Clock::time_point from = Clock::now();
+        ~BusyTime() {
+            host.busy(uint64_t(
+                std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - from).count()));
+        }
+    } busy_time{host_};
+    if (auto next = inbox_.take_scene()) {
+        const uint32_t v = next->version ? next->version : version + 1;
+        if (rebuild(next->scene, v)) {
+            version = v;
+            log::info("scene version {}: '{}'", version, current_.name);
+            drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
+        } else {
+            host_.scene_failed(*next);
+        }
+    }
+    std::vector<ViewerJob> small;
+    sort_batch(batch, free_released(), small);
+    batch = std::move(small);
+    if (!batch.empty())
+        serve(batch, false);
+    if (!large_.empty()) {
+        batch = {std::move(large_.front())};
+        large_.pop_front();
+        serve(batch, true);
+    }
+    batch.clear();
+}
+
+void FrameLoop::drop_unserved(std::vector<ViewerJob>& batch, const ServedDisplays& served) {
+    auto unserved = [&](const ViewerJob& j) {
+        if (!served.refusal(j.display))
+            return false;
+        host_.job_dropped(j.session_id, "");  // told once, with the scene change
+        return true;
+    };
+    std::erase_if(batch, unserved);
+    std::erase_if(large_, unserved);
+}
+
+void FrameLoop::sort_batch(std::vector<ViewerJob>& batch, const std::set<uint32_t>& gone,
+                           std::vector<ViewerJob>& small) {
+    for (auto& j : batch) {
+        if (gone.count(j.session_id))
+            host_.job_dropped(j.session_id, "");  // left after it was scheduled
+        else if (j.display.eye_pixels() > info_.large_display_pixels)
+            large_.push_back(std::move(j));
+        else
+            small.push_back(std::move(j));
+    }
+    batch.clear();
+}
+
+bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
+    const auto t0 = Clock::now();
+    auto r = render::Renderer::create(device_, next, info_.renderer);
+    if (!r) {
+        log::error("render: cannot build the scene: {}", r.error().message);
+        return false;
+    }
+    SceneVersion built;
+    auto layer_drive = projector_frame(*r.value(), next, built);
+    if (!layer_drive) {
+        log::error("render: {}", layer_drive.error().message);
+        return false;
+    }
+    // Built: only now does it replace the running scene, once no submission of the old one is
+    // in flight and no frame of it is being encoded.
+    (void)ring_->wait_idle();
+    sink_->drain();
+    source_.reset();
+    renderer_ = std::move(r).value();
+    current_ = next;
+    source_ = current_.captured_material ? captured_source(*current_.captured_material)
+                                         : rendered_source(*renderer_, current_.material.specular);
+    sink_->set_layer_drive(std::move(layer_drive).value());  // drained: no frame in flight
+    built.version = version;
+    built.name = current_.name;
+    built.unserved = scheduler_.set_served(ServedDisplays::of(current_, info_.calibration));
+    built.total_ms = ms_since(t0);
+    update_held_bytes();
+    host_.scene_built(std::move(built));
+    return true;
+}
+
+Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
+    render::Renderer& r, const scene::Scene& next, SceneVersion& out) {
+    ImageRgba32f frame;
+    std::shared_ptr<const calib::LayerDrive> layer_drive;
+    if (next.captured_material) {
+        // A captured material: the calibrated VI image is the frame; nothing is rendered. Its
+        // images are device drives already, so a calibration has nothing to add.
+        frame = codec::drive_as_layer(*next.captured_material->projector_image);
+        out.report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
+    } else {
+        auto proj = r.render_projector();
+        if (!proj)
+            return make_error(proj.error().code, "projector pass failed: " + proj.error().message);
+        frame = std::move(proj->image);
+        const render::PassReport& p = proj->report;
+        out.pass_ms = p.gpu_ms, out.readback_ms = p.readback_ms;
+        out.report = {{"pass", p.pass},
+                      {"ran", p.ran},
+                      {"skipped_because", p.skipped_because},
+                      {"effects", p.effects},
+                      {"level", p.level},
+                      {"triangles", p.triangles},
+                      {"lights_skipped", p.lights_skipped},
+                      {"render_ms", p.render_ms}};
+        if (info_.calibration) {
+            const auto t_cal = Clock::now();
+            auto drives = calibrate(r, next, frame);
+            if (!drives)
+                return make_error(drives.error().code,
+                                  "calibrated output: " + drives.error().message);
+            frame = codec::drive_as_layer(drives->projector);
+            layer_drive = drives->layers;
+            out.report["calibration"] = {
+                {"folder", info_.calibration->dir.string()},
+                {"compensation", calib::compensation_names(info_.calibration->compensation)},
+                {"scene_to_signal", drives->scene_to_signal},
+                {"projector_lit_pixels", drives->lit},
+                {"projector_clipped_pixels", drives->clipped},
+                {"hmd_camera_per_radiance", drives->layers->camera_per_radiance()},
+                {"ms", ms_since(t_cal)}};
+        }
+    }
+    const auto t_encode = Clock::now();
+    out.width = frame.width;
+    out.height = frame.height;
+    out.rgba8 = codec::srgb8_pixels(frame);
+    out.encode_ms = ms_since(t_encode);
+    return layer_drive;
+}
+
+Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene::Scene& next,
+                                                const ImageRgba32f& frame) {
+    // The projector's per-pixel falloff (docs/OPTICS.md), once per scene version.
+    HS_ASSIGN_OR_RETURN(
+        render::RenderResult geometry,
+        r.render_capture_geometry(next.projector.intrinsics, next.projector.pose, std::nullopt));
+    HS_ASSIGN_OR_RETURN(calib::SceneDrives d,
+                        info_.calibration->scene_drives(next, frame, geometry.image));
+    log::info(
+        "calibrated output: k {:.6g} DN/s per unit radiance, {} of {} lit projector pixels "
+        "clipped",
+        d.scene_to_signal, d.clipped, d.lit);
+    return d;
+}
+
+void FrameLoop::update_held_bytes() {
+    uint64_t n = renderer_ ? renderer_->target_bytes() : 0, indices = 0;
+    for (const auto& [id, f] : frames_) n += f->target_bytes, indices += f->index_bytes;
+    host_.held_bytes(n, indices);
+}
+
+std::set<uint32_t> FrameLoop::free_released() {
+    const std::vector<uint32_t> gone = inbox_.take_released();
+    // A frame still being encoded keeps its targets until the encoder lets go of it (after
+    // its submission completed), so nothing in use is freed here.
+    for (uint32_t id : gone) {
+        frames_.erase(id);
+        std::erase_if(large_, [&](const ViewerJob& j) {
+            if (j.session_id != id)
+                return false;
+            host_.job_dropped(id, "");
+            return true;
+        });
+    }
+    if (!gone.empty())
+        update_held_bytes();
+    return {gone.begin(), gone.end()};
+}
+
+Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
+    const Display& d = job.display;
+    auto& slot = frames_[job.session_id];
+    const uint64_t index_bytes = renderer_->layer_index_bytes();
+    const bool depth = renderer_->uses_depth();
+    if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
+        slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
+        slot->targets[0].has_depth() == depth)
+        return slot.get();
+    // A new display, or a scene that needs a depth buffer where the last did not (or the
+    // other way round): new targets (the old frame, if the encoder still holds it, lives on
+    // until it is done).
+    auto f = std::make_shared<ViewerFrame>();
+    f->viewer = job.session_id;
+    f->width = d.eye.width;
+    f->height = d.eye.height;
+    f->encoding = d.encoding;
+    const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
+    for (size_t e = 0; e < 2; ++e) {
+        HS_ASSIGN_OR_RETURN(
+            f->targets[e],
+            gpu::RenderTarget::create(device_, d.eye.width, d.eye.height, cf,
+                                      fmt::format("viewer{}.eye{}", job.session_id, e), depth));
+        HS_ASSIGN_OR_RETURN(
+            f->indices[e],
+            gpu::Buffer::create(device_, index_bytes, gpu::BufferUsage::kIndex,
+                                fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
+    }
+    f->target_bytes = 2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth);
+    f->index_bytes = 2 * index_bytes;
+    slot = std::move(f);
+    update_held_bytes();
+    return slot.get();
+}
+
+void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
+    const auto taken = Clock::now();
+    slots_.clear();
+    std::vector<std::shared_ptr<ViewerFrame>> filled;
+    for (ViewerJob& job : batch) {
+        auto frame = frame_for(job);
+        if (!frame) {
+            host_.job_dropped(job.session_id,
+                              "no render target for this display: " + frame.error().message);
+            continue;
+        }
+        ViewerFrame* f = frame.value();
+        f->job = std::move(job);
+        f->taken = taken;
+        f->timeline = 0;
+        f->keep_alive.reset();
+        f->batch.reset();
+        slots_.push_back({f, f->job.pose.T_world_head});
+        filled.push_back(frames_[f->viewer]);
+    }
+    batch.clear();
+    if (slots_.empty())
+        return;
+    uint64_t value = 0;
+    bool recorded = false;
+    try {
+        std::tie(value, recorded) = submit();
+    } catch (const std::exception& e) {
+        // One failed batch costs its viewers this frame, never the server.
+        log::error("render: {}", e.what());
+        for (const FrameSlot& s : slots_)
+            host_.job_dropped(s.frame->viewer, "rendering this frame failed");
+        return;
+    }
+    const auto now = Clock::now();
+    auto figures = std::make_shared<BatchFigures>();
+    figures->eyes = 2 * slots_.size();
+    figures->queue_ms = std::chrono::duration<double, std::milli>(now - taken).count();
+    figures->large_turn = large_turn;
+    figures->report = source_->report();
+    filled.front()->batch = std::move(figures);
+    for (auto& f : filled) {
+        // A submission with nothing recorded (every layer black) needs no wait.
+        f->timeline = recorded ? value : 0;
+        f->submitted = now;
+        sink_->push(std::move(f));
+    }
+}
+
+std::pair<uint64_t, bool> FrameLoop::submit() {
+    if (!source_->uses_gpu()) {
+        auto r = source_->fill(nullptr, slots_);
+        if (!r)
+            throw std::runtime_error(r.error().message);
+        return {0, false};
+    }
+    Result<bool> fill_result = false;
+    auto submitted = ring_->submit("pass.viewer-vd.frames", [&](gpu::CommandList& cl) {
+        fill_result = source_->fill(&cl, slots_);
+    });
+    if (!submitted)
+        throw std::runtime_error(submitted.error().message);
+    if (!fill_result)
+        throw std::runtime_error(fill_result.error().message);
+    return {submitted.value(), fill_result.value()};
+}
+
+}  // namespace hs::loop

@@ -1,0 +1,169 @@
+// The render thread (docs/ARCHITECTURE.md, "One VD layer, thread by thread"): builds each scene
+// version (its projector frame once), takes ready viewers from the scheduler round-robin, fills
+// their ViewerFrames through the scene's FrameSource in one submission that it does not wait
+// for, and hands the frames to the frame sink (the encoder threads). A large display renders in
+// a submission of its own, one per turn. With a calibration (docs/CALIBRATION.md, "Serving with
+// a calibration") each scene version's projector frame is made into the projector's drives and
+// the sink gets the headset drive's lookups for its layers.
+//
+// The render thread owns the renderer, the scene, the frame source, the submit ring and every
+// viewer's ViewerFrame between taking its job and pushing it to the sink. It writes no stats
+// and touches no socket: what it has to say goes to its FrameLoopHost, whose every call hands
+// a value over and returns at once.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "calib/serving.hpp"
+#include "gpu/device.hpp"
+#include "gpu/submit_ring.hpp"
+#include "loop/frame_source.hpp"
+#include "loop/scheduler.hpp"
+#include "loop/viewer_frame.hpp"
+#include "render/renderer.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::loop {
+
+// A scene the door accepted, waiting for the render thread to build it.
+struct PendingScene {
+    scene::Scene scene;
+    uint32_t session = 0;   // who asked (0: a reload or the bus), answered if it cannot be built
+    uint32_t sequence = 0;  // the SceneUpdate's
+    uint32_t version = 0;   // the bus's version for it; 0: the next one
+};
+
+// What the network thread hands the render thread besides the scheduler's jobs: the next scene
+// (latest wins) and the viewers that left (their frames are freed). Thread: the network thread
+// puts, the render thread takes (then wakes through Scheduler::wake); its own lock.
+class LoopInbox {
+public:
+    // Queues `s`; returns the scene it replaced before it was built, if any (to be answered).
+    std::optional<PendingScene> put_scene(PendingScene s);
+    void release_viewer(uint32_t viewer);
+    std::optional<PendingScene> take_scene();
+    std::vector<uint32_t> take_released();
+
+private:
+    std::mutex mutex_;
+    std::optional<PendingScene> scene_;
+    std::vector<uint32_t> released_;
+};
+
+// A scene version built and applied: its projector frame (sRGB8 codes, or drives when
+// calibrated) and what building it cost.
+struct SceneVersion {
+    uint32_t version = 0;
+    std::string name;
+    uint32_t width = 0, height = 0;                      // the projector frame's pixels
+    std::vector<uint8_t> rgba8;                          // width x height x 4 bytes
+    double pass_ms = 0, readback_ms = 0, encode_ms = 0;  // the projector frame's stages
+    double total_ms = 0;                                 // building the whole version
+    nlohmann::json report;                               // the projector pass (stats "passes")
+    // Registered viewers whose display this version cannot serve, with why (told once).
+    std::vector<std::pair<uint32_t, std::string>> unserved;
+};
+
+// Where submitted frames go: the encoder threads. Thread: the render thread calls it.
+class FrameSink {
+public:
+    virtual ~FrameSink() = default;
+    // Hands a submitted frame on; the sink gives it back to the scheduler when it is done.
+    virtual void push(std::shared_ptr<ViewerFrame> frame) = 0;
+    // Blocks until every pushed frame is done with its pixels (before a scene is replaced).
+    virtual void drain() = 0;
+    // The headset drive of the frames pushed from now on (null: none); set after drain().
+    virtual void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) = 0;
+};
+
+// What the render thread tells the rest of the server. Every call is made on the render
+// thread, hands its values over (a post to the network thread, an atomic store) and returns at
+// once; none calls back into the frame loop.
+class FrameLoopHost {
+public:
+    virtual ~FrameLoopHost() = default;
+    // The sink of this loop's frames, which waits on `ring` (alive until the sink is gone).
+    virtual std::unique_ptr<FrameSink> make_sink(const gpu::SubmitRing& ring) = 0;
+    virtual void scene_built(SceneVersion version) = 0;
+    // A queued scene could not be built; the running one stays.
+    virtual void scene_failed(const PendingScene& scene) = 0;
+    // A job taken from the scheduler that will not reach the sink: `why` empty, dropped
+    // without a word (its viewer left or is no longer served); else it failed (error 13).
+    virtual void job_dropped(uint32_t viewer, std::string why) = 0;
+    // The render targets and index buffers the loop holds (bytes).
+    virtual void held_bytes(uint64_t targets, uint64_t indices) = 0;
+    // Time the loop spent on a turn, from taking a batch to its end (ns).
+    virtual void busy(uint64_t ns) = 0;
+    // The loop cannot serve at all (its initial scene cannot be rendered) and returns.
+    virtual void cannot_serve() = 0;
+};
+
+struct FrameLoopInfo {
+    gpu::Device* device = nullptr;
+    render::RendererCreateInfo renderer;
+    const calib::ServingCalibration* calibration = nullptr;  // null: layers sent as rendered
+    uint64_t large_display_pixels = 2u << 20;  // per eye; above: a submission of its own
+};
+
+class FrameLoop {
+public:
+    FrameLoop(const FrameLoopInfo& info, Scheduler& scheduler, LoopInbox& inbox,
+              FrameLoopHost& host);
+    ~FrameLoop();
+    // Builds `initial` as `version`, then serves until the scheduler stops. Throws only when
+    // the loop cannot start (no submit ring). Thread: the render thread.
+    void run(const scene::Scene& initial, uint32_t version);
+
+private:
+    // One turn: the next scene if one waits, the viewers that left, a batch served.
+    void turn(std::vector<ViewerJob>& batch, uint32_t& version);
+    // Builds and applies a new scene version; false (logged) when it cannot be built.
+    bool rebuild(const scene::Scene& scene, uint32_t version);
+    // The projector frame of `scene` (drives when calibrated) into `out`; its layer drive.
+    Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(render::Renderer& renderer,
+                                                                     const scene::Scene& scene,
+                                                                     SceneVersion& out);
+    // The projector frame as drives; the headset drive for the sink.
+    Result<calib::SceneDrives> calibrate(render::Renderer& renderer, const scene::Scene& scene,
+                                         const ImageRgba32f& frame);
+    // After a scene change: the jobs in hand that the new scene cannot serve are dropped.
+    void drop_unserved(std::vector<ViewerJob>& batch, const ServedDisplays& served);
+    std::set<uint32_t> free_released();
+    // Small jobs to `small`, large displays to their queue; jobs of departed viewers dropped.
+    void sort_batch(std::vector<ViewerJob>& batch, const std::set<uint32_t>& gone,
+                    std::vector<ViewerJob>& small);
+    void serve(std::vector<ViewerJob>& batch, bool large_turn);
+    // Records and submits the slots' frames; the submission's timeline value and whether
+    // anything was recorded.
+    std::pair<uint64_t, bool> submit();
+    // The viewer's frame for this display, made or re-made as needed.
+    Result<ViewerFrame*> frame_for(const ViewerJob& job);
+    void update_held_bytes();
+
+    FrameLoopInfo info_;
+    gpu::Device& device_;
+    Scheduler& scheduler_;
+    LoopInbox& inbox_;
+    FrameLoopHost& host_;
+    std::unique_ptr<gpu::SubmitRing> ring_;
+    std::unique_ptr<FrameSink> sink_;
+    std::unique_ptr<render::Renderer> renderer_;
+    std::unique_ptr<FrameSource> source_;
+    scene::Scene current_;
+    std::map<uint32_t, std::shared_ptr<ViewerFrame>> frames_;
+    std::deque<ViewerJob> large_;   // large displays waiting for a turn of their own
+    std::vector<FrameSlot> slots_;  // reused per batch
+};
+
+}  // namespace hs::loop
