@@ -2,11 +2,13 @@
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
 # outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
-# server/admin/ (and its tests), no CLI11 outside options/options.cpp, no argument
-# parsed by hand outside options/ (below), no OpenSSL outside the two
-# tls.cpp files, no NATS client outside server/cluster/scene_bus.cpp, and hs_admin's links as docs/ARCHITECTURE.md draws them: it
-# reads the server through its snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol),
-# never the GPU or the renderer; only the hysar commands' library (server/cli/) links it.
+# server/admin/ (and its tests), no CLI11 outside options/options.cpp, no argument parsed by
+# hand outside options/, no OpenSSL outside the two tls.cpp files, no NATS client outside
+# server/cluster/scene_bus.cpp, no wire type behind the door (core, plot, scene, shading,
+# optics, calib, gpu, render, loop: no protocol header included, no wire library linked), and
+# hs_admin's links as docs/ARCHITECTURE.md draws them: it reads the server through its
+# snapshot (hs_stream) and decodes layers (hs_codec, hs_protocol), never the GPU or the
+# renderer; only the hysar commands' library (server/cli/) links it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -43,8 +45,18 @@ tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='
 if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
 nats=$(grep -rnE '#include <nats' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^server/cluster/scene_bus\.cpp:' || true)
 if [[ -n "$nats" ]]; then echo "layers: nats.h outside server/cluster/scene_bus.cpp:"; echo "$nats"; fail=1; fi
-door=$(grep -rnE '#include "(protocol/|codec/layer_codec\.hpp|stream/)' server/loop --include='*.cpp' --include='*.hpp' || true)
-if [[ -n "$door" ]]; then echo "layers: server/loop/ sees the wire (the session converts at the door; loop/viewer.hpp):"; echo "$door"; fail=1; fi
+# Behind the door: the session (server/stream/session.cpp) converts every wire message into
+# domain types and the encoder writes the wire on the way out, so no wing behind them includes a
+# protocol header (or the codec's wire half, or the network server), nor links the libraries
+# that would bring them.
+wings=(server/core server/plot server/scene server/shading server/optics server/calib server/gpu
+       server/render server/loop)
+door=$(grep -rnE '#include "(protocol/|codec/layer_codec\.hpp|stream/|clients/)' "${wings[@]}" --include='*.cpp' --include='*.hpp' || true)
+if [[ -n "$door" ]]; then echo "layers: behind the door, a file sees the wire (the session converts; loop/viewer.hpp holds the domain types):"; echo "$door"; fail=1; fi
+for w in "${wings[@]}"; do
+  links=$(tr '\n' ' ' < "$w/CMakeLists.txt" | grep -oE 'target_link_libraries\([^)]*\)' | grep -oE '\bhs_(protocol|stream|client[a-z_]*|admin)\b' || true)
+  if [[ -n "$links" ]]; then echo "layers: $w links the wire's side: $(echo $links)"; fail=1; fi
+done
 adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
 if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
 adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)
