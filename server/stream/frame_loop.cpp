@@ -12,6 +12,7 @@
 
 #include "codec/layer_codec.hpp"
 #include "core/log.hpp"
+#include "render/warm_up.hpp"
 #include "scene/camera.hpp"
 #include "stream/encoder.hpp"
 #include "stream/frame_source.hpp"
@@ -85,6 +86,8 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
         log::error("render: cannot build the scene: {}", r.error().message);
         return false;
     }
+    render::warm_up_for_serving(**r, s_.device, !next.captured_material,
+                                s_.info.pipeline_cache_file);
     auto t0 = Clock::now();
     ImageRgba32f frame;
     nlohmann::json report;
