@@ -185,6 +185,13 @@ public:
                 {"bytes", info.bytes_received},
                 {"latency_ms_p50", percentile(latency_ms_, 0.5)},
                 {"latency_ms_p95", percentile(latency_ms_, 0.95)},
+                // The first layer pair apart from the rest: what a new headset waits for.
+                {"first_layer_ms",
+                 latency_ms_.empty() ? nlohmann::json(nullptr) : nlohmann::json(latency_ms_[0])},
+                {"steady_latency_ms_p50",
+                 latency_ms_.size() < 2 ? nlohmann::json(nullptr)
+                                        : nlohmann::json(percentile(
+                                              {latency_ms_.begin() + 1, latency_ms_.end()}, 0.5))},
                 {"reconnects", reconnects_},
                 {"cleared", clears_},
                 {"errors", errors_}};

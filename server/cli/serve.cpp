@@ -33,6 +33,7 @@ const char* kServeHelp =
     "usage: hysar serve [--scene FILE] [--listen HOST:PORT] [--unix PATH] [--token-file FILE]\n"
     "                   [--admin-token-file FILE] [--asset-root DIR] [--device auto|cpu|gpu]\n"
     "                   [--stats-file FILE] [--calibration DIR [--compensation LIST]]\n"
+    "                   [--pipeline-cache FILE]\n"
     "                   [--admin-listen [HOST:]PORT] [--tls-cert FILE --tls-key FILE]\n"
     "                   [--agent-port PORT [--drain-file PATH]]\n"
     "                   [--cluster nats://HOST:PORT --node-id ID]\n"
@@ -49,6 +50,9 @@ const char* kServeHelp =
     "  --asset-root DIR         files a scene may reference lie inside DIR (default: the scene\n"
     "                           file's folder, or the working directory)\n"
     "  --stats-file FILE        write the final stats JSON here on shutdown\n"
+    "  --pipeline-cache FILE    the Vulkan pipeline cache: read at start, written after each\n"
+    "                           scene's warm-up, so the next start compiles less; a corrupt or\n"
+    "                           foreign file is ignored with a warning (docs/OPERATIONS.md)\n"
     "  --admin-listen [HOST:]PORT  an HTTP endpoint for watching the server: Prometheus text at\n"
     "                           /metrics, a live dashboard at / (docs/OPERATIONS.md); a bare\n"
     "                           port means 127.0.0.1, 0 any free port; every request carries\n"
@@ -216,6 +220,7 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--asset-root",
                                            "--device",
                                            "--stats-file",
+                                           "--pipeline-cache",
                                            "--admin-listen",
                                            "--max-sessions",
                                            "--max-pending",
@@ -344,6 +349,7 @@ std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
 // Returns an exit status when one is refused (the refusal printed).
 std::optional<int> read_serve_options(const Flags& f, ServeSetup& s) {
     s.info.unix_path = f.get("--unix", "");
+    s.info.pipeline_cache_file = f.get("--pipeline-cache", "");
     if (f.has("--device")) {
         const std::string d = f.get("--device", "");
         auto p = gpu::parse_device_preference(d);

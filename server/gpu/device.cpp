@@ -258,6 +258,11 @@ Result<void> Device::create_logical_device(bool want_float64) {
     fence_ = FenceHandle(device_, fence);
     set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), "hysar.command_pool");
     set_name(VK_OBJECT_TYPE_FENCE, uint64_t(fence), "hysar.submit_fence");
+    VkPipelineCacheCreateInfo cci{VK_STRUCTURE_TYPE_PIPELINE_CACHE_CREATE_INFO};
+    VkPipelineCache cache;
+    HS_VK_TRY(vkCreatePipelineCache(device_, &cci, nullptr, &cache));
+    pipeline_cache_ = PipelineCacheHandle(device_, cache);
+    set_name(VK_OBJECT_TYPE_PIPELINE_CACHE, uint64_t(cache), "hysar.pipeline_cache");
     return {};
 }
 
@@ -276,6 +281,7 @@ Device::~Device() {
         vkDeviceWaitIdle(device_);
         pool_.reset();
         fence_.reset();
+        pipeline_cache_.reset();
         vkDestroyDevice(device_, nullptr);
     }
     if (messenger_) {

@@ -74,6 +74,10 @@ public:
     void begin_label(VkCommandBuffer cmd, const char* label) const;
     void end_label(VkCommandBuffer cmd) const;
 
+    // The cache every pipeline is made through (empty at creation; gpu/pipeline_cache.hpp
+    // fills it from a file and saves it). Internally synchronised: any thread.
+    VkPipelineCache pipeline_cache() const { return pipeline_cache_.get(); }
+
     Result<uint32_t> find_memory_type(uint32_t type_bits, VkMemoryPropertyFlags props) const;
 
 private:
@@ -101,6 +105,7 @@ private:
     VkPhysicalDeviceMemoryProperties memory_props_{};
     CommandPoolHandle pool_;
     FenceHandle fence_;
+    PipelineCacheHandle pipeline_cache_;
     std::mutex submit_mutex_;
     std::atomic<uint32_t> validation_count_{0};
     mutable std::mutex messages_mutex_;

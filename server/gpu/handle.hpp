@@ -55,5 +55,6 @@ using CommandPoolHandle = Handle<VkCommandPool, vkDestroyCommandPool>;
 using FenceHandle = Handle<VkFence, vkDestroyFence>;
 using SamplerHandle = Handle<VkSampler, vkDestroySampler>;
 using QueryPoolHandle = Handle<VkQueryPool, vkDestroyQueryPool>;
+using PipelineCacheHandle = Handle<VkPipelineCache, vkDestroyPipelineCache>;
 
 }  // namespace hs::gpu

@@ -205,7 +205,8 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     fixed.fill(gci);
     gci.layout = p.layout_.get();
     VkPipeline pipeline;
-    HS_VK_TRY(vkCreateGraphicsPipelines(dev.vk(), VK_NULL_HANDLE, 1, &gci, nullptr, &pipeline));
+    HS_VK_TRY(
+        vkCreateGraphicsPipelines(dev.vk(), dev.pipeline_cache(), 1, &gci, nullptr, &pipeline));
     p.pipeline_ = PipelineHandle(dev.vk(), pipeline);
     dev.set_name(VK_OBJECT_TYPE_PIPELINE, uint64_t(pipeline), info.name);
     return p;
@@ -253,7 +254,7 @@ Result<ComputePipeline> ComputePipeline::create(Device& dev, const ComputePipeli
     ci.stage.pSpecializationInfo = &spec;
     ci.layout = p.layout_.get();
     VkPipeline pipeline;
-    HS_VK_TRY(vkCreateComputePipelines(dev.vk(), VK_NULL_HANDLE, 1, &ci, nullptr, &pipeline));
+    HS_VK_TRY(vkCreateComputePipelines(dev.vk(), dev.pipeline_cache(), 1, &ci, nullptr, &pipeline));
     p.pipeline_ = PipelineHandle(dev.vk(), pipeline);
     dev.set_name(VK_OBJECT_TYPE_PIPELINE, uint64_t(pipeline), info.name);
     return p;

@@ -6,6 +6,7 @@
 
 #include "codec/pixels.hpp"
 #include "core/log.hpp"
+#include "render/warm_up.hpp"
 
 namespace hs::loop {
 
@@ -142,6 +143,9 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
         log::error("render: cannot build the scene: {}", r.error().message);
         return false;
     }
+    // Before the version is announced (its projector frame), so that its first headset pays
+    // for no pipeline compilation.
+    render::warm_up_for_serving(**r, device_, !next.captured_material, info_.pipeline_cache_file);
     SceneVersion built;
     auto layer_drive = projector_frame(*r.value(), next, built);
     if (!layer_drive) {

@@ -14,6 +14,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -114,6 +115,8 @@ struct FrameLoopInfo {
     render::RendererCreateInfo renderer;
     const calib::ServingCalibration* calibration = nullptr;  // null: layers sent as rendered
     uint64_t large_display_pixels = 2u << 20;  // per eye; above: a submission of its own
+    // Written after each scene version's warm-up (render/warm_up.hpp); empty: not saved.
+    std::filesystem::path pipeline_cache_file;
 };
 
 class FrameLoop {

@@ -167,6 +167,21 @@ public:
                                                  const scene::Pose& camera,
                                                  std::optional<double> sheen_exponent);
 
+    // What warm_up() prepared.
+    struct WarmUpReport {
+        uint32_t pipelines_built = 0;  // compiled now (the rest were made already)
+        uint32_t pipelines_drawn = 0;  // drawn with once into a tiny target
+        uint32_t layers = 0;           // sample VD layers planned, recorded and read back
+        double ms = 0;                 // wall time of the whole warm-up
+        std::string skipped_because;   // nothing to prepare (no VD term, no format)
+    };
+    // Compiles every pipeline the served VD layers of the scene's material need in these layer
+    // formats (the occluder, the generic VD pipeline, one per subset of up to 4 lit lights),
+    // draws with each once, and renders small sample layers as the scene's viewer profiles see
+    // the prop from its viewing plan, so a headset's first layer costs what its later ones do.
+    // Defined in render/warm_up.cpp. Thread: the renderer's; before layers are served.
+    Result<WarmUpReport> warm_up(std::span<const LayerEncoding> encodings);
+
     // Device and host bytes held by the pooled render targets.
     uint64_t target_bytes() const;
     // What one render target of this size holds: colour, depth (if it has one) and readback

@@ -162,6 +162,8 @@ struct HeadsetPlan {
 struct HeadsetTally {
     uint64_t stereo_layers = 0, eye_layers = 0, bytes = 0, errors = 0;
     std::vector<double> latency_ms;
+    std::optional<double>
+        first_layer_ms;  // the first stereo layer's latency, in or out of the window
     std::string first_error;
     void fail(const std::string& e) {
         ++errors;
@@ -217,6 +219,8 @@ struct LayerCounter {
         const bool stereo = eyes == 3;
         if (stereo) {
             eyes_of_frame.erase(layer.frame_id);
+            if (!t.first_layer_ms)
+                t.first_layer_ms = double(int64_t(at - layer.pose_time_ns)) * 1e-6;
             if (inside) {
                 ++t.stereo_layers;
                 t.latency_ms.push_back(double(int64_t(at - layer.pose_time_ns)) * 1e-6);
@@ -444,9 +448,11 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     r.headsets = headsets;
     r.seconds = o.seconds;
     r.warmup_s = double(m.start_ns - m.go_ns) * 1e-9;
-    std::vector<double> latency;
+    std::vector<double> latency, first;
     uint64_t bytes = 0;
     for (const auto& t : tallies) {
+        if (t.first_layer_ms)
+            first.push_back(*t.first_layer_ms);
         r.stereo_layers += t.stereo_layers;
         r.eye_layers += t.eye_layers;
         bytes += t.bytes;
@@ -461,6 +467,10 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     if (!latency.empty()) {
         r.latency_p50_ms = percentile_of(latency, 0.5);
         r.latency_p99_ms = percentile_of(latency, 0.99);
+    }
+    if (!first.empty()) {
+        r.first_layer_p50_ms = percentile_of(first, 0.5);
+        r.first_layer_max_ms = *std::max_element(first.begin(), first.end());
     }
     const double frames = m.c1.frames - m.c0.frames;
     if (frames > 0)
@@ -501,6 +511,20 @@ ServedRow serve_row(const stream::LoopbackServer& server, const scene::Scene& sc
     return r;
 }
 
+// Waits until the server has built and announced its scene (its projector frame rendered, after
+// its warm-up), as a visitor who arrives after start-up finds it, so that the rows' first
+// layers are a new headset's and not the server's start; prints how long that took.
+void wait_until_ready(const stream::LoopbackServer& server, Clock::time_point started) {
+    const auto deadline = Clock::now() + std::chrono::seconds(120);
+    while (json_at<uint64_t>(server.stats(), {"projector_renders"}).value_or(0) == 0 &&
+           Clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    fmt::print(stderr,
+               "bench serve: the server is ready {:.0f} ms after its start (warm-up "
+               "included)\n",
+               std::chrono::duration<double, std::milli>(Clock::now() - started).count());
+}
+
 // Starts the server on an ephemeral loopback port, serves one row per headset count (progress
 // on stderr), stops it. `lp` labels the rows of a --lp-threads child.
 Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scene& scene,
@@ -515,7 +539,9 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.max_batch_viewers = o.max_batch_viewers;
     info.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
+    const auto started = Clock::now();
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, scene, info));
+    wait_until_ready(*server, started);
     const scene::Intrinsics k = scene::eye_intrinsics(profile);
     proto::RegisterDisplay d;
     d.eye_width = k.width, d.eye_height = k.height;
@@ -538,9 +564,11 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
         fmt::print(
             stderr,
             "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
-            "latency p50 {} ms, render thread busy {}, warm-up {:.1f} s, {} error(s){}\n",
+            "latency p50 {} ms, first layer {} ms, render thread busy {}, warm-up {:.1f} s, {} "
+            "error(s){}\n",
             lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
             r.per_s_per_headset, r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
+            r.first_layer_p50_ms ? fmt::format("{:.1f}", *r.first_layer_p50_ms) : "-",
             r.render_thread_busy ? fmt::format("{:.0f} %", 100 * *r.render_thread_busy) : "-",
             r.warmup_s, r.errors, r.first_error.empty() ? "" : "; the first: " + r.first_error);
         std::fflush(stderr);
@@ -802,6 +830,9 @@ const json& report_notes() {
         "layer; it includes the in-process headset clients",
         "latency: client receive time of a frame's second eye layer minus the send time of the "
         "pose it was rendered from",
+        "first_layer_ms_p50, first_layer_ms_max: each headset's first stereo layer, measured as "
+        "latency (usually before the window opens), the median and the largest over the row's "
+        "headsets; against latency_ms_p50 it shows what a new headset's first layer pays",
         "bytes_per_layer: wire bytes per eye layer, header included",
         "render_thread_busy: the share of the row's wall time the server's render thread spent "
         "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "

@@ -77,6 +77,11 @@ struct ServedRow {
     double per_s_total = 0;      // stereo layers per second, all headsets
     double per_s_per_headset = 0;
     std::optional<double> latency_p50_ms, latency_p99_ms;  // pose sent to second eye received
+    // A new headset's first stereo layer, measured as the latency above (its pose sent to its
+    // second eye received), whenever it came (usually before the window): the median and the
+    // largest over the row's headsets. Set against latency_p50_ms it shows what the first
+    // layer pays that later ones do not.
+    std::optional<double> first_layer_p50_ms, first_layer_max_ms;
     // The server's stages (its cost_ms.viewer_vd means over the row), by its own names (pass,
     // readback, encode, send, ...) and in its own unit per stage (today: per eye layer); a stage
     // it does not report is absent.

@@ -15,6 +15,7 @@ void Server::Impl::render_loop() {
         li.renderer = info.renderer;
         li.calibration = info.calibration.get();
         li.large_display_pixels = limits.large_display_pixels;
+        li.pipeline_cache_file = info.pipeline_cache_file;
         loop::FrameLoop(li, scheduler, inbox, *this).run(initial_scene, initial_version);
     } catch (const std::exception& e) {
         log::error("render: {}; stopping", e.what());

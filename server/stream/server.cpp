@@ -12,6 +12,7 @@
 #include "core/stats.hpp"
 #include "gateway/gateway.hpp"
 #include "gpu/driver_info.hpp"
+#include "gpu/pipeline_cache.hpp"
 #include "protocol/schema.hpp"
 #include "scene/config.hpp"
 #include "stream/server_impl.hpp"
@@ -68,6 +69,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
                           "the admin token must differ from the viewers' token");
     auto impl = std::make_unique<Impl>(device, info);
     impl->driver_info = gpu::driver_info(device);
+    gpu::load_pipeline_cache(device, info.pipeline_cache_file);
     impl->scheduler.set_options(
         {std::max<uint32_t>(info.limits.max_batch_viewers, 1), double(info.limits.max_viewer_hz)});
     impl->encoder_threads = info.encoder_threads > 0 ? std::min<uint32_t>(info.encoder_threads, 64)

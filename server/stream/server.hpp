@@ -109,6 +109,9 @@ struct ServerCreateInfo {
     // SceneUpdate is applied here, as on a single machine.
     uint32_t initial_scene_version = 1;
     std::function<std::string(uint32_t applied_version, const std::string& json)> publish_scene;
+    // The Vulkan pipeline cache file (`hysar serve --pipeline-cache`, gpu/pipeline_cache.hpp):
+    // read at create(), written after each scene version's warm-up. Empty: none.
+    std::filesystem::path pipeline_cache_file;
 };
 
 class Server {

@@ -37,6 +37,7 @@ for r in rows:
     assert r["errors"] == 0, r  # a headset that errs stops sending poses: its row is wrong
     assert finite(r["latency_ms_p50"]) and finite(r["latency_ms_p99"]), r
     assert r["latency_ms_p50"] <= r["latency_ms_p99"], r
+    assert finite(r["first_layer_ms_p50"]) and r["first_layer_ms_p50"] <= r["first_layer_ms_max"], r
     assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
     assert finite(r["render_thread_busy"]) and 0 < r["render_thread_busy"] <= 1.05, r
     assert finite(r["stage_ms_mean"]["device"]) and r["stage_ms_mean"]["device"] > 0, r
