@@ -135,6 +135,16 @@ def leaves_of(cmd, help_text):
 
 top = check_help([hysar], "hysar")
 commands = commands_section(top)
+# `hysar --help` names every subcommand on a line of its own ("    bench serve   ...") under its
+# command, so that a newcomer sees the whole tool in one page.
+LISTED = {cmd: list(leaves) for cmd, leaves in KNOWN.items()}
+LISTED["admin"].append("kick")
+LISTED["cluster"] = ["config"]
+for cmd, leaves in LISTED.items():
+    for leaf in leaves:
+        checked += 1
+        if not re.search(rf"^    {cmd} {leaf}\b", top, re.M):
+            fail("hysar --help", f"'{cmd} {leaf}' is not listed under its command")
 for cmd, known_leaves in KNOWN.items():
     if cmd not in commands:
         fail("hysar --help", f"'{cmd}' is not in its commands list ({commands})")
