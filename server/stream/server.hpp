@@ -97,7 +97,7 @@ struct ServerCreateInfo {
     // both or neither. The Unix socket stays plain (local, guarded by its file mode).
     std::string tls_cert_file, tls_key_file;
     // HAProxy's agent-check on this TCP port of `host` (0: none): each connection is answered
-    // with one line, "up NN%", "drain" or "down" (cluster/gateway.hpp, docs/CLUSTER.md), and
+    // with one line, "up NN%", "drain" or "down" (gateway/gateway.hpp, docs/CLUSTER.md), and
     // closed. While `drain_file` exists the node answers "drain".
     uint16_t agent_port = 0;
     std::string drain_file;

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Checks a figure's SVG (core/figure.hpp) and, with --accuracy-csv, its ticks against the data.
+"""Checks a figure's SVG (plot/figure.hpp) and, with --accuracy-csv, its ticks against the data.
 
 usage: check_figure_svg.py FIGURE.svg [--accuracy-csv accuracy.csv] [--plots N]
 
