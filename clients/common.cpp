@@ -13,6 +13,8 @@
 #include <stb_image_write.h>
 #include <nlohmann/json.hpp>
 
+#include "server/core/srgb.hpp"
+
 namespace hs::client {
 
 namespace {
@@ -278,9 +280,7 @@ bool write_layer_png(const std::string& path, uint32_t w, uint32_t h, protocol::
         for (size_t i = 0; i < rgba8.size(); ++i) {
             uint16_t hv;
             std::memcpy(&hv, &data[i * 2], 2);
-            float x = std::clamp(half_to_float(hv), 0.0f, 1.0f);
-            float s = x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
-            rgba8[i] = uint8_t(std::lround(s * 255));
+            rgba8[i] = uint8_t(std::lround(hs::srgb_oetf(half_to_float(hv)) * 255));
         }
     }
     if (rgba8.size() != size_t(w) * h * 4)

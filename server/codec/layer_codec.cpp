@@ -91,10 +91,8 @@ ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32
         if (bytes.size() != n)
             return {};
         for (size_t i = 0; i < n; ++i) {
-            double x = bytes[i] / 255.0;
-            img.pixels[i] =
-                i % 4 == 3 ? float(x)
-                           : float(x <= 0.04045 ? x / 12.92 : std::pow((x + 0.055) / 1.055, 2.4));
+            const double x = bytes[i] / 255.0;
+            img.pixels[i] = i % 4 == 3 ? float(x) : float(srgb_eotf(x));
         }
         return img;
     }

@@ -20,11 +20,6 @@
 
 namespace hs {
 
-float srgb_oetf(float x) {
-    x = std::clamp(x, 0.0f, 1.0f);
-    return x <= 0.0031308f ? 12.92f * x : 1.055f * std::pow(x, 1.0f / 2.4f) - 0.055f;
-}
-
 uint8_t srgb8_formula(float linear) {
     return static_cast<uint8_t>(std::lround(srgb_oetf(linear) * 255.0f));
 }
@@ -280,10 +275,6 @@ void bleed_into(ImageRgba32f& image, std::vector<uint8_t> have, int rings) {
             }
         have.swap(next);
     }
-}
-
-double srgb_eotf(double v) {
-    return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4);
 }
 
 void blit(ImageRgba8& canvas, const ImageRgba8& tile, int x0, int y0) {

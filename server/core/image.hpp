@@ -8,6 +8,7 @@
 #include <glm/vec4.hpp>
 
 #include "core/result.hpp"
+#include "core/srgb.hpp"
 
 namespace hs {
 
@@ -47,10 +48,7 @@ struct ImageRgba8 {
 // `white` is the linear radiance drawn as full white; NaN draws as magenta so it is never hidden.
 ImageRgba8 tonemap_srgb8(const ImageRgba32f& image, float white);
 
-// sRGB opto-electronic transfer function (IEC 61966-2-1) of a value in [0, 1].
-float srgb_oetf(float linear);
-// Its inverse: IEC 61966-2-1 decoding of an sRGB-encoded value in [0, 1].
-double srgb_eotf(double encoded);
+// srgb_oetf and srgb_eotf (IEC 61966-2-1): core/srgb.hpp, included here.
 
 // The 8-bit code of a linear value: lround(srgb_oetf(clamp(linear, 0, 1)) * 255).
 // srgb8_formula evaluates that with pow; srgb8 gives the same code bit for bit from a table of
