@@ -12,8 +12,8 @@
 #include <string>
 #include <variant>
 
-#include "clients/args.hpp"
 #include "clients/lib/hysar_client.h"
+#include "clients/net/args.hpp"
 #include "protocol/protocol.hpp"
 
 namespace hs::client {

@@ -12,14 +12,14 @@
 
 #include <nlohmann/json.hpp>
 
-#include "clients/args.hpp"
 #include "clients/client_handle.hpp"
-#include "clients/common.hpp"
-#include "clients/connection.hpp"
-#include "clients/pose_input.hpp"
+#include "clients/common/common.hpp"
+#include "clients/common/pose_input.hpp"
+#include "clients/net/args.hpp"
+#include "clients/net/connection.hpp"
 #include "clients/usb_cli.hpp"
 #include "clients/version.hpp"
-#include "clients/window.hpp"
+#include "clients/window/window.hpp"
 
 using namespace hs;
 using namespace hs::client;
@@ -49,7 +49,8 @@ static const std::string kUsage =
         "  --csv FILE       poses as lines 't_s,x,y,z,qw,qx,qy,qz' (t_s: seconds from start)\n"
         "  --poses SRC      live poses from a tracker: '-' (standard input) or udp:[HOST:]PORT\n"
         "                   (HOST 127.0.0.1 unless given; PORT 0: a free port, printed), lines\n"
-        "                   't_s,x,y,z,qw,qx,qy,qz[,frame_id]' (clients/pose_input.hpp); each\n"
+        "                   't_s,x,y,z,qw,qx,qy,qz[,frame_id]' (clients/common/pose_input.hpp); "
+        "each\n"
         "                   new pose is sent at once, bad lines are reported and skipped; runs\n"
         "                   until the input ends, --frames, or a signal\n"
         "  --frames N       stop after N layer pairs, repeating the angles or trajectory as\n"

@@ -18,10 +18,10 @@
 
 #include <nlohmann/json.hpp>
 
-#include "clients/args.hpp"
 #include "clients/client_handle.hpp"
-#include "clients/common.hpp"
-#include "clients/connection.hpp"
+#include "clients/common/common.hpp"
+#include "clients/net/args.hpp"
+#include "clients/net/connection.hpp"
 #include "clients/version.hpp"
 
 using namespace hs::client;

@@ -5,12 +5,12 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "clients/args.hpp"
 #include "clients/client_handle.hpp"
-#include "clients/common.hpp"
-#include "clients/connection.hpp"
+#include "clients/common/common.hpp"
+#include "clients/net/args.hpp"
+#include "clients/net/connection.hpp"
 #include "clients/version.hpp"
-#include "clients/window.hpp"
+#include "clients/window/window.hpp"
 
 using namespace hs::client;
 namespace proto = hs::protocol;

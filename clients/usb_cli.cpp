@@ -6,8 +6,8 @@
 #include <ctime>
 #include <filesystem>
 
-#include "clients/common.hpp"
-#include "clients/usb_devices.hpp"
+#include "clients/common/common.hpp"
+#include "clients/usb_table/usb_devices.hpp"
 
 namespace hs::client {
 

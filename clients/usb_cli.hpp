@@ -6,7 +6,7 @@
 #include <set>
 #include <string>
 
-#include "clients/args.hpp"
+#include "clients/net/args.hpp"
 
 namespace hs::client {
 

@@ -2,8 +2,8 @@
 // (Debian libcli11-dev) tokenises and matches them ("--key value", "--key=value", switches,
 // repeated options, positional words where a command takes them, "--" ending the options);
 // numbers are read by options/numbers.hpp, and the typed checks with their ranges stay with
-// each program (server/cli/flags.hpp, clients/args.hpp), whose messages name the flag, the value
-// and the range. Depends on CLI11 and the standard library only, so the clients link it too.
+// each program (server/cli/flags.hpp, clients/net/args.hpp), whose messages name the flag, the
+// value and the range. Depends on CLI11 and the standard library only, so the clients link it too.
 #pragma once
 
 #include <initializer_list>

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Holds the module boundaries of docs/ARCHITECTURE.md: no Vulkan call outside server/gpu/,
 # no tinygltf outside server/scene/, no socket outside server/stream/ and clients/, no OpenCV
-# outside server/calib/, no libusb outside clients/usb_enumerate.cpp, no HTTP library outside
+# outside server/calib/, no libusb outside clients/usb/usb_enumerate.cpp, no HTTP library outside
 # server/admin/ (and its tests), no CLI11 outside options/options.cpp, no argument parsed by
 # hand outside options/, no OpenSSL outside the two tls.cpp files, no NATS client outside
 # server/cluster/scene_bus.cpp, no wire type behind the door (core, plot, scene, shading,
@@ -20,8 +20,8 @@ so=$(grep -rnE '#include <(sys/socket|netinet/in|asio)' server --include='*.cpp'
 if [[ -n "$so" ]]; then echo "layers: sockets outside server/stream/:"; echo "$so"; fail=1; fi
 cv=$(grep -rn '#include <opencv2' server clients --include='*.cpp' --include='*.hpp' | grep -v '^server/calib/' || true)
 if [[ -n "$cv" ]]; then echo "layers: OpenCV outside server/calib/:"; echo "$cv"; fail=1; fi
-usb=$(grep -rnE '#include <libusb|\blibusb_[a-z_]+\(' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^clients/usb_enumerate\.cpp:' || true)
-if [[ -n "$usb" ]]; then echo "layers: libusb outside clients/usb_enumerate.cpp:"; echo "$usb"; fail=1; fi
+usb=$(grep -rnE '#include <libusb|\blibusb_[a-z_]+\(' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^clients/usb/usb_enumerate\.cpp:' || true)
+if [[ -n "$usb" ]]; then echo "layers: libusb outside clients/usb/usb_enumerate.cpp:"; echo "$usb"; fail=1; fi
 http=$(grep -rn '#include <httplib' server clients tests --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server|tests)/admin/' || true)
 if [[ -n "$http" ]]; then echo "layers: cpp-httplib outside server/admin/:"; echo "$http"; fail=1; fi
 cli11=$(grep -rn '#include <CLI/' server clients tests options --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^options/options\.cpp:' || true)
@@ -41,8 +41,8 @@ if [[ -n "$handargv$handopt" ]]; then
   if [[ -n "$handopt" ]]; then echo "$handopt"; fi
   fail=1
 fi
-tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server/stream/tls\.cpp|clients/tls\.cpp):' || true)
-if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/tls.cpp:"; echo "$tls"; fail=1; fi
+tls=$(grep -rn '#include <openssl/' server clients --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -vE '^(server/stream/tls\.cpp|clients/net/tls\.cpp):' || true)
+if [[ -n "$tls" ]]; then echo "layers: OpenSSL outside server/stream/tls.cpp and clients/net/tls.cpp:"; echo "$tls"; fail=1; fi
 nats=$(grep -rnE '#include <nats' server clients tests cli --include='*.cpp' --include='*.hpp' 2>/dev/null | grep -v '^server/cluster/scene_bus\.cpp:' || true)
 if [[ -n "$nats" ]]; then echo "layers: nats.h outside server/cluster/scene_bus.cpp:"; echo "$nats"; fail=1; fi
 # Behind the door: the session (server/stream/session.cpp) converts every wire message into

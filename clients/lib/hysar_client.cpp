@@ -6,8 +6,8 @@
 #include <new>
 #include <string>
 
-#include "clients/common.hpp"
-#include "clients/lib/session.hpp"
+#include "clients/common/common.hpp"
+#include "clients/session/session.hpp"
 
 namespace proto = hs::protocol;
 using hs::client::Session;

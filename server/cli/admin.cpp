@@ -17,8 +17,8 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
-#include "clients/args.hpp"
-#include "clients/connection.hpp"
+#include "clients/net/args.hpp"
+#include "clients/net/connection.hpp"
 #include "options/options.hpp"
 #include "scene/config.hpp"
 

@@ -23,7 +23,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "core/check.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"

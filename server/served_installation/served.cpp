@@ -5,7 +5,7 @@
 
 #include <fmt/format.h>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "codec/layer_codec.hpp"
 #include "optics/capture.hpp"
 #include "protocol/tiles.hpp"

@@ -7,8 +7,8 @@
 #include <thread>
 
 #include "clients/client_handle.hpp"
-#include "clients/connection.hpp"
-#include "clients/lib/session.hpp"
+#include "clients/net/connection.hpp"
+#include "clients/session/session.hpp"
 #include "net/net_fixture.hpp"
 
 namespace hs::net_test {

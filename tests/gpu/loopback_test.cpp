@@ -4,7 +4,7 @@
 #include <string>
 #include <variant>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
 #include "stream/loopback.hpp"

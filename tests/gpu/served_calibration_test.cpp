@@ -13,7 +13,7 @@
 #include <thread>
 
 #include "calib/serving.hpp"
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
 #include "served_installation/served.hpp"

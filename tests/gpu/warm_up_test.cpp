@@ -12,7 +12,7 @@
 #include <variant>
 #include <vector>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "gpu/pipeline_cache.hpp"
 #include "gpu_fixture.hpp"
 #include "render/warm_up.hpp"

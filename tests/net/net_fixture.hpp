@@ -14,7 +14,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "gpu/device.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"

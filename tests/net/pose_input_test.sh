@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# hysar-hmd driven by live poses (clients/pose_input.hpp): from standard input and from a UDP
+# hysar-hmd driven by live poses (clients/common/pose_input.hpp): from standard input and from a UDP
 # port on loopback. Checks that the layers it receives follow those poses (each is, byte for
 # byte, the layer the same pose gets from a --csv trajectory; the two poses give different ones), that bad
 # and out-of-order lines are reported and skipped, and that a silent source is reported stale.

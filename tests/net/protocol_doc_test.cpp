@@ -20,7 +20,7 @@
 #include <glm/gtc/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
-#include "clients/common.hpp"
+#include "clients/common/common.hpp"
 #include "scene/camera.hpp"
 
 namespace {
@@ -130,7 +130,7 @@ std::vector<double> v3(glm::dvec3 v) {
 constexpr double kAngleDeg = 20.0, kDistanceM = 0.8, kHeightM = 1.10;
 const glm::dvec3 kTarget(0.0, 0.745, 0.0);
 
-// The head pose of that viewpoint as the client computes it (clients/common.cpp orbit_pose),
+// The head pose of that viewpoint as the client computes it (clients/common/common.cpp orbit_pose),
 // checked against the server's viewing_pose for the same viewpoint.
 scene::Pose example_head() {
     const proto::Pose p =

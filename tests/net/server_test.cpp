@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "codec/layer_codec.hpp"
 #include "gpu/device.hpp"
 #include "protocol/tiles.hpp"

@@ -11,8 +11,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "clients/common.hpp"
-#include "clients/usb_devices.hpp"
+#include "clients/common/common.hpp"
+#include "clients/usb_table/usb_devices.hpp"
 
 using namespace hs::client;
 

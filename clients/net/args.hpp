@@ -24,7 +24,7 @@
 #include <variant>
 #include <vector>
 
-#include "clients/tls.hpp"
+#include "clients/net/tls.hpp"
 #include "options/numbers.hpp"
 #include "options/options.hpp"
 

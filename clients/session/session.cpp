@@ -1,4 +1,4 @@
-#include "clients/lib/session.hpp"
+#include "clients/session/session.hpp"
 
 #include <poll.h>
 #include <sys/eventfd.h>

@@ -1,4 +1,4 @@
-#include "clients/window.hpp"
+#include "clients/window/window.hpp"
 
 #include <algorithm>
 

@@ -7,7 +7,7 @@
 
 #include <libusb.h>
 
-#include "clients/usb_devices.hpp"
+#include "clients/usb_table/usb_devices.hpp"
 
 namespace hs::client {
 

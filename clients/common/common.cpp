@@ -1,6 +1,6 @@
-#include "clients/common.hpp"
+#include "clients/common/common.hpp"
 
-#include "clients/args.hpp"
+#include "clients/net/args.hpp"
 
 #include <algorithm>
 #include <cctype>

@@ -8,7 +8,7 @@
 #include <variant>
 #include <vector>
 
-#include "clients/tls.hpp"
+#include "clients/net/tls.hpp"
 #include "protocol/protocol.hpp"
 
 namespace hs::client {

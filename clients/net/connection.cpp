@@ -1,4 +1,4 @@
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -14,7 +14,7 @@
 #include <chrono>
 #include <cstring>
 
-#include "clients/args.hpp"
+#include "clients/net/args.hpp"
 
 namespace hs::client {
 

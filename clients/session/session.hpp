@@ -20,7 +20,7 @@
 #include <variant>
 #include <vector>
 
-#include "clients/connection.hpp"
+#include "clients/net/connection.hpp"
 #include "protocol/protocol.hpp"
 
 namespace hs::client {

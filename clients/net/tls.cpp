@@ -1,4 +1,4 @@
-#include "clients/tls.hpp"
+#include "clients/net/tls.hpp"
 
 #include <arpa/inet.h>
 #include <fcntl.h>

@@ -1,4 +1,4 @@
-#include "clients/pose_input.hpp"
+#include "clients/common/pose_input.hpp"
 
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -12,7 +12,7 @@
 #include <cstring>
 #include <vector>
 
-#include "clients/args.hpp"
+#include "clients/net/args.hpp"
 
 namespace hs::client {
 

@@ -1,5 +1,5 @@
 // The table of known headsets and the matching: no libusb here (usb_devices.hpp).
-#include "clients/usb_devices.hpp"
+#include "clients/usb_table/usb_devices.hpp"
 
 #include <algorithm>
 #include <cerrno>
