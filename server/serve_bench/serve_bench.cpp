@@ -162,6 +162,7 @@ struct HeadsetPlan {
 struct HeadsetTally {
     uint64_t stereo_layers = 0, eye_layers = 0, bytes = 0, errors = 0;
     std::vector<double> latency_ms;
+    std::vector<double> interval_ms;  // between consecutive stereo layers in the window
     std::optional<double>
         first_layer_ms;  // the first stereo layer's latency, in or out of the window
     std::string first_error;
@@ -205,6 +206,7 @@ struct LayerCounter {
     const Window& w;
     HeadsetTally& t;
     std::map<uint32_t, uint8_t> eyes_of_frame;
+    uint64_t last_stereo_ns = 0;  // the last stereo layer inside the window
 
     // True when the layer completed a stereo frame.
     bool count(const proto::VdLayer& layer) {
@@ -224,6 +226,9 @@ struct LayerCounter {
             if (inside) {
                 ++t.stereo_layers;
                 t.latency_ms.push_back(double(int64_t(at - layer.pose_time_ns)) * 1e-6);
+                if (last_stereo_ns != 0)
+                    t.interval_ms.push_back(double(at - last_stereo_ns) * 1e-6);
+                last_stereo_ns = at;
             }
         }
         while (eyes_of_frame.size() > 64) eyes_of_frame.erase(eyes_of_frame.begin());
@@ -240,7 +245,7 @@ void pose_and_receive(client::Connection& conn, const HeadsetPlan& plan, const W
         std::chrono::duration<double>(1.0 / plan.rate_hz));
     const Clock::time_point start = Clock::now();
     Clock::time_point next_pose = start;
-    LayerCounter layers{plan, w, t, {}};
+    LayerCounter layers{plan, w, t, {}, 0};
     while (!w.stop.load()) {
         const auto now = Clock::now();
         if (now >= next_pose) {
@@ -319,6 +324,9 @@ struct CostSnapshot {
     double frames = 0;
     std::map<std::string, double> sums;
     std::optional<double> render_busy_ns;
+    std::map<std::string, double> busy_ms;  // stats "busy_ms": render_thread, device, encoders
+    double encoder_threads = 0;
+    double layers_replaced = 0;  // over the connected viewers
     uint64_t at_ns = 0;
 };
 CostSnapshot cost_snapshot(const json& stats) {
@@ -327,6 +335,18 @@ CostSnapshot cost_snapshot(const json& stats) {
     if (stats.is_object() && stats.contains("render_busy_ns") &&
         stats["render_busy_ns"].is_number())
         s.render_busy_ns = stats["render_busy_ns"].get<double>();
+    if (stats.is_object() && stats.contains("busy_ms") && stats["busy_ms"].is_object())
+        for (const auto& [k, v] : stats["busy_ms"].items())
+            if (v.is_number()) {
+                if (k == "encoder_threads")
+                    s.encoder_threads = v.get<double>();
+                else
+                    s.busy_ms[k] = v.get<double>();
+            }
+    if (stats.is_object() && stats.contains("viewers") && stats["viewers"].is_array())
+        for (const auto& v : stats["viewers"])
+            if (v.is_object() && v.contains("layers_replaced") && v["layers_replaced"].is_number())
+                s.layers_replaced += v["layers_replaced"].get<double>();
     if (!stats.is_object() || !stats.contains("cost_ms") || !stats["cost_ms"].is_object())
         return s;
     const json& cost = stats["cost_ms"];
@@ -441,6 +461,29 @@ RowWindow measure_window(const stream::LoopbackServer& server, const ServeBenchO
     return m;
 }
 
+// Each stage's busy share of the window, from the growth of the server's busy times (and of
+// this process's CPU time, over the machine's cores).
+void add_busy_shares(ServedRow& r, const RowWindow& m) {
+    if (m.c1.at_ns <= m.c0.at_ns)
+        return;
+    const double wall_ms = double(m.c1.at_ns - m.c0.at_ns) * 1e-6;
+    const auto grown = [&](const char* k) -> std::optional<double> {
+        auto a = m.c0.busy_ms.find(k), b = m.c1.busy_ms.find(k);
+        if (a == m.c0.busy_ms.end() || b == m.c1.busy_ms.end())
+            return std::nullopt;
+        return std::max(0.0, b->second - a->second);
+    };
+    if (auto v = grown("render_thread"))
+        r.busy["render_thread"] = *v / wall_ms;
+    if (auto v = grown("device"))
+        r.busy["gpu"] = *v / wall_ms;
+    if (auto v = grown("encoders"); v && m.c1.encoder_threads > 0)
+        r.busy["encoders"] = *v / (wall_ms * m.c1.encoder_threads);
+    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    r.busy["cores"] = (m.cpu1 - m.cpu0) * 1000.0 / (wall_ms * cores);
+    r.layers_replaced = uint64_t(std::max(0.0, m.c1.layers_replaced - m.c0.layers_replaced));
+}
+
 // The row's figures from the headsets' tallies and the window's snapshots.
 ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
                    const ServeBenchOptions& o, int headsets) {
@@ -448,7 +491,7 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     r.headsets = headsets;
     r.seconds = o.seconds;
     r.warmup_s = double(m.start_ns - m.go_ns) * 1e-9;
-    std::vector<double> latency, first;
+    std::vector<double> latency, first, interval;
     uint64_t bytes = 0;
     for (const auto& t : tallies) {
         if (t.first_layer_ms)
@@ -461,6 +504,11 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
         if (r.first_error.empty())
             r.first_error = t.first_error;
         latency.insert(latency.end(), t.latency_ms.begin(), t.latency_ms.end());
+        interval.insert(interval.end(), t.interval_ms.begin(), t.interval_ms.end());
+    }
+    if (!interval.empty()) {
+        r.interval_p50_ms = percentile_of(interval, 0.5);
+        r.interval_p99_ms = percentile_of(interval, 0.99);
     }
     r.per_s_total = double(r.stereo_layers) / o.seconds;
     r.per_s_per_headset = r.per_s_total / headsets;
@@ -485,6 +533,8 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     if (m.c0.render_busy_ns && m.c1.render_busy_ns && m.c1.at_ns > m.c0.at_ns)
         r.render_thread_busy =
             (*m.c1.render_busy_ns - *m.c0.render_busy_ns) / double(m.c1.at_ns - m.c0.at_ns);
+    add_busy_shares(r, m);
+    classify_bound(r, o.pose_rate_hz);
     return r;
 }
 
@@ -537,6 +587,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     const int most = *std::max_element(o.headsets.begin(), o.headsets.end());
     info.clients = uint32_t(most);
     info.max_batch_viewers = o.max_batch_viewers;
+    info.max_target_mib = o.max_target_mib;
     info.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
     const auto started = Clock::now();
@@ -564,13 +615,15 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
         fmt::print(
             stderr,
             "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
-            "latency p50 {} ms, first layer {} ms, render thread busy {}, warm-up {:.1f} s, {} "
-            "error(s){}\n",
+            "latency p50 {} ms, first layer {} ms, render thread busy {}, gap p99 {} ms, bound: {} "
+            "({}), warm-up {:.1f} s, {} error(s){}\n",
             lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
             r.per_s_per_headset, r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
             r.first_layer_p50_ms ? fmt::format("{:.1f}", *r.first_layer_p50_ms) : "-",
             r.render_thread_busy ? fmt::format("{:.0f} %", 100 * *r.render_thread_busy) : "-",
-            r.warmup_s, r.errors, r.first_error.empty() ? "" : "; the first: " + r.first_error);
+            r.interval_p99_ms ? fmt::format("{:.1f}", *r.interval_p99_ms) : "-", r.bound,
+            r.bound_why, r.warmup_s, r.errors,
+            r.first_error.empty() ? "" : "; the first: " + r.first_error);
         std::fflush(stderr);
         rows.push_back(std::move(r));
     }
@@ -817,6 +870,7 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"lp_threads", o.lp_threads},
             {"encoder_threads", o.encoder_threads},
             {"max_batch_viewers", o.max_batch_viewers},
+            {"max_target_mib", o.max_target_mib},
             {"planning_threads", o.planning_threads},
             {"quick", o.quick}};
 }
@@ -836,7 +890,16 @@ const json& report_notes() {
         "bytes_per_layer: wire bytes per eye layer, header included",
         "render_thread_busy: the share of the row's wall time the server's render thread spent "
         "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "
-        "a free command buffer); near 1 it is the bound"};
+        "a free command buffer); near 1 it is the bound",
+        "interval_ms_p50, interval_ms_p99: the time between a headset's consecutive stereo "
+        "layers inside the window, over all headsets (pacing)",
+        "busy: each stage's busy share of the window: render_thread, gpu (the device's own "
+        "timestamped time, once per submission), encoders (CPU time over all encoder threads), "
+        "cores (this process's CPU time over the machine's cores, clients and, on lavapipe, the "
+        "rasteriser included)",
+        "bound: poses when every headset got >= 95 % of its pose rate; sockets when > 5 % of "
+        "the eye layers were replaced in socket queues; else the busiest stage at >= 85 %; else "
+        "latency (each headset has at most two frames in flight); bound_why says it in words"};
     return notes;
 }
 

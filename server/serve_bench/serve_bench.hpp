@@ -55,6 +55,7 @@ struct ServeBenchOptions {
     std::vector<int> lp_threads;        // LP_NUM_THREADS values for the repeated served rows
     uint32_t encoder_threads = 0;       // the server's, as `hysar serve --encoder-threads`
     uint32_t max_batch_viewers = 8;     // as `hysar serve --max-batch-viewers`
+    uint32_t max_target_mib = 0;        // as `hysar serve --max-target-mib`; 0: its default
     int planning_threads = -1;          // as `hysar serve --planning-threads`; -1: its default
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
@@ -89,10 +90,25 @@ struct ServedRow {
     std::optional<double> bytes_per_layer;          // wire bytes per eye layer (header included)
     std::optional<double> cpu_ms_per_stereo_layer;  // this process: server and clients
     std::optional<double> render_thread_busy;       // share of the row's wall time, 0..1
+    // Pacing: the time between a headset's consecutive stereo layers in the window, over all
+    // headsets (a headset served evenly at 60 Hz has both near 16.7 ms; bursts raise the p99).
+    std::optional<double> interval_p50_ms, interval_p99_ms;
+    // Where the limit is: each stage's busy share of the row's wall time (0..1): render_thread,
+    // gpu (the device's own time per submission), encoders (over all encoder threads), cores
+    // (this process's CPU time over the machine's cores: on lavapipe the rasteriser is there).
+    std::map<std::string, double> busy;
+    uint64_t layers_replaced = 0;  // queued layers replaced by newer ones: the sockets lagged
+    // The stage that bound the row ("poses": every headset got a layer per pose, nothing else
+    // did), and why, in words (bound_of).
+    std::string bound, bound_why;
     uint64_t headsets_without_layers = 0;
     uint64_t errors = 0;
     std::string first_error;
 };
+
+// Names the stage that bound a row from its busy shares, its rate per headset against the
+// pose rate and the layers its sockets replaced (docs: README, "Where the limit is").
+void classify_bound(ServedRow& row, double pose_rate_hz);
 
 // Runs the whole benchmark; prints the table on stdout and progress on stderr, writes
 // DIR/bench-serve.json and DIR/bench-serve.png. Returns the exit status: 0 ok, 1 a failure

@@ -61,6 +61,47 @@ double nice_step(double v) {
 
 }  // namespace
 
+void classify_bound(ServedRow& r, double pose_rate_hz) {
+    std::string top;
+    double top_share = -1;
+    for (const auto& [stage, share] : r.busy)
+        if (share > top_share) {
+            top = stage;
+            top_share = share;
+        }
+    const std::string busiest =
+        top.empty() ? std::string("no stage measured")
+                    : fmt::format("busiest stage {} at {:.0f} %", top, 100 * top_share);
+    const double replaced =
+        r.eye_layers ? double(r.layers_replaced) / double(r.eye_layers + r.layers_replaced) : 0.0;
+    if (r.stereo_layers == 0) {
+        r.bound = "none served";
+        r.bound_why = "no stereo layer arrived in the window";
+    } else if (r.per_s_per_headset >= 0.95 * pose_rate_hz) {
+        r.bound = "poses";
+        r.bound_why =
+            fmt::format("each headset got {:.1f} stereo layers/s of its {:.0f} poses/s; {}",
+                        r.per_s_per_headset, pose_rate_hz, busiest);
+    } else if (replaced > 0.05) {
+        r.bound = "sockets";
+        r.bound_why = fmt::format(
+            "{:.0f} % of the eye layers were replaced in their socket queues by newer ones; {}",
+            100 * replaced, busiest);
+    } else if (top_share >= 0.85) {
+        r.bound = top;
+        r.bound_why = fmt::format("{}; the headsets got {:.1f} of {:.0f} layers/s", busiest,
+                                  r.per_s_per_headset, pose_rate_hz);
+    } else {
+        // Nothing saturated: each headset has at most two frames in flight, so its rate is
+        // capped near 2 / latency.
+        r.bound = "latency";
+        r.bound_why = fmt::format(
+            "no stage over 85 % ({}); two frames in flight per headset over a p50 of {} ms",
+            busiest,
+            r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : std::string("-"));
+    }
+}
+
 std::string row_label(const ServedRow& r) {
     return r.lp_num_threads ? fmt::format("served LP_NUM_THREADS={}", *r.lp_num_threads)
                             : std::string("served");
@@ -69,6 +110,8 @@ std::string row_label(const ServedRow& r) {
 json row_json(const ServedRow& r) {
     json stages = json::object();
     for (const auto& [k, v] : r.stage_ms) stages[k] = opt(v);
+    json busy = json::object();
+    for (const auto& [k, v] : r.busy) busy[k] = opt(v);
     return {{"headsets", r.headsets},
             {"lp_num_threads", r.lp_num_threads ? json(*r.lp_num_threads) : json(nullptr)},
             {"seconds", r.seconds},
@@ -85,6 +128,12 @@ json row_json(const ServedRow& r) {
             {"bytes_per_layer", opt(r.bytes_per_layer)},
             {"cpu_ms_per_stereo_layer", opt(r.cpu_ms_per_stereo_layer)},
             {"render_thread_busy", opt(r.render_thread_busy)},
+            {"interval_ms_p50", opt(r.interval_p50_ms)},
+            {"interval_ms_p99", opt(r.interval_p99_ms)},
+            {"busy", busy},
+            {"layers_replaced", r.layers_replaced},
+            {"bound", r.bound},
+            {"bound_why", r.bound_why},
             {"headsets_without_layers", r.headsets_without_layers},
             {"errors", r.errors},
             {"first_error", r.first_error}};
@@ -112,6 +161,15 @@ ServedRow row_of(const json& j) {
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
     r.cpu_ms_per_stereo_layer = opt_of(j, "cpu_ms_per_stereo_layer");
     r.render_thread_busy = opt_of(j, "render_thread_busy");
+    r.interval_p50_ms = opt_of(j, "interval_ms_p50");
+    r.interval_p99_ms = opt_of(j, "interval_ms_p99");
+    if (j.contains("busy") && j["busy"].is_object())
+        for (const auto& [k, v] : j["busy"].items())
+            if (v.is_number())
+                r.busy[k] = v.get<double>();
+    r.layers_replaced = j.value("layers_replaced", uint64_t(0));
+    r.bound = j.value("bound", std::string());
+    r.bound_why = j.value("bound_why", std::string());
     r.headsets_without_layers = j.value("headsets_without_layers", uint64_t(0));
     r.errors = j.value("errors", uint64_t(0));
     r.first_error = j.value("first_error", std::string());
@@ -121,9 +179,10 @@ ServedRow row_of(const json& j) {
 std::string table(const Report& rep) {
     std::string out = fmt::format(
         "{:<26} {:>4} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9} "
-        "{:>8} {:>8} {:>8}\n",
+        "{:>8} {:>8} {:>8} {:>8} {:<13}\n",
         "", "HMDs", "stereo/s", "/headset", "ms/stereo", "p50 ms", "p99 ms", "1st ms", "render",
-        "readback", "encode", "send", "KiB/layer", "CPU ms", "x full", "x lean", "x script");
+        "readback", "encode", "send", "KiB/layer", "CPU ms", "x full", "x lean", "x script",
+        "gap p99", "bound");
     for (const auto& b : rep.baselines) {
         const std::string label =
             b.figure ? fmt::format("{} {} tri", b.name, b.figure->triangles) : b.name;
@@ -148,9 +207,9 @@ std::string table(const Report& rep) {
         const std::optional<double> kib =
             r.bytes_per_layer ? std::optional(*r.bytes_per_layer / 1024.0) : std::nullopt;
         out += fmt::format(
-            "{:<26} {:>4} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {}\n", row_label(r), r.headsets,
-            cell(r.per_s_total, 2, 9), cell(r.per_s_per_headset, 2, 9), cell(ms_per, 1, 9),
-            cell(r.latency_p50_ms, 1, 8), cell(r.latency_p99_ms, 1, 8),
+            "{:<26} {:>4} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {} {:<13}\n", row_label(r),
+            r.headsets, cell(r.per_s_total, 2, 9), cell(r.per_s_per_headset, 2, 9),
+            cell(ms_per, 1, 9), cell(r.latency_p50_ms, 1, 8), cell(r.latency_p99_ms, 1, 8),
             cell(r.first_layer_p50_ms, 1, 8), cell(stage(r, {"render", "pass"}), 2, 8),
             cell(stage(r, {"readback"}), 2, 8), cell(stage(r, {"encode"}), 2, 8),
             cell(stage(r, {"send"}), 2, 8), cell(kib, 1, 9), cell(r.cpu_ms_per_stereo_layer, 1, 9),
@@ -158,7 +217,8 @@ std::string table(const Report& rep) {
                  2, 8),
             cell(rep.baselines.size() > 1 ? ratio(r.per_s_total, rep.baselines[1]) : std::nullopt,
                  2, 8),
-            cell(ratio_external(r.per_s_total, rep.lean_external), 2, 8));
+            cell(ratio_external(r.per_s_total, rep.lean_external), 2, 8),
+            cell(r.interval_p99_ms, 1, 8), r.bound.empty() ? "-" : r.bound);
     }
     out +=
         "\n"
@@ -171,7 +231,12 @@ std::string table(const Report& rep) {
         "the stages it counts per layer; - : it does not report the stage).\n"
         "KiB/layer: on the wire, per eye. CPU ms: this process's user + system time per\n"
         "stereo layer, which includes the in-process headset clients. x full, x lean, x script:\n"
-        "served stereo/s over the full-frame, lean (64 x 32) and lean-script baselines.\n";
+        "served stereo/s over the full-frame, lean (64 x 32) and lean-script baselines.\n"
+        "gap p99: the 99th percentile of the time between a headset's consecutive stereo\n"
+        "layers (pacing; 16.7 ms at 60 Hz). bound: the stage that limited the row: poses (every\n"
+        "headset got a layer per pose), sockets (queued layers replaced), render_thread, gpu,\n"
+        "encoders or cores (busy >= 85 % of the window), latency (nothing saturated: two frames\n"
+        "in flight per headset); the reason and every share are in the JSON (bound_why, busy).\n";
     std::set<std::string> other;
     for (const auto& r : rep.rows)
         for (const auto& [k, v] : r.stage_ms)

@@ -36,6 +36,7 @@ struct LoopbackCreateInfo {
     // this many and 8 more, or `hysar serve`'s defaults where those are larger.
     uint32_t clients = 0;
     uint32_t max_batch_viewers = 0;  // viewers rendered in one submission
+    uint64_t max_target_mib = 0;     // render-target budget, as `hysar serve --max-target-mib`
     uint32_t encoder_threads = 0;    // threads that encode layers beside the render thread
     int planning_threads = -1;       // the renderer's planning threads (-1: by device)
     // Calibrated output (docs/CALIBRATION.md): frame and layers sent as device drives; a scene

@@ -107,8 +107,11 @@ void Server::Impl::on_encoded(EncodedFrame done) {
     {
         std::lock_guard lock(figures_mutex);
         FrameStats& st = figures.frame_stats;
-        if (done.batch)
+        if (done.batch) {
             add_batch(st, *done.batch);
+            if (done.device_ms)  // once per submission: the first frame of a batch
+                st.device_busy_ms += *done.device_ms;
+        }
         for (const auto& p : done.plans) add_plan(st, p);
         if (ok) {
             st.frames += 1;
@@ -118,6 +121,7 @@ void Server::Impl::on_encoded(EncodedFrame done) {
             if (done.device_ms)
                 st.device.add(*done.device_ms);
             st.encode.add(done.encode_ms / 2.0);
+            st.encode_busy_ms += done.encode_ms;
         }
     }
     scheduler.rendered(done.viewer);  // its frame may be reused from here on

@@ -122,6 +122,7 @@ ServerSnapshot Server::Impl::snapshot() const {
     s.index_buffer_bytes = held_index_bytes.load();
     s.pooled_layer_bytes = buffers->pooled_bytes();
     s.render_busy_ns = render_busy_ns.load();
+    s.encoder_threads = encoder_threads;
     s.device = device.name();
     s.driver = driver_info;
     s.viewers = viewers_of(counters);

@@ -72,6 +72,10 @@ struct FrameStats {
     // encode = per layer, CPU (added once per frame as the mean of its two layers); send =
     // handed to the socket to written (per layer).
     StageCost queue, pass, device, encode, send;
+    // Busy time since start, for "where is the limit": the device's own time summed once per
+    // submission (not per frame: a batch's frames share one), and the encoders' CPU time
+    // (both layers of every frame, over all encoder threads).
+    double device_busy_ms = 0, encode_busy_ms = 0;
     nlohmann::json last_report;  // the latest submission's pass (stats "passes.viewer")
 };
 
@@ -128,6 +132,7 @@ struct ServerSnapshot {
     std::string device, driver;  // the Vulkan device and its driver
     // The render thread's time from taking a batch to the end of its turn, since start (ns).
     uint64_t render_busy_ns = 0;
+    uint32_t encoder_threads = 0;  // the encoder's threads
     // The VD path and the projector frames in full (stats "frames", "cost_ms", "passes").
     FrameStats frame_stats;
     PassCost projector_cost;

@@ -97,6 +97,13 @@ nlohmann::json stats_json(const ServerSnapshot& s) {
             {"projector_renders", s.projector_renders},
             // The render thread's time from taking a batch to the end of its turn, since start.
             {"render_busy_ns", s.render_busy_ns},
+            // Busy time since start of the three stages that can bound the served rate
+            // (`hysar bench serve` divides their growth by the wall time it measured).
+            {"busy_ms",
+             {{"render_thread", double(s.render_busy_ns) * 1e-6},
+              {"device", fs.device_busy_ms},
+              {"encoders", fs.encode_busy_ms},
+              {"encoder_threads", s.encoder_threads}}},
             {"sessions", s.sessions},
             {"sessions_total", s.sessions_total},
             {"viewers", viewers},

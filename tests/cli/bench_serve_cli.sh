@@ -41,6 +41,13 @@ for r in rows:
     assert finite(r["stereo_per_s_total"]) and r["stereo_per_s_total"] > 0, r
     assert finite(r["render_thread_busy"]) and 0 < r["render_thread_busy"] <= 1.05, r
     assert finite(r["stage_ms_mean"]["device"]) and r["stage_ms_mean"]["device"] > 0, r
+    # Pacing and where the limit is (every row of a served bench has both).
+    assert finite(r["interval_ms_p50"]) and r["interval_ms_p50"] <= r["interval_ms_p99"], r
+    for k in ("render_thread", "gpu", "encoders", "cores"):
+        assert finite(r["busy"][k]) and 0 <= r["busy"][k] <= 1.5, (k, r["busy"])
+    assert r["bound"] in ("poses", "sockets", "render_thread", "gpu", "encoders", "cores",
+                          "latency"), r["bound"]
+    assert r["bound_why"], r
     for k in ("served_over_full", "served_over_lean", "served_over_lean_script"):
         assert finite(r[k]) and r[k] > 0, (k, r)
 c = j["config"]
@@ -74,6 +81,7 @@ bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 1025
 bad --planning-threads --planning-threads 65
+bad --max-target-mib --max-target-mib 0
 bad --bogus --bogus
 bad --profile --profile no-such-headset --quick
 echo "bench serve: files, rows and errors as documented"
