@@ -69,9 +69,12 @@ void classify_bound(ServedRow& r, double pose_rate_hz) {
             top = stage;
             top_share = share;
         }
-    const std::string busiest =
+    std::string busiest =
         top.empty() ? std::string("no stage measured")
                     : fmt::format("busiest stage {} at {:.0f} %", top, 100 * top_share);
+    for (const auto& [stage, share] : r.busy)  // the others near their limit too
+        if (stage != top && share >= 0.85)
+            busiest += fmt::format(", {} at {:.0f} %", stage, 100 * share);
     const double replaced =
         r.eye_layers ? double(r.layers_replaced) / double(r.eye_layers + r.layers_replaced) : 0.0;
     if (r.stereo_layers == 0) {

@@ -32,6 +32,12 @@ TEST(ServeBound, TheBusiestSaturatedStageBounds) {
     r = row(30, {{"render_thread", 0.5}, {"gpu", 0.2}, {"encoders", 0.93}, {"cores", 0.6}});
     hs::bench::classify_bound(r, 60);
     EXPECT_EQ(r.bound, "encoders");
+    // A second stage near its limit is named beside the first.
+    r = row(30, {{"render_thread", 0.99}, {"encoders", 0.96}, {"cores", 0.5}});
+    hs::bench::classify_bound(r, 60);
+    EXPECT_EQ(r.bound, "render_thread");
+    EXPECT_NE(r.bound_why.find("encoders at 96 %"), std::string::npos) << r.bound_why;
+    EXPECT_EQ(r.bound_why.find("cores"), std::string::npos) << r.bound_why;
 }
 
 TEST(ServeBound, ReplacedLayersMeanTheSockets) {
