@@ -1,5 +1,7 @@
 #include "loop/scheduler.hpp"
 
+#include <algorithm>
+
 namespace hs::loop {
 
 using SteadyClock = Clock;
@@ -142,22 +144,41 @@ std::vector<ViewerJob> Scheduler::take_locked() {
                               ? std::chrono::duration_cast<SteadyClock::duration>(
                                     std::chrono::duration<double>(1.0 / options_.max_viewer_hz))
                               : SteadyClock::duration::zero();
-    // Round-robin: start after the last viewer taken, wrap around once.
+    // Paced: of the ready viewers, those whose last frame was taken longest ago go first, so
+    // that under load each viewer's frames stay evenly spaced instead of coming in bursts (a
+    // viewer that was busy when its turn came is not sent to the back of a whole round). Ties
+    // (viewers never taken) go round-robin, starting after the last viewer taken.
+    struct Candidate {
+        Clock::time_point last_taken;
+        size_t order;
+        Slot* slot;
+        uint32_t id;
+    };
+    std::vector<Candidate> ready_now;
     auto it = slots_.upper_bound(last_taken_);
     for (size_t seen = 0; seen < slots_.size(); ++seen, ++it) {
         if (it == slots_.end())
             it = slots_.begin();
-        if (batch.size() >= std::max<uint32_t>(options_.max_batch, 1))
-            break;
-        auto& [id, s] = *it;
-        if (!ready(s, now))
-            continue;
+        if (ready(it->second, now))
+            ready_now.push_back({it->second.last_taken, seen, &it->second, it->first});
+    }
+    const size_t take =
+        std::min<size_t>(ready_now.size(), std::max<uint32_t>(options_.max_batch, 1));
+    std::partial_sort(ready_now.begin(), ready_now.begin() + std::ptrdiff_t(take), ready_now.end(),
+                      [](const Candidate& a, const Candidate& b) {
+                          return a.last_taken != b.last_taken ? a.last_taken < b.last_taken
+                                                              : a.order < b.order;
+                      });
+    for (size_t i = 0; i < take; ++i) {
+        Slot& s = *ready_now[i].slot;
+        const uint32_t id = ready_now[i].id;
         batch.push_back({id, s.next_frame++, s.display, *s.pose});
         s.pose_fresh = false;
         if (s.requests > 0)
             --s.requests;
         s.rendering = true;
         s.next_allowed = now + interval;
+        s.last_taken = now;
         ++s.counters.in_flight;
         last_taken_ = id;
     }

@@ -1,6 +1,7 @@
 // Which headset gets the next frame: latest pose wins, at most kMaxInFlight frames in flight per
 // headset and one of them rendering or encoding (its ViewerFrame is in use until rendered()),
-// each at most at its display's rate, ready headsets taken round-robin up to a batch's size.
+// each at most at its display's rate, ready headsets taken oldest-last-frame first (round-robin
+// among equals) up to a batch's size.
 // Pure bookkeeping, no I/O, no GPU, no wire types.
 //
 // The scheduler is the hand-off between two threads, and only these two call it:
@@ -64,8 +65,8 @@ public:
     void complete(uint32_t session_id, uint64_t bytes, double latency_ms);
 
     // Render thread. Blocks until at least one viewer is ready, wake() or stop() was called;
-    // returns up to max_batch ready viewers, round-robin, each counted in flight and rendering
-    // (possibly none after wake() or stop()).
+    // returns up to max_batch ready viewers, the longest since their last frame first, each counted
+    // in flight and rendering (possibly none after wake() or stop()).
     std::vector<ViewerJob> wait_for_batch();
     // As wait_for_batch(), without blocking: the viewers ready now (possibly none).
     std::vector<ViewerJob> take_batch();
@@ -93,6 +94,7 @@ private:
         uint32_t next_frame = 1;
         bool rendering = false;            // its frame is being rendered or encoded
         Clock::time_point next_allowed{};  // by the display's rate
+        Clock::time_point last_taken{};    // its last frame taken (pacing: oldest first)
         ViewerCounters counters;
     };
     // Ready, rate aside: served, has a pose, room in flight, not rendering, and a reason (a

@@ -1,0 +1,103 @@
+// The scheduler (server/loop/scheduler.hpp): which headset gets the next frame. Pure
+// bookkeeping, so these drive it by hand: poses, batches taken, frames rendered and sent.
+#include <gtest/gtest.h>
+
+#include <map>
+
+#include "loop/scheduler.hpp"
+
+namespace {
+
+using hs::loop::Scheduler;
+
+hs::loop::Display continuous() {
+    hs::loop::Display d;
+    d.eye.width = 64;
+    d.eye.height = 32;
+    d.mode = hs::loop::FrameMode::kContinuous;
+    return d;
+}
+
+void pose(Scheduler& s, uint32_t id) {
+    hs::loop::HeadPose p;
+    p.received = hs::loop::Clock::now();
+    ASSERT_TRUE(s.set_pose(id, p));
+}
+
+std::vector<uint32_t> ids(const std::vector<hs::loop::ViewerJob>& batch) {
+    std::vector<uint32_t> out;
+    for (const auto& j : batch) out.push_back(j.session_id);
+    return out;
+}
+
+// The frame of `id` was rendered and sent.
+void done(Scheduler& s, uint32_t id) {
+    s.rendered(id);
+    s.complete(id, 100, 1.0);
+}
+
+TEST(Scheduler, AmongViewersNeverServedTheOrderIsRoundRobin) {
+    Scheduler s({.max_batch = 2});
+    for (uint32_t id : {1u, 2u, 3u}) {
+        ASSERT_FALSE(s.add_viewer(id, continuous()));
+        pose(s, id);
+    }
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{1, 2}));
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{3}));
+    EXPECT_TRUE(s.take_batch().empty());  // every one rendering
+}
+
+TEST(Scheduler, AViewerSkippedWhileNotReadyGoesFirstWhenItIs) {
+    // Batches of one. Viewer 2 has no pose when its turn comes; once it has, it has waited
+    // longer than viewer 1 (served at the start) and goes before it, where a plain
+    // round-robin after the last taken (3) would serve 1 again.
+    Scheduler s({.max_batch = 1});
+    for (uint32_t id : {1u, 2u, 3u}) ASSERT_FALSE(s.add_viewer(id, continuous()));
+    pose(s, 1);
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{1}));
+    done(s, 1);
+    pose(s, 3);
+    pose(s, 1);
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{3}));
+    done(s, 3);
+    pose(s, 2);
+    pose(s, 3);
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{2}));
+    done(s, 2);
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{1}));
+}
+
+TEST(Scheduler, UnderLoadEveryViewerIsServedEvenly) {
+    // Ten viewers that always have a fresh pose, batches of three: each viewer's frames come
+    // one round apart, never two rounds, and the counts differ by at most one.
+    constexpr uint32_t kViewers = 10;
+    Scheduler s({.max_batch = 3});
+    for (uint32_t id = 1; id <= kViewers; ++id) {
+        ASSERT_FALSE(s.add_viewer(id, continuous()));
+        pose(s, id);
+    }
+    std::map<uint32_t, int> frames, last_batch;
+    int most_batches_between = 0;
+    for (int b = 0; b < 200; ++b) {
+        const auto batch = s.take_batch();
+        ASSERT_FALSE(batch.empty()) << "batch " << b;
+        for (const auto& j : batch) {
+            if (last_batch.count(j.session_id))
+                most_batches_between = std::max(most_batches_between, b - last_batch[j.session_id]);
+            last_batch[j.session_id] = b;
+            ++frames[j.session_id];
+            done(s, j.session_id);
+            pose(s, j.session_id);
+        }
+    }
+    int lo = 1 << 30, hi = 0;
+    for (const auto& [id, n] : frames) {
+        lo = std::min(lo, n);
+        hi = std::max(hi, n);
+    }
+    EXPECT_EQ(frames.size(), kViewers);
+    EXPECT_LE(hi - lo, 1);
+    EXPECT_LE(most_batches_between, 4);  // ceil(10 / 3) batches per round
+}
+
+}  // namespace
