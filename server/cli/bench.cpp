@@ -74,7 +74,8 @@ const char* kServeHelp =
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
-    "                         [--max-target-mib MIB] [--quick]\n"
+    "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
+    "                         [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
     "  the project's renderer on whole stereo pairs (the scene's tessellation, and its\n"
@@ -96,6 +97,8 @@ const char* kServeHelp =
     "  --max-batch-viewers N  viewers per submission (default 8, as hysar serve)\n"
     "  --max-target-mib MIB  the render-target budget (default 2048, as hysar serve; each\n"
     "                       HoloLens headset takes about 20 MiB)\n"
+    "  --submissions-in-flight N  the server's VD submissions on the device at once\n"
+    "                       (default 3)\n"
     "  --planning-threads N threads planning a batch's layers (default as hysar serve: 0 on\n"
     "                       lavapipe, cores - 1 up to 7 on a GPU)\n"
     "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
@@ -136,7 +139,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--encoder-threads",
                                             "--planning-threads",
                                             "--max-batch-viewers",
-                                            "--max-target-mib"};
+                                            "--max-target-mib",
+                                            "--submissions-in-flight"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -161,6 +165,7 @@ Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
     HS_TRY(read_count(f, "--encoder-threads", 0, 64, o.encoder_threads));
     HS_TRY(read_count(f, "--max-batch-viewers", 1, 1024, o.max_batch_viewers));
     HS_TRY(read_count(f, "--max-target-mib", 1, 1u << 20, o.max_target_mib));
+    HS_TRY(read_count(f, "--submissions-in-flight", 1, 16, o.submissions_in_flight));
     HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
     if (f.has("--lp-threads")) {
         HS_ASSIGN_OR_RETURN(o.lp_threads,

@@ -11,9 +11,6 @@
 namespace hs::loop {
 
 namespace {
-// Submissions in flight at once (one command buffer each); a fourth waits for the first.
-constexpr uint32_t kSubmissionsInFlight = 3;
-
 double ms_since(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
@@ -55,7 +52,8 @@ FrameLoop::~FrameLoop() {
 }
 
 void FrameLoop::run(const scene::Scene& initial, uint32_t version) {
-    auto ring = gpu::SubmitRing::create(device_, kSubmissionsInFlight, "frames");
+    auto ring = gpu::SubmitRing::create(device_, std::max<uint32_t>(info_.submissions_in_flight, 1),
+                                        "frames");
     if (!ring)
         throw std::runtime_error(ring.error().message);
     ring_ = std::move(ring).value();
@@ -333,6 +331,8 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
     auto figures = std::make_shared<BatchFigures>();
     figures->eyes = 2 * slots_.size();
     figures->queue_ms = std::chrono::duration<double, std::milli>(now - taken).count();
+    figures->record_ms = last_record_ms_;
+    figures->submit_ms = last_submit_ms_;
     figures->large_turn = large_turn;
     figures->report = source_->report();
     filled.front()->batch = std::move(figures);
@@ -346,15 +346,22 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
 
 std::pair<uint64_t, bool> FrameLoop::submit() {
     if (!source_->uses_gpu()) {
+        last_record_ms_ = last_submit_ms_ = 0;
         auto r = source_->fill(nullptr, slots_);
         if (!r)
             throw std::runtime_error(r.error().message);
         return {0, false};
     }
     Result<bool> fill_result = false;
+    const auto t0 = Clock::now();
+    Clock::duration filling{};
     auto submitted = ring_->submit("pass.viewer-vd.frames", [&](gpu::CommandList& cl) {
+        const auto f0 = Clock::now();
         fill_result = source_->fill(&cl, slots_);
+        filling = Clock::now() - f0;
     });
+    last_record_ms_ = std::chrono::duration<double, std::milli>(filling).count();
+    last_submit_ms_ = ms_since(t0) - last_record_ms_;
     if (!submitted)
         throw std::runtime_error(submitted.error().message);
     if (!fill_result)

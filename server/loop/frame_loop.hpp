@@ -115,6 +115,7 @@ struct FrameLoopInfo {
     render::RendererCreateInfo renderer;
     const calib::ServingCalibration* calibration = nullptr;  // null: layers sent as rendered
     uint64_t large_display_pixels = 2u << 20;  // per eye; above: a submission of its own
+    uint32_t submissions_in_flight = 3;        // command buffers; a further batch waits
     // Written after each scene version's warm-up (render/warm_up.hpp); empty: not saved.
     std::filesystem::path pipeline_cache_file;
 };
@@ -150,6 +151,7 @@ private:
     // Records and submits the slots' frames; the submission's timeline value and whether
     // anything was recorded.
     std::pair<uint64_t, bool> submit();
+    double last_record_ms_ = 0, last_submit_ms_ = 0;  // the last submit()'s (BatchFigures)
     // The viewer's frame for this display, made or re-made as needed.
     Result<ViewerFrame*> frame_for(const ViewerJob& job);
     void update_held_bytes();

@@ -38,6 +38,9 @@ struct EyePixels {
 struct BatchFigures {
     uint64_t eyes = 0;
     double queue_ms = 0;
+    // Of queue_ms: planning and recording the layers (the fill), and the rest of the
+    // submission: waiting for a free command buffer, beginning, ending and submitting it.
+    double record_ms = 0, submit_ms = 0;
     bool large_turn = false;
     nlohmann::json report;
 };

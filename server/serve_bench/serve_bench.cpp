@@ -477,6 +477,12 @@ void add_busy_shares(ServedRow& r, const RowWindow& m) {
         r.busy["render_thread"] = *v / wall_ms;
     if (auto v = grown("device"))
         r.busy["gpu"] = *v / wall_ms;
+    // Of the render thread's: recording (planning included) and submitting (waiting for a free
+    // command buffer included); not stages of their own in the bound.
+    if (auto v = grown("render_thread_recording"))
+        r.render_split["recording"] = *v / wall_ms;
+    if (auto v = grown("render_thread_submitting"))
+        r.render_split["submitting"] = *v / wall_ms;
     if (auto v = grown("encoders"); v && m.c1.encoder_threads > 0)
         r.busy["encoders"] = *v / (wall_ms * m.c1.encoder_threads);
     const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
@@ -588,6 +594,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.clients = uint32_t(most);
     info.max_batch_viewers = o.max_batch_viewers;
     info.max_target_mib = o.max_target_mib;
+    info.submissions_in_flight = o.submissions_in_flight;
     info.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
     const auto started = Clock::now();
@@ -871,6 +878,7 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"encoder_threads", o.encoder_threads},
             {"max_batch_viewers", o.max_batch_viewers},
             {"max_target_mib", o.max_target_mib},
+            {"submissions_in_flight", o.submissions_in_flight},
             {"planning_threads", o.planning_threads},
             {"quick", o.quick}};
 }

@@ -51,12 +51,13 @@ struct ServeBenchOptions {
     protocol::Encoding encoding = protocol::Encoding::kSparseTiles;
     std::string scene_path;  // empty: scene::default_scene()
     std::string out_dir = "out/bench-serve";
-    std::string lean_baseline_command;  // run through the shell when non-empty
-    std::vector<int> lp_threads;        // LP_NUM_THREADS values for the repeated served rows
-    uint32_t encoder_threads = 0;       // the server's, as `hysar serve --encoder-threads`
-    uint32_t max_batch_viewers = 8;     // as `hysar serve --max-batch-viewers`
-    uint32_t max_target_mib = 0;        // as `hysar serve --max-target-mib`; 0: its default
-    int planning_threads = -1;          // as `hysar serve --planning-threads`; -1: its default
+    std::string lean_baseline_command;   // run through the shell when non-empty
+    std::vector<int> lp_threads;         // LP_NUM_THREADS values for the repeated served rows
+    uint32_t encoder_threads = 0;        // the server's, as `hysar serve --encoder-threads`
+    uint32_t max_batch_viewers = 8;      // as `hysar serve --max-batch-viewers`
+    uint32_t max_target_mib = 0;         // as `hysar serve --max-target-mib`; 0: its default
+    uint32_t submissions_in_flight = 0;  // the server's VD submissions in flight; 0: default
+    int planning_threads = -1;           // as `hysar serve --planning-threads`; -1: its default
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.
@@ -97,6 +98,9 @@ struct ServedRow {
     // gpu (the device's own time per submission), encoders (over all encoder threads), cores
     // (this process's CPU time over the machine's cores: on lavapipe the rasteriser is there).
     std::map<std::string, double> busy;
+    // The render thread's busy share split: "recording" (planning and recording layers) and
+    // "submitting" (waiting for a free command buffer, submitting).
+    std::map<std::string, double> render_split;
     uint64_t layers_replaced = 0;  // queued layers replaced by newer ones: the sockets lagged
     // The stage that bound the row ("poses": every headset got a layer per pose, nothing else
     // did), and why, in words (bound_of).

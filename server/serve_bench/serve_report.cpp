@@ -69,9 +69,9 @@ void classify_bound(ServedRow& r, double pose_rate_hz) {
             top = stage;
             top_share = share;
         }
-    std::string busiest =
-        top.empty() ? std::string("no stage measured")
-                    : fmt::format("busiest stage {} at {:.0f} %", top, 100 * top_share);
+    std::string busiest = top.empty()
+                              ? std::string("no stage measured")
+                              : fmt::format("busiest stage {} at {:.0f} %", top, 100 * top_share);
     for (const auto& [stage, share] : r.busy)  // the others near their limit too
         if (stage != top && share >= 0.85)
             busiest += fmt::format(", {} at {:.0f} %", stage, 100 * share);
@@ -94,6 +94,12 @@ void classify_bound(ServedRow& r, double pose_rate_hz) {
         r.bound = top;
         r.bound_why = fmt::format("{}; the headsets got {:.1f} of {:.0f} layers/s", busiest,
                                   r.per_s_per_headset, pose_rate_hz);
+        const auto rec = r.render_split.find("recording"), sub = r.render_split.find("submitting");
+        if (top == "render_thread" && rec != r.render_split.end() && sub != r.render_split.end())
+            r.bound_why += fmt::format(
+                "; the render thread spent {:.0f} % of the time planning and recording, {:.0f} % "
+                "submitting (waiting for a free command buffer included)",
+                100 * rec->second, 100 * sub->second);
     } else {
         // Nothing saturated: each headset has at most two frames in flight, so its rate is
         // capped near 2 / latency.
@@ -115,6 +121,8 @@ json row_json(const ServedRow& r) {
     for (const auto& [k, v] : r.stage_ms) stages[k] = opt(v);
     json busy = json::object();
     for (const auto& [k, v] : r.busy) busy[k] = opt(v);
+    json split = json::object();
+    for (const auto& [k, v] : r.render_split) split[k] = opt(v);
     return {{"headsets", r.headsets},
             {"lp_num_threads", r.lp_num_threads ? json(*r.lp_num_threads) : json(nullptr)},
             {"seconds", r.seconds},
@@ -134,6 +142,7 @@ json row_json(const ServedRow& r) {
             {"interval_ms_p50", opt(r.interval_p50_ms)},
             {"interval_ms_p99", opt(r.interval_p99_ms)},
             {"busy", busy},
+            {"render_thread_split", split},
             {"layers_replaced", r.layers_replaced},
             {"bound", r.bound},
             {"bound_why", r.bound_why},
@@ -166,6 +175,10 @@ ServedRow row_of(const json& j) {
     r.render_thread_busy = opt_of(j, "render_thread_busy");
     r.interval_p50_ms = opt_of(j, "interval_ms_p50");
     r.interval_p99_ms = opt_of(j, "interval_ms_p99");
+    if (j.contains("render_thread_split") && j["render_thread_split"].is_object())
+        for (const auto& [k, v] : j["render_thread_split"].items())
+            if (v.is_number())
+                r.render_split[k] = v.get<double>();
     if (j.contains("busy") && j["busy"].is_object())
         for (const auto& [k, v] : j["busy"].items())
             if (v.is_number())

@@ -41,6 +41,8 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     info.limits.max_pending = std::max(info.limits.max_pending, o.clients + 8);
     if (o.max_batch_viewers > 0)
         info.limits.max_batch_viewers = o.max_batch_viewers;
+    if (o.submissions_in_flight > 0)
+        info.limits.submissions_in_flight = o.submissions_in_flight;
     if (o.max_target_mib > 0)
         info.limits.max_target_bytes = o.max_target_mib << 20;
     info.encoder_threads = o.encoder_threads;

@@ -35,10 +35,11 @@ struct LoopbackCreateInfo {
     // Clients that connect at once: sessions and connections before Hello are allowed up to
     // this many and 8 more, or `hysar serve`'s defaults where those are larger.
     uint32_t clients = 0;
-    uint32_t max_batch_viewers = 0;  // viewers rendered in one submission
-    uint64_t max_target_mib = 0;     // render-target budget, as `hysar serve --max-target-mib`
-    uint32_t encoder_threads = 0;    // threads that encode layers beside the render thread
-    int planning_threads = -1;       // the renderer's planning threads (-1: by device)
+    uint32_t max_batch_viewers = 0;      // viewers rendered in one submission
+    uint64_t max_target_mib = 0;         // render-target budget, as `hysar serve --max-target-mib`
+    uint32_t submissions_in_flight = 0;  // ServerLimits::submissions_in_flight; 0: its default
+    uint32_t encoder_threads = 0;        // threads that encode layers beside the render thread
+    int planning_threads = -1;           // the renderer's planning threads (-1: by device)
     // Calibrated output (docs/CALIBRATION.md): frame and layers sent as device drives; a scene
     // whose projector is not the calibrated size is refused. Null: sent as rendered.
     std::shared_ptr<const calib::ServingCalibration> calibration;

@@ -2,6 +2,8 @@
 // frame loop's host. Each FrameLoopHost call runs on the render thread and only posts (or
 // stores one atomic); the encoder's results are posted too. The network thread then answers
 // the sessions, feeds the scheduler and writes the figures, of which it is the one producer.
+#include <algorithm>
+
 #include "core/log.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
@@ -15,6 +17,7 @@ void Server::Impl::render_loop() {
         li.renderer = info.renderer;
         li.calibration = info.calibration.get();
         li.large_display_pixels = limits.large_display_pixels;
+        li.submissions_in_flight = std::clamp<uint32_t>(limits.submissions_in_flight, 1, 16);
         li.pipeline_cache_file = info.pipeline_cache_file;
         loop::FrameLoop(li, scheduler, inbox, *this).run(initial_scene, initial_version);
     } catch (const std::exception& e) {

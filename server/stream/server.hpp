@@ -64,7 +64,10 @@ struct ServerLimits {
     // 0: no limit.
     uint32_t max_viewer_hz = 60;
     uint32_t max_batch_viewers = 8;  // viewers rendered in one submission
-    scene::SceneLimits scene;        // triangles and projector pixels of any scene it accepts
+    // Submissions of VD layers in flight on the device at once (command buffers); a further
+    // batch waits for the oldest. 1..16.
+    uint32_t submissions_in_flight = 3;
+    scene::SceneLimits scene;  // triangles and projector pixels of any scene it accepts
 };
 
 struct ServerCreateInfo {

@@ -65,6 +65,8 @@ inline void add_batch(FrameStats& st, const loop::BatchFigures& b) {
     st.max_eyes = std::max(st.max_eyes, b.eyes);
     st.large_turns += b.large_turn ? 1 : 0;
     st.queue.add(b.queue_ms);
+    st.record_busy_ms += b.record_ms;
+    st.submit_busy_ms += b.submit_ms;
     st.last_report = b.report;
 }
 

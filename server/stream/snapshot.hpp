@@ -76,6 +76,9 @@ struct FrameStats {
     // submission (not per frame: a batch's frames share one), and the encoders' CPU time
     // (both layers of every frame, over all encoder threads).
     double device_busy_ms = 0, encode_busy_ms = 0;
+    // The render thread's share of it: planning and recording layers, and submitting (waiting
+    // for a free command buffer included).
+    double record_busy_ms = 0, submit_busy_ms = 0;
     nlohmann::json last_report;  // the latest submission's pass (stats "passes.viewer")
 };
 

@@ -103,6 +103,8 @@ nlohmann::json stats_json(const ServerSnapshot& s) {
              {{"render_thread", double(s.render_busy_ns) * 1e-6},
               {"device", fs.device_busy_ms},
               {"encoders", fs.encode_busy_ms},
+              {"render_thread_recording", fs.record_busy_ms},
+              {"render_thread_submitting", fs.submit_busy_ms},
               {"encoder_threads", s.encoder_threads}}},
             {"sessions", s.sessions},
             {"sessions_total", s.sessions_total},
