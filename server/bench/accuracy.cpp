@@ -126,7 +126,7 @@ Encoded encode(const ImageRgba32f& img, const LayerEncoding& e, int repeats) {
 // What a client shows from the encoded layer (alpha: the coverage of `img`, for the error).
 ImageRgba32f decode(const Encoded& enc, const ImageRgba32f& img, const LayerEncoding& e) {
     std::vector<uint8_t> px = enc.data;
-    if (e.encoding == protocol::Encoding::kSparseTiles) {
+    if (e.encoding != protocol::Encoding::kRaw) {
         const uint32_t bpp = e.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
         auto d = protocol::decode_tiles(enc.data, img.width, img.height, bpp);
         if (!std::holds_alternative<std::vector<uint8_t>>(d))
