@@ -63,13 +63,15 @@ bool jpeg_encode(const uint8_t* rgb, uint32_t w, uint32_t h, int quality, unsign
     c.input_components = 3;
     c.in_color_space = JCS_RGB;
     jpeg_set_defaults(&c);
+    // RGB samples, no YCbCr: the colour transform's 8-bit rounding alone costs up to 3.5
+    // CIEDE2000 on dark saturated pixels at any quality (`hysar bench encoding`, README), and
+    // 4:4:4, since subsampled chroma would bleed between packed tiles that are not neighbours.
+    jpeg_set_colorspace(&c, JCS_RGB);
     jpeg_set_quality(&c, quality, TRUE);
-    // 4:4:4: chroma subsampling would bleed colour between packed tiles that are not
-    // neighbours in the layer, and costs error on small coloured highlights.
     for (int i = 0; i < c.num_components; ++i)
         c.comp_info[i].h_samp_factor = c.comp_info[i].v_samp_factor = 1;
     c.dct_method = JDCT_ISLOW;
-    c.optimize_coding = TRUE;
+    c.optimize_coding = TRUE;  // a fifth fewer bytes than the standard Huffman tables
     jpeg_start_compress(&c, TRUE);
     JSAMPROW rows[16];
     while (c.next_scanline < h) {
@@ -104,9 +106,10 @@ const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h
         jpeg_destroy_decompress(&d);
         return "lossy tiles: the JPEG's size differs from the packed tiles'";
     }
-    if (d.num_components != 3 || d.jpeg_color_space != JCS_YCbCr) {
+    if (d.num_components != 3 ||
+        (d.jpeg_color_space != JCS_RGB && d.jpeg_color_space != JCS_YCbCr)) {
         jpeg_destroy_decompress(&d);
-        return "lossy tiles: the JPEG must have three YCbCr components";
+        return "lossy tiles: the JPEG must have three components, RGB or YCbCr";
     }
     if (d.progressive_mode || d.arith_code) {
         jpeg_destroy_decompress(&d);
@@ -138,70 +141,70 @@ inline bool lit(const uint8_t* p) {
     return v != 0;
 }
 
-// The tile at `t` into the packed image at (px, py) (row pitch `pitch`, RGB) and its coverage
-// bits into `bits`: lit pixels as they are, the others (and the padding past the layer's edge)
-// the mean of the lit pixels of their 8 x 8 block, or of the tile where the block has none, so
-// that the JPEG spends no bits on an edge that the coverage cuts anyway.
+// The tile at `t` into the packed image at `img` (row pitch `pitch`, RGB) and its coverage bits
+// into `bits`. Lit pixels go as they are; the others (and the padding past the layer's edge)
+// continue the lit ones: along each row from the nearest lit pixel, and rows without one from
+// the nearest row with one, so that the JPEG sees no edge where the coverage cuts anyway (an
+// edge costs bits and rings into the lit pixels beside it).
 void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t ts, uint8_t* img,
                size_t pitch, uint8_t* bits) {
-    uint32_t tile_sum[3] = {0, 0, 0}, tile_n = 0;
-    for (uint32_t by = 0; by < ts; by += 8)
-        for (uint32_t bx = 0; bx < ts; bx += 8) {
-            uint32_t sum[3] = {0, 0, 0}, n = 0;
-            for (uint32_t y = by; y < by + 8; ++y) {
-                uint8_t* dst = img + size_t(y) * pitch + size_t(bx) * 3;
-                for (uint32_t x = bx; x < bx + 8; ++x, dst += 3) {
-                    if (y >= t.ch || x >= t.cw)
-                        continue;
-                    const uint8_t* p = raw + size_t(t.y0 + y) * stride + size_t(t.x0 + x) * 4;
-                    if (!lit(p))
-                        continue;
-                    const uint32_t i = y * ts + x;
-                    bits[i / 8] |= uint8_t(1u << (i % 8));
-                    dst[0] = p[0], dst[1] = p[1], dst[2] = p[2];
-                    sum[0] += p[0], sum[1] += p[1], sum[2] += p[2];
-                    ++n;
-                }
+    constexpr uint32_t kNone = UINT32_MAX;
+    uint32_t lit_row = kNone;  // a row with a lit pixel, the last one seen
+    uint32_t row_src[256];     // per row: itself when it has a lit pixel, else kNone
+    for (uint32_t y = 0; y < ts; ++y) {
+        uint8_t* dst = img + size_t(y) * pitch;
+        uint32_t first = kNone, last = kNone;
+        if (y < t.ch) {
+            const uint8_t* src = raw + size_t(t.y0 + y) * stride + size_t(t.x0) * 4;
+            for (uint32_t x = 0; x < t.cw; ++x) {
+                const uint8_t* p = src + size_t(x) * 4;
+                if (!lit(p))
+                    continue;
+                const uint32_t i = y * ts + x;
+                bits[i / 8] |= uint8_t(1u << (i % 8));
+                uint8_t* d = dst + size_t(x) * 3;
+                d[0] = p[0], d[1] = p[1], d[2] = p[2];
+                if (first == kNone)
+                    first = x;
+                else if (last != kNone && last + 1 < x)
+                    // The gap between two lit pixels: the left one's colour up to the middle,
+                    // the right one's after it.
+                    for (uint32_t g = last + 1; g < x; ++g)
+                        std::memcpy(dst + size_t(g) * 3,
+                                    dst + size_t(g - last <= x - g ? last : x) * 3, 3);
+                last = x;
             }
-            for (int c = 0; c < 3; ++c) tile_sum[c] += sum[c];
-            tile_n += n;
-            const uint8_t fill[3] = {uint8_t(n ? (sum[0] + n / 2) / n : 0),
-                                     uint8_t(n ? (sum[1] + n / 2) / n : 0),
-                                     uint8_t(n ? (sum[2] + n / 2) / n : 0)};
-            for (uint32_t y = by; y < by + 8; ++y)
-                for (uint32_t x = bx; x < bx + 8; ++x) {
-                    const uint32_t i = y * ts + x;
-                    if ((bits[i / 8] >> (i % 8)) & 1u)
-                        continue;
-                    uint8_t* dst = img + size_t(y) * pitch + size_t(x) * 3;
-                    // Blocks without a lit pixel are filled below with the tile's mean.
-                    dst[0] = fill[0], dst[1] = fill[1], dst[2] = fill[2];
-                }
         }
-    if (tile_n == 0)
-        return;
-    const uint8_t mean[3] = {uint8_t((tile_sum[0] + tile_n / 2) / tile_n),
-                             uint8_t((tile_sum[1] + tile_n / 2) / tile_n),
-                             uint8_t((tile_sum[2] + tile_n / 2) / tile_n)};
-    for (uint32_t by = 0; by < ts; by += 8)
-        for (uint32_t bx = 0; bx < ts; bx += 8) {
-            bool empty = true;
-            for (uint32_t y = by; y < by + 8 && empty; ++y)
-                for (uint32_t x = bx; x < bx + 8; ++x) {
-                    const uint32_t i = y * ts + x;
-                    if ((bits[i / 8] >> (i % 8)) & 1u) {
-                        empty = false;
-                        break;
-                    }
-                }
-            if (!empty)
-                continue;
-            for (uint32_t y = by; y < by + 8; ++y)
-                for (uint32_t x = bx; x < bx + 8; ++x) {
-                    uint8_t* dst = img + size_t(y) * pitch + size_t(x) * 3;
-                    dst[0] = mean[0], dst[1] = mean[1], dst[2] = mean[2];
-                }
+        if (first == kNone) {
+            row_src[y] = kNone;
+            continue;
         }
+        for (uint32_t x = 0; x < first; ++x) std::memcpy(dst + size_t(x) * 3, dst + first * 3, 3);
+        for (uint32_t x = last + 1; x < ts; ++x)
+            std::memcpy(dst + size_t(x) * 3, dst + last * 3, 3);
+        row_src[y] = y;
+        lit_row = y;
+    }
+    if (lit_row == kNone)
+        return;  // a stored tile has a lit pixel; cannot happen
+    // Rows without a lit pixel: the nearest row with one (the one above on a tie).
+    uint32_t above = kNone;
+    for (uint32_t y = 0; y < ts; ++y) {
+        if (row_src[y] != kNone) {
+            above = y;
+            continue;
+        }
+        uint32_t below = y + 1;
+        while (below < ts && row_src[below] == kNone) ++below;
+        uint32_t from;
+        if (above == kNone)
+            from = below;
+        else if (below >= ts)
+            from = above;
+        else
+            from = y - above <= below - y ? above : below;
+        std::memcpy(img + size_t(y) * pitch, img + size_t(from) * pitch, size_t(ts) * 3);
+    }
 }
 
 }  // namespace

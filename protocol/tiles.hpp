@@ -16,7 +16,7 @@ namespace hs::protocol {
 enum class TileCodec : uint8_t { kNone = 0, kLz4 = 1, kZstd = 2, kJpeg = 3 };
 inline constexpr uint16_t kDefaultTileSize = 32;
 // The JPEG quality of codec 3, 1..100 (`hysar serve --layer-quality`).
-inline constexpr int kDefaultLayerQuality = 85;
+inline constexpr int kDefaultLayerQuality = 90;
 
 // Encodes raw pixel bytes (width x height x bytes_per_pixel, rows top to bottom). kJpeg, at
 // `quality`, applies to 4 bytes per pixel with a tile size that is a multiple of 16; otherwise,

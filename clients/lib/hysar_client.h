@@ -51,7 +51,7 @@ enum { HYSAR_ROLE_PROJECTOR = 1, HYSAR_ROLE_HMD = 2 };
 enum { HYSAR_FORMAT_RGBA8 = 1, HYSAR_FORMAT_RGBA16F = 2 };
 /* What travels on the wire; the library hands back decoded pixels either way. LOSSY: sparse
  * tiles whose RGBA8 colour is JPEG-coded at the server's quality (black stays exactly black;
- * about a fifth of SPARSE's bytes); RGBA16F layers stay lossless. */
+ * about a sixth of SPARSE's bytes); RGBA16F layers stay lossless. */
 enum { HYSAR_ENCODING_RAW = 1, HYSAR_ENCODING_SPARSE = 2, HYSAR_ENCODING_LOSSY = 3 };
 /* ON_REQUEST: one layer pair per hysar_client_request_frame(). CONTINUOUS: one per new pose,
  * the newest pose winning when the server is busy. */

@@ -90,7 +90,7 @@ const char* kServeHelp =
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
     "  --encoder-threads N (0: 1 on lavapipe, half the cores up to 8 on a GPU)\n"
     "  --tile-codec lz4|zstd|none (lz4)\n"
-    "  --layer-quality Q (85): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
+    "  --layer-quality Q (90): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --planning-threads N (0 on lavapipe, cores - 1 up to 7 on a GPU): threads that plan a\n"
     "                      batch's layers beside the render thread\n"
