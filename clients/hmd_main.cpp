@@ -31,7 +31,7 @@ static const std::string kUsage =
         "                 [--scale S] [--angles LIST | --orbit SECONDS | --csv FILE | --poses "
         "SRC]\n"
         "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
-        "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse]\n"
+        "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse|lossy]\n"
         "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS]\n"
         "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
         "                 [--retries N] [--backoff-ms MS]\n"
@@ -390,8 +390,10 @@ proto::RegisterDisplay read_display(const Args& args, const std::string& configu
         args.fail("--profile " + *err);
     const std::string fmt = args.choice("--format", "rgba8", {"rgba8", "rgba16f"});
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
-    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse"});
-    display.encoding = enc == "raw" ? proto::Encoding::kRaw : proto::Encoding::kSparseTiles;
+    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse", "lossy"});
+    display.encoding = enc == "raw"     ? proto::Encoding::kRaw
+                       : enc == "lossy" ? proto::Encoding::kLossyTiles
+                                        : proto::Encoding::kSparseTiles;
     return display;
 }
 

@@ -32,7 +32,8 @@ static const std::string kUsage =
     std::string(
         "usage: hysar-loadgen [--connect ADDR] (--token T | --token-file F) --viewers N\n"
         "                     --rate HZ --seconds S [--frames N] [--profile FILE] [--scale S]\n"
-        "                     [--format rgba8|rgba16f] [--encoding raw|sparse] [--json FILE]\n"
+        "                     [--format rgba8|rgba16f] [--encoding raw|sparse|lossy] [--json "
+        "FILE]\n"
         "                     [--out DIR] [--retries N] [--backoff-ms MS]\n"
         "                     [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
         "\n"
@@ -140,9 +141,10 @@ Run read_options(const Args& args, std::ofstream& json_file) {
     r.display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
                            ? proto::PixelFormat::kRgba16f
                            : proto::PixelFormat::kRgba8;
-    r.display.encoding = args.choice("--encoding", "sparse", {"raw", "sparse"}) == "raw"
-                             ? proto::Encoding::kRaw
-                             : proto::Encoding::kSparseTiles;
+    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse", "lossy"});
+    r.display.encoding = enc == "raw"     ? proto::Encoding::kRaw
+                         : enc == "lossy" ? proto::Encoding::kLossyTiles
+                                          : proto::Encoding::kSparseTiles;
     r.display.mode = proto::FrameMode::kContinuous;
     if (args.has("--json")) {
         r.json_path = args.output_path("--json", "");

@@ -35,7 +35,9 @@ std::optional<uint32_t> max_payload(uint16_t type);
 
 enum class Role : uint8_t { kProjector = 1, kHmd = 2, kAdmin = 3 };
 enum class PixelFormat : uint8_t { kRgba8 = 1, kRgba16f = 2 };
-enum class Encoding : uint8_t { kRaw = 1, kSparseTiles = 2 };
+// 3: sparse tiles whose RGBA8 tiles may be coded lossy (codec 3, PROTOCOL.md "Lossy tiles");
+// only a client that asks for it gets it.
+enum class Encoding : uint8_t { kRaw = 1, kSparseTiles = 2, kLossyTiles = 3 };
 enum class FrameMode : uint8_t { kOnRequest = 0, kContinuous = 1 };
 
 // Error codes of the Error message (PROTOCOL.md, "Errors").

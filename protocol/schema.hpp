@@ -66,7 +66,7 @@ constexpr bool is_known(PixelFormat f) {
     return f == PixelFormat::kRgba8 || f == PixelFormat::kRgba16f;
 }
 constexpr bool is_known(Encoding e) {
-    return e == Encoding::kRaw || e == Encoding::kSparseTiles;
+    return e == Encoding::kRaw || e == Encoding::kSparseTiles || e == Encoding::kLossyTiles;
 }
 constexpr bool is_known(FrameMode m) {
     return m == FrameMode::kOnRequest || m == FrameMode::kContinuous;

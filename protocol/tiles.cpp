@@ -6,6 +6,8 @@
 #include <lz4.h>
 #include <zstd.h>
 
+#include "protocol/lossy_tiles.hpp"
+
 namespace hs::protocol {
 
 namespace {
@@ -56,6 +58,8 @@ size_t compress_into(std::vector<uint8_t>& out, size_t at, const std::vector<uin
             const size_t k = ZSTD_compress(out.data() + at, bound, packed.data(), packed.size(), 3);
             return ZSTD_isError(k) ? 0 : k;
         }
+        case TileCodec::kJpeg:
+            break;  // encode_tiles_into codes it
     }
     return 0;
 }
@@ -64,12 +68,15 @@ size_t compress_into(std::vector<uint8_t>& out, size_t at, const std::vector<uin
 
 void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
                        uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
-                       std::vector<uint8_t>& packed, uint16_t ts) {
+                       std::vector<uint8_t>& packed, uint16_t ts, int quality) {
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
     region.x1 = std::min(region.x1, tx);
     region.y1 = std::min(region.y1, ty);
     const size_t tile_bytes = size_t(ts) * ts * bpp;
     const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
+    const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0;
+    if (codec == TileCodec::kJpeg && !lossy)
+        codec = TileCodec::kLz4;
     const size_t header_at = out.size();
     out.resize(header_at + kFixedHeader + mask_bytes);
     uint8_t* head = out.data() + header_at;
@@ -79,6 +86,9 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     head[3] = 0;
     std::memset(head + kFixedHeader, 0, mask_bytes);
     packed.clear();
+    // The stored tiles' places (lossy); kept by the thread, so a steady stream allocates nothing.
+    thread_local std::vector<lossy::TilePlace> places;
+    places.clear();
     uint32_t present = 0;
     for (uint32_t by = region.y0; by < region.y1; ++by)
         for (uint32_t bx = region.x0; bx < region.x1; ++bx) {
@@ -89,6 +99,10 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
             const size_t tile = size_t(by) * tx + bx;
             out[header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
             ++present;
+            if (lossy) {
+                places.push_back({x0, y0, cw, ch});
+                continue;
+            }
             const size_t base = packed.size();
             packed.resize(base + tile_bytes);  // zeros: edge tiles are padded with them
             for (uint32_t y = 0; y < ch; ++y)
@@ -98,6 +112,19 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     std::memcpy(out.data() + header_at + 4, &present, 4);
     const size_t len_at = out.size();
     out.resize(len_at + 4);
+    if (lossy) {
+        // Never more than the tiles themselves: the bound that registration checks
+        // (codec::max_layer_payload_bytes) holds for every codec.
+        if (lossy::encode_payload(out, raw, stride, places, ts, quality, packed) &&
+            out.size() - len_at - 4 <= size_t(present) * tile_bytes) {
+            const uint32_t n32 = uint32_t(out.size() - len_at - 4);
+            std::memcpy(out.data() + len_at, &n32, 4);
+            return;
+        }
+        out.resize(header_at);
+        encode_tiles_into(out, raw, stride, w, h, bpp, TileCodec::kLz4, region, packed, ts);
+        return;
+    }
     const size_t n = compress_into(out, len_at + 4, packed, codec);
     out.resize(len_at + 4 + n);
     const uint32_t n32 = uint32_t(n);
@@ -105,9 +132,10 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
 }
 
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
-                                  uint32_t bpp, TileCodec codec, uint16_t ts) {
+                                  uint32_t bpp, TileCodec codec, uint16_t ts, int quality) {
     std::vector<uint8_t> out, packed;
-    encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed, ts);
+    encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed, ts,
+                      quality);
     return out;
 }
 
@@ -123,8 +151,10 @@ std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uin
     std::memcpy(&present, &d[4], 4);
     if (ts < 4 || ts > 256)
         return std::string("sparse tiles: tile size must lie in 4..256");
-    if (codec > 2)
+    if (codec > 3)
         return std::string("sparse tiles: unknown codec " + std::to_string(codec));
+    if (codec == uint8_t(TileCodec::kJpeg) && bpp != 4)
+        return std::string("sparse tiles: codec 3 (lossy) is for RGBA8 layers only");
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
     const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
     if (d.size() < kFixedHeader + mask_bytes + 4)
@@ -140,9 +170,25 @@ std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uin
     if (d.size() - off != comp_bytes)
         return std::string("sparse tiles: compressed length differs from the data");
     const size_t tile_bytes = size_t(ts) * ts * bpp;
+    const uint8_t* src = d.data() + off;
+    if (codec == uint8_t(TileCodec::kJpeg)) {
+        std::vector<lossy::TilePlace> places;
+        places.reserve(present);
+        for (uint32_t by = 0; by < ty; ++by)
+            for (uint32_t bx = 0; bx < tx; ++bx) {
+                const size_t tile = size_t(by) * tx + bx;
+                if ((mask[tile / 8] >> (tile % 8)) & 1u)
+                    places.push_back({bx * ts, by * ts, std::min<uint32_t>(ts, w - bx * ts),
+                                      std::min<uint32_t>(ts, h - by * ts)});
+            }
+        std::vector<uint8_t> raw(size_t(w) * h * bpp, 0);
+        std::string why = lossy::decode_payload(src, comp_bytes, places, ts, raw.data(), w);
+        if (!why.empty())
+            return why;
+        return raw;
+    }
     const size_t packed_bytes = size_t(present) * tile_bytes;
     std::vector<uint8_t> packed(packed_bytes);
-    const uint8_t* src = d.data() + off;
     switch (TileCodec(codec)) {
         case TileCodec::kNone:
             if (comp_bytes != packed_bytes)
@@ -165,6 +211,8 @@ std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uin
                 return std::string("sparse tiles: zstd data is corrupt");
             break;
         }
+        case TileCodec::kJpeg:
+            break;  // decoded above
     }
     std::vector<uint8_t> raw(size_t(w) * h * bpp, 0);
     size_t k = 0;

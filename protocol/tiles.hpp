@@ -1,6 +1,7 @@
 // The sparse-tiles layer encoding (PROTOCOL.md, "Sparse tiles"): all-zero tiles are skipped
 // (an optical see-through display is additive: black is see-through) and the remaining tiles
-// are compressed with LZ4 or zstd. Lossless.
+// are compressed with LZ4 or zstd (lossless), or, in lossy-tiles layers (encoding 3) of RGBA8,
+// coded as a JPEG with their exact coverage (codec 3, PROTOCOL.md "Lossy tiles").
 #pragma once
 
 #include <climits>
@@ -12,13 +13,18 @@
 
 namespace hs::protocol {
 
-enum class TileCodec : uint8_t { kNone = 0, kLz4 = 1, kZstd = 2 };
+enum class TileCodec : uint8_t { kNone = 0, kLz4 = 1, kZstd = 2, kJpeg = 3 };
 inline constexpr uint16_t kDefaultTileSize = 32;
+// The JPEG quality of codec 3, 1..100 (`hysar serve --layer-quality`).
+inline constexpr int kDefaultLayerQuality = 90;
 
-// Encodes raw pixel bytes (width x height x bytes_per_pixel, rows top to bottom).
+// Encodes raw pixel bytes (width x height x bytes_per_pixel, rows top to bottom). kJpeg, at
+// `quality`, applies to 4 bytes per pixel with a tile size that is a multiple of 16; otherwise,
+// or when its payload would be larger than the tiles themselves, the tiles go out with LZ4.
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t width, uint32_t height,
                                   uint32_t bytes_per_pixel, TileCodec codec,
-                                  uint16_t tile_size = kDefaultTileSize);
+                                  uint16_t tile_size = kDefaultTileSize,
+                                  int quality = kDefaultLayerQuality);
 
 // The tiles that may hold non-zero pixels, in tile units [x0, x1) x [y0, y1): tiles outside are
 // sent absent without being read.
@@ -32,10 +38,10 @@ struct TileRegion {
 void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t width,
                        uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
                        TileRegion region, std::vector<uint8_t>& scratch,
-                       uint16_t tile_size = kDefaultTileSize);
+                       uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality);
 
 // Decodes to raw pixel bytes, or an error sentence; never reads or writes out of bounds,
-// whatever the input.
+// whatever the input. Codec 3 (lossy) is accepted for 4 bytes per pixel.
 std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uint8_t> data,
                                                              uint32_t width, uint32_t height,
                                                              uint32_t bytes_per_pixel);

@@ -29,6 +29,7 @@ static_assert(int(proto::PixelFormat::kRgba8) == HYSAR_FORMAT_RGBA8 &&
               int(proto::PixelFormat::kRgba16f) == HYSAR_FORMAT_RGBA16F &&
               int(proto::Encoding::kRaw) == HYSAR_ENCODING_RAW &&
               int(proto::Encoding::kSparseTiles) == HYSAR_ENCODING_SPARSE &&
+              int(proto::Encoding::kLossyTiles) == HYSAR_ENCODING_LOSSY &&
               int(proto::FrameMode::kContinuous) == HYSAR_MODE_CONTINUOUS);
 
 namespace {
@@ -225,14 +226,14 @@ hysar_status hysar_client_register_display(hysar_client* client, const hysar_dis
         r.eye_width = d->eye_width, r.eye_height = d->eye_height;
         r.fx = d->fx, r.fy = d->fy, r.cx = d->cx, r.cy = d->cy, r.ipd_m = d->ipd_m;
         auto format = enum_value<proto::PixelFormat>(d->format, 1, 2);
-        auto encoding = enum_value<proto::Encoding>(d->encoding, 1, 2);
+        auto encoding = enum_value<proto::Encoding>(d->encoding, 1, 3);
         auto mode = enum_value<proto::FrameMode>(d->mode, 0, 1);
         if (!format)
             return fail(HYSAR_E_INVALID_ARGUMENT,
                         "display.format " + std::to_string(d->format) + " is not 1 or 2");
         if (!encoding)
             return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "display.encoding " + std::to_string(d->encoding) + " is not 1 or 2");
+                        "display.encoding " + std::to_string(d->encoding) + " is not 1, 2 or 3");
         if (!mode)
             return fail(HYSAR_E_INVALID_ARGUMENT,
                         "display.mode " + std::to_string(d->mode) + " is not 0 or 1");

@@ -49,8 +49,10 @@ typedef enum hysar_status {
 enum { HYSAR_ROLE_PROJECTOR = 1, HYSAR_ROLE_HMD = 2 };
 /* RGBA8: sRGB-encoded bytes. RGBA16F: linear radiance as IEEE 754 half floats. */
 enum { HYSAR_FORMAT_RGBA8 = 1, HYSAR_FORMAT_RGBA16F = 2 };
-/* What travels on the wire; the library hands back decoded pixels either way. */
-enum { HYSAR_ENCODING_RAW = 1, HYSAR_ENCODING_SPARSE = 2 };
+/* What travels on the wire; the library hands back decoded pixels either way. LOSSY: sparse
+ * tiles whose RGBA8 colour is JPEG-coded at the server's quality (black stays exactly black;
+ * about a sixth of SPARSE's bytes); RGBA16F layers stay lossless. */
+enum { HYSAR_ENCODING_RAW = 1, HYSAR_ENCODING_SPARSE = 2, HYSAR_ENCODING_LOSSY = 3 };
 /* ON_REQUEST: one layer pair per hysar_client_request_frame(). CONTINUOUS: one per new pose,
  * the newest pose winning when the server is busy. */
 enum { HYSAR_MODE_ON_REQUEST = 0, HYSAR_MODE_CONTINUOUS = 1 };

@@ -91,7 +91,7 @@ Result<ImageRgba8> frame_thumbnail(const std::vector<uint8_t>& frame, uint32_t m
     const uint32_t bpp = p.format == proto::PixelFormat::kRgba8 ? 4 : 8;
     std::vector<uint8_t> tiles;
     const std::vector<uint8_t>* raw = p.data;
-    if (p.encoding == proto::Encoding::kSparseTiles) {
+    if (p.encoding != proto::Encoding::kRaw) {
         auto t = proto::decode_tiles(*p.data, p.width, p.height, bpp);
         if (auto* e = std::get_if<std::string>(&t))
             return make_error(ErrorCode::kInvalidArgument,

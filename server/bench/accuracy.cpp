@@ -100,6 +100,7 @@ struct LayerEncoding {
     protocol::PixelFormat format;
     protocol::Encoding encoding;
     protocol::TileCodec codec;
+    int quality = protocol::kDefaultLayerQuality;  // lossy tiles' JPEG quality (codec 3)
 };
 const LayerEncoding kDefaultEncoding{"f16 tiles+lz4", protocol::PixelFormat::kRgba16f,
                                      protocol::Encoding::kSparseTiles,
@@ -116,7 +117,8 @@ Encoded encode(const ImageRgba32f& img, const LayerEncoding& e, int repeats) {
     for (int r = 0; r < std::max(1, repeats); ++r) {
         const auto t0 = Clock::now();
         auto px = codec::encode_pixels(img, e.format);
-        out.data = codec::encode_layer(px, img.width, img.height, e.format, e.encoding, e.codec);
+        out.data = codec::encode_layer(px, img.width, img.height, e.format, e.encoding, e.codec,
+                                       e.quality);
         t.push_back(ms_since(t0));
     }
     out.ms = median(t);
@@ -126,7 +128,7 @@ Encoded encode(const ImageRgba32f& img, const LayerEncoding& e, int repeats) {
 // What a client shows from the encoded layer (alpha: the coverage of `img`, for the error).
 ImageRgba32f decode(const Encoded& enc, const ImageRgba32f& img, const LayerEncoding& e) {
     std::vector<uint8_t> px = enc.data;
-    if (e.encoding == protocol::Encoding::kSparseTiles) {
+    if (e.encoding != protocol::Encoding::kRaw) {
         const uint32_t bpp = e.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
         auto d = protocol::decode_tiles(enc.data, img.width, img.height, bpp);
         if (!std::holds_alternative<std::vector<uint8_t>>(d))
@@ -389,7 +391,14 @@ Result<void> Sweep::formats_and_encodings(std::vector<AccuracyRow>& rows) {
         {"f16 tiles+zstd", protocol::PixelFormat::kRgba16f, protocol::Encoding::kSparseTiles,
          protocol::TileCodec::kZstd},
         {"srgb8 tiles+zstd", protocol::PixelFormat::kRgba8, protocol::Encoding::kSparseTiles,
-         protocol::TileCodec::kZstd}};
+         protocol::TileCodec::kZstd},
+        // Lossy tiles (`hysar serve --layer-quality`): the quality knob, default 90.
+        {"srgb8 lossy q70", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
+         protocol::TileCodec::kJpeg, 70},
+        {"srgb8 lossy q90", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
+         protocol::TileCodec::kJpeg, 90},
+        {"srgb8 lossy q95", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
+         protocol::TileCodec::kJpeg, 95}};
     auto encoded_row = [&](const std::string& knob, const std::string& setting, bool is_default,
                            const Measured& m, const LayerEncoding& e) {
         AccuracyRow r;
@@ -405,7 +414,7 @@ Result<void> Sweep::formats_and_encodings(std::vector<AccuracyRow>& rows) {
     for (const auto& e : encodings)
         encoded_row("encoding", e.name, e.name == kDefaultEncoding.name, by_format["rgba16f"], e);
     // The combination that matters: a finer render target buys nothing an 8-bit layer drops.
-    const LayerEncoding& srgb8 = encodings.back();
+    const LayerEncoding& srgb8 = encodings[4];  // srgb8 tiles+zstd
     encoded_row("format+encoding", "rgba32f > f16", false, by_format["rgba32f"], kDefaultEncoding);
     encoded_row("format+encoding", "rgba16f > f16", true, by_format["rgba16f"], kDefaultEncoding);
     encoded_row("format+encoding", "rgba16f > srgb8", false, by_format["rgba16f"], srgb8);

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/accuracy.hpp"
+#include "bench/encoding.hpp"
 #include "bench/stability.hpp"
 #include "cli/commands.hpp"
 #include "cli/common.hpp"
@@ -40,7 +41,8 @@ namespace hs::cli {
 namespace {
 
 const char* kBenchHelp =
-    "usage: hysar bench encoding [--repeats N] [--json FILE]\n"
+    "usage: hysar bench encoding [--repeats N] [--json FILE] [--qualities 50,70,85,95]\n"
+    "                            [--moving-frames N] [--quick]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
     "       hysar bench stability [--out DIR] [--no-float64]\n"
@@ -50,9 +52,13 @@ const char* kBenchHelp =
     "             double-precision reference: RMSE, mean CIEDE2000, render and encode ms, bytes;\n"
     "             writes DIR/accuracy.csv, DIR/accuracy.png and .svg (default DIR: out/accuracy)\n"
     "             and prints the table. --quick: a quarter of the resolution, fewer settings\n"
-    "  encoding   VD layers of the default scene (HoloLens resolution, every Fig. 7 model and\n"
-    "             angle): bytes per layer and encode/decode ms for raw and sparse tiles with\n"
-    "             no compression, LZ4 and zstd, in RGBA8 and RGBA16F; medians over N repeats\n"
+    "  encoding   VD layers of the default scene (HoloLens resolution): every Fig. 7 model and\n"
+    "             angle, and a moving headset (N stereo frames at 60 Hz walking around the\n"
+    "             prop, default 60): bytes per eye layer, Mbit/s per headset at 60 Hz, encode\n"
+    "             and decode ms per eye (one core, medians over N repeats) for raw and sparse\n"
+    "             tiles (none, LZ4, zstd; RGBA8 and RGBA16F) and lossy tiles at each quality,\n"
+    "             with mean and max CIEDE2000 over lit pixels and PSNR against the lossless\n"
+    "             RGBA8 layer. --quick: the first model only, 4 moving frames\n"
     "  serve      the served path (an in-process server, N headsets on loopback) against\n"
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
     "             writes DIR/bench-serve.json, DIR/bench-serve.png and .svg (default\n"
@@ -243,25 +249,7 @@ double time_ms(F&& f) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// The layers `hysar bench encoding` encodes: the right eye of the scene's first viewer for every
-// specular preset at every angle of the viewing plan, at its default height.
-std::vector<ImageRgba32f> sample_layers(render::Renderer& renderer, const scene::Scene& s) {
-    const auto& v = s.viewers.front();
-    const auto k = scene::eye_intrinsics(v);
-    std::vector<ImageRgba32f> layers;
-    for (const auto& [name, spec] : s.specular_presets)
-        for (double a : s.viewing.angles_deg) {
-            auto head =
-                scene::viewing_pose(s.viewing, a, s.viewing.heights_m.at(s.viewing.default_height))
-                    .value();
-            auto out = renderer.render_eye(spec, k, scene::eye_poses(head, v.ipd_m)[1]);
-            if (out)
-                layers.push_back(std::move(out->image));
-        }
-    return layers;
-}
-
-int bench_encoding(int repeats, const std::string& json_path) {
+int bench_encoding(const bench::EncodingBenchOptions& o, const std::string& json_path) {
     scene::Scene s = scene::default_scene();
     auto device = gpu::Device::create(gpu::device_info_from_environment());
     if (!device) {
@@ -273,66 +261,50 @@ int bench_encoding(int repeats, const std::string& json_path) {
         std::fprintf(stderr, "hysar bench: %s\n", renderer.error().message.c_str());
         return 1;
     }
+    bench::EncodingBenchOptions opts = o;
+    opts.progress = [](const std::string& line) {
+        std::fprintf(stderr, "%s\n", line.c_str());
+        std::fflush(stderr);
+    };
+    auto rows = bench::run_encoding_bench(*renderer.value(), s, opts);
+    if (!rows) {
+        std::fprintf(stderr, "hysar bench: %s\n", rows.error().message.c_str());
+        return 1;
+    }
     const auto& v = s.viewers.front();
     const auto k = scene::eye_intrinsics(v);
-    const std::vector<ImageRgba32f> layers = sample_layers(*renderer.value(), s);
-    std::printf("%zu VD layers of %ux%u (%s), %d repeats, device %s\n\n", layers.size(), k.width,
-                k.height, v.name.c_str(), repeats, device.value()->name().c_str());
-    std::printf("%-8s %-14s %12s %10s %12s %12s\n", "format", "encoding", "bytes/layer", "ratio",
-                "encode ms", "decode ms");
-    nlohmann::json rows = nlohmann::json::array();
-    struct Variant {
-        const char* name;
-        protocol::Encoding enc;
-        protocol::TileCodec codec;
-    };
-    const Variant variants[] = {
-        {"raw", protocol::Encoding::kRaw, protocol::TileCodec::kNone},
-        {"tiles", protocol::Encoding::kSparseTiles, protocol::TileCodec::kNone},
-        {"tiles+lz4", protocol::Encoding::kSparseTiles, protocol::TileCodec::kLz4},
-        {"tiles+zstd", protocol::Encoding::kSparseTiles, protocol::TileCodec::kZstd}};
-    for (auto fmt : {protocol::PixelFormat::kRgba8, protocol::PixelFormat::kRgba16f}) {
-        const uint32_t bpp = fmt == protocol::PixelFormat::kRgba8 ? 4 : 8;
-        std::vector<std::vector<uint8_t>> raw;
-        std::vector<double> pixel_ms;
-        for (const auto& img : layers)
-            pixel_ms.push_back(time_ms([&] { raw.push_back(codec::encode_pixels(img, fmt)); }));
-        for (const auto& var : variants) {
-            std::vector<double> enc_ms, dec_ms, bytes;
-            for (int r = 0; r < repeats; ++r)
-                for (const auto& px : raw) {
-                    std::vector<uint8_t> data;
-                    enc_ms.push_back(time_ms([&] {
-                        data = codec::encode_layer(px, k.width, k.height, fmt, var.enc, var.codec);
-                    }));
-                    bytes.push_back(double(data.size()));
-                    dec_ms.push_back(time_ms([&] {
-                        if (var.enc == protocol::Encoding::kSparseTiles) {
-                            auto d = protocol::decode_tiles(data, k.width, k.height, bpp);
-                            if (!std::holds_alternative<std::vector<uint8_t>>(d) ||
-                                std::get<std::vector<uint8_t>>(d) != px)
-                                std::fprintf(stderr,
-                                             "hysar bench: a round trip was not lossless\n");
-                        }
-                    }));
-                }
-            const double b = bench::median(bytes), ratio = double(raw.front().size()) / b;
-            const char* fname = fmt == protocol::PixelFormat::kRgba8 ? "rgba8" : "rgba16f";
-            std::printf("%-8s %-14s %12.0f %9.1fx %12.3f %12.3f\n", fname, var.name, b, ratio,
-                        bench::median(enc_ms), bench::median(dec_ms));
-            rows.push_back({{"format", fname},
-                            {"encoding", var.name},
-                            {"bytes_per_layer_median", b},
-                            {"compression_ratio", ratio},
-                            {"encode_ms_median", bench::median(enc_ms)},
-                            {"decode_ms_median", bench::median(dec_ms)},
-                            {"pixel_conversion_ms_median", bench::median(pixel_ms)}});
-        }
+    std::printf("VD layers of %ux%u (%s), %d repeats, device %s\n\n%s", k.width, k.height,
+                v.name.c_str(), o.repeats, device.value()->name().c_str(),
+                bench::encoding_table(rows.value()).c_str());
+    if (json_path.empty())
+        return 0;
+    nlohmann::json js = nlohmann::json::array();
+    for (const auto& r : rows.value())
+        js.push_back({{"views", r.views},
+                      {"format", r.format},
+                      {"encoding", r.encoding},
+                      {"quality", r.quality},
+                      {"layers", r.layers},
+                      {"bytes_per_eye_layer", r.bytes_per_layer},
+                      {"bytes_per_eye_layer_max", r.bytes_per_layer_max},
+                      {"mbit_s_per_headset_60hz", r.mbit_s_60hz},
+                      {"encode_ms_per_eye", r.encode_ms},
+                      {"decode_ms_per_eye", r.decode_ms},
+                      {"de00_mean", r.de00_mean},
+                      {"de00_max", r.de00_max},
+                      {"psnr_db", r.psnr_db ? nlohmann::json(*r.psnr_db) : nlohmann::json()}});
+    std::ofstream f(json_path);
+    if (!(f << nlohmann::json{{"viewer", v.name},
+                              {"eye_width", k.width},
+                              {"eye_height", k.height},
+                              {"repeats", o.repeats},
+                              {"device", device.value()->name()},
+                              {"rows", js}}
+                   .dump(2)
+            << "\n")) {
+        std::fprintf(stderr, "hysar bench: cannot write %s\n", json_path.c_str());
+        return 1;
     }
-    if (!json_path.empty())
-        std::ofstream(json_path) << nlohmann::json{{"layers", layers.size()}, {"rows", rows}}.dump(
-                                        2)
-                                 << "\n";
     return 0;
 }
 
@@ -458,7 +430,8 @@ int bench_offline(const std::string& name, const std::vector<std::string>& args)
     if (name == "stability")
         f = parse_flags(args, {"--out"}, {"--no-float64"});
     else if (name == "encoding")
-        f = parse_flags(args, {"--repeats", "--json"});
+        f = parse_flags(args, {"--repeats", "--json", "--qualities", "--moving-frames"},
+                        {"--quick"});
     else if (name == "accuracy")
         f = parse_flags(args, {"--repeats", "--scene", "--out"}, {"--quick"});
     else {
@@ -478,8 +451,39 @@ int bench_offline(const std::string& name, const std::vector<std::string>& args)
         std::fprintf(stderr, "hysar bench: %s\n", repeats.error().message.c_str());
         return 2;
     }
-    if (name == "encoding")
-        return bench_encoding(int(*repeats), f->get("--json", ""));
+    if (name == "encoding") {
+        bench::EncodingBenchOptions o;
+        o.repeats = int(*repeats);
+        o.quick = f->has("--quick");
+        o.moving_frames = o.quick ? 4 : 60;
+        if (f->has("--moving-frames")) {
+            auto n = parse_number(*f, {"--moving-frames", 0, 3600, NumericFlag::kWhole}, 60);
+            if (!n) {
+                std::fprintf(stderr, "hysar bench: %s\n", n.error().message.c_str());
+                return 2;
+            }
+            o.moving_frames = int(*n);
+        }
+        if (f->has("--qualities")) {
+            o.qualities.clear();
+            const std::string list = f->get("--qualities", "");
+            for (size_t at = 0; at <= list.size();) {
+                const size_t comma = std::min(list.find(',', at), list.size());
+                int q = 0;
+                const auto [end, ec] = std::from_chars(list.data() + at, list.data() + comma, q);
+                if (ec != std::errc() || end != list.data() + comma || q < 1 || q > 100) {
+                    std::fprintf(stderr,
+                                 "hysar bench: --qualities: expected a list of 1..100 such as "
+                                 "50,85, got '%s'\n",
+                                 list.c_str());
+                    return 2;
+                }
+                o.qualities.push_back(q);
+                at = comma + 1;
+            }
+        }
+        return bench_encoding(o, f->get("--json", ""));
+    }
     return bench_accuracy(f->get("--scene", ""), f->get("--out", "out/accuracy"), f->has("--quick"),
                           int(*repeats));
 }

@@ -90,6 +90,8 @@ const char* kServeHelp =
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
     "  --encoder-threads N (0: 1 on lavapipe, half the cores up to 8 on a GPU)\n"
     "  --tile-codec lz4|zstd|none (lz4)\n"
+    "  --layer-quality Q (90): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
+    "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --planning-threads N (0 on lavapipe, cores - 1 up to 7 on a GPU): threads that plan a\n"
     "                      batch's layers beside the render thread\n"
     "\n"
@@ -238,6 +240,7 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--encoder-threads",
                                            "--planning-threads",
                                            "--tile-codec",
+                                           "--layer-quality",
                                            "--calibration",
                                            "--compensation",
                                            "--tls-cert",
@@ -324,6 +327,10 @@ std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
         else
             return usage_error("--tile-codec: expected lz4, zstd or none, got '" + c + "'");
     }
+    if (auto q = parse_count(f, "--layer-quality", uint64_t(info.layer_quality), 1, 100); q)
+        info.layer_quality = int(q.value());
+    else
+        return usage_error(q.error().message);
     if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 0, 64); n)
         info.encoder_threads = uint32_t(n.value());
     else

@@ -54,16 +54,16 @@ uint64_t max_layer_payload_bytes(uint32_t w, uint32_t h, protocol::PixelFormat f
 
 std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h,
                                   protocol::PixelFormat format, protocol::Encoding encoding,
-                                  protocol::TileCodec codec) {
+                                  protocol::TileCodec codec, int quality) {
     if (encoding == protocol::Encoding::kRaw)
         return raw;
-    return protocol::encode_tiles(raw, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8,
-                                  codec);
+    return protocol::encode_tiles(raw, w, h, format == protocol::PixelFormat::kRgba8 ? 4 : 8, codec,
+                                  protocol::kDefaultTileSize, quality);
 }
 
 void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
                        protocol::Encoding encoding, protocol::TileCodec codec,
-                       std::vector<uint8_t>& scratch) {
+                       std::vector<uint8_t>& scratch, int quality) {
     const size_t bpp = px.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
     const uint32_t x1 = std::min(px.x1, px.width), y1 = std::min(px.y1, px.height);
     if (encoding == protocol::Encoding::kRaw) {
@@ -80,7 +80,7 @@ void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
     if (px.x0 >= x1 || px.y0 >= y1)
         region = {0, 0, 0, 0};
     protocol::encode_tiles_into(out, px.data, px.stride, px.width, px.height, uint32_t(bpp), codec,
-                                region, scratch);
+                                region, scratch, protocol::kDefaultTileSize, quality);
 }
 
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h,

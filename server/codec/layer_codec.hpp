@@ -14,10 +14,11 @@ namespace hs::codec {
 // Raw pixel bytes of `image` in `format`: srgb8_pixels or half_pixels (codec/pixels.hpp).
 std::vector<uint8_t> encode_pixels(const ImageRgba32f& image, protocol::PixelFormat format);
 
-// The layer bytes of `raw` pixels in `encoding` (sparse tiles use `codec`).
+// The layer bytes of `raw` pixels in `encoding` (sparse tiles use `codec`, codec 3 `quality`).
 std::vector<uint8_t> encode_layer(const std::vector<uint8_t>& raw, uint32_t width, uint32_t height,
                                   protocol::PixelFormat format, protocol::Encoding encoding,
-                                  protocol::TileCodec codec);
+                                  protocol::TileCodec codec,
+                                  int quality = protocol::kDefaultLayerQuality);
 
 // The most bytes a VdLayer payload of this display can take: its fixed fields and the data in
 // the worst case (raw pixels, or sparse tiles padded to whole tiles with every tile present
@@ -50,7 +51,7 @@ struct LayerPixels {
 // on the tile grid). `scratch` and `out` keep their capacity between calls.
 void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& pixels,
                        protocol::Encoding encoding, protocol::TileCodec codec,
-                       std::vector<uint8_t>& scratch);
+                       std::vector<uint8_t>& scratch, int quality = protocol::kDefaultLayerQuality);
 
 // The inverse of encode_pixels for RGBA16F (exact up to half precision); RGBA8 decodes the
 // sRGB values back to linear. Returns an empty image when the byte count does not fit.

@@ -25,9 +25,10 @@ inline constexpr uint32_t kLayerTile = 32;
 
 // When a headset gets a frame: per request, or for every pose that arrives.
 enum class FrameMode { kOnRequest, kContinuous };
-// How the encoder packs a layer's pixels for the wire: all of them, or the rendered tiles only.
-// Chosen at the door; nothing behind it but the encoder reads it.
-enum class LayerPacking { kRaw, kSparseTiles };
+// How the encoder packs a layer's pixels for the wire: all of them, the rendered tiles only, or
+// the rendered tiles coded lossy (sRGB8 layers; halves stay lossless). Chosen at the door;
+// nothing behind it but the encoder reads it.
+enum class LayerPacking { kRaw, kSparseTiles, kLossyTiles };
 
 // One headset's display: both eyes share its size and intrinsics.
 struct Display {

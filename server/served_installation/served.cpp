@@ -25,7 +25,7 @@ Result<ImageRgba32f> received_drive(const std::vector<uint8_t>& data, uint32_t w
                                     proto::PixelFormat format, proto::Encoding encoding) {
     const uint32_t bpp = format == proto::PixelFormat::kRgba8 ? 4 : 8;
     std::vector<uint8_t> raw;
-    if (encoding == proto::Encoding::kSparseTiles) {
+    if (encoding != proto::Encoding::kRaw) {
         auto d = proto::decode_tiles(data, w, h, bpp);
         if (auto* e = std::get_if<std::string>(&d))
             return make_error(ErrorCode::kParse, "served layer: " + *e);

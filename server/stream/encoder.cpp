@@ -28,8 +28,15 @@ protocol::PixelFormat wire_format(render::LayerEncoding encoding) {
 }
 
 protocol::Encoding wire_encoding(loop::LayerPacking packing) {
-    return packing == loop::LayerPacking::kRaw ? protocol::Encoding::kRaw
-                                               : protocol::Encoding::kSparseTiles;
+    switch (packing) {
+        case loop::LayerPacking::kRaw:
+            return protocol::Encoding::kRaw;
+        case loop::LayerPacking::kSparseTiles:
+            return protocol::Encoding::kSparseTiles;
+        case loop::LayerPacking::kLossyTiles:
+            return protocol::Encoding::kLossyTiles;
+    }
+    return protocol::Encoding::kSparseTiles;
 }
 
 std::vector<uint8_t> BufferPool::take() {
@@ -67,8 +74,12 @@ uint64_t BufferPool::pooled_bytes() const {
 }
 
 Encoder::Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
-                 std::optional<protocol::TileCodec> codec, Done done)
-    : ring_(ring), pool_(std::move(pool)), codec_(codec), done_(std::move(done)) {
+                 std::optional<protocol::TileCodec> codec, Done done, int layer_quality)
+    : ring_(ring),
+      pool_(std::move(pool)),
+      codec_(codec),
+      quality_(std::clamp(layer_quality, 1, 100)),
+      done_(std::move(done)) {
     for (uint32_t i = 0; i < std::max<uint32_t>(threads, 1); ++i)
         threads_.emplace_back([this] { run(); });
 }
@@ -131,10 +142,10 @@ void Encoder::run() {
 
 void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pixels,
                          const calib::LayerDrive* drive, protocol::Encoding encoding,
-                         protocol::TileCodec codec, LayerScratch& scratch) {
+                         protocol::TileCodec codec, LayerScratch& scratch, int quality) {
     const uint32_t x1 = std::min(pixels.x1, pixels.width), y1 = std::min(pixels.y1, pixels.height);
     if (!drive || pixels.x0 >= x1 || pixels.y0 >= y1) {
-        codec::append_layer_data(out, pixels, encoding, codec, scratch.tiles);
+        codec::append_layer_data(out, pixels, encoding, codec, scratch.tiles, quality);
         return;
     }
     // The rectangle through the headset drive, at the same place in a layer-sized buffer, so
@@ -160,7 +171,7 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     codec::LayerPixels driven = pixels;
     driven.data = dst;
     driven.stride = stride;
-    codec::append_layer_data(out, driven, encoding, codec, scratch.tiles);
+    codec::append_layer_data(out, driven, encoding, codec, scratch.tiles, quality);
 }
 
 EncodedFrame Encoder::encode(std::shared_ptr<loop::ViewerFrame> frame,
@@ -190,7 +201,12 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
                             LayerScratch& scratch, EncodedFrame& out) {
     const protocol::PixelFormat format = wire_format(f.encoding);
     const protocol::Encoding encoding = wire_encoding(f.job.display.packing);
-    const protocol::TileCodec codec = codec_.value_or(codec::default_tile_codec(format));
+    // Lossy tiles: sRGB8 layers through codec 3 at the server's quality (RGBA16F ones go
+    // lossless, which encoding 3 allows); the lossless encodings never see codec 3.
+    const protocol::TileCodec codec =
+        encoding == protocol::Encoding::kLossyTiles && format == protocol::PixelFormat::kRgba8
+            ? protocol::TileCodec::kJpeg
+            : codec_.value_or(codec::default_tile_codec(format));
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;
@@ -203,7 +219,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
-            append_served_layer(o, pixels, drive, encoding, codec, scratch);
+            append_served_layer(o, pixels, drive, encoding, codec, scratch, quality_);
             return true;
         });
         if (err) {

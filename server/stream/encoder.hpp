@@ -56,12 +56,13 @@ struct LayerScratch {
 };
 
 // One eye's layer data as the encoder appends it to `out` (after the message's fields):
-// `pixels` in `encoding`, through `drive` first when the server is calibrated (the headset
-// drive of the rendered rectangle, into scratch.driven); `drive` null: the pixels as rendered,
-// at the cost of one pointer test. Thread: the caller's, with its own scratch.
+// `pixels` in `encoding` (codec 3 at `quality`, 1..100), through `drive` first when the server is
+// calibrated (the headset drive of the rendered rectangle, into scratch.driven); `drive` null: the
+// pixels as rendered, at the cost of one pointer test. Thread: the caller's, with its own scratch.
 void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pixels,
                          const calib::LayerDrive* drive, protocol::Encoding encoding,
-                         protocol::TileCodec codec, LayerScratch& scratch);
+                         protocol::TileCodec codec, LayerScratch& scratch,
+                         int quality = protocol::kDefaultLayerQuality);
 
 // The wire's pixel format and layer encoding of loop's domain values (the door's conversions
 // on the way out; session.cpp has the way in).
@@ -88,9 +89,11 @@ class Encoder final : public loop::FrameSink {
 public:
     using Done = std::function<void(EncodedFrame&&)>;
     // `threads` encoder threads; `done` is called on them, once per pushed frame, after the
-    // frame was let go: it hands the result on (a post) and returns.
+    // frame was let go: it hands the result on (a post) and returns. `layer_quality`: codec 3's
+    // quality (1..100) for the layers of headsets that asked for lossy tiles.
     Encoder(const gpu::SubmitRing& ring, std::shared_ptr<BufferPool> pool, uint32_t threads,
-            std::optional<protocol::TileCodec> codec, Done done);
+            std::optional<protocol::TileCodec> codec, Done done,
+            int layer_quality = protocol::kDefaultLayerQuality);
     ~Encoder() override;  // encodes what is queued, then joins
     Encoder(const Encoder&) = delete;
     Encoder& operator=(const Encoder&) = delete;
@@ -114,6 +117,7 @@ private:
     const gpu::SubmitRing& ring_;
     std::shared_ptr<BufferPool> pool_;
     std::optional<protocol::TileCodec> codec_;
+    int quality_;
     Done done_;
     std::mutex mutex_;
     std::condition_variable cv_, idle_;

@@ -31,7 +31,8 @@ std::unique_ptr<loop::FrameSink> Server::Impl::make_sink(const gpu::SubmitRing& 
         ring, buffers, std::max<uint32_t>(encoder_threads, 1), info.tile_codec,
         [this](EncodedFrame&& f) {
             asio::post(io, [this, f = std::move(f)]() mutable { on_encoded(std::move(f)); });
-        });
+        },
+        info.layer_quality);
 }
 
 void Server::Impl::scene_built(loop::SceneVersion v) {

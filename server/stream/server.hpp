@@ -87,6 +87,9 @@ struct ServerCreateInfo {
     uint32_t encoder_threads = 0;
     // The compressor of sparse-tile layers; nullopt: codec::default_tile_codec.
     std::optional<protocol::TileCodec> tile_codec;
+    // The JPEG quality (1..100) of lossy-tile layers, for headsets that register encoding 3
+    // (`hysar serve --layer-quality`); the others get the lossless encodings they ask for.
+    int layer_quality = protocol::kDefaultLayerQuality;
     // Calibrated output (`hysar serve --calibration`, docs/CALIBRATION.md): the projector frame
     // and every rendered VD layer are sent as device drives; a scene whose projector or a
     // headset whose display is not the calibrated size is refused. Null: sent as rendered.

@@ -23,8 +23,9 @@ loop::Display display_of(const proto::RegisterDisplay& d) {
     out.eye = {d.eye_width, d.eye_height, d.fx, d.fy, d.cx, d.cy};
     out.ipd_m = d.ipd_m;
     out.encoding = encoding_of(d.format);
-    out.packing = d.encoding == proto::Encoding::kRaw ? loop::LayerPacking::kRaw
-                                                      : loop::LayerPacking::kSparseTiles;
+    out.packing = d.encoding == proto::Encoding::kRaw          ? loop::LayerPacking::kRaw
+                  : d.encoding == proto::Encoding::kLossyTiles ? loop::LayerPacking::kLossyTiles
+                                                               : loop::LayerPacking::kSparseTiles;
     out.mode = d.mode == proto::FrameMode::kContinuous ? loop::FrameMode::kContinuous
                                                        : loop::FrameMode::kOnRequest;
     return out;

@@ -38,8 +38,8 @@ void decode_as(std::span<const uint8_t> bytes, Side sender) {
     const auto& b = std::get<std::vector<uint8_t>>(again);
     if (b.size() != bytes.size() || std::memcmp(b.data(), bytes.data(), b.size()) != 0)
         fail("round trip changed the bytes of a", to_string(type_of(m)));
-    // Sparse-tile payloads of decoded layers.
-    if (auto* l = std::get_if<VdLayer>(&m); l && l->encoding == Encoding::kSparseTiles)
+    // Sparse-tile and lossy-tile payloads of decoded layers.
+    if (auto* l = std::get_if<VdLayer>(&m); l && l->encoding != Encoding::kRaw)
         (void)decode_tiles(l->data, l->width, l->height, l->format == PixelFormat::kRgba8 ? 4 : 8);
 }
 
@@ -58,8 +58,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
             if (auto* e = std::get_if<DecodeError>(&h); e && e->sequence != seq)
                 fail("a header error lost the sequence", e->message.c_str());
         }
-    // The raw bytes as a tile stream.
+    // The raw bytes as a tile stream, and as one of lossy tiles (codec 3, tile size 16: the
+    // seeds' lossy-tiles-* files) so that mutations reach the JPEG and coverage decoders.
     (void)decode_tiles(bytes, 61, 37, 4);
+    if (size >= 4) {
+        std::vector<uint8_t> lossy(bytes.begin(), bytes.end());
+        lossy[0] = 16, lossy[1] = 0, lossy[2] = uint8_t(TileCodec::kJpeg);
+        (void)decode_tiles(lossy, 61, 37, 4);
+    }
     // UTF-8: sanitizing gives valid UTF-8 and leaves valid UTF-8 alone; truncation keeps it valid.
     const std::string_view text(reinterpret_cast<const char*>(data), size);
     const std::string clean = sanitize_utf8(text);

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "protocol/protocol.hpp"
+#include "protocol/tiles.hpp"
 #include "tests/protocol/corpus.hpp"
 
 using namespace hs::protocol;
@@ -35,6 +36,21 @@ int main(int argc, char** argv) {
         for (size_t i = 0; i < frames.size(); ++i)
             write(std::string("corpus-") + to_string(sender) + "-" + std::to_string(i),
                   frames[i].bytes);
+    }
+    // Lossy tiles of a 61 x 37 layer (the fuzzer's tile-stream size): a few lit discs.
+    for (int seed = 0; seed < 3; ++seed) {
+        std::vector<uint8_t> img(size_t(61) * 37 * 4, 0);
+        for (int y = 0; y < 37; ++y)
+            for (int x = 0; x < 61; ++x) {
+                const int dx = x - 12 - 15 * seed, dy = y - 18;
+                if (dx * dx + dy * dy < 64 + 40 * seed) {
+                    uint8_t* p = &img[(size_t(y) * 61 + x) * 4];
+                    p[0] = uint8_t(200 - dx * dx), p[1] = uint8_t(120 + 5 * dy), p[2] = 60,
+                    p[3] = 255;
+                }
+            }
+        write("lossy-tiles-" + std::to_string(seed),
+              encode_tiles(img, 61, 37, 4, TileCodec::kJpeg, 16, 40 + 20 * seed));
     }
     return 0;
 }

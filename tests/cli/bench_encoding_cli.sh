@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# `hysar bench encoding --quick`: a row per view set, format, encoding and quality, in the table
+# and in the JSON (bytes per eye layer, Mbit/s at 60 Hz, encode and decode ms, CIEDE2000 and
+# PSNR); lossless rows have no error, lossy rows keep black black (the bench checks each
+# lossless round trip) and cost fewer bytes than LZ4 tiles; bad options exit 2 naming the option.
+set -euo pipefail
+hysar="$1/hysar"
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+HYSAR_VALIDATION=1 "$hysar" bench encoding --quick --repeats 1 --qualities 50,90 --moving-frames 2 \
+    --json "$out/enc.json" > "$out/table.txt" 2> "$out/progress.txt"
+grep -q 'lossy q90' "$out/table.txt"
+grep -q '^moving ' "$out/table.txt"
+python3 - "$out/enc.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+rows = d["rows"]
+keys = {"views", "format", "encoding", "quality", "layers", "bytes_per_eye_layer",
+        "mbit_s_per_headset_60hz", "encode_ms_per_eye", "decode_ms_per_eye", "de00_mean",
+        "de00_max", "psnr_db"}
+for r in rows:
+    missing = keys - r.keys()
+    assert not missing, f"row {r} lacks {missing}"
+    assert r["layers"] > 0 and r["bytes_per_eye_layer"] > 0, r
+    assert abs(r["mbit_s_per_headset_60hz"] - r["bytes_per_eye_layer"] * 960 / 1e6) < 1e-6, r
+for views in ("fig7", "moving"):
+    lz4 = [r for r in rows if r["views"] == views and r["format"] == "rgba8" and r["encoding"] == "tiles+lz4"]
+    lossy = {r["quality"]: r for r in rows if r["views"] == views and r["encoding"] == "lossy"}
+    assert len(lz4) == 1 and sorted(lossy) == [50, 90], (views, lossy.keys())
+    assert lz4[0]["de00_mean"] == 0 and lz4[0]["psnr_db"] is None
+    for q, r in lossy.items():
+        assert 0 < r["de00_mean"] <= r["de00_max"], r
+        assert r["psnr_db"] > 30, r
+        assert r["bytes_per_eye_layer"] < lz4[0]["bytes_per_eye_layer"], r
+    assert lossy[50]["bytes_per_eye_layer"] < lossy[90]["bytes_per_eye_layer"]
+    assert lossy[90]["de00_mean"] < lossy[50]["de00_mean"]
+print(f"bench encoding: {len(rows)} rows")
+PY
+for bad in "--qualities 0" "--qualities 50,x" "--moving-frames -1" "--repeats 0"; do
+    # shellcheck disable=SC2086
+    if "$hysar" bench encoding $bad 2> "$out/err.txt"; then echo "'$bad' was accepted"; exit 1; fi
+    grep -q -- "${bad%% *}" "$out/err.txt" || { echo "'$bad': the error does not name the option"; cat "$out/err.txt"; exit 1; }
+done
+echo "bench encoding: rows, JSON and errors as documented"
