@@ -362,5 +362,57 @@ TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
     }
 }
 
+// PROTOCOL.md, "Time": the library measures the clock offset over Ping/Pong (server and client
+// share one steady clock in this process, so the true offset is 0: within 1 ms on loopback) and
+// the pose-to-layer time.
+TEST_F(ClientLib, ClockOffsetWithinAMillisecondOnLoopback) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    hysar_clock clock{};
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < until) {
+        ASSERT_EQ(hysar_client_get_clock(c.get(), &clock), HYSAR_OK);
+        if (clock.samples >= 8)
+            break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_GE(clock.samples, 8u) << "the library pings 8 times when a session begins";
+    EXPECT_GT(clock.round_trip_ns, 0u);
+    EXPECT_LT(clock.round_trip_ns, 100000000u);
+    EXPECT_LT(std::abs(clock.offset_ns), 1000000) << "offset " << clock.offset_ns << " ns";
+    EXPECT_EQ(clock.pose_to_layer_ns, 0u) << "no layer yet";
+}
+
+// A pose sent with a display time gets layers that echo it; one sent without (as every older
+// client does) gets layers without it, as before.
+TEST_F(ClientLib, LayersEchoTheDisplayTimeAndOldPosesAreServedAsBefore) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
+    const uint64_t display_at = hysar_now_ns() + 40000000;
+    for (uint64_t want : {display_at, uint64_t(0)}) {
+        const hysar_pose p = pose(want ? 10 : -10);
+        uint64_t stamp = 0;
+        ASSERT_EQ(hysar_client_send_pose_at(c.get(), &p, want, &stamp), HYSAR_OK)
+            << hysar_last_error();
+        ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+        for (int k = 0; k < 2; ++k) {
+            e = wait_for(c.get(), HYSAR_EVENT_LAYER);
+            ASSERT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+            EXPECT_EQ(e.pose.time_ns, stamp);
+            EXPECT_EQ(hysar_event_display_time_ns(&e), want);
+            hysar_event_release(&e);
+        }
+    }
+    hysar_clock clock{};
+    ASSERT_EQ(hysar_client_get_clock(c.get(), &clock), HYSAR_OK);
+    EXPECT_GT(clock.pose_to_layer_ns, 0u);
+}
+
 }  // namespace
 }  // namespace hs::net_test
