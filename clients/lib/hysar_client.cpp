@@ -435,8 +435,8 @@ uint64_t hysar_next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uin
 
 hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display* display,
                                    const hysar_pose* latest, uint64_t now_ns,
-                                   uint64_t stale_limit_ns, uint32_t filter, uint8_t* dst,
-                                   size_t dst_bytes, uint32_t* cleared) {
+                                   uint64_t stale_limit_ns, double plane_depth_m, uint32_t filter,
+                                   uint8_t* dst, size_t dst_bytes, uint32_t* cleared) {
     return guarded([&] {
         if (!layer || !display || !latest || !dst)
             return fail(HYSAR_E_INVALID_ARGUMENT,
@@ -455,14 +455,26 @@ hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display
               std::isfinite(display->fy) && std::isfinite(display->cx) &&
               std::isfinite(display->cy)))
             return fail(HYSAR_E_INVALID_ARGUMENT, "display intrinsics must be finite, fx, fy > 0");
+        if (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "plane_depth_m " + std::to_string(plane_depth_m) +
+                            " must be finite and >= 0 (0: rotation only)");
         hs::motion::Quat render, now;
+        hs::motion::Vec3 render_at, now_at;
         for (size_t i = 0; i < 4; ++i) {
             render[i] = layer->pose.orientation_wxyz[i];
             now[i] = latest->orientation_wxyz[i];
         }
+        for (size_t i = 0; i < 3; ++i) {
+            render_at[i] = layer->pose.position_m[i];
+            now_at[i] = latest->position_m[i];
+        }
         for (size_t i = 0; i < 4; ++i)
             if (!std::isfinite(now[i]) || !std::isfinite(render[i]))
                 return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is not finite");
+        for (size_t i = 0; i < 3; ++i)
+            if (!std::isfinite(now_at[i]) || !std::isfinite(render_at[i]))
+                return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's position is not finite");
         const auto n2 = [](const hs::motion::Quat& q) {
             return q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
         };
@@ -477,8 +489,12 @@ hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display
             return HYSAR_OK;
         }
         const hs::motion::Pinhole k{display->fx, display->fy, display->cx, display->cy};
+        const int eye = layer->eye == 1 ? 1 : 0;
+        const double ipd = std::isfinite(display->ipd_m) ? display->ipd_m : 0;
         hs::motion::warp(im.pixels, dst, im.width, im.height, im.bytes_per_pixel,
-                         hs::motion::rotation_homography(k, render, now),
+                         hs::motion::plane_homography(
+                             k, hs::motion::eye_pose(render_at, render, ipd, eye),
+                             hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
                          filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
                                                          : hs::motion::Filter::kNearest);
         return HYSAR_OK;

@@ -248,16 +248,20 @@ HYSAR_API uint64_t hysar_next_display_time_ns(uint64_t earliest_ns, double refre
                                               uint64_t vsync_ns);
 
 enum { HYSAR_FILTER_NEAREST = 0, HYSAR_FILTER_BILINEAR = 1 };
-/* Late reprojection on the CPU: warps a LAYER event's image from the orientation it was
- * rendered for (event->pose) to `latest`'s (rotation only: a homography per eye from the
- * display's intrinsics) into dst (dst_bytes >= image.size_bytes, not the event's pixels).
+/* Late reprojection on the CPU: warps a LAYER event's image from the pose it was rendered for
+ * (event->pose, its eye placed by display->ipd_m) to `latest` into dst (dst_bytes >=
+ * image.size_bytes, not the event's pixels). plane_depth_m > 0: the points of a plane facing
+ * the eye at that distance (metres; the prop's, e.g. from the installation's viewing plan) are
+ * put exactly where they belong, the head's translation included; 0: rotation only (a
+ * homography per eye from the display's intrinsics, exact for far points).
  * A layer whose pose is older than stale_limit_ns at now_ns (0: no limit) is cleared to 0
  * (see-through: better nothing than a highlight in the wrong place) and *cleared is 1.
- * BILINEAR needs RGBA8; RGBA16F is warped NEAREST. Cost: docs in README ("Registration"). */
+ * BILINEAR needs RGBA8; RGBA16F is warped NEAREST. Cost: README ("Registration"). */
 HYSAR_API hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display* display,
                                              const hysar_pose* latest, uint64_t now_ns,
-                                             uint64_t stale_limit_ns, uint32_t filter, uint8_t* dst,
-                                             size_t dst_bytes, uint32_t* cleared);
+                                             uint64_t stale_limit_ns, double plane_depth_m,
+                                             uint32_t filter, uint8_t* dst, size_t dst_bytes,
+                                             uint32_t* cleared);
 
 #ifdef __cplusplus
 }

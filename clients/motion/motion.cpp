@@ -198,6 +198,57 @@ std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
     return out;
 }
 
+EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye) {
+    const Vec3 right = rotate(normalized(head), {1, 0, 0});
+    const double side = (eye == 0 ? -0.5 : 0.5) * ipd_m;
+    return {{head_m[0] + side * right[0], head_m[1] + side * right[1], head_m[2] + side * right[2]},
+            normalized(head)};
+}
+
+std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
+                                       const EyePose& display, double depth_m) {
+    if (!(depth_m > 0) || !std::isfinite(depth_m))
+        return rotation_homography(k, render.orientation_wxyz, display.orientation_wxyz);
+    // Render eye (OpenCV axes) to display eye: X_d = A X_r + t with A = S R_d^T R_r S and
+    // t = S R_d^T (p_r - p_d); on the plane n.X_r = d (n = +z) X_d = (A + t n^T / d) X_r.
+    // The pixel map render -> display is K (A + t n^T / d) K^-1; the warp needs its inverse.
+    const Quat rel = multiply(conjugate(display.orientation_wxyz), render.orientation_wxyz);
+    const double w = rel[0], x = rel[1], y = rel[2], z = rel[3];
+    const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                         2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                         2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+    const double s[3] = {1, -1, -1};
+    const Vec3 dp{render.position_m[0] - display.position_m[0],
+                  render.position_m[1] - display.position_m[1],
+                  render.position_m[2] - display.position_m[2]};
+    const Vec3 td = rotate(conjugate(display.orientation_wxyz), dp);
+    const double t[3] = {s[0] * td[0], s[1] * td[1], s[2] * td[2]};
+    double a[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) a[i * 3 + j] = s[i] * r[i * 3 + j] * s[j];
+    for (int i = 0; i < 3; ++i) a[i * 3 + 2] += t[i] / depth_m;
+    const double kk[9] = {k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1};
+    const double ki[9] = {1 / k.fx, 0, -k.cx / k.fx, 0, 1 / k.fy, -k.cy / k.fy, 0, 0, 1};
+    auto mul = [](const double* p, const double* q, double* o) {
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+                o[i * 3 + j] = 0;
+                for (int l = 0; l < 3; ++l) o[i * 3 + j] += p[i * 3 + l] * q[l * 3 + j];
+            }
+    };
+    double tmp[9], m[9];
+    mul(a, ki, tmp);
+    mul(kk, tmp, m);
+    // The inverse by the adjugate (the scale of a homography does not matter).
+    std::array<double, 9> inv{
+        m[4] * m[8] - m[5] * m[7], m[2] * m[7] - m[1] * m[8], m[1] * m[5] - m[2] * m[4],
+        m[5] * m[6] - m[3] * m[8], m[0] * m[8] - m[2] * m[6], m[2] * m[3] - m[0] * m[5],
+        m[3] * m[7] - m[4] * m[6], m[1] * m[6] - m[0] * m[7], m[0] * m[4] - m[1] * m[3]};
+    if (std::abs(inv[8]) > 1e-300)
+        for (double& v : inv) v /= inv[8];  // h[8] = 1: w > 0 in front of the eye
+    return inv;
+}
+
 namespace {
 
 // Nearest-neighbour rows: the source position is computed exactly (one division) every kSpan

@@ -87,6 +87,21 @@ struct Pinhole {
 std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
                                           const Quat& display);
 
+// An eye's pose in the world: position (metres) and orientation (world from head axes).
+struct EyePose {
+    Vec3 position_m{};
+    Quat orientation_wxyz{1, 0, 0, 0};
+};
+// The eye `eye` (0 left, 1 right) of a head pose (PROTOCOL.md §Conventions.Eyes).
+EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye);
+
+// As rotation_homography, and the eye's translation too, for the points of a plane facing the
+// render eye at `depth_m` along its view axis (a plane through the prop): exact for that plane,
+// and far better than a rotation alone when the head moves around a near prop (a walk around it
+// turns the head while the prop stays in view). depth_m <= 0 or not finite: rotation only.
+std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
+                                       const EyePose& display, double depth_m);
+
 enum class Filter { kNearest, kBilinear };
 
 // Warps one eye's layer (tightly packed rows, `bytes_per_pixel` 4: RGBA8, or 8: RGBA16F with

@@ -245,6 +245,34 @@ TEST(Reproject, PureRotationMatchesAFreshRender) {
     }
 }
 
+// The plane homography puts a point of the plane where the display eye sees it, the head's
+// translation and rotation included; without translation it is the rotation homography.
+TEST(Reproject, PlaneHomographyIsExactOnItsPlane) {
+    const EyePose render = eye_pose(kHead, kLook, 0.063, 0);
+    const Quat turned = multiply(from_rotation_vector({0.01, 0.05, 0.002}), kLook);
+    const EyePose display =
+        eye_pose({kHead[0] + 0.04, kHead[1] - 0.01, kHead[2] + 0.02}, turned, 0.063, 0);
+    const double depth = 0.8;
+    // A point on the plane at render pixel (200, 60): X = depth * K^-1 (u, v, 1) (OpenCV axes).
+    const double u = 200, v = 60;
+    const Vec3 cv{(u - kK.cx) / kK.fx * depth, (v - kK.cy) / kK.fy * depth, depth};
+    const Vec3 world_offset = rotate(render.orientation_wxyz, {cv[0], -cv[1], -cv[2]});
+    const Vec3 world{render.position_m[0] + world_offset[0], render.position_m[1] + world_offset[1],
+                     render.position_m[2] + world_offset[2]};
+    const Vec3 rel = rotate(conjugate(display.orientation_wxyz),
+                            {world[0] - display.position_m[0], world[1] - display.position_m[1],
+                             world[2] - display.position_m[2]});
+    const double du = kK.fx * rel[0] / -rel[2] + kK.cx, dv = kK.fy * -rel[1] / -rel[2] + kK.cy;
+    const auto h = plane_homography(kK, render, display, depth);
+    const double w = h[6] * du + h[7] * dv + h[8];
+    EXPECT_NEAR((h[0] * du + h[1] * dv + h[2]) / w, u, 1e-6);
+    EXPECT_NEAR((h[3] * du + h[4] * dv + h[5]) / w, v, 1e-6);
+    // No translation: the rotation homography, up to scale.
+    const auto a = plane_homography(kK, render, {render.position_m, turned}, depth);
+    const auto b = rotation_homography(kK, render.orientation_wxyz, turned);
+    for (size_t i = 0; i < 9; ++i) EXPECT_NEAR(a[i], b[i] / b[8], 1e-9) << i;
+}
+
 // The C API: a LAYER event warped to the latest pose; a stale one is cleared.
 TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
     auto src = render(kHead, kLook);
@@ -258,23 +286,24 @@ TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
     hysar_pose latest = e.pose;
     std::vector<uint8_t> dst(src.size(), 9);
     uint32_t cleared = 7;
-    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 120 * kMs, 50 * kMs, HYSAR_FILTER_NEAREST,
+    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 120 * kMs, 50 * kMs, 0.8, HYSAR_FILTER_NEAREST,
                                     dst.data(), dst.size(), &cleared),
               HYSAR_OK)
         << hysar_last_error();
     EXPECT_EQ(cleared, 0u);
     EXPECT_EQ(dst, src);
-    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 151 * kMs, 50 * kMs, HYSAR_FILTER_BILINEAR,
+    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 151 * kMs, 50 * kMs, 0, HYSAR_FILTER_BILINEAR,
                                     dst.data(), dst.size(), &cleared),
               HYSAR_OK);
     EXPECT_EQ(cleared, 1u);
     EXPECT_EQ(dst, std::vector<uint8_t>(src.size(), 0));
     // Bad arguments name what is wrong.
-    EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, dst.data(), dst.size() - 1, nullptr),
-              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_EQ(
+        hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size() - 1, nullptr),
+        HYSAR_E_INVALID_ARGUMENT);
     EXPECT_NE(std::string(hysar_last_error()).find("dst_bytes"), std::string::npos);
     latest.orientation_wxyz[0] = std::numeric_limits<double>::quiet_NaN();
-    EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, dst.data(), dst.size(), nullptr),
+    EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
               HYSAR_E_INVALID_ARGUMENT);
 }
 
