@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 namespace hs::motion {
 
@@ -253,9 +254,9 @@ namespace {
 
 // Nearest-neighbour rows: the source position is computed exactly (one division) every kSpan
 // pixels and stepped linearly in 16.16 fixed point between (a homography of a few degrees'
-// rotation is affine to well under a thousandth of a pixel over kSpan pixels). T is the pixel
+// rotation is affine to within a hundredth of a pixel over kSpan pixels). T is the pixel
 // (4 or 8 bytes).
-constexpr uint32_t kSpan = 16;
+constexpr uint32_t kSpan = 64;
 
 template <typename T>
 void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uint32_t height,
@@ -263,9 +264,44 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
     const auto* src = reinterpret_cast<const T*>(src_bytes);
     auto* dst = reinterpret_cast<T*>(dst_bytes);
     const double fw = width, fh = height;
+    // A layer is black (see-through) but for the prop's highlight: each source row's lit
+    // columns [first, last], so that a span whose source holds nothing lit is filled with 0
+    // without a gather (kept per thread: no allocation once it is large enough).
+    thread_local std::vector<uint32_t> first, last;
+    first.resize(height), last.resize(height);
+    for (uint32_t y = 0; y < height; ++y) {
+        const T* row = src + size_t(y) * width;
+        uint32_t a = 0, b = width;
+        for (; a + 8 <= width; a += 8) {  // eight at a time through the black
+            T any = 0;
+            for (uint32_t i = 0; i < 8; ++i) any |= row[a + i];
+            if (any)
+                break;
+        }
+        while (a < width && row[a] == T(0)) ++a;
+        while (b > a && row[b - 1] == T(0)) --b;
+        first[y] = a, last[y] = b;  // empty: a == b
+    }
+    // Prefix counts of lit source rows: a destination row whose source rows hold nothing lit
+    // is filled with 0 at once.
+    thread_local std::vector<uint32_t> lit_rows;
+    lit_rows.assign(size_t(height) + 1, 0);
+    for (uint32_t y = 0; y < height; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
     for (uint32_t y = 0; y < height; ++y) {
         T* out = dst + size_t(y) * width;
         const double bx = h[1] * y + h[2], by = h[4] * y + h[5], bw = h[7] * y + h[8];
+        {
+            const double wa = bw, wb = bw + h[6] * (fw - 1);
+            if (wa > 1e-9 && wb > 1e-9) {
+                const double va = by / wa + 0.5, vb = (by + h[3] * (fw - 1)) / wb + 0.5;
+                const double lo = std::max(0.0, std::min(va, vb) - 1);
+                const double hi = std::min(fh - 1, std::max(va, vb) + 1);
+                if (hi < lo || lit_rows[size_t(hi) + 1] == lit_rows[size_t(lo)]) {
+                    std::fill(out, out + width, T(0));
+                    continue;
+                }
+            }
+        }
         for (uint32_t x0 = 0; x0 < width; x0 += kSpan) {
             const uint32_t x1 = std::min(x0 + kSpan, width);
             const double w0 = bw + h[6] * x0, w1 = bw + h[6] * x1;
@@ -288,10 +324,24 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
                 std::fill(out + x0, out + x1, T(0));
                 continue;
             }
+            {
+                const auto ulo = uint32_t(std::max(0.0, lo_u)),
+                           uhi = uint32_t(std::min(fw - 1, hi_u));
+                const auto vlo = uint32_t(std::max(0.0, lo_v - 1)),
+                           vhi = uint32_t(std::min(fh - 1, hi_v + 1));
+                bool lit = false;
+                for (uint32_t r = vlo; r <= vhi && !lit; ++r)
+                    lit = first[r] < last[r] && first[r] <= uhi + 1 && last[r] + 1 >= ulo;
+                if (!lit) {
+                    std::fill(out + x0, out + x1, T(0));
+                    continue;
+                }
+            }
             const double n = x1 - x0;
-            int64_t fu = std::llround(u0 * 65536), fv = std::llround(v0 * 65536);
-            const int64_t du = std::llround((u1 - u0) / n * 65536);
-            const int64_t dv = std::llround((v1 - v0) / n * 65536);
+            // Rounded to 16.16 by hand: std::llround is a library call on baseline x86-64.
+            const auto fixed = [](double v) { return int64_t(v * 65536 + (v < 0 ? -0.5 : 0.5)); };
+            int64_t fu = fixed(u0), fv = fixed(v0);
+            const int64_t du = fixed((u1 - u0) / n), dv = fixed((v1 - v0) / n);
             for (uint32_t x = x0; x < x1; ++x, fu += du, fv += dv) {
                 const int64_t iu = fu >> 16, iv = fv >> 16;  // floor
                 out[x] = uint64_t(iu) < width && uint64_t(iv) < height

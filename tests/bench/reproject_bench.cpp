@@ -3,6 +3,7 @@
 // README's "Registration" section quotes.
 //   build/tests/hs_motion_benchmarks [--benchmark_repetitions=5]
 #include <cmath>
+#include <cstring>
 #include <vector>
 
 #include <benchmark/benchmark.h>
@@ -47,6 +48,20 @@ BENCHMARK(BM_ReprojectStereo)
     ->Args({0, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+// The floor: copying the two eyes as they are (what showing a layer costs without a warp).
+void BM_CopyStereo(benchmark::State& state) {
+    std::vector<uint8_t> src(size_t(kW) * kH * 4, 0), dst[2] = {src, src};
+    for (auto _ : state) {
+        for (auto& d : dst) {
+            std::memcpy(d.data(), src.data(), src.size());
+            benchmark::DoNotOptimize(d.data());
+        }
+        benchmark::ClobberMemory();
+    }
+    state.SetLabel("memcpy RGBA8, 2 x 1268 x 720");
+}
+BENCHMARK(BM_CopyStereo)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 
