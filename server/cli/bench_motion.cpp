@@ -16,7 +16,7 @@ constexpr const char* kMotionHelp =
     "usage: hysar bench motion [--traces walk,turn,nod] [--modes none,predict,reproject,both]\n"
     "                          [--seconds S] [--delay-ms MS] [--refresh-hz HZ] [--scale F]\n"
     "                          [--noise-deg D] [--noise-mm MM] [--reference-frames N]\n"
-    "                          [--profile NAME] [--json FILE] [--quick]\n"
+    "                          [--profile NAME] [--json FILE] [--plot FILE.png] [--quick]\n"
     "\n"
     "  Registration while heads move: a headset through `hysar serve` in-process on loopback\n"
     "  (libhysar-client's session), driven by a head-motion trace sampled by a 500 Hz tracker\n"
@@ -41,6 +41,7 @@ constexpr const char* kMotionHelp =
     "  --profile NAME       a viewer profile of the default scene (default its first)\n"
     "  --json FILE          {\"traces\": {NAME: {MODE: {\"p50_px\", \"p95_px\", \"max_px\",\n"
     "                       \"m2p_p50_ms\", \"m2p_p95_ms\", \"client_ms\", ...}}}}\n"
+    "  --plot FILE.png      the p95 error per trace and mode as a bar chart (and FILE.svg)\n"
     "  --quick              short rows (CI)\n"
     "\n"
     "Example: hysar bench motion --quick --traces turn --json out/motion.json\n";
@@ -70,11 +71,11 @@ Result<std::vector<std::string>> words(const Flags& f, const char* flag,
 
 Result<bench::MotionBenchOptions> parse(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
-        Flags f,
-        parse_flags(args,
-                    {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz", "--scale",
-                     "--noise-deg", "--noise-mm", "--reference-frames", "--profile", "--json"},
-                    {"--quick"}));
+        Flags f, parse_flags(args,
+                             {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz",
+                              "--scale", "--noise-deg", "--noise-mm", "--reference-frames",
+                              "--profile", "--json", "--plot"},
+                             {"--quick"}));
     bench::MotionBenchOptions o;
     const std::vector<std::string> traces(std::begin(bench::kMotionTraces),
                                           std::end(bench::kMotionTraces));
@@ -94,6 +95,7 @@ Result<bench::MotionBenchOptions> parse(const std::vector<std::string>& args) {
     o.reference_frames = int(refs);
     o.profile = f.get("--profile", "");
     o.json_path = f.get("--json", "");
+    o.plot_path = f.get("--plot", "");
     o.quick = f.has("--quick");
     return o;
 }

@@ -17,6 +17,8 @@
 
 #include "clients/motion/motion.hpp"
 #include "clients/session/session.hpp"
+#include "plot/figure.hpp"
+#include "plot/plot.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 #include "stream/loopback.hpp"
@@ -463,6 +465,31 @@ int run_motion_bench(const MotionBenchOptions& in) {
         f << j.dump(2) << "\n";
         if (!f) {
             std::fprintf(stderr, "hysar bench motion: cannot write %s\n", o.json_path.c_str());
+            return 1;
+        }
+    }
+    if (!o.plot_path.empty()) {
+        // p95 highlight error per trace (groups) and mode (bars).
+        const Rgb colours[] = {{90, 90, 90}, {66, 133, 244}, {219, 68, 55}, {15, 157, 88}};
+        std::vector<BarSeries> series;
+        for (size_t m = 0; m < o.modes.size(); ++m) {
+            BarSeries b;
+            b.name = o.modes[m];
+            b.colour = colours[m % 4];
+            for (const auto& t : o.traces)
+                for (const auto& r : rows)
+                    if (r.trace == t && r.mode == o.modes[m]) {
+                        b.values.push_back(std::max(r.p95_px, 0.1));
+                        b.errors.push_back(0);
+                    }
+            series.push_back(std::move(b));
+        }
+        PlotOptions po;
+        po.title = fmt::format("p95 highlight error, {} {:.0f} Hz", profile->name, o.refresh_hz);
+        po.y_label = "profile pixels";
+        po.width = 640;
+        if (auto w = write_figure(o.plot_path, bar_plot(o.traces, series, po)); !w) {
+            std::fprintf(stderr, "hysar bench motion: %s\n", w.error().message.c_str());
             return 1;
         }
     }

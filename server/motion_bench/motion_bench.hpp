@@ -30,6 +30,7 @@ struct MotionBenchOptions {
     int reference_frames = 60;  // displayed frames compared with a fresh render, per row
     std::string profile;        // the scene's viewer profile; empty: the scene's first
     std::string json_path;      // --json FILE; empty: none
+    std::string plot_path;      // --plot FILE.png (and .svg beside it); empty: none
     bool quick = false;         // 2 s per row and 20 reference frames
 };
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # `hysar bench motion --quick`: checks that the command works end to end, never an accuracy or a
 # speed. One short trace in two modes: the JSON has the documented keys with finite values,
-# layers were shown and compared; bad flags exit 2 with one line naming them.
+# layers were shown and compared, the plot is written; bad flags exit 2 with one line naming them.
 set -euo pipefail
 hysar="$1/hysar"
 out=$(mktemp -d)
@@ -10,6 +10,7 @@ command -v python3 > /dev/null || { echo "python3 is needed to read the JSON"; e
 
 if ! "$hysar" bench motion --quick --traces turn --modes none,both --seconds 1.5 \
         --reference-frames 6 --scale 0.25 --delay-ms 5 --json "$out/motion.json" \
+        --plot "$out/motion.png" \
         > "$out/table.txt" 2> "$out/progress.txt"; then
     cat "$out/progress.txt" "$out/table.txt"
     exit 1
@@ -28,6 +29,7 @@ for name, r in modes.items():
 print("bench motion: JSON as documented")
 PY
 grep -q '^turn' "$out/table.txt" || { cat "$out/table.txt"; exit 1; }
+[[ -s "$out/motion.png" && -s "$out/motion.svg" ]] || { echo "no plot written"; exit 1; }
 
 for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" "--frobnicate"; do
     set +e
