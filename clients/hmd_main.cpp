@@ -32,7 +32,8 @@ static const std::string kUsage =
         "SRC]\n"
         "                 [--distance M] [--height M] [--frames N] [--stale-ms MS]\n"
         "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse|lossy]\n"
-        "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS]\n"
+        "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS] "
+        "[--reproject]\n"
         "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
         "                 [--retries N] [--backoff-ms MS]\n"
         "                 [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
@@ -64,6 +65,9 @@ static const std::string kUsage =
         "  --clear-after-ms MS  with --window: show black (see-through) when no new layer came\n"
         "                   for MS, or the connection is lost (1..600000, default 1000): better\n"
         "                   nothing than a highlight in the wrong place\n"
+        "  --reproject      with --window: warp each layer from the pose it was rendered for to\n"
+        "                   the newest pose sent before showing it (libhysar-client's late\n"
+        "                   reprojection, rotation only)\n"
         "  --summary FILE   also write the run's figures as JSON\n"
         "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
         "                   --profile, with a message; two different ones: an error naming both)\n"
@@ -101,14 +105,16 @@ struct Step {
 class Run {
 public:
     Run(hysar_client* client, const proto::RegisterDisplay& display, std::string name,
-        std::filesystem::path out, bool write_layers, ImageWindow* window, int clear_after_ms)
+        std::filesystem::path out, bool write_layers, ImageWindow* window, int clear_after_ms,
+        bool reproject = false)
         : client_(client),
           display_(display),
           name_(std::move(name)),
           out_(std::move(out)),
           write_layers_(write_layers),
           window_(window),
-          clear_after_(std::chrono::milliseconds(clear_after_ms)) {
+          clear_after_(std::chrono::milliseconds(clear_after_ms)),
+          reproject_(reproject) {
         if (window_)
             side_by_side_.assign(size_t(display.eye_width) * 2 * display.eye_height * 4, 0);
     }
@@ -125,6 +131,8 @@ public:
             return 0;
         }
         labels_[stamp] = label;
+        newest_ = p;
+        newest_.time_ns = stamp;
         if (labels_.size() > 1024)
             labels_.erase(labels_.begin());
         last_sent_ = stamp;
@@ -222,10 +230,21 @@ private:
         if (window_ && e.eye <= 1 && format == proto::PixelFormat::kRgba8 &&
             im.width == display_.eye_width && im.height == display_.eye_height) {
             const size_t row = size_t(im.width) * 4;
+            const uint8_t* pixels = im.pixels;
+            if (reproject_ && newest_.time_ns != 0) {
+                // Late reprojection: the layer as the newest pose sees it (--clear-after-ms
+                // clears stale ones, so no stale limit here).
+                warped_.resize(im.size_bytes);
+                const hysar_display d = to_c(display_);
+                if (hysar_reproject_layer(&e, &d, &newest_, hysar_now_ns(), 0, 0,
+                                          HYSAR_FILTER_NEAREST, warped_.data(), warped_.size(),
+                                          nullptr) == HYSAR_OK)
+                    pixels = warped_.data();
+            }
             for (uint32_t y = 0; y < im.height; ++y)
                 for (size_t i = 0; i < row; ++i)
                     side_by_side_[(size_t(y) * 2 * im.width) * 4 + e.eye * row + i] =
-                        i % 4 == 3 ? 255 : im.pixels[y * row + i];
+                        i % 4 == 3 ? 255 : pixels[y * row + i];
             if (e.eye == 1) {
                 window_->show(side_by_side_, 2 * im.width, im.height);
                 shown_ = std::chrono::steady_clock::now();
@@ -262,6 +281,9 @@ private:
     const bool write_layers_;
     ImageWindow* window_;
     const std::chrono::steady_clock::duration clear_after_;
+    const bool reproject_;
+    hysar_pose newest_{};          // the newest pose sent (time_ns 0: none yet)
+    std::vector<uint8_t> warped_;  // --reproject: the warped eye
     std::chrono::steady_clock::time_point shown_ = std::chrono::steady_clock::now();
     bool cleared_ = true;  // nothing shown yet
     std::vector<uint8_t> side_by_side_;
@@ -509,7 +531,7 @@ int hmd_main(int argc, char** argv) {
               "--target",       "--format",        "--encoding",      "--name",     "--out",
               "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
               "--device-table", "--watch-devices", "--clear-after-ms"}),
-        with(kConnectionFlags, {"--window", "--list-devices"}), kUsage.c_str(),
+        with(kConnectionFlags, {"--window", "--list-devices", "--reproject"}), kUsage.c_str(),
         HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile = profile_option(args);
@@ -530,6 +552,8 @@ int hmd_main(int argc, char** argv) {
     if (!args.has("--window") && args.has("--clear-after-ms"))
         args.fail("--clear-after-ms goes with --window");
     const int clear_after_ms = int(args.integer("--clear-after-ms", 1000, 1, 600000));
+    if (!args.has("--window") && args.has("--reproject"))
+        args.fail("--reproject goes with --window");
     const std::vector<Step> steps = read_steps(args, live);
     const std::filesystem::path out = args.get("--out", "out/hmd");
     if (auto err = make_output_dir(out.string()))
@@ -567,7 +591,8 @@ int hmd_main(int argc, char** argv) {
         return 1;
     }
     stop_on_signals();
-    Run run(client, display, name, out, stills || args.has("--out"), window.get(), clear_after_ms);
+    Run run(client, display, name, out, stills || args.has("--out"), window.get(), clear_after_ms,
+            args.has("--reproject"));
     const int rc = live     ? follow_live_poses(run, *source, mode.frame_limit, mode.stale_ms)
                    : stills ? play_stills(run, steps, mode.frame_limit, client)
                             : play_trajectory(run, steps, mode.frame_limit);

@@ -211,6 +211,10 @@ template <typename M, typename F>
 size_t wire_bytes(const M&, const F& f) {
     return schema::min_bytes(f);
 }
+template <typename M, typename V>
+size_t wire_bytes(const M& m, const Uint<M, V>& f) {
+    return f.tail && m.*f.member == 0 ? 0 : sizeof(V);
+}
 template <typename M, typename Len>
 size_t wire_bytes(const M& m, const Str<M, Len>& f) {
     return sizeof(Len) + (m.*f.member).size();
@@ -246,7 +250,17 @@ public:
 
 template <typename M, typename V>
 void write(Writer& w, const M& m, const Uint<M, V>& f) {
-    w.put<V>(m.*f.member);
+    if (!f.tail || m.*f.member != 0)
+        w.put<V>(m.*f.member);
+}
+// Whether a field is an optional tail (written after a VdLayer's data).
+template <typename F>
+bool is_tail(const F&) {
+    return false;
+}
+template <typename M, typename V>
+bool is_tail(const Uint<M, V>& f) {
+    return f.tail;
 }
 template <typename M>
 void write(Writer& w, const M& m, const F64<M>& f) {
@@ -306,6 +320,7 @@ public:
         pos_ += n;
         return s;
     }
+    size_t left() const { return b_.size() - pos_; }
     bool done() {
         if (pos_ != b_.size())
             return fail(std::to_string(b_.size() - pos_) +
@@ -332,6 +347,11 @@ Where where(const F& f) {
 
 template <typename M, typename V>
 bool read(Reader& r, M& m, const Uint<M, V>& f) {
+    if (f.tail && r.left() == 0)
+        return true;  // an older peer's payload: the default stays
+    if (f.tail && r.left() < sizeof(V))
+        return r.fail(std::to_string(r.left()) + " trailing byte(s) after the last field (" +
+                      where<M>(f).str() + ", optional, takes " + std::to_string(sizeof(V)) + ")");
     return r.get(m.*f.member, where<M>(f));
 }
 template <typename M>
@@ -494,12 +514,20 @@ std::optional<EncodeError> encode_vd_layer_into(
     w.put<uint16_t>(uint16_t(I::type));
     w.put<uint32_t>(0);  // payload length, patched below
     w.put(sequence);
-    std::apply([&](const auto&... f) { (write(w, m, f), ...); }, I::fields);
+    const auto write_if = [&](bool tails) {
+        std::apply(
+            [&](const auto&... f) { ((is_tail(f) == tails ? write(w, m, f) : void()), ...); },
+            I::fields);
+    };
+    write_if(false);
     out = std::move(w.out);
     const size_t data_at = out.size();  // the data's u32 length is the last field written
     if (!fill(out))
         return EncodeError{"VdLayer: the layer data could not be encoded"};
     const size_t data_bytes = out.size() - data_at;
+    w.out = std::move(out);
+    write_if(true);  // the optional tail follows the data
+    out = std::move(w.out);
     const size_t payload = out.size() - kHeaderBytes;
     if (payload > I::max_payload)
         return EncodeError{too_large(I::name, payload, I::max_payload)};

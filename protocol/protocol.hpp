@@ -87,6 +87,7 @@ struct Header {
 #define HS_U16(name, init) uint16_t name = init;
 #define HS_U32(name, init) uint32_t name = init;
 #define HS_U64(name, init) uint64_t name = init;
+#define HS_U64_TAIL(name, init) uint64_t name = init;
 #define HS_F64(name, init) double name = init;
 #define HS_F64S(name, count, ...) std::array<double, count> name{__VA_ARGS__};
 #define HS_ENUM8(name, type, init) type name = init;

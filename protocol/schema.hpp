@@ -26,6 +26,8 @@ struct Uint {  // V on the wire; a value above `max` is malformed
     V M::*member;
     const char* name;
     V max;
+    // Only a message's last field: omitted when 0, and 0 when the payload ends before it.
+    bool tail = false;
 };
 template <typename M>
 struct F64 {
@@ -90,6 +92,7 @@ struct Info;
 #define HS_U16(name, init) Uint<M, uint16_t>{&M::name, #name, 0xffff},
 #define HS_U32(name, init) Uint<M, uint32_t>{&M::name, #name, 0xffffffffu},
 #define HS_U64(name, init) Uint<M, uint64_t>{&M::name, #name, ~uint64_t(0)},
+#define HS_U64_TAIL(name, init) Uint<M, uint64_t>{&M::name, #name, ~uint64_t(0), true},
 #define HS_F64(name, init) F64<M>{&M::name, #name},
 #define HS_F64S(name, count, ...) F64s<M, count>{&M::name, #name},
 #define HS_ENUM8(name, type, init) Enum<M, type, uint8_t, true>{&M::name, #name, #type},
@@ -101,8 +104,8 @@ struct Info;
 #include "protocol/messages.def"
 #include "protocol/messages_end.def"
 
-// Bytes a field takes on the wire when empty (a string or byte array: its length prefix) and at
-// most (nullopt: bounded only by the payload limit).
+// Bytes a field takes on the wire when empty (a string or byte array: its length prefix; a tail
+// counts as present) and at most (nullopt: bounded only by the payload limit).
 template <typename M, typename V>
 constexpr size_t min_bytes(const Uint<M, V>&) {
     return sizeof(V);

@@ -3,10 +3,12 @@
 #include "clients/lib/hysar_client.h"
 
 #include <cmath>
+#include <cstring>
 #include <new>
 #include <string>
 
 #include "clients/common/common.hpp"
+#include "clients/motion/motion.hpp"
 #include "clients/session/session.hpp"
 
 namespace proto = hs::protocol;
@@ -16,6 +18,10 @@ using hs::client::SessionEvent;
 
 struct hysar_client {
     std::unique_ptr<Session> session;
+};
+
+struct hysar_predictor {
+    hs::motion::Predictor predictor;
 };
 
 static_assert(int(SessionEvent::Kind::kConnected) == HYSAR_EVENT_CONNECTED &&
@@ -319,6 +325,179 @@ hysar_status hysar_client_get_info(hysar_client* client, hysar_client_info* out)
         const auto i = client->session->info();
         *out = hysar_client_info{i.connected ? 1u : 0u, i.session_id,     i.scene_version,
                                  i.reconnects,          i.images_dropped, i.bytes_received};
+        return HYSAR_OK;
+    });
+}
+
+hysar_status hysar_client_get_clock(hysar_client* client, hysar_clock* out) {
+    return guarded([&] {
+        if (!client || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and out must not be NULL");
+        const auto c = client->session->clock();
+        *out = hysar_clock{c.samples, 0, c.offset_ns, c.round_trip_ns, c.pose_to_layer_ns};
+        return HYSAR_OK;
+    });
+}
+
+hysar_status hysar_client_send_pose_at(hysar_client* client, const hysar_pose* pose,
+                                       uint64_t display_time_ns, uint64_t* sent_time_ns) {
+    return guarded([&] {
+        if (!client || !pose)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "client and pose must not be NULL");
+        proto::Pose p = to_proto(*pose);
+        p.display_time_ns = display_time_ns;
+        const hysar_status s = from_session(client->session->send_pose(p));
+        if (s == HYSAR_OK && sent_time_ns)
+            *sent_time_ns = p.client_time_ns;
+        return s;
+    });
+}
+
+uint64_t hysar_event_display_time_ns(const hysar_event* event) {
+    if (!event || event->kind != HYSAR_EVENT_LAYER || !event->internal_)
+        return 0;
+    return static_cast<const SessionEvent*>(event->internal_)->pose.display_time_ns;
+}
+
+void hysar_predictor_config_init(hysar_predictor_config* config) {
+    if (!config)
+        return;
+    const hs::motion::PredictorConfig d;
+    *config = hysar_predictor_config{sizeof(hysar_predictor_config),
+                                     0,
+                                     d.window_ms,
+                                     d.filter_ms,
+                                     d.max_horizon_ms,
+                                     d.max_angle_deg,
+                                     d.max_distance_m};
+}
+
+hysar_status hysar_predictor_create(const hysar_predictor_config* config, hysar_predictor** out) {
+    return guarded([&] {
+        if (!out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "out must not be NULL");
+        *out = nullptr;
+        hs::motion::PredictorConfig c;
+        if (config) {
+            if (config->struct_size != sizeof(hysar_predictor_config))
+                return fail(HYSAR_E_INVALID_ARGUMENT,
+                            "predictor config struct_size " + std::to_string(config->struct_size) +
+                                " is not " + std::to_string(sizeof(hysar_predictor_config)) +
+                                " (call hysar_predictor_config_init)");
+            c = {config->window_ms, config->filter_ms, config->max_horizon_ms,
+                 config->max_angle_deg, config->max_distance_m};
+        }
+        if (auto bad = hs::motion::check(c))
+            return fail(HYSAR_E_INVALID_ARGUMENT, *bad);
+        *out = new hysar_predictor{hs::motion::Predictor(c)};
+        return HYSAR_OK;
+    });
+}
+
+void hysar_predictor_destroy(hysar_predictor* predictor) {
+    delete predictor;
+}
+
+hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample) {
+    return guarded([&] {
+        if (!predictor || !sample)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "predictor and sample must not be NULL");
+        hs::motion::PoseSample s;
+        s.time_ns = sample->time_ns;
+        for (size_t i = 0; i < 3; ++i) s.position_m[i] = sample->position_m[i];
+        for (size_t i = 0; i < 4; ++i) s.orientation_wxyz[i] = sample->orientation_wxyz[i];
+        if (!predictor->predictor.add(s))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "pose sample refused: a non-finite number, a zero quaternion, or a "
+                        "time_ns not after the newest sample's");
+        return HYSAR_OK;
+    });
+}
+
+hysar_status hysar_predictor_predict(const hysar_predictor* predictor, uint64_t display_time_ns,
+                                     hysar_pose* out) {
+    return guarded([&] {
+        if (!predictor || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "predictor and out must not be NULL");
+        const auto p = predictor->predictor.predict(display_time_ns);
+        if (!p)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "the predictor has no sample yet");
+        const auto newest = predictor->predictor.predict(0);
+        out->time_ns = newest->time_ns;
+        for (size_t i = 0; i < 3; ++i) out->position_m[i] = p->position_m[i];
+        for (size_t i = 0; i < 4; ++i) out->orientation_wxyz[i] = p->orientation_wxyz[i];
+        return HYSAR_OK;
+    });
+}
+
+uint64_t hysar_next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uint64_t vsync_ns) {
+    return hs::motion::next_display_time_ns(earliest_ns, refresh_hz, vsync_ns);
+}
+
+hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display* display,
+                                   const hysar_pose* latest, uint64_t now_ns,
+                                   uint64_t stale_limit_ns, double plane_depth_m, uint32_t filter,
+                                   uint8_t* dst, size_t dst_bytes, uint32_t* cleared) {
+    return guarded([&] {
+        if (!layer || !display || !latest || !dst)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "layer, display, latest and dst must not be NULL");
+        if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
+        const hysar_image& im = layer->image;
+        if (dst_bytes < im.size_bytes)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "dst_bytes " + std::to_string(dst_bytes) +
+                                                      " is less than the image's " +
+                                                      std::to_string(im.size_bytes));
+        if (filter > HYSAR_FILTER_BILINEAR)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "filter " + std::to_string(filter) + " is not 0 (nearest) or 1 (bilinear)");
+        if (!(display->fx > 0 && display->fy > 0 && std::isfinite(display->fx) &&
+              std::isfinite(display->fy) && std::isfinite(display->cx) &&
+              std::isfinite(display->cy)))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "display intrinsics must be finite, fx, fy > 0");
+        if (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "plane_depth_m " + std::to_string(plane_depth_m) +
+                            " must be finite and >= 0 (0: rotation only)");
+        hs::motion::Quat render, now;
+        hs::motion::Vec3 render_at, now_at;
+        for (size_t i = 0; i < 4; ++i) {
+            render[i] = layer->pose.orientation_wxyz[i];
+            now[i] = latest->orientation_wxyz[i];
+        }
+        for (size_t i = 0; i < 3; ++i) {
+            render_at[i] = layer->pose.position_m[i];
+            now_at[i] = latest->position_m[i];
+        }
+        for (size_t i = 0; i < 4; ++i)
+            if (!std::isfinite(now[i]) || !std::isfinite(render[i]))
+                return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is not finite");
+        for (size_t i = 0; i < 3; ++i)
+            if (!std::isfinite(now_at[i]) || !std::isfinite(render_at[i]))
+                return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's position is not finite");
+        const auto n2 = [](const hs::motion::Quat& q) {
+            return q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+        };
+        if (!(n2(render) > 1e-12) || !(n2(now) > 1e-12))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is zero");
+        const bool stale = stale_limit_ns != 0 && now_ns > layer->pose.time_ns &&
+                           now_ns - layer->pose.time_ns > stale_limit_ns;
+        if (cleared)
+            *cleared = stale ? 1 : 0;
+        if (stale) {
+            std::memset(dst, 0, im.size_bytes);
+            return HYSAR_OK;
+        }
+        const hs::motion::Pinhole k{display->fx, display->fy, display->cx, display->cy};
+        const int eye = layer->eye == 1 ? 1 : 0;
+        const double ipd = std::isfinite(display->ipd_m) ? display->ipd_m : 0;
+        hs::motion::warp(im.pixels, dst, im.width, im.height, im.bytes_per_pixel,
+                         hs::motion::plane_homography(
+                             k, hs::motion::eye_pose(render_at, render, ipd, eye),
+                             hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
+                         filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
+                                                         : hs::motion::Filter::kNearest);
         return HYSAR_OK;
     });
 }

@@ -193,6 +193,78 @@ HYSAR_API void hysar_event_release(hysar_event* event);
 
 HYSAR_API hysar_status hysar_client_get_info(hysar_client* client, hysar_client_info* out);
 
+/* ---- Time, prediction and late reprojection (library 1.2, added functions only;
+ * protocol/PROTOCOL.md, "Time") ----
+ *
+ * A headset's loop: sample the tracker and hysar_predictor_add() every sample; pick the display
+ * time with hysar_next_display_time_ns(now + clock.pose_to_layer_ns, refresh, vsync); send
+ * hysar_predictor_predict() of it with hysar_client_send_pose_at(); just before each refresh,
+ * hysar_reproject_layer() the newest layer pair to the newest predicted pose and show that. */
+
+/* The clock and latency the library measured this session. */
+typedef struct hysar_clock {
+    uint32_t samples; /* Ping/Pong samples this session (0: none yet) */
+    uint32_t reserved_;
+    int64_t offset_ns;         /* server clock - client clock, of the shortest round trip of the
+                                  last 16 samples */
+    uint64_t round_trip_ns;    /* that sample's round trip */
+    uint64_t pose_to_layer_ns; /* median, over the last 32 layers, of the time from a pose's
+                                  time_ns to its layer's arrival (0: no layer yet) */
+} hysar_clock;
+HYSAR_API hysar_status hysar_client_get_clock(hysar_client* client, hysar_clock* out);
+
+/* As hysar_client_send_pose, and the pose says the display (photon) time it is for, on the
+ * clock of hysar_now_ns (0: none, as hysar_client_send_pose). The pose should be the one
+ * predicted for that time: the server renders it as it is. */
+HYSAR_API hysar_status hysar_client_send_pose_at(hysar_client* client, const hysar_pose* pose,
+                                                 uint64_t display_time_ns, uint64_t* sent_time_ns);
+/* A LAYER event's display time (the one its pose was sent with); 0 when none or not a layer. */
+HYSAR_API uint64_t hysar_event_display_time_ns(const hysar_event* event);
+
+typedef struct hysar_predictor hysar_predictor;
+typedef struct hysar_predictor_config {
+    uint32_t struct_size; /* sizeof(hysar_predictor_config) */
+    uint32_t reserved_;
+    double window_ms;      /* velocities over the samples of the last window_ms (default 40) */
+    double filter_ms;      /* their exponential filter's time constant, 0: none (default 20) */
+    double max_horizon_ms; /* extrapolate at most this far past the newest sample (default 100) */
+    double max_angle_deg;  /* ... nor turn further (default 30) */
+    double max_distance_m; /* ... nor move further (default 0.3) */
+} hysar_predictor_config;
+HYSAR_API void hysar_predictor_config_init(hysar_predictor_config* config);
+/* config NULL: the defaults. */
+HYSAR_API hysar_status hysar_predictor_create(const hysar_predictor_config* config,
+                                              hysar_predictor** out);
+HYSAR_API void hysar_predictor_destroy(hysar_predictor* predictor);
+/* A tracker sample (time_ns must be set). One with a non-finite number, a zero quaternion or a
+ * time not after the newest is refused (HYSAR_E_INVALID_ARGUMENT) and changes nothing. */
+HYSAR_API hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample);
+/* The pose predicted for display_time_ns (constant angular and linear velocity, filtered,
+ * capped); its time_ns is the newest sample's, so a layer's pose says when it was sampled.
+ * HYSAR_E_INVALID_ARGUMENT before the first sample. */
+HYSAR_API hysar_status hysar_predictor_predict(const hysar_predictor* predictor,
+                                               uint64_t display_time_ns, hysar_pose* out);
+/* The first refresh at or after earliest_ns of a display whose refreshes fall at
+ * vsync_ns + k / refresh_hz; earliest_ns itself when refresh_hz <= 0. */
+HYSAR_API uint64_t hysar_next_display_time_ns(uint64_t earliest_ns, double refresh_hz,
+                                              uint64_t vsync_ns);
+
+enum { HYSAR_FILTER_NEAREST = 0, HYSAR_FILTER_BILINEAR = 1 };
+/* Late reprojection on the CPU: warps a LAYER event's image from the pose it was rendered for
+ * (event->pose, its eye placed by display->ipd_m) to `latest` into dst (dst_bytes >=
+ * image.size_bytes, not the event's pixels). plane_depth_m > 0: the points of a plane facing
+ * the eye at that distance (metres; the prop's, e.g. from the installation's viewing plan) are
+ * put exactly where they belong, the head's translation included; 0: rotation only (a
+ * homography per eye from the display's intrinsics, exact for far points).
+ * A layer whose pose is older than stale_limit_ns at now_ns (0: no limit) is cleared to 0
+ * (see-through: better nothing than a highlight in the wrong place) and *cleared is 1.
+ * BILINEAR needs RGBA8; RGBA16F is warped NEAREST. Cost: README ("Registration"). */
+HYSAR_API hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display* display,
+                                             const hysar_pose* latest, uint64_t now_ns,
+                                             uint64_t stale_limit_ns, double plane_depth_m,
+                                             uint32_t filter, uint8_t* dst, size_t dst_bytes,
+                                             uint32_t* cleared);
+
 #ifdef __cplusplus
 }
 #endif

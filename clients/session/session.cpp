@@ -20,6 +20,10 @@ namespace {
 
 constexpr size_t kMaxControlEvents = 256;  // events that carry no image, kept at most
 constexpr size_t kKeptPoses = 256;         // sent poses remembered for the layers' pose field
+constexpr size_t kClockSamples = 16;       // Ping/Pong samples the clock offset is chosen from
+constexpr size_t kLatencySamples = 32;     // layers whose pose-to-arrival time is kept
+constexpr uint32_t kStartPings = 8;        // pings back to back when a session begins
+constexpr uint64_t kClockPingEveryNs = 1000000000;  // then one a second
 
 bool is_image(const SessionEvent& e) {
     return e.kind == SessionEvent::Kind::kLayer || e.kind == SessionEvent::Kind::kProjectorFrame;
@@ -174,6 +178,7 @@ std::optional<Session::Refusal> Session::send_pose(proto::Pose& p) {
     return queue([&] {
         pose_ = p;
         pose_sent_ = false;
+        clock_wanted_ = clock_wanted_ || p.display_time_ns != 0;
     });
 }
 
@@ -212,6 +217,59 @@ bool Session::closed() const {
 SessionInfo Session::info() const {
     std::lock_guard lock(mutex_);
     return info_;
+}
+
+ClockEstimate Session::clock() {
+    std::lock_guard lock(mutex_);
+    if (!clock_wanted_) {
+        clock_wanted_ = true;
+        wake();
+    }
+    ClockEstimate c;
+    c.samples = clock_count_;
+    uint64_t best = UINT64_MAX;
+    for (const auto& [offset, rtt] : clock_samples_)
+        if (rtt < best)
+            best = rtt, c.offset_ns = offset, c.round_trip_ns = rtt;
+    if (!layer_latency_ns_.empty()) {
+        std::vector<uint64_t> v(layer_latency_ns_.begin(), layer_latency_ns_.end());
+        std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+        c.pose_to_layer_ns = v[v.size() / 2];
+    }
+    return c;
+}
+
+void Session::clock_sample(const proto::Pong& p, uint64_t received_ns) {
+    ping_outstanding_ = false;
+    if (p.client_time_ns == 0 || p.client_time_ns > received_ns)
+        return;  // not one of ours
+    const uint64_t rtt = received_ns - p.client_time_ns;
+    const int64_t offset = int64_t(p.server_time_ns) - int64_t(p.client_time_ns) - int64_t(rtt / 2);
+    std::lock_guard lock(mutex_);
+    clock_samples_.emplace_back(offset, rtt);
+    if (clock_samples_.size() > kClockSamples)
+        clock_samples_.pop_front();
+    ++clock_count_;
+}
+
+uint64_t Session::next_clock_ping_ns() const {
+    {
+        std::lock_guard lock(mutex_);
+        if (!clock_wanted_)
+            return UINT64_MAX;
+    }
+    if (clock_pings_ < kStartPings && !ping_outstanding_)
+        return last_ping_ns_;
+    return last_ping_ns_ + kClockPingEveryNs;
+}
+
+bool Session::ping_for_clock(uint64_t now) {
+    if (now < next_clock_ping_ns())
+        return true;
+    ++clock_pings_;
+    ping_outstanding_ = true;
+    last_ping_ns_ = last_sent_ns_ = now;
+    return conn_->send(proto::Ping{now}, sequence_++);
 }
 
 void Session::push(SessionEvent e) {
@@ -253,6 +311,9 @@ bool Session::send_pending() {
             display = display_, display_sent_ = true;
         if (pose_ && !pose_sent_) {
             pose = pose_, pose_sent_ = true;
+            if (!send_display_time_)
+                pose->display_time_ns = 0;
+            last_pose_had_display_time_ = pose->display_time_ns != 0;
             sent_poses_[pose->client_time_ns] = *pose;
             if (sent_poses_.size() > kKeptPoses)
                 sent_poses_.erase(sent_poses_.begin());
@@ -305,12 +366,17 @@ void Session::handle(Message m, uint64_t received_ns) {
         e.eye = layer->eye;
         e.frame_id = layer->frame_id;
         e.pose.client_time_ns = layer->pose_time_ns;
+        e.pose.display_time_ns = layer->display_time_ns;
         decode(layer->width, layer->height, layer->format, layer->encoding, layer->data);
     } else if (frame) {
         e.kind = SessionEvent::Kind::kProjectorFrame;
         e.scene_version = frame->scene_version;
         decode(frame->width, frame->height, frame->format, frame->encoding, frame->data);
     } else if (auto* err = std::get_if<proto::Error>(&m)) {
+        // A server that predates Pose.display_time_ns refuses the longer Pose as too large:
+        // from now on poses go without it (PROTOCOL.md, "Time").
+        if (err->code == proto::ErrorCode::kTooLarge && last_pose_had_display_time_)
+            send_display_time_ = false;
         e.kind = SessionEvent::Kind::kServerError;
         e.error_code = uint32_t(err->code);
         e.text = describe(*err);
@@ -324,6 +390,11 @@ void Session::handle(Message m, uint64_t received_ns) {
     if (layer) {
         if (auto it = sent_poses_.find(layer->pose_time_ns); it != sent_poses_.end())
             e.pose = it->second;
+        if (layer->eye == 0 && received_ns >= layer->pose_time_ns) {
+            layer_latency_ns_.push_back(received_ns - layer->pose_time_ns);
+            if (layer_latency_ns_.size() > kLatencySamples)
+                layer_latency_ns_.pop_front();
+        }
         if (layer->eye == 1 && frame_request_sent_)
             frame_wanted_ = frame_request_sent_ = false;  // the request was answered
     }
@@ -386,6 +457,10 @@ bool Session::reconnect(const std::string& why) {
         std::lock_guard lock(mutex_);
         // Everything the server must have goes again, in order, on the next send_pending().
         display_sent_ = pose_sent_ = frame_request_sent_ = false;
+        clock_samples_.clear();
+        clock_count_ = 0;
+        clock_pings_ = 0;
+        ping_outstanding_ = false;
         info_.connected = true;
         info_.session_id = id;
         info_.scene_version = version;
@@ -414,7 +489,9 @@ void Session::run() {
             lost = conn_->last_error();
         } else {
             const uint64_t now = now_ns();
-            if (now - last_sent_ns_ >= keepalive_ns) {
+            if (!ping_for_clock(now))
+                lost = conn_->last_error();
+            if (lost.empty() && now - last_sent_ns_ >= keepalive_ns) {
                 if (!conn_->send(proto::Ping{now}, sequence_++))
                     lost = conn_->last_error();
                 last_sent_ns_ = now;
@@ -426,7 +503,7 @@ void Session::run() {
                        std::to_string((now - last_received_ns_) / 1000000) + " ms";
         }
         if (lost.empty()) {
-            const uint64_t ping_at = last_sent_ns_ + keepalive_ns;
+            const uint64_t ping_at = std::min(last_sent_ns_ + keepalive_ns, next_clock_ping_ns());
             const uint64_t until_ping = ping_at - std::min(now_ns(), ping_at);
             pollfd fds[2] = {{conn_->fd(), POLLIN, 0}, {wake_fd_, POLLIN, 0}};
             int rc = ::poll(fds, 2, conn_->has_buffered() ? 0 : int(until_ping / 1000000) + 1);
@@ -454,7 +531,9 @@ void Session::run() {
                         std::lock_guard lock(mutex_);
                         info_.bytes_received = bytes_before_ + conn_->bytes_read();
                     }
-                    if (auto* p = std::get_if<proto::Ping>(m)) {
+                    if (auto* pong = std::get_if<proto::Pong>(m)) {
+                        clock_sample(*pong, last_received_ns_);
+                    } else if (auto* p = std::get_if<proto::Ping>(m)) {
                         if (!conn_->send(proto::Pong{p->client_time_ns, now_ns()}))
                             lost = conn_->last_error();
                     } else if (std::holds_alternative<proto::Bye>(*m)) {

@@ -69,6 +69,17 @@ struct SessionEvent {
     std::string text;
 };
 
+// The clock offset to the server and the round trip, measured over Ping/Pong (PROTOCOL.md,
+// "Time"): of the last 16 samples, the one with the shortest round trip; and the time from a
+// pose's sampling to the arrival of its layer (the echoed pose_time_ns), the median of the last
+// 32 layers: the prediction horizon before the wait for the display's refresh.
+struct ClockEstimate {
+    uint32_t samples = 0;           // Pongs seen this session (0: nothing measured yet)
+    int64_t offset_ns = 0;          // server clock - client clock
+    uint64_t round_trip_ns = 0;     // of the sample the offset comes from
+    uint64_t pose_to_layer_ns = 0;  // median sampling-to-arrival time (0: no layer yet)
+};
+
 struct SessionInfo {
     bool connected = false;
     uint32_t session_id = 0, scene_version = 0, reconnects = 0;
@@ -103,6 +114,9 @@ public:
     std::optional<SessionEvent> poll(int timeout_ms);
     bool closed() const;
     SessionInfo info() const;
+    // The first call (or the first pose with a display time) starts the clock's Pings: a
+    // session that never asks sends none (as before the clock existed).
+    ClockEstimate clock();
 
 private:
     using Message = protocol::Message;
@@ -114,6 +128,11 @@ private:
     // Sends what the application queued since the last call; false when the connection broke.
     bool send_pending();
     void handle(Message m, uint64_t received_ns);
+    // A Pong to our Ping: one clock sample. Network thread.
+    void clock_sample(const protocol::Pong& p, uint64_t received_ns);
+    // Sends the clock's Ping when one is due; false when the connection broke. Network thread.
+    bool ping_for_clock(uint64_t now);
+    uint64_t next_clock_ping_ns() const;
     // Connection lost: a kDisconnected event, then attempts until one succeeds (true) or the
     // session stops or gives up (false; kClosed queued).
     bool reconnect(const std::string& why);
@@ -147,6 +166,19 @@ private:
     uint64_t last_sent_ns_ = 0, last_received_ns_ = 0;
     uint64_t bytes_before_ = 0;  // read by the connections before this one
     uint32_t sequence_ = 1;
+    // The clock (PROTOCOL.md, "Time"). Pings, once wanted: 8 back to back, then 1/s; again 8
+    // after a reconnect.
+    bool clock_wanted_ = false;  // mutex_
+    uint32_t clock_pings_ = 0;   // sent this session
+    bool ping_outstanding_ = false;
+    uint64_t last_ping_ns_ = 0;
+    std::deque<std::pair<int64_t, uint64_t>> clock_samples_;  // offset, round trip; mutex_
+    std::deque<uint64_t> layer_latency_ns_;                   // mutex_
+    uint32_t clock_count_ = 0;                                // mutex_
+    // False once a server refused a Pose with display time (too large: it predates the field);
+    // poses then go without it. Network thread.
+    bool send_display_time_ = true;
+    bool last_pose_had_display_time_ = false;
 };
 
 }  // namespace hs::client

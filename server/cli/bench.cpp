@@ -23,6 +23,7 @@
 #include "bench/accuracy.hpp"
 #include "bench/encoding.hpp"
 #include "bench/stability.hpp"
+#include "cli/bench_motion.hpp"
 #include "cli/commands.hpp"
 #include "cli/common.hpp"
 #include "cli/flags.hpp"
@@ -45,6 +46,7 @@ const char* kBenchHelp =
     "                            [--moving-frames N] [--quick]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
+    "       hysar bench motion [--traces walk,turn,nod] [--quick] [--json FILE] ... (see --help)\n"
     "       hysar bench stability [--out DIR] [--no-float64]\n"
     "\n"
     "  accuracy   every quality knob of the VD layer (tessellation, render scale, samples per\n"
@@ -63,6 +65,9 @@ const char* kBenchHelp =
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
     "             writes DIR/bench-serve.json, DIR/bench-serve.png and .svg (default\n"
     "             out/bench-serve)\n"
+    "  motion     registration while heads move (walk, turn, nod) with and without pose\n"
+    "             prediction and late reprojection: highlight error in px and degrees, motion-to-\n"
+    "             photon latency, client ms; --json FILE\n"
     "  stability  the hard-case table (docs/STABILITY.md): per formula and regime, the GPU's\n"
     "             shading code against the double reference, max error in relative terms and\n"
     "             ulps for fp32 and the half-float layer, with each regime's tolerance; writes\n"
@@ -491,13 +496,16 @@ int bench_offline(const std::string& name, const std::vector<std::string>& args)
 }  // namespace
 
 int run_bench(const std::vector<std::string>& args) {
-    if (args.empty() || (args[0] != "serve" && options::asks_for_help(args))) {
+    if (args.empty() ||
+        (args[0] != "serve" && args[0] != "motion" && options::asks_for_help(args))) {
         std::fputs(kBenchHelp, args.empty() ? stderr : stdout);
         return args.empty() ? 2 : 0;
     }
     const std::vector<std::string> rest(args.begin() + 1, args.end());
     if (args[0] == "serve")
         return bench_serve(rest);
+    if (args[0] == "motion")
+        return bench_motion(rest);
     return bench_offline(args[0], rest);
 }
 

@@ -43,11 +43,15 @@ struct Display {
 };
 
 // A head pose as it arrived: T_world_head (checked and normalised at the door), the client's
-// clock at sampling (echoed in the layers, never compared) and the server's clock on arrival.
+// clock at sampling and the display (photon) time the client predicted the pose for (both
+// echoed in the layers, never compared with the server's clock; 0: a client that sends no
+// display time), and the server's clock on arrival. A client that predicts sends the pose
+// for display_time_ns already: the server renders it as it is (PROTOCOL.md, "Time").
 struct HeadPose {
     scene::Pose T_world_head;
     uint64_t client_time_ns = 0;
     Clock::time_point received{};
+    uint64_t display_time_ns = 0;
 };
 
 // One frame to render for one headset, as the scheduler hands it out.

@@ -211,6 +211,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;
         fields.pose_time_ns = f.job.pose.client_time_ns;
+        fields.display_time_ns = f.job.pose.display_time_ns;
         fields.eye = e;
         fields.format = format;
         fields.encoding = encoding;

@@ -36,7 +36,7 @@ Result<loop::HeadPose> head_pose_of(const proto::Pose& p, Clock::time_point rece
     HS_ASSIGN_OR_RETURN(scene::Pose head,
                         scene::make_pose({p.position_m[0], p.position_m[1], p.position_m[2]},
                                          glm::dquat(q[0], q[1], q[2], q[3])));
-    return loop::HeadPose{head, p.client_time_ns, received};
+    return loop::HeadPose{head, p.client_time_ns, received, p.display_time_ns};
 }
 
 }  // namespace

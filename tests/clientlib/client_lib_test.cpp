@@ -362,5 +362,135 @@ TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
     }
 }
 
+// PROTOCOL.md, "Time": the library measures the clock offset over Ping/Pong (server and client
+// share one steady clock in this process, so the true offset is 0: within 1 ms on loopback) and
+// the pose-to-layer time.
+TEST_F(ClientLib, ClockOffsetWithinAMillisecondOnLoopback) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    hysar_clock clock{};
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < until) {
+        ASSERT_EQ(hysar_client_get_clock(c.get(), &clock), HYSAR_OK);
+        if (clock.samples >= 8)
+            break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    ASSERT_GE(clock.samples, 8u) << "the library pings 8 times when a session begins";
+    EXPECT_GT(clock.round_trip_ns, 0u);
+    EXPECT_LT(clock.round_trip_ns, 100000000u);
+    EXPECT_LT(std::abs(clock.offset_ns), 1000000) << "offset " << clock.offset_ns << " ns";
+    EXPECT_EQ(clock.pose_to_layer_ns, 0u) << "no layer yet";
+}
+
+// A pose sent with a display time gets layers that echo it; one sent without (as every older
+// client does) gets layers without it, as before.
+TEST_F(ClientLib, LayersEchoTheDisplayTimeAndOldPosesAreServedAsBefore) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
+    const uint64_t display_at = hysar_now_ns() + 40000000;
+    for (uint64_t want : {display_at, uint64_t(0)}) {
+        const hysar_pose p = pose(want ? 10 : -10);
+        uint64_t stamp = 0;
+        ASSERT_EQ(hysar_client_send_pose_at(c.get(), &p, want, &stamp), HYSAR_OK)
+            << hysar_last_error();
+        ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+        for (int k = 0; k < 2; ++k) {
+            e = wait_for(c.get(), HYSAR_EVENT_LAYER);
+            ASSERT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+            EXPECT_EQ(e.pose.time_ns, stamp);
+            EXPECT_EQ(hysar_event_display_time_ns(&e), want);
+            hysar_event_release(&e);
+        }
+    }
+    hysar_clock clock{};
+    ASSERT_EQ(hysar_client_get_clock(c.get(), &clock), HYSAR_OK);
+    EXPECT_GT(clock.pose_to_layer_ns, 0u);
+}
+
+// Late reprojection against the server's own renderer: a layer rendered at pose A and warped to
+// pose B (B is A turned by 2 degrees about the vertical, the eye fixed: IPD 0) lands within
+// half a pixel (highlight centroid) of the layer the server renders at B.
+TEST_F(ClientLib, ReprojectionOfAPureRotationMatchesAFreshRender) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    const scene::Scene sc = scene::default_scene();
+    const auto& v = sc.viewers.front();
+    const auto k =
+        scene::intrinsics_from_fov(v.eye_width / 4, v.eye_height / 4, v.fov_x_rad, v.fov_y_rad);
+    const hysar_display d{k.width,
+                          k.height,
+                          k.fx,
+                          k.fy,
+                          k.cx,
+                          k.cy,
+                          0.0,
+                          HYSAR_FORMAT_RGBA8,
+                          HYSAR_ENCODING_SPARSE,
+                          HYSAR_MODE_ON_REQUEST};
+    ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK) << hysar_last_error();
+    const hysar_pose a = pose(0);
+    hysar_pose b = a;
+    const double half = 1.0 * 3.14159265358979323846 / 180;  // half of 2 degrees
+    const double qy[4] = {std::cos(half), 0, std::sin(half), 0};
+    const double* q = a.orientation_wxyz;
+    b.orientation_wxyz[0] = qy[0] * q[0] - qy[2] * q[2];
+    b.orientation_wxyz[1] = qy[0] * q[1] + qy[2] * q[3];
+    b.orientation_wxyz[2] = qy[0] * q[2] + qy[2] * q[0];
+    b.orientation_wxyz[3] = qy[0] * q[3] - qy[2] * q[1];
+    auto left_layer = [&](const hysar_pose& p) {
+        uint64_t stamp = 0;
+        EXPECT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK);
+        EXPECT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+        hysar_event left{};
+        for (int k2 = 0; k2 < 2; ++k2) {
+            hysar_event l = wait_for(c.get(), HYSAR_EVENT_LAYER);
+            EXPECT_EQ(l.pose.time_ns, stamp);
+            if (l.eye == 0)
+                left = l;
+            else
+                hysar_event_release(&l);
+        }
+        return left;
+    };
+    hysar_event la = left_layer(a), lb = left_layer(b);
+    ASSERT_EQ(la.kind, uint32_t(HYSAR_EVENT_LAYER));
+    ASSERT_EQ(lb.kind, uint32_t(HYSAR_EVENT_LAYER));
+    std::vector<uint8_t> warped(la.image.size_bytes);
+    ASSERT_EQ(hysar_reproject_layer(&la, &d, &b, 0, 0, 0, HYSAR_FILTER_NEAREST, warped.data(),
+                                    warped.size(), nullptr),
+              HYSAR_OK)
+        << hysar_last_error();
+    struct C {
+        double u = 0, v = 0, m = 0;
+    };
+    auto centroid = [&](const uint8_t* px) {
+        C r;
+        for (uint32_t y = 0; y < d.eye_height; ++y)
+            for (uint32_t x = 0; x < d.eye_width; ++x) {
+                const uint8_t* p = px + (size_t(y) * d.eye_width + x) * 4;
+                const double m = double(p[0]) + p[1] + p[2];
+                r.u += m * x, r.v += m * y, r.m += m;
+            }
+        r.u /= r.m, r.v /= r.m;
+        return r;
+    };
+    const C ca = centroid(la.image.pixels), cb = centroid(lb.image.pixels),
+            cw = centroid(warped.data());
+    EXPECT_GT(std::hypot(ca.u - cb.u, ca.v - cb.v), 5) << "2 degrees move the highlight";
+    EXPECT_LT(std::hypot(cw.u - cb.u, cw.v - cb.v), 0.5)
+        << "warped (" << cw.u << ", " << cw.v << ") fresh (" << cb.u << ", " << cb.v << ")";
+    hysar_event_release(&la);
+    hysar_event_release(&lb);
+}
+
 }  // namespace
 }  // namespace hs::net_test

@@ -1,0 +1,403 @@
+#include "clients/motion/motion.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+namespace hs::motion {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+bool finite(const PoseSample& s) {
+    for (double v : s.position_m)
+        if (!std::isfinite(v))
+            return false;
+    for (double v : s.orientation_wxyz)
+        if (!std::isfinite(v))
+            return false;
+    return true;
+}
+
+double norm(const Vec3& v) {
+    return std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+}
+
+Vec3 scaled(const Vec3& v, double s) {
+    return {v[0] * s, v[1] * s, v[2] * s};
+}
+
+}  // namespace
+
+Quat multiply(const Quat& a, const Quat& b) {
+    return {a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]};
+}
+
+Quat conjugate(const Quat& q) {
+    return {q[0], -q[1], -q[2], -q[3]};
+}
+
+Quat normalized(const Quat& q) {
+    const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    return {q[0] / n, q[1] / n, q[2] / n, q[3] / n};
+}
+
+Vec3 rotate(const Quat& q, const Vec3& v) {
+    const Quat r = multiply(multiply(q, Quat{0, v[0], v[1], v[2]}), conjugate(q));
+    return {r[1], r[2], r[3]};
+}
+
+Quat from_rotation_vector(const Vec3& r) {
+    const double angle = norm(r);
+    if (angle < 1e-12)
+        return normalized(Quat{1, r[0] / 2, r[1] / 2, r[2] / 2});
+    const double s = std::sin(angle / 2) / angle;
+    return {std::cos(angle / 2), r[0] * s, r[1] * s, r[2] * s};
+}
+
+Vec3 to_rotation_vector(const Quat& q_in) {
+    Quat q = normalized(q_in);
+    if (q[0] < 0)
+        q = {-q[0], -q[1], -q[2], -q[3]};  // the shorter way round
+    const double s = std::sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (s < 1e-12)
+        return {2 * q[1], 2 * q[2], 2 * q[3]};
+    const double angle = 2 * std::atan2(s, q[0]);
+    return {q[1] / s * angle, q[2] / s * angle, q[3] / s * angle};
+}
+
+std::optional<std::string> check(const PredictorConfig& c) {
+    auto bad = [](const char* name, double v, const char* range) {
+        return std::string("predictor ") + name + " = " + std::to_string(v) + " is outside " +
+               range;
+    };
+    if (!(c.window_ms > 0 && c.window_ms <= 1000))
+        return bad("window_ms", c.window_ms, "(0, 1000]");
+    if (!(c.filter_ms >= 0 && c.filter_ms <= 1000))
+        return bad("filter_ms", c.filter_ms, "[0, 1000]");
+    if (!(c.max_horizon_ms >= 0 && c.max_horizon_ms <= 1000))
+        return bad("max_horizon_ms", c.max_horizon_ms, "[0, 1000]");
+    if (!(c.max_angle_deg >= 0 && c.max_angle_deg <= 180))
+        return bad("max_angle_deg", c.max_angle_deg, "[0, 180]");
+    if (!(c.max_distance_m >= 0 && c.max_distance_m <= 10))
+        return bad("max_distance_m", c.max_distance_m, "[0, 10]");
+    return std::nullopt;
+}
+
+Predictor::Predictor(const PredictorConfig& config) : config_(config) {}
+
+void Predictor::reset() {
+    samples_.clear();
+    omega_ = velocity_ = Vec3{};
+    have_velocity_ = false;
+}
+
+bool Predictor::add(const PoseSample& in) {
+    if (!finite(in))
+        return false;
+    const Quat& q = in.orientation_wxyz;
+    const double n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+    if (!(n2 > 1e-12))
+        return false;
+    if (!samples_.empty() && in.time_ns <= samples_.back().time_ns)
+        return false;
+    PoseSample s = in;
+    s.orientation_wxyz = normalized(q);
+    const uint64_t previous = samples_.empty() ? 0 : samples_.back().time_ns;
+    samples_.push_back(s);
+    const auto window_ns = uint64_t(config_.window_ms * 1e6);
+    while (samples_.size() > 2 && samples_.front().time_ns + window_ns < s.time_ns)
+        samples_.pop_front();
+    if (samples_.size() < 2)
+        return true;
+    const PoseSample& a = samples_.front();
+    const double dt = double(s.time_ns - a.time_ns) * 1e-9;
+    Vec3 v, w;
+    for (int i = 0; i < 3; ++i)
+        v[size_t(i)] = (s.position_m[size_t(i)] - a.position_m[size_t(i)]) / dt;
+    w = scaled(to_rotation_vector(multiply(s.orientation_wxyz, conjugate(a.orientation_wxyz))),
+               1 / dt);
+    if (!have_velocity_ || config_.filter_ms <= 0) {
+        velocity_ = v, omega_ = w;
+        have_velocity_ = true;
+        return true;
+    }
+    const double step = double(s.time_ns - previous) * 1e-9;
+    const double alpha = 1 - std::exp(-step / (config_.filter_ms * 1e-3));
+    for (size_t i = 0; i < 3; ++i) {
+        velocity_[i] += alpha * (v[i] - velocity_[i]);
+        omega_[i] += alpha * (w[i] - omega_[i]);
+    }
+    return true;
+}
+
+std::optional<PoseSample> Predictor::predict(uint64_t time_ns) const {
+    if (samples_.empty())
+        return std::nullopt;
+    PoseSample out = samples_.back();
+    if (!have_velocity_ || time_ns <= out.time_ns)
+        return out;
+    const double h = std::min(double(time_ns - out.time_ns) * 1e-9, config_.max_horizon_ms * 1e-3);
+    Vec3 turn = scaled(omega_, h);
+    const double angle = norm(turn), max_angle = config_.max_angle_deg * kPi / 180;
+    if (angle > max_angle)
+        turn = scaled(turn, max_angle / angle);
+    Vec3 move = scaled(velocity_, h);
+    const double dist = norm(move);
+    if (dist > config_.max_distance_m)
+        move = scaled(move, config_.max_distance_m / dist);
+    out.orientation_wxyz = normalized(multiply(from_rotation_vector(turn), out.orientation_wxyz));
+    for (size_t i = 0; i < 3; ++i) out.position_m[i] += move[i];
+    out.time_ns = time_ns;
+    return out;
+}
+
+uint64_t next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uint64_t vsync_ns) {
+    if (!(refresh_hz > 0) || !std::isfinite(refresh_hz))
+        return earliest_ns;
+    const double period = 1e9 / refresh_hz;
+    if (earliest_ns <= vsync_ns)
+        return vsync_ns;
+    const double k = std::ceil(double(earliest_ns - vsync_ns) / period - 1e-9);
+    return vsync_ns + uint64_t(std::llround(k * period));
+}
+
+std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
+                                          const Quat& display) {
+    // Display pixel -> ray in the display eye (OpenCV axes) -> head axes (y, z flipped) ->
+    // world -> the render pose's head -> OpenCV axes -> render pixel:
+    // H = K S R_render^T R_display S K^-1, S = diag(1, -1, -1).
+    const Quat rel = multiply(conjugate(normalized(render)), normalized(display));
+    const double w = rel[0], x = rel[1], y = rel[2], z = rel[3];
+    double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                   2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                   2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+    const double s[3] = {1, -1, -1};
+    double m[9];  // S R S
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) m[i * 3 + j] = s[i] * r[i * 3 + j] * s[j];
+    const double kk[9] = {k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1};
+    const double ki[9] = {1 / k.fx, 0, -k.cx / k.fx, 0, 1 / k.fy, -k.cy / k.fy, 0, 0, 1};
+    double t[9], h[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            t[i * 3 + j] = 0;
+            for (int l = 0; l < 3; ++l) t[i * 3 + j] += m[i * 3 + l] * ki[l * 3 + j];
+        }
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            h[i * 3 + j] = 0;
+            for (int l = 0; l < 3; ++l) h[i * 3 + j] += kk[i * 3 + l] * t[l * 3 + j];
+        }
+    std::array<double, 9> out;
+    std::copy(h, h + 9, out.begin());
+    return out;
+}
+
+EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye) {
+    const Vec3 right = rotate(normalized(head), {1, 0, 0});
+    const double side = (eye == 0 ? -0.5 : 0.5) * ipd_m;
+    return {{head_m[0] + side * right[0], head_m[1] + side * right[1], head_m[2] + side * right[2]},
+            normalized(head)};
+}
+
+std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
+                                       const EyePose& display, double depth_m) {
+    if (!(depth_m > 0) || !std::isfinite(depth_m))
+        return rotation_homography(k, render.orientation_wxyz, display.orientation_wxyz);
+    // Render eye (OpenCV axes) to display eye: X_d = A X_r + t with A = S R_d^T R_r S and
+    // t = S R_d^T (p_r - p_d); on the plane n.X_r = d (n = +z) X_d = (A + t n^T / d) X_r.
+    // The pixel map render -> display is K (A + t n^T / d) K^-1; the warp needs its inverse.
+    const Quat rel = multiply(conjugate(display.orientation_wxyz), render.orientation_wxyz);
+    const double w = rel[0], x = rel[1], y = rel[2], z = rel[3];
+    const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                         2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                         2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+    const double s[3] = {1, -1, -1};
+    const Vec3 dp{render.position_m[0] - display.position_m[0],
+                  render.position_m[1] - display.position_m[1],
+                  render.position_m[2] - display.position_m[2]};
+    const Vec3 td = rotate(conjugate(display.orientation_wxyz), dp);
+    const double t[3] = {s[0] * td[0], s[1] * td[1], s[2] * td[2]};
+    double a[9];
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) a[i * 3 + j] = s[i] * r[i * 3 + j] * s[j];
+    for (int i = 0; i < 3; ++i) a[i * 3 + 2] += t[i] / depth_m;
+    const double kk[9] = {k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1};
+    const double ki[9] = {1 / k.fx, 0, -k.cx / k.fx, 0, 1 / k.fy, -k.cy / k.fy, 0, 0, 1};
+    auto mul = [](const double* p, const double* q, double* o) {
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+                o[i * 3 + j] = 0;
+                for (int l = 0; l < 3; ++l) o[i * 3 + j] += p[i * 3 + l] * q[l * 3 + j];
+            }
+    };
+    double tmp[9], m[9];
+    mul(a, ki, tmp);
+    mul(kk, tmp, m);
+    // The inverse by the adjugate (the scale of a homography does not matter).
+    std::array<double, 9> inv{
+        m[4] * m[8] - m[5] * m[7], m[2] * m[7] - m[1] * m[8], m[1] * m[5] - m[2] * m[4],
+        m[5] * m[6] - m[3] * m[8], m[0] * m[8] - m[2] * m[6], m[2] * m[3] - m[0] * m[5],
+        m[3] * m[7] - m[4] * m[6], m[1] * m[6] - m[0] * m[7], m[0] * m[4] - m[1] * m[3]};
+    if (std::abs(inv[8]) > 1e-300)
+        for (double& v : inv) v /= inv[8];  // h[8] = 1: w > 0 in front of the eye
+    return inv;
+}
+
+namespace {
+
+// Nearest-neighbour rows: the source position is computed exactly (one division) every kSpan
+// pixels and stepped linearly in 16.16 fixed point between (a homography of a few degrees'
+// rotation is affine to within a hundredth of a pixel over kSpan pixels). T is the pixel
+// (4 or 8 bytes).
+constexpr uint32_t kSpan = 64;
+
+template <typename T>
+void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uint32_t height,
+                  const std::array<double, 9>& h) {
+    const auto* src = reinterpret_cast<const T*>(src_bytes);
+    auto* dst = reinterpret_cast<T*>(dst_bytes);
+    const double fw = width, fh = height;
+    // A layer is black (see-through) but for the prop's highlight: each source row's lit
+    // columns [first, last], so that a span whose source holds nothing lit is filled with 0
+    // without a gather (kept per thread: no allocation once it is large enough).
+    thread_local std::vector<uint32_t> first, last;
+    first.resize(height), last.resize(height);
+    for (uint32_t y = 0; y < height; ++y) {
+        const T* row = src + size_t(y) * width;
+        uint32_t a = 0, b = width;
+        for (; a + 8 <= width; a += 8) {  // eight at a time through the black
+            T any = 0;
+            for (uint32_t i = 0; i < 8; ++i) any |= row[a + i];
+            if (any)
+                break;
+        }
+        while (a < width && row[a] == T(0)) ++a;
+        while (b > a && row[b - 1] == T(0)) --b;
+        first[y] = a, last[y] = b;  // empty: a == b
+    }
+    // Prefix counts of lit source rows: a destination row whose source rows hold nothing lit
+    // is filled with 0 at once.
+    thread_local std::vector<uint32_t> lit_rows;
+    lit_rows.assign(size_t(height) + 1, 0);
+    for (uint32_t y = 0; y < height; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
+    for (uint32_t y = 0; y < height; ++y) {
+        T* out = dst + size_t(y) * width;
+        const double bx = h[1] * y + h[2], by = h[4] * y + h[5], bw = h[7] * y + h[8];
+        {
+            const double wa = bw, wb = bw + h[6] * (fw - 1);
+            if (wa > 1e-9 && wb > 1e-9) {
+                const double va = by / wa + 0.5, vb = (by + h[3] * (fw - 1)) / wb + 0.5;
+                const double lo = std::max(0.0, std::min(va, vb) - 1);
+                const double hi = std::min(fh - 1, std::max(va, vb) + 1);
+                if (hi < lo || lit_rows[size_t(hi) + 1] == lit_rows[size_t(lo)]) {
+                    std::fill(out, out + width, T(0));
+                    continue;
+                }
+            }
+        }
+        for (uint32_t x0 = 0; x0 < width; x0 += kSpan) {
+            const uint32_t x1 = std::min(x0 + kSpan, width);
+            const double w0 = bw + h[6] * x0, w1 = bw + h[6] * x1;
+            if (!(w0 > 1e-9 && w1 > 1e-9)) {  // behind the eye somewhere: pixel by pixel
+                for (uint32_t x = x0; x < x1; ++x) {
+                    const double sw = bw + h[6] * x;
+                    const double u = (bx + h[0] * x) / sw + 0.5, v = (by + h[3] * x) / sw + 0.5;
+                    const bool in = sw > 1e-9 && u >= 0 && v >= 0 && u < fw && v < fh;
+                    out[x] = in ? src[size_t(v) * width + size_t(u)] : T(0);
+                }
+                continue;
+            }
+            const double u0 = (bx + h[0] * x0) / w0 + 0.5, v0 = (by + h[3] * x0) / w0 + 0.5;
+            const double u1 = (bx + h[0] * x1) / w1 + 0.5, v1 = (by + h[3] * x1) / w1 + 0.5;
+            // Far outside (or out of fixed-point range): the span shows nothing.
+            const double lo_u = std::min(u0, u1), hi_u = std::max(u0, u1);
+            const double lo_v = std::min(v0, v1), hi_v = std::max(v0, v1);
+            if (hi_u < 0 || hi_v < 0 || lo_u >= fw || lo_v >= fh || !(std::abs(u0) < 1e6) ||
+                !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) || !(std::abs(v1) < 1e6)) {
+                std::fill(out + x0, out + x1, T(0));
+                continue;
+            }
+            {
+                const auto ulo = uint32_t(std::max(0.0, lo_u)),
+                           uhi = uint32_t(std::min(fw - 1, hi_u));
+                const auto vlo = uint32_t(std::max(0.0, lo_v - 1)),
+                           vhi = uint32_t(std::min(fh - 1, hi_v + 1));
+                bool lit = false;
+                for (uint32_t r = vlo; r <= vhi && !lit; ++r)
+                    lit = first[r] < last[r] && first[r] <= uhi + 1 && last[r] + 1 >= ulo;
+                if (!lit) {
+                    std::fill(out + x0, out + x1, T(0));
+                    continue;
+                }
+            }
+            const double n = x1 - x0;
+            // Rounded to 16.16 by hand: std::llround is a library call on baseline x86-64.
+            const auto fixed = [](double v) { return int64_t(v * 65536 + (v < 0 ? -0.5 : 0.5)); };
+            int64_t fu = fixed(u0), fv = fixed(v0);
+            const int64_t du = fixed((u1 - u0) / n), dv = fixed((v1 - v0) / n);
+            for (uint32_t x = x0; x < x1; ++x, fu += du, fv += dv) {
+                const int64_t iu = fu >> 16, iv = fv >> 16;  // floor
+                out[x] = uint64_t(iu) < width && uint64_t(iv) < height
+                             ? src[size_t(iv) * width + size_t(iu)]
+                             : T(0);
+            }
+        }
+    }
+}
+
+void warp_bilinear(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
+                   const std::array<double, 9>& h) {
+    const double fw = width, fh = height;
+    for (uint32_t y = 0; y < height; ++y) {
+        uint8_t* out = dst + size_t(y) * width * 4;
+        double sx = h[1] * y + h[2], sy = h[4] * y + h[5], sw = h[7] * y + h[8];
+        for (uint32_t x = 0; x < width; ++x, sx += h[0], sy += h[3], sw += h[6]) {
+            uint8_t* o = out + size_t(x) * 4;
+            const double inv = sw > 1e-9 ? 1 / sw : 0;
+            const double u = sx * inv, v = sy * inv;
+            if (!(sw > 1e-9) || !(u > -1 && v > -1 && u < fw && v < fh)) {
+                std::memset(o, 0, 4);
+                continue;
+            }
+            // Fixed point: 8-bit weights.
+            const auto fu = int64_t((u + 1) * 256 + 0.5) - 256;  // u + 1 > 0: truncation rounds
+            const auto fv = int64_t((v + 1) * 256 + 0.5) - 256;
+            const int64_t iu = fu >> 8, iv = fv >> 8;
+            const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
+            const uint32_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av,
+                                    au * av};
+            uint32_t acc[3] = {0, 0, 0};
+            for (int t = 0; t < 4; ++t) {
+                const int64_t px = iu + (t & 1), py = iv + (t >> 1);
+                if (uint64_t(px) >= width || uint64_t(py) >= height)
+                    continue;  // outside: black, see-through
+                const uint8_t* p = src + (size_t(py) * width + size_t(px)) * 4;
+                for (int c = 0; c < 3; ++c) acc[c] += wt[t] * p[c];
+            }
+            for (int c = 0; c < 3; ++c) o[c] = uint8_t((acc[c] + 32768) >> 16);
+            // PROTOCOL.md: alpha is 0 exactly where the colour is 0, full elsewhere.
+            o[3] = (o[0] | o[1] | o[2]) ? 255 : 0;
+        }
+    }
+}
+
+}  // namespace
+
+void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
+          uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter) {
+    if (filter == Filter::kBilinear && bytes_per_pixel == 4)
+        warp_bilinear(src, dst, width, height, h);
+    else if (bytes_per_pixel == 8)
+        warp_nearest<uint64_t>(src, dst, width, height, h);
+    else
+        warp_nearest<uint32_t>(src, dst, width, height, h);
+}
+
+}  // namespace hs::motion

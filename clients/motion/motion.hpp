@@ -1,0 +1,124 @@
+// Registration while heads move, on the client's side (PROTOCOL.md, "Time"): the head pose
+// predicted to the display's photon time, and the newest layer warped from the pose it was
+// rendered for to the latest pose just before display. Standard library only: libhysar-client
+// and the benchmarks use it alike.
+//
+// Why the client predicts, not the server: the client sees every tracker sample (the server
+// only those that cross the network, with the network's jitter on their arrival), knows its own
+// display clock and refresh, and measures the sampling-to-layer time it has to cover. The
+// server renders the pose it is given for the display time it is told.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <string>
+
+namespace hs::motion {
+
+using Vec3 = std::array<double, 3>;
+using Quat = std::array<double, 4>;  // w, x, y, z; world from head (PROTOCOL.md §Conventions.Pose)
+
+struct PoseSample {
+    uint64_t time_ns = 0;  // the client's clock at sampling
+    Vec3 position_m{};
+    Quat orientation_wxyz{1, 0, 0, 0};
+};
+
+struct PredictorConfig {
+    // Velocities are the displacement between the newest sample and the oldest one at most
+    // this old (milliseconds): a longer window averages more tracker noise, and lags more when
+    // the motion changes.
+    double window_ms = 40;
+    // The velocities then pass an exponential filter with this time constant (milliseconds; 0:
+    // none). A constant velocity passes it unchanged.
+    double filter_ms = 20;
+    // The cap: never extrapolate further than this past the newest sample (milliseconds), nor
+    // turn by more than max_angle_deg, nor move by more than max_distance_m.
+    double max_horizon_ms = 100;
+    double max_angle_deg = 30;
+    double max_distance_m = 0.3;
+};
+
+// An error sentence naming the field when a configuration is not usable.
+std::optional<std::string> check(const PredictorConfig& c);
+
+// Predicts a head pose to a future time from the recent samples: angular velocity (world
+// frame, from the relative rotation of the samples across the window) and linear velocity,
+// each filtered, extrapolated at constant velocity and capped. Exact on constant angular and
+// constant linear velocity. Not thread-safe: one owner.
+class Predictor {
+public:
+    explicit Predictor(const PredictorConfig& config = {});
+    // Adds a tracker sample. A sample with a non-finite number, a zero quaternion or a time not
+    // after the newest one is ignored (false); the velocities are then as they were.
+    bool add(const PoseSample& s);
+    // The pose at `time_ns` (the display time): the newest sample moved by the filtered
+    // velocities over min(time_ns - newest, max_horizon) (not backwards: a time before the newest
+    // sample gives the newest). Nullopt before the first sample.
+    std::optional<PoseSample> predict(uint64_t time_ns) const;
+    // The filtered velocities: world-frame angular (rad/s, axis times rate) and linear (m/s).
+    Vec3 angular_velocity() const { return omega_; }
+    Vec3 linear_velocity() const { return velocity_; }
+    void reset();
+
+private:
+    PredictorConfig config_;
+    std::deque<PoseSample> samples_;
+    Vec3 omega_{}, velocity_{};
+    bool have_velocity_ = false;
+};
+
+// The photon time of the first refresh of a display at `refresh_hz` whose refreshes fall at
+// vsync_ns + k / refresh_hz, at or after `earliest_ns` (now plus the measured pose-to-layer
+// time). refresh_hz <= 0 or not finite: earliest_ns itself.
+uint64_t next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uint64_t vsync_ns);
+
+// One eye's pinhole (OpenCV convention: u right, v down, pixel centres at integers).
+struct Pinhole {
+    double fx = 0, fy = 0, cx = 0, cy = 0;
+};
+
+// The 3x3 homography, row-major, that takes a pixel of the layer as it is to be displayed at
+// orientation `display` to the pixel of the layer rendered at orientation `render` (rotation
+// only: exact for a pure rotation about the eye, and for points far away).
+std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
+                                          const Quat& display);
+
+// An eye's pose in the world: position (metres) and orientation (world from head axes).
+struct EyePose {
+    Vec3 position_m{};
+    Quat orientation_wxyz{1, 0, 0, 0};
+};
+// The eye `eye` (0 left, 1 right) of a head pose (PROTOCOL.md §Conventions.Eyes).
+EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye);
+
+// As rotation_homography, and the eye's translation too, for the points of a plane facing the
+// render eye at `depth_m` along its view axis (a plane through the prop): exact for that plane,
+// and far better than a rotation alone when the head moves around a near prop (a walk around it
+// turns the head while the prop stays in view). depth_m <= 0 or not finite: rotation only.
+std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
+                                       const EyePose& display, double depth_m);
+
+enum class Filter { kNearest, kBilinear };
+
+// Warps one eye's layer (tightly packed rows, `bytes_per_pixel` 4: RGBA8, or 8: RGBA16F with
+// kNearest only) by the homography into `dst` (same size, not `src`): each destination pixel
+// takes the source pixel its centre maps to (kNearest: the source position exact every 64
+// pixels, stepped linearly between; kBilinear: the 4 neighbours, 8-bit weights); outside the
+// source it is 0 (see-through). Cost: one pass over the destination (README, "Registration").
+void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
+          uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter);
+
+// Quaternion helpers (Hamilton, w first).
+Quat multiply(const Quat& a, const Quat& b);
+Quat conjugate(const Quat& q);
+Quat normalized(const Quat& q);
+Vec3 rotate(const Quat& q, const Vec3& v);
+// exp of a rotation vector (axis times angle, radians) and its inverse (angle in [0, pi]).
+Quat from_rotation_vector(const Vec3& r);
+Vec3 to_rotation_vector(const Quat& q);
+
+}  // namespace hs::motion

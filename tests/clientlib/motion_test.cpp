@@ -1,0 +1,376 @@
+// Pose prediction and late reprojection (clients/motion/motion.hpp, and their C API), and the
+// wire's optional display time (PROTOCOL.md, "Time"). No server and no GPU: the fresh renders
+// the warp is compared with are ray-cast here, analytically, for the same pinhole.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "clients/lib/hysar_client.h"
+#include "clients/motion/motion.hpp"
+#include "protocol/protocol.hpp"
+
+namespace hs::motion {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr uint64_t kMs = 1000000;
+
+double angle_between(const Quat& a, const Quat& b) {
+    const Quat r = multiply(conjugate(a), b);  // well conditioned near 0, unlike acos
+    return 2 * std::atan2(std::sqrt(r[1] * r[1] + r[2] * r[2] + r[3] * r[3]), std::abs(r[0]));
+}
+
+// The true pose at t seconds of a head turning at `omega` (world frame, rad/s) and walking at
+// `v` (m/s) from a tilted start.
+PoseSample truth(double t, const Vec3& omega, const Vec3& v) {
+    PoseSample s;
+    s.time_ns = uint64_t(std::llround(1e9 + t * 1e9));
+    const Quat q0 = normalized(Quat{0.96, -0.2, 0.17, 0.04});
+    s.orientation_wxyz =
+        multiply(from_rotation_vector({omega[0] * t, omega[1] * t, omega[2] * t}), q0);
+    s.position_m = {0.27 + v[0] * t, 1.1 + v[1] * t, 0.75 + v[2] * t};
+    return s;
+}
+
+TEST(Predictor, ExactOnConstantAngularVelocity) {
+    const double rate = 200 * kPi / 180;  // the 200 degrees/s head turn
+    const Vec3 omega{0.1 * rate, rate * std::sqrt(0.99), 0};
+    Predictor p;
+    for (int i = 0; i <= 30; ++i) ASSERT_TRUE(p.add(truth(i / 500.0, omega, {0, 0, 0})));
+    const double newest = 30 / 500.0;
+    for (double ahead : {0.005, 0.02, 0.05, 0.09}) {
+        const auto got = p.predict(truth(newest + ahead, omega, {0, 0, 0}).time_ns);
+        ASSERT_TRUE(got);
+        const auto want = truth(newest + ahead, omega, {0, 0, 0});
+        EXPECT_LT(angle_between(got->orientation_wxyz, want.orientation_wxyz), 1e-9) << ahead;
+        for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(got->position_m[i], want.position_m[i], 1e-9);
+    }
+}
+
+TEST(Predictor, ExactOnConstantLinearVelocity) {
+    const Vec3 v{0.6, 0.02, -0.9};
+    Predictor p;
+    for (int i = 0; i <= 20; ++i) ASSERT_TRUE(p.add(truth(i / 90.0, {0, 0, 0}, v)));
+    const double newest = 20 / 90.0;
+    for (double ahead : {0.01, 0.04, 0.08}) {
+        const auto want = truth(newest + ahead, {0, 0, 0}, v);
+        const auto got = p.predict(want.time_ns);
+        ASSERT_TRUE(got);
+        for (size_t i = 0; i < 3; ++i) EXPECT_NEAR(got->position_m[i], want.position_m[i], 1e-6);
+        EXPECT_LT(angle_between(got->orientation_wxyz, want.orientation_wxyz), 1e-9);
+    }
+}
+
+TEST(Predictor, CapsHorizonAngleAndDistance) {
+    PredictorConfig c;
+    c.max_horizon_ms = 50;
+    c.max_angle_deg = 5;
+    c.max_distance_m = 0.02;
+    const Vec3 omega{0, 200 * kPi / 180, 0}, v{1, 0, 0};
+    Predictor p(c);
+    for (int i = 0; i <= 20; ++i) p.add(truth(i / 500.0, omega, v));
+    const auto newest = *p.predict(0);
+    // One second ahead: the horizon cap (50 ms: 10 deg, 5 cm) and then the angle and distance
+    // caps hold.
+    const auto far = *p.predict(newest.time_ns + 1000 * kMs);
+    EXPECT_NEAR(angle_between(far.orientation_wxyz, newest.orientation_wxyz) * 180 / kPi, 5, 1e-6);
+    const double moved = std::hypot(far.position_m[0] - newest.position_m[0],
+                                    far.position_m[1] - newest.position_m[1],
+                                    far.position_m[2] - newest.position_m[2]);
+    EXPECT_NEAR(moved, 0.02, 1e-9);
+    // A display time before the newest sample is the newest sample.
+    const auto back = *p.predict(newest.time_ns - 5 * kMs);
+    EXPECT_EQ(back.position_m, newest.position_m);
+}
+
+TEST(Predictor, RefusesNonFiniteZeroAndOutOfOrderSamples) {
+    const Vec3 omega{0, 1, 0};
+    Predictor p;
+    EXPECT_FALSE(p.predict(5));
+    for (int i = 0; i <= 10; ++i) p.add(truth(i / 100.0, omega, {0, 0, 0}));
+    const Vec3 before = p.angular_velocity();
+    auto s = truth(0.2, omega, {0, 0, 0});
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const double inf = std::numeric_limits<double>::infinity();
+    for (double bad : {nan, inf, -inf}) {
+        auto a = s;
+        a.position_m[1] = bad;
+        EXPECT_FALSE(p.add(a));
+        auto b = s;
+        b.orientation_wxyz[2] = bad;
+        EXPECT_FALSE(p.add(b));
+    }
+    auto zero = s;
+    zero.orientation_wxyz = {0, 0, 0, 0};
+    EXPECT_FALSE(p.add(zero));
+    auto old = truth(0.05, omega, {0, 0, 0});
+    EXPECT_FALSE(p.add(old));
+    EXPECT_EQ(p.angular_velocity(), before);
+    const auto got = *p.predict(s.time_ns);
+    for (double d : got.position_m) EXPECT_TRUE(std::isfinite(d));
+    for (double d : got.orientation_wxyz) EXPECT_TRUE(std::isfinite(d));
+    EXPECT_LT(angle_between(got.orientation_wxyz, s.orientation_wxyz), 1e-7);
+}
+
+TEST(Predictor, FilterAveragesTrackerNoise) {
+    // 1 mrad and 1 mm of white noise at 500 Hz on a 100 deg/s turn: the filtered rate is within
+    // 5% of the truth.
+    const Vec3 omega{0, 100 * kPi / 180, 0};
+    Predictor p;
+    uint32_t seed = 12345;
+    auto noise = [&] {
+        seed = seed * 1664525u + 1013904223u;
+        return (double(seed >> 8) / double(1u << 24) - 0.5) * 2e-3;
+    };
+    for (int i = 0; i <= 200; ++i) {
+        auto s = truth(i / 500.0, omega, {0, 0, 0});
+        s.orientation_wxyz = normalized(
+            multiply(from_rotation_vector({noise(), noise(), noise()}), s.orientation_wxyz));
+        for (double& x : s.position_m) x += noise();
+        ASSERT_TRUE(p.add(s));
+    }
+    EXPECT_NEAR(p.angular_velocity()[1], omega[1], 0.05 * omega[1]);
+}
+
+TEST(Predictor, NextDisplayTime) {
+    EXPECT_EQ(next_display_time_ns(1000, 0, 0), 1000u);
+    const uint64_t vsync = 5 * kMs;
+    // 60 Hz: refreshes at 5 ms + k * 16.67 ms.
+    EXPECT_EQ(next_display_time_ns(5 * kMs, 60, vsync), 5 * kMs);
+    EXPECT_EQ(next_display_time_ns(6 * kMs, 60, vsync), 5 * kMs + 16666667);
+    EXPECT_EQ(next_display_time_ns(40 * kMs, 60, vsync), 5 * kMs + 50 * kMs);
+    EXPECT_EQ(next_display_time_ns(1 * kMs, 60, vsync), vsync);
+}
+
+// ---- Reprojection ------------------------------------------------------------------------
+
+constexpr uint32_t kW = 320, kH = 180;  // the HoloLens profile's 30 x 17 degrees, a quarter
+const Pinhole kK{kW / 2.0 / std::tan(15 * kPi / 180), kH / 2.0 / std::tan(8.5 * kPi / 180),
+                 (kW - 1) / 2.0, (kH - 1) / 2.0};
+
+// A fresh render, ray-cast: from an eye at `eye` with orientation q, a sphere (the prop,
+// radius 0.12 m at (0, 0.7, 0)) shows a specular lobe around the reflection of a light: RGBA8,
+// black (see-through) where nothing is lit.
+std::vector<uint8_t> render(const Vec3& eye, const Quat& q) {
+    std::vector<uint8_t> img(size_t(kW) * kH * 4, 0);
+    const Vec3 c{0, 0.7, 0}, light{1.5, 2.5, 1.5};
+    const double r = 0.12;
+    for (uint32_t y = 0; y < kH; ++y)
+        for (uint32_t x = 0; x < kW; ++x) {
+            // OpenCV ray -> head axes (y, z flipped) -> world.
+            const Vec3 d = rotate(q, {(x - kK.cx) / kK.fx, -(y - kK.cy) / kK.fy, -1});
+            const double dn = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            const Vec3 u{d[0] / dn, d[1] / dn, d[2] / dn};
+            const Vec3 oc{eye[0] - c[0], eye[1] - c[1], eye[2] - c[2]};
+            const double b = oc[0] * u[0] + oc[1] * u[1] + oc[2] * u[2];
+            const double disc = b * b - (oc[0] * oc[0] + oc[1] * oc[1] + oc[2] * oc[2] - r * r);
+            if (disc < 0)
+                continue;
+            const double t = -b - std::sqrt(disc);
+            const Vec3 p{eye[0] + t * u[0], eye[1] + t * u[1], eye[2] + t * u[2]};
+            const Vec3 n{(p[0] - c[0]) / r, (p[1] - c[1]) / r, (p[2] - c[2]) / r};
+            Vec3 l{light[0] - p[0], light[1] - p[1], light[2] - p[2]};
+            const double ln = std::sqrt(l[0] * l[0] + l[1] * l[1] + l[2] * l[2]);
+            const Vec3 h{l[0] / ln - u[0], l[1] / ln - u[1], l[2] / ln - u[2]};
+            const double hn = std::sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+            const double spec =
+                std::pow(std::max(0.0, (n[0] * h[0] + n[1] * h[1] + n[2] * h[2]) / hn), 60);
+            const auto v = uint8_t(std::lround(255 * std::min(1.0, spec)));
+            if (v == 0)
+                continue;
+            uint8_t* o = &img[(size_t(y) * kW + x) * 4];
+            o[0] = o[1] = o[2] = v;
+            o[3] = 255;
+        }
+    return img;
+}
+
+struct Centroid {
+    double x = 0, y = 0, mass = 0;
+};
+Centroid centroid(const std::vector<uint8_t>& img) {
+    Centroid c;
+    for (uint32_t y = 0; y < kH; ++y)
+        for (uint32_t x = 0; x < kW; ++x) {
+            const double v = img[(size_t(y) * kW + x) * 4];
+            c.x += v * x, c.y += v * y, c.mass += v;
+        }
+    c.x /= c.mass, c.y /= c.mass;
+    return c;
+}
+
+const Quat kLook = normalized(Quat{0.963414, -0.204158, 0.169876, 0.035999});  // PROTOCOL.md
+const Vec3 kHead{0.273616, 1.1, 0.751754};
+
+TEST(Reproject, ZeroMotionIsTheIdentity) {
+    const auto src = render(kHead, kLook);
+    ASSERT_GT(centroid(src).mass, 1000);
+    for (Filter f : {Filter::kNearest, Filter::kBilinear}) {
+        std::vector<uint8_t> dst(src.size(), 7);
+        warp(src.data(), dst.data(), kW, kH, 4, rotation_homography(kK, kLook, kLook), f);
+        EXPECT_EQ(dst, src);
+    }
+    // RGBA16F, nearest.
+    std::vector<uint8_t> half(size_t(kW) * kH * 8);
+    for (size_t i = 0; i < half.size(); ++i) half[i] = uint8_t(i * 31);
+    std::vector<uint8_t> out(half.size());
+    warp(half.data(), out.data(), kW, kH, 8, rotation_homography(kK, kLook, kLook),
+         Filter::kNearest);
+    EXPECT_EQ(out, half);
+}
+
+// A pure rotation about the eye: the warped old render is within 0.25 px (highlight centroid)
+// of the fresh render at the new orientation, and its lit pixels within 8 codes on average.
+TEST(Reproject, PureRotationMatchesAFreshRender) {
+    for (double deg : {1.0, 3.0, 6.0}) {
+        const Quat turned =
+            multiply(from_rotation_vector({0.2 * deg * kPi / 180, deg * kPi / 180, 0}), kLook);
+        const auto old_render = render(kHead, kLook);
+        const auto fresh = render(kHead, turned);
+        std::vector<uint8_t> warped(old_render.size());
+        warp(old_render.data(), warped.data(), kW, kH, 4, rotation_homography(kK, kLook, turned),
+             Filter::kBilinear);
+        const auto a = centroid(warped), b = centroid(fresh), o = centroid(old_render);
+        EXPECT_GT(std::hypot(o.x - b.x, o.y - b.y), deg * 5) << "the turn moves the highlight";
+        EXPECT_LT(std::hypot(a.x - b.x, a.y - b.y), 0.25) << deg << " deg";
+        double err = 0;
+        size_t lit = 0;
+        for (size_t i = 0; i < fresh.size(); i += 4)
+            if (fresh[i] || warped[i])
+                err += std::abs(int(fresh[i]) - int(warped[i])), ++lit;
+        EXPECT_LT(err / double(lit), 8) << deg << " deg";
+    }
+}
+
+// The plane homography puts a point of the plane where the display eye sees it, the head's
+// translation and rotation included; without translation it is the rotation homography.
+TEST(Reproject, PlaneHomographyIsExactOnItsPlane) {
+    const EyePose render = eye_pose(kHead, kLook, 0.063, 0);
+    const Quat turned = multiply(from_rotation_vector({0.01, 0.05, 0.002}), kLook);
+    const EyePose display =
+        eye_pose({kHead[0] + 0.04, kHead[1] - 0.01, kHead[2] + 0.02}, turned, 0.063, 0);
+    const double depth = 0.8;
+    // A point on the plane at render pixel (200, 60): X = depth * K^-1 (u, v, 1) (OpenCV axes).
+    const double u = 200, v = 60;
+    const Vec3 cv{(u - kK.cx) / kK.fx * depth, (v - kK.cy) / kK.fy * depth, depth};
+    const Vec3 world_offset = rotate(render.orientation_wxyz, {cv[0], -cv[1], -cv[2]});
+    const Vec3 world{render.position_m[0] + world_offset[0], render.position_m[1] + world_offset[1],
+                     render.position_m[2] + world_offset[2]};
+    const Vec3 rel = rotate(conjugate(display.orientation_wxyz),
+                            {world[0] - display.position_m[0], world[1] - display.position_m[1],
+                             world[2] - display.position_m[2]});
+    const double du = kK.fx * rel[0] / -rel[2] + kK.cx, dv = kK.fy * -rel[1] / -rel[2] + kK.cy;
+    const auto h = plane_homography(kK, render, display, depth);
+    const double w = h[6] * du + h[7] * dv + h[8];
+    EXPECT_NEAR((h[0] * du + h[1] * dv + h[2]) / w, u, 1e-6);
+    EXPECT_NEAR((h[3] * du + h[4] * dv + h[5]) / w, v, 1e-6);
+    // No translation: the rotation homography, up to scale.
+    const auto a = plane_homography(kK, render, {render.position_m, turned}, depth);
+    const auto b = rotation_homography(kK, render.orientation_wxyz, turned);
+    for (size_t i = 0; i < 9; ++i) EXPECT_NEAR(a[i], b[i] / b[8], 1e-9) << i;
+}
+
+// The C API: a LAYER event warped to the latest pose; a stale one is cleared.
+TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
+    auto src = render(kHead, kLook);
+    hysar_event e{};
+    e.kind = HYSAR_EVENT_LAYER;
+    e.pose.time_ns = 100 * kMs;
+    for (size_t i = 0; i < 4; ++i) e.pose.orientation_wxyz[i] = kLook[i];
+    e.image = hysar_image{kW, kH, HYSAR_FORMAT_RGBA8, 4, src.size(), src.data()};
+    hysar_display d{};
+    d.eye_width = kW, d.eye_height = kH, d.fx = kK.fx, d.fy = kK.fy, d.cx = kK.cx, d.cy = kK.cy;
+    hysar_pose latest = e.pose;
+    std::vector<uint8_t> dst(src.size(), 9);
+    uint32_t cleared = 7;
+    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 120 * kMs, 50 * kMs, 0.8, HYSAR_FILTER_NEAREST,
+                                    dst.data(), dst.size(), &cleared),
+              HYSAR_OK)
+        << hysar_last_error();
+    EXPECT_EQ(cleared, 0u);
+    EXPECT_EQ(dst, src);
+    ASSERT_EQ(hysar_reproject_layer(&e, &d, &latest, 151 * kMs, 50 * kMs, 0, HYSAR_FILTER_BILINEAR,
+                                    dst.data(), dst.size(), &cleared),
+              HYSAR_OK);
+    EXPECT_EQ(cleared, 1u);
+    EXPECT_EQ(dst, std::vector<uint8_t>(src.size(), 0));
+    // Bad arguments name what is wrong.
+    EXPECT_EQ(
+        hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size() - 1, nullptr),
+        HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("dst_bytes"), std::string::npos);
+    latest.orientation_wxyz[0] = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+}
+
+TEST(Predictor, CApi) {
+    hysar_predictor_config c;
+    hysar_predictor_config_init(&c);
+    c.max_horizon_ms = -1;
+    hysar_predictor* p = nullptr;
+    EXPECT_EQ(hysar_predictor_create(&c, &p), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("max_horizon_ms"), std::string::npos);
+    ASSERT_EQ(hysar_predictor_create(nullptr, &p), HYSAR_OK);
+    hysar_pose out{};
+    EXPECT_EQ(hysar_predictor_predict(p, 1, &out), HYSAR_E_INVALID_ARGUMENT);
+    const Vec3 v{0.5, 0, 0};
+    for (int i = 0; i <= 10; ++i) {
+        const auto s = truth(i / 100.0, {0, 0, 0}, v);
+        hysar_pose h{s.time_ns, {s.position_m[0], s.position_m[1], s.position_m[2]}, {}};
+        for (size_t k = 0; k < 4; ++k) h.orientation_wxyz[k] = s.orientation_wxyz[k];
+        ASSERT_EQ(hysar_predictor_add(p, &h), HYSAR_OK);
+    }
+    const auto want = truth(0.15, {0, 0, 0}, v);
+    ASSERT_EQ(hysar_predictor_predict(p, want.time_ns, &out), HYSAR_OK);
+    EXPECT_NEAR(out.position_m[0], want.position_m[0], 1e-6);
+    EXPECT_EQ(out.time_ns, truth(0.1, {0, 0, 0}, v).time_ns) << "the newest sample's time";
+    hysar_predictor_destroy(p);
+}
+
+// ---- The wire: the optional display time -------------------------------------------------
+
+TEST(WireTime, PoseWithoutDisplayTimeIsTheOldPose) {
+    namespace proto = hs::protocol;
+    proto::Pose p{42, {0.1, 1.6, 0.3}, {1, 0, 0, 0}};
+    auto old_bytes = std::get<std::vector<uint8_t>>(proto::encode(p, proto::Side::kClient, 1));
+    EXPECT_EQ(old_bytes.size(), proto::kHeaderBytes + 64) << "a Pose as before the field";
+    p.display_time_ns = 77;
+    auto new_bytes = std::get<std::vector<uint8_t>>(proto::encode(p, proto::Side::kClient, 1));
+    ASSERT_EQ(new_bytes.size(), proto::kHeaderBytes + 72);
+    EXPECT_TRUE(std::equal(old_bytes.begin() + 16, old_bytes.end(), new_bytes.begin() + 16));
+    auto back = proto::decode_frame(new_bytes, proto::Side::kClient);
+    ASSERT_TRUE(std::holds_alternative<proto::Message>(back));
+    EXPECT_EQ(std::get<proto::Pose>(std::get<proto::Message>(back)).display_time_ns, 77u);
+    auto old_back = proto::decode_frame(old_bytes, proto::Side::kClient);
+    ASSERT_TRUE(std::holds_alternative<proto::Message>(old_back));
+    EXPECT_EQ(std::get<proto::Pose>(std::get<proto::Message>(old_back)).display_time_ns, 0u);
+}
+
+TEST(WireTime, VdLayerCarriesTheDisplayTimeAfterItsData) {
+    namespace proto = hs::protocol;
+    for (uint64_t t : {uint64_t(0), uint64_t(123456789)}) {
+        proto::VdLayer l;
+        l.frame_id = 3, l.pose_time_ns = 9, l.width = 2, l.height = 1, l.display_time_ns = t;
+        std::vector<uint8_t> out;
+        auto err = proto::encode_vd_layer_into(out, l, 5, [](std::vector<uint8_t>& o) {
+            for (int i = 0; i < 8; ++i) o.push_back(uint8_t(i + 1));
+            return true;
+        });
+        ASSERT_FALSE(err) << err->message;
+        auto back = proto::decode_frame(out, proto::Side::kServer);
+        ASSERT_TRUE(std::holds_alternative<proto::Message>(back))
+            << std::get<proto::DecodeError>(back).message;
+        const auto& m = std::get<proto::VdLayer>(std::get<proto::Message>(back));
+        EXPECT_EQ(m.display_time_ns, t);
+        EXPECT_EQ(m.data, (std::vector<uint8_t>{1, 2, 3, 4, 5, 6, 7, 8}));
+        l.data = m.data;
+        EXPECT_EQ(std::get<std::vector<uint8_t>>(proto::encode(l, proto::Side::kServer, 5)), out);
+    }
+}
+
+}  // namespace
+}  // namespace hs::motion
