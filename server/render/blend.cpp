@@ -1,0 +1,272 @@
+#include "render/blend.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <glm/geometric.hpp>
+#include <glm/mat4x4.hpp>
+
+#include "core/check.hpp"
+#include "scene/camera.hpp"
+
+namespace hs::render {
+
+namespace {
+
+constexpr float kFar = std::numeric_limits<float>::max();
+
+double smoothstep01(double t) {
+    t = std::clamp(t, 0.0, 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+// The roll-off toward the frame's edges at pixel (u, v): 1 inside, smoothly to 0 at the edge.
+double edge_factor(const scene::Intrinsics& k, double rolloff, double u, double v) {
+    const double dx = std::min(u + 0.5, double(k.width) - 0.5 - u);
+    const double dy = std::min(v + 0.5, double(k.height) - 0.5 - v);
+    const double d = std::min(dx, dy);
+    if (d <= 0.0)
+        return 0.0;
+    const double band = rolloff * double(std::min(k.width, k.height));
+    return band <= 0.0 ? 1.0 : std::max(smoothstep01(d / band), 1e-9);
+}
+
+}  // namespace
+
+std::optional<glm::dvec3> SurfaceView::project(const glm::dvec3& world) const {
+    const glm::dvec3 q = glm::dvec3(scene::frame_from_world(pose) * glm::dvec4(world, 1.0));
+    const double z = -q.z;
+    if (!(z > 1e-9))
+        return std::nullopt;
+    const auto& k = intrinsics;
+    return glm::dvec3(k.fx * q.x / z + k.cx, k.cy - k.fy * q.y / z, z);
+}
+
+SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
+                      const scene::Pose& pose) {
+    SurfaceView view;
+    view.intrinsics = k;
+    view.pose = pose;
+    const size_t n = size_t(k.width) * k.height;
+    view.depth.assign(n, kFar);
+    view.position.assign(n, glm::vec3(0.0f));
+    view.normal.assign(n, glm::vec3(0.0f));
+    const glm::dmat4 view_m = scene::frame_from_world(pose);
+    // Per vertex: pixel position and view depth (nothing behind the camera is drawn).
+    struct V {
+        double u, v, z;
+    };
+    std::vector<V> verts(mesh.positions.size());
+    for (size_t i = 0; i < mesh.positions.size(); ++i) {
+        const glm::dvec3 q = glm::dvec3(view_m * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
+        const double z = -q.z;
+        verts[i] = z > 1e-6 ? V{k.fx * q.x / z + k.cx, k.cy - k.fy * q.y / z, z} : V{0, 0, -1};
+    }
+    for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
+        const uint32_t i0 = mesh.indices[t], i1 = mesh.indices[t + 1], i2 = mesh.indices[t + 2];
+        const V a = verts[i0], b = verts[i1], c = verts[i2];
+        if (a.z <= 0 || b.z <= 0 || c.z <= 0)
+            continue;
+        const double area = (b.u - a.u) * (c.v - a.v) - (b.v - a.v) * (c.u - a.u);
+        if (std::abs(area) < 1e-12)
+            continue;
+        const int x0 = std::max(0, int(std::ceil(std::min({a.u, b.u, c.u}))));
+        const int x1 = std::min(int(k.width) - 1, int(std::floor(std::max({a.u, b.u, c.u}))));
+        const int y0 = std::max(0, int(std::ceil(std::min({a.v, b.v, c.v}))));
+        const int y1 = std::min(int(k.height) - 1, int(std::floor(std::max({a.v, b.v, c.v}))));
+        for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+                // Barycentric coordinates in the image, then perspective-correct weights.
+                const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
+                const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
+                const double w2 = 1.0 - w0 - w1;
+                if (w0 < 0 || w1 < 0 || w2 < 0)
+                    continue;
+                const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
+                const double inv_z = p0 + p1 + p2;
+                const double z = 1.0 / inv_z;
+                const size_t i = size_t(y) * k.width + x;
+                if (z >= view.depth[i])
+                    continue;
+                view.depth[i] = float(z);
+                const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
+                view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
+                                             q1 * glm::dvec3(mesh.positions[i1]) +
+                                             q2 * glm::dvec3(mesh.positions[i2]));
+                glm::dvec3 nn = q0 * glm::dvec3(mesh.normals[i0]) +
+                                q1 * glm::dvec3(mesh.normals[i1]) +
+                                q2 * glm::dvec3(mesh.normals[i2]);
+                const double len = glm::length(nn);
+                view.normal[i] = len > 1e-12 ? glm::vec3(nn / len) : glm::vec3(0.0f);
+            }
+    }
+    return view;
+}
+
+double blend_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
+                    const glm::dvec3& n) {
+    const glm::dvec3 to = view.pose.position - p;
+    const double d2 = glm::dot(to, to);
+    if (!(d2 > 0.0))
+        return 0.0;
+    const double d = std::sqrt(d2);
+    const double cos_t = glm::dot(n, to / d);
+    if (!(cos_t > 0.0))
+        return 0.0;
+    const auto uvz = view.project(p);
+    if (!uvz)
+        return 0.0;
+    const auto& k = view.intrinsics;
+    const double u = uvz->x, v = uvz->y;
+    const double e = edge_factor(k, o.edge_rolloff, u, v);
+    if (e <= 0.0)
+        return 0.0;
+    // The shadow test: the surfaces in the 2 x 2 pixels around (u, v) must not all lie in front
+    // of p by more than the tolerance.
+    const double footprint = uvz->z / std::min(k.fx, k.fy);
+    const double bias = o.shadow_bias_px * footprint / std::max(cos_t, 0.05) + 5e-4;
+    const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
+    double farthest = -1.0;
+    for (int y = y0; y <= y0 + 1; ++y)
+        for (int x = x0; x <= x0 + 1; ++x)
+            if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height)) {
+                const size_t i = size_t(y) * k.width + x;
+                if (view.covered(i))
+                    farthest = std::max(farthest, double(view.depth[i]));
+            }
+    // The farthest of the four: a nearer surface beside p (a silhouette) does not hide it.
+    if (farthest >= 0.0 && farthest < uvz->z - bias)
+        return 0.0;
+    return cos_t / d2 * e;
+}
+
+std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
+    std::vector<double> w(blend.views.size(), 0.0);
+    double sum = 0.0;
+    for (size_t j = 0; j < w.size(); ++j)
+        sum += w[j] = blend_factor(blend.views[j], blend.options, p, n);
+    if (sum > 0.0)
+        for (double& x : w) x /= sum;
+    return w;
+}
+
+uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
+    uint32_t count = 0;
+    for (const auto& view : blend.views) count += blend_factor(view, blend.options, p, n) > 0.0;
+    return count;
+}
+
+Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
+                    const BlendOptions& options) {
+    Blend blend;
+    blend.options = options;
+    for (const auto& pr : projectors)
+        blend.views.push_back(rasterise(mesh, pr.intrinsics, pr.pose));
+    for (size_t j = 0; j < projectors.size(); ++j) {
+        const SurfaceView& view = blend.views[j];
+        const auto& k = view.intrinsics;
+        ProjectorBlend pb;
+        pb.name = projectors[j].name;
+        pb.weight.assign(size_t(k.width) * k.height, 0.0f);
+        pb.geometry = ImageRgba32f::zeros(k.width, k.height);
+        for (uint32_t y = 0; y < k.height; ++y)
+            for (uint32_t x = 0; x < k.width; ++x) {
+                const size_t i = size_t(y) * k.width + x;
+                if (!view.covered(i))
+                    continue;
+                const glm::dvec3 p(view.position[i]), n(view.normal[i]);
+                const auto w = blend_weights(blend, p, n);
+                const glm::dvec3 to = view.pose.position - p;
+                const double d2 = glm::dot(to, to);
+                const double cos_t = glm::dot(n, to / std::sqrt(d2));
+                float* g = &pb.geometry.pixels[i * 4];
+                g[0] = float(x), g[1] = float(y);
+                g[2] = cos_t > 0.0 ? float(cos_t / d2) : 0.0f;
+                g[3] = 1.0f;
+                pb.weight[i] = float(w[j]);
+                ++pb.prop_pixels;
+                pb.shared_pixels += w[j] > 0.0 && w[j] < 1.0;
+            }
+        blend.projectors.push_back(std::move(pb));
+    }
+    return blend;
+}
+
+void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight) {
+    HS_CHECK(weight.size() == size_t(frame.width) * frame.height,
+             "apply_weights: the weights and the frame differ in size");
+    // A prop pixel the rasteriser missed (the GPU covered its centre, the CPU did not, at the
+    // silhouette) takes the largest weight of its neighbours.
+    const uint32_t w = frame.width, h = frame.height;
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            float s = weight[i];
+            if (s == 0.0f && frame.pixels[i * 4 + 3] > 0.0f)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int xx = int(x) + dx, yy = int(y) + dy;
+                        if (xx >= 0 && yy >= 0 && xx < int(w) && yy < int(h))
+                            s = std::max(s, weight[size_t(yy) * w + xx]);
+                    }
+            for (int c = 0; c < 3; ++c) frame.pixels[i * 4 + c] *= s;
+        }
+}
+
+ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
+                                     const ProjectorBlend& blend, const ImageRgba32f& target,
+                                     double hmd_min_through) {
+    HS_CHECK(target.width == blend.geometry.width && target.height == blend.geometry.height,
+             "blended_projector_drive: the target and the projector differ in size");
+    scene::Optics o = optics;
+    o.levels.projector_max = projector.white_level.value_or(optics.levels.projector_max);
+    o.levels.projector_min = projector.black_level.value_or(optics.levels.projector_min);
+    const scene::DeviceLevels d = optics::effective_levels(o);
+    auto g_ref = optics::reference_falloff(blend.geometry, projector.intrinsics);
+    const double base = d.environment + hmd_min_through;
+    const bool black = o.compensation.black_levels;
+    ImageRgba32f share = target;
+    for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
+        const double w = blend.weight[i];
+        for (int c = 0; c < 3; ++c) {
+            const double t = target.pixels[i * 4 + c];
+            share.pixels[i * 4 + c] = float(black && w > 0.0 ? w * t + (1.0 - w) * base : w * t);
+        }
+    }
+    return optics::projector_drive(o, share, blend.geometry, g_ref.ok() ? g_ref.value() : 1.0,
+                                   hmd_min_through);
+}
+
+double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n, int shifted,
+                       glm::dvec2 shift_px) {
+    double share = 0.0;
+    for (size_t j = 0; j < blend.views.size(); ++j) {
+        const SurfaceView& view = blend.views[j];
+        if (blend_factor(view, blend.options, p, n) <= 0.0)
+            continue;
+        auto uvz = view.project(p);
+        if (!uvz)
+            continue;
+        double u = uvz->x, v = uvz->y;
+        if (int(j) == shifted)
+            u += shift_px.x, v += shift_px.y;
+        // Bilinear, as a projector pixel's light spreads over its footprint.
+        const auto& k = view.intrinsics;
+        const auto& wt = blend.projectors[j].weight;
+        const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
+        const double fx = u - x0, fy = v - y0;
+        double acc = 0.0;
+        for (int dy = 0; dy <= 1; ++dy)
+            for (int dx = 0; dx <= 1; ++dx) {
+                const int x = x0 + dx, y = y0 + dy;
+                const double f = (dx ? fx : 1.0 - fx) * (dy ? fy : 1.0 - fy);
+                if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height))
+                    acc += f * wt[size_t(y) * k.width + x];
+            }
+        share += acc;
+    }
+    return share;
+}
+
+}  // namespace hs::render

@@ -1,0 +1,108 @@
+// Several projectors over one prop (docs/OPTICS.md, "Several projectors"): per surface point,
+// blend weights that split the VI radiance between the projectors that reach it, the weighted
+// projector frames, and what the blended frames deliver where a camera looks.
+//
+// Everything here runs on the CPU from the prop's mesh: each projector's view of the prop is
+// rasterised into a depth buffer (its shadow map) holding, per pixel, the nearest surface point
+// and its normal. For a point p with normal n, projector j's blend factor is
+//
+//   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * e_j(p)
+//
+// V_j: 1 when p is inside j's frame and no nearer surface hides it from j (the shadow test),
+// theta_j and d_j: the incidence angle and distance of j's light at p, e_j: a smooth roll-off
+// (smoothstep) over the `edge_rolloff` fraction of the frame nearest its edges. The weights are
+// w_j = a_j / sum_k a_k: they sum to one wherever any projector reaches p, and 0 elsewhere.
+// With one projector the weight is 1 wherever it reaches (the single-projector path applies no
+// weights at all).
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "core/image.hpp"
+#include "optics/capture.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::render {
+
+struct BlendOptions {
+    // The band along each frame edge over which a projector's factor rolls off to 0, as a
+    // fraction of the frame's smaller side (0: a hard edge).
+    double edge_rolloff = 0.08;
+    // The shadow test's tolerance, in pixel footprints of the projector at the point (divided
+    // by the incidence cosine, clamped at 0.05), plus a fixed 0.5 mm.
+    double shadow_bias_px = 2.0;
+};
+
+// A camera's view of the prop, rasterised on the CPU: per pixel (pixel centres at integers,
+// OpenCV), the nearest surface point. depth is the distance along the view axis (-z), +inf
+// where no prop covers the pixel centre.
+struct SurfaceView {
+    scene::Intrinsics intrinsics;
+    scene::Pose pose;
+    std::vector<float> depth;
+    std::vector<glm::vec3> position;  // world, metres
+    std::vector<glm::vec3> normal;    // world, unit (interpolated vertex normals)
+    bool covered(size_t i) const { return depth[i] < 3.0e38f; }
+    // Where a world point lands: pixel (u, v) and its depth; nullopt behind the camera.
+    std::optional<glm::dvec3> project(const glm::dvec3& world) const;
+};
+SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const scene::Pose& pose);
+
+// One projector's part of the blend, at its own pixels.
+struct ProjectorBlend {
+    std::string name;
+    std::vector<float> weight;  // w_j of the surface point each pixel lights; 0 off the prop
+    // The projector's capture geometry as render_capture_geometry gives it seen from the
+    // projector itself: u, v (the pixel), g = cos theta / d^2 (m^-2), alpha 1 on the prop.
+    ImageRgba32f geometry;
+    uint64_t prop_pixels = 0;    // pixels that light the prop
+    uint64_t shared_pixels = 0;  // of which another projector shares (0 < w < 1)
+};
+
+struct Blend {
+    BlendOptions options;
+    std::vector<SurfaceView> views;  // one per projector: its shadow map
+    std::vector<ProjectorBlend> projectors;
+};
+
+// The factor a_j at a world point with unit normal n (0 where j cannot light it).
+double blend_factor(const SurfaceView& view, const BlendOptions& options, const glm::dvec3& p,
+                    const glm::dvec3& n);
+// The weights w_j at a point (all 0 where no projector reaches it).
+std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n);
+
+// The blend of the scene's projectors over `mesh` (the prop as the renderer draws it).
+Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
+                    const BlendOptions& options = {});
+
+// Multiplies a projector frame's RGB by its weights (alpha untouched). Sizes must agree.
+void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight);
+
+// The share of the single-projector VI light that the blended frames put at p: sum over the
+// projectors that reach p of their weight image, sampled bilinearly where p lands in their
+// frame. `shift_px` moves one projector's image (index `shifted`) by that many pixels (a
+// misregistered projector). 1 where the blend is exact; 0 where no projector reaches p.
+double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n,
+                       int shifted = -1, glm::dvec2 shift_px = {0, 0});
+
+// Projector j's drive for its share of a wanted projector signal (docs/OPTICS.md, "Several
+// projectors"): `target` is the single-projector signal (DN/s at the camera, projector j's
+// pixels), weighted here by j's blend; the compensation is optics::projector_drive's with the
+// projector's own white and black levels, its own falloff (its blend geometry) and its own
+// reference point g_ref (g at its principal point; 1 where that ray misses the prop), and it
+// takes off only j's share of the environment and the headset black. Drives lie in [0, 1].
+ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
+                                     const ProjectorBlend& blend, const ImageRgba32f& target,
+                                     double hmd_min_through);
+
+// How many of the projectors reach p (V_j and cos theta_j > 0).
+uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n);
+
+}  // namespace hs::render
