@@ -32,6 +32,31 @@ double edge_factor(const scene::Intrinsics& k, double rolloff, double u, double 
     return band <= 0.0 ? 1.0 : std::max(smoothstep01(d / band), 1e-9);
 }
 
+// Pixels off the prop take the mean weight of their prop neighbours (8-connected), so that a
+// prop pixel the GPU covers where the CPU did not (at the silhouette) carries the weight of the
+// prop beside it.
+void dilate(std::vector<float>& weight, const SurfaceView& view) {
+    const uint32_t w = view.intrinsics.width, h = view.intrinsics.height;
+    std::vector<float> next = weight;
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            if (view.covered(i))
+                continue;
+            double sum = 0;
+            int count = 0;
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const int xx = int(x) + dx, yy = int(y) + dy;
+                    if (xx >= 0 && yy >= 0 && xx < int(w) && yy < int(h) &&
+                        view.covered(size_t(yy) * w + xx))
+                        sum += weight[size_t(yy) * w + xx], ++count;
+                }
+            next[i] = count ? float(sum / count) : 0.0f;
+        }
+    weight.swap(next);
+}
+
 }  // namespace
 
 std::optional<glm::dvec3> SurfaceView::project(const glm::dvec3& world) const {
@@ -104,8 +129,10 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
     return view;
 }
 
-double blend_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
-                    const glm::dvec3& n) {
+namespace {
+// a_j without the roll-off toward grazing (the factor where no projector has more than that).
+double raw_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
+                  const glm::dvec3& n, double* cos_out) {
     const glm::dvec3 to = view.pose.position - p;
     const double d2 = glm::dot(to, to);
     if (!(d2 > 0.0))
@@ -138,14 +165,34 @@ double blend_factor(const SurfaceView& view, const BlendOptions& o, const glm::d
     // The farthest of the four: a nearer surface beside p (a silhouette) does not hide it.
     if (farthest >= 0.0 && farthest < uvz->z - bias)
         return 0.0;
+    *cos_out = cos_t;
     return cos_t / d2 * e;
 }
 
+double incidence_factor(const BlendOptions& o, double cos_t) {
+    return smoothstep01((cos_t - o.incidence_cutoff) /
+                        std::max(o.incidence_rolloff - o.incidence_cutoff, 1e-9));
+}
+}  // namespace
+
+double blend_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
+                    const glm::dvec3& n) {
+    double cos_t = 0.0;
+    return raw_factor(view, o, p, n, &cos_t) * incidence_factor(o, cos_t);
+}
+
 std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
-    std::vector<double> w(blend.views.size(), 0.0);
-    double sum = 0.0;
-    for (size_t j = 0; j < w.size(); ++j)
-        sum += w[j] = blend_factor(blend.views[j], blend.options, p, n);
+    std::vector<double> w(blend.views.size(), 0.0), raw(blend.views.size(), 0.0);
+    double sum = 0.0, raw_sum = 0.0;
+    for (size_t j = 0; j < w.size(); ++j) {
+        double cos_t = 0.0;
+        raw_sum += raw[j] = raw_factor(blend.views[j], blend.options, p, n, &cos_t);
+        sum += w[j] = raw[j] * incidence_factor(blend.options, cos_t);
+    }
+    // Where every projector that reaches p does so at grazing, they share it without the
+    // roll-off: coverage first.
+    if (!(sum > 0.0))
+        w.swap(raw), sum = raw_sum;
     if (sum > 0.0)
         for (double& x : w) x /= sum;
     return w;
@@ -153,7 +200,9 @@ std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const
 
 uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
     uint32_t count = 0;
-    for (const auto& view : blend.views) count += blend_factor(view, blend.options, p, n) > 0.0;
+    double cos_t = 0.0;
+    for (const auto& view : blend.views)
+        count += raw_factor(view, blend.options, p, n, &cos_t) > 0.0;
     return count;
 }
 
@@ -188,6 +237,7 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                 ++pb.prop_pixels;
                 pb.shared_pixels += w[j] > 0.0 && w[j] < 1.0;
             }
+        dilate(pb.weight, view);
         blend.projectors.push_back(std::move(pb));
     }
     return blend;
@@ -196,22 +246,8 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
 void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight) {
     HS_CHECK(weight.size() == size_t(frame.width) * frame.height,
              "apply_weights: the weights and the frame differ in size");
-    // A prop pixel the rasteriser missed (the GPU covered its centre, the CPU did not, at the
-    // silhouette) takes the largest weight of its neighbours.
-    const uint32_t w = frame.width, h = frame.height;
-    for (uint32_t y = 0; y < h; ++y)
-        for (uint32_t x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * w + x;
-            float s = weight[i];
-            if (s == 0.0f && frame.pixels[i * 4 + 3] > 0.0f)
-                for (int dy = -1; dy <= 1; ++dy)
-                    for (int dx = -1; dx <= 1; ++dx) {
-                        const int xx = int(x) + dx, yy = int(y) + dy;
-                        if (xx >= 0 && yy >= 0 && xx < int(w) && yy < int(h))
-                            s = std::max(s, weight[size_t(yy) * w + xx]);
-                    }
-            for (int c = 0; c < 3; ++c) frame.pixels[i * 4 + c] *= s;
-        }
+    for (size_t i = 0; i < weight.size(); ++i)
+        for (int c = 0; c < 3; ++c) frame.pixels[i * 4 + c] *= weight[i];
 }
 
 ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
@@ -243,7 +279,8 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
     double share = 0.0;
     for (size_t j = 0; j < blend.views.size(); ++j) {
         const SurfaceView& view = blend.views[j];
-        if (blend_factor(view, blend.options, p, n) <= 0.0)
+        double cos_t = 0.0;
+        if (raw_factor(view, blend.options, p, n, &cos_t) <= 0.0)
             continue;
         auto uvz = view.project(p);
         if (!uvz)
@@ -251,22 +288,78 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
         double u = uvz->x, v = uvz->y;
         if (int(j) == shifted)
             u += shift_px.x, v += shift_px.y;
-        // Bilinear, as a projector pixel's light spreads over its footprint.
+        // Bilinear over the pixels that light the prop (those beside it light what lies
+        // behind): the weight of the surface around p in j's frame.
         const auto& k = view.intrinsics;
         const auto& wt = blend.projectors[j].weight;
         const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
         const double fx = u - x0, fy = v - y0;
-        double acc = 0.0;
+        double acc = 0.0, norm = 0.0;
         for (int dy = 0; dy <= 1; ++dy)
             for (int dx = 0; dx <= 1; ++dx) {
                 const int x = x0 + dx, y = y0 + dy;
                 const double f = (dx ? fx : 1.0 - fx) * (dy ? fy : 1.0 - fy);
-                if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height))
-                    acc += f * wt[size_t(y) * k.width + x];
+                if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height) &&
+                    view.covered(size_t(y) * k.width + x))
+                    acc += f * wt[size_t(y) * k.width + x], norm += f;
             }
+        if (norm > 0.0)
+            acc /= norm;
         share += acc;
     }
     return share;
+}
+
+ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted,
+                     glm::dvec2 shift_px) {
+    ViewBlend out;
+    const auto& k = camera.intrinsics;
+    out.width = k.width;
+    out.height = k.height;
+    const size_t n = size_t(k.width) * k.height;
+    out.share.assign(n, -1.0f);
+    std::vector<uint8_t> overlap(n, 0);
+    std::vector<double> errors;
+    for (size_t i = 0; i < n; ++i) {
+        if (!camera.covered(i))
+            continue;
+        const glm::dvec3 p(camera.position[i]), nn(camera.normal[i]);
+        ++out.prop_pixels;
+        const uint32_t reach = projectors_reaching(blend, p, nn);
+        if (reach == 0) {
+            out.share[i] = 0.0f;
+            continue;
+        }
+        ++out.covered;
+        overlap[i] = reach > 1;
+        out.overlap += reach > 1;
+        const double s = delivered_share(blend, p, nn, shifted, shift_px);
+        out.share[i] = float(s);
+        errors.push_back(std::abs(s - 1.0));
+    }
+    if (!errors.empty()) {
+        double sum = 0;
+        for (double e : errors) sum += e, out.max_error = std::max(out.max_error, e);
+        out.mean_error = sum / double(errors.size());
+        const size_t at = std::min(errors.size() - 1, size_t(0.99 * double(errors.size())));
+        std::nth_element(errors.begin(), errors.begin() + ptrdiff_t(at), errors.end());
+        out.p99_error = errors[at];
+    }
+    for (uint32_t y = 0; y < k.height; ++y)
+        for (uint32_t x = 0; x < k.width; ++x) {
+            const size_t i = size_t(y) * k.width + x;
+            if (out.share[i] <= 0.0f)
+                continue;
+            for (const size_t j : {i + 1, i + k.width}) {
+                if ((j == i + 1 && x + 1 >= k.width) || (j == i + k.width && y + 1 >= k.height))
+                    continue;
+                if (out.share[j] <= 0.0f || !(overlap[i] || overlap[j]))
+                    continue;
+                out.max_step =
+                    std::max(out.max_step, double(std::abs(out.share[i] - out.share[j])));
+            }
+        }
+    return out;
 }
 
 }  // namespace hs::render

@@ -6,12 +6,17 @@
 // rasterised into a depth buffer (its shadow map) holding, per pixel, the nearest surface point
 // and its normal. For a point p with normal n, projector j's blend factor is
 //
-//   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * e_j(p)
+//   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * s((cos theta_j - c0) / (c1 - c0)) * e_j(p)
 //
 // V_j: 1 when p is inside j's frame and no nearer surface hides it from j (the shadow test),
-// theta_j and d_j: the incidence angle and distance of j's light at p, e_j: a smooth roll-off
+// theta_j and d_j: the incidence angle and distance of j's light at p, s: the smoothstep
+// 3t^2 - 2t^3 on [0, 1] (a roll-off toward grazing, from cos theta = c1 down to 0 at c0: a
+// projector's light there moves far across the surface for a small misregistration, and its
+// pixels' footprints stretch), e_j: a smooth roll-off
 // (smoothstep) over the `edge_rolloff` fraction of the frame nearest its edges. The weights are
 // w_j = a_j / sum_k a_k: they sum to one wherever any projector reaches p, and 0 elsewhere.
+// Where every projector that reaches p does so below the cutoff (all a_j = 0, some cos > 0),
+// the weights are taken without s: a grazing projector still covers what nothing else reaches.
 // With one projector the weight is 1 wherever it reaches (the single-projector path applies no
 // weights at all).
 #pragma once
@@ -35,9 +40,13 @@ struct BlendOptions {
     // The band along each frame edge over which a projector's factor rolls off to 0, as a
     // fraction of the frame's smaller side (0: a hard edge).
     double edge_rolloff = 0.08;
+    // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) to 0 at
+    // incidence_cutoff (c0).
     // The shadow test's tolerance, in pixel footprints of the projector at the point (divided
     // by the incidence cosine, clamped at 0.05), plus a fixed 0.5 mm.
     double shadow_bias_px = 2.0;
+    double incidence_rolloff = 0.4;  // c1
+    double incidence_cutoff = 0.1;   // c0
 };
 
 // A camera's view of the prop, rasterised on the CPU: per pixel (pixel centres at integers,
@@ -58,7 +67,9 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const
 // One projector's part of the blend, at its own pixels.
 struct ProjectorBlend {
     std::string name;
-    std::vector<float> weight;  // w_j of the surface point each pixel lights; 0 off the prop
+    // w_j of the surface point each pixel lights; off the prop, the mean of its prop
+    // neighbours' (a pixel straddling the silhouette), else 0.
+    std::vector<float> weight;
     // The projector's capture geometry as render_capture_geometry gives it seen from the
     // projector itself: u, v (the pixel), g = cos theta / d^2 (m^-2), alpha 1 on the prop.
     ImageRgba32f geometry;
@@ -72,7 +83,8 @@ struct Blend {
     std::vector<ProjectorBlend> projectors;
 };
 
-// The factor a_j at a world point with unit normal n (0 where j cannot light it).
+// The factor a_j at a world point with unit normal n (0 where j cannot light it, or lights it
+// at cos theta <= incidence_cutoff).
 double blend_factor(const SurfaceView& view, const BlendOptions& options, const glm::dvec3& p,
                     const glm::dvec3& n);
 // The weights w_j at a point (all 0 where no projector reaches it).
@@ -87,8 +99,9 @@ void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight);
 
 // The share of the single-projector VI light that the blended frames put at p: sum over the
 // projectors that reach p of their weight image, sampled bilinearly where p lands in their
-// frame. `shift_px` moves one projector's image (index `shifted`) by that many pixels (a
-// misregistered projector). 1 where the blend is exact; 0 where no projector reaches p.
+// frame (over the pixels that light the prop). `shift_px` moves one projector's image (index
+// `shifted`) by that many pixels (a misregistered projector). 1 where the blend is exact; 0 where
+// no projector reaches p.
 double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n,
                        int shifted = -1, glm::dvec2 shift_px = {0, 0});
 
@@ -101,6 +114,26 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
 ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
                                      const ProjectorBlend& blend, const ImageRgba32f& target,
                                      double hmd_min_through);
+
+// The blend as a camera sees it (a viewpoint around the prop): per camera pixel on the prop,
+// the share of the single-projector VI light the blended frames deliver (delivered_share at
+// the surface point the pixel sees; -1 off the prop, 0 where no projector reaches).
+struct ViewBlend {
+    uint32_t width = 0, height = 0;
+    std::vector<float> share;
+    uint64_t prop_pixels = 0;  // camera pixels on the prop
+    uint64_t covered = 0;      // of which at least one projector reaches
+    uint64_t overlap = 0;      // of which two or more reach (a blend region)
+    double max_error = 0;      // max |share - 1| over covered pixels
+    double mean_error = 0;     // mean |share - 1| over covered pixels
+    double p99_error = 0;      // its 99th percentile
+    // The largest |share(a) - share(b)| between 4-neighbour pixels a, b both covered, one in
+    // an overlap: the luminance step across a seam, relative to the local luminance.
+    double max_step = 0;
+    double coverage() const { return prop_pixels ? double(covered) / double(prop_pixels) : 1.0; }
+};
+ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted = -1,
+                     glm::dvec2 shift_px = {0, 0});
 
 // How many of the projectors reach p (V_j and cos theta_j > 0).
 uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n);
