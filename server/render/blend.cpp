@@ -59,6 +59,54 @@ void dilate(std::vector<float>& weight, const SurfaceView& view) {
 
 }  // namespace
 
+std::vector<float> outline_distance(const SurfaceView& view) {
+    const uint32_t w = view.intrinsics.width, h = view.intrinsics.height;
+    const float inf = 1e9f;
+    std::vector<float> d(size_t(w) * h, inf);
+    // Seeds: pixels off the prop, and prop pixels on a depth step of more than 2 % to a
+    // neighbour (an outline where one part of the prop passes in front of another).
+    const auto step = [&](size_t a, size_t b) {
+        return !view.covered(b) || std::abs(view.depth[a] - view.depth[b]) >
+                                       0.02f * std::min(view.depth[a], view.depth[b]);
+    };
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            if (!view.covered(i) || (x > 0 && step(i, i - 1)) || (x + 1 < w && step(i, i + 1)) ||
+                (y > 0 && step(i, i - w)) || (y + 1 < h && step(i, i + w)))
+                d[i] = 0.0f;
+        }
+    // Two chamfer passes (1, sqrt 2).
+    const float diag = 1.41421356f;
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            float& v = d[size_t(y) * w + x];
+            if (x > 0)
+                v = std::min(v, d[size_t(y) * w + x - 1] + 1.0f);
+            if (y > 0) {
+                v = std::min(v, d[size_t(y - 1) * w + x] + 1.0f);
+                if (x > 0)
+                    v = std::min(v, d[size_t(y - 1) * w + x - 1] + diag);
+                if (x + 1 < w)
+                    v = std::min(v, d[size_t(y - 1) * w + x + 1] + diag);
+            }
+        }
+    for (uint32_t y = h; y-- > 0;)
+        for (uint32_t x = w; x-- > 0;) {
+            float& v = d[size_t(y) * w + x];
+            if (x + 1 < w)
+                v = std::min(v, d[size_t(y) * w + x + 1] + 1.0f);
+            if (y + 1 < h) {
+                v = std::min(v, d[size_t(y + 1) * w + x] + 1.0f);
+                if (x + 1 < w)
+                    v = std::min(v, d[size_t(y + 1) * w + x + 1] + diag);
+                if (x > 0)
+                    v = std::min(v, d[size_t(y + 1) * w + x - 1] + diag);
+            }
+        }
+    return d;
+}
+
 std::optional<glm::dvec3> SurfaceView::project(const glm::dvec3& world) const {
     const glm::dvec3 q = glm::dvec3(scene::frame_from_world(pose) * glm::dvec4(world, 1.0));
     const double z = -q.z;
@@ -106,7 +154,9 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
                 const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
                 const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
                 const double w2 = 1.0 - w0 - w1;
-                if (w0 < 0 || w1 < 0 || w2 < 0)
+                // A little beyond the edge: no pixel falls between two triangles.
+                constexpr double kEdge = -1e-7;
+                if (w0 < kEdge || w1 < kEdge || w2 < kEdge)
                     continue;
                 const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
                 const double inv_z = p0 + p1 + p2;
@@ -132,7 +182,7 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
 namespace {
 // a_j without the roll-off toward grazing (the factor where no projector has more than that).
 double raw_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
-                  const glm::dvec3& n, double* cos_out) {
+                  const glm::dvec3& n, double* soft_out) {
     const glm::dvec3 to = view.pose.position - p;
     const double d2 = glm::dot(to, to);
     if (!(d2 > 0.0))
@@ -165,29 +215,42 @@ double raw_factor(const SurfaceView& view, const BlendOptions& o, const glm::dve
     // The farthest of the four: a nearer surface beside p (a silhouette) does not hide it.
     if (farthest >= 0.0 && farthest < uvz->z - bias)
         return 0.0;
-    *cos_out = cos_t;
+    // The roll-offs toward grazing and toward the prop's outline in j's frame.
+    double soft = smoothstep01((cos_t - o.incidence_cutoff) /
+                               std::max(o.incidence_rolloff - o.incidence_cutoff, 1e-9));
+    if (!view.edge_distance.empty() && o.silhouette_rolloff > 0.0) {
+        const double band = o.silhouette_rolloff * double(std::min(k.width, k.height));
+        double dist = 0.0, norm = 0.0;
+        const double fx = u - x0, fy = v - y0;
+        for (int y = y0; y <= y0 + 1; ++y)
+            for (int x = x0; x <= x0 + 1; ++x)
+                if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height)) {
+                    const double f = (x > x0 ? fx : 1.0 - fx) * (y > y0 ? fy : 1.0 - fy);
+                    dist += f * view.edge_distance[size_t(y) * k.width + x], norm += f;
+                }
+        soft *= smoothstep01((norm > 0.0 ? dist / norm : 0.0) / band);
+    }
+    // A floor, so that where every projector is in a roll-off they still share the point
+    // smoothly (by their other factors) rather than switch.
+    *soft_out = o.rolloff_floor + (1.0 - o.rolloff_floor) * soft;
     return cos_t / d2 * e;
 }
 
-double incidence_factor(const BlendOptions& o, double cos_t) {
-    return smoothstep01((cos_t - o.incidence_cutoff) /
-                        std::max(o.incidence_rolloff - o.incidence_cutoff, 1e-9));
-}
 }  // namespace
 
 double blend_factor(const SurfaceView& view, const BlendOptions& o, const glm::dvec3& p,
                     const glm::dvec3& n) {
-    double cos_t = 0.0;
-    return raw_factor(view, o, p, n, &cos_t) * incidence_factor(o, cos_t);
+    double soft = 0.0;
+    return raw_factor(view, o, p, n, &soft) * soft;
 }
 
 std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
     std::vector<double> w(blend.views.size(), 0.0), raw(blend.views.size(), 0.0);
     double sum = 0.0, raw_sum = 0.0;
     for (size_t j = 0; j < w.size(); ++j) {
-        double cos_t = 0.0;
-        raw_sum += raw[j] = raw_factor(blend.views[j], blend.options, p, n, &cos_t);
-        sum += w[j] = raw[j] * incidence_factor(blend.options, cos_t);
+        double soft = 0.0;
+        raw_sum += raw[j] = raw_factor(blend.views[j], blend.options, p, n, &soft);
+        sum += w[j] = raw[j] * soft;
     }
     // Where every projector that reaches p does so at grazing, they share it without the
     // roll-off: coverage first.
@@ -210,8 +273,10 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                     const BlendOptions& options) {
     Blend blend;
     blend.options = options;
-    for (const auto& pr : projectors)
+    for (const auto& pr : projectors) {
         blend.views.push_back(rasterise(mesh, pr.intrinsics, pr.pose));
+        blend.views.back().edge_distance = outline_distance(blend.views.back());
+    }
     for (size_t j = 0; j < projectors.size(); ++j) {
         const SurfaceView& view = blend.views[j];
         const auto& k = view.intrinsics;
@@ -279,8 +344,8 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
     double share = 0.0;
     for (size_t j = 0; j < blend.views.size(); ++j) {
         const SurfaceView& view = blend.views[j];
-        double cos_t = 0.0;
-        if (raw_factor(view, blend.options, p, n, &cos_t) <= 0.0)
+        double soft = 0.0;
+        if (raw_factor(view, blend.options, p, n, &soft) <= 0.0)
             continue;
         auto uvz = view.project(p);
         if (!uvz)
@@ -288,10 +353,15 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
         double u = uvz->x, v = uvz->y;
         if (int(j) == shifted)
             u += shift_px.x, v += shift_px.y;
-        // Bilinear over the pixels that light the prop (those beside it light what lies
-        // behind): the weight of the surface around p in j's frame.
+        // Bilinear over the pixels around p that light the same surface (their point within
+        // the shadow test's tolerance of p's depth): across a silhouette in j's frame, the
+        // pixels beside p light another part of the prop.
         const auto& k = view.intrinsics;
         const auto& wt = blend.projectors[j].weight;
+        const glm::dvec3 to = view.pose.position - p;
+        const double cos_p = std::max(glm::dot(n, glm::normalize(to)), 0.05);
+        const double bias =
+            blend.options.shadow_bias_px * uvz->z / std::min(k.fx, k.fy) / cos_p + 5e-4;
         const int x0 = int(std::floor(u)), y0 = int(std::floor(v));
         const double fx = u - x0, fy = v - y0;
         double acc = 0.0, norm = 0.0;
@@ -299,9 +369,11 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
             for (int dx = 0; dx <= 1; ++dx) {
                 const int x = x0 + dx, y = y0 + dy;
                 const double f = (dx ? fx : 1.0 - fx) * (dy ? fy : 1.0 - fy);
-                if (x >= 0 && y >= 0 && x < int(k.width) && y < int(k.height) &&
-                    view.covered(size_t(y) * k.width + x))
-                    acc += f * wt[size_t(y) * k.width + x], norm += f;
+                if (x < 0 || y < 0 || x >= int(k.width) || y >= int(k.height))
+                    continue;
+                const size_t i = size_t(y) * k.width + x;
+                if (view.covered(i) && std::abs(double(view.depth[i]) - uvz->z) <= bias)
+                    acc += f * wt[i], norm += f;
             }
         if (norm > 0.0)
             acc /= norm;
@@ -345,6 +417,16 @@ ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted,
         std::nth_element(errors.begin(), errors.begin() + ptrdiff_t(at), errors.end());
         out.p99_error = errors[at];
     }
+    // Interior: at least kInteriorPx camera pixels in from the prop's outline in the camera.
+    const std::vector<float> outline = outline_distance(camera);
+    // And where the camera sees the surface at n.v >= kInteriorMinNdotV.
+    std::vector<uint8_t> interior(n, 0);
+    for (size_t i = 0; i < n; ++i)
+        if (camera.covered(i) && outline[i] >= kInteriorPx) {
+            const glm::dvec3 p(camera.position[i]);
+            interior[i] = glm::dot(glm::dvec3(camera.normal[i]),
+                                   glm::normalize(camera.pose.position - p)) >= kInteriorMinNdotV;
+        }
     for (uint32_t y = 0; y < k.height; ++y)
         for (uint32_t x = 0; x < k.width; ++x) {
             const size_t i = size_t(y) * k.width + x;
@@ -355,8 +437,10 @@ ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted,
                     continue;
                 if (out.share[j] <= 0.0f || !(overlap[i] || overlap[j]))
                     continue;
-                out.max_step =
-                    std::max(out.max_step, double(std::abs(out.share[i] - out.share[j])));
+                const double step = std::abs(out.share[i] - out.share[j]);
+                out.max_step_all = std::max(out.max_step_all, step);
+                if (interior[i] && interior[j])
+                    out.max_step = std::max(out.max_step, step);
             }
         }
     return out;

@@ -47,6 +47,13 @@ struct BlendOptions {
     double shadow_bias_px = 2.0;
     double incidence_rolloff = 0.4;  // c1
     double incidence_cutoff = 0.1;   // c0
+    // The roll-off toward the prop's outline in the projector's frame (where the prop's edge
+    // or a part of it in front of another is), over this fraction of the frame's smaller side:
+    // a ramp that is smooth in the projector's own pixels, where the light is placed.
+    double silhouette_rolloff = 0.0;
+    // The roll-offs' product s never falls below this: where every projector is in one, they
+    // share the point by their other factors, continuously.
+    double rolloff_floor = 1e-3;
 };
 
 // A camera's view of the prop, rasterised on the CPU: per pixel (pixel centres at integers,
@@ -58,11 +65,17 @@ struct SurfaceView {
     std::vector<float> depth;
     std::vector<glm::vec3> position;  // world, metres
     std::vector<glm::vec3> normal;    // world, unit (interpolated vertex normals)
+    // Pixels to the prop's outline (outline_distance); empty: not computed.
+    std::vector<float> edge_distance;
     bool covered(size_t i) const { return depth[i] < 3.0e38f; }
     // Where a world point lands: pixel (u, v) and its depth; nullopt behind the camera.
     std::optional<glm::dvec3> project(const glm::dvec3& world) const;
 };
 SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const scene::Pose& pose);
+
+// Per pixel, the distance in pixels to the nearest pixel off the prop or on a depth step of
+// more than 2 % (where a part of the prop passes in front of another): 0 there.
+std::vector<float> outline_distance(const SurfaceView& view);
 
 // One projector's part of the blend, at its own pixels.
 struct ProjectorBlend {
@@ -115,6 +128,11 @@ ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::P
                                      const ProjectorBlend& blend, const ImageRgba32f& target,
                                      double hmd_min_through);
 
+// The interior of a camera's view of the prop, as the shading comparisons take it: at least
+// kInteriorPx pixels in from the prop's outline, and seen at n.v >= kInteriorMinNdotV.
+inline constexpr float kInteriorPx = 3.0f;
+inline constexpr double kInteriorMinNdotV = 0.1;
+
 // The blend as a camera sees it (a viewpoint around the prop): per camera pixel on the prop,
 // the share of the single-projector VI light the blended frames deliver (delivered_share at
 // the surface point the pixel sees; -1 off the prop, 0 where no projector reaches).
@@ -128,8 +146,9 @@ struct ViewBlend {
     double mean_error = 0;     // mean |share - 1| over covered pixels
     double p99_error = 0;      // its 99th percentile
     // The largest |share(a) - share(b)| between 4-neighbour pixels a, b both covered, one in
-    // an overlap: the luminance step across a seam, relative to the local luminance.
-    double max_step = 0;
+    // an overlap: the luminance step across a seam, relative to the local luminance. max_step
+    // over the interior (both pixels in it, kInteriorPx), max_step_all over all.
+    double max_step = 0, max_step_all = 0;
     double coverage() const { return prop_pixels ? double(covered) / double(prop_pixels) : 1.0; }
 };
 ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted = -1,
