@@ -6,19 +6,18 @@
 // rasterised into a depth buffer (its shadow map) holding, per pixel, the nearest surface point
 // and its normal. For a point p with normal n, projector j's blend factor is
 //
-//   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * s((cos theta_j - c0) / (c1 - c0)) * e_j(p)
+//   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * (f + (1 - f) s_j(p)) * e_j(p)
+//   s_j(p) = S((cos theta_j - c0) / (c1 - c0)) [* S(outline distance / band), when enabled]
 //
-// V_j: 1 when p is inside j's frame and no nearer surface hides it from j (the shadow test),
-// theta_j and d_j: the incidence angle and distance of j's light at p, s: the smoothstep
-// 3t^2 - 2t^3 on [0, 1] (a roll-off toward grazing, from cos theta = c1 down to 0 at c0: a
+// V_j: 1 when p is inside j's frame, faces j and no nearer surface hides it from j (the shadow
+// test), theta_j and d_j: the incidence angle and distance of j's light at p, S: the smoothstep
+// 3t^2 - 2t^3 on [0, 1], s_j: the roll-off toward grazing, from cos theta = c1 down to c0 (a
 // projector's light there moves far across the surface for a small misregistration, and its
-// pixels' footprints stretch), e_j: a smooth roll-off
-// (smoothstep) over the `edge_rolloff` fraction of the frame nearest its edges. The weights are
-// w_j = a_j / sum_k a_k: they sum to one wherever any projector reaches p, and 0 elsewhere.
-// Where every projector that reaches p does so below the cutoff (all a_j = 0, some cos > 0),
-// the weights are taken without s: a grazing projector still covers what nothing else reaches.
-// With one projector the weight is 1 wherever it reaches (the single-projector path applies no
-// weights at all).
+// pixels' footprints stretch), f: a small floor (rolloff_floor) that keeps the weights
+// continuous where every projector is in a roll-off, e_j: the roll-off over the `edge_rolloff`
+// fraction of the frame nearest its edges. The weights are w_j = a_j / sum_k a_k: they sum to
+// one wherever any projector reaches p, and are 0 elsewhere. With one projector the weight is 1
+// wherever it reaches (the single-projector path applies no weights at all).
 #pragma once
 
 #include <cstdint>
@@ -40,16 +39,17 @@ struct BlendOptions {
     // The band along each frame edge over which a projector's factor rolls off to 0, as a
     // fraction of the frame's smaller side (0: a hard edge).
     double edge_rolloff = 0.08;
-    // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) to 0 at
-    // incidence_cutoff (c0).
     // The shadow test's tolerance, in pixel footprints of the projector at the point (divided
     // by the incidence cosine, clamped at 0.05), plus a fixed 0.5 mm.
     double shadow_bias_px = 2.0;
+    // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) to 0 at
+    // incidence_cutoff (c0).
     double incidence_rolloff = 0.4;  // c1
     double incidence_cutoff = 0.1;   // c0
     // The roll-off toward the prop's outline in the projector's frame (where the prop's edge
     // or a part of it in front of another is), over this fraction of the frame's smaller side:
-    // a ramp that is smooth in the projector's own pixels, where the light is placed.
+    // a ramp that is smooth in the projector's own pixels, where the light is placed. 0: off
+    // (the default: on the dome it made the seams larger, docs/OPTICS.md).
     double silhouette_rolloff = 0.0;
     // The roll-offs' product s never falls below this: where every projector is in one, they
     // share the point by their other factors, continuously.
@@ -96,8 +96,7 @@ struct Blend {
     std::vector<ProjectorBlend> projectors;
 };
 
-// The factor a_j at a world point with unit normal n (0 where j cannot light it, or lights it
-// at cos theta <= incidence_cutoff).
+// The factor a_j at a world point with unit normal n (0 where j cannot light it).
 double blend_factor(const SurfaceView& view, const BlendOptions& options, const glm::dvec3& p,
                     const glm::dvec3& n);
 // The weights w_j at a point (all 0 where no projector reaches it).
