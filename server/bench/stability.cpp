@@ -3,12 +3,16 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 
 #include <fmt/format.h>
 #include <glm/gtc/constants.hpp>
 
+#include "render/blend.hpp"
+#include "scene/camera.hpp"
+#include "scene/mesh.hpp"
 #include "shading/brdf.hpp"
 
 namespace hs::bench {
@@ -499,6 +503,210 @@ std::string stability_csv(const std::vector<StabilityRow>& rows) {
             r.max_abs_error, r.max_rel_error, r.max_ulps, r.half_max_rel_error, r.half_max_ulps,
             r.peak_reference, r.first_failure);
     return s;
+}
+
+}  // namespace hs::bench
+
+// --- Several projectors: the blend's hard cases ---------------------------------------------
+
+namespace hs::bench {
+
+namespace {
+
+scene::Projector small_projector(const std::string& name, dvec3 at, dvec3 look) {
+    scene::Projector p;
+    p.name = name;
+    p.intrinsics = {240, 150, 375, 375, 119.5, 74.5};
+    p.pose = scene::look_at(at, look).value();
+    return p;
+}
+
+// Two horizontal squares facing up: a 0.4 m floor at y = 0.7 and a 0.1 m lid 5 cm above its
+// centre, which hides part of the floor from a projector at a slant.
+scene::Mesh floor_and_lid() {
+    scene::Mesh m;
+    const auto quad = [&](double half, double y) {
+        const auto base = uint32_t(m.positions.size());
+        for (auto [x, z] : {std::pair{-half, -half}, {half, -half}, {half, half}, {-half, half}}) {
+            m.positions.push_back(glm::vec3(float(x), float(y), float(z)));
+            m.normals.push_back(glm::vec3(0, 1, 0));
+            m.uvs.push_back(glm::vec2(0));
+            m.tangents.push_back(glm::vec3(1, 0, 0));
+        }
+        for (uint32_t i : {0u, 2u, 1u, 0u, 3u, 2u}) m.indices.push_back(base + i);
+    };
+    quad(0.2, 0.7);
+    quad(0.05, 0.75);
+    return m;
+}
+
+BlendCaseRow run_case(const std::string& name, const scene::Mesh& mesh,
+                      const std::vector<scene::Projector>& projectors,
+                      const std::function<std::string(const render::Blend&)>& check) {
+    BlendCaseRow row;
+    row.name = name;
+    row.projectors = projectors.size();
+    const render::Blend blend = render::compute_blend(mesh, projectors);
+    row.min_drive = 1.0, row.max_drive = 0.0;
+    // Every prop point some projector's pixel lands on, through every projector's eyes.
+    for (size_t j = 0; j < blend.views.size(); ++j) {
+        const auto& view = blend.views[j];
+        for (size_t i = 0; i < view.depth.size(); ++i) {
+            if (!view.covered(i))
+                continue;
+            const dvec3 p(view.position[i]), n(view.normal[i]);
+            const auto w = render::blend_weights(blend, p, n);
+            double sum = 0;
+            for (double x : w) {
+                row.finite = row.finite && std::isfinite(x) && x >= 0.0 && x <= 1.0;
+                sum += x;
+            }
+            ++row.points;
+            if (render::projectors_reaching(blend, p, n) > 0) {
+                ++row.covered;
+                row.max_weight_sum_error = std::max(row.max_weight_sum_error, std::abs(sum - 1.0));
+            } else {
+                row.max_uncovered_weight = std::max(row.max_uncovered_weight, sum);
+            }
+        }
+    }
+    // Each projector's drive for a uniform wanted signal of half the projector's white.
+    scene::Optics optics;
+    for (size_t j = 0; j < projectors.size(); ++j) {
+        const auto& k = projectors[j].intrinsics;
+        ImageRgba32f target = ImageRgba32f::zeros(k.width, k.height);
+        for (size_t i = 0; i < size_t(k.width) * k.height; ++i)
+            for (int c = 0; c < 3; ++c)
+                target.pixels[i * 4 + c] = float(0.5 * optics.levels.projector_max);
+        const ImageRgba32f drive = render::blended_projector_drive(
+            optics, projectors[j], blend.projectors[j], target, 0.0);
+        for (size_t i = 0; i < size_t(k.width) * k.height; ++i)
+            for (int c = 0; c < 3; ++c) {
+                const double d = drive.pixels[i * 4 + c];
+                row.finite = row.finite && std::isfinite(d);
+                row.min_drive = std::min(row.min_drive, d);
+                row.max_drive = std::max(row.max_drive, d);
+            }
+    }
+    row.check = check(blend);
+    return row;
+}
+
+}  // namespace
+
+bool BlendCaseRow::ok() const {
+    return finite && max_weight_sum_error <= 1e-9 && max_uncovered_weight == 0.0 &&
+           min_drive >= 0.0 && max_drive <= 1.0 && check.empty();
+}
+
+std::vector<BlendCaseRow> run_blend_hard_cases() {
+    scene::Hemisphere dome;
+    dome.segments = 64;
+    dome.rings = 16;
+    const scene::Mesh hemisphere = scene::tessellate_hemisphere(dome);
+    const dvec3 centre = dome.centre + dvec3(0, 0.05, 0);
+    const auto above = [&](double azimuth_deg) {
+        const double a = glm::radians(azimuth_deg);
+        return small_projector(fmt::format("above-{}", azimuth_deg),
+                               {0.8 * std::sin(a), 2.4, 0.8 * std::cos(a)}, centre);
+    };
+    std::vector<BlendCaseRow> rows;
+    // Grazing: one projector level with the dome's base sees its rim at n.l -> 0; where it is
+    // the only one, its weight is 1 however small its factor.
+    {
+        auto level = small_projector("level", {0.0, dome.centre.y + 0.002, 1.2},
+                                     {0.0, dome.centre.y + 0.002, 0.0});
+        rows.push_back(run_case(
+            "grazing incidence for one projector", hemisphere, {above(0), level},
+            [&](const render::Blend& b) -> std::string {
+                // High on the dome, towards the level projector: it sees the point at about
+                // 87 degrees from its light, the projector above almost head-on.
+                const dvec3 n(0, std::sin(glm::radians(80.0)), std::cos(glm::radians(80.0)));
+                const dvec3 p = dome.centre + dome.radius * n;
+                const auto w = render::blend_weights(b, p, n);
+                if (!(w[1] >= 0.0 && w[1] < 0.01))
+                    return fmt::format("the grazing projector's weight is {}, not in [0, 0.01)",
+                                       w[1]);
+                // Alone, the level projector keeps that point at weight 1 (no roll-off where
+                // nothing else reaches).
+                const render::Blend alone =
+                    render::compute_blend(hemisphere, std::vector<scene::Projector>{level});
+                const auto w1 = render::blend_weights(alone, p, n);
+                if (w1[0] != 1.0)
+                    return fmt::format("alone, the grazing projector's weight is {}", w1[0]);
+                return "";
+            }));
+    }
+    // Points seen by none: one projector in front; the back of the dome is lit by nobody.
+    rows.push_back(run_case("points seen by no projector", hemisphere,
+                            {small_projector("side", {0.0, 0.9, 1.2}, centre)},
+                            [&](const render::Blend& b) -> std::string {
+                                const dvec3 n(0, 0.2, -1.0);
+                                const dvec3 p = dome.centre + dome.radius * glm::normalize(n);
+                                if (render::delivered_share(b, p, glm::normalize(n)) != 0.0)
+                                    return "the back of the dome receives light";
+                                return "";
+                            }));
+    // Two projectors at one pose: each carries half.
+    {
+        auto a = above(0), b = above(0);
+        b.name = "above-0 twin";
+        rows.push_back(run_case("two projectors at identical poses", hemisphere, {a, b},
+                                [&](const render::Blend& bl) -> std::string {
+                                    const auto& wa = bl.projectors[0].weight;
+                                    const auto& wb = bl.projectors[1].weight;
+                                    for (size_t i = 0; i < wa.size(); ++i)
+                                        if (bl.views[0].covered(i) && wa[i] > 0 &&
+                                            std::abs(wa[i] - 0.5f) > 1e-6f)
+                                            return fmt::format("a weight is {}, not 0.5", wa[i]);
+                                    return wa == wb ? "" : "the twins' weights differ";
+                                }));
+    }
+    // A projector whose frame misses the prop: it gets no pixel, the others cover alone.
+    {
+        auto away = small_projector("looking away", {0.0, 2.4, 0.8}, {0.0, 2.4, 3.0});
+        rows.push_back(run_case("a projector that misses the prop", hemisphere,
+                                {above(0), above(120), above(240), away},
+                                [&](const render::Blend& b) -> std::string {
+                                    if (b.projectors[3].prop_pixels != 0)
+                                        return "the projector looking away lights the prop";
+                                    return "";
+                                }));
+    }
+    // Self-shadowing: the lid hides part of the floor from the slanted projector, whose weight
+    // there is 0; the projector straight above covers it alone.
+    {
+        const scene::Mesh lid = floor_and_lid();
+        auto slant = small_projector("slant", {0.0, 1.2, 0.8}, {0.0, 0.7, 0.0});
+        auto top = small_projector("top", {0.0, 2.0, 0.0001}, {0.0, 0.7, 0.0});
+        rows.push_back(run_case(
+            "a prop that shadows part of itself", lid, {slant, top},
+            [&](const render::Blend& b) -> std::string {
+                // On the floor just behind the lid, seen from the slant: in its shadow.
+                const dvec3 hidden(0.0, 0.7, -0.06), n(0, 1, 0);
+                const auto w = render::blend_weights(b, hidden, n);
+                if (w[0] != 0.0 || std::abs(w[1] - 1.0) > 1e-12)
+                    return fmt::format("in the shadow the weights are {} and {}", w[0], w[1]);
+                // In front of the lid both reach it.
+                const auto f = render::blend_weights(b, dvec3(0.0, 0.7, 0.12), n);
+                if (!(f[0] > 0.0 && f[1] > 0.0))
+                    return "in front of the lid a projector is missing";
+                return "";
+            }));
+    }
+    return rows;
+}
+
+std::string blend_cases_table(const std::vector<BlendCaseRow>& rows) {
+    std::string out =
+        fmt::format("{:<40} {:>3} {:>7} {:>7} {:>10} {:>9} {:>6} {:>6}  {}\n", "case", "K",
+                    "points", "covered", "|sum w-1|", "uncovered", "drive-", "drive+", "result");
+    for (const auto& r : rows)
+        out += fmt::format("{:<40} {:>3} {:>7} {:>7} {:>10.2e} {:>9.2e} {:>6.3f} {:>6.3f}  {}\n",
+                           r.name, r.projectors, r.points, r.covered, r.max_weight_sum_error,
+                           r.max_uncovered_weight, r.min_drive, r.max_drive,
+                           r.ok() ? "ok" : (r.check.empty() ? "FAILED" : r.check));
+    return out;
 }
 
 }  // namespace hs::bench

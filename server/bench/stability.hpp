@@ -59,6 +59,25 @@ Result<std::vector<StabilityRow>> run_stability(gpu::Device& device,
 std::string stability_table(const std::vector<StabilityRow>& rows, bool markdown);
 std::string stability_csv(const std::vector<StabilityRow>& rows);
 
+// The blend of several projectors in its hard cases (docs/STABILITY.md, "Several projectors"):
+// a point one projector sees at grazing incidence, points no projector sees, two projectors at
+// identical poses, a projector whose frame misses the prop, a prop that shadows part of itself.
+// CPU only (render/blend.hpp). Each case's projectors are small (a few hundred pixels a side).
+struct BlendCaseRow {
+    std::string name;
+    size_t projectors = 0;
+    uint64_t points = 0;                  // surface points sampled (prop pixels of every projector)
+    uint64_t covered = 0;                 // of which at least one projector reaches
+    double max_weight_sum_error = 0;      // max |sum_j w_j - 1| over covered points
+    double max_uncovered_weight = 0;      // max sum_j w_j over points no projector reaches
+    bool finite = true;                   // every weight and every drive finite
+    double min_drive = 0, max_drive = 0;  // over every projector's drive (must lie in [0, 1])
+    std::string check;                    // the case's own check, "" when it held, else why
+    bool ok() const;
+};
+std::vector<BlendCaseRow> run_blend_hard_cases();
+std::string blend_cases_table(const std::vector<BlendCaseRow>& rows);
+
 // Helpers shared with the probe tests: a rotation taking +z to a direction near no axis (fixed
 // seeds: reproducible), and a case's vectors and scalars rounded to what the GPU receives, so
 // that a reference computed from them measures the shader's own arithmetic.

@@ -16,8 +16,10 @@
 #include "cli/flags.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "optics/colour.hpp"
 #include "options/options.hpp"
 #include "plot/draw.hpp"
+#include "render/blend.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
@@ -35,7 +37,7 @@ const char* kRenderHelp =
     "usage: hysar render [--scene FILE] [--out DIR] [--angles LIST] [--heights LIST]\n"
     "                    [--model LIST] [--viewer NAME] [--format rgba16f|rgba32f|rgba8]\n"
     "                    [--device auto|cpu|gpu] [--white W] [--no-reference] [--no-exr]\n"
-    "                    [--check]\n"
+    "                    [--check] [--around N] [--around-div D] [--around-only]\n"
     "\n"
     "  --scene FILE     scene JSON (default: the embedded experiment-1 room)\n"
     "  --out DIR        output folder (default: out/render)\n"
@@ -53,12 +55,22 @@ const char* kRenderHelp =
     "  --no-exr         write no float EXR files\n"
     "  --check          exit with status 3 when an image disagrees with the reference beyond the\n"
     "                   stated tolerance (docs/SHADING.md, \"Agreement with the reference\")\n"
+    "  --around N       N viewpoints all around the prop (0 to 360 degrees, at each height):\n"
+    "                   the share of the visible prop that gets its VI light and the largest\n"
+    "                   luminance step across a blend seam (percent and CIEDE2000), with the\n"
+    "                   first projector alone and with all of the scene's projectors; writes\n"
+    "                   DIR/around.json and DIR/around.png (docs/OPTICS.md, \"Several "
+    "projectors\")\n"
+    "  --around-div D   the around views' eyes and projectors at 1/D of their resolution, in\n"
+    "                   [1, 16] (default 4; 1: full resolution)\n"
+    "  --around-only    only the around views (no projector frame, VD layers or sheet)\n"
     "\n"
     "writes DIR/projector.png (+.exr), DIR/vd/<model>_<angle>_<height>_<eye>.png (+.exr),\n"
     "DIR/sheet.png and DIR/render.json (per image: render ms, RMSE and max against the "
     "reference,\nand whether that is within the stated tolerance).\n"
     "\n"
-    "example: hysar render --angles -40,0,40 --model ward --out out/ward --check\n";
+    "example: hysar render --angles -40,0,40 --model ward --out out/ward --check\n"
+    "         hysar render --scene configs/exp1-room-3proj.json --around 8 --around-only\n";
 
 struct Options {
     std::optional<fs::path> scene;
@@ -74,6 +86,9 @@ struct Options {
     bool reference = true;
     bool exr = true;
     bool check = false;
+    uint32_t around = 0;  // viewpoints around the prop; 0: none
+    uint32_t around_div = 4;
+    bool around_only = false;
 };
 
 std::vector<std::string> split(const std::string& s) {
@@ -134,8 +149,8 @@ Result<Options> parse(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
         Flags f, parse_flags(args,
                              {"--scene", "--out", "--angles", "--heights", "--model", "--viewer",
-                              "--format", "--device", "--white"},
-                             {"--no-reference", "--no-exr", "--check"}));
+                              "--format", "--device", "--white", "--around", "--around-div"},
+                             {"--no-reference", "--no-exr", "--check", "--around-only"}));
     Options o;
     if (f.has("--scene"))
         o.scene = f.get("--scene", "");
@@ -163,6 +178,24 @@ Result<Options> parse(const std::vector<std::string>& args) {
     o.reference = !f.has("--no-reference");
     o.exr = !f.has("--no-exr");
     o.check = f.has("--check");
+    if (f.has("--around")) {
+        HS_ASSIGN_OR_RETURN(double n, parse_double("--around", f.get("--around", ""), 1, 360));
+        if (n != std::floor(n))
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--around: '{}' is not a whole number", n));
+        o.around = uint32_t(n);
+    }
+    if (f.has("--around-div")) {
+        HS_ASSIGN_OR_RETURN(double d,
+                            parse_double("--around-div", f.get("--around-div", ""), 1, 16));
+        if (d != std::floor(d))
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--around-div: '{}' is not a whole number", d));
+        o.around_div = uint32_t(d);
+    }
+    o.around_only = f.has("--around-only");
+    if (o.around_only && o.around == 0)
+        return make_error(ErrorCode::kInvalidArgument, "--around-only needs --around N");
     return o;
 }
 
@@ -456,6 +489,170 @@ Result<size_t> render_vd_layers(render::Renderer& renderer, const Plan& p, Writt
     return done;
 }
 
+// 4. Viewpoints all around the prop (--around): per viewpoint, what the blended projector
+// frames deliver (render/blend.hpp) with the first projector alone and with every projector,
+// and a contact sheet of both. The eyes and projectors at 1/around_div of their resolution.
+scene::Intrinsics scaled(const scene::Intrinsics& k, uint32_t div) {
+    if (div == 1)
+        return k;
+    const uint32_t w = std::max<uint32_t>(1, k.width / div),
+                   h = std::max<uint32_t>(1, k.height / div);
+    const double sx = double(w) / k.width, sy = double(h) / k.height;
+    return {w, h, k.fx * sx, k.fy * sy, (k.cx + 0.5) * sx - 0.5, (k.cy + 0.5) * sy - 0.5};
+}
+
+struct AroundStats {
+    render::ViewBlend view;
+    double mean_de00 = 0;  // over covered overlap pixels, against the single-projector VI
+    double max_de00 = 0;
+    double step_de00 = 0;  // CIEDE2000 of the largest seam step
+};
+
+AroundStats around_stats(const render::Blend& blend, const render::SurfaceView& camera,
+                         const ImageRgba32f& vi, float white) {
+    AroundStats st;
+    st.view = render::view_blend(blend, camera);
+    const auto& v = st.view;
+    const auto colour = [&](size_t i, double share) {
+        return optics::lab_from_linear_srgb(
+            glm::dvec3(vi.pixels[i * 4], vi.pixels[i * 4 + 1], vi.pixels[i * 4 + 2]) *
+            (share / white));
+    };
+    uint64_t n = 0;
+    double sum = 0;
+    for (size_t i = 0; i < v.share.size(); ++i) {
+        if (!(v.share[i] > 0.0f))
+            continue;
+        const double de = optics::delta_e_2000(colour(i, v.share[i]), colour(i, 1.0));
+        sum += de, ++n;
+        st.max_de00 = std::max(st.max_de00, de);
+        for (const size_t j : {i + 1, i + v.width})
+            if (j < v.share.size() && v.share[j] > 0.0f &&
+                (j != i + 1 || (i % v.width) + 1 < v.width))
+                st.step_de00 = std::max(st.step_de00, optics::delta_e_2000(colour(i, v.share[i]),
+                                                                           colour(i, v.share[j])));
+    }
+    st.mean_de00 = n ? sum / double(n) : 0.0;
+    return st;
+}
+
+// The VI light the blend delivers, as the camera sees it: the VI image times the share; where
+// no projector reaches the prop, a dim red (so that the uncovered surface shows).
+ImageRgba32f delivered_image(const ImageRgba32f& vi, const render::ViewBlend& v, float white) {
+    ImageRgba32f out = vi;
+    for (size_t i = 0; i < v.share.size(); ++i) {
+        const float s = v.share[i];
+        if (s < 0.0f)
+            continue;
+        for (int c = 0; c < 3; ++c) out.pixels[i * 4 + c] *= s;
+        if (s == 0.0f)
+            out.pixels[i * 4] = 0.25f * white;
+    }
+    return out;
+}
+
+Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o) {
+    const uint32_t div = o.around_div;
+    scene::Scene s = p.s;
+    s.projector.intrinsics = scaled(s.projector.intrinsics, div);
+    for (auto& pr : s.more_projectors) pr.intrinsics = scaled(pr.intrinsics, div);
+    render::RendererCreateInfo ri;
+    ri.format = gpu::ColorFormat::kRgba32Float;
+    HS_ASSIGN_OR_RETURN(auto renderer, render::Renderer::create(device, s, ri));
+    const auto all = s.projectors();
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::vector<scene::Projector> first{all.front()};
+    struct Config {
+        std::string name;
+        render::Blend blend;
+    };
+    std::vector<Config> configs;
+    configs.push_back({"1 projector", render::compute_blend(renderer->mesh(), first)});
+    if (all.size() > 1)
+        configs.push_back({fmt::format("{} projectors", all.size()),
+                           render::compute_blend(renderer->mesh(), all)});
+    const double blend_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    const scene::Intrinsics k = scaled(scene::eye_intrinsics(*p.viewer), div);
+    const uint32_t n = o.around;
+    // The sheet: a column per angle, a row per configuration and height.
+    const int label_w = 200, header_h = 28, gap = 4;
+    const uint32_t factor = std::max<uint32_t>(1, (k.width + 239) / 240);
+    const int cw = int(k.width / factor), ch = int(k.height / factor);
+    const size_t rows = configs.size() * p.heights.size();
+    ImageRgba8 sheet =
+        make_canvas(uint32_t(label_w + n * (cw + gap)), uint32_t(header_h + rows * (ch + gap)), 24);
+    json views = json::array();
+    json summary = json::object();
+    std::vector<double> worst_cov(configs.size(), 1.0), worst_step(configs.size(), 0.0),
+        worst_step_de(configs.size(), 0.0), worst_mean_de(configs.size(), 0.0);
+    for (uint32_t a = 0; a < n; ++a) {
+        const double angle = 360.0 * a / n;
+        draw_text(sheet, label_w + int(a) * (cw + gap) + cw / 2 - 30, 6,
+                  fmt::format("{:.0f} deg", angle), 2, 230, 230, 230);
+        for (size_t hi = 0; hi < p.heights.size(); ++hi) {
+            const auto& [hname, hm] = p.heights[hi];
+            // viewing_pose takes |angle| <= 360; 0..360 is inside.
+            HS_ASSIGN_OR_RETURN(scene::Pose head, scene::viewing_pose(s.viewing, angle, hm));
+            HS_ASSIGN_OR_RETURN(auto vi, renderer->render_eye_diffuse(k, head));
+            const render::SurfaceView camera = render::rasterise(renderer->mesh(), k, head);
+            for (size_t c = 0; c < configs.size(); ++c) {
+                const AroundStats st = around_stats(configs[c].blend, camera, vi.image, o.white);
+                const auto& v = st.view;
+                worst_cov[c] = std::min(worst_cov[c], v.coverage());
+                worst_step[c] = std::max(worst_step[c], v.max_step);
+                worst_step_de[c] = std::max(worst_step_de[c], st.step_de00);
+                worst_mean_de[c] = std::max(worst_mean_de[c], st.mean_de00);
+                views.push_back({{"projectors", configs[c].name},
+                                 {"angle_deg", angle},
+                                 {"height", hname},
+                                 {"height_m", hm},
+                                 {"prop_pixels", v.prop_pixels},
+                                 {"coverage", v.coverage()},
+                                 {"overlap_pixels", v.overlap},
+                                 {"share_error_mean_pct", 100 * v.mean_error},
+                                 {"share_error_p99_pct", 100 * v.p99_error},
+                                 {"share_error_max_pct", 100 * v.max_error},
+                                 {"max_seam_step_pct", 100 * v.max_step},
+                                 {"max_seam_step_with_outline_pct", 100 * v.max_step_all},
+                                 {"max_seam_step_de00", st.step_de00},
+                                 {"mean_de00", st.mean_de00},
+                                 {"max_de00", st.max_de00}});
+                log::info(
+                    "around {:.0f} deg h={} {}: coverage {:.2f} %, seam step {:.2f} % "
+                    "(dE00 {:.2f}), mean dE00 {:.3f}",
+                    angle, hname, configs[c].name, 100 * v.coverage(), 100 * v.max_step,
+                    st.step_de00, st.mean_de00);
+                const int y = header_h + int(c * p.heights.size() + hi) * (ch + gap);
+                blit(sheet,
+                     downscale(tonemap_srgb8(delivered_image(vi.image, v, o.white), o.white),
+                               factor),
+                     label_w + int(a) * (cw + gap), y);
+                if (a == 0) {
+                    draw_text(sheet, 6, y + ch / 2 - 14, configs[c].name, 2, 230, 230, 230);
+                    draw_text(sheet, 6, y + ch / 2 + 4, fmt::format("h={}", hname), 2, 160, 160,
+                              160);
+                }
+            }
+        }
+    }
+    HS_TRY(write_png(o.out / "around.png", sheet));
+    for (size_t c = 0; c < configs.size(); ++c)
+        summary[configs[c].name] = {{"min_coverage", worst_cov[c]},
+                                    {"max_seam_step_pct", 100 * worst_step[c]},
+                                    {"max_seam_step_de00", worst_step_de[c]},
+                                    {"max_mean_de00", worst_mean_de[c]}};
+    summary["views"] = n;
+    summary["eye"] = {{"width", k.width}, {"height", k.height}};
+    summary["projector"] = {{"width", all.front().intrinsics.width},
+                            {"height", all.front().intrinsics.height}};
+    summary["blend_ms"] = blend_ms;
+    summary["blend_options"] = {{"edge_rolloff", render::BlendOptions{}.edge_rolloff},
+                                {"incidence_rolloff", render::BlendOptions{}.incidence_rolloff},
+                                {"incidence_cutoff", render::BlendOptions{}.incidence_cutoff}};
+    return json{{"summary", summary}, {"views", views}};
+}
+
 // Returns how many images disagree with the reference beyond the stated tolerance.
 Result<size_t> run(const Options& o) {
     const auto t_start = std::chrono::steady_clock::now();
@@ -478,10 +675,18 @@ Result<size_t> run(const Options& o) {
         p.viewer->eye_width, p.viewer->eye_height, gpu::to_string(o.format));
     json report = report_head(p, o, *device);
     Written w{o};
-    HS_TRY(render_projector(*renderer, p, w));
-    Sheet sheet(p);
-    HS_ASSIGN_OR_RETURN(size_t done, render_vd_layers(*renderer, p, w, sheet));
-    HS_TRY(write_png(o.out / "sheet.png", sheet.image));
+    size_t done = 0;
+    if (!o.around_only) {
+        HS_TRY(render_projector(*renderer, p, w));
+        Sheet sheet(p);
+        HS_ASSIGN_OR_RETURN(done, render_vd_layers(*renderer, p, w, sheet));
+        HS_TRY(write_png(o.out / "sheet.png", sheet.image));
+    }
+    if (o.around > 0) {
+        HS_ASSIGN_OR_RETURN(json around, render_around(*device, p, o));
+        report["around"] = around["summary"];
+        std::ofstream(o.out / "around.json") << around.dump(2) << "\n";
+    }
     report["images"] = w.images;
     report["projector_renders"] = renderer->projector_render_count();
     report["pipelines_built"] = renderer->pipelines_built();
@@ -492,9 +697,14 @@ Result<size_t> run(const Options& o) {
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
                                                           device->validation_message_count()));
-    std::printf("wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n",
-                o.out.c_str(), done, report["total_s"].get<double>());
-    if (o.reference)
+    if (o.around_only)
+        std::printf("wrote %s/{around.png, around.json, render.json} in %.1f s\n", o.out.c_str(),
+                    report["total_s"].get<double>());
+    else
+        std::printf(
+            "wrote %s/{projector.png, sheet.png, render.json} and %zu VD images in %.1f s\n",
+            o.out.c_str(), done, report["total_s"].get<double>());
+    if (o.reference && !o.around_only)
         std::printf("%zu of %zu images disagree with the reference beyond the stated tolerance\n",
                     w.disagreements.size(), done + 1);
     for (const auto& d : w.disagreements) std::printf("  %s\n", d.c_str());

@@ -6,6 +6,7 @@
 
 #include "codec/pixels.hpp"
 #include "core/log.hpp"
+#include "render/projectors.hpp"
 #include "render/warm_up.hpp"
 
 namespace hs::loop {
@@ -179,11 +180,12 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
         frame = codec::drive_as_layer(*next.captured_material->projector_image);
         out.report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
     } else {
-        auto proj = r.render_projector();
-        if (!proj)
-            return make_error(proj.error().code, "projector pass failed: " + proj.error().message);
-        frame = std::move(proj->image);
-        const render::PassReport& p = proj->report;
+        auto frames = render::render_projector_frames(r, next);
+        if (!frames)
+            return make_error(frames.error().code,
+                              "projector pass failed: " + frames.error().message);
+        frame = std::move(frames->frames.front().image);
+        const render::PassReport& p = frames->frames.front().report;
         out.pass_ms = p.gpu_ms, out.readback_ms = p.readback_ms;
         out.report = {{"pass", p.pass},
                       {"ran", p.ran},
@@ -192,7 +194,32 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
                       {"level", p.level},
                       {"triangles", p.triangles},
                       {"lights_skipped", p.lights_skipped},
-                      {"render_ms", p.render_ms}};
+                      {"render_ms", p.render_ms},
+                      {"projector_renders", r.projector_render_count()}};
+        if (frames->frames.size() > 1) {
+            // The other projectors' shares, as rendered radiance (a calibration covers the
+            // first projector only).
+            nlohmann::json list = nlohmann::json::array();
+            for (size_t j = 0; j < frames->frames.size(); ++j) {
+                const auto& b = frames->blend->projectors[j];
+                list.push_back({{"name", frames->names[j]},
+                                {"prop_pixels", b.prop_pixels},
+                                {"shared_pixels", b.shared_pixels},
+                                {"render_ms", frames->frames[j].report.render_ms}});
+                if (j == 0)
+                    continue;
+                const ImageRgba32f& img = frames->frames[j].image;
+                out.more_projectors.push_back(
+                    {frames->names[j], img.width, img.height, codec::srgb8_pixels(img)});
+            }
+            out.report["projectors"] = std::move(list);
+            out.report["blend_ms"] = frames->blend_ms;
+            if (info_.calibration)
+                log::warn(
+                    "calibrated output: the calibration covers the first projector only; "
+                    "the other {} are sent as rendered",
+                    frames->frames.size() - 1);
+        }
         if (info_.calibration) {
             const auto t_cal = Clock::now();
             auto drives = calibrate(r, next, frame);

@@ -63,7 +63,8 @@ private:
 };
 
 // A scene version built and applied: its projector frame (sRGB8 codes, or drives when
-// calibrated) and what building it cost.
+// calibrated; the first projector's blended share when the scene has several) and what building
+// it cost. Each projector's frame is rendered once per version (report "projector_renders").
 struct SceneVersion {
     uint32_t version = 0;
     std::string name;
@@ -72,6 +73,14 @@ struct SceneVersion {
     double pass_ms = 0, readback_ms = 0, encode_ms = 0;  // the projector frame's stages
     double total_ms = 0;                                 // building the whole version
     nlohmann::json report;                               // the projector pass (stats "passes")
+    // The scene's other projectors' frames (scene.more_projectors' order), each its blended
+    // share of the VI radiance as sRGB8 codes; empty with one projector.
+    struct ProjectorFrame {
+        std::string name;
+        uint32_t width = 0, height = 0;
+        std::vector<uint8_t> rgba8;
+    };
+    std::vector<ProjectorFrame> more_projectors;
     // Registered viewers whose display this version cannot serve, with why (told once).
     std::vector<std::pair<uint32_t, std::string>> unserved;
 };

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <glm/gtc/constants.hpp>
 
+#include "core/check.hpp"
 #include "gpu/shared_layout.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
@@ -488,12 +489,13 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::render_layers(
     return plans;
 }
 
-Result<RenderResult> Renderer::render_projector() {
+Result<RenderResult> Renderer::render_projector(size_t index) {
+    HS_CHECK(index < scene_.projector_count(), "render_projector: no such projector");
+    const scene::Projector& pr = index == 0 ? scene_.projector : scene_.more_projectors[index - 1];
     if (!has_albedo(scene_)) {
         // Nothing diffuse to light: no pass, a black frame.
         RenderResult r;
-        r.image = ImageRgba32f::zeros(scene_.projector.intrinsics.width,
-                                      scene_.projector.intrinsics.height);
+        r.image = ImageRgba32f::zeros(pr.intrinsics.width, pr.intrinsics.height);
         r.report.pass = "projector-vi";
         r.report.lights_skipped = lights_skipped_;
         r.report.skipped_because = "the albedo is black or every light is black";
@@ -501,8 +503,7 @@ Result<RenderResult> Renderer::render_projector() {
         return r;
     }
     HS_ASSIGN_OR_RETURN(Variant * v, variant(false, scene::Specular{}));
-    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, scene_.projector.intrinsics, scene_.projector.pose,
-                                             "pass.projector-vi"));
+    HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, pr.intrinsics, pr.pose, "pass.projector-vi"));
     r.report.pass = "projector-vi";
     ++projector_renders_;
     return r;

@@ -87,8 +87,10 @@ public:
                                                     const RendererCreateInfo& info);
 
     // The projector frame: per projector pixel, the diffuse radiance sum_i L_d of the prop
-    // point it lights (VI). Counted in projector_render_count().
-    Result<RenderResult> render_projector();
+    // point it lights (VI). Counted in projector_render_count(). `index` picks the scene's
+    // projector (0: the first, scene.projector; i: scene.more_projectors[i - 1]); the frame is
+    // unweighted (render/blend.hpp splits it between several projectors).
+    Result<RenderResult> render_projector(size_t index = 0);
 
     // One eye's VD layer for the given specular model: sum_i L_s(p, l_i, v) + L_e; black where
     // there is none. A material without specular and emission records no GPU work.

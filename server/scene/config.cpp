@@ -55,6 +55,12 @@ Result<SpecularModel> parse_specular_model(std::string_view s) {
                                   s));
 }
 
+std::vector<Projector> Scene::projectors() const {
+    std::vector<Projector> all{projector};
+    all.insert(all.end(), more_projectors.begin(), more_projectors.end());
+    return all;
+}
+
 const ViewerProfile* Scene::find_viewer(const std::string& n) const {
     for (const auto& v : viewers)
         if (v.name == n)
@@ -545,24 +551,82 @@ struct SceneReader {
                 r.fail("lights", placed.error().message);
     }
 
-    void projector(const json& pj) {
-        r.only(pj, "projector", {"name", "width", "height", "fx", "fy", "cx", "cy", "pose"});
-        Intrinsics& k = s.projector.intrinsics;
-        s.projector.name = r.string(pj, "projector", "name", "projector");
-        k.width = r.integer(pj, "projector", "width", std::nullopt, 1, kMaxImageSide);
-        k.height = r.integer(pj, "projector", "height", std::nullopt, 1, kMaxImageSide);
+    // One projector at key path `p` ("projector", or "projectors[i]" where the name is required).
+    Projector projector(const json& pj, const std::string& p, bool name_required) {
+        Projector out;
+        r.only(pj, p,
+               {"name", "width", "height", "fx", "fy", "cx", "cy", "pose", "white_level",
+                "black_level", "comment"});
+        Intrinsics& k = out.intrinsics;
+        out.name = r.string(pj, p, "name",
+                            name_required ? std::nullopt : std::optional<std::string>("projector"));
+        if (!r.failed() && out.name.empty())
+            r.fail(Reader::join(p, "name"), "must not be empty");
+        k.width = r.integer(pj, p, "width", std::nullopt, 1, kMaxImageSide);
+        k.height = r.integer(pj, p, "height", std::nullopt, 1, kMaxImageSide);
         const uint64_t pixels = uint64_t(k.width) * k.height;
         if (!r.failed() && pixels > limits.max_projector_pixels)
-            r.fail("projector.width",
+            r.fail(Reader::join(p, "width"),
                    fmt::format("width {} x height {} = {} pixels, more than the limit of {} "
                                "(max_projector_pixels)",
                                k.width, k.height, pixels, limits.max_projector_pixels));
-        k.fx = r.number(pj, "projector", "fx", std::nullopt, 1e-3, 1e7);
-        k.fy = r.number(pj, "projector", "fy", k.fx, 1e-3, 1e7);
-        k.cx = r.number(pj, "projector", "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
-        k.cy = r.number(pj, "projector", "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
-        if (const json* pose = r.member(pj, "projector", "pose", true))
-            s.projector.pose = read_pose(r, *pose, "projector.pose");
+        k.fx = r.number(pj, p, "fx", std::nullopt, 1e-3, 1e7);
+        k.fy = r.number(pj, p, "fy", k.fx, 1e-3, 1e7);
+        k.cx = r.number(pj, p, "cx", 0.5 * (k.width - 1.0), -1e5, 1e5);
+        k.cy = r.number(pj, p, "cy", 0.5 * (k.height - 1.0), -1e5, 1e5);
+        if (const json* pose = r.member(pj, p, "pose", true))
+            out.pose = read_pose(r, *pose, Reader::join(p, "pose"));
+        if (pj.is_object() && pj.contains("white_level"))
+            out.white_level = r.number(pj, p, "white_level", std::nullopt, 1e-9, 1e12);
+        if (pj.is_object() && pj.contains("black_level"))
+            out.black_level = r.number(pj, p, "black_level", std::nullopt, 0.0, 1e12);
+        return out;
+    }
+
+    void projector_list(const json& list) {
+        if (!list.is_array()) {
+            r.fail("projectors", fmt::format("expected an array, got {}", list.type_name()));
+            return;
+        }
+        if (list.empty()) {
+            r.fail("projectors", "expected at least one projector, got an empty list");
+            return;
+        }
+        if (list.size() > kMaxProjectors) {
+            r.fail("projectors", fmt::format("at most {} projectors are supported, got {}",
+                                             kMaxProjectors, list.size()));
+            return;
+        }
+        std::set<std::string> names;
+        for (size_t i = 0; i < list.size() && !r.failed(); ++i) {
+            const std::string p = fmt::format("projectors[{}]", i);
+            Projector pr = projector(list[i], p, true);
+            if (r.failed())
+                return;
+            if (!names.insert(pr.name).second) {
+                r.fail(Reader::join(p, "name"), fmt::format("'{}' names an earlier projector too: "
+                                                            "projector names must be unique",
+                                                            pr.name));
+                return;
+            }
+            if (i == 0)
+                s.projector = std::move(pr);
+            else
+                s.more_projectors.push_back(std::move(pr));
+        }
+    }
+
+    // Each projector's own levels against the scene's (set once both are read).
+    void check_projector_levels() {
+        const auto all = s.projectors();
+        for (size_t i = 0; i < all.size() && !r.failed(); ++i) {
+            const double hi = all[i].white_level.value_or(s.optics.levels.projector_max);
+            const double lo = all[i].black_level.value_or(s.optics.levels.projector_min);
+            if (lo >= hi)
+                r.fail(s.more_projectors.empty() ? std::string("projector")
+                                                 : fmt::format("projectors[{}]", i),
+                       fmt::format("black level {} must be below the white level {}", lo, hi));
+        }
     }
 
     // A viewer's field of view: from its intrinsics, its diagonal, or its two angles.
@@ -734,9 +798,10 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
     if (!root.is_object())
         return make_error(ErrorCode::kParse,
                           fmt::format("{}: expected a JSON object at the top", source));
-    r.only(root, "",
-           {"schema_version", "name", "prop", "material", "specular_presets", "lights", "projector",
-            "viewers", "viewing", "effects", "optics", "captured_material", "comment"});
+    r.only(
+        root, "",
+        {"schema_version", "name", "prop", "material", "specular_presets", "lights", "projector",
+         "projectors", "viewers", "viewing", "effects", "optics", "captured_material", "comment"});
     s.schema_version = int(r.integer(root, "", "schema_version", std::nullopt, 0, 1000));
     if (!r.failed() && s.schema_version != kSchemaVersion) {
         r.fail("schema_version", fmt::format("this build reads schema_version {}, the file has {}",
@@ -752,8 +817,14 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
         read.specular_presets(*presets);
     if (const json* ls = r.member(root, "", "lights", true))
         read.lights(*ls);
-    if (const json* pj = r.member(root, "", "projector", true))
-        read.projector(*pj);
+    if (root.contains("projector") && root.contains("projectors"))
+        r.fail("projectors", "give either `projector` (one) or `projectors` (a list), not both");
+    else if (const json* list = r.member(root, "", "projectors", false))
+        read.projector_list(*list);
+    else if (const json* pj = r.member(root, "", "projector", false))
+        s.projector = read.projector(*pj, "projector", false);
+    else
+        r.fail("projectors", "missing required key (`projectors`, a list, or `projector`)");
     if (const json* vs = r.member(root, "", "viewers", true))
         read.viewers(*vs);
     if (const json* vw = r.member(root, "", "viewing", false))
@@ -766,6 +837,13 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
         read_optics(r, *o, &s.optics);
     if (const json* c = r.member(root, "", "captured_material", false))
         read.captured_material(*c);
+    if (!r.failed())
+        read.check_projector_levels();
+    if (!r.failed() && s.captured_material && !s.more_projectors.empty())
+        r.fail("captured_material",
+               "a captured material is made for one projector; this scene "
+               "has " +
+                   std::to_string(s.projector_count()));
     if (r.failed())
         return r.error();
     return s;
@@ -832,14 +910,17 @@ Result<void> check_scene_limits(const Scene& scene, const SceneLimits& limits) {
                                       "{} (max_triangles)",
                                       scene.name, what, triangles, limits.max_triangles));
     }
-    const Intrinsics& k = scene.projector.intrinsics;
-    const uint64_t pixels = uint64_t(k.width) * k.height;
-    if (pixels > limits.max_projector_pixels)
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            fmt::format("scene '{}': projector width {} x height {} = {} pixels, "
-                        "more than the limit of {} (max_projector_pixels)",
-                        scene.name, k.width, k.height, pixels, limits.max_projector_pixels));
+    for (const Projector& p : scene.projectors()) {
+        const Intrinsics& k = p.intrinsics;
+        const uint64_t pixels = uint64_t(k.width) * k.height;
+        if (pixels > limits.max_projector_pixels)
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("scene '{}': projector {}width {} x height {} = {} pixels, "
+                            "more than the limit of {} (max_projector_pixels)",
+                            scene.name, scene.more_projectors.empty() ? "" : "'" + p.name + "' ",
+                            k.width, k.height, pixels, limits.max_projector_pixels));
+    }
     return {};
 }
 

@@ -117,6 +117,9 @@ struct Projector {
     std::string name;
     Intrinsics intrinsics;
     Pose pose;  // T_world_projector
+    // This projector's measured levels (camera DN/s, as DeviceLevels): its response to a full
+    // drive (P^M) and its black level (P^m). Unset: the scene's optics.levels.
+    std::optional<double> white_level, black_level;
 };
 
 // An optical see-through headset's display, one eye. Eyes are at -ipd/2 and +ipd/2 along the
@@ -211,7 +214,11 @@ struct Scene {
     Material material;
     std::map<std::string, Specular> specular_presets;  // named alternatives (Fig. 7 rows)
     std::vector<Light> lights;
+    // The installation's projectors (docs/SCENE_FORMAT.md, `projectors`): `projector` is the
+    // first, `more_projectors` the others in the scene's order (empty: one projector, the
+    // single-projector path unchanged). Names are unique. projectors() lists all of them.
     Projector projector;
+    std::vector<Projector> more_projectors;
     std::vector<ViewerProfile> viewers;  // at least one
     Viewing viewing;
     Effects effects;
@@ -219,9 +226,13 @@ struct Scene {
     std::optional<CapturedMaterial> captured_material;
 
     const ViewerProfile* find_viewer(const std::string& name) const;
+    // Every projector, the first one first.
+    std::vector<Projector> projectors() const;
+    size_t projector_count() const { return 1 + more_projectors.size(); }
 };
 
 inline constexpr int kSchemaVersion = 1;
 inline constexpr size_t kMaxLights = 64;
+inline constexpr size_t kMaxProjectors = 16;
 
 }  // namespace hs::scene

@@ -80,6 +80,17 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
     pf.scene_version = v.version;
     pf.data = std::move(v.rgba8);
     auto bytes = wire(pf);
+    std::map<std::string, Bytes> named;
+    for (auto& more : v.more_projectors) {
+        proto::ProjectorFrame mf;
+        mf.width = more.width;
+        mf.height = more.height;
+        mf.format = proto::PixelFormat::kRgba8;
+        mf.scene_version = v.version;
+        mf.data = std::move(more.rgba8);
+        if (auto b = wire(mf))
+            named[more.name] = std::make_shared<const std::vector<uint8_t>>(std::move(*b));
+    }
     {
         std::lock_guard lock(figures_mutex);
         Figures& f = figures;
@@ -96,6 +107,7 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
         return;
     Bytes frame = std::make_shared<const std::vector<uint8_t>>(std::move(*bytes));
     projector_frame = frame;
+    named_projector_frames = std::move(named);
     {
         std::lock_guard lock(figures_mutex);
         figures.current_projector_frame = frame;
@@ -103,7 +115,7 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
     }
     for (auto& [id, s] : sessions)
         if (s->is_projector())
-            s->send(frame, nullptr, 0, true);
+            s->send(projector_frame_for(s->name()), nullptr, 0, true);
 }
 
 void Server::Impl::on_encoded(EncodedFrame done) {

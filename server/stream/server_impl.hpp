@@ -140,6 +140,14 @@ struct Server::Impl final : loop::FrameLoopHost {
     // HAProxy's agent-check (`--agent-port`): a line about this node's load per connection.
     std::unique_ptr<asio::ip::tcp::acceptor> agent_acceptor;
     asio::steady_timer tcp_retry{io}, unix_retry{io}, sweep_timer{io}, shutdown_timer{io};
+    // The scene's other projectors' frames by projector name (docs/OPTICS.md, "Several
+    // projectors"): a projector client whose Hello names one gets that one, any other the
+    // first projector's (projector_frame, below).
+    std::map<std::string, Bytes> named_projector_frames;
+    const Bytes& projector_frame_for(const std::string& name) const {
+        const auto it = named_projector_frames.find(name);
+        return it == named_projector_frames.end() ? projector_frame : it->second;
+    }
     std::map<uint32_t, std::shared_ptr<Session>> sessions;
     uint32_t next_session_id = 1;
     uint32_t accept_backoff_ms = 0;

@@ -343,8 +343,8 @@ void Session::hello(const proto::Hello& hello, uint32_t seq) {
     log::for_session(id_).info("{} '{}' joined", role_name(role_), name_);
     if (auto b = wire(proto::Welcome{id_, now_ns(), version}, seq))
         send(std::move(*b));
-    if (role_ == proto::Role::kProjector && srv_.projector_frame)
-        send(srv_.projector_frame, nullptr, 0, true);
+    if (role_ == proto::Role::kProjector && srv_.projector_frame_for(name_))
+        send(srv_.projector_frame_for(name_), nullptr, 0, true);
 }
 
 void Session::handle(const proto::Message& msg) {
