@@ -72,25 +72,30 @@ void Server::Impl::on_job_dropped(uint32_t viewer, const std::string& why) {
     scheduler.complete(viewer, 0, -1.0);
 }
 
-void Server::Impl::on_scene_built(loop::SceneVersion v) {
+namespace {
+
+// One projector's frame of a scene version on the wire (nullopt: it does not encode).
+std::optional<std::vector<uint8_t>> projector_frame_wire(uint32_t width, uint32_t height,
+                                                         uint32_t version,
+                                                         std::vector<uint8_t>&& rgba8) {
     proto::ProjectorFrame pf;
-    pf.width = v.width;
-    pf.height = v.height;
+    pf.width = width;
+    pf.height = height;
     pf.format = proto::PixelFormat::kRgba8;
-    pf.scene_version = v.version;
-    pf.data = std::move(v.rgba8);
-    auto bytes = wire(pf);
+    pf.scene_version = version;
+    pf.data = std::move(rgba8);
+    return wire(pf);
+}
+
+}  // namespace
+
+void Server::Impl::on_scene_built(loop::SceneVersion v) {
+    auto bytes = projector_frame_wire(v.width, v.height, v.version, std::move(v.rgba8));
     std::map<std::string, Bytes> named;
-    for (auto& more : v.more_projectors) {
-        proto::ProjectorFrame mf;
-        mf.width = more.width;
-        mf.height = more.height;
-        mf.format = proto::PixelFormat::kRgba8;
-        mf.scene_version = v.version;
-        mf.data = std::move(more.rgba8);
-        if (auto b = wire(mf))
+    for (auto& more : v.more_projectors)
+        if (auto b =
+                projector_frame_wire(more.width, more.height, v.version, std::move(more.rgba8)))
             named[more.name] = std::make_shared<const std::vector<uint8_t>>(std::move(*b));
-    }
     {
         std::lock_guard lock(figures_mutex);
         Figures& f = figures;
