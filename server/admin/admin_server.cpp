@@ -1,11 +1,9 @@
 #include "admin/admin_server.hpp"
 
-#include <sys/socket.h>
-
 #include <atomic>
 #include <thread>
 
-#include <httplib.h>
+#include <httplib.h>  // and with it the socket calls (send, recv, getpeername)
 
 #include <fmt/format.h>
 

@@ -2,10 +2,8 @@
 
 #include <arpa/inet.h>
 #include <fcntl.h>
-#include <netinet/in.h>
 #include <poll.h>
 #include <sys/eventfd.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -18,7 +16,7 @@
 #include <thread>
 #include <vector>
 
-#include <httplib.h>
+#include <httplib.h>  // and with it the socket calls (send, recv, getpeername)
 
 #include <fmt/format.h>
 
