@@ -1,5 +1,4 @@
 #include "admin/admin_server.hpp"
-
 #include <atomic>
 #include <thread>
 
