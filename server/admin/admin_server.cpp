@@ -1,4 +1,5 @@
 #include "admin/admin_server.hpp"
+
 #include <atomic>
 #include <thread>
 
