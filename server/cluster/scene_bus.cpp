@@ -1,8 +1,14 @@
 #include "cluster/scene_bus.hpp"
 
 #include <nats/nats.h>
+#include <openssl/crypto.h>
+#include <openssl/evp.h>
+#include <openssl/hmac.h>
+#include <openssl/sha.h>
 
+#include <algorithm>
 #include <chrono>
+#include <mutex>
 
 #include <fmt/format.h>
 
@@ -13,13 +19,128 @@ namespace hs::cluster {
 namespace {
 
 constexpr const char* kKey = "scene";
+constexpr std::string_view kMagic = "hysar-scene 1 ";
+constexpr size_t kMaxValue = (size_t(1) << 20) + 256;  // a SceneUpdate's limit and the header
 
 std::string status_text(natsStatus s) {
     const char* last = nats_GetLastError(nullptr);
     return last && *last ? last : natsStatus_GetText(s);
 }
 
+// HMAC-SHA256 over "hysar-scene 1\nBASE\nJSON" with a key derived from the admin token (so
+// that the token itself is never the key of anything else), as 64 hex digits.
+std::string mac(const std::string& admin_token, uint64_t base, std::string_view json) {
+    const std::string label = "hysar scene bus key\n" + admin_token;
+    unsigned char key[SHA256_DIGEST_LENGTH];
+    SHA256(reinterpret_cast<const unsigned char*>(label.data()), label.size(), key);
+    const std::string head = fmt::format("hysar-scene 1\n{}\n", base);
+    unsigned char out[EVP_MAX_MD_SIZE];
+    unsigned int len = 0;
+    std::string data;
+    data.reserve(head.size() + json.size());
+    data.append(head).append(json);
+    HMAC(EVP_sha256(), key, sizeof key, reinterpret_cast<const unsigned char*>(data.data()),
+         data.size(), out, &len);
+    static constexpr char kHex[] = "0123456789abcdef";
+    std::string hex;
+    for (unsigned int i = 0; i < len; ++i) {
+        hex.push_back(kHex[out[i] >> 4]);
+        hex.push_back(kHex[out[i] & 15]);
+    }
+    return hex;
+}
+
+// Logs the first of a burst of refused values at once and the rest in one line per 10 s.
+class BurstLog {
+public:
+    void note(const std::string& what) {
+        std::lock_guard lock(mutex_);
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_ < std::chrono::seconds(10)) {
+            ++held_;
+            return;
+        }
+        if (held_ > 0)
+            log::warn("scene bus: {} more value(s) ignored in the last burst", held_);
+        log::warn("scene bus: {}", what);
+        held_ = 0;
+        last_ = now;
+    }
+
+private:
+    std::mutex mutex_;
+    std::chrono::steady_clock::time_point last_{};
+    uint64_t held_ = 0;
+};
+
+BurstLog& burst_log() {
+    static BurstLog log;
+    return log;
+}
+
 }  // namespace
+
+std::string SceneBus::sign(const std::string& admin_token, uint64_t base, const std::string& json) {
+    return fmt::format("{}{} {}\n{}", kMagic, base, mac(admin_token, base, json), json);
+}
+
+Result<std::pair<uint64_t, std::string>> SceneBus::verify(const std::string& admin_token,
+                                                          std::string_view value) {
+    if (value.size() > kMaxValue)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("a value of {} bytes (at most {})", value.size(), kMaxValue));
+    const auto eol = value.find('\n');
+    if (value.substr(0, kMagic.size()) != kMagic || eol == std::string_view::npos || eol > 120)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "a value not signed with the admin credential");
+    const std::string_view head = value.substr(kMagic.size(), eol - kMagic.size());
+    const auto space = head.find(' ');
+    const std::string_view base_text = head.substr(0, space);
+    uint64_t base = 0;
+    bool ok = space != std::string_view::npos && !base_text.empty() && base_text.size() <= 19;
+    for (char c : base_text) {
+        ok = ok && c >= '0' && c <= '9';
+        base = base * 10 + uint64_t(c - '0');
+    }
+    const std::string json(value.substr(eol + 1));
+    const std::string given(ok ? head.substr(space + 1) : std::string_view());
+    const std::string want = ok ? mac(admin_token, base, json) : std::string();
+    if (!ok || given.size() != want.size() ||
+        CRYPTO_memcmp(given.data(), want.data(), want.size()) != 0)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "a value not signed with the admin credential");
+    return std::pair{base, json};
+}
+
+std::string SceneBus::redacted(const std::string& url) {
+    const auto scheme = url.find("://");
+    const auto from = scheme == std::string::npos ? 0 : scheme + 3;
+    const auto at = url.find('@', from);
+    if (at == std::string::npos)
+        return url;
+    return url.substr(0, from) + "***" + url.substr(at);
+}
+
+std::string SceneBus::metrics_text() const {
+    std::string t =
+        "# HELP hysar_scene_bus_ignored_values_total Values on the scene bus this node did not "
+        "apply, by why: unsigned (not signed with the admin credential), replayed (signed, but "
+        "an older write put again), superseded (a newer one came in the same burst), invalid "
+        "(refused as a SceneUpdate would be).\n"
+        "# TYPE hysar_scene_bus_ignored_values_total counter\n";
+    const std::pair<const char*, uint64_t> rows[] = {
+        {"unsigned", counters_.unsigned_values.load()},
+        {"replayed", counters_.replayed_values.load()},
+        {"superseded", counters_.superseded_values.load()},
+        {"invalid", counters_.invalid_values.load()}};
+    for (const auto& [why, n] : rows)
+        t += fmt::format("hysar_scene_bus_ignored_values_total{{why=\"{}\"}} {}\n", why, n);
+    t += fmt::format(
+        "# HELP hysar_scene_bus_connected Whether this node is connected to the scene bus.\n"
+        "# TYPE hysar_scene_bus_connected gauge\nhysar_scene_bus_connected {}\n",
+        connected() ? 1 : 0);
+    return t;
+}
 
 std::string conflict_message(uint64_t current_revision) {
     return fmt::format("scene changed concurrently, now version {}; fetch it and try again",
@@ -52,8 +173,13 @@ SceneBus::~SceneBus() {
 }
 
 Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
+    if (o.admin_token.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster: the scene bus needs the admin token (--admin-token-file): "
+                          "it signs and checks every scene");
     auto st = std::make_unique<State>();
     st->options = o;
+    const std::string shown = redacted(o.url);
     natsOptions* opts = nullptr;
     natsStatus s = natsOptions_Create(&opts);
     if (s == NATS_OK)
@@ -64,6 +190,18 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         s = natsOptions_SetMaxReconnect(opts, -1);  // forever: nodes outlive a bus outage
     if (s == NATS_OK)
         s = natsOptions_SetReconnectWait(opts, 250);
+    if (s == NATS_OK && !o.user.empty())
+        s = natsOptions_SetUserInfo(opts, o.user.c_str(), o.password.c_str());
+    if (s == NATS_OK && !o.token.empty())
+        s = natsOptions_SetToken(opts, o.token.c_str());
+    if (s == NATS_OK && !o.creds_file.empty())
+        s = natsOptions_SetUserCredentialsFromFiles(opts, o.creds_file.c_str(), nullptr);
+    if (s == NATS_OK && o.tls)
+        s = natsOptions_SetSecure(opts, true);
+    if (s == NATS_OK && !o.tls_ca.empty())
+        s = natsOptions_LoadCATrustedCertificates(opts, o.tls_ca.c_str());
+    if (s == NATS_OK && !o.tls_cert.empty())
+        s = natsOptions_LoadCertificatesChain(opts, o.tls_cert.c_str(), o.tls_key.c_str());
     if (s == NATS_OK)
         s = natsConnection_Connect(&st->nc, opts);
     if (opts)
@@ -71,7 +209,7 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo, fmt::format("--cluster {}: cannot connect to the scene "
                                                       "bus: {}",
-                                                      o.url, status_text(s)));
+                                                      shown, status_text(s)));
     jsOptions jo;
     jsOptions_Init(&jo);
     jo.Wait = o.timeout_ms;
@@ -82,8 +220,10 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
             kvConfig cfg;
             kvConfig_Init(&cfg);
             cfg.Bucket = o.bucket.c_str();
-            cfg.History = 1;
-            cfg.MaxValueSize = 1 << 20;  // a SceneUpdate's limit
+            // Some history, so that a node starts on the newest signed value even when
+            // unsigned ones were put after it.
+            cfg.History = 16;
+            cfg.MaxValueSize = int32_t(kMaxValue);
             s = js_CreateKeyValue(&st->kv, st->js, &cfg);
         }
     }
@@ -91,7 +231,7 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         return make_error(ErrorCode::kIo,
                           fmt::format("--cluster {}: cannot open the key-value bucket '{}' "
                                       "(is JetStream on? nats-server -js): {}",
-                                      o.url, o.bucket, status_text(s)));
+                                      shown, o.bucket, status_text(s)));
     return std::unique_ptr<SceneBus>(new SceneBus(std::move(st)));
 }
 
@@ -99,17 +239,47 @@ bool SceneBus::connected() const {
     return natsConnection_Status(s_->nc) == NATS_CONN_STATUS_CONNECTED;
 }
 
-Result<std::pair<uint64_t, std::string>> SceneBus::current() {
-    kvEntry* e = nullptr;
-    const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
+std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, std::string_view raw) {
+    for (uint64_t t = tail_.load(); revision > t && !tail_.compare_exchange_weak(t, revision);) {
+    }
+    auto v = verify(s_->options.admin_token, raw);
+    if (!v) {
+        ++counters_.unsigned_values;
+        burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
+        return std::nullopt;
+    }
+    for (uint64_t t = signed_tail_.load();
+         revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
+    }
+    return Value{revision, v->first, std::move(v->second)};
+}
+
+Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
+    kvEntryList list{};
+    kvWatchOptions wo;
+    kvWatchOptions_Init(&wo);
+    wo.IgnoreDeletes = true;
+    const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
+    std::vector<Value> out;
     if (s == NATS_NOT_FOUND)
-        return std::pair<uint64_t, std::string>{0, ""};
+        return out;
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo, "the scene bus: " + status_text(s));
-    std::pair<uint64_t, std::string> out{
-        kvEntry_Revision(e),
-        std::string(static_cast<const char*>(kvEntry_Value(e)), size_t(kvEntry_ValueLen(e)))};
-    kvEntry_Destroy(e);
+    for (int i = 0; i < list.Count; ++i) {
+        kvEntry* e = list.Entries[i];
+        if (kvEntry_Operation(e) != kvOp_Put)
+            continue;
+        auto v =
+            check(kvEntry_Revision(e), std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                                        size_t(kvEntry_ValueLen(e))));
+        if (v)
+            out.push_back(std::move(*v));
+    }
+    kvEntryList_Destroy(&list);
+    // An old value put again has an old base: the greatest base is the newest write.
+    std::sort(out.begin(), out.end(), [](const Value& a, const Value& b) {
+        return a.base != b.base ? a.base > b.base : a.revision > b.revision;
+    });
     return out;
 }
 
@@ -118,19 +288,29 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
     // long after the admin was told it failed: refuse it here instead.
     if (!connected())
         return {0, BusError::kUnavailable,
-                "the scene bus is unavailable (not connected to " + s_->options.url +
+                "the scene bus is unavailable (not connected to " + redacted(s_->options.url) +
                     "); the running scene stays"};
+    // Unsigned values after the applied version are no one's write: write over them.
+    const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
+    const uint64_t expected = tail > applied && signed_tail <= applied ? tail : applied;
+    const std::string value = sign(s_->options.admin_token, applied, json);
     uint64_t rev = 0;
     const natsStatus s =
-        applied == 0 ? kvStore_Create(&rev, s_->kv, kKey, json.data(), int(json.size()))
-                     : kvStore_Update(&rev, s_->kv, kKey, json.data(), int(json.size()), applied);
+        expected == 0
+            ? kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()))
+            : kvStore_Update(&rev, s_->kv, kKey, value.data(), int(value.size()), expected);
     if (s == NATS_OK)
         return {rev, BusError::kNone, ""};
     const std::string why = status_text(s);
     if (why.find("wrong last sequence") != std::string::npos ||
         why.find("key exists") != std::string::npos) {
-        auto now = current();
-        return {0, BusError::kConflict, conflict_message(now.ok() ? now->first : applied + 1)};
+        kvEntry* e = nullptr;
+        uint64_t now = applied + 1;
+        if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
+            now = kvEntry_Revision(e);
+            kvEntry_Destroy(e);
+        }
+        return {0, BusError::kConflict, conflict_message(now)};
     }
     if (s == NATS_TIMEOUT)
         return {0, BusError::kUnavailable,
@@ -153,7 +333,7 @@ kvWatcher* make_watcher(kvStore* kv) {
 
 }  // namespace
 
-void SceneBus::watch(std::function<void(uint64_t, const std::string&)> on_scene) {
+void SceneBus::watch(std::function<void(const Value&)> on_scene) {
     on_scene_ = std::move(on_scene);
     // Made here, so that every write after watch() returns is delivered after the latest one.
     kvWatcher* first = make_watcher(s_->kv);
@@ -170,17 +350,35 @@ void SceneBus::watch_loop(void* first) {
             continue;
         }
         while (!stop_) {
-            kvEntry* e = nullptr;
-            const natsStatus s = kvWatcher_Next(&e, w, 200);
-            if (s == NATS_TIMEOUT)
-                continue;
-            if (s != NATS_OK)
+            // A burst is taken whole (bounded), and only its newest signed value is
+            // delivered: a flood costs one check per value and one scene at most.
+            std::optional<Value> newest;
+            natsStatus s = NATS_OK;
+            for (int taken = 0; taken < 4096; ++taken) {
+                kvEntry* e = nullptr;
+                s = kvWatcher_Next(&e, w, taken == 0 ? 200 : 1);
+                if (s != NATS_OK)
+                    break;
+                if (!e)
+                    continue;  // the end of the initial values
+                auto v = check(kvEntry_Revision(e),
+                               std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                                size_t(kvEntry_ValueLen(e))));
+                kvEntry_Destroy(e);
+                if (v) {
+                    if (newest)
+                        ++counters_.superseded_values;
+                    // The newest write: the greatest base (an old value put again has an old
+                    // one), then the newest revision.
+                    if (!newest ||
+                        std::pair(v->base, v->revision) > std::pair(newest->base, newest->revision))
+                        newest = std::move(v);
+                }
+            }
+            if (newest)
+                on_scene_(*newest);
+            if (s != NATS_OK && s != NATS_TIMEOUT)
                 break;  // made again
-            if (!e)
-                continue;  // the end of the initial values
-            on_scene_(kvEntry_Revision(e), std::string(static_cast<const char*>(kvEntry_Value(e)),
-                                                       size_t(kvEntry_ValueLen(e))));
-            kvEntry_Destroy(e);
         }
         kvWatcher_Destroy(w);
         w = nullptr;
