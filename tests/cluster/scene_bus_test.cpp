@@ -198,6 +198,34 @@ TEST(SceneBus, ABurstIsCoalescedToItsNewest) {
     EXPECT_GT(node->counters().superseded_values.load(), 50u);
 }
 
+// TLS to the bus and a token: connects with the bus's CA and the token, not without either.
+TEST(SceneBus, TlsAndATokenToTheBus) {
+    const char* url = std::getenv("HYSAR_TEST_NATS_TLS_URL");
+    const char* ca = std::getenv("HYSAR_TEST_NATS_CA");
+    const char* token = std::getenv("HYSAR_TEST_NATS_TOKEN");
+    ASSERT_TRUE(url && ca && token) << "run through tests/cluster/scene_bus_test.sh";
+    SceneBus::Options o;
+    o.url = url;
+    o.node_id = "tls";
+    o.admin_token = kAdmin;
+    o.bucket = "tls";
+    o.timeout_ms = 2000;
+    o.tls = true;
+    o.tls_ca = ca;
+    o.token = token;
+    auto ok = SceneBus::connect(o);
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    const BusWrite w = ok.value()->write(0, "over tls");
+    EXPECT_EQ(w.error, BusError::kNone) << w.message;
+    auto no_token = o;
+    no_token.token.clear();
+    EXPECT_FALSE(SceneBus::connect(no_token).ok());
+    auto no_ca = o;
+    no_ca.tls_ca.clear();
+    auto untrusted = SceneBus::connect(no_ca);
+    EXPECT_FALSE(untrusted.ok());
+}
+
 TEST(SceneBus, AnUnreachableBusIsNamed) {
     SceneBus::Options o;
     o.url = "nats://127.0.0.1:1";
