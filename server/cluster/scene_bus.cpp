@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <mutex>
 
 #include <fmt/format.h>
@@ -27,13 +28,26 @@ std::string status_text(natsStatus s) {
     return last && *last ? last : natsStatus_GetText(s);
 }
 
-// HMAC-SHA256 over "hysar-scene 1\nBASE\nJSON" with a key derived from the admin token (so
-// that the token itself is never the key of anything else), as 64 hex digits.
-std::string mac(const std::string& admin_token, uint64_t base, std::string_view json) {
+// The wall clock in milliseconds since the UNIX epoch: a write's deadline, which the bus's own
+// timestamp of the stored value is held to.
+uint64_t now_unix_ms() {
+    return uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
+                        std::chrono::system_clock::now().time_since_epoch())
+                        .count());
+}
+
+// How far the bus's clock may be behind the writer's (NTP keeps it far less): a writer told
+// "refused" checks the bus only this long after the deadline.
+constexpr uint64_t kClockMarginMs = 500;
+
+// HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
+// token (so that the token itself is never the key of anything else), as 64 hex digits.
+std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                std::string_view json) {
     const std::string label = "hysar scene bus key\n" + admin_token;
     unsigned char key[SHA256_DIGEST_LENGTH];
     SHA256(reinterpret_cast<const unsigned char*>(label.data()), label.size(), key);
-    const std::string head = fmt::format("hysar-scene 1\n{}\n", base);
+    const std::string head = fmt::format("hysar-scene 1\n{}\n{}\n", base, deadline_ms);
     unsigned char out[EVP_MAX_MD_SIZE];
     unsigned int len = 0;
     std::string data;
@@ -80,12 +94,13 @@ BurstLog& burst_log() {
 
 }  // namespace
 
-std::string SceneBus::sign(const std::string& admin_token, uint64_t base, const std::string& json) {
-    return fmt::format("{}{} {}\n{}", kMagic, base, mac(admin_token, base, json), json);
+std::string SceneBus::sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                           const std::string& json) {
+    return fmt::format("{}{} {} {}\n{}", kMagic, base, deadline_ms,
+                       mac(admin_token, base, deadline_ms, json), json);
 }
 
-Result<std::pair<uint64_t, std::string>> SceneBus::verify(const std::string& admin_token,
-                                                          std::string_view value) {
+Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::string_view value) {
     if (value.size() > kMaxValue)
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("a value of {} bytes (at most {})", value.size(), kMaxValue));
@@ -93,23 +108,31 @@ Result<std::pair<uint64_t, std::string>> SceneBus::verify(const std::string& adm
     if (value.substr(0, kMagic.size()) != kMagic || eol == std::string_view::npos || eol > 120)
         return make_error(ErrorCode::kInvalidArgument,
                           "a value not signed with the admin credential");
-    const std::string_view head = value.substr(kMagic.size(), eol - kMagic.size());
-    const auto space = head.find(' ');
-    const std::string_view base_text = head.substr(0, space);
-    uint64_t base = 0;
-    bool ok = space != std::string_view::npos && !base_text.empty() && base_text.size() <= 19;
-    for (char c : base_text) {
-        ok = ok && c >= '0' && c <= '9';
-        base = base * 10 + uint64_t(c - '0');
-    }
-    const std::string json(value.substr(eol + 1));
-    const std::string given(ok ? head.substr(space + 1) : std::string_view());
-    const std::string want = ok ? mac(admin_token, base, json) : std::string();
-    if (!ok || given.size() != want.size() ||
-        CRYPTO_memcmp(given.data(), want.data(), want.size()) != 0)
+    std::string_view head = value.substr(kMagic.size(), eol - kMagic.size());
+    // BASE and DEADLINE: decimal numbers, each followed by a space.
+    auto number = [&head](uint64_t& n) {
+        const auto space = head.find(' ');
+        const std::string_view text = head.substr(0, space);
+        if (space == std::string_view::npos || text.empty() || text.size() > 19)
+            return false;
+        n = 0;
+        for (char c : text) {
+            if (c < '0' || c > '9')
+                return false;
+            n = n * 10 + uint64_t(c - '0');
+        }
+        head.remove_prefix(space + 1);
+        return true;
+    };
+    Signed out;
+    const bool ok = number(out.base) && number(out.deadline_ms);
+    out.json = std::string(value.substr(eol + 1));
+    const std::string want = ok ? mac(admin_token, out.base, out.deadline_ms, out.json) : "";
+    if (!ok || head.size() != want.size() ||
+        CRYPTO_memcmp(head.data(), want.data(), want.size()) != 0)
         return make_error(ErrorCode::kInvalidArgument,
                           "a value not signed with the admin credential");
-    return std::pair{base, json};
+    return out;
 }
 
 std::string SceneBus::redacted(const std::string& url) {
@@ -126,13 +149,14 @@ std::string SceneBus::metrics_text() const {
         "# HELP hysar_scene_bus_ignored_values_total Values on the scene bus this node did not "
         "apply, by why: unsigned (not signed with the admin credential), replayed (signed, but "
         "an older write put again), superseded (a newer one came in the same burst), invalid "
-        "(refused as a SceneUpdate would be).\n"
+        "(refused as a SceneUpdate would be), late (stored after its write's deadline).\n"
         "# TYPE hysar_scene_bus_ignored_values_total counter\n";
     const std::pair<const char*, uint64_t> rows[] = {
         {"unsigned", counters_.unsigned_values.load()},
         {"replayed", counters_.replayed_values.load()},
         {"superseded", counters_.superseded_values.load()},
-        {"invalid", counters_.invalid_values.load()}};
+        {"invalid", counters_.invalid_values.load()},
+        {"late", counters_.late_values.load()}};
     for (const auto& [why, n] : rows)
         t += fmt::format("hysar_scene_bus_ignored_values_total{{why=\"{}\"}} {}\n", why, n);
     t += fmt::format(
@@ -239,7 +263,8 @@ bool SceneBus::connected() const {
     return natsConnection_Status(s_->nc) == NATS_CONN_STATUS_CONNECTED;
 }
 
-std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, std::string_view raw) {
+std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored_ns,
+                                               std::string_view raw) {
     for (uint64_t t = tail_.load(); revision > t && !tail_.compare_exchange_weak(t, revision);) {
     }
     auto v = verify(s_->options.admin_token, raw);
@@ -248,10 +273,19 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, std::string_vi
         burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
         return std::nullopt;
     }
+    // Stored after its deadline: its writer was told the write failed, so no node takes it.
+    if (stored_ns > 0 && uint64_t(stored_ns / 1000000) > v->deadline_ms) {
+        ++counters_.late_values;
+        burst_log().note(
+            fmt::format("version {} ignored: the bus stored it {} ms after its "
+                        "write's deadline (its writer was told it failed)",
+                        revision, uint64_t(stored_ns / 1000000) - v->deadline_ms));
+        return std::nullopt;
+    }
     for (uint64_t t = signed_tail_.load();
          revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
     }
-    return Value{revision, v->first, std::move(v->second)};
+    return Value{revision, v->base, std::move(v->json)};
 }
 
 Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
@@ -269,9 +303,9 @@ Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
         kvEntry* e = list.Entries[i];
         if (kvEntry_Operation(e) != kvOp_Put)
             continue;
-        auto v =
-            check(kvEntry_Revision(e), std::string_view(static_cast<const char*>(kvEntry_Value(e)),
-                                                        size_t(kvEntry_ValueLen(e))));
+        auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
+                       std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                        size_t(kvEntry_ValueLen(e))));
         if (v)
             out.push_back(std::move(*v));
     }
@@ -293,7 +327,10 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
     // Unsigned values after the applied version are no one's write: write over them.
     const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
     const uint64_t expected = tail > applied && signed_tail <= applied ? tail : applied;
-    const std::string value = sign(s_->options.admin_token, applied, json);
+    // The bus must store it by the deadline, or no node takes it: a write the admin is told
+    // failed never lands later.
+    const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
+    const std::string value = sign(s_->options.admin_token, applied, deadline, json);
     uint64_t rev = 0;
     const natsStatus s =
         expected == 0
@@ -313,12 +350,41 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
         return {0, BusError::kConflict, conflict_message(now)};
     }
     if (s == NATS_TIMEOUT)
-        return {0, BusError::kUnavailable,
-                fmt::format("the scene bus did not confirm the write within {} ms; it may still "
-                            "arrive (hysar admin stats shows the version)",
-                            s_->options.timeout_ms)};
+        return settle(value, deadline);
     return {0, BusError::kUnavailable,
             "the scene bus is unavailable (" + why + "); the running scene stays"};
+}
+
+BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
+    // Unconfirmed: once no copy of it can be taken any more (the deadline and the clock margin
+    // passed), it was either stored in time (then it is the new version, taken by every node)
+    // or it never will be.
+    const uint64_t until = deadline_ms + kClockMarginMs;
+    while (now_unix_ms() < until && !stop_)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    kvEntryList list{};
+    kvWatchOptions wo;
+    kvWatchOptions_Init(&wo);
+    wo.IgnoreDeletes = true;
+    uint64_t stored = 0;
+    const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
+    if (s == NATS_OK) {
+        for (int i = 0; i < list.Count; ++i) {
+            kvEntry* e = list.Entries[i];
+            const int64_t at = kvEntry_Created(e);
+            if (size_t(kvEntry_ValueLen(e)) == value.size() &&
+                std::memcmp(kvEntry_Value(e), value.data(), value.size()) == 0 &&
+                uint64_t(at / 1000000) <= deadline_ms)
+                stored = kvEntry_Revision(e);
+        }
+        kvEntryList_Destroy(&list);
+    }
+    if (stored != 0)
+        return {stored, BusError::kNone, ""};
+    return {0, BusError::kUnavailable,
+            fmt::format("the scene bus did not confirm the write within {} ms; it is refused "
+                        "and stays refused (a copy the bus stores later is taken by no node)",
+                        s_->options.timeout_ms)};
 }
 
 namespace {
@@ -361,7 +427,7 @@ void SceneBus::watch_loop(void* first) {
                     break;
                 if (!e)
                     continue;  // the end of the initial values
-                auto v = check(kvEntry_Revision(e),
+                auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
                                std::string_view(static_cast<const char*>(kvEntry_Value(e)),
                                                 size_t(kvEntry_ValueLen(e))));
                 kvEntry_Destroy(e);

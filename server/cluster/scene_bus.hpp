@@ -1,14 +1,17 @@
 // The scene bus of a cluster (`hysar serve --cluster nats://HOST:PORT`, docs/CLUSTER.md): the
 // scene JSON under key "scene" of a NATS JetStream key-value bucket, whose revision is the scene
 // version every node serves. The only code that includes nats.h (scripts/check_layers.sh).
-// Every value is signed: "hysar-scene 1 BASE HMAC\n" then the JSON, where BASE is the version
-// the write follows and HMAC is HMAC-SHA256 over "hysar-scene 1\nBASE\nJSON", keyed by a key
-// derived from the admin token, so only a holder of the admin credential changes the scene even
+// Every value is signed: "hysar-scene 1 BASE DEADLINE HMAC\n" then the JSON, where BASE is the
+// version the write follows, DEADLINE the time (UNIX ms) by which the bus must store it, and
+// HMAC is HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON", keyed by a key derived from
+// the admin token, so only a holder of the admin credential changes the scene even
 // on a bus anyone can write; a value not so signed is ignored and counted. Writes are
 // compare-and-set on the revision the writing node has applied (or on the unsigned values put
 // after it); no node applies its own write: every node applies what its watch delivers, if and
 // only if it is newer than what it has applied and follows it (BASE >= applied: an old signed
-// value put again is refused). A burst of values is coalesced to its newest signed one.
+// value put again is refused). A value the bus stored after its deadline is taken by no node,
+// and a write not confirmed in time is reported applied only if the bus stored it in time: a
+// refused write never lands later. A burst of values is coalesced to its newest signed one.
 // Thread: any; the watch callback runs on the bus's own thread.
 #pragma once
 
@@ -63,6 +66,13 @@ public:
         std::atomic<uint64_t> replayed_values{0};    // signed, but not following the applied one
         std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
         std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
+        std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
+    };
+    // A value's signed parts.
+    struct Signed {
+        uint64_t base = 0;         // the version the write followed
+        uint64_t deadline_ms = 0;  // the bus must have stored it by then (UNIX ms)
+        std::string json;
     };
     // Connects and opens (or creates) the bucket. An error naming the URL when the bus cannot be
     // reached at start: a node that cannot learn the current scene must not serve another.
@@ -97,11 +107,11 @@ public:
     static bool follows(const Value& v, uint64_t applied) {
         return newer(v.revision, applied) && v.base >= applied;
     }
-    // The signed form of `json` following version `base` (unit-tested), and its check: the
-    // value's base and JSON, or an error saying why it is refused.
-    static std::string sign(const std::string& admin_token, uint64_t base, const std::string& json);
-    static Result<std::pair<uint64_t, std::string>> verify(const std::string& admin_token,
-                                                           std::string_view value);
+    // The signed form of `json` following version `base`, to be stored by `deadline_ms`
+    // (unit-tested), and its check: the signed parts, or an error saying why it is refused.
+    static std::string sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                            const std::string& json);
+    static Result<Signed> verify(const std::string& admin_token, std::string_view value);
 
 private:
     struct State;
@@ -110,7 +120,9 @@ private:
     void watch_loop(void* first);
     std::unique_ptr<State> s_;
     // A raw entry seen: its signed value, if any; counts and notes the tail revision.
-    std::optional<Value> check(uint64_t revision, std::string_view raw);
+    std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw);
+    // A write the bus did not confirm in time: stored by its deadline (then applied), or never.
+    BusWrite settle(const std::string& value, uint64_t deadline_ms);
     std::function<void(const Value&)> on_scene_;
     Counters counters_;
     // The newest revision seen of any value, and of a signed one (writes go on the former when

@@ -8,8 +8,11 @@
 #   2. a poison value ("{{{") on the bucket: a new node still starts, on the newest signed scene;
 #   3. 2,000 unsigned values: headsets keep getting layers, the nodes apply none, /metrics counts
 #      those they saw, and a SceneUpdate afterwards reaches every node;
-#   4. the signed value of an older version put again is refused on every node;
-#   5. a healthy headset is served at the end, the version equal on every node.
+#   4. the signed value of an older version put again is refused on every node (it follows an
+#      older version, and the bus stores it after its write's deadline);
+#   5. the bus frozen (SIGSTOP) during a SceneUpdate: it is refused, and after SIGCONT the copy
+#      the bus then stores is taken by no node; the next update reaches every node;
+#   6. a healthy headset is served at the end, the version equal on every node.
 set -euo pipefail
 bin="$1"
 dir=$(mktemp -d)
@@ -159,10 +162,11 @@ f1=$(frames); t1=$(date +%s%N)
 rate=$(( (f1 - f0) * 1000000000 / (t1 - t0) ))
 (( rate >= 5 )) || fail "headsets starved during the flood: $f0 -> $f1 layers"
 same_everywhere 2 a b c || fail "the flood changed a scene: a: $(applied a); b: $(applied b); c: $(applied c)"
-unsigned_count() {
+ignored() {  # WHY: node a's count of bus values ignored for that reason
   curl -sf -H "Authorization: Bearer $(cat "$dir/token")" "http://127.0.0.1:$admin_port/metrics" \
-    | grep -E '^hysar_scene_bus_ignored_values_total\{why="unsigned"\}' | awk '{print $2}'
+    | grep -E "^hysar_scene_bus_ignored_values_total\{why=\"$1\"\}" | awk '{print $2}'
 }
+unsigned_count() { ignored unsigned; }
 # The bucket keeps 16 values of the key: a flood faster than the watch is partly dropped by the
 # bus itself before any node sees it; every value a node sees is counted.
 within 10 '(( $(unsigned_count) >= 16 ))' || fail "/metrics counts $(unsigned_count) unsigned values, expected >= 16"
@@ -180,13 +184,30 @@ within 10 'same_everywhere $want a b c' || fail "version $want not on every node
 intrude "@$dir/old.value"
 sleep 1.5
 same_everywhere "$want" a b c || fail "a replayed value was applied: a: $(applied a); b: $(applied b); c: $(applied c)"
-grep -q "an old value put again" "$dir/node-a.log" || fail "node a did not log the replay"
+# Refused twice over: it follows an older version, and the bus stored it long after its deadline
+# (counted as the latter, which is checked first).
+(( $(ignored late) + $(ignored replayed) >= 1 )) || fail "node a did not count the replay"
 echo "4. the signed value of an older version put again: refused on every node (still v$want)"
 
-# 5. A healthy headset at the end, served the version every node holds.
+# 5. The bus frozen during a push: refused, and the copy stored after the thaw lands nowhere.
+before=$want
+kill -STOP "$nats"
+if out=$(push a frozen 2>&1); then kill -CONT "$nats"; fail "a push to a frozen bus was taken: $out"; fi
+kill -CONT "$nats"
+grep -q "stays refused" <<< "$out" || fail "the push to a frozen bus: $out"
+sleep 3
+same_everywhere "$before" a b c || fail "the refused update landed: a: $(applied a); b: $(applied b); c: $(applied c)"
+! grep -q "'room frozen'" "$dir"/node-*.log || fail "a node served the refused scene"
+within 5 '(( $(ignored late) >= 2 ))' || fail "node a did not count the late copy"
+push b thawed > "$dir/push.log" 2>&1 || fail "push after the thaw: $(cat "$dir/push.log")"
+want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
+within 10 'same_everywhere $want a b c' || fail "version $want not on every node: a: $(applied a); b: $(applied b); c: $(applied c)"
+echo "5. a push while the bus was frozen: refused ($(grep -oE 'did not confirm[^;]*' <<< "$out")); after the thaw no node took it; v$want on a, b, c"
+
+# 6. A healthy headset at the end, served the version every node holds.
 mkdir "$dir/p"
 "$bin/clients/hysar-projector" --connect "127.0.0.1:$port_c" --token-file "$dir/token" --frames 1 \
   --out "$dir/p" > "$dir/projector.log" 2>&1 || fail "projector on node c"
 [[ -e "$dir/p/projector_v$want.png" ]] || fail "the projector frame is not v$want: $(ls "$dir/p")"
 f2=$(frames); sleep 1; (( $(frames) > f2 )) || fail "the headsets stopped getting layers"
-echo "5. headsets served, the projector on v$want; a: $(applied a); b: $(applied b); c: $(applied c)"
+echo "6. headsets served, the projector on v$want; a: $(applied a); b: $(applied b); c: $(applied c)"
