@@ -85,7 +85,10 @@ const char* kServeHelp =
     "                           or --cluster-token-file FILE, or --cluster-creds FILE (.creds:\n"
     "                           a user JWT and its nkey seed); TLS to the bus with a tls://\n"
     "                           URL or --cluster-ca FILE (the bus's CA), --cluster-cert FILE\n"
-    "                           --cluster-key FILE when it asks for a client certificate\n"
+    "                           --cluster-key FILE when it asks for a client certificate;\n"
+    "                           --cluster-replicas N (1): copies of the bucket a NATS cluster\n"
+    "                           keeps when this node creates it (3 on three servers; give every\n"
+    "                           server's URL, comma-separated)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -259,7 +262,8 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--cluster-creds",
                                            "--cluster-ca",
                                            "--cluster-cert",
-                                           "--cluster-key"};
+                                           "--cluster-key",
+                                           "--cluster-replicas"};
 
 // The scene a server starts on and SIGHUP reloads: --scene's file, or the embedded room.
 struct SceneSource {
@@ -476,6 +480,8 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
     if (!o.tls_key.empty())
         HS_TRY(check_secret_file(o.tls_key, "--cluster-key"));
     o.tls = o.url.rfind("tls://", 0) == 0 || !o.tls_ca.empty() || !o.tls_cert.empty();
+    HS_ASSIGN_OR_RETURN(const uint64_t replicas, parse_count(f, "--cluster-replicas", 1, 1, 5));
+    o.replicas = int(replicas);
     return o;
 }
 
@@ -487,7 +493,13 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                                                     bool& own) {
     own = false;
     for (int attempt = 0; attempt < 3; ++attempt) {
-        HS_ASSIGN_OR_RETURN(auto values, bus.signed_values());
+        // A bus that just lost a server may take a few seconds to answer (a new leader).
+        auto listed = bus.signed_values();
+        for (int i = 0; !listed && i < 30; ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(500));
+            listed = bus.signed_values();
+        }
+        HS_ASSIGN_OR_RETURN(auto values, std::move(listed));
         for (const auto& v : values) {
             if (v.revision > 0xffffffffu)
                 continue;

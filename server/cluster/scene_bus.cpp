@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstring>
 #include <mutex>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -206,8 +207,18 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
     const std::string shown = redacted(o.url);
     natsOptions* opts = nullptr;
     natsStatus s = natsOptions_Create(&opts);
+    // One URL, or every server of a NATS cluster, comma-separated.
+    std::vector<std::string> urls;
+    for (size_t from = 0; from <= o.url.size();) {
+        const size_t comma = std::min(o.url.find(',', from), o.url.size());
+        if (comma > from)
+            urls.push_back(o.url.substr(from, comma - from));
+        from = comma + 1;
+    }
+    std::vector<const char*> servers;
+    for (const auto& u : urls) servers.push_back(u.c_str());
     if (s == NATS_OK)
-        s = natsOptions_SetURL(opts, o.url.c_str());
+        s = natsOptions_SetServers(opts, servers.data(), int(servers.size()));
     if (s == NATS_OK)
         s = natsOptions_SetTimeout(opts, o.timeout_ms);
     if (s == NATS_OK)
@@ -248,6 +259,7 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
             // unsigned ones were put after it.
             cfg.History = 16;
             cfg.MaxValueSize = int32_t(kMaxValue);
+            cfg.Replicas = o.replicas;
             s = js_CreateKeyValue(&st->kv, st->js, &cfg);
         }
     }

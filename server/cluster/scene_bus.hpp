@@ -45,6 +45,9 @@ public:
         std::string node_id;      // heartbeats go to node.<id>
         std::string admin_token;  // signs and checks every value (required)
         std::string bucket = "hysar";
+        // Copies of the bucket kept by a NATS cluster when this node creates it (3 on a
+        // 3-server cluster: a write is confirmed once a majority stored it).
+        int replicas = 1;
         int timeout_ms = 2000;  // per request to the bus
         // Authentication to NATS, at most one kind: user and password, a token, or a .creds
         // file (a user JWT and its nkey seed).
