@@ -14,7 +14,7 @@ servers=()
 cleanup() {
   for p in "${pids[@]}" "${servers[@]}"; do kill -KILL "$p" 2>/dev/null || true; done
   wait 2>/dev/null || true
-  [[ -n "${KEEP:-}" ]] || rm -rf "$dir"
+  rm -rf "$dir"
 }
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 8 "$f"; done; exit 1; }
