@@ -348,8 +348,22 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
         expected == 0
             ? kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()))
             : kvStore_Update(&rev, s_->kv, kKey, value.data(), int(value.size()), expected);
-    if (s == NATS_OK)
+    if (s == NATS_OK) {
+        // Confirmed, but every node holds it to the deadline by the bus's clock: a writer whose
+        // clock is behind must not report a write that no node takes.
+        kvEntry* e = nullptr;
+        if (kvStore_GetRevision(&e, s_->kv, kKey, rev) == NATS_OK) {
+            const uint64_t stored_ms = uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000);
+            kvEntry_Destroy(e);
+            if (stored_ms > deadline)
+                return {0, BusError::kUnavailable,
+                        fmt::format("the scene bus stored the write {} ms after its deadline "
+                                    "(is this node's clock behind the bus's? NTP): no node takes "
+                                    "it; the running scene stays",
+                                    stored_ms - deadline)};
+        }
         return {rev, BusError::kNone, ""};
+    }
     const std::string why = status_text(s);
     if (why.find("wrong last sequence") != std::string::npos ||
         why.find("key exists") != std::string::npos) {
