@@ -174,6 +174,9 @@ std::string conflict_message(uint64_t current_revision) {
 
 struct SceneBus::State {
     Options options;
+    // Set by the client's thread on a reconnect: the watch is made again at once (its consumer
+    // may have lived on a server that is gone).
+    std::atomic<bool> reconnected{false};
     natsConnection* nc = nullptr;
     jsCtx* js = nullptr;
     kvStore* kv = nullptr;
@@ -225,6 +228,11 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         s = natsOptions_SetMaxReconnect(opts, -1);  // forever: nodes outlive a bus outage
     if (s == NATS_OK)
         s = natsOptions_SetReconnectWait(opts, 250);
+    if (s == NATS_OK)
+        s = natsOptions_SetReconnectedCB(
+            opts,
+            [](natsConnection*, void* state) { static_cast<State*>(state)->reconnected = true; },
+            st.get());
     if (s == NATS_OK && !o.user.empty())
         s = natsOptions_SetUserInfo(opts, o.user.c_str(), o.password.c_str());
     if (s == NATS_OK && !o.token.empty())
@@ -434,6 +442,23 @@ void SceneBus::watch(std::function<void(const Value&)> on_scene) {
 
 void SceneBus::watch_loop(void* first) {
     kvWatcher* w = static_cast<kvWatcher*>(first);
+    // A watch can stall without an error (its consumer lived on a server that died, or the
+    // bus was frozen): every 2 s the key's revision is read, and a watch behind it twice in a
+    // row is made again.
+    auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    int behind = 0;
+    auto stalled = [&] {
+        if (std::chrono::steady_clock::now() < next_check)
+            return false;
+        next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+        kvEntry* e = nullptr;
+        if (kvStore_Get(&e, s_->kv, kKey) != NATS_OK)
+            return false;
+        const uint64_t rev = kvEntry_Revision(e);
+        kvEntry_Destroy(e);
+        behind = rev > tail_.load() ? behind + 1 : 0;
+        return behind >= 2;
+    };
     while (!stop_) {
         if (!w)
             w = make_watcher(s_->kv);
@@ -469,8 +494,11 @@ void SceneBus::watch_loop(void* first) {
             }
             if (newest)
                 on_scene_(*newest);
-            if (s != NATS_OK && s != NATS_TIMEOUT)
+            if ((s != NATS_OK && s != NATS_TIMEOUT) || s_->reconnected.exchange(false) ||
+                stalled()) {
+                behind = 0;
                 break;  // made again
+            }
         }
         kvWatcher_Destroy(w);
         w = nullptr;
