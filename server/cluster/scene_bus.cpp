@@ -338,6 +338,11 @@ Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
 }
 
 BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
+    return write_on(applied, json, 0, 3);
+}
+
+BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t over,
+                            int attempts) {
     // While disconnected the client would buffer the write and send it after the reconnect,
     // long after the admin was told it failed: refuse it here instead.
     if (!connected())
@@ -346,7 +351,8 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
                     "); the running scene stays"};
     // Unsigned values after the applied version are no one's write: write over them.
     const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
-    const uint64_t expected = tail > applied && signed_tail <= applied ? tail : applied;
+    const uint64_t expected =
+        std::max(tail > applied && signed_tail <= applied ? tail : applied, over);
     // The bus must store it by the deadline, or no node takes it: a write the admin is told
     // failed never lands later.
     const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
@@ -377,10 +383,20 @@ BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
         why.find("key exists") != std::string::npos) {
         kvEntry* e = nullptr;
         uint64_t now = applied + 1;
+        bool takeable = true;  // by every node: a real concurrent write
         if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
             now = kvEntry_Revision(e);
+            auto v = verify(s_->options.admin_token,
+                            std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                             size_t(kvEntry_ValueLen(e))));
+            takeable =
+                v && v->base >= applied &&
+                uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000) <= v->deadline_ms;
             kvEntry_Destroy(e);
         }
+        // Over a value no node takes (unsigned, late, or an old one put again): written on it.
+        if (!takeable && now > expected && attempts > 1)
+            return write_on(applied, json, now, attempts - 1);
         return {0, BusError::kConflict, conflict_message(now)};
     }
     if (s == NATS_TIMEOUT)

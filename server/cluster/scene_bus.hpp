@@ -124,6 +124,8 @@ private:
     std::unique_ptr<State> s_;
     // A raw entry seen: its signed value, if any; counts and notes the tail revision.
     std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw);
+    // write() with the compare-and-set on `over` when that is later (a value no node takes).
+    BusWrite write_on(uint64_t applied, const std::string& json, uint64_t over, int attempts);
     // A write the bus did not confirm in time: stored by its deadline (then applied), or never.
     BusWrite settle(const std::string& value, uint64_t deadline_ms);
     std::function<void(const Value&)> on_scene_;
