@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# nats-server with JetStream, two render nodes sharing its scene, and HAProxy in front of them,
+# Three nats-servers with JetStream (the scene bucket in three replicas), two render nodes
+# sharing its scene, and HAProxy in front of them,
 # on loopback (docs/CLUSTER.md), each with its own ports and temp folders: a projector, a headset
 # and four load-generating headsets go through the gateway's one address; HAProxy's table shows
 # where each landed; a scene pushed to one node is served by both; everything is stopped by PID.
@@ -22,11 +23,25 @@ free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",
 gw=$(free_port)
 (umask 077 && head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/token" &&
   head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n' > "$dir/admin-token")
-np=$(free_port)
-nats-server -js -a 127.0.0.1 -p "$np" -sd "$dir/jetstream" > "$dir/nats.log" 2>&1 &
-pids+=($!)
-echo "scene bus: nats://127.0.0.1:$np (nats-server pid $!)"
-for _ in $(seq 100); do grep -q "Server is ready" "$dir/nats.log" && break; sleep 0.1; done
+# The scene bus: three nats-servers in one NATS cluster, the bucket in three replicas (an update
+# is confirmed once two of them stored it; any one may die).
+client_ports=() route_ports=()
+for i in 0 1 2; do client_ports+=("$(free_port)"); route_ports+=("$(free_port)"); done
+routes=$(for p in "${route_ports[@]}"; do printf 'nats-route://127.0.0.1:%s,' "$p"; done)
+for i in 0 1 2; do
+  cat > "$dir/nats-$i.conf" <<EOF
+server_name: bus$i
+listen: 127.0.0.1:${client_ports[$i]}
+jetstream { store_dir: "$dir/jetstream-$i" }
+cluster { name: hysar-bus, listen: 127.0.0.1:${route_ports[$i]}, routes: [${routes%,}] }
+EOF
+  nats-server -c "$dir/nats-$i.conf" > "$dir/nats-$i.log" 2>&1 &
+  pids+=($!)
+done
+bus=$(for p in "${client_ports[@]}"; do printf 'nats://127.0.0.1:%s,' "$p"; done)
+bus=${bus%,}
+echo "scene bus: $bus (three nats-servers, replicas 3)"
+for _ in $(seq 300); do grep -qh "JetStream cluster new metadata leader" "$dir"/nats-*.log && break; sleep 0.1; done
 
 nodes=()
 for n in a b; do
@@ -34,9 +49,9 @@ for n in a b; do
   mkdir -p "$dir/$n"
   LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --agent-port "$agent" \
     --drain-file "$dir/$n/drain" --token-file "$dir/token" --admin-token-file "$dir/admin-token" \
-    --cluster "nats://127.0.0.1:$np" --node-id "$n" > "$dir/$n/serve.log" 2>&1 &
+    --cluster "$bus" --cluster-replicas 3 --node-id "$n" > "$dir/$n/serve.log" 2>&1 &
   pids+=($!)
-  for _ in $(seq 100); do grep -q "^serving" "$dir/$n/serve.log" && break; sleep 0.1; done
+  for _ in $(seq 300); do grep -q "^serving" "$dir/$n/serve.log" && break; sleep 0.1; done
   nodes+=(--node "$n=127.0.0.1:$port,agent=$agent")
   eval "port_$n=$port"
   echo "node $n: 127.0.0.1:$port, agent-check on $agent (pid $!)"

@@ -1,20 +1,13 @@
 #include "admin/admin_server.hpp"
 
-#include <arpa/inet.h>
-#include <poll.h>
-#include <unistd.h>
-
 #include <atomic>
-#include <cerrno>
-#include <condition_variable>
-#include <cstring>
-#include <deque>
 #include <thread>
 
-#include <httplib.h>  // and with it the socket calls (send, recv) of the connections it accepts
+#include <httplib.h>  // and with it the socket calls (send, recv, getpeername)
 
 #include <fmt/format.h>
 
+#include "admin/http_gate.hpp"
 #include "admin/metrics.hpp"
 #include "admin/thumbnails.hpp"
 #include "core/log.hpp"
@@ -47,198 +40,37 @@ void send_png(httplib::Response& res, const Result<std::shared_ptr<const std::st
     res.set_content(*png.value(), "image/png");
 }
 
-using Clock = std::chrono::steady_clock;
-
-// Set on the thread that runs a connection's task to refuse it (BoundedPool::enqueue).
-thread_local bool t_refuse = false;
-
-constexpr std::string_view kBusy =
-    "HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain; charset=utf-8\r\n"
-    "Content-Length: 51\r\nRetry-After: 1\r\nConnection: close\r\n\r\n"
-    "busy: every admin worker is taken; try again later\n";
-static_assert(kBusy.size() - kBusy.find("\r\n\r\n") - 4 == 51);
-
-// A connection's socket for httplib's request parser: every read and write waits at most
-// `io_timeout` and none goes past `deadline`, so a client that sends a byte now and then cannot
-// keep a worker longer than the deadline. Reads through a small buffer (the parser reads lines
-// a byte at a time).
-class DeadlineStream final : public httplib::Stream {
-public:
-    DeadlineStream(int sock, Clock::duration io_timeout, Clock::time_point deadline)
-        : sock_(sock), io_timeout_(io_timeout), deadline_(deadline) {}
-    bool is_readable() const override { return begin_ < end_ || wait(POLLIN); }
-    bool is_writable() const override { return wait(POLLOUT); }
-    ssize_t read(char* ptr, size_t size) override {
-        if (begin_ == end_) {
-            if (!wait(POLLIN))
-                return -1;
-            ssize_t n;
-            do n = ::recv(sock_, buffer_, sizeof buffer_, 0);
-            while (n < 0 && errno == EINTR);
-            if (n <= 0)
-                return n;
-            begin_ = 0;
-            end_ = size_t(n);
-        }
-        const size_t n = std::min(size, end_ - begin_);
-        std::memcpy(ptr, buffer_ + begin_, n);
-        begin_ += n;
-        return ssize_t(n);
-    }
-    ssize_t write(const char* ptr, size_t size) override {
-        if (!wait(POLLOUT))
-            return -1;
-        ssize_t n;
-        do n = ::send(sock_, ptr, size, MSG_NOSIGNAL);
-        while (n < 0 && errno == EINTR);
-        return n;
-    }
-    void get_remote_ip_and_port(std::string& ip, int& port) const override {
-        address(::getpeername, ip, port);
-    }
-    void get_local_ip_and_port(std::string& ip, int& port) const override {
-        address(::getsockname, ip, port);
-    }
-    socket_t socket() const override { return sock_; }
-
-private:
-    bool wait(short events) const {
-        const auto left = deadline_ - Clock::now();
-        if (left <= Clock::duration::zero())
-            return false;
-        const auto ms = std::chrono::ceil<std::chrono::milliseconds>(std::min(left, io_timeout_));
-        pollfd p{sock_, events, 0};
-        int r;
-        do r = ::poll(&p, 1, int(ms.count()));
-        while (r < 0 && errno == EINTR);
-        return r > 0;
-    }
-    template <typename F>
-    void address(F f, std::string& ip, int& port) const {
-        sockaddr_storage a{};
-        socklen_t len = sizeof a;
-        ip.clear();
-        port = 0;
-        if (f(sock_, reinterpret_cast<sockaddr*>(&a), &len) != 0)
-            return;
-        char host[64] = {};
-        if (a.ss_family == AF_INET) {
-            const auto* in = reinterpret_cast<const sockaddr_in*>(&a);
-            ::inet_ntop(AF_INET, &in->sin_addr, host, sizeof host);
-            port = ntohs(in->sin_port);
-        } else if (a.ss_family == AF_INET6) {
-            const auto* in = reinterpret_cast<const sockaddr_in6*>(&a);
-            ::inet_ntop(AF_INET6, &in->sin6_addr, host, sizeof host);
-            port = ntohs(in->sin6_port);
-        }
-        ip = host;
-    }
-
-    const int sock_;
-    const Clock::duration io_timeout_;
-    const Clock::time_point deadline_;
-    char buffer_[4096];
-    size_t begin_ = 0, end_ = 0;
-};
-
 // httplib's server with our own connection handling: httplib's listener accepts a socket and
 // hands the task queue a function that calls process_and_close_socket(sock) (a virtual, as
-// httplib's SSLServer overrides it). Ours serves one request under a deadline, or, when the
-// queue refused the connection, writes a 503 and closes the socket at once. Either way the
-// socket is closed here: nothing leaks.
+// httplib's SSLServer overrides it). The task queue runs it at once on the listener's thread,
+// and ours hands the socket to the gate (http_gate.hpp), which reads the request and has a
+// worker call serve_one() with it.
 class Http final : public httplib::Server {
 public:
-    Http(Clock::duration io_timeout, Clock::duration deadline)
-        : io_timeout_(io_timeout), deadline_(deadline) {}
+    HttpGate* gate = nullptr;
+    // httplib listens with a backlog of 5: a burst of connections (a slowloris opening its
+    // sockets) would have the operator's connect wait seconds for a SYN retry. Listening
+    // again on the bound socket only widens the queue.
+    void widen_backlog() { ::listen(svr_sock_, 1024); }
+    // One request of `stream`; true when the connection may serve another.
+    bool serve_one(httplib::Stream& stream, const RequestHead& head) {
+        bool closed = false;
+        const bool ok = process_request(stream, !head.keep_alive, closed, nullptr);
+        return ok && !closed;
+    }
 
 private:
     bool process_and_close_socket(socket_t sock) override {
-        bool served = false;
-        if (t_refuse) {
-            // Never blocks the listener: a fresh socket's send buffer holds this, and what the
-            // client already sent is read off so that the close is a FIN, not a reset.
-            (void)::send(sock, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
-            char sink[4096];
-            for (int i = 0; i < 16 && ::recv(sock, sink, sizeof sink, MSG_DONTWAIT) > 0; ++i) {
-            }
-        } else {
-            DeadlineStream stream(sock, io_timeout_, Clock::now() + deadline_);
-            bool closed = false;
-            served = process_request(stream, /*close_connection=*/true, closed, nullptr);
-        }
-        ::shutdown(sock, SHUT_RDWR);
-        ::close(sock);
-        return served;
+        gate->admit(sock);
+        return true;
     }
-
-    const Clock::duration io_timeout_, deadline_;
 };
 
-// httplib's ThreadPool with a bound: at most threads + max_waiting connections held (being
-// served or waiting); the listener runs a connection beyond that with t_refuse set, which
-// answers 503 and closes it at once.
-class BoundedPool final : public httplib::TaskQueue {
+// The listener's task queue: the task (HttpGate::admit) runs at once, on the listener's thread.
+class AdmitAtOnce final : public httplib::TaskQueue {
 public:
-    BoundedPool(size_t threads, size_t max_waiting, std::atomic<uint64_t>& refused)
-        : capacity_(threads + max_waiting), refused_(refused) {
-        for (size_t i = 0; i < threads; ++i) threads_.emplace_back([this] { work(); });
-    }
-    ~BoundedPool() override { shutdown(); }
-    void enqueue(std::function<void()> fn) override {
-        {
-            std::lock_guard lock(mutex_);
-            if (held_ < capacity_) {
-                ++held_;
-                jobs_.push_back(std::move(fn));
-                fn = nullptr;
-            }
-        }
-        if (!fn) {
-            cond_.notify_one();
-            return;
-        }
-        ++refused_;
-        t_refuse = true;
-        fn();
-        t_refuse = false;
-    }
-    void shutdown() override {
-        {
-            std::lock_guard lock(mutex_);
-            stopping_ = true;
-        }
-        cond_.notify_all();
-        for (auto& t : threads_)
-            if (t.joinable())
-                t.join();
-    }
-
-private:
-    void work() {
-        for (;;) {
-            std::function<void()> fn;
-            {
-                std::unique_lock lock(mutex_);
-                cond_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
-                if (jobs_.empty())
-                    return;  // stopping, and nothing left to serve
-                fn = std::move(jobs_.front());
-                jobs_.pop_front();
-            }
-            fn();
-            std::lock_guard lock(mutex_);
-            --held_;
-        }
-    }
-
-    const size_t capacity_;
-    std::atomic<uint64_t>& refused_;
-    std::mutex mutex_;
-    std::condition_variable cond_;
-    std::deque<std::function<void()>> jobs_;
-    size_t held_ = 0;  // connections queued or being served
-    bool stopping_ = false;
-    std::vector<std::thread> threads_;
+    void enqueue(std::function<void()> fn) override { fn(); }
+    void shutdown() override {}
 };
 
 }  // namespace
@@ -246,7 +78,9 @@ private:
 struct AdminServer::Impl {
     AdminOptions options;
     AdminSource source;
+    GateCounters counters;
     Http http;
+    std::unique_ptr<HttpGate> gate;
     std::thread thread;
     std::atomic<bool> finished{false};
     uint16_t port = 0;
@@ -254,13 +88,8 @@ struct AdminServer::Impl {
     ThumbnailCache thumbnails{options.thumbnail_side, options.thumbnail_min_interval};
     ThumbnailCache projector{options.projector_side, options.thumbnail_min_interval};
     std::atomic<uint64_t> unauthorized{0};
-    std::atomic<uint64_t> refused{0};
 
-    Impl(AdminOptions o, AdminSource s)
-        : options(std::move(o)),
-          source(std::move(s)),
-          http(std::chrono::seconds(std::max<uint32_t>(options.io_timeout_s, 1)),
-               std::chrono::seconds(std::max<uint32_t>(options.deadline_s, 1))) {}
+    Impl(AdminOptions o, AdminSource s) : options(std::move(o)), source(std::move(s)) {}
 
     static std::string key(uint64_t viewer, int eye) { return fmt::format("{}/{}", viewer, eye); }
 
@@ -278,8 +107,12 @@ struct AdminServer::Impl {
     }
 
     AdminFigures figures() const {
-        return {thumbnails.bytes() + projector.bytes(), thumbnails.encoded() + projector.encoded(),
-                unauthorized.load(), refused.load()};
+        return {thumbnails.bytes() + projector.bytes(),
+                thumbnails.encoded() + projector.encoded(),
+                unauthorized.load(),
+                counters.refused.load(),
+                counters.bad_requests.load(),
+                counters.dropped.load()};
     }
 
     void routes() {
@@ -303,7 +136,10 @@ struct AdminServer::Impl {
         });
         http.Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
             auto [s, r] = look();
-            res.set_content(prometheus_text(s, r, figures()), "text/plain; version=0.0.4");
+            std::string text = prometheus_text(s, r, figures());
+            if (source.extra_metrics)
+                text += source.extra_metrics();
+            res.set_content(text, "text/plain; version=0.0.4");
         });
         http.Get("/api/viewers", [this](const httplib::Request&, httplib::Response& res) {
             auto [s, r] = look();
@@ -359,6 +195,7 @@ AdminServer::~AdminServer() {
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
     impl_->thread.join();
+    impl_->gate->stop();  // before the routes' state goes
 }
 
 uint16_t AdminServer::port() const {
@@ -372,17 +209,27 @@ Result<std::unique_ptr<AdminServer>> AdminServer::start(const AdminOptions& opti
     if (!source.snapshot || !source.latest_layer || !source.latest_projector_frame)
         return make_error(ErrorCode::kInvalidArgument, "the admin endpoint needs its source");
     auto impl = std::make_unique<Impl>(options, std::move(source));
-    const uint32_t threads = std::max<uint32_t>(options.threads, 1);
-    impl->http.new_task_queue = [threads, waiting = options.max_waiting, i = impl.get()] {
-        return new BoundedPool(threads, waiting, i->refused);
-    };
-    // Our process_and_close_socket serves one request per connection under DeadlineStream;
-    // these say the same to anything of httplib's that reads them.
-    impl->http.set_keep_alive_max_count(1);
-    impl->http.set_keep_alive_timeout(1);
-    impl->http.set_read_timeout(std::max<uint32_t>(options.io_timeout_s, 1));
-    impl->http.set_write_timeout(std::max<uint32_t>(options.io_timeout_s, 1));
-    impl->http.set_payload_max_length(4096);  // GET only: a body is refused
+    GateOptions g;
+    g.workers = std::max<uint32_t>(options.threads, 1);
+    g.reserved_workers = std::min<uint32_t>(2, g.workers - 1);
+    g.max_queued = options.max_waiting;
+    g.per_address = options.max_per_address;
+    g.max_connections = options.max_connections;
+    g.head_deadline = std::chrono::seconds(std::max<uint32_t>(options.deadline_s, 1));
+    g.keep_alive = std::chrono::seconds(std::max<uint32_t>(options.keep_alive_s, 1));
+    g.io_timeout = std::chrono::seconds(std::max<uint32_t>(options.io_timeout_s, 1));
+    impl->gate = std::make_unique<HttpGate>(
+        g, options.token,
+        [h = &impl->http](httplib::Stream& s, const RequestHead& head) {
+            return h->serve_one(s, head);
+        },
+        impl->counters);
+    impl->http.gate = impl->gate.get();
+    impl->http.new_task_queue = [] { return new AdmitAtOnce; };
+    // What httplib writes in its answers' Keep-Alive header; the gate enforces them.
+    impl->http.set_keep_alive_max_count(100);
+    impl->http.set_keep_alive_timeout(std::max<uint32_t>(options.keep_alive_s, 1));
+    impl->http.set_payload_max_length(kMaxBody);  // GET only: a body is small or refused
     impl->routes();
     int port = options.port;
     if (port == 0)
@@ -395,6 +242,7 @@ Result<std::unique_ptr<AdminServer>> AdminServer::start(const AdminOptions& opti
                                       "address of this machine)",
                                       options.host, options.port));
     impl->port = uint16_t(port);
+    impl->http.widen_backlog();
     impl->thread = std::thread([i = impl.get()] {
         if (!i->http.listen_after_bind())
             log::error("admin endpoint on {}:{} stopped with an error", i->options.host, i->port);

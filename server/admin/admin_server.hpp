@@ -2,10 +2,13 @@
 // "Watching a running server"): Prometheus text at /metrics, a live dashboard at /, its JSON at
 // /api/viewers, thumbnails of each headset's latest layers and of the projector frame. It runs
 // on threads of its own and reads the server only through the functions of AdminSource, which
-// copy numbers and pointers under the server's lock and nothing more. One request per
-// connection, a deadline per connection and a bound on connections held, so that slow or many
-// clients cost a bounded number of threads and file descriptors. The only code that sees the
-// HTTP library. Meant for loopback or a trusted network.
+// copy numbers and pointers under the server's lock and nothing more. Requests are read by one
+// thread without blocking and checked strictly (http_gate.hpp: a malformed head is answered 400
+// and closed), each within a deadline; only complete requests reach a worker, those with the
+// token first and on workers of their own; connections are capped per client address and in
+// all, the oldest silent one giving way; kept alive between requests. So slow or many clients
+// cost a bounded number of file descriptors and never deny the operator's prober. The only code
+// that sees the HTTP library. Meant for loopback or a trusted network.
 #pragma once
 
 #include <chrono>
@@ -26,14 +29,20 @@ struct AdminOptions {
     // Every request but the dashboard's page itself (which holds no figures) must carry
     // `Authorization: Bearer <token>`; compared in constant time.
     std::string token;
-    uint32_t threads = 8;  // HTTP worker threads: connections served at once
-    // Connections accepted beyond those being served, waiting for a worker; one more is
+    uint32_t threads = 8;  // HTTP worker threads: requests served at once (2 kept for the token)
+    // Complete requests waiting for a worker, with the token and without it each; one more is
     // answered 503 and closed at once (hysar_admin_connections_refused_total).
     uint32_t max_waiting = 32;
-    // A connection serves one request (no keep-alive) and must be read and answered within
-    // `deadline_s`, each read or write within `io_timeout_s`; then it is closed.
+    // A request's head (and body) must arrive within `deadline_s` of the connection (or of the
+    // previous answer), else it is closed; each write of an answer waits at most
+    // `io_timeout_s`; an idle kept-alive connection is closed after `keep_alive_s`.
     uint32_t io_timeout_s = 2;
     uint32_t deadline_s = 5;
+    uint32_t keep_alive_s = 5;
+    // Connections held per client address and in all; beyond, the oldest that is still reading
+    // its head and never sent the token is closed (hysar_admin_connections_dropped_total).
+    uint32_t max_per_address = 32;
+    uint32_t max_connections = 512;
     uint32_t thumbnail_side = 256;  // a headset layer's thumbnail, longer side, pixels
     uint32_t projector_side = 480;  // the projector frame's thumbnail
     // A thumbnail is served from the cache until it is this old, newer frame or not.
@@ -47,6 +56,8 @@ struct AdminSource {
     // Headset `viewer`'s latest layer (`eye` 0 left, 1 right); empty when there is none.
     std::function<stream::LatestFrame(uint32_t viewer, int eye)> latest_layer;
     std::function<stream::LatestFrame()> latest_projector_frame;
+    // Optional: more Prometheus text appended to /metrics (the scene bus's counters).
+    std::function<std::string()> extra_metrics;
 };
 
 class AdminServer {

@@ -244,8 +244,15 @@ void server_families(Writer& w, const stream::ServerSnapshot& s, const AdminFigu
     w.sample("hysar_admin_unauthorized_total", "", admin.unauthorized);
     w.family("hysar_admin_connections_refused_total", "counter",
              "Connections to this endpoint answered 503 and closed: every worker busy and too "
-             "many waiting.");
+             "many waiting, or no room for another connection.");
     w.sample("hysar_admin_connections_refused_total", "", admin.connections_refused);
+    w.family("hysar_admin_bad_requests_total", "counter",
+             "Requests to this endpoint answered 400 and closed: a malformed request head.");
+    w.sample("hysar_admin_bad_requests_total", "", admin.bad_requests);
+    w.family("hysar_admin_connections_dropped_total", "counter",
+             "Connections to this endpoint closed unanswered: the request head did not arrive "
+             "within the deadline, or the connection gave way to a newer one of its address.");
+    w.sample("hysar_admin_connections_dropped_total", "", admin.connections_dropped);
     w.family("hysar_gpu_info", "gauge", "The Vulkan device the server renders on and its driver.");
     w.sample(
         "hysar_gpu_info",

@@ -42,6 +42,8 @@ struct AdminFigures {
     uint64_t thumbnails_encoded = 0;   // PNGs made since start
     uint64_t unauthorized = 0;         // requests refused for want of the token
     uint64_t connections_refused = 0;  // connections answered 503: the endpoint was full
+    uint64_t bad_requests = 0;         // requests answered 400: a malformed head
+    uint64_t connections_dropped = 0;  // closed: head deadline passed, or gave way to another
 };
 
 // The Prometheus text exposition format (version 0.0.4): # HELP and # TYPE per family, the

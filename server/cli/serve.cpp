@@ -36,7 +36,7 @@ const char* kServeHelp =
     "                   [--pipeline-cache FILE]\n"
     "                   [--admin-listen [HOST:]PORT] [--tls-cert FILE --tls-key FILE]\n"
     "                   [--agent-port PORT [--drain-file PATH]]\n"
-    "                   [--cluster nats://HOST:PORT --node-id ID]\n"
+    "                   [--cluster nats://HOST:PORT --node-id ID [bus credentials...]]\n"
     "                   [limits...]\n"
     "\n"
     "  --scene FILE             scene JSON (default: the embedded experiment-1 room); SIGHUP\n"
@@ -78,7 +78,17 @@ const char* kServeHelp =
     "                           key 'scene', its revision the scene version on every node; a\n"
     "                           node starts on the bus's scene (or puts its own when there is\n"
     "                           none), SceneUpdate and SIGHUP write through it (docs/CLUSTER.md)\n"
+    "                           (needs --admin-token-file: every scene on the bus is signed\n"
+    "                           with it, and a value not so signed is ignored)\n"
     "  --node-id ID             with --cluster: this node's name (heartbeats on node.ID)\n"
+    "  bus credentials (never in the URL): --cluster-user USER --cluster-password-file FILE,\n"
+    "                           or --cluster-token-file FILE, or --cluster-creds FILE (.creds:\n"
+    "                           a user JWT and its nkey seed); TLS to the bus with a tls://\n"
+    "                           URL or --cluster-ca FILE (the bus's CA), --cluster-cert FILE\n"
+    "                           --cluster-key FILE when it asks for a client certificate;\n"
+    "                           --cluster-replicas N (1): copies of the bucket a NATS cluster\n"
+    "                           keeps when this node creates it (3 on three servers; give every\n"
+    "                           server's URL, comma-separated)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -248,7 +258,15 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--agent-port",
                                            "--drain-file",
                                            "--cluster",
-                                           "--node-id"};
+                                           "--node-id",
+                                           "--cluster-user",
+                                           "--cluster-password-file",
+                                           "--cluster-token-file",
+                                           "--cluster-creds",
+                                           "--cluster-ca",
+                                           "--cluster-cert",
+                                           "--cluster-key",
+                                           "--cluster-replicas"};
 
 // The scene a server starts on and SIGHUP reloads: --scene's file, or the embedded room.
 struct SceneSource {
@@ -423,25 +441,99 @@ std::optional<int> read_tokens(const Flags& f, stream::ServerCreateInfo& info) {
     return std::nullopt;
 }
 
-// The bus's scene and its version, or this node's own scene put there when the bus has none.
-// `own` says which.
-Result<std::pair<uint64_t, std::string>> bus_scene_text(cluster::SceneBus& bus,
-                                                        const std::string& own_json, bool& own) {
-    auto current = bus.current();
-    own = false;
-    if (current.ok() && current->first == 0) {
-        auto w = bus.write(0, own_json);
-        own = w.error == cluster::BusError::kNone;
-        if (own)
-            current = std::pair<uint64_t, std::string>{w.revision, own_json};
-        else
-            current = bus.current();  // another node put its scene first
+// --cluster's URL and the bus credentials, each secret from a file of mode 600 or 640.
+Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
+                                                    const stream::ServerCreateInfo& info) {
+    cluster::SceneBus::Options o;
+    o.url = f.get("--cluster", "");
+    o.node_id = f.get("--node-id", "");
+    o.admin_token = info.admin_token;
+    if (o.admin_token.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster needs --admin-token-file: every scene on the bus is signed "
+                          "with the admin token, and a value not so signed is ignored");
+    if (cluster::SceneBus::redacted(o.url) != o.url)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster: credentials in the URL would show in ps and the logs; give "
+                          "them with --cluster-user and --cluster-password-file, "
+                          "--cluster-token-file or --cluster-creds");
+    const int kinds = int(f.has("--cluster-user")) + int(f.has("--cluster-token-file")) +
+                      int(f.has("--cluster-creds"));
+    if (kinds > 1)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster-user, --cluster-token-file and --cluster-creds: give one");
+    if (f.has("--cluster-user") != f.has("--cluster-password-file"))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster-user and --cluster-password-file go together");
+    if (f.has("--cluster-user")) {
+        o.user = f.get("--cluster-user", "");
+        HS_ASSIGN_OR_RETURN(o.password, read_token_file(f.get("--cluster-password-file", ""),
+                                                        "--cluster-password-file"));
     }
-    if (!current || current->first == 0 || current->first > 0xffffffffu)
-        return make_error(ErrorCode::kIo,
-                          fmt::format("--cluster: cannot read the bus's scene: {}",
-                                      current ? "no usable version" : current.error().message));
-    return current;
+    if (f.has("--cluster-token-file")) {
+        HS_ASSIGN_OR_RETURN(
+            o.token, read_token_file(f.get("--cluster-token-file", ""), "--cluster-token-file"));
+    }
+    if (f.has("--cluster-creds")) {
+        o.creds_file = f.get("--cluster-creds", "");
+        HS_TRY(check_secret_file(o.creds_file, "--cluster-creds"));
+    }
+    if (f.has("--cluster-cert") != f.has("--cluster-key"))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster-cert and --cluster-key go together");
+    o.tls_ca = f.get("--cluster-ca", "");
+    o.tls_cert = f.get("--cluster-cert", "");
+    o.tls_key = f.get("--cluster-key", "");
+    if (!o.tls_key.empty())
+        HS_TRY(check_secret_file(o.tls_key, "--cluster-key"));
+    o.tls = o.url.rfind("tls://", 0) == 0 || !o.tls_ca.empty() || !o.tls_cert.empty();
+    HS_ASSIGN_OR_RETURN(const uint64_t replicas, parse_count(f, "--cluster-replicas", 1, 1, 5));
+    o.replicas = int(replicas);
+    return o;
+}
+
+// The newest signed scene on the bus that this node can serve (the same checks and limits as a
+// SceneUpdate), or this node's own scene put there when it holds none. A value that cannot be
+// served is skipped (counted), never a reason not to start.
+Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, const ServeSetup& s,
+                                                    const stream::ServerCreateInfo& info,
+                                                    bool& own) {
+    own = false;
+    for (int attempt = 0; attempt < 3; ++attempt) {
+        // A bus that just lost a server may take a few seconds to answer (a new leader).
+        auto listed = bus.signed_values();
+        for (int i = 0; !listed && i < 30; ++i) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(500));
+            listed = bus.signed_values();
+        }
+        HS_ASSIGN_OR_RETURN(auto values, std::move(listed));
+        for (const auto& v : values) {
+            if (v.revision > 0xffffffffu)
+                continue;
+            auto parsed =
+                scene::parse_scene(v.json, fmt::format("the bus's scene version {}", v.revision),
+                                   info.asset_root, info.asset_root, info.limits.scene);
+            if (parsed && info.calibration)
+                if (auto r = info.calibration->check_scene(parsed.value()); !r)
+                    parsed = make_error(r.error().code, r.error().message);
+            if (parsed)
+                return std::pair{v.revision, std::move(parsed).value()};
+            ++bus.counters().invalid_values;
+            log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
+                      v.revision, parsed.error().message);
+        }
+        // None to serve: this node's own scene, if no other node puts one first.
+        const auto w = bus.write(0, s.scene.text());
+        if (w.error == cluster::BusError::kNone) {
+            own = true;
+            HS_ASSIGN_OR_RETURN(auto mine, s.scene.load());
+            return std::pair{w.revision, std::move(mine)};
+        }
+        if (w.error != cluster::BusError::kConflict)
+            return make_error(ErrorCode::kIo, "--cluster: " + w.message);
+    }
+    return make_error(ErrorCode::kIo,
+                      "--cluster: the bus's scene kept changing while this node started");
 }
 
 // --cluster: joins the scene bus; the bus's scene wins over `scene`, and with none there yet,
@@ -451,24 +543,20 @@ std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scen
                                 std::unique_ptr<cluster::SceneBus>& bus) {
     if (!f.has("--cluster"))
         return std::nullopt;
-    const std::string node_id = f.get("--node-id", "");
-    auto b = cluster::SceneBus::connect({f.get("--cluster", ""), node_id});
+    auto options = read_bus_options(f, info);
+    if (!options)
+        return options.error().code == ErrorCode::kInvalidArgument
+                   ? usage_error(options.error().message)
+                   : start_error(options.error().message);
+    auto b = cluster::SceneBus::connect(options.value());
     if (!b)
         return start_error(b.error().message);
     bus = std::move(b).value();
     bool own = false;
-    auto current = bus_scene_text(*bus, s.scene.text(), own);
+    auto current = bus_scene(*bus, s, info, own);
     if (!current)
         return start_error(current.error().message);
-    auto bus_scene = scene::parse_scene(current->second,
-                                        fmt::format("the bus's scene version {}", current->first),
-                                        info.asset_root, info.asset_root, info.limits.scene);
-    if (!bus_scene)
-        return start_error("--cluster: " + bus_scene.error().message);
-    if (info.calibration)
-        if (auto r = info.calibration->check_scene(bus_scene.value()); !r)
-            return start_error("--calibration: the bus's scene: " + r.error().message);
-    scene = std::move(bus_scene).value();
+    scene = std::move(current->second);
     info.initial_scene_version = uint32_t(current->first);
     if (!own)
         std::printf("cluster: serving the bus's scene '%s' (version %u)%s\n", scene.name.c_str(),
@@ -479,8 +567,9 @@ std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scen
         const auto w = b_ptr->write(applied, json);
         return w.error == cluster::BusError::kNone ? std::string() : w.message;
     };
-    std::printf("cluster: node '%s' on %s, scene version %u\n", node_id.c_str(),
-                f.get("--cluster", "").c_str(), info.initial_scene_version);
+    std::printf("cluster: node '%s' on %s%s, scene version %u\n", options->node_id.c_str(),
+                cluster::SceneBus::redacted(options->url).c_str(), options->tls ? " (TLS)" : "",
+                info.initial_scene_version);
     return std::nullopt;
 }
 
@@ -514,33 +603,48 @@ void print_started(const stream::Server& server, const stream::ServerCreateInfo&
                     tls.c_str());
 }
 
-// Every node (this one's writes too) applies what the bus's watch delivers, if newer.
+// Every node (this one's writes too) applies what the bus's watch delivers (signed, the newest
+// of a burst), if newer and following what it applied.
 void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
     stream::Server* watched = &server;
-    bus.watch([watched](uint64_t revision, const std::string& json) {
-        if (revision > 0xffffffffu || !cluster::SceneBus::newer(revision, watched->bus_version()))
+    cluster::SceneBus* b = &bus;
+    bus.watch([watched, b](const cluster::SceneBus::Value& v) {
+        const uint64_t applied = watched->bus_version();
+        if (v.revision > 0xffffffffu || !cluster::SceneBus::newer(v.revision, applied))
             return;
-        if (auto r = watched->apply_scene_version(json, uint32_t(revision)); !r)
+        if (!cluster::SceneBus::follows(v, applied)) {
+            ++b->counters().replayed_values;
+            log::warn(
+                "scene bus: version {} ignored: it follows version {}, older than the "
+                "applied {} (an old value put again)",
+                v.revision, v.base, applied);
+            return;
+        }
+        if (auto r = watched->apply_scene_version(v.json, uint32_t(v.revision)); !r) {
+            ++b->counters().invalid_values;
             log::error("scene bus: version {} cannot be served here: {}; the running scene stays",
-                       revision, r.error().message);
-        else
-            log::info("scene bus: version {} arrived", revision);
+                       v.revision, r.error().message);
+        } else {
+            log::info("scene bus: version {} arrived", v.revision);
+        }
     });
 }
 
 // The HTTP endpoint of --admin-listen over the server's snapshot and latest images.
 Result<std::unique_ptr<admin::AdminServer>> start_admin(admin::AdminOptions options,
                                                         const std::string& token,
-                                                        stream::Server& server) {
+                                                        stream::Server& server,
+                                                        cluster::SceneBus* bus) {
     options.token = token;
     stream::Server* watched = &server;
-    HS_ASSIGN_OR_RETURN(auto endpoint,
-                        admin::AdminServer::start(
-                            options, {[watched] { return watched->snapshot(); },
-                                      [watched](uint32_t viewer, int eye) {
-                                          return watched->latest_layer(viewer, eye);
-                                      },
-                                      [watched] { return watched->latest_projector_frame(); }}));
+    HS_ASSIGN_OR_RETURN(
+        auto endpoint,
+        admin::AdminServer::start(
+            options,
+            {[watched] { return watched->snapshot(); },
+             [watched](uint32_t viewer, int eye) { return watched->latest_layer(viewer, eye); },
+             [watched] { return watched->latest_projector_frame(); },
+             bus ? std::function<std::string()>([bus] { return bus->metrics_text(); }) : nullptr}));
     std::printf(
         "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
         "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
@@ -691,7 +795,7 @@ int run_serve(const std::vector<std::string>& args) {
         watch_bus(*bus, *server.value());
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (setup.admin) {
-        auto a = start_admin(*setup.admin, info.token, *server.value());
+        auto a = start_admin(*setup.admin, info.token, *server.value(), bus.get());
         if (!a)
             return start_error(a.error().message);
         admin_endpoint = std::move(a).value();

@@ -1,8 +1,16 @@
 #include "cluster/scene_bus.hpp"
 
 #include <nats/nats.h>
+#include <openssl/crypto.h>
+#include <openssl/evp.h>
+#include <openssl/hmac.h>
+#include <openssl/sha.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstring>
+#include <mutex>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -13,13 +21,151 @@ namespace hs::cluster {
 namespace {
 
 constexpr const char* kKey = "scene";
+constexpr std::string_view kMagic = "hysar-scene 1 ";
+constexpr size_t kMaxValue = (size_t(1) << 20) + 256;  // a SceneUpdate's limit and the header
 
 std::string status_text(natsStatus s) {
     const char* last = nats_GetLastError(nullptr);
     return last && *last ? last : natsStatus_GetText(s);
 }
 
+// The wall clock in milliseconds since the UNIX epoch: a write's deadline, which the bus's own
+// timestamp of the stored value is held to.
+uint64_t now_unix_ms() {
+    return uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
+                        std::chrono::system_clock::now().time_since_epoch())
+                        .count());
+}
+
+// How far the bus's clock may be behind the writer's (NTP keeps it far less): a writer told
+// "refused" checks the bus only this long after the deadline.
+constexpr uint64_t kClockMarginMs = 500;
+
+// HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
+// token (so that the token itself is never the key of anything else), as 64 hex digits.
+std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                std::string_view json) {
+    const std::string label = "hysar scene bus key\n" + admin_token;
+    unsigned char key[SHA256_DIGEST_LENGTH];
+    SHA256(reinterpret_cast<const unsigned char*>(label.data()), label.size(), key);
+    const std::string head = fmt::format("hysar-scene 1\n{}\n{}\n", base, deadline_ms);
+    unsigned char out[EVP_MAX_MD_SIZE];
+    unsigned int len = 0;
+    std::string data;
+    data.reserve(head.size() + json.size());
+    data.append(head).append(json);
+    HMAC(EVP_sha256(), key, sizeof key, reinterpret_cast<const unsigned char*>(data.data()),
+         data.size(), out, &len);
+    static constexpr char kHex[] = "0123456789abcdef";
+    std::string hex;
+    for (unsigned int i = 0; i < len; ++i) {
+        hex.push_back(kHex[out[i] >> 4]);
+        hex.push_back(kHex[out[i] & 15]);
+    }
+    return hex;
+}
+
+// Logs the first of a burst of refused values at once and the rest in one line per 10 s.
+class BurstLog {
+public:
+    void note(const std::string& what) {
+        std::lock_guard lock(mutex_);
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_ < std::chrono::seconds(10)) {
+            ++held_;
+            return;
+        }
+        if (held_ > 0)
+            log::warn("scene bus: {} more value(s) ignored in the last burst", held_);
+        log::warn("scene bus: {}", what);
+        held_ = 0;
+        last_ = now;
+    }
+
+private:
+    std::mutex mutex_;
+    std::chrono::steady_clock::time_point last_{};
+    uint64_t held_ = 0;
+};
+
+BurstLog& burst_log() {
+    static BurstLog log;
+    return log;
+}
+
 }  // namespace
+
+std::string SceneBus::sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                           const std::string& json) {
+    return fmt::format("{}{} {} {}\n{}", kMagic, base, deadline_ms,
+                       mac(admin_token, base, deadline_ms, json), json);
+}
+
+Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::string_view value) {
+    if (value.size() > kMaxValue)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("a value of {} bytes (at most {})", value.size(), kMaxValue));
+    const auto eol = value.find('\n');
+    if (value.substr(0, kMagic.size()) != kMagic || eol == std::string_view::npos || eol > 120)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "a value not signed with the admin credential");
+    std::string_view head = value.substr(kMagic.size(), eol - kMagic.size());
+    // BASE and DEADLINE: decimal numbers, each followed by a space.
+    auto number = [&head](uint64_t& n) {
+        const auto space = head.find(' ');
+        const std::string_view text = head.substr(0, space);
+        if (space == std::string_view::npos || text.empty() || text.size() > 19)
+            return false;
+        n = 0;
+        for (char c : text) {
+            if (c < '0' || c > '9')
+                return false;
+            n = n * 10 + uint64_t(c - '0');
+        }
+        head.remove_prefix(space + 1);
+        return true;
+    };
+    Signed out;
+    const bool ok = number(out.base) && number(out.deadline_ms);
+    out.json = std::string(value.substr(eol + 1));
+    const std::string want = ok ? mac(admin_token, out.base, out.deadline_ms, out.json) : "";
+    if (!ok || head.size() != want.size() ||
+        CRYPTO_memcmp(head.data(), want.data(), want.size()) != 0)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "a value not signed with the admin credential");
+    return out;
+}
+
+std::string SceneBus::redacted(const std::string& url) {
+    const auto scheme = url.find("://");
+    const auto from = scheme == std::string::npos ? 0 : scheme + 3;
+    const auto at = url.find('@', from);
+    if (at == std::string::npos)
+        return url;
+    return url.substr(0, from) + "***" + url.substr(at);
+}
+
+std::string SceneBus::metrics_text() const {
+    std::string t =
+        "# HELP hysar_scene_bus_ignored_values_total Values on the scene bus this node did not "
+        "apply, by why: unsigned (not signed with the admin credential), replayed (signed, but "
+        "an older write put again), superseded (a newer one came in the same burst), invalid "
+        "(refused as a SceneUpdate would be), late (stored after its write's deadline).\n"
+        "# TYPE hysar_scene_bus_ignored_values_total counter\n";
+    const std::pair<const char*, uint64_t> rows[] = {
+        {"unsigned", counters_.unsigned_values.load()},
+        {"replayed", counters_.replayed_values.load()},
+        {"superseded", counters_.superseded_values.load()},
+        {"invalid", counters_.invalid_values.load()},
+        {"late", counters_.late_values.load()}};
+    for (const auto& [why, n] : rows)
+        t += fmt::format("hysar_scene_bus_ignored_values_total{{why=\"{}\"}} {}\n", why, n);
+    t += fmt::format(
+        "# HELP hysar_scene_bus_connected Whether this node is connected to the scene bus.\n"
+        "# TYPE hysar_scene_bus_connected gauge\nhysar_scene_bus_connected {}\n",
+        connected() ? 1 : 0);
+    return t;
+}
 
 std::string conflict_message(uint64_t current_revision) {
     return fmt::format("scene changed concurrently, now version {}; fetch it and try again",
@@ -28,6 +174,9 @@ std::string conflict_message(uint64_t current_revision) {
 
 struct SceneBus::State {
     Options options;
+    // Set by the client's thread on a reconnect: the watch is made again at once (its consumer
+    // may have lived on a server that is gone).
+    std::atomic<bool> reconnected{false};
     natsConnection* nc = nullptr;
     jsCtx* js = nullptr;
     kvStore* kv = nullptr;
@@ -52,12 +201,27 @@ SceneBus::~SceneBus() {
 }
 
 Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
+    if (o.admin_token.empty())
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--cluster: the scene bus needs the admin token (--admin-token-file): "
+                          "it signs and checks every scene");
     auto st = std::make_unique<State>();
     st->options = o;
+    const std::string shown = redacted(o.url);
     natsOptions* opts = nullptr;
     natsStatus s = natsOptions_Create(&opts);
+    // One URL, or every server of a NATS cluster, comma-separated.
+    std::vector<std::string> urls;
+    for (size_t from = 0; from <= o.url.size();) {
+        const size_t comma = std::min(o.url.find(',', from), o.url.size());
+        if (comma > from)
+            urls.push_back(o.url.substr(from, comma - from));
+        from = comma + 1;
+    }
+    std::vector<const char*> servers;
+    for (const auto& u : urls) servers.push_back(u.c_str());
     if (s == NATS_OK)
-        s = natsOptions_SetURL(opts, o.url.c_str());
+        s = natsOptions_SetServers(opts, servers.data(), int(servers.size()));
     if (s == NATS_OK)
         s = natsOptions_SetTimeout(opts, o.timeout_ms);
     if (s == NATS_OK)
@@ -65,13 +229,30 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
     if (s == NATS_OK)
         s = natsOptions_SetReconnectWait(opts, 250);
     if (s == NATS_OK)
+        s = natsOptions_SetReconnectedCB(
+            opts,
+            [](natsConnection*, void* state) { static_cast<State*>(state)->reconnected = true; },
+            st.get());
+    if (s == NATS_OK && !o.user.empty())
+        s = natsOptions_SetUserInfo(opts, o.user.c_str(), o.password.c_str());
+    if (s == NATS_OK && !o.token.empty())
+        s = natsOptions_SetToken(opts, o.token.c_str());
+    if (s == NATS_OK && !o.creds_file.empty())
+        s = natsOptions_SetUserCredentialsFromFiles(opts, o.creds_file.c_str(), nullptr);
+    if (s == NATS_OK && o.tls)
+        s = natsOptions_SetSecure(opts, true);
+    if (s == NATS_OK && !o.tls_ca.empty())
+        s = natsOptions_LoadCATrustedCertificates(opts, o.tls_ca.c_str());
+    if (s == NATS_OK && !o.tls_cert.empty())
+        s = natsOptions_LoadCertificatesChain(opts, o.tls_cert.c_str(), o.tls_key.c_str());
+    if (s == NATS_OK)
         s = natsConnection_Connect(&st->nc, opts);
     if (opts)
         natsOptions_Destroy(opts);
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo, fmt::format("--cluster {}: cannot connect to the scene "
                                                       "bus: {}",
-                                                      o.url, status_text(s)));
+                                                      shown, status_text(s)));
     jsOptions jo;
     jsOptions_Init(&jo);
     jo.Wait = o.timeout_ms;
@@ -82,8 +263,11 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
             kvConfig cfg;
             kvConfig_Init(&cfg);
             cfg.Bucket = o.bucket.c_str();
-            cfg.History = 1;
-            cfg.MaxValueSize = 1 << 20;  // a SceneUpdate's limit
+            // Some history, so that a node starts on the newest signed value even when
+            // unsigned ones were put after it.
+            cfg.History = 16;
+            cfg.MaxValueSize = int32_t(kMaxValue);
+            cfg.Replicas = o.replicas;
             s = js_CreateKeyValue(&st->kv, st->js, &cfg);
         }
     }
@@ -91,7 +275,7 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         return make_error(ErrorCode::kIo,
                           fmt::format("--cluster {}: cannot open the key-value bucket '{}' "
                                       "(is JetStream on? nats-server -js): {}",
-                                      o.url, o.bucket, status_text(s)));
+                                      shown, o.bucket, status_text(s)));
     return std::unique_ptr<SceneBus>(new SceneBus(std::move(st)));
 }
 
@@ -99,46 +283,158 @@ bool SceneBus::connected() const {
     return natsConnection_Status(s_->nc) == NATS_CONN_STATUS_CONNECTED;
 }
 
-Result<std::pair<uint64_t, std::string>> SceneBus::current() {
-    kvEntry* e = nullptr;
-    const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
+std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored_ns,
+                                               std::string_view raw) {
+    for (uint64_t t = tail_.load(); revision > t && !tail_.compare_exchange_weak(t, revision);) {
+    }
+    auto v = verify(s_->options.admin_token, raw);
+    if (!v) {
+        ++counters_.unsigned_values;
+        burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
+        return std::nullopt;
+    }
+    // Stored after its deadline: its writer was told the write failed, so no node takes it.
+    if (stored_ns > 0 && uint64_t(stored_ns / 1000000) > v->deadline_ms) {
+        ++counters_.late_values;
+        burst_log().note(
+            fmt::format("version {} ignored: the bus stored it {} ms after its "
+                        "write's deadline (its writer was told it failed)",
+                        revision, uint64_t(stored_ns / 1000000) - v->deadline_ms));
+        return std::nullopt;
+    }
+    for (uint64_t t = signed_tail_.load();
+         revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
+    }
+    return Value{revision, v->base, std::move(v->json)};
+}
+
+Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
+    kvEntryList list{};
+    kvWatchOptions wo;
+    kvWatchOptions_Init(&wo);
+    wo.IgnoreDeletes = true;
+    const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
+    std::vector<Value> out;
     if (s == NATS_NOT_FOUND)
-        return std::pair<uint64_t, std::string>{0, ""};
+        return out;
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo, "the scene bus: " + status_text(s));
-    std::pair<uint64_t, std::string> out{
-        kvEntry_Revision(e),
-        std::string(static_cast<const char*>(kvEntry_Value(e)), size_t(kvEntry_ValueLen(e)))};
-    kvEntry_Destroy(e);
+    for (int i = 0; i < list.Count; ++i) {
+        kvEntry* e = list.Entries[i];
+        if (kvEntry_Operation(e) != kvOp_Put)
+            continue;
+        auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
+                       std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                        size_t(kvEntry_ValueLen(e))));
+        if (v)
+            out.push_back(std::move(*v));
+    }
+    kvEntryList_Destroy(&list);
+    // An old value put again has an old base: the greatest base is the newest write.
+    std::sort(out.begin(), out.end(), [](const Value& a, const Value& b) {
+        return a.base != b.base ? a.base > b.base : a.revision > b.revision;
+    });
     return out;
 }
 
 BusWrite SceneBus::write(uint64_t applied, const std::string& json) {
+    return write_on(applied, json, 0, 3);
+}
+
+BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t over,
+                            int attempts) {
     // While disconnected the client would buffer the write and send it after the reconnect,
     // long after the admin was told it failed: refuse it here instead.
     if (!connected())
         return {0, BusError::kUnavailable,
-                "the scene bus is unavailable (not connected to " + s_->options.url +
+                "the scene bus is unavailable (not connected to " + redacted(s_->options.url) +
                     "); the running scene stays"};
+    // Unsigned values after the applied version are no one's write: write over them.
+    const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
+    const uint64_t expected =
+        std::max(tail > applied && signed_tail <= applied ? tail : applied, over);
+    // The bus must store it by the deadline, or no node takes it: a write the admin is told
+    // failed never lands later.
+    const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
+    const std::string value = sign(s_->options.admin_token, applied, deadline, json);
     uint64_t rev = 0;
     const natsStatus s =
-        applied == 0 ? kvStore_Create(&rev, s_->kv, kKey, json.data(), int(json.size()))
-                     : kvStore_Update(&rev, s_->kv, kKey, json.data(), int(json.size()), applied);
-    if (s == NATS_OK)
+        expected == 0
+            ? kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()))
+            : kvStore_Update(&rev, s_->kv, kKey, value.data(), int(value.size()), expected);
+    if (s == NATS_OK) {
+        // Confirmed, but every node holds it to the deadline by the bus's clock: a writer whose
+        // clock is behind must not report a write that no node takes.
+        kvEntry* e = nullptr;
+        if (kvStore_GetRevision(&e, s_->kv, kKey, rev) == NATS_OK) {
+            const uint64_t stored_ms = uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000);
+            kvEntry_Destroy(e);
+            if (stored_ms > deadline)
+                return {0, BusError::kUnavailable,
+                        fmt::format("the scene bus stored the write {} ms after its deadline "
+                                    "(is this node's clock behind the bus's? NTP): no node takes "
+                                    "it; the running scene stays",
+                                    stored_ms - deadline)};
+        }
         return {rev, BusError::kNone, ""};
+    }
     const std::string why = status_text(s);
     if (why.find("wrong last sequence") != std::string::npos ||
         why.find("key exists") != std::string::npos) {
-        auto now = current();
-        return {0, BusError::kConflict, conflict_message(now.ok() ? now->first : applied + 1)};
+        kvEntry* e = nullptr;
+        uint64_t now = applied + 1;
+        bool takeable = true;  // by every node: a real concurrent write
+        if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
+            now = kvEntry_Revision(e);
+            auto v = verify(s_->options.admin_token,
+                            std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                             size_t(kvEntry_ValueLen(e))));
+            takeable =
+                v && v->base >= applied &&
+                uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000) <= v->deadline_ms;
+            kvEntry_Destroy(e);
+        }
+        // Over a value no node takes (unsigned, late, or an old one put again): written on it.
+        if (!takeable && now > expected && attempts > 1)
+            return write_on(applied, json, now, attempts - 1);
+        return {0, BusError::kConflict, conflict_message(now)};
     }
     if (s == NATS_TIMEOUT)
-        return {0, BusError::kUnavailable,
-                fmt::format("the scene bus did not confirm the write within {} ms; it may still "
-                            "arrive (hysar admin stats shows the version)",
-                            s_->options.timeout_ms)};
+        return settle(value, deadline);
     return {0, BusError::kUnavailable,
             "the scene bus is unavailable (" + why + "); the running scene stays"};
+}
+
+BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
+    // Unconfirmed: once no copy of it can be taken any more (the deadline and the clock margin
+    // passed), it was either stored in time (then it is the new version, taken by every node)
+    // or it never will be.
+    const uint64_t until = deadline_ms + kClockMarginMs;
+    while (now_unix_ms() < until && !stop_)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    kvEntryList list{};
+    kvWatchOptions wo;
+    kvWatchOptions_Init(&wo);
+    wo.IgnoreDeletes = true;
+    uint64_t stored = 0;
+    const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
+    if (s == NATS_OK) {
+        for (int i = 0; i < list.Count; ++i) {
+            kvEntry* e = list.Entries[i];
+            const int64_t at = kvEntry_Created(e);
+            if (size_t(kvEntry_ValueLen(e)) == value.size() &&
+                std::memcmp(kvEntry_Value(e), value.data(), value.size()) == 0 &&
+                uint64_t(at / 1000000) <= deadline_ms)
+                stored = kvEntry_Revision(e);
+        }
+        kvEntryList_Destroy(&list);
+    }
+    if (stored != 0)
+        return {stored, BusError::kNone, ""};
+    return {0, BusError::kUnavailable,
+            fmt::format("the scene bus did not confirm the write within {} ms; it is refused "
+                        "and stays refused (a copy the bus stores later is taken by no node)",
+                        s_->options.timeout_ms)};
 }
 
 namespace {
@@ -153,7 +449,7 @@ kvWatcher* make_watcher(kvStore* kv) {
 
 }  // namespace
 
-void SceneBus::watch(std::function<void(uint64_t, const std::string&)> on_scene) {
+void SceneBus::watch(std::function<void(const Value&)> on_scene) {
     on_scene_ = std::move(on_scene);
     // Made here, so that every write after watch() returns is delivered after the latest one.
     kvWatcher* first = make_watcher(s_->kv);
@@ -162,6 +458,23 @@ void SceneBus::watch(std::function<void(uint64_t, const std::string&)> on_scene)
 
 void SceneBus::watch_loop(void* first) {
     kvWatcher* w = static_cast<kvWatcher*>(first);
+    // A watch can stall without an error (its consumer lived on a server that died, or the
+    // bus was frozen): every 2 s the key's revision is read, and a watch behind it twice in a
+    // row is made again.
+    auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    int behind = 0;
+    auto stalled = [&] {
+        if (std::chrono::steady_clock::now() < next_check)
+            return false;
+        next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+        kvEntry* e = nullptr;
+        if (kvStore_Get(&e, s_->kv, kKey) != NATS_OK)
+            return false;
+        const uint64_t rev = kvEntry_Revision(e);
+        kvEntry_Destroy(e);
+        behind = rev > tail_.load() ? behind + 1 : 0;
+        return behind >= 2;
+    };
     while (!stop_) {
         if (!w)
             w = make_watcher(s_->kv);
@@ -170,17 +483,38 @@ void SceneBus::watch_loop(void* first) {
             continue;
         }
         while (!stop_) {
-            kvEntry* e = nullptr;
-            const natsStatus s = kvWatcher_Next(&e, w, 200);
-            if (s == NATS_TIMEOUT)
-                continue;
-            if (s != NATS_OK)
+            // A burst is taken whole (bounded), and only its newest signed value is
+            // delivered: a flood costs one check per value and one scene at most.
+            std::optional<Value> newest;
+            natsStatus s = NATS_OK;
+            for (int taken = 0; taken < 4096; ++taken) {
+                kvEntry* e = nullptr;
+                s = kvWatcher_Next(&e, w, taken == 0 ? 200 : 1);
+                if (s != NATS_OK)
+                    break;
+                if (!e)
+                    continue;  // the end of the initial values
+                auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
+                               std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                                size_t(kvEntry_ValueLen(e))));
+                kvEntry_Destroy(e);
+                if (v) {
+                    if (newest)
+                        ++counters_.superseded_values;
+                    // The newest write: the greatest base (an old value put again has an old
+                    // one), then the newest revision.
+                    if (!newest ||
+                        std::pair(v->base, v->revision) > std::pair(newest->base, newest->revision))
+                        newest = std::move(v);
+                }
+            }
+            if (newest)
+                on_scene_(*newest);
+            if ((s != NATS_OK && s != NATS_TIMEOUT) || s_->reconnected.exchange(false) ||
+                stalled()) {
+                behind = 0;
                 break;  // made again
-            if (!e)
-                continue;  // the end of the initial values
-            on_scene_(kvEntry_Revision(e), std::string(static_cast<const char*>(kvEntry_Value(e)),
-                                                       size_t(kvEntry_ValueLen(e))));
-            kvEntry_Destroy(e);
+            }
         }
         kvWatcher_Destroy(w);
         w = nullptr;

@@ -1,17 +1,29 @@
 // The scene bus of a cluster (`hysar serve --cluster nats://HOST:PORT`, docs/CLUSTER.md): the
 // scene JSON under key "scene" of a NATS JetStream key-value bucket, whose revision is the scene
 // version every node serves. The only code that includes nats.h (scripts/check_layers.sh).
-// Writes are compare-and-set on the revision the writing node has applied; no node applies its
-// own write: every node applies what its watch delivers, if and only if it is newer than what it
-// has applied. Thread: any; the watch callback runs on the bus's own thread.
+// Every value is signed: "hysar-scene 1 BASE DEADLINE HMAC\n" then the JSON, where BASE is the
+// version the write follows, DEADLINE the time (UNIX ms) by which the bus must store it, and
+// HMAC is HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON", keyed by a key derived from
+// the admin token, so only a holder of the admin credential changes the scene even
+// on a bus anyone can write; a value not so signed is ignored and counted. Writes are
+// compare-and-set on the revision the writing node has applied (or on the unsigned values put
+// after it); no node applies its own write: every node applies what its watch delivers, if and
+// only if it is newer than what it has applied and follows it (BASE >= applied: an old signed
+// value put again is refused). A value the bus stored after its deadline is taken by no node,
+// and a write not confirmed in time is reported applied only if the bus stored it in time: a
+// refused write never lands later. A burst of values is coalesced to its newest signed one.
+// Thread: any; the watch callback runs on the bus's own thread.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <thread>
+#include <vector>
 
 #include "core/result.hpp"
 
@@ -29,10 +41,41 @@ struct BusWrite {
 class SceneBus {
 public:
     struct Options {
-        std::string url;      // nats://HOST:PORT
-        std::string node_id;  // heartbeats go to node.<id>
+        std::string url;          // nats://HOST:PORT or tls://HOST:PORT, without credentials
+        std::string node_id;      // heartbeats go to node.<id>
+        std::string admin_token;  // signs and checks every value (required)
         std::string bucket = "hysar";
+        // Copies of the bucket kept by a NATS cluster when this node creates it (3 on a
+        // 3-server cluster: a write is confirmed once a majority stored it).
+        int replicas = 1;
         int timeout_ms = 2000;  // per request to the bus
+        // Authentication to NATS, at most one kind: user and password, a token, or a .creds
+        // file (a user JWT and its nkey seed).
+        std::string user, password, token, creds_file;
+        // TLS to the bus: the CA that signed its certificate (empty: the system's); a client
+        // certificate and key when the bus asks for one. `tls` turns it on.
+        bool tls = false;
+        std::string tls_ca, tls_cert, tls_key;
+    };
+    // A value of the bus, checked.
+    struct Value {
+        uint64_t revision = 0;  // the bus's revision: the scene version
+        uint64_t base = 0;      // the version the write followed (signed)
+        std::string json;
+    };
+    // What the bus ignored, for /metrics.
+    struct Counters {
+        std::atomic<uint64_t> unsigned_values{0};    // not signed with the admin credential
+        std::atomic<uint64_t> replayed_values{0};    // signed, but not following the applied one
+        std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
+        std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
+        std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
+    };
+    // A value's signed parts.
+    struct Signed {
+        uint64_t base = 0;         // the version the write followed
+        uint64_t deadline_ms = 0;  // the bus must have stored it by then (UNIX ms)
+        std::string json;
     };
     // Connects and opens (or creates) the bucket. An error naming the URL when the bus cannot be
     // reached at start: a node that cannot learn the current scene must not serve another.
@@ -41,20 +84,37 @@ public:
     SceneBus(const SceneBus&) = delete;
     SceneBus& operator=(const SceneBus&) = delete;
 
-    // The current scene: its revision and JSON; revision 0 when the bucket holds none.
-    Result<std::pair<uint64_t, std::string>> current();
-    // Writes `json` if the bucket's revision is still `applied` (0: only if there is none yet).
+    // The signed values the bucket holds, the one to start on first (the greatest BASE, then
+    // the newest); empty when it holds none. A node starts on the first that it can serve.
+    Result<std::vector<Value>> signed_values();
+    // Writes `json`, signed, if the bucket's revision is still `applied` (0: only if there is
+    // none yet), or if only unsigned values came after it.
     BusWrite write(uint64_t applied, const std::string& json);
-    // Starts delivering every revision of the scene (the latest when this is called first, then
-    // each new one) to `on_scene` on the bus's thread, until destruction; the watch is made
-    // again after an outage.
-    void watch(std::function<void(uint64_t revision, const std::string& json)> on_scene);
+    // Starts delivering the signed revisions of the scene (the latest when this is called
+    // first, then each new one; of a burst, only the newest) to `on_scene` on the bus's thread,
+    // until destruction; the watch is made again after an outage.
+    void watch(std::function<void(const Value& value)> on_scene);
     // Publishes `json` on node.<id> (best effort).
     void heartbeat(const std::string& json);
     bool connected() const;
 
+    Counters& counters() { return counters_; }
+    // The bus's counters in the Prometheus text format (hysar_scene_bus_*).
+    std::string metrics_text() const;
+    // `url` with any user and password replaced by "***", for logs.
+    static std::string redacted(const std::string& url);
+
     // The rule every node applies a delivered revision by (unit-tested): only a newer one.
     static bool newer(uint64_t delivered, uint64_t applied) { return delivered > applied; }
+    // A signed value is applied only if it is newer and follows the applied version.
+    static bool follows(const Value& v, uint64_t applied) {
+        return newer(v.revision, applied) && v.base >= applied;
+    }
+    // The signed form of `json` following version `base`, to be stored by `deadline_ms`
+    // (unit-tested), and its check: the signed parts, or an error saying why it is refused.
+    static std::string sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                            const std::string& json);
+    static Result<Signed> verify(const std::string& admin_token, std::string_view value);
 
 private:
     struct State;
@@ -62,7 +122,17 @@ private:
     // `first`: the watcher watch() made (a kvWatcher*, kept out of this header), or null.
     void watch_loop(void* first);
     std::unique_ptr<State> s_;
-    std::function<void(uint64_t, const std::string&)> on_scene_;
+    // A raw entry seen: its signed value, if any; counts and notes the tail revision.
+    std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw);
+    // write() with the compare-and-set on `over` when that is later (a value no node takes).
+    BusWrite write_on(uint64_t applied, const std::string& json, uint64_t over, int attempts);
+    // A write the bus did not confirm in time: stored by its deadline (then applied), or never.
+    BusWrite settle(const std::string& value, uint64_t deadline_ms);
+    std::function<void(const Value&)> on_scene_;
+    Counters counters_;
+    // The newest revision seen of any value, and of a signed one (writes go on the former when
+    // only unsigned values came after the latter).
+    std::atomic<uint64_t> tail_{0}, signed_tail_{0};
     std::atomic<bool> stop_{false};
     std::thread thread_;
 };

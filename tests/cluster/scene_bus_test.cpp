@@ -9,17 +9,26 @@
 #include <condition_variable>
 #include <cstdlib>
 #include <mutex>
+#include <thread>
 #include <vector>
 
 namespace hs::cluster {
 namespace {
 
-std::unique_ptr<SceneBus> bus(const std::string& bucket, const std::string& node = "t") {
+constexpr const char* kAdmin = "the-admin-token";
+
+std::unique_ptr<SceneBus> bus(const std::string& bucket, const std::string& node = "t",
+                              const std::string& admin = kAdmin) {
     const char* url = std::getenv("HYSAR_TEST_NATS_URL");
     EXPECT_NE(url, nullptr) << "run through tests/cluster/scene_bus_test.sh";
     if (!url)
         return nullptr;
-    auto b = SceneBus::connect({url, node, bucket, 2000});
+    SceneBus::Options o;
+    o.url = url;
+    o.node_id = node;
+    o.admin_token = admin;
+    o.bucket = bucket;
+    auto b = SceneBus::connect(o);
     EXPECT_TRUE(b.ok()) << (b.ok() ? "" : b.error().message);
     return b.ok() ? std::move(b).value() : nullptr;
 }
@@ -28,9 +37,9 @@ TEST(SceneBus, CreateOnceThenCompareAndSet) {
     auto a = bus("cas");
     auto b = bus("cas", "u");
     ASSERT_TRUE(a && b);
-    auto empty = a->current();
+    auto empty = a->signed_values();
     ASSERT_TRUE(empty.ok());
-    EXPECT_EQ(empty->first, 0u);
+    EXPECT_TRUE(empty->empty());
     const BusWrite first = a->write(0, "{\"v\":1}");
     ASSERT_EQ(first.error, BusError::kNone) << first.message;
     // A second node that also found the bucket empty loses the race to create.
@@ -48,10 +57,11 @@ TEST(SceneBus, CreateOnceThenCompareAndSet) {
                                 std::to_string(win.revision)),
               std::string::npos)
         << lose.message;
-    auto now = b->current();
-    ASSERT_TRUE(now.ok());
-    EXPECT_EQ(now->first, win.revision);
-    EXPECT_EQ(now->second, "{\"v\":2}");
+    auto now = b->signed_values();
+    ASSERT_TRUE(now.ok() && !now->empty());
+    EXPECT_EQ(now->front().revision, win.revision);
+    EXPECT_EQ(now->front().base, first.revision);
+    EXPECT_EQ(now->front().json, "{\"v\":2}");
 }
 
 TEST(SceneBus, WatchDeliversTheLatestThenEachNewOneInOrder) {
@@ -64,9 +74,9 @@ TEST(SceneBus, WatchDeliversTheLatestThenEachNewOneInOrder) {
     std::mutex m;
     std::condition_variable cv;
     std::vector<std::pair<uint64_t, std::string>> seen;
-    w->watch([&](uint64_t rev, const std::string& json) {
+    w->watch([&](const SceneBus::Value& v) {
         std::lock_guard lock(m);
-        seen.emplace_back(rev, json);
+        seen.emplace_back(v.revision, v.json);
         cv.notify_all();
     });
     auto writer = bus("watch", "v");
@@ -81,8 +91,10 @@ TEST(SceneBus, WatchDeliversTheLatestThenEachNewOneInOrder) {
     ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
                             [&] { return !seen.empty() && seen.back().first == last; }))
         << "the watch did not deliver revision " << last;
-    // The latest at the start (history 1: "two"), then each new revision, strictly increasing.
-    EXPECT_EQ(seen.front().second, "two");
+    // The latest at the start ("two"), then new revisions (a burst as its newest), strictly
+    // increasing.
+    EXPECT_TRUE(seen.front().second == "two" || seen.front().first > r2.revision)
+        << seen.front().second;
     for (size_t i = 1; i < seen.size(); ++i) EXPECT_GT(seen[i].first, seen[i - 1].first);
     EXPECT_EQ(seen.back().second, "n4");
 }
@@ -95,8 +107,138 @@ TEST(SceneBus, OnlyANewerRevisionIsApplied) {
               "scene changed concurrently, now version 9; fetch it and try again");
 }
 
+TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
+    const std::string v = SceneBus::sign(kAdmin, 7, 1700000000000, "{\"name\":\"x\"}");
+    auto ok = SceneBus::verify(kAdmin, v);
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    EXPECT_EQ(ok->base, 7u);
+    EXPECT_EQ(ok->deadline_ms, 1700000000000u);
+    EXPECT_EQ(ok->json, "{\"name\":\"x\"}");
+    std::string later = v;
+    later.replace(later.find(" 1700000000000 "), 15, " 1800000000000 ");
+    EXPECT_FALSE(SceneBus::verify(kAdmin, later).ok());
+    EXPECT_FALSE(SceneBus::verify("another-token", v).ok());
+    std::string tampered = v;
+    tampered.back() = ' ';
+    EXPECT_FALSE(SceneBus::verify(kAdmin, tampered).ok());
+    std::string rebased = v;
+    rebased.replace(rebased.find(" 7 "), 3, " 8 ");
+    EXPECT_FALSE(SceneBus::verify(kAdmin, rebased).ok());
+    for (const char* junk : {"{{{", "", "{\"name\":\"x\"}", "hysar-scene 1 7 9 00\n{}"})
+        EXPECT_FALSE(SceneBus::verify(kAdmin, junk).ok()) << junk;
+    // The rule: newer, and following the applied version (an old value put again is not).
+    EXPECT_TRUE(SceneBus::follows({9, 5, ""}, 5));
+    EXPECT_FALSE(SceneBus::follows({9, 3, ""}, 5));
+    EXPECT_FALSE(SceneBus::follows({5, 4, ""}, 5));
+    EXPECT_EQ(SceneBus::redacted("nats://u:secret@host:4222"), "nats://***@host:4222");
+    EXPECT_EQ(SceneBus::redacted("nats://host:4222"), "nats://host:4222");
+}
+
+// A writer without the admin token (here: signing with another) changes nothing: its values are
+// not delivered, are counted, and a node's next write goes over them.
+TEST(SceneBus, AValueWithoutTheAdminCredentialIsIgnored) {
+    auto node = bus("intruder");
+    auto intruder = bus("intruder", "x", "not-the-admin-token");
+    ASSERT_TRUE(node && intruder);
+    const BusWrite r1 = node->write(0, "one");
+    ASSERT_EQ(r1.error, BusError::kNone) << r1.message;
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    node->watch([&](const SceneBus::Value& v) {
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    uint64_t last = r1.revision;
+    for (int i = 0; i < 20; ++i) {
+        const BusWrite w = intruder->write(last, "evil");
+        ASSERT_EQ(w.error, BusError::kNone) << w.message;
+        last = w.revision;
+    }
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] {
+            return node->counters().unsigned_values.load() >= 20;
+        }) || node->counters().unsigned_values.load() >= 20);
+    }
+    // The node's write (on the version it applied) goes over the unsigned ones.
+    const BusWrite r2 = node->write(r1.revision, "two");
+    ASSERT_EQ(r2.error, BusError::kNone) << r2.message;
+    std::unique_lock lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
+                            [&] { return !seen.empty() && seen.back().revision == r2.revision; }));
+    for (const auto& v : seen) EXPECT_NE(v.json, "evil");
+    auto values = node->signed_values();
+    ASSERT_TRUE(values.ok() && !values->empty());
+    EXPECT_EQ(values->front().json, "two");
+    EXPECT_NE(node->metrics_text().find("hysar_scene_bus_ignored_values_total{why=\"unsigned\"}"),
+              std::string::npos);
+}
+
+// A burst is coalesced: a slow consumer gets the newest of it, not each one.
+TEST(SceneBus, ABurstIsCoalescedToItsNewest) {
+    auto node = bus("burst");
+    auto writer = bus("burst", "w");
+    ASSERT_TRUE(node && writer);
+    BusWrite last = writer->write(0, "v0");
+    ASSERT_EQ(last.error, BusError::kNone) << last.message;
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<uint64_t> seen;
+    node->watch([&](const SceneBus::Value& v) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));  // a slow scene build
+        std::lock_guard lock(m);
+        seen.push_back(v.revision);
+        cv.notify_all();
+    });
+    for (int i = 1; i <= 100; ++i) {
+        last = writer->write(last.revision, "v" + std::to_string(i));
+        ASSERT_EQ(last.error, BusError::kNone) << last.message;
+    }
+    std::unique_lock lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(20),
+                            [&] { return !seen.empty() && seen.back() == last.revision; }));
+    EXPECT_LT(seen.size(), 50u);
+    EXPECT_GT(node->counters().superseded_values.load(), 50u);
+}
+
+// TLS to the bus and a token: connects with the bus's CA and the token, not without either.
+TEST(SceneBus, TlsAndATokenToTheBus) {
+    const char* url = std::getenv("HYSAR_TEST_NATS_TLS_URL");
+    const char* ca = std::getenv("HYSAR_TEST_NATS_CA");
+    const char* token = std::getenv("HYSAR_TEST_NATS_TOKEN");
+    ASSERT_TRUE(url && ca && token) << "run through tests/cluster/scene_bus_test.sh";
+    SceneBus::Options o;
+    o.url = url;
+    o.node_id = "tls";
+    o.admin_token = kAdmin;
+    o.bucket = "tls";
+    o.timeout_ms = 2000;
+    o.tls = true;
+    o.tls_ca = ca;
+    o.token = token;
+    auto ok = SceneBus::connect(o);
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+    const BusWrite w = ok.value()->write(0, "over tls");
+    EXPECT_EQ(w.error, BusError::kNone) << w.message;
+    auto no_token = o;
+    no_token.token.clear();
+    EXPECT_FALSE(SceneBus::connect(no_token).ok());
+    auto no_ca = o;
+    no_ca.tls_ca.clear();
+    auto untrusted = SceneBus::connect(no_ca);
+    EXPECT_FALSE(untrusted.ok());
+}
+
 TEST(SceneBus, AnUnreachableBusIsNamed) {
-    auto b = SceneBus::connect({"nats://127.0.0.1:1", "t", "x", 500});
+    SceneBus::Options o;
+    o.url = "nats://127.0.0.1:1";
+    o.node_id = "t";
+    o.admin_token = kAdmin;
+    o.bucket = "x";
+    o.timeout_ms = 500;
+    auto b = SceneBus::connect(o);
     ASSERT_FALSE(b.ok());
     EXPECT_NE(b.error().message.find("nats://127.0.0.1:1"), std::string::npos) << b.error().message;
 }
