@@ -352,7 +352,14 @@ bool read(Reader& r, M& m, const Uint<M, V>& f) {
     if (f.tail && r.left() < sizeof(V))
         return r.fail(std::to_string(r.left()) + " trailing byte(s) after the last field (" +
                       where<M>(f).str() + ", optional, takes " + std::to_string(sizeof(V)) + ")");
-    return r.get(m.*f.member, where<M>(f));
+    if (!r.get(m.*f.member, where<M>(f)))
+        return false;
+    // A sender omits an optional field that is 0, so that each message has one encoding.
+    if (f.tail && m.*f.member == 0)
+        return r.fail(where<M>(f).str() +
+                      " is present but 0 (an optional field that is 0 is "
+                      "left out)");
+    return true;
 }
 template <typename M>
 bool read(Reader& r, M& m, const F64<M>& f) {

@@ -445,6 +445,17 @@ hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display
         if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
             return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
         const hysar_image& im = layer->image;
+        // The image's own fields must agree: the warp reads and writes width x height x bpp.
+        if (im.bytes_per_pixel != 4 && im.bytes_per_pixel != 8)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "the image's bytes_per_pixel is " +
+                                                      std::to_string(im.bytes_per_pixel) +
+                                                      ", not 4 (rgba8) or 8 (rgba16f)");
+        if (uint64_t(im.width) * im.height * im.bytes_per_pixel != uint64_t(im.size_bytes))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "the image's size_bytes " + std::to_string(im.size_bytes) +
+                            " is not width x height x bytes_per_pixel (" +
+                            std::to_string(im.width) + " x " + std::to_string(im.height) + " x " +
+                            std::to_string(im.bytes_per_pixel) + ")");
         if (dst_bytes < im.size_bytes)
             return fail(HYSAR_E_INVALID_ARGUMENT, "dst_bytes " + std::to_string(dst_bytes) +
                                                       " is less than the image's " +

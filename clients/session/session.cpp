@@ -307,8 +307,10 @@ bool Session::send_pending() {
     int stats = 0;
     {
         std::lock_guard lock(mutex_);
-        if (display_ && !display_sent_)
+        if (display_ && !display_sent_) {
             display = display_, display_sent_ = true;
+            layer_since_display_ = false;
+        }
         if (pose_ && !pose_sent_) {
             pose = pose_, pose_sent_ = true;
             if (!send_display_time_)
@@ -377,6 +379,15 @@ void Session::handle(Message m, uint64_t received_ns) {
         // from now on poses go without it (PROTOCOL.md, "Time").
         if (err->code == proto::ErrorCode::kTooLarge && last_pose_had_display_time_)
             send_display_time_ = false;
+        // A server that predates lossy tiles refuses encoding 3 in RegisterDisplay as
+        // malformed and closes: the display goes again, after the reconnect, with sparse tiles
+        // (PROTOCOL.md, "Lossy tiles").
+        {
+            std::lock_guard lock(mutex_);
+            if (err->code == proto::ErrorCode::kMalformed && display_ && display_sent_ &&
+                !layer_since_display_ && display_->encoding == proto::Encoding::kLossyTiles)
+                display_->encoding = proto::Encoding::kSparseTiles;
+        }
         e.kind = SessionEvent::Kind::kServerError;
         e.error_code = uint32_t(err->code);
         e.text = describe(*err);
@@ -388,8 +399,11 @@ void Session::handle(Message m, uint64_t received_ns) {
     }
     std::lock_guard lock(mutex_);
     if (layer) {
+        layer_since_display_ = true;
         if (auto it = sent_poses_.find(layer->pose_time_ns); it != sent_poses_.end())
             e.pose = it->second;
+        // The display time the server says it rendered for (its echo), not the one kept here.
+        e.pose.display_time_ns = layer->display_time_ns;
         if (layer->eye == 0 && received_ns >= layer->pose_time_ns) {
             layer_latency_ns_.push_back(received_ns - layer->pose_time_ns);
             if (layer_latency_ns_.size() > kLatencySamples)

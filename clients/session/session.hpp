@@ -179,6 +179,7 @@ private:
     // poses then go without it. Network thread.
     bool send_display_time_ = true;
     bool last_pose_had_display_time_ = false;
+    bool layer_since_display_ = false;  // a layer came after the display was last sent
 };
 
 }  // namespace hs::client

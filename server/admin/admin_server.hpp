@@ -35,7 +35,8 @@ struct AdminOptions {
     uint32_t max_waiting = 32;
     // A request's head (and body) must arrive within `deadline_s` of the connection (or of the
     // previous answer), else it is closed; each write of an answer waits at most
-    // `io_timeout_s`; an idle kept-alive connection is closed after `keep_alive_s`.
+    // `io_timeout_s` and the whole answer at most 4 x `io_timeout_s`; on a kept-alive
+    // connection the next request must come within `keep_alive_s` of the previous answer.
     uint32_t io_timeout_s = 2;
     uint32_t deadline_s = 5;
     uint32_t keep_alive_s = 5;

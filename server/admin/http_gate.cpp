@@ -163,12 +163,20 @@ Result<RequestHead> check_request_head(std::string_view head, const std::string&
 namespace {
 
 // The buffered request, then nothing: the gate read the whole request (head and body), so a
-// worker never waits on the client to read. Writes wait at most `io_timeout` each.
+// worker never waits on the client to read. Writes wait at most `io_timeout` each, and the
+// whole answer at most kAnswerTimeouts of them: a client that reads a few bytes at a time
+// cannot hold a worker for longer.
+constexpr int kAnswerTimeouts = 4;
+
 class GateStream final : public httplib::Stream {
 public:
     GateStream(int fd, std::string& buffer, const std::string& address,
                std::chrono::milliseconds io_timeout)
-        : fd_(fd), buffer_(buffer), address_(address), io_timeout_(io_timeout) {}
+        : fd_(fd),
+          buffer_(buffer),
+          address_(address),
+          io_timeout_(io_timeout),
+          answer_deadline_(Clock::now() + kAnswerTimeouts * io_timeout) {}
     bool is_readable() const override { return begin_ < buffer_.size(); }
     bool is_writable() const override { return wait(POLLOUT); }
     ssize_t read(char* ptr, size_t size) override {
@@ -178,7 +186,7 @@ public:
         return ssize_t(n);
     }
     ssize_t write(const char* ptr, size_t size) override {
-        const auto deadline = Clock::now() + io_timeout_;
+        const auto deadline = std::min(Clock::now() + io_timeout_, answer_deadline_);
         for (;;) {
             const ssize_t n = ::send(fd_, ptr, size, MSG_NOSIGNAL | MSG_DONTWAIT);
             if (n >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
@@ -211,6 +219,7 @@ private:
     std::string& buffer_;
     const std::string& address_;
     const std::chrono::milliseconds io_timeout_;
+    const Clock::time_point answer_deadline_;  // the whole answer written by then
     size_t begin_ = 0;
 };
 

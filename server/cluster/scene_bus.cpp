@@ -330,9 +330,12 @@ Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
             out.push_back(std::move(*v));
     }
     kvEntryList_Destroy(&list);
-    // An old value put again has an old base: the greatest base is the newest write.
+    // An old value put again has an old base: the greatest base is the newest write. Of the
+    // values with that base the first stored is the write; a later one is a copy put again
+    // (within its deadline), which the nodes that applied the first refuse as replayed, so a
+    // node that took the copy would refuse the next write, which follows the first.
     std::sort(out.begin(), out.end(), [](const Value& a, const Value& b) {
-        return a.base != b.base ? a.base > b.base : a.revision > b.revision;
+        return a.base != b.base ? a.base > b.base : a.revision < b.revision;
     });
     return out;
 }
@@ -502,9 +505,10 @@ void SceneBus::watch_loop(void* first) {
                     if (newest)
                         ++counters_.superseded_values;
                     // The newest write: the greatest base (an old value put again has an old
-                    // one), then the newest revision.
-                    if (!newest ||
-                        std::pair(v->base, v->revision) > std::pair(newest->base, newest->revision))
+                    // one), then the first stored of that base (a later one is a copy put
+                    // again; see read_values).
+                    if (!newest || v->base > newest->base ||
+                        (v->base == newest->base && v->revision < newest->revision))
                         newest = std::move(v);
                 }
             }

@@ -921,6 +921,18 @@ Result<void> check_scene_limits(const Scene& scene, const SceneLimits& limits) {
                             scene.name, scene.more_projectors.empty() ? "" : "'" + p.name + "' ",
                             k.width, k.height, pixels, limits.max_projector_pixels));
     }
+    // Several projectors: their pixels together, since the blend holds and weighs every one
+    // of them on the render thread at each scene version.
+    uint64_t total = 0;
+    for (const Projector& p : scene.projectors())
+        total += uint64_t(p.intrinsics.width) * p.intrinsics.height;
+    if (scene.projectors().size() > 1 && total > limits.max_projector_pixels)
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("scene '{}': the {} projectors have {} pixels together, more "
+                        "than the limit of {} (max_projector_pixels, which bounds "
+                        "the blend of several projectors too)",
+                        scene.name, scene.projectors().size(), total, limits.max_projector_pixels));
     return {};
 }
 

@@ -22,7 +22,7 @@ struct SceneLimits {
     // 256 x 64 has 32,512); a glTF prop counts every triangle of every instance.
     uint64_t max_triangles = 1'048'576;
     // Projector width x height: 16,000,000 rgba8 pixels (64,000,000 bytes) fit the protocol's
-    // 64 MiB frame limit.
+    // 64 MiB frame limit. Several projectors: their pixels together (the blend's work).
     uint64_t max_projector_pixels = 16'000'000;
 };
 

@@ -518,6 +518,9 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     }
     r.per_s_total = double(r.stereo_layers) / o.seconds;
     r.per_s_per_headset = r.per_s_total / headsets;
+    for (const auto& t : tallies)
+        r.per_s_slowest_headset =
+            std::min(r.per_s_slowest_headset.value_or(1e300), double(t.stereo_layers) / o.seconds);
     if (!latency.empty()) {
         r.latency_p50_ms = percentile_of(latency, 0.5);
         r.latency_p99_ms = percentile_of(latency, 0.99);

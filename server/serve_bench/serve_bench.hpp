@@ -78,6 +78,7 @@ struct ServedRow {
     uint64_t eye_layers = 0;     // VdLayer messages received in the window
     double per_s_total = 0;      // stereo layers per second, all headsets
     double per_s_per_headset = 0;
+    std::optional<double> per_s_slowest_headset;           // the headset that got the fewest
     std::optional<double> latency_p50_ms, latency_p99_ms;  // pose sent to second eye received
     // A new headset's first stereo layer, measured as the latency above (its pose sent to its
     // second eye received), whenever it came (usually before the window): the median and the

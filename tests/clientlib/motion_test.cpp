@@ -302,6 +302,17 @@ TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
         hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size() - 1, nullptr),
         HYSAR_E_INVALID_ARGUMENT);
     EXPECT_NE(std::string(hysar_last_error()).find("dst_bytes"), std::string::npos);
+    // An image whose fields disagree is refused before a byte is read or written.
+    hysar_event odd = e;
+    odd.image.bytes_per_pixel = 3;
+    EXPECT_EQ(hysar_reproject_layer(&odd, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("bytes_per_pixel"), std::string::npos);
+    odd = e;
+    odd.image.size_bytes /= 2;
+    EXPECT_EQ(hysar_reproject_layer(&odd, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("size_bytes"), std::string::npos);
     latest.orientation_wxyz[0] = std::numeric_limits<double>::quiet_NaN();
     EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
               HYSAR_E_INVALID_ARGUMENT);
@@ -348,6 +359,14 @@ TEST(WireTime, PoseWithoutDisplayTimeIsTheOldPose) {
     auto old_back = proto::decode_frame(old_bytes, proto::Side::kClient);
     ASSERT_TRUE(std::holds_alternative<proto::Message>(old_back));
     EXPECT_EQ(std::get<proto::Pose>(std::get<proto::Message>(old_back)).display_time_ns, 0u);
+    // Present but 0 is malformed: a message has exactly one encoding (the sender omits a 0).
+    std::vector<uint8_t> zero = new_bytes;
+    std::fill(zero.end() - 8, zero.end(), uint8_t(0));
+    auto zero_back = proto::decode_frame(zero, proto::Side::kClient);
+    ASSERT_TRUE(std::holds_alternative<proto::DecodeError>(zero_back));
+    const auto& e = std::get<proto::DecodeError>(zero_back);
+    EXPECT_EQ(e.code, proto::ErrorCode::kMalformed);
+    EXPECT_NE(e.message.find("display_time_ns is present but 0"), std::string::npos) << e.message;
 }
 
 TEST(WireTime, VdLayerCarriesTheDisplayTimeAfterItsData) {

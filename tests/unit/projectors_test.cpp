@@ -167,12 +167,18 @@ TEST(Projectors, BadListsAreClearErrors) {
 TEST(Projectors, ScenePixelLimitCoversEveryProjector) {
     Scene s = three_projector_room(1);
     SceneLimits limits;
-    limits.max_projector_pixels = 1920 * 1200;
+    limits.max_projector_pixels = 3 * 1920 * 1200;  // the three together, exactly
     EXPECT_TRUE(check_scene_limits(s, limits).ok());
-    s.more_projectors[1].intrinsics.width = 4000;
+    s.more_projectors[1].intrinsics.width = 6000;  // alone over the limit
     auto r = check_scene_limits(s, limits);
     ASSERT_FALSE(r.ok());
     EXPECT_TRUE(has(r.error().message, "back-left")) << r.error().message;
+    // Each within the limit, together over it: refused, naming the sum.
+    s = three_projector_room(1);
+    limits.max_projector_pixels = 2 * 1920 * 1200;
+    r = check_scene_limits(s, limits);
+    ASSERT_FALSE(r.ok());
+    EXPECT_TRUE(has(r.error().message, "pixels together")) << r.error().message;
 }
 
 TEST(Blend, WeightsSumToOneWhereverAProjectorReaches) {
@@ -244,12 +250,15 @@ TEST(Blend, OneProjectorWeighsOneWhereItReaches) {
     Projector p = s.projector;
     p.intrinsics = {240, 150, 375, 375, 119.5, 74.5};
     const auto blend = render::compute_blend(*mesh, std::vector<Projector>{p});
+    uint64_t ones = 0;
     for (size_t i = 0; i < blend.projectors[0].weight.size(); ++i) {
         const float w = blend.projectors[0].weight[i];
         if (blend.views[0].covered(i)) {
             ASSERT_TRUE(w == 1.0f || w == 0.0f) << w;
+            ones += w == 1.0f;
         }
     }
+    EXPECT_GT(ones, 1000u);  // it reaches the prop: not every weight 0
 }
 
 TEST(Blend, HardCasesAreFiniteBoundedAndSumToOne) {
@@ -259,7 +268,5 @@ TEST(Blend, HardCasesAreFiniteBoundedAndSumToOne) {
         EXPECT_TRUE(r.ok()) << bench::blend_cases_table(rows);
         EXPECT_GT(r.points, 0u) << r.name;
     }
-    // The case with points seen by none has some.
-    EXPECT_LT(rows[1].covered, rows[1].points + 1);
     std::printf("%s", bench::blend_cases_table(rows).c_str());
 }

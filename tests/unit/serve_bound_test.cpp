@@ -25,6 +25,13 @@ TEST(ServeBound, EveryPoseServedIsBoundByThePoses) {
     EXPECT_NE(r.bound_why.find("render_thread at 97 %"), std::string::npos) << r.bound_why;
 }
 
+TEST(ServeBound, OneStarvedHeadsetIsNotHiddenByTheMean) {
+    auto r = row(59.0, {{"render_thread", 0.97}, {"gpu", 0.3}});
+    r.per_s_slowest_headset = 30.0;
+    hs::bench::classify_bound(r, 60);
+    EXPECT_EQ(r.bound, "render_thread");
+}
+
 TEST(ServeBound, TheBusiestSaturatedStageBounds) {
     auto r = row(30, {{"render_thread", 0.99}, {"gpu", 0.4}, {"encoders", 0.5}, {"cores", 0.3}});
     hs::bench::classify_bound(r, 60);
