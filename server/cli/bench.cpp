@@ -81,7 +81,8 @@ const char* kBenchHelp =
 
 const char* kServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
-    "                         [--format srgb8|rgba16f] [--encoding tiles|raw] [--scene FILE]\n"
+    "                         [--format srgb8|rgba16f] [--encoding tiles|lossy|raw]\n"
+    "                         [--scene FILE]\n"
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
@@ -98,7 +99,8 @@ const char* kServeHelp =
     "  --seconds S          measured seconds per row (default 10), after a warm-up of 1 s\n"
     "                       or until every headset has had its first stereo layer\n"
     "  --profile NAME       the scene's viewer profile (default its first)\n"
-    "  --format, --encoding what the headsets register (default srgb8, tiles)\n"
+    "  --format, --encoding what the headsets register (default srgb8, tiles; lossy: JPEG\n"
+    "                       tiles at the server's default quality)\n"
     "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
     "  --out DIR            default out/bench-serve\n"
     "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
@@ -198,9 +200,11 @@ Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
     }
     if (f.has("--encoding")) {
         const std::string v = f.get("--encoding", "");
-        if (v != "tiles" && v != "raw")
-            return invalid("--encoding wants tiles or raw, got '" + v + "'");
-        o.encoding = v == "tiles" ? protocol::Encoding::kSparseTiles : protocol::Encoding::kRaw;
+        if (v != "tiles" && v != "raw" && v != "lossy")
+            return invalid("--encoding wants tiles, lossy or raw, got '" + v + "'");
+        o.encoding = v == "tiles"   ? protocol::Encoding::kSparseTiles
+                     : v == "lossy" ? protocol::Encoding::kLossyTiles
+                                    : protocol::Encoding::kRaw;
     }
     const std::pair<const char*, std::string*> paths[] = {
         {"--profile", &o.profile},

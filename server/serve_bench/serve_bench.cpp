@@ -56,7 +56,9 @@ const char* format_name(proto::PixelFormat f) {
     return f == proto::PixelFormat::kRgba16f ? "rgba16f" : "srgb8";
 }
 const char* encoding_name(proto::Encoding e) {
-    return e == proto::Encoding::kRaw ? "raw" : "tiles";
+    return e == proto::Encoding::kRaw          ? "raw"
+           : e == proto::Encoding::kLossyTiles ? "lossy"
+                                               : "tiles";
 }
 
 Result<scene::Pose> head_at(const scene::Scene& s, double angle_deg) {

@@ -62,6 +62,21 @@ grep -q '^served ' "$out/table.txt"
 grep -q '^lean script ' "$out/table.txt"
 [[ $(grep -c 'headset(s):' "$out/progress.txt") -eq 4 ]]
 
+# Lossy tiles (encoding 3): served, and fewer bytes per layer than the lossless tiles above.
+"$hysar" bench serve --quick --headsets 1 --encoding lossy --out "$out/lossy" > /dev/null 2>&1 ||
+    { echo "bench serve --encoding lossy failed"; exit 1; }
+python3 - "$out/bs/bench-serve.json" "$out/lossy/bench-serve.json" <<'PY'
+import json, sys
+tiles = json.load(open(sys.argv[1]))
+lossy = json.load(open(sys.argv[2]))
+assert lossy["config"]["encoding"] == "lossy", lossy["config"]
+t = [r["bytes_per_layer"] for r in tiles["rows"] if r["headsets"] == 1 and not r["lp_num_threads"]][0]
+l = lossy["rows"][0]
+assert l["stereo_layers"] > 0 and l["errors"] == 0, l
+assert l["bytes_per_layer"] < 0.5 * t, (l["bytes_per_layer"], t)
+print("bench serve: lossy %.0f bytes per layer against %.0f for tiles" % (l["bytes_per_layer"], t))
+PY
+
 # A bad flag: exit 2 and one line that names it.
 bad() {
     local flag=$1; shift
