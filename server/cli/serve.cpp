@@ -496,8 +496,8 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
 // SceneUpdate), or this node's own scene put there when it holds none. A value that cannot be
 // served is skipped (counted), never a reason not to start.
 Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, const ServeSetup& s,
-                                                    const stream::ServerCreateInfo& info,
-                                                    bool& own) {
+                                                    const stream::ServerCreateInfo& info, bool& own,
+                                                    cluster::SceneBus::Value& held) {
     own = false;
     for (int attempt = 0; attempt < 3; ++attempt) {
         // A bus that just lost a server may take a few seconds to answer (a new leader).
@@ -516,8 +516,10 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
             if (parsed && info.calibration)
                 if (auto r = info.calibration->check_scene(parsed.value()); !r)
                     parsed = make_error(r.error().code, r.error().message);
-            if (parsed)
+            if (parsed) {
+                held = v;
                 return std::pair{v.revision, std::move(parsed).value()};
+            }
             ++bus.counters().invalid_values;
             log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
                       v.revision, parsed.error().message);
@@ -526,6 +528,7 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
         const auto w = bus.write(0, s.scene.text());
         if (w.error == cluster::BusError::kNone) {
             own = true;
+            held = {w.revision, 0, w.deadline_ms, s.scene.text()};
             HS_ASSIGN_OR_RETURN(auto mine, s.scene.load());
             return std::pair{w.revision, std::move(mine)};
         }
@@ -553,9 +556,11 @@ std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scen
         return start_error(b.error().message);
     bus = std::move(b).value();
     bool own = false;
-    auto current = bus_scene(*bus, s, info, own);
+    cluster::SceneBus::Value held;
+    auto current = bus_scene(*bus, s, info, own, held);
     if (!current)
         return start_error(current.error().message);
+    bus->hold(held);
     scene = std::move(current->second);
     info.initial_scene_version = uint32_t(current->first);
     if (!own)
@@ -620,6 +625,9 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
                 v.revision, v.base, applied);
             return;
         }
+        // Held even if it cannot be built here: it is the cluster's scene, which this node
+        // puts back on a bus that comes back empty or behind.
+        b->hold(v);
         if (auto r = watched->apply_scene_version(v.json, uint32_t(v.revision)); !r) {
             ++b->counters().invalid_values;
             log::error("scene bus: version {} cannot be served here: {}; the running scene stays",

@@ -161,6 +161,12 @@ std::string SceneBus::metrics_text() const {
     for (const auto& [why, n] : rows)
         t += fmt::format("hysar_scene_bus_ignored_values_total{{why=\"{}\"}} {}\n", why, n);
     t += fmt::format(
+        "# HELP hysar_scene_bus_refills_total Times this node found the bus empty or behind the "
+        "scene version it holds (its servers restarted without their stores, or the key was "
+        "deleted) and put the newest scene back.\n"
+        "# TYPE hysar_scene_bus_refills_total counter\nhysar_scene_bus_refills_total {}\n",
+        counters_.refills.load());
+    t += fmt::format(
         "# HELP hysar_scene_bus_connected Whether this node is connected to the scene bus.\n"
         "# TYPE hysar_scene_bus_connected gauge\nhysar_scene_bus_connected {}\n",
         connected() ? 1 : 0);
@@ -171,6 +177,23 @@ std::string conflict_message(uint64_t current_revision) {
     return fmt::format("scene changed concurrently, now version {}; fetch it and try again",
                        current_revision);
 }
+
+namespace {
+
+// Makes the bucket (or opens it when another node just made it with the same settings).
+natsStatus create_bucket(kvStore** kv, jsCtx* js, const SceneBus::Options& o) {
+    kvConfig cfg;
+    kvConfig_Init(&cfg);
+    cfg.Bucket = o.bucket.c_str();
+    // Some history, so that a node starts on the newest signed value even when unsigned ones
+    // were put after it.
+    cfg.History = 16;
+    cfg.MaxValueSize = int32_t(kMaxValue);
+    cfg.Replicas = o.replicas;
+    return js_CreateKeyValue(kv, js, &cfg);
+}
+
+}  // namespace
 
 struct SceneBus::State {
     Options options;
@@ -259,17 +282,8 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
     s = natsConnection_JetStream(&st->js, st->nc, &jo);
     if (s == NATS_OK) {
         s = js_KeyValue(&st->kv, st->js, o.bucket.c_str());
-        if (s == NATS_NOT_FOUND) {
-            kvConfig cfg;
-            kvConfig_Init(&cfg);
-            cfg.Bucket = o.bucket.c_str();
-            // Some history, so that a node starts on the newest signed value even when
-            // unsigned ones were put after it.
-            cfg.History = 16;
-            cfg.MaxValueSize = int32_t(kMaxValue);
-            cfg.Replicas = o.replicas;
-            s = js_CreateKeyValue(&st->kv, st->js, &cfg);
-        }
+        if (s == NATS_NOT_FOUND)
+            s = create_bucket(&st->kv, st->js, o);
     }
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo,
@@ -305,7 +319,7 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     for (uint64_t t = signed_tail_.load();
          revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
     }
-    return Value{revision, v->base, std::move(v->json)};
+    return Value{revision, v->base, v->deadline_ms, std::move(v->json)};
 }
 
 Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
@@ -349,7 +363,7 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
     // While disconnected the client would buffer the write and send it after the reconnect,
     // long after the admin was told it failed: refuse it here instead.
     if (!connected())
-        return {0, BusError::kUnavailable,
+        return {0, 0, BusError::kUnavailable,
                 "the scene bus is unavailable (not connected to " + redacted(s_->options.url) +
                     "); the running scene stays"};
     // Unsigned values after the applied version are no one's write: write over them.
@@ -373,13 +387,13 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
             const uint64_t stored_ms = uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000);
             kvEntry_Destroy(e);
             if (stored_ms > deadline)
-                return {0, BusError::kUnavailable,
+                return {0, 0, BusError::kUnavailable,
                         fmt::format("the scene bus stored the write {} ms after its deadline "
                                     "(is this node's clock behind the bus's? NTP): no node takes "
                                     "it; the running scene stays",
                                     stored_ms - deadline)};
         }
-        return {rev, BusError::kNone, ""};
+        return {rev, deadline, BusError::kNone, ""};
     }
     const std::string why = status_text(s);
     if (why.find("wrong last sequence") != std::string::npos ||
@@ -400,11 +414,11 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
         // Over a value no node takes (unsigned, late, or an old one put again): written on it.
         if (!takeable && now > expected && attempts > 1)
             return write_on(applied, json, now, attempts - 1);
-        return {0, BusError::kConflict, conflict_message(now)};
+        return {0, 0, BusError::kConflict, conflict_message(now)};
     }
     if (s == NATS_TIMEOUT)
         return settle(value, deadline);
-    return {0, BusError::kUnavailable,
+    return {0, 0, BusError::kUnavailable,
             "the scene bus is unavailable (" + why + "); the running scene stays"};
 }
 
@@ -433,8 +447,8 @@ BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
         kvEntryList_Destroy(&list);
     }
     if (stored != 0)
-        return {stored, BusError::kNone, ""};
-    return {0, BusError::kUnavailable,
+        return {stored, deadline_ms, BusError::kNone, ""};
+    return {0, 0, BusError::kUnavailable,
             fmt::format("the scene bus did not confirm the write within {} ms; it is refused "
                         "and stays refused (a copy the bus stores later is taken by no node)",
                         s_->options.timeout_ms)};
@@ -461,27 +475,24 @@ void SceneBus::watch(std::function<void(const Value&)> on_scene) {
 
 void SceneBus::watch_loop(void* first) {
     kvWatcher* w = static_cast<kvWatcher*>(first);
-    // A watch can stall without an error (its consumer lived on a server that died, or the
-    // bus was frozen): every 2 s the key's revision is read, and a watch behind it twice in a
-    // row is made again.
+    // Every 2 s the key is read (check_bus): a watch behind it twice in a row is made again (it
+    // can stall without an error when its consumer lived on a server that died, or the bus was
+    // frozen), and a bus found empty or behind the held version is refilled.
     auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
     int behind = 0;
     auto stalled = [&] {
         if (std::chrono::steady_clock::now() < next_check)
             return false;
         next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-        kvEntry* e = nullptr;
-        if (kvStore_Get(&e, s_->kv, kKey) != NATS_OK)
-            return false;
-        const uint64_t rev = kvEntry_Revision(e);
-        kvEntry_Destroy(e);
-        behind = rev > tail_.load() ? behind + 1 : 0;
-        return behind >= 2;
+        return check_bus(behind);
     };
     while (!stop_) {
         if (!w)
             w = make_watcher(s_->kv);
         if (!w) {
+            // No watch (the bucket may be gone with a bus that restarted empty): the check
+            // still runs, and refills it.
+            (void)stalled();
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             continue;
         }
@@ -525,6 +536,114 @@ void SceneBus::watch_loop(void* first) {
     }
     if (w)
         kvWatcher_Destroy(w);
+}
+
+void SceneBus::hold(const Value& value) {
+    std::lock_guard lock(held_mutex_);
+    if (value.revision >= held_.revision)
+        held_ = value;
+}
+
+std::optional<SceneBus::Refill> SceneBus::plan_refill(const Value& held, uint64_t bus_revision,
+                                                      uint64_t last,
+                                                      const std::optional<Value>& bus_newest) {
+    if (held.revision == 0 || bus_revision >= held.revision)
+        return std::nullopt;
+    // A later admin's write on the bus (made after the held one, following a version): it goes
+    // back, not the held one. A node's start-up scene on an empty bus follows none (base 0).
+    if (bus_newest && bus_newest->base > 0 && bus_newest->deadline_ms > held.deadline_ms)
+        return Refill{std::max(held.revision + 1, last + 1), false};
+    return Refill{std::max(held.revision, last + 1), true};
+}
+
+bool SceneBus::check_bus(int& behind) {
+    uint64_t held;
+    {
+        std::lock_guard lock(held_mutex_);
+        held = held_.revision;
+    }
+    kvEntry* e = nullptr;
+    const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
+    if (s == NATS_OK) {
+        const uint64_t rev = kvEntry_Revision(e);
+        kvEntry_Destroy(e);
+        if (rev < held)
+            return refill();
+        behind = rev > tail_.load() ? behind + 1 : 0;
+        return behind >= 2;
+    }
+    // No value (deleted or purged), or no bucket at all (a bus that restarted without its
+    // store answers a read of a missing stream with a timeout, so the stream is asked for).
+    if (held > 0 && connected() && (s == NATS_NOT_FOUND || s == NATS_TIMEOUT))
+        return refill();
+    return false;
+}
+
+bool SceneBus::refill() {
+    Value held;
+    {
+        std::lock_guard lock(held_mutex_);
+        held = held_;
+    }
+    const std::string stream = "KV_" + s_->options.bucket;
+    jsStreamInfo* si = nullptr;
+    jsErrCode jerr = jsErrCode(0);
+    natsStatus s = js_GetStreamInfo(&si, s_->js, stream.c_str(), nullptr, &jerr);
+    bool made = false;
+    if (s == NATS_NOT_FOUND || jerr == JSStreamNotFoundErr) {
+        kvStore* kv = nullptr;
+        s = create_bucket(&kv, s_->js, s_->options);
+        if (s != NATS_OK)
+            return false;
+        kvStore_Destroy(kv);
+        made = true;
+        s = js_GetStreamInfo(&si, s_->js, stream.c_str(), nullptr, &jerr);
+    }
+    if (s != NATS_OK || !si)
+        return made;  // the bus is slow or frozen: nothing to say yet
+    const uint64_t last = si->State.LastSeq;
+    jsStreamInfo_Destroy(si);
+    // What the bus holds now: its current revision (0: none) and its newest signed write.
+    uint64_t bus_revision = 0;
+    kvEntry* e = nullptr;
+    if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
+        bus_revision = kvEntry_Revision(e);
+        kvEntry_Destroy(e);
+    }
+    std::optional<Value> newest;
+    if (auto listed = signed_values(); listed && !listed->empty())
+        newest = listed->front();
+    const auto plan = plan_refill(held, bus_revision, last, newest);
+    if (!plan)
+        return made;
+    const Value& from = plan->ours ? held : *newest;
+    // Every revision below the refill's goes (the bus's next sequence becomes its revision),
+    // then it is written only if no other node refilled first.
+    jsOptions po;
+    jsOptions_Init(&po);
+    po.Stream.Purge.Sequence = plan->revision;
+    if (const natsStatus p = js_PurgeStream(s_->js, stream.c_str(), &po, &jerr); p != NATS_OK) {
+        log::warn("scene bus: found empty or behind (version {} held) but cannot purge it: {}",
+                  held.revision, status_text(p));
+        return made;
+    }
+    const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
+    const std::string value =
+        sign(s_->options.admin_token, plan->revision - 1, deadline, from.json);
+    uint64_t rev = 0;
+    s = kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()));
+    if (s != NATS_OK)
+        return true;  // another node refilled it first: the watch is made again and takes it
+    tail_ = rev;
+    signed_tail_ = rev;
+    ++counters_.refills;
+    log::warn(
+        "scene bus: the bus came back {} (revision {}, this node holds version {}): put "
+        "{} back as version {}",
+        bus_revision == 0 ? "empty" : "behind", bus_revision, held.revision,
+        plan->ours ? "the held scene" : fmt::format("the newer write of version {}", from.revision),
+        rev);
+    return true;
 }
 
 void SceneBus::heartbeat(const std::string& json) {

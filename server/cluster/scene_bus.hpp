@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -33,7 +34,8 @@ namespace hs::cluster {
 enum class BusError { kNone, kConflict, kUnavailable };
 
 struct BusWrite {
-    uint64_t revision = 0;  // the new revision (kNone)
+    uint64_t revision = 0;     // the new revision (kNone)
+    uint64_t deadline_ms = 0;  // the signed deadline of the value written (kNone)
     BusError error = BusError::kNone;
     std::string message;  // "scene changed concurrently, now version 7", "the scene bus ..."
 };
@@ -59,8 +61,9 @@ public:
     };
     // A value of the bus, checked.
     struct Value {
-        uint64_t revision = 0;  // the bus's revision: the scene version
-        uint64_t base = 0;      // the version the write followed (signed)
+        uint64_t revision = 0;     // the bus's revision: the scene version
+        uint64_t base = 0;         // the version the write followed (signed)
+        uint64_t deadline_ms = 0;  // when the bus had to store it by (signed): its write time
         std::string json;
     };
     // What the bus ignored, for /metrics.
@@ -70,6 +73,12 @@ public:
         std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
         std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
         std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
+        std::atomic<uint64_t> refills{0};  // the bus came back empty or behind and was refilled
+    };
+    // How a bus found empty or behind the version a node holds is refilled (unit-tested).
+    struct Refill {
+        uint64_t revision = 0;  // where the value lands: the next value's revision
+        bool ours = true;       // the node's held value; else the bus's own newer write
     };
     // A value's signed parts.
     struct Signed {
@@ -94,6 +103,21 @@ public:
     // first, then each new one; of a burst, only the newest) to `on_scene` on the bus's thread,
     // until destruction; the watch is made again after an outage.
     void watch(std::function<void(const Value& value)> on_scene);
+    // The value this node serves (it started on it, or applied it from the watch): what it puts
+    // back on a bus that comes back empty or behind it (its revisions started again, because
+    // its servers restarted without their stores, or the key was deleted). Every 2 s the watch
+    // reads the key; a bus behind the held version gets its newest scene again, at a revision
+    // no node has applied yet, so every node converges on it and nobody's version goes back.
+    void hold(const Value& value);
+    // The rule (unit-tested): nullopt while the bus holds `held` or a later revision. Else the
+    // held value goes back, at revision max(held, last + 1) where `last` is the bus's last
+    // sequence (the revisions below are purged first); unless the bus's newest signed value
+    // `bus_newest` is an admin's write made after the held one (a later deadline, following a
+    // version, i.e. not a node's own start-up scene on an empty bus), which then goes back at
+    // max(held + 1, last + 1), so the node that held the older one applies it too.
+    static std::optional<Refill> plan_refill(const Value& held, uint64_t bus_revision,
+                                             uint64_t last, const std::optional<Value>& bus_newest);
+
     // Publishes `json` on node.<id> (best effort).
     void heartbeat(const std::string& json);
     bool connected() const;
@@ -126,6 +150,11 @@ private:
     std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw);
     // write() with the compare-and-set on `over` when that is later (a value no node takes).
     BusWrite write_on(uint64_t applied, const std::string& json, uint64_t over, int attempts);
+    // The 2-s check of the watch: true when the watch must be made again (it is behind the
+    // bus, or the bus was refilled).
+    bool check_bus(int& behind);
+    // Puts the held value back on a bus found empty or behind it; true if the bus changed.
+    bool refill();
     // A write the bus did not confirm in time: stored by its deadline (then applied), or never.
     BusWrite settle(const std::string& value, uint64_t deadline_ms);
     std::function<void(const Value&)> on_scene_;
@@ -135,6 +164,8 @@ private:
     std::atomic<uint64_t> tail_{0}, signed_tail_{0};
     std::atomic<bool> stop_{false};
     std::thread thread_;
+    std::mutex held_mutex_;
+    Value held_;
 };
 
 // A write's error as the admin reads it: the conflict names the version now current.

@@ -41,6 +41,7 @@ authorization {
     { user: node, password: "$(cat "$dir/bus-password")", permissions: {
         publish: { allow: ["\$KV.hysar.scene", "node.*", "\$JS.API.INFO", "\$JS.API.STREAM.NAMES",
                            "\$JS.API.STREAM.INFO.KV_hysar", "\$JS.API.STREAM.CREATE.KV_hysar",
+                           "\$JS.API.STREAM.PURGE.KV_hysar",
                            "\$JS.API.STREAM.MSG.GET.KV_hysar", "\$JS.API.DIRECT.GET.KV_hysar",
                            "\$JS.API.DIRECT.GET.KV_hysar.>",
                            "\$JS.API.CONSUMER.CREATE.KV_hysar", "\$JS.API.CONSUMER.CREATE.KV_hysar.>",

@@ -8,7 +8,10 @@
 #      conflict ("scene changed concurrently, now version N"), and is not applied;
 #   3. nats-server stopped: layers keep flowing, SceneUpdate gets the bus error; after its
 #      restart, an update reaches both nodes;
-#   4. a third node started late serves the latest version from its first Welcome.
+#   4. a third node started late serves the latest version from its first Welcome;
+#   5. nats-server restarted without its store, and the third node restarted on the empty bus
+#      (it puts its own scene there as version 1): the nodes still running put the acknowledged
+#      scene back, so every node converges on it at one version, and the next push reaches all.
 set -euo pipefail
 bin="$1"
 dir=$(mktemp -d)
@@ -202,4 +205,25 @@ PY
   --out "$dir/pc" > "$dir/late-projector.log" 2>&1 || fail "projector on the late node"
 [[ -e "$dir/pc/projector_v$want.png" ]] || fail "the late node's projector frame is not v$want: $(ls "$dir/pc")"
 echo "late node: version $want at start and in its Welcome; nodes applied a: $(applied a); b: $(applied b); c: $(applied c)"
+
+# 5. The bus comes back empty: nothing acknowledged is lost and the cluster does not split.
+kill -KILL "$nats"; wait "$nats" 2>/dev/null || true; nats=""
+kill -KILL "${pids[-1]}" 2>/dev/null || true  # the late node
+rm -rf "$dir/js" "$dir/node-c.log"
+start_nats
+start_node c
+grep -q "scene version 1$" "$dir/node-c.log" || fail "the restarted node did not put its own scene as version 1 on the empty bus"
+named() { grep -oE "scene version [0-9]+: '[^']*'" "$dir/node-$1.log" | tail -n 1; }
+within 20 '[[ "$(named a)" == "$(named b)" && "$(named b)" == "$(named c)" && "$(named a)" == *"room after"* ]]' \
+  || fail "the cluster did not converge on the acknowledged scene after the bus came back empty: a: $(named a); b: $(named b); c: $(named c)"
+refilled=$(last_applied a)
+refilled_name=$(named a | cut -d"'" -f2)
+(( refilled >= want )) || fail "the refilled version $refilled is below the acknowledged $want"
+within 15 'push c refill > "$dir/push.log" 2>&1' || fail "no push went through after the refill: $(cat "$dir/push.log")"
+now=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
+within 10 '[[ "$(last_applied a)" == "$now" && "$(last_applied b)" == "$now" && "$(last_applied c)" == "$now" ]]' \
+  || fail "the push after the refill did not reach every node at $now: a: $(applied a); b: $(applied b); c: $(applied c)"
+grep -q "put the held scene back\|put the newer write" "$dir/node-a.log" "$dir/node-b.log" \
+  || fail "no node says it refilled the bus"
+echo "bus back empty: c put version 1, the held '$refilled_name' went back as version $refilled on every node; the next push is version $now on all three"
 echo "scene bus: ordered versions on every node, conflict, outage and catch-up behave"

@@ -127,9 +127,9 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
     for (const char* junk : {"{{{", "", "{\"name\":\"x\"}", "hysar-scene 1 7 9 00\n{}"})
         EXPECT_FALSE(SceneBus::verify(kAdmin, junk).ok()) << junk;
     // The rule: newer, and following the applied version (an old value put again is not).
-    EXPECT_TRUE(SceneBus::follows({9, 5, ""}, 5));
-    EXPECT_FALSE(SceneBus::follows({9, 3, ""}, 5));
-    EXPECT_FALSE(SceneBus::follows({5, 4, ""}, 5));
+    EXPECT_TRUE(SceneBus::follows({9, 5, 0, ""}, 5));
+    EXPECT_FALSE(SceneBus::follows({9, 3, 0, ""}, 5));
+    EXPECT_FALSE(SceneBus::follows({5, 4, 0, ""}, 5));
     EXPECT_EQ(SceneBus::redacted("nats://u:secret@host:4222"), "nats://***@host:4222");
     EXPECT_EQ(SceneBus::redacted("nats://host:4222"), "nats://host:4222");
 }
@@ -241,6 +241,41 @@ TEST(SceneBus, AnUnreachableBusIsNamed) {
     auto b = SceneBus::connect(o);
     ASSERT_FALSE(b.ok());
     EXPECT_NE(b.error().message.find("nats://127.0.0.1:1"), std::string::npos) << b.error().message;
+}
+
+// A bus found empty or behind the held version gets the newest scene back, at a revision no
+// node has applied yet: the held one, unless an admin wrote a later one on the emptied bus.
+TEST(SceneBus, RefillPlan) {
+    const SceneBus::Value held{7, 6, 1000, "held"};
+    // Nothing held (a node still starting), or the bus at or past the held version: no refill.
+    EXPECT_FALSE(SceneBus::plan_refill({}, 0, 0, std::nullopt));
+    EXPECT_FALSE(SceneBus::plan_refill(held, 7, 7, std::nullopt));
+    EXPECT_FALSE(SceneBus::plan_refill(held, 9, 9, std::nullopt));
+    // Empty: the held value lands at its own revision (the nodes holding it apply nothing).
+    auto empty = SceneBus::plan_refill(held, 0, 0, std::nullopt);
+    ASSERT_TRUE(empty);
+    EXPECT_EQ(empty->revision, 7u);
+    EXPECT_TRUE(empty->ours);
+    // A node restarted on the empty bus put its start-up scene (base 0) as version 1: later, but
+    // no admin's write, so the held one still goes back.
+    auto restarted = SceneBus::plan_refill(held, 1, 1, SceneBus::Value{1, 0, 2000, "start-up"});
+    ASSERT_TRUE(restarted);
+    EXPECT_TRUE(restarted->ours);
+    EXPECT_EQ(restarted->revision, 7u);
+    // An admin then wrote version 2 through that node: acknowledged and newer, it goes back, one
+    // past the held version so that the nodes holding 7 apply it too.
+    auto admin = SceneBus::plan_refill(held, 2, 2, SceneBus::Value{2, 1, 3000, "admin"});
+    ASSERT_TRUE(admin);
+    EXPECT_FALSE(admin->ours);
+    EXPECT_EQ(admin->revision, 8u);
+    // A write older than the held one (an old value put again) does not win.
+    auto old = SceneBus::plan_refill(held, 2, 2, SceneBus::Value{2, 1, 500, "old"});
+    ASSERT_TRUE(old);
+    EXPECT_TRUE(old->ours);
+    // The key deleted after revision 9 (no value, its sequence at 10): one past the sequence.
+    auto deleted = SceneBus::plan_refill(held, 0, 10, std::nullopt);
+    ASSERT_TRUE(deleted);
+    EXPECT_EQ(deleted->revision, 11u);
 }
 
 }  // namespace
