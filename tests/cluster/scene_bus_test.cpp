@@ -3,7 +3,11 @@
 // is never skipped). Each test uses a bucket of its own.
 #include "cluster/scene_bus.hpp"
 
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <condition_variable>
@@ -174,6 +178,76 @@ TEST(SceneBus, AValueWithoutTheAdminCredentialIsIgnored) {
     EXPECT_EQ(values->front().json, "two");
     EXPECT_NE(node->metrics_text().find("hysar_scene_bus_ignored_values_total{why=\"unsigned\"}"),
               std::string::npos);
+}
+
+// Puts `value` on the bucket's key as any NATS client can (plain protocol, no JetStream API):
+// what an intruder, or a copy put again, looks like to the nodes. True once the server answered.
+bool raw_put(const std::string& bucket, const std::string& value) {
+    const char* url = std::getenv("HYSAR_TEST_NATS_URL");
+    if (!url)
+        return false;
+    const std::string u = url;
+    const auto colon = u.rfind(':');
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(uint16_t(std::stoi(u.substr(colon + 1))));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (fd < 0 || ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
+        return false;
+    const std::string msg = "CONNECT {\"verbose\":false}\r\nPUB $KV." + bucket + ".scene " +
+                            std::to_string(value.size()) + "\r\n" + value + "\r\nPING\r\n";
+    bool ok = ::send(fd, msg.data(), msg.size(), 0) == ssize_t(msg.size());
+    std::string in;
+    char buf[512];
+    while (ok && in.find("PONG") == std::string::npos) {
+        const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+        ok = n > 0;
+        if (ok)
+            in.append(buf, size_t(n));
+    }
+    ::close(fd);
+    return ok;
+}
+
+// A copy of a signed value put again within its deadline has the same base as the write: of the
+// two, every node takes the first stored, so a node starting then serves the write's revision,
+// and the next write (which follows it) is taken, over the copy.
+TEST(SceneBus, OfTwoCopiesTheFirstStoredIsTheWrite) {
+    auto a = bus("copies");
+    ASSERT_TRUE(a);
+    const BusWrite w = a->write(0, "one");
+    ASSERT_EQ(w.error, BusError::kNone) << w.message;
+    ASSERT_GT(w.deadline_ms, 0u);
+    // The very bytes the bus stored, put again at once (within the deadline).
+    ASSERT_TRUE(raw_put("copies", SceneBus::sign(kAdmin, 0, w.deadline_ms, "one")));
+    auto b = bus("copies", "u");
+    ASSERT_TRUE(b);
+    auto values = b->signed_values();
+    ASSERT_TRUE(values.ok()) << values.error().message;
+    ASSERT_EQ(values->size(), 2u) << "the copy was not stored";
+    EXPECT_EQ(values->front().revision, w.revision);
+    EXPECT_EQ((*values)[1].revision, w.revision + 1);
+    EXPECT_EQ((*values)[1].base, values->front().base);
+    // The copy is no one's write: the next write, following the first, goes over it.
+    const BusWrite next = b->write(values->front().revision, "two");
+    ASSERT_EQ(next.error, BusError::kNone) << next.message;
+    EXPECT_EQ(next.revision, w.revision + 2);
+    // A node watching from the start takes "one", then "two", never the copy as a version.
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    auto c = bus("copies", "c");
+    ASSERT_TRUE(c);
+    c->watch([&](const SceneBus::Value& v) {
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    std::unique_lock lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
+                            [&] { return !seen.empty() && seen.back().json == "two"; }));
+    EXPECT_EQ(seen.back().revision, next.revision);
 }
 
 // A burst is coalesced: a slow consumer gets the newest of it, not each one.
