@@ -15,21 +15,9 @@
 #   6. a healthy headset is served at the end, the version equal on every node.
 set -euo pipefail
 bin="$1"
-dir=$(mktemp -d)
-pids=()
-nats=""
-cleanup() {
-  for p in "${pids[@]}" $nats; do kill -KILL "$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-  rm -rf "$dir"
-}
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 12 "$f"; done; exit 1; }
-command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
-src="$(cd "$(dirname "$0")/../.." && pwd)"
+source "$(dirname "$0")/cluster_lib.sh"
 (umask 077 && echo "attack-test-token" > "$dir/token" && echo "attack-test-admin" > "$dir/admin" &&
   echo "node-password-$RANDOM$RANDOM" > "$dir/bus-password")
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 np=$(free_port)
 url="nats://127.0.0.1:$np"
 # The account of docs/CLUSTER.md: node users may publish only the scene subjects.
@@ -54,30 +42,9 @@ authorization {
 EOF
 nats-server -c "$dir/nats.conf" > "$dir/nats.log" 2>&1 &
 nats=$!
-for _ in $(seq 100); do grep -q "Server is ready" "$dir/nats.log" && break; sleep 0.1; done
-grep -q "Server is ready" "$dir/nats.log" || fail "nats-server did not start"
-start_node() {  # NAME [more flags]
-  local name=$1 port; shift; port=$(free_port)
-  eval "port_$name=$port"
-  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
-    --admin-token-file "$dir/admin" --cluster "$url" --node-id "$name" --cluster-user node \
-    --cluster-password-file "$dir/bus-password" "$@" > "$dir/node-$name.log" 2>&1 &
-  pids+=($!)
-  for _ in $(seq 300); do grep -q "^serving" "$dir/node-$name.log" && return 0; sleep 0.1; done
-  fail "node $name did not start"
-}
-push() {  # NODE NAME: the room file with a new name, through that node
-  sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"
-  "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
-    --timeout-ms 20000 scene push "$dir/room-$2.json"
-}
-applied() { grep -oE "scene version [0-9]+(:|$)" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
-last_applied() { applied "$1" | awk '{print $NF}'; }
-within() {
-  local end=$(( $(date +%s%N) + $1 * 1000000000 ))
-  while (( $(date +%s%N) < end )); do eval "$2" && return 0; sleep 0.1; done
-  return 1
-}
+servers+=($nats)
+nats_ready "$dir/nats.log"
+node_flags=(--cluster-user node --cluster-password-file "$dir/bus-password")
 # NATS as an intruder: puts each of the files or literal values given on the scene subject.
 intrude() {
   python3 - "$np" "$@" <<'PY'
@@ -115,10 +82,6 @@ PY
 frames() {  # headset layers node b has sent
   "$bin/hysar" admin --connect "127.0.0.1:$port_b" --token-file "$dir/admin" stats --json \
     | python3 -c "import json,sys; print(sum(v.get('frames',0) for v in json.load(sys.stdin).get('viewers',[])))"
-}
-same_everywhere() {  # VERSION NODE...: every node applied VERSION last
-  local v=$1; shift
-  for n in "$@"; do [[ "$(last_applied "$n")" == "$v" ]] || return 1; done
 }
 
 start_node a --admin-listen 0

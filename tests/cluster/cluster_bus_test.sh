@@ -14,50 +14,20 @@
 #      scene back, so every node converges on it at one version, and the next push reaches all.
 set -euo pipefail
 bin="$1"
-dir=$(mktemp -d)
-pids=()
+source "$(dirname "$0")/cluster_lib.sh"
 nats=""
-cleanup() {
-  for p in "${pids[@]}" $nats; do kill -KILL "$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-  rm -rf "$dir"
-}
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 12 "$f"; done; exit 1; }
-command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
 (umask 077 && echo "bus-test-token" > "$dir/token" && echo "bus-test-admin" > "$dir/admin")
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 np=$(free_port)
 url="nats://127.0.0.1:$np"
 start_nats() {
-  nats-server -js -a 127.0.0.1 -p "$np" -sd "$dir/js" >> "$dir/nats.log" 2>&1 &
+  nats-server -js -a 127.0.0.1 -p "$np" -sd "$dir/js" > "$dir/nats.log" 2>&1 &
   nats=$!
-  for _ in $(seq 100); do grep -q "Server is ready" "$dir/nats.log" && return 0; sleep 0.1; done
-  fail "nats-server did not start"
+  servers+=($nats)
+  nats_ready "$dir/nats.log"
 }
-start_node() {  # NAME
-  local port; port=$(free_port)
-  eval "port_$1=$port"
-  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
-    --admin-token-file "$dir/admin" --cluster "$url" --node-id "$1" > "$dir/node-$1.log" 2>&1 &
-  pids+=($!)
-  for _ in $(seq 200); do grep -q "^serving" "$dir/node-$1.log" && return 0; sleep 0.1; done
-  fail "node $1 did not start"
-}
-push() {  # NODE: the room file with a new name, through that node
-  sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"
-  "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
-    --timeout-ms 20000 scene push "$dir/room-$2.json"
-}
+# Here a version counts once applied (the start-up line has no colon).
 applied() { grep -oE "scene version [0-9]+:" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
-last_applied() { applied "$1" | awk '{print $NF}'; }
 increasing() { python3 -c "import sys; v=[int(x) for x in sys.argv[1:]]; sys.exit(0 if all(a<b for a,b in zip(v,v[1:])) else 1)" $(applied "$1"); }
-within() {
-  local end=$(( $(date +%s%N) + $1 * 1000000000 ))
-  while (( $(date +%s%N) < end )); do eval "$2" && return 0; sleep 0.1; done
-  return 1
-}
-src="$(cd "$(dirname "$0")/../.." && pwd)"
 
 start_nats
 start_node a
@@ -208,7 +178,7 @@ echo "late node: version $want at start and in its Welcome; nodes applied a: $(a
 
 # 5. The bus comes back empty: nothing acknowledged is lost and the cluster does not split.
 kill -KILL "$nats"; wait "$nats" 2>/dev/null || true; nats=""
-kill -KILL "${pids[-1]}" 2>/dev/null || true  # the late node
+kill -KILL "$pid_c" 2>/dev/null || true  # the late node
 rm -rf "$dir/js" "$dir/node-c.log"
 start_nats
 start_node c

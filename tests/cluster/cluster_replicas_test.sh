@@ -8,20 +8,8 @@
 #   4. a projector is served that version, equal on every node.
 set -euo pipefail
 bin="$1"
-dir=$(mktemp -d)
-pids=()
-servers=()
-cleanup() {
-  for p in "${pids[@]}" "${servers[@]}"; do kill -KILL "$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-  rm -rf "$dir"
-}
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 8 "$f"; done; exit 1; }
-command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
-src="$(cd "$(dirname "$0")/../.." && pwd)"
+source "$(dirname "$0")/cluster_lib.sh"
 (umask 077 && echo "replica-test-token" > "$dir/token" && echo "replica-test-admin" > "$dir/admin")
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 client_ports=() route_ports=()
 for i in 1 2 3; do client_ports+=("$(free_port)"); route_ports+=("$(free_port)"); done
 routes=$(for p in "${route_ports[@]}"; do printf 'nats-route://127.0.0.1:%s,' "$p"; done)
@@ -41,30 +29,7 @@ for _ in $(seq 300); do leader && break; sleep 0.1; done
 leader || fail "the three nats-servers elected no JetStream leader within 30 s"
 url=$(for p in "${client_ports[@]}"; do printf 'nats://127.0.0.1:%s,' "$p"; done)
 url=${url%,}
-start_node() {  # NAME
-  local port; port=$(free_port)
-  eval "port_$1=$port"
-  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
-    --admin-token-file "$dir/admin" --cluster "$url" --cluster-replicas 3 --node-id "$1" \
-    > "$dir/node-$1.log" 2>&1 &
-  pids+=($!)
-  eval "pid_$1=$!"
-  for _ in $(seq 600); do grep -q "^serving" "$dir/node-$1.log" && return 0; sleep 0.1; done
-  fail "node $1 did not start"
-}
-push() {  # NODE NAME
-  sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"
-  "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
-    --timeout-ms 20000 scene push "$dir/room-$2.json"
-}
-applied() { grep -oE "scene version [0-9]+(:|$)" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
-last_applied() { applied "$1" | awk '{print $NF}'; }
-within() {
-  local end=$(( $(date +%s%N) + $1 * 1000000000 ))
-  while (( $(date +%s%N) < end )); do eval "$2" && return 0; sleep 0.2; done
-  return 1
-}
-same_everywhere() { local v=$1; shift; for n in "$@"; do [[ "$(last_applied "$n")" == "$v" ]] || return 1; done; }
+node_flags=(--cluster-replicas 3)
 
 # 1. Two nodes on the three servers; the bucket is made with three replicas.
 start_node a

@@ -1,0 +1,51 @@
+# Shared by the cluster tests (sourced): a temporary folder cleaned on exit, render nodes on
+# loopback and the admin pushes that change their scene. Before sourcing, a script sets `bin`
+# (the build folder); before start_node, `url` (the bus) and, if any, `node_flags` (an array of
+# flags every node gets: credentials, replicas).
+dir=$(mktemp -d)
+pids=()     # render nodes and clients, killed on exit
+servers=()  # nats-servers, killed on exit
+node_flags=()
+src="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+cleanup() {
+  for p in "${pids[@]}" "${servers[@]}"; do kill -KILL "$p" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  rm -rf "$dir"
+}
+trap cleanup EXIT
+fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 12 "$f"; done; exit 1; }
+command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+# Waits for a nats-server's log to say it is ready.
+nats_ready() {  # LOG
+  for _ in $(seq 100); do grep -q "Server is ready" "$1" && return 0; sleep 0.1; done
+  fail "nats-server did not start ($1)"
+}
+# A render node on a free port (port_NAME, pid_NAME), started once it prints "serving".
+start_node() {  # NAME [more flags]
+  local name=$1 port; shift; port=$(free_port)
+  eval "port_$name=$port"
+  LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
+    --admin-token-file "$dir/admin" --cluster "$url" --node-id "$name" "${node_flags[@]}" "$@" \
+    > "$dir/node-$name.log" 2>&1 &
+  pids+=($!)
+  eval "pid_$name=$!"
+  for _ in $(seq 600); do grep -q "^serving" "$dir/node-$name.log" && return 0; sleep 0.1; done
+  fail "node $name did not start"
+}
+# The room file renamed "room NAME", pushed through a node as an admin.
+push() {  # NODE NAME
+  sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"
+  "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
+    --timeout-ms 20000 scene push "$dir/room-$2.json"
+}
+# The versions a node started on and applied, in order.
+applied() { grep -oE "scene version [0-9]+(:|$)" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
+last_applied() { applied "$1" | awk '{print $NF}'; }
+same_everywhere() { local v=$1; shift; for n in "$@"; do [[ "$(last_applied "$n")" == "$v" ]] || return 1; done; }
+# True once CONDITION holds, within SECONDS.
+within() {  # SECONDS CONDITION
+  local end=$(( $(date +%s%N) + $1 * 1000000000 ))
+  while (( $(date +%s%N) < end )); do eval "$2" && return 0; sleep 0.1; done
+  return 1
+}
