@@ -11,6 +11,7 @@
 #include "admin/metrics.hpp"
 #include "admin/thumbnails.hpp"
 #include "core/log.hpp"
+#include "stream/tls.hpp"
 #include "stream/token.hpp"
 
 namespace hs::admin {
@@ -79,6 +80,7 @@ struct AdminServer::Impl {
     AdminOptions options;
     AdminSource source;
     GateCounters counters;
+    stream::TlsContext tls;  // HTTPS when the options name a certificate (outlives the gate)
     Http http;
     std::unique_ptr<HttpGate> gate;
     std::thread thread;
@@ -112,7 +114,8 @@ struct AdminServer::Impl {
                 unauthorized.load(),
                 counters.refused.load(),
                 counters.bad_requests.load(),
-                counters.dropped.load()};
+                counters.dropped.load(),
+                counters.tls_failed.load()};
     }
 
     void routes() {
@@ -210,6 +213,11 @@ Result<std::unique_ptr<AdminServer>> AdminServer::start(const AdminOptions& opti
         return make_error(ErrorCode::kInvalidArgument, "the admin endpoint needs its source");
     auto impl = std::make_unique<Impl>(options, std::move(source));
     GateOptions g;
+    if (!options.tls_cert_file.empty()) {
+        HS_ASSIGN_OR_RETURN(impl->tls,
+                            stream::make_tls_context(options.tls_cert_file, options.tls_key_file));
+        g.tls = impl->tls.context->native_handle();
+    }
     g.workers = std::max<uint32_t>(options.threads, 1);
     g.reserved_workers = std::min<uint32_t>(2, g.workers - 1);
     g.max_queued = options.max_waiting;

@@ -44,6 +44,9 @@ struct AdminOptions {
     // its head and never sent the token is closed (hysar_admin_connections_dropped_total).
     uint32_t max_per_address = 32;
     uint32_t max_connections = 512;
+    // HTTPS with this certificate chain and key (PEM; `hysar serve --tls-cert/--tls-key`):
+    // every connection is TLS 1.2+, a plain HTTP request is answered 400 naming HTTPS.
+    std::string tls_cert_file, tls_key_file;
     uint32_t thumbnail_side = 256;  // a headset layer's thumbnail, longer side, pixels
     uint32_t projector_side = 480;  // the projector frame's thumbnail
     // A thumbnail is served from the cache until it is this old, newer frame or not.

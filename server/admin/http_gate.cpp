@@ -17,6 +17,8 @@
 #include <vector>
 
 #include <httplib.h>  // and with it the socket calls (send, recv, getpeername)
+#include <openssl/err.h>
+#include <openssl/ssl.h>
 
 #include <fmt/format.h>
 
@@ -170,9 +172,10 @@ constexpr int kAnswerTimeouts = 4;
 
 class GateStream final : public httplib::Stream {
 public:
-    GateStream(int fd, std::string& buffer, const std::string& address,
+    GateStream(int fd, SSL* ssl, std::string& buffer, const std::string& address,
                std::chrono::milliseconds io_timeout)
         : fd_(fd),
+          ssl_(ssl),
           buffer_(buffer),
           address_(address),
           io_timeout_(io_timeout),
@@ -187,6 +190,19 @@ public:
     }
     ssize_t write(const char* ptr, size_t size) override {
         const auto deadline = std::min(Clock::now() + io_timeout_, answer_deadline_);
+        if (ssl_) {
+            // Non-blocking: SSL_write is called again with the same bytes until it took them.
+            for (;;) {
+                ERR_clear_error();
+                const int n = SSL_write(ssl_, ptr, int(std::min<size_t>(size, 1 << 30)));
+                if (n > 0)
+                    return n;
+                const int e = SSL_get_error(ssl_, n);
+                if ((e != SSL_ERROR_WANT_WRITE && e != SSL_ERROR_WANT_READ) ||
+                    Clock::now() >= deadline || !wait(e == SSL_ERROR_WANT_WRITE ? POLLOUT : POLLIN))
+                    return -1;
+            }
+        }
         for (;;) {
             const ssize_t n = ::send(fd_, ptr, size, MSG_NOSIGNAL | MSG_DONTWAIT);
             if (n >= 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR))
@@ -216,6 +232,7 @@ private:
         return r > 0;
     }
     const int fd_;
+    SSL* const ssl_;  // null: plain HTTP
     std::string& buffer_;
     const std::string& address_;
     const std::chrono::milliseconds io_timeout_;
@@ -223,8 +240,15 @@ private:
     size_t begin_ = 0;
 };
 
+struct SslFree {
+    void operator()(SSL* s) const { SSL_free(s); }
+};
+
 struct Conn {
     int fd = -1;
+    std::unique_ptr<SSL, SslFree> ssl;  // HTTPS: this connection's TLS
+    bool handshaken = false;            // its handshake is done
+    bool want_write = false;            // TLS waits for the socket to take bytes
     std::string address;
     std::string buffer;
     Clock::time_point since;     // when it started waiting for this request
@@ -269,6 +293,24 @@ std::string peer_address(int fd) {
     }
     return host;
 }
+
+// The same over TLS, then its close_notify; best effort, without waiting.
+void answer_and_close(SSL* ssl, int fd, int status, std::string_view reason,
+                      const std::string& body) {
+    const std::string text = fmt::format(
+        "HTTP/1.1 {} {}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\n"
+        "{}Connection: close\r\n\r\n{}",
+        status, reason, body.size(), status == 503 ? "Retry-After: 1\r\n" : "", body);
+    ERR_clear_error();
+    (void)SSL_write(ssl, text.data(), int(text.size()));
+    (void)SSL_shutdown(ssl);
+    ERR_clear_error();
+    ::shutdown(fd, SHUT_WR);
+    ::close(fd);
+}
+
+constexpr const char* kHttpsBody =
+    "bad request: this admin endpoint speaks HTTPS (the server has a certificate); use https://\n";
 
 constexpr const char* kBusyBody = "busy: every admin worker is taken; try again later\n";
 
@@ -317,15 +359,28 @@ struct HttpGate::Impl {
             --held;
         }
         if (answered_already) {
+            if (c.ssl && c.handshaken) {
+                ERR_clear_error();
+                (void)SSL_shutdown(c.ssl.get());  // close_notify, if the socket takes it
+                ERR_clear_error();
+            }
             ::shutdown(c.fd, SHUT_RDWR);
             ::close(c.fd);
         }
+        c.ssl.reset();
         c.fd = -1;
     }
     void refuse(Conn& c, int status, std::string_view reason, const std::string& body) {
         const int fd = c.fd;
+        auto ssl = std::move(c.ssl);
+        const bool handshaken = c.handshaken;
         release(c, false);
-        answer_and_close(fd, status, reason, body);
+        if (!ssl)
+            answer_and_close(fd, status, reason, body);
+        else if (handshaken)
+            answer_and_close(ssl.get(), fd, status, reason, body);
+        else
+            ::close(fd);  // nothing can be said before the handshake
     }
 
     // Closes the oldest connection still reading its head that never sent an authorised
@@ -360,6 +415,16 @@ struct HttpGate::Impl {
             ++held;
         }
         c.fresh = false;
+        if (o.tls) {
+            c.ssl.reset(SSL_new(o.tls));
+            if (!c.ssl || SSL_set_fd(c.ssl.get(), c.fd) != 1) {
+                ++counters.tls_failed;
+                c.ssl.reset();
+                release(c);
+                return;
+            }
+            SSL_set_accept_state(c.ssl.get());
+        }
         if (of_address >= o.per_address || all >= o.max_connections) {
             ++counters.refused;
             refuse(c, 503, "Service Unavailable", kBusyBody);
@@ -368,8 +433,62 @@ struct HttpGate::Impl {
         conns.push_back(std::move(c));
     }
 
+    // Reads what `c` sent over TLS (the handshake first); false when it is gone (closed here).
+    bool read_tls(Conn& c) {
+        SSL* ssl = c.ssl.get();
+        auto waiting = [&c](int e) {
+            c.want_write = e == SSL_ERROR_WANT_WRITE;
+            return e == SSL_ERROR_WANT_READ || e == SSL_ERROR_WANT_WRITE;
+        };
+        if (!c.handshaken) {
+            ERR_clear_error();
+            const int r = SSL_accept(ssl);
+            if (r != 1) {
+                const int e = SSL_get_error(ssl, r);
+                if (waiting(e))
+                    return true;
+                // A browser or curl that spoke plain HTTP to it: told so, in plain text.
+                const unsigned long why = ERR_peek_error();
+                ERR_clear_error();
+                if (ERR_GET_REASON(why) == SSL_R_HTTP_REQUEST) {
+                    ++counters.bad_requests;
+                    c.ssl.reset();
+                    refuse(c, 400, "Bad Request", kHttpsBody);
+                } else {
+                    ++counters.tls_failed;
+                    c.ssl.reset();  // no close_notify on a failed handshake
+                    release(c);
+                }
+                return false;
+            }
+            c.handshaken = true;
+        }
+        char chunk[4096];
+        while (c.buffer.size() < kMaxHead + kMaxBody + kMaxHead) {
+            ERR_clear_error();
+            const int n = SSL_read(ssl, chunk, sizeof chunk);
+            if (n > 0) {
+                c.buffer.append(chunk, size_t(n));
+                continue;
+            }
+            const int e = SSL_get_error(ssl, n);
+            if (waiting(e))
+                return true;
+            ERR_clear_error();
+            if (e == SSL_ERROR_ZERO_RETURN && !c.buffer.empty()) {
+                c.eof = true;  // a request, then the client's close_notify: serve it
+                return true;
+            }
+            release(c);
+            return false;
+        }
+        return true;
+    }
+
     // Reads what `c` sent; false when it is gone (closed here).
     bool read_some(Conn& c) {
+        if (c.ssl)
+            return read_tls(c);
         char chunk[4096];
         while (c.buffer.size() < kMaxHead + kMaxBody + kMaxHead) {
             const ssize_t n = ::recv(c.fd, chunk, sizeof chunk, MSG_DONTWAIT);
@@ -462,7 +581,8 @@ struct HttpGate::Impl {
             fds.assign(1, pollfd{wake, POLLIN, 0});
             auto next = now + std::chrono::seconds(1);
             for (const auto& c : conns) {
-                fds.push_back({c.fd, short(c.eof ? 0 : POLLIN), 0});
+                fds.push_back(
+                    {c.fd, short(c.eof ? 0 : (c.want_write ? POLLIN | POLLOUT : POLLIN)), 0});
                 next = std::min(next, c.deadline);
             }
             const auto wait_ms = std::chrono::ceil<std::chrono::milliseconds>(next - now);
@@ -513,7 +633,7 @@ struct HttpGate::Impl {
                 }
             }
             Conn& c = job.conn;
-            GateStream stream(c.fd, c.buffer, c.address, o.io_timeout);
+            GateStream stream(c.fd, c.ssl.get(), c.buffer, c.address, o.io_timeout);
             bool keep = serve(stream, job.head);
             std::string rest = stream.rest();
             {

@@ -24,6 +24,7 @@
 namespace httplib {
 class Stream;
 }
+struct ssl_ctx_st;  // OpenSSL's SSL_CTX
 
 namespace hs::admin {
 
@@ -59,12 +60,17 @@ struct GateOptions {
     std::chrono::milliseconds keep_alive{5000};     // an idle kept-alive connection is closed
     std::chrono::milliseconds io_timeout{2000};     // a worker's each write
     uint32_t max_requests = 100;                    // per kept-alive connection
+    // TLS on every connection (HTTPS) when set: the handshake is read without blocking like a
+    // request head and within the same deadline; a plain HTTP request is answered 400 in
+    // plain text, naming HTTPS. The context must outlive the gate.
+    ssl_ctx_st* tls = nullptr;
 };
 
 struct GateCounters {
     std::atomic<uint64_t> refused{0};       // answered 503: every worker and place taken
     std::atomic<uint64_t> bad_requests{0};  // answered 400: the head is malformed
     std::atomic<uint64_t> dropped{0};       // closed: head deadline, or gave way to another
+    std::atomic<uint64_t> tls_failed{0};    // closed: the TLS handshake failed
 };
 
 class HttpGate {

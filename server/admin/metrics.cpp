@@ -253,6 +253,10 @@ void server_families(Writer& w, const stream::ServerSnapshot& s, const AdminFigu
              "Connections to this endpoint closed unanswered: the request head did not arrive "
              "within the deadline, or the connection gave way to a newer one of its address.");
     w.sample("hysar_admin_connections_dropped_total", "", admin.connections_dropped);
+    w.family("hysar_admin_tls_handshakes_failed_total", "counter",
+             "Connections to this endpoint closed because their TLS handshake failed (HTTPS, "
+             "when the server has a certificate).");
+    w.sample("hysar_admin_tls_handshakes_failed_total", "", admin.tls_failed);
     w.family("hysar_gpu_info", "gauge", "The Vulkan device the server renders on and its driver.");
     w.sample(
         "hysar_gpu_info",

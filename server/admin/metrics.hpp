@@ -44,6 +44,7 @@ struct AdminFigures {
     uint64_t connections_refused = 0;  // connections answered 503: the endpoint was full
     uint64_t bad_requests = 0;         // requests answered 400: a malformed head
     uint64_t connections_dropped = 0;  // closed: head deadline passed, or gave way to another
+    uint64_t tls_failed = 0;           // closed: the TLS handshake failed (HTTPS only)
 };
 
 // The Prometheus text exposition format (version 0.0.4): # HELP and # TYPE per family, the

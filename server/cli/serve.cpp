@@ -56,8 +56,8 @@ const char* kServeHelp =
     "  --admin-listen [HOST:]PORT  an HTTP endpoint for watching the server: Prometheus text at\n"
     "                           /metrics, a live dashboard at / (docs/OPERATIONS.md); a bare\n"
     "                           port means 127.0.0.1, 0 any free port; every request carries\n"
-    "                           the viewers' token ('Authorization: Bearer TOKEN'); off unless\n"
-    "                           given\n"
+    "                           the viewers' token ('Authorization: Bearer TOKEN'); HTTPS\n"
+    "                           with --tls-cert's certificate; off unless given\n"
     "  --calibration DIR        calibrated output (docs/CALIBRATION.md): DIR holds projector/,\n"
     "                           hmd/ (hysar calibrate) and optics.json; the projector frame and\n"
     "                           every VD layer are sent as device drives (an RGBA8 code is the\n"
@@ -639,12 +639,14 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
 }
 
 // The HTTP endpoint of --admin-listen over the server's snapshot and latest images.
-Result<std::unique_ptr<admin::AdminServer>> start_admin(admin::AdminOptions options,
-                                                        const std::string& token,
-                                                        stream::Server& server,
-                                                        cluster::SceneBus* bus) {
+Result<std::unique_ptr<admin::AdminServer>> start_admin(
+    admin::AdminOptions options, const std::string& token, const std::string& tls_cert_file,
+    const std::string& tls_key_file, stream::Server& server, cluster::SceneBus* bus) {
     options.token = token;
     stream::Server* watched = &server;
+    // A server with a certificate serves its admin endpoint over HTTPS with it.
+    options.tls_cert_file = tls_cert_file;
+    options.tls_key_file = tls_key_file;
     HS_ASSIGN_OR_RETURN(
         auto endpoint,
         admin::AdminServer::start(
@@ -654,9 +656,10 @@ Result<std::unique_ptr<admin::AdminServer>> start_admin(admin::AdminOptions opti
              [watched] { return watched->latest_projector_frame(); },
              bus ? std::function<std::string()>([bus] { return bus->metrics_text(); }) : nullptr}));
     std::printf(
-        "admin endpoint on http://%s:%u/ (metrics at /metrics; the viewers' token "
+        "admin endpoint on %s://%s:%u/ (metrics at /metrics; the viewers' token "
         "as 'Authorization: Bearer TOKEN', or the page's #token=TOKEN)\n",
-        admin::bracketed(options.host).c_str(), endpoint->port());
+        tls_cert_file.empty() ? "http" : "https", admin::bracketed(options.host).c_str(),
+        endpoint->port());
     return endpoint;
 }
 
@@ -803,7 +806,8 @@ int run_serve(const std::vector<std::string>& args) {
         watch_bus(*bus, *server.value());
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (setup.admin) {
-        auto a = start_admin(*setup.admin, info.token, *server.value(), bus.get());
+        auto a = start_admin(*setup.admin, info.token, info.tls_cert_file, info.tls_key_file,
+                             *server.value(), bus.get());
         if (!a)
             return start_error(a.error().message);
         admin_endpoint = std::move(a).value();

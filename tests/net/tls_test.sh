@@ -5,7 +5,9 @@
 # admin tool. Then what must be refused, each with its own message: a certificate signed by
 # someone else, a wrong pin, a name the certificate does not carry, a plain client on the TLS
 # port, TLS on a Unix socket, a key others may read, a key that is not the certificate's. The
-# server's Unix socket stays plain and keeps serving throughout.
+# admin HTTP endpoint is HTTPS with the same certificate: /metrics over it; plain HTTP answered
+# 400 naming HTTPS; a broken handshake counted. The server's Unix socket stays plain and keeps
+# serving throughout.
 set -euo pipefail
 bin="$1"
 dir=$(mktemp -d)
@@ -40,7 +42,7 @@ grep -q "needs both --tls-cert and --tls-key" <<< "$out" || fail "cert alone: '$
 
 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/s.sock" --token-file "$dir/token" \
   --admin-token-file "$dir/admin" --tls-cert "$dir/localhost.pem" --tls-key "$dir/localhost.key" \
-  > "$dir/serve.log" 2>&1 &
+  --admin-listen 127.0.0.1:0 > "$dir/serve.log" 2>&1 &
 server=$!
 for _ in $(seq 300); do [[ -S "$dir/s.sock" ]] && grep -q "^TLS on" "$dir/serve.log" && break; sleep 0.1; done
 port=$(sed -n 's/^serving .* on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$dir/serve.log")
@@ -68,6 +70,60 @@ PY
 "$bin/hysar" admin --connect "localhost:$port" --tls-ca "$dir/localhost.pem" \
   --token-file "$dir/admin" viewers > "$dir/admin.log" 2>&1 || fail "hysar admin over TLS"
 
+# The admin endpoint: HTTPS with the server's certificate; plain HTTP is told so; a broken
+# handshake is closed and counted, and the operator is answered afterwards.
+admin_port=$(sed -n 's|^admin endpoint on https://127\.0\.0\.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
+[[ -n "$admin_port" ]] || fail "no https:// admin endpoint in the start-up lines"
+python3 - "$admin_port" "$dir/localhost.pem" "$dir/token" > "$dir/admin-https.log" 2>&1 <<'PY' || fail "admin endpoint over HTTPS: $(cat "$dir/admin-https.log")"
+import socket, ssl, sys, urllib.request
+port, ca, token = int(sys.argv[1]), sys.argv[2], open(sys.argv[3]).read().strip()
+ctx = ssl.create_default_context(cafile=ca)
+def metrics():
+    req = urllib.request.Request(f"https://localhost:{port}/metrics",
+                                 headers={"Authorization": f"Bearer {token}"})
+    with urllib.request.urlopen(req, context=ctx, timeout=20) as r:
+        assert r.status == 200, r.status
+        return r.read().decode()
+def value(text, name):
+    return float(next(l.split()[-1] for l in text.splitlines() if l.startswith(name + " ")))
+first = metrics()
+assert "hysar_frames_total" in first or "hysar_" in first, first[:200]
+# Plain HTTP on the HTTPS port: 400, in plain text, naming HTTPS.
+s = socket.create_connection(("127.0.0.1", port), timeout=10)
+s.sendall(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n")
+answer = b""
+while True:
+    c = s.recv(4096)
+    if not c:
+        break
+    answer += c
+assert answer.startswith(b"HTTP/1.1 400 ") and b"speaks HTTPS" in answer, answer[:200]
+# A handshake that is not TLS at all, and one that stops half way: closed, counted.
+for junk in (b"\x16\x03\x01\x00\x05hello", b"\x16\x03\x01"):
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(junk)
+    s.shutdown(socket.SHUT_WR)
+    s.settimeout(10)
+    try:
+        while s.recv(4096):
+            pass
+    except (ConnectionResetError, socket.timeout):
+        pass
+    s.close()
+# A client that does not trust the certificate is refused by its own check.
+try:
+    urllib.request.urlopen(f"https://localhost:{port}/metrics", timeout=10,
+                           context=ssl.create_default_context())
+    raise SystemExit("an untrusting client was answered")
+except urllib.error.URLError as e:
+    assert "CERTIFICATE_VERIFY_FAILED" in str(e), e
+after = metrics()
+assert value(after, "hysar_admin_bad_requests_total") >= 1, after
+assert value(after, "hysar_admin_tls_handshakes_failed_total") >= 2, after
+print("admin over HTTPS: /metrics 200, plain HTTP 400, failed handshakes",
+      value(after, "hysar_admin_tls_handshakes_failed_total"))
+PY
+
 # Refused, each with the reason, exit status 2, nothing written.
 refused() {  # EXPECTED-TEXT ARGS...
   local want="$1"; shift
@@ -93,4 +149,4 @@ ls "$dir"/u/plain_*left*.png > /dev/null || fail "no layer on the Unix socket"
 kill -TERM "$server"
 wait "$server" || fail "hysar serve exit $?"
 server=""
-echo "TLS: served hmd (CA), projector and loadgen (pin), admin; refused 6 wrong connections"
+echo "TLS: served hmd (CA), projector and loadgen (pin), admin; refused 6 wrong connections; $(tail -n 1 "$dir/admin-https.log")"
