@@ -40,6 +40,9 @@ uint64_t now_unix_ms() {
 // How far the bus's clock may be behind the writer's (NTP keeps it far less): a writer told
 // "refused" checks the bus only this long after the deadline.
 constexpr uint64_t kClockMarginMs = 500;
+// How long an unconfirmed writer keeps asking a bus that does not answer whether it stored the
+// value in time, before it says the outcome is unknown.
+constexpr uint64_t kSettleLookMs = 15000;
 
 // HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
 // token (so that the token itself is never the key of anything else), as 64 hex digits.
@@ -425,29 +428,47 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
 BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
     // Unconfirmed: once no copy of it can be taken any more (the deadline and the clock margin
     // passed), it was either stored in time (then it is the new version, taken by every node)
-    // or it never will be.
+    // or it never will be. The bus may be down then (killed mid-write): it is asked again
+    // until it answers, for as long as kSettleLookMs, since a value it stored in time will be
+    // taken by the nodes when it is back.
     const uint64_t until = deadline_ms + kClockMarginMs;
     while (now_unix_ms() < until && !stop_)
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    kvEntryList list{};
-    kvWatchOptions wo;
-    kvWatchOptions_Init(&wo);
-    wo.IgnoreDeletes = true;
+    bool looked = false;
     uint64_t stored = 0;
-    const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
-    if (s == NATS_OK) {
-        for (int i = 0; i < list.Count; ++i) {
-            kvEntry* e = list.Entries[i];
-            const int64_t at = kvEntry_Created(e);
-            if (size_t(kvEntry_ValueLen(e)) == value.size() &&
-                std::memcmp(kvEntry_Value(e), value.data(), value.size()) == 0 &&
-                uint64_t(at / 1000000) <= deadline_ms)
-                stored = kvEntry_Revision(e);
+    for (const uint64_t give_up = now_unix_ms() + kSettleLookMs; !looked && !stop_;) {
+        kvEntryList list{};
+        kvWatchOptions wo;
+        kvWatchOptions_Init(&wo);
+        wo.IgnoreDeletes = true;
+        const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
+        if (s == NATS_OK || s == NATS_NOT_FOUND) {
+            looked = true;
+            for (int i = 0; s == NATS_OK && i < list.Count; ++i) {
+                kvEntry* e = list.Entries[i];
+                const int64_t at = kvEntry_Created(e);
+                if (size_t(kvEntry_ValueLen(e)) == value.size() &&
+                    std::memcmp(kvEntry_Value(e), value.data(), value.size()) == 0 &&
+                    uint64_t(at / 1000000) <= deadline_ms)
+                    stored = kvEntry_Revision(e);
+            }
+            if (s == NATS_OK)
+                kvEntryList_Destroy(&list);
+        } else if (now_unix_ms() >= give_up) {
+            break;
+        } else {
+            std::this_thread::sleep_for(std::chrono::milliseconds(250));
         }
-        kvEntryList_Destroy(&list);
     }
     if (stored != 0)
         return {stored, deadline_ms, BusError::kNone, ""};
+    if (!looked)
+        return {0, 0, BusError::kUnavailable,
+                fmt::format("the scene bus did not confirm the write within {} ms and could not "
+                            "be reached for {} s after to look whether it stored it: the outcome "
+                            "is unknown (if the bus stored it in time, every node applies it when "
+                            "the bus is back; the scene version will say)",
+                            s_->options.timeout_ms, kSettleLookMs / 1000)};
     return {0, 0, BusError::kUnavailable,
             fmt::format("the scene bus did not confirm the write within {} ms; it is refused "
                         "and stays refused (a copy the bus stores later is taken by no node)",

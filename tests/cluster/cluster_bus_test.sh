@@ -8,6 +8,8 @@
 #      conflict ("scene changed concurrently, now version N"), and is not applied;
 #   3. nats-server stopped: layers keep flowing, SceneUpdate gets the bus error; after its
 #      restart, an update reaches both nodes;
+#   3b. nats-server killed while a writer waits to learn whether an update was stored: the
+#      writer looks again once it is back, and its refusal holds;
 #   4. a third node started late serves the latest version from its first Welcome;
 #   5. nats-server restarted without its store, and the third node restarted on the empty bus
 #      (it puts its own scene there as version 1): the nodes still running put the acknowledged
@@ -153,6 +155,30 @@ within 10 '[[ "$(last_applied a)" == "$want" && "$(last_applied b)" == "$want" ]
   || fail "after the bus came back the nodes are not both at $want: a: $(applied a); b: $(applied b)"
 echo "bus back: version $want on both nodes; the first push through $(( ($(date +%s%N) - restarted) / 1000000 )) ms after the restart"
 
+# 3b. nats-server frozen, a SceneUpdate written to it, then the server killed (-9) while the
+#     writer waits to look whether the bus stored it, and restarted on its store: the writer
+#     looks again until the bus answers, and its answer holds: refused, and never applied.
+kill -STOP "$nats"
+push a killed > "$dir/push-killed.log" 2>&1 &
+push_pid=$!
+sleep 1
+kill -KILL "$nats"; wait "$nats" 2>/dev/null || true; nats=""
+sleep 5  # well past the write's deadline and the clock margin: the writer is looking
+kill -0 "$push_pid" 2>/dev/null \
+  || fail "the writer answered while the bus was down, without looking: $(cat "$dir/push-killed.log")"
+start_nats
+wait "$push_pid" && fail "the update written to a frozen, then killed bus was taken: $(cat "$dir/push-killed.log")"
+grep -q "it is refused and stays refused" "$dir/push-killed.log" \
+  || fail "the update in flight when the bus was killed: $(cat "$dir/push-killed.log")"
+within 15 'push b after-kill > "$dir/push.log" 2>&1' || fail "no push went through after the kill: $(cat "$dir/push.log")"
+want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
+within 10 '[[ "$(last_applied a)" == "$want" && "$(last_applied b)" == "$want" ]]' \
+  || fail "after the kill the nodes are not both at $want: a: $(applied a); b: $(applied b)"
+sleep 1
+if grep -q "'room killed'" "$dir"/node-*.log; then fail "the refused update was applied later"; fi
+echo "bus killed mid-update: refused ($(grep -o 'did not confirm[^;]*' "$dir/push-killed.log")), never applied; version $want on both"
+# The nodes' scene is now 'room after-kill'.
+
 # 4. A late node serves the latest version from its first Welcome.
 start_node c
 grep -q "scene version $want$" "$dir/node-c.log" || fail "the late node did not start on version $want: $(head -3 "$dir/node-c.log")"
@@ -179,12 +205,13 @@ echo "late node: version $want at start and in its Welcome; nodes applied a: $(a
 # 5. The bus comes back empty: nothing acknowledged is lost and the cluster does not split.
 kill -KILL "$nats"; wait "$nats" 2>/dev/null || true; nats=""
 kill -KILL "$pid_c" 2>/dev/null || true  # the late node
+wait "$pid_c" 2>/dev/null || true
 rm -rf "$dir/js" "$dir/node-c.log"
 start_nats
 start_node c
 grep -q "scene version 1$" "$dir/node-c.log" || fail "the restarted node did not put its own scene as version 1 on the empty bus"
 named() { grep -oE "scene version [0-9]+: '[^']*'" "$dir/node-$1.log" | tail -n 1; }
-within 20 '[[ "$(named a)" == "$(named b)" && "$(named b)" == "$(named c)" && "$(named a)" == *"room after"* ]]' \
+within 20 '[[ "$(named a)" == "$(named b)" && "$(named b)" == "$(named c)" && "$(named a)" == *"room after-kill"* ]]' \
   || fail "the cluster did not converge on the acknowledged scene after the bus came back empty: a: $(named a); b: $(named b); c: $(named c)"
 refilled=$(last_applied a)
 refilled_name=$(named a | cut -d"'" -f2)
