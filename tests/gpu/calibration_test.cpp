@@ -5,6 +5,8 @@
 
 #include "gpu_fixture.hpp"
 #include "installation/chain.hpp"
+#include "installation/projectors.hpp"
+#include "scene/config.hpp"
 
 using namespace hs;
 using namespace hs::test;
@@ -72,6 +74,79 @@ TEST_F(Calibration, ChainMeetsEveryTargetOnTheVirtualInstallation) {
     auto lin = installation::round_trip(*inst, p, h, options);
     ASSERT_TRUE(lin.ok()) << lin.error().message;
     EXPECT_GT(lin->rmse_dn, 1.5 * t.rmse_dn);
+}
+
+// Several projectors (configs/exp1-room-3proj.json), each calibrated in turn with the one
+// camera: each meets the targets of one projector, and every pair that lights common surface
+// is registered there to within a few camera pixels.
+TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
+    auto s =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    ASSERT_TRUE(s.ok()) << s.error().message;
+    ASSERT_EQ(s->projector_count(), 3u);
+    installation::Options o;
+    o.scale = 0.3;
+    const installation::ChainOptions options;
+    auto rep = installation::calibrate_projectors(device(), s.value(), o, options);
+    ASSERT_TRUE(rep.ok()) << rep.error().message;
+    ASSERT_EQ(rep->projectors.size(), 3u);
+    for (const auto& p : rep->projectors) {
+        SCOPED_TRACE(p.name);
+        EXPECT_GT(p.result.lut_error.pixels, 5000u);
+        EXPECT_LE(p.result.lut_error.median_px, 0.5);
+        EXPECT_LE(p.result.lut_error.p95_px, 1.0);
+        EXPECT_LE(p.result.curve_check.predict_mean_de00, 1.0);
+        EXPECT_LE(p.result.inverse_error.median_px, 0.5);
+    }
+    // Each projector is its own: the first is the scene's first, the others differ from it.
+    EXPECT_EQ(rep->projectors[0].name, s->projector.name);
+    EXPECT_NE(rep->projectors[1].result.lut.valid, rep->projectors[0].result.lut.valid);
+    ASSERT_EQ(rep->pairs.size(), 3u);
+    for (const auto& q : rep->pairs) {
+        SCOPED_TRACE(q.a + " / " + q.b);
+        EXPECT_GT(q.error.pixels, 2000u);
+        EXPECT_GT(q.error.median_px, 0.0);
+        EXPECT_LE(q.error.median_px, 2.0);
+        EXPECT_LE(q.error.p95_px, 6.0);
+    }
+}
+
+// The pair registration on maps made by hand: the true map device = 2 x camera; a look-up
+// table one device pixel off in x lands half a camera pixel away, so against an exact one the
+// pair is 0.5 camera pixels apart everywhere, and against itself 0.
+TEST(ProjectorRegistration, CarriesEachErrorToTheCameraThroughTheTrueMap) {
+    const uint32_t w = 8, h = 6;
+    calib::DeviceLut exact, off;
+    std::vector<float> tx(w * h), ty(w * h);
+    for (auto* l : {&exact, &off}) {
+        l->camera_width = w;
+        l->camera_height = h;
+        l->x.resize(w * h);
+        l->y.resize(w * h);
+        l->state.assign(w * h, calib::DeviceLut::kValid);
+    }
+    for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            tx[i] = 2.0f * float(x);
+            ty[i] = 2.0f * float(y);
+            exact.x[i] = tx[i];
+            exact.y[i] = ty[i];
+            off.x[i] = tx[i] + 1.0f;
+            off.y[i] = ty[i];
+        }
+    const auto apart = installation::pair_registration(exact, tx, ty, off, tx, ty);
+    EXPECT_EQ(apart.pixels, uint64_t(w) * h);
+    EXPECT_NEAR(apart.median_px, 0.5, 1e-6);
+    EXPECT_NEAR(apart.max_px, 0.5, 1e-6);
+    const auto same = installation::pair_registration(off, tx, ty, off, tx, ty);
+    EXPECT_NEAR(same.max_px, 0.0, 1e-9);
+    // Pixels with no true map, or none around them to difference, are not compared.
+    std::vector<float> holes(w * h, std::nanf(""));
+    holes[0] = 0;
+    const auto none = installation::pair_registration(exact, holes, holes, off, holes, holes);
+    EXPECT_EQ(none.pixels, 0u);
+    EXPECT_EQ(none.untrue, uint64_t(w) * h);
 }
 
 TEST_F(Calibration, ImagesOfTheWrongSizeAreRejected) {

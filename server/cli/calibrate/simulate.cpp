@@ -3,8 +3,10 @@
 // server on it: the folder it writes, served on loopback with and without --calibration.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -14,6 +16,7 @@
 #include "core/log.hpp"
 #include "gpu/device.hpp"
 #include "installation/chain.hpp"
+#include "installation/projectors.hpp"
 #include "plot/plot.hpp"
 #include "served_installation/served.hpp"
 
@@ -188,6 +191,57 @@ std::string outcome_rows(const installation::ChainReport& rep, const Served& ser
     return t;
 }
 
+// Several projectors: each one's map and colour against the targets of one, and every pair's
+// registration where both light the same surface point (reported).
+std::string projector_rows(const installation::ProjectorsReport& pr,
+                           const installation::ChainOptions& co, std::vector<std::string>& missed) {
+    size_t w = 28;  // the names' column
+    for (const auto& p : pr.projectors) w = std::max(w, p.name.size() + 2);
+    std::string t =
+        fmt::format("{:<{}}{:>8}{:>8}{:>8}{:>8}   {}\n", "projector (device pixels)", w, "median",
+                    "p95", "colour", "s", "target: median <= 0.5, p95 <= 1, colour dE00 <= 1");
+    for (const auto& p : pr.projectors) {
+        const auto& r = p.result;
+        const auto& chk = co.model == calib::ColourModel::kCurve ? r.curve_check : r.linear_check;
+        const bool ok = r.lut_error.median_px <= kLutMedianPx && r.lut_error.p95_px <= kLutP95Px &&
+                        r.lut_error.pixels > 0 && chk.predict_mean_de00 <= kColourDe00;
+        if (!ok)
+            missed.push_back("projector '" + p.name + "'");
+        t += fmt::format("{:<{}}{:>8.3f}{:>8.3f}{:>8.2f}{:>8.1f}   {} ({} px compared)\n", p.name,
+                         w, r.lut_error.median_px, r.lut_error.p95_px, chk.predict_mean_de00,
+                         p.seconds, verdict(ok), r.lut_error.pixels);
+    }
+    t += fmt::format("\n{:<{}}{:>8}{:>8}{:>8}   {}\n", "registration (camera pixels)", w, "median",
+                     "p95", "max", "where both light the same point; reported");
+    for (size_t k = 0; k < pr.pairs.size(); ++k) {
+        const auto& q = pr.pairs[k];
+        t += fmt::format(
+            "pair {}: {} / {}\n{:<{}}{:>8.3f}{:>8.3f}{:>8.2f}   {} camera pixels lit "
+            "by both\n",
+            k + 1, q.a, q.b, "", w, q.error.median_px, q.error.p95_px, q.error.max_px,
+            q.error.pixels);
+    }
+    return t + "\n";
+}
+
+json projectors_json(const installation::ProjectorsReport& pr) {
+    json j = {{"projectors", json::array()}, {"pairs", json::array()}};
+    for (const auto& p : pr.projectors)
+        j["projectors"].push_back(
+            {{"name", p.name},
+             {"lut", map_json(p.result.lut_error)},
+             {"inverse", map_json(p.result.inverse_error)},
+             {"decoded", p.result.lut.valid},
+             {"lit", p.result.lut.lit},
+             {"colour_linear", check_json(p.result.linear_check, p.result.linear)},
+             {"colour_curve", check_json(p.result.curve_check, p.result.curve)},
+             {"seconds", p.seconds}});
+    for (const auto& q : pr.pairs)
+        j["pairs"].push_back(
+            {{"a", q.a}, {"b", q.b}, {"registration_camera_px", map_json(q.error)}});
+    return j;
+}
+
 // report.json of --out: the installation, every figure, what missed its target.
 json simulate_json(const installation::VirtualInstallation& inst, const SimulateOptions& o,
                    const installation::ChainReport& rep, const Served& served,
@@ -231,10 +285,13 @@ json simulate_json(const installation::VirtualInstallation& inst, const Simulate
 Result<void> write_simulate_outputs(const Flags& f, const fs::path& out,
                                     const installation::VirtualInstallation& inst,
                                     const SimulateOptions& o, const installation::ChainReport& rep,
-                                    const Served& served, const std::vector<std::string>& missed) {
+                                    const Served& served, const std::vector<std::string>& missed,
+                                    const installation::ProjectorsReport* several) {
     const auto& trip = rep.trip;
-    HS_TRY(write_text(out / "report.json",
-                      simulate_json(inst, o, rep, served, missed).dump(2) + "\n"));
+    json report = simulate_json(inst, o, rep, served, missed);
+    if (several)
+        report["several_projectors"] = projectors_json(*several);
+    HS_TRY(write_text(out / "report.json", report.dump(2) + "\n"));
     // Reference | re-capture | VD areas (green match, red missing, blue extra).
     HS_TRY(write_png(out / "roundtrip.png",
                      hstack({optics::to_rgba8(trip.reference_vi_vd),
@@ -269,6 +326,16 @@ Result<void> calibrate_simulate(const Flags& f) {
     HS_ASSIGN_OR_RETURN(scene::Scene s, load_scene(f));
     HS_ASSIGN_OR_RETURN(SimulateOptions o, read_simulate_options(f));
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
+    // Several projectors: each calibrated in turn with the one camera, and every pair
+    // registered; the chain below (headset, round trip, serving) then runs with the first
+    // projector alone, as for a room of one.
+    std::optional<installation::ProjectorsReport> several;
+    if (s.projector_count() > 1) {
+        HS_ASSIGN_OR_RETURN(several, installation::calibrate_projectors(
+                                         *device, s, o.io, o.co,
+                                         [](const std::string& line) { log::info("{}", line); }));
+        s = installation::single_projector_scene(s, 0);
+    }
     HS_ASSIGN_OR_RETURN(auto inst, installation::VirtualInstallation::create(*device, s, o.io));
     log_installation(*inst);
     HS_ASSIGN_OR_RETURN(installation::ChainReport rep,
@@ -290,11 +357,13 @@ Result<void> calibrate_simulate(const Flags& f) {
                                                           device->validation_message_count()));
     // The table, each figure against its target.
     std::vector<std::string> missed;
-    std::string t = calibration_rows(rep, o.co, missed);
+    std::string t = several ? projector_rows(*several, o.co, missed) : std::string();
+    t += calibration_rows(rep, o.co, missed);
     t += outcome_rows(rep, *served, missed);
     std::printf("%s", t.c_str());
     if (keep)
-        HS_TRY(write_simulate_outputs(f, cal_dir, *inst, o, rep, *served, missed));
+        HS_TRY(write_simulate_outputs(f, cal_dir, *inst, o, rep, *served, missed,
+                                      several ? &*several : nullptr));
     if (!missed.empty()) {
         std::string list;
         for (const auto& m : missed) list += (list.empty() ? "" : ", ") + m;
