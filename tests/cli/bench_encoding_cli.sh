@@ -34,6 +34,11 @@ for views in ("fig7", "moving"):
         assert r["bytes_per_eye_layer"] < lz4[0]["bytes_per_eye_layer"], r
     assert lossy[50]["bytes_per_eye_layer"] < lossy[90]["bytes_per_eye_layer"]
     assert lossy[90]["de00_mean"] < lossy[50]["de00_mean"]
+# Coding against the previous layer (a reference frame): on the moving headset only, lossless
+# (the bench checks each round trip through the held layer).
+delta = [r for r in rows if r["encoding"].startswith("delta+")]
+assert sorted(r["encoding"] for r in delta) == ["delta+lz4", "delta+zstd"], delta
+assert all(r["views"] == "moving" and r["de00_mean"] == 0 and r["layers"] == 4 for r in delta), delta
 print(f"bench encoding: {len(rows)} rows")
 PY
 for bad in "--qualities 0" "--qualities 50,x" "--moving-frames -1" "--repeats 0"; do
