@@ -9,6 +9,7 @@
 #include "bench/accuracy.hpp"
 #include "codec/layer_codec.hpp"
 #include "optics/metrics.hpp"
+#include "plot/plot.hpp"
 #include "protocol/tiles.hpp"
 #include "scene/camera.hpp"
 
@@ -283,6 +284,70 @@ Result<std::vector<EncodingRow>> run_encoding_bench(render::Renderer& renderer,
             }
     }
     return rows;
+}
+
+Figure encoding_plot(const std::vector<EncodingRow>& rows) {
+    std::vector<Figure> panels;
+    for (const char* views : {"moving", "fig7"}) {
+        Series mean{"lossy, mean dE00", {}, {}, {70, 110, 200}, true};
+        Series worst{"lossy, max dE00", {}, {}, {215, 60, 40}, true};
+        Series lossless{"lossless (RGBA8 tiles)", {}, {}, {60, 150, 60}, true};
+        lossless.lines = false;
+        double x_lo = 1e9, x_hi = 0, y_hi = 3.5;
+        for (const auto& r : rows) {
+            if (r.views != views || r.format != "rgba8" ||
+                (r.encoding != "lossy" && r.encoding != "tiles+lz4" && r.encoding != "tiles+zstd"))
+                continue;
+            x_lo = std::min(x_lo, r.mbit_s_60hz);
+            x_hi = std::max(x_hi, r.mbit_s_60hz);
+            if (r.quality == 0) {
+                lossless.x.push_back(r.mbit_s_60hz);
+                lossless.y.push_back(0);
+                lossless.labels.push_back(r.encoding == "tiles+lz4" ? "lz4" : "zstd");
+                continue;
+            }
+            mean.x.push_back(r.mbit_s_60hz);
+            mean.y.push_back(r.de00_mean);
+            mean.labels.push_back(fmt::format("q{}", r.quality));
+            worst.x.push_back(r.mbit_s_60hz);
+            worst.y.push_back(r.de00_max);
+            y_hi = std::max(y_hi, r.de00_max);
+        }
+        if (mean.x.empty() && lossless.x.empty())
+            continue;
+        auto by_x = [](Series& s) {
+            std::vector<size_t> order(s.x.size());
+            for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+            std::sort(order.begin(), order.end(),
+                      [&](size_t a, size_t b) { return s.x[a] < s.x[b]; });
+            Series o = s;
+            for (size_t i = 0; i < order.size(); ++i) {
+                o.x[i] = s.x[order[i]];
+                o.y[i] = s.y[order[i]];
+                if (!s.labels.empty())
+                    o.labels[i] = s.labels[order[i]];
+            }
+            s = std::move(o);
+        };
+        by_x(mean);
+        by_x(worst);
+        x_lo = std::min(x_lo, 25.0) * 0.8;
+        x_hi = std::max(x_hi, 25.0) * 1.25;
+        const Series budget{"25 Mbit/s", {25, 25}, {0, y_hi * 1.05}, {150, 150, 150}};
+        const Series mean_target{"mean <= 1", {x_lo, x_hi}, {1, 1}, {120, 160, 230}};
+        const Series max_target{"max <= 3", {x_lo, x_hi}, {3, 3}, {240, 140, 120}};
+        PlotOptions po;
+        po.title = std::string(views == std::string("moving") ? "moving headset" : "Fig. 7 views") +
+                   ": bytes against error";
+        po.x_label = "Mbit/s per headset at 60 stereo layers/s, log";
+        po.y_label = "CIEDE2000 against the lossless layer";
+        po.log_x = true;
+        po.x_lo = x_lo, po.x_hi = x_hi;
+        po.y_lo = 0, po.y_hi = y_hi * 1.05;
+        po.width = 560, po.height = 380;
+        panels.push_back(line_plot({budget, mean_target, max_target, lossless, mean, worst}, po));
+    }
+    return panels.empty() ? blank_figure(16, 16) : hstack(panels);
 }
 
 std::string encoding_table(const std::vector<EncodingRow>& rows) {

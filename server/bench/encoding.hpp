@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/result.hpp"
+#include "plot/figure.hpp"
 #include "render/renderer.hpp"
 #include "scene/scene.hpp"
 
@@ -42,6 +43,11 @@ struct EncodingRow {
 Result<std::vector<EncodingRow>> run_encoding_bench(render::Renderer& renderer,
                                                     const scene::Scene& scene,
                                                     const EncodingBenchOptions& options);
+
+// Bytes against error: per view set, each lossy quality's mean and worst CIEDE2000 against the
+// Mbit/s a headset needs (log), the lossless encodings at 0 and the targets (25 Mbit/s; mean 1,
+// max 3) as lines.
+Figure encoding_plot(const std::vector<EncodingRow>& rows);
 
 // The rows as a fixed-width table, one line each.
 std::string encoding_table(const std::vector<EncodingRow>& rows);

@@ -43,7 +43,7 @@ namespace {
 
 const char* kBenchHelp =
     "usage: hysar bench encoding [--repeats N] [--json FILE] [--qualities 50,70,85,95]\n"
-    "                            [--moving-frames N] [--quick]\n"
+    "                            [--moving-frames N] [--plot FILE.png] [--quick]\n"
     "       hysar bench accuracy [--scene FILE] [--out DIR] [--quick] [--repeats N]\n"
     "       hysar bench serve [--headsets 1,8,32] [--seconds S] [--quick] ... (see --help)\n"
     "       hysar bench motion [--traces walk,turn,nod] [--quick] [--json FILE] ... (see --help)\n"
@@ -60,7 +60,9 @@ const char* kBenchHelp =
     "             and decode ms per eye (one core, medians over N repeats) for raw and sparse\n"
     "             tiles (none, LZ4, zstd; RGBA8 and RGBA16F) and lossy tiles at each quality,\n"
     "             with mean and max CIEDE2000 over lit pixels and PSNR against the lossless\n"
-    "             RGBA8 layer. --quick: the first model only, 4 moving frames\n"
+    "             RGBA8 layer; the moving headset also coded against its previous layer\n"
+    "             (delta+lz4, delta+zstd). --plot FILE.png: bytes against error (and .svg).\n"
+    "             --quick: the first model only, 4 moving frames\n"
     "  serve      the served path (an in-process server, N headsets on loopback) against\n"
     "             full-frame baselines of the renderer: stereo layers/s, latency, stage costs;\n"
     "             writes DIR/bench-serve.json, DIR/bench-serve.png and .svg (default\n"
@@ -258,7 +260,8 @@ double time_ms(F&& f) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-int bench_encoding(const bench::EncodingBenchOptions& o, const std::string& json_path) {
+int bench_encoding(const bench::EncodingBenchOptions& o, const std::string& json_path,
+                   const std::string& plot_path) {
     scene::Scene s = scene::default_scene();
     auto device = gpu::Device::create(gpu::device_info_from_environment());
     if (!device) {
@@ -285,6 +288,13 @@ int bench_encoding(const bench::EncodingBenchOptions& o, const std::string& json
     std::printf("VD layers of %ux%u (%s), %d repeats, device %s\n\n%s", k.width, k.height,
                 v.name.c_str(), o.repeats, device.value()->name().c_str(),
                 bench::encoding_table(rows.value()).c_str());
+    if (!plot_path.empty()) {
+        if (auto w = write_figure(plot_path, bench::encoding_plot(rows.value())); !w) {
+            std::fprintf(stderr, "hysar bench: %s\n", w.error().message.c_str());
+            return 1;
+        }
+        std::printf("wrote %s (and its .svg)\n", plot_path.c_str());
+    }
     if (json_path.empty())
         return 0;
     nlohmann::json js = nlohmann::json::array();
@@ -439,7 +449,7 @@ int bench_offline(const std::string& name, const std::vector<std::string>& args)
     if (name == "stability")
         f = parse_flags(args, {"--out"}, {"--no-float64"});
     else if (name == "encoding")
-        f = parse_flags(args, {"--repeats", "--json", "--qualities", "--moving-frames"},
+        f = parse_flags(args, {"--repeats", "--json", "--qualities", "--moving-frames", "--plot"},
                         {"--quick"});
     else if (name == "accuracy")
         f = parse_flags(args, {"--repeats", "--scene", "--out"}, {"--quick"});
@@ -491,7 +501,7 @@ int bench_offline(const std::string& name, const std::vector<std::string>& args)
                 at = comma + 1;
             }
         }
-        return bench_encoding(o, f->get("--json", ""));
+        return bench_encoding(o, f->get("--json", ""), f->get("--plot", ""));
     }
     return bench_accuracy(f->get("--scene", ""), f->get("--out", "out/accuracy"), f->has("--quick"),
                           int(*repeats));

@@ -8,7 +8,11 @@ hysar="$1/hysar"
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 HYSAR_VALIDATION=1 "$hysar" bench encoding --quick --repeats 1 --qualities 50,90 --moving-frames 2 \
-    --json "$out/enc.json" > "$out/table.txt" 2> "$out/progress.txt"
+    --json "$out/enc.json" --plot "$out/enc.png" > "$out/table.txt" 2> "$out/progress.txt"
+# The plot of bytes against error: both view sets, ticks where their values belong.
+[[ -s "$out/enc.png" ]] || { echo "no plot written"; exit 1; }
+python3 "$(dirname "$0")/check_figure_svg.py" "$out/enc.svg" --plots 2
+grep -q "moving headset: bytes against error" "$out/enc.svg" || { echo "the plot lacks its title"; exit 1; }
 grep -q 'lossy q90' "$out/table.txt"
 grep -q '^moving ' "$out/table.txt"
 python3 - "$out/enc.json" <<'PY'
