@@ -254,17 +254,16 @@ namespace {
 
 // Rows of either filter: the source position is computed exactly (one division) every kSpan
 // pixels and stepped linearly in 16.16 fixed point between (a homography of a few degrees'
-// rotation is affine to within a hundredth of a pixel over kSpan pixels; where it is not, a
-// span is cut into pieces of a quarter, a sixteenth... until the position is within kTol of
-// exact). T is the pixel (4 or 8 bytes; bilinear: 4).
+// rotation is affine to within a few hundredths of a pixel over kSpan pixels; where it is not
+// close enough for the filter, a span is cut into pieces of a quarter, a sixteenth... until the
+// position is within kTol of exact). T is the pixel (4 or 8 bytes; bilinear: 4).
 constexpr uint32_t kSpan = 64;
-constexpr double kTol = 1.0 / 512;  // pixels: half a step of the bilinear weights
 
 // The bilinear sample of an RGBA8 layer at (u, v) in 24.8 fixed point (pixel centres at
 // integers): the 4 neighbours with 8-bit weights, neighbours outside the layer black. Red and
 // blue go through one 64-bit multiply per neighbour (a 32-bit lane each: 255 x 65536 fits),
 // green through another. Alpha: 0 exactly where the colour is 0, full elsewhere (PROTOCOL.md).
-inline uint32_t bilinear_at(const uint32_t* src, uint32_t width, uint32_t height, int64_t fu,
+[[gnu::always_inline]] inline uint32_t bilinear_at(const uint32_t* src, uint32_t width, uint32_t height, int64_t fu,
                             int64_t fv) {
     const int64_t iu = fu >> 8, iv = fv >> 8;  // floor
     const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
@@ -313,6 +312,9 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
     constexpr double kOff = kBilinear ? 0.0 : 0.5;
     constexpr double kSlack = kBilinear ? 2.0 : 1.0;
     constexpr double kLow = kBilinear ? -1.0 : 0.0;
+    // How far the stepped position may stray from exact, in pixels: half a step of the bilinear
+    // weights; for nearest, 1/32 of its own half-pixel rounding.
+    constexpr double kTol = kBilinear ? 1.0 / 512 : 1.0 / 64;
     // One destination pixel, the position exact (behind the eye somewhere in its span).
     const auto exact = [&](double sx, double sy, double sw) -> T {
         if (!(sw > 1e-9))
@@ -335,9 +337,16 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
     for (uint32_t y = 0; y < height; ++y) {
         const T* row = src + size_t(y) * width;
         uint32_t a = 0, b = width;
-        for (; a + 8 <= width; a += 8) {  // eight at a time through the black
-            T any = 0;
-            for (uint32_t i = 0; i < 8; ++i) any |= row[a + i];
+        for (; a + 8 <= width; a += 8) {  // eight at a time through the black, in 64-bit words
+            const auto* p = reinterpret_cast<const uint8_t*>(row + a);
+            const auto word = [p](int i) {
+                uint64_t v;
+                std::memcpy(&v, p + 8 * i, 8);
+                return v;
+            };
+            uint64_t any = word(0) | word(1) | word(2) | word(3);
+            if constexpr (sizeof(T) == 8)
+                any |= word(4) | word(5) | word(6) | word(7);
             if (any)
                 break;
         }
