@@ -30,7 +30,7 @@ void usage(FILE* f) {
         "    bench encoding     bytes per VD layer and encode/decode ms: raw and sparse tiles,\n"
         "                       none/LZ4/zstd, RGBA8 and RGBA16F\n"
         "    bench accuracy     every quality knob of the VD layer against the reference: error,\n"
-        "                       ms, bytes\n"
+        "                       ms, bytes; the motion modes' registration error and client ms\n"
         "    bench serve        the served path (in-process server, N headsets on loopback):\n"
         "                       layers/s, steady latency and a new headset's first layer\n"
         "    bench stability    the hard-case table: the GPU's shading code against the double\n"

@@ -252,18 +252,83 @@ std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
 
 namespace {
 
-// Nearest-neighbour rows: the source position is computed exactly (one division) every kSpan
+// Rows of either filter: the source position is computed exactly (one division) every kSpan
 // pixels and stepped linearly in 16.16 fixed point between (a homography of a few degrees'
-// rotation is affine to within a hundredth of a pixel over kSpan pixels). T is the pixel
-// (4 or 8 bytes).
+// rotation is affine to within a few hundredths of a pixel over kSpan pixels; where it is not
+// close enough for the filter, a span is cut into pieces of a quarter, a sixteenth... until the
+// position is within kTol of exact). T is the pixel (4 or 8 bytes; bilinear: 4).
 constexpr uint32_t kSpan = 64;
 
-template <typename T>
-void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uint32_t height,
-                  const std::array<double, 9>& h) {
+// The bilinear sample of an RGBA8 layer at (u, v) in 24.8 fixed point (pixel centres at
+// integers): the 4 neighbours with 8-bit weights, neighbours outside the layer black. Red and
+// blue go through one 64-bit multiply per neighbour (a 32-bit lane each: 255 x 65536 fits),
+// green through another. Alpha: 0 exactly where the colour is 0, full elsewhere (PROTOCOL.md).
+[[gnu::always_inline]] inline uint32_t bilinear_at(const uint32_t* src, uint32_t width, uint32_t height, int64_t fu,
+                            int64_t fv) {
+    const int64_t iu = fu >> 8, iv = fv >> 8;  // floor
+    const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
+    uint32_t p[4];
+    if (uint64_t(iu) < uint64_t(width) - 1 && uint64_t(iv) < uint64_t(height) - 1) {
+        const uint32_t* r0 = src + size_t(iv) * width + size_t(iu);
+        p[0] = r0[0], p[1] = r0[1], p[2] = r0[width], p[3] = r0[width + 1];
+    } else {
+        for (int t = 0; t < 4; ++t) {
+            const int64_t x = iu + (t & 1), y = iv + (t >> 1);
+            p[t] = uint64_t(x) < width && uint64_t(y) < height
+                       ? src[size_t(y) * width + size_t(x)]
+                       : 0u;
+        }
+    }
+    if ((p[0] | p[1] | p[2] | p[3]) == 0)
+        return 0;
+    const uint64_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av, au * av};
+    uint64_t rb = 0, g = 0;
+    for (int t = 0; t < 4; ++t) {
+        rb += ((uint64_t(p[t]) & 0xFF) | (uint64_t(p[t] & 0xFF0000) << 16)) * wt[t];
+        g += uint64_t((p[t] >> 8) & 0xFF) * wt[t];
+    }
+    const uint32_t r = uint32_t(((rb & 0xFFFFFFFF) + 32768) >> 16);
+    const uint32_t b = uint32_t(((rb >> 32) + 32768) >> 16);
+    const uint32_t gg = uint32_t((g + 32768) >> 16);
+    const uint32_t rgb = r | (gg << 8) | (b << 16);
+    return rgb ? rgb | 0xFF000000u : 0u;
+}
+
+// 24.8 fixed point of a position known to be > -1 (truncation rounds).
+inline int64_t fixed8(double v) {
+    return int64_t((v + 1) * 256 + 0.5) - 256;
+}
+
+template <typename T, bool kBilinear>
+void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uint32_t height,
+               const std::array<double, 9>& h) {
+    static_assert(!kBilinear || sizeof(T) == 4, "bilinear: RGBA8 only");
     const auto* src = reinterpret_cast<const T*>(src_bytes);
     auto* dst = reinterpret_cast<T*>(dst_bytes);
     const double fw = width, fh = height;
+    // Nearest takes the pixel whose square holds the position (+0.5, floored); bilinear the
+    // four around it (pixel centres at integers), so it reads one more column and row, and a
+    // position down to -1 still weighs pixel 0.
+    constexpr double kOff = kBilinear ? 0.0 : 0.5;
+    constexpr double kSlack = kBilinear ? 2.0 : 1.0;
+    constexpr double kLow = kBilinear ? -1.0 : 0.0;
+    // How far the stepped position may stray from exact, in pixels: half a step of the bilinear
+    // weights; for nearest, 1/32 of its own half-pixel rounding.
+    constexpr double kTol = kBilinear ? 1.0 / 512 : 1.0 / 64;
+    // One destination pixel, the position exact (behind the eye somewhere in its span).
+    const auto exact = [&](double sx, double sy, double sw) -> T {
+        if (!(sw > 1e-9))
+            return T(0);
+        const double u = sx / sw + kOff, v = sy / sw + kOff;
+        if constexpr (kBilinear) {
+            if (!(u > -1 && v > -1 && u < fw && v < fh))
+                return T(0);
+            return bilinear_at(src, width, height, fixed8(u), fixed8(v));
+        } else {
+            const bool in = u >= 0 && v >= 0 && u < fw && v < fh;
+            return in ? src[size_t(v) * width + size_t(u)] : T(0);
+        }
+    };
     // A layer is black (see-through) but for the prop's highlight: each source row's lit
     // columns [first, last], so that a span whose source holds nothing lit is filled with 0
     // without a gather (kept per thread: no allocation once it is large enough).
@@ -272,9 +337,16 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
     for (uint32_t y = 0; y < height; ++y) {
         const T* row = src + size_t(y) * width;
         uint32_t a = 0, b = width;
-        for (; a + 8 <= width; a += 8) {  // eight at a time through the black
-            T any = 0;
-            for (uint32_t i = 0; i < 8; ++i) any |= row[a + i];
+        for (; a + 8 <= width; a += 8) {  // eight at a time through the black, in 64-bit words
+            const auto* p = reinterpret_cast<const uint8_t*>(row + a);
+            const auto word = [p](int i) {
+                uint64_t v;
+                std::memcpy(&v, p + 8 * i, 8);
+                return v;
+            };
+            uint64_t any = word(0) | word(1) | word(2) | word(3);
+            if constexpr (sizeof(T) == 8)
+                any |= word(4) | word(5) | word(6) | word(7);
             if (any)
                 break;
         }
@@ -293,9 +365,9 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
         {
             const double wa = bw, wb = bw + h[6] * (fw - 1);
             if (wa > 1e-9 && wb > 1e-9) {
-                const double va = by / wa + 0.5, vb = (by + h[3] * (fw - 1)) / wb + 0.5;
-                const double lo = std::max(0.0, std::min(va, vb) - 1);
-                const double hi = std::min(fh - 1, std::max(va, vb) + 1);
+                const double va = by / wa + kOff, vb = (by + h[3] * (fw - 1)) / wb + kOff;
+                const double lo = std::max(0.0, std::min(va, vb) - kSlack);
+                const double hi = std::min(fh - 1, std::max(va, vb) + kSlack);
                 if (hi < lo || lit_rows[size_t(hi) + 1] == lit_rows[size_t(lo)]) {
                     std::fill(out, out + width, T(0));
                     continue;
@@ -306,29 +378,26 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
             const uint32_t x1 = std::min(x0 + kSpan, width);
             const double w0 = bw + h[6] * x0, w1 = bw + h[6] * x1;
             if (!(w0 > 1e-9 && w1 > 1e-9)) {  // behind the eye somewhere: pixel by pixel
-                for (uint32_t x = x0; x < x1; ++x) {
-                    const double sw = bw + h[6] * x;
-                    const double u = (bx + h[0] * x) / sw + 0.5, v = (by + h[3] * x) / sw + 0.5;
-                    const bool in = sw > 1e-9 && u >= 0 && v >= 0 && u < fw && v < fh;
-                    out[x] = in ? src[size_t(v) * width + size_t(u)] : T(0);
-                }
+                for (uint32_t x = x0; x < x1; ++x)
+                    out[x] = exact(bx + h[0] * x, by + h[3] * x, bw + h[6] * x);
                 continue;
             }
-            const double u0 = (bx + h[0] * x0) / w0 + 0.5, v0 = (by + h[3] * x0) / w0 + 0.5;
-            const double u1 = (bx + h[0] * x1) / w1 + 0.5, v1 = (by + h[3] * x1) / w1 + 0.5;
+            const double u0 = (bx + h[0] * x0) / w0 + kOff, v0 = (by + h[3] * x0) / w0 + kOff;
+            const double u1 = (bx + h[0] * x1) / w1 + kOff, v1 = (by + h[3] * x1) / w1 + kOff;
             // Far outside (or out of fixed-point range): the span shows nothing.
             const double lo_u = std::min(u0, u1), hi_u = std::max(u0, u1);
             const double lo_v = std::min(v0, v1), hi_v = std::max(v0, v1);
-            if (hi_u < 0 || hi_v < 0 || lo_u >= fw || lo_v >= fh || !(std::abs(u0) < 1e6) ||
-                !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) || !(std::abs(v1) < 1e6)) {
+            if (hi_u <= kLow || hi_v <= kLow || lo_u >= fw || lo_v >= fh ||
+                !(std::abs(u0) < 1e6) || !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) ||
+                !(std::abs(v1) < 1e6)) {
                 std::fill(out + x0, out + x1, T(0));
                 continue;
             }
             {
-                const auto ulo = uint32_t(std::max(0.0, lo_u)),
-                           uhi = uint32_t(std::min(fw - 1, hi_u));
-                const auto vlo = uint32_t(std::max(0.0, lo_v - 1)),
-                           vhi = uint32_t(std::min(fh - 1, hi_v + 1));
+                const auto ulo = uint32_t(std::max(0.0, lo_u - (kSlack - 1))),
+                           uhi = uint32_t(std::min(fw - 1, hi_u + (kSlack - 1)));
+                const auto vlo = uint32_t(std::max(0.0, lo_v - kSlack)),
+                           vhi = uint32_t(std::min(fh - 1, hi_v + kSlack));
                 bool lit = false;
                 for (uint32_t r = vlo; r <= vhi && !lit; ++r)
                     lit = first[r] < last[r] && first[r] <= uhi + 1 && last[r] + 1 >= ulo;
@@ -337,53 +406,43 @@ void warp_nearest(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, 
                     continue;
                 }
             }
-            const double n = x1 - x0;
-            // Rounded to 16.16 by hand: std::llround is a library call on baseline x86-64.
-            const auto fixed = [](double v) { return int64_t(v * 65536 + (v < 0 ? -0.5 : 0.5)); };
-            int64_t fu = fixed(u0), fv = fixed(v0);
-            const int64_t du = fixed((u1 - u0) / n), dv = fixed((v1 - v0) / n);
-            for (uint32_t x = x0; x < x1; ++x, fu += du, fv += dv) {
-                const int64_t iu = fu >> 16, iv = fv >> 16;  // floor
-                out[x] = uint64_t(iu) < width && uint64_t(iv) < height
-                             ? src[size_t(iv) * width + size_t(iu)]
-                             : T(0);
+            // A large turn bends the position along the span (its error from the line is
+            // largest mid-span and falls with the square of the length): shorter pieces, each
+            // exact at its ends, until it is within kTol.
+            uint32_t step = x1 - x0;
+            {
+                const double xm = 0.5 * (x0 + x1), wm = bw + h[6] * xm;
+                const double um = (bx + h[0] * xm) / wm + kOff, vm = (by + h[3] * xm) / wm + kOff;
+                double e = std::max(std::abs(um - 0.5 * (u0 + u1)), std::abs(vm - 0.5 * (v0 + v1)));
+                for (; e > kTol && step > 1; e /= 16) step = (step + 3) / 4;
             }
-        }
-    }
-}
-
-void warp_bilinear(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
-                   const std::array<double, 9>& h) {
-    const double fw = width, fh = height;
-    for (uint32_t y = 0; y < height; ++y) {
-        uint8_t* out = dst + size_t(y) * width * 4;
-        double sx = h[1] * y + h[2], sy = h[4] * y + h[5], sw = h[7] * y + h[8];
-        for (uint32_t x = 0; x < width; ++x, sx += h[0], sy += h[3], sw += h[6]) {
-            uint8_t* o = out + size_t(x) * 4;
-            const double inv = sw > 1e-9 ? 1 / sw : 0;
-            const double u = sx * inv, v = sy * inv;
-            if (!(sw > 1e-9) || !(u > -1 && v > -1 && u < fw && v < fh)) {
-                std::memset(o, 0, 4);
-                continue;
+            for (uint32_t s0 = x0; s0 < x1; s0 += step) {
+                const uint32_t s1 = std::min(s0 + step, x1);
+                double a_u = u0, a_v = v0, b_u = u1, b_v = v1;
+                if (s1 - s0 != x1 - x0) {
+                    const double ws0 = bw + h[6] * s0, ws1 = bw + h[6] * s1;
+                    a_u = (bx + h[0] * s0) / ws0 + kOff, a_v = (by + h[3] * s0) / ws0 + kOff;
+                    b_u = (bx + h[0] * s1) / ws1 + kOff, b_v = (by + h[3] * s1) / ws1 + kOff;
+                }
+                const double n = s1 - s0;
+                // Rounded to 16.16 by hand: std::llround is a library call on baseline x86-64.
+                const auto fixed = [](double v) {
+                    return int64_t(v * 65536 + (v < 0 ? -0.5 : 0.5));
+                };
+                int64_t fu = fixed(a_u), fv = fixed(a_v);
+                const int64_t du = fixed((b_u - a_u) / n), dv = fixed((b_v - a_v) / n);
+                if constexpr (kBilinear) {
+                    for (uint32_t x = s0; x < s1; ++x, fu += du, fv += dv)  // 24.8, rounded
+                        out[x] = bilinear_at(src, width, height, (fu + 128) >> 8, (fv + 128) >> 8);
+                } else {
+                    for (uint32_t x = s0; x < s1; ++x, fu += du, fv += dv) {
+                        const int64_t iu = fu >> 16, iv = fv >> 16;  // floor
+                        out[x] = uint64_t(iu) < width && uint64_t(iv) < height
+                                     ? src[size_t(iv) * width + size_t(iu)]
+                                     : T(0);
+                    }
+                }
             }
-            // Fixed point: 8-bit weights.
-            const auto fu = int64_t((u + 1) * 256 + 0.5) - 256;  // u + 1 > 0: truncation rounds
-            const auto fv = int64_t((v + 1) * 256 + 0.5) - 256;
-            const int64_t iu = fu >> 8, iv = fv >> 8;
-            const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
-            const uint32_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av,
-                                    au * av};
-            uint32_t acc[3] = {0, 0, 0};
-            for (int t = 0; t < 4; ++t) {
-                const int64_t px = iu + (t & 1), py = iv + (t >> 1);
-                if (uint64_t(px) >= width || uint64_t(py) >= height)
-                    continue;  // outside: black, see-through
-                const uint8_t* p = src + (size_t(py) * width + size_t(px)) * 4;
-                for (int c = 0; c < 3; ++c) acc[c] += wt[t] * p[c];
-            }
-            for (int c = 0; c < 3; ++c) o[c] = uint8_t((acc[c] + 32768) >> 16);
-            // PROTOCOL.md: alpha is 0 exactly where the colour is 0, full elsewhere.
-            o[3] = (o[0] | o[1] | o[2]) ? 255 : 0;
         }
     }
 }
@@ -393,11 +452,11 @@ void warp_bilinear(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t he
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
           uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter) {
     if (filter == Filter::kBilinear && bytes_per_pixel == 4)
-        warp_bilinear(src, dst, width, height, h);
+        warp_rows<uint32_t, true>(src, dst, width, height, h);
     else if (bytes_per_pixel == 8)
-        warp_nearest<uint64_t>(src, dst, width, height, h);
+        warp_rows<uint64_t, false>(src, dst, width, height, h);
     else
-        warp_nearest<uint32_t>(src, dst, width, height, h);
+        warp_rows<uint32_t, false>(src, dst, width, height, h);
 }
 
 }  // namespace hs::motion

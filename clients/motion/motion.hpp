@@ -106,9 +106,11 @@ enum class Filter { kNearest, kBilinear };
 
 // Warps one eye's layer (tightly packed rows, `bytes_per_pixel` 4: RGBA8, or 8: RGBA16F with
 // kNearest only) by the homography into `dst` (same size, not `src`): each destination pixel
-// takes the source pixel its centre maps to (kNearest: the source position exact every 64
-// pixels, stepped linearly between; kBilinear: the 4 neighbours, 8-bit weights); outside the
-// source it is 0 (see-through). Cost: one pass over the destination (README, "Registration").
+// takes the source pixel its centre maps to (kNearest) or the 4 around it with 8-bit weights
+// (kBilinear); the source position is exact every 64 pixels and stepped linearly between, in
+// fixed point, and a span whose source holds nothing lit is cleared without a gather; outside
+// the source it is 0 (see-through). Cost: one pass over the destination (README,
+// "Registration").
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
           uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter);
 

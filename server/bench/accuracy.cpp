@@ -483,12 +483,12 @@ Result<AccuracyReport> run_accuracy(gpu::Device& device, const scene::Scene& sce
 
 void mark_pareto(std::vector<AccuracyRow>& rows) {
     for (auto& a : rows) {
-        a.pareto = std::isfinite(a.rmse);
+        a.pareto = std::isfinite(a.error());
         for (const auto& b : rows) {
-            if (&a == &b || b.knob != a.knob || !std::isfinite(b.rmse))
+            if (&a == &b || b.knob != a.knob || !std::isfinite(b.error()))
                 continue;
-            const bool no_worse = b.cost_ms() <= a.cost_ms() && b.rmse <= a.rmse;
-            const bool better = b.cost_ms() < a.cost_ms() || b.rmse < a.rmse;
+            const bool no_worse = b.cost_ms() <= a.cost_ms() && b.error() <= a.error();
+            const bool better = b.cost_ms() < a.cost_ms() || b.error() < a.error();
             if (no_worse && better)
                 a.pareto = false;
         }
@@ -515,13 +515,20 @@ double hemisphere_geometric_error_mm(const scene::Hemisphere& h) {
 std::string accuracy_csv(const AccuracyReport& rep) {
     std::string out =
         "knob,setting,reference,default,geometric_error_mm,rmse,mean_de00,render_ms,encode_ms,"
-        "bytes,pareto\n";
-    for (const auto& r : rep.rows)
+        "bytes,pareto,p50_px,p95_px,client_ms\n";
+    for (const auto& r : rep.rows) {
+        if (r.is_motion()) {
+            out += fmt::format("{},{},{},{},,,,,,,{},{:.3f},{:.3f},{:.4f}\n", r.knob, r.setting,
+                               r.reference, int(r.is_default), int(r.pareto), r.p50_px, r.p95_px,
+                               r.client_ms);
+            continue;
+        }
         out += fmt::format(
-            "{},{},{},{},{},{:.6e},{:.4f},{:.3f},{:.3f},{:.0f},{}\n", r.knob, r.setting,
+            "{},{},{},{},{},{:.6e},{:.4f},{:.3f},{:.3f},{:.0f},{},,,\n", r.knob, r.setting,
             r.reference, int(r.is_default),
             r.geometric_error_mm < 0 ? std::string() : fmt::format("{:.4f}", r.geometric_error_mm),
             r.rmse, r.mean_de00, r.render_ms, r.encode_ms, r.bytes, int(r.pareto));
+    }
     return out;
 }
 
@@ -532,7 +539,19 @@ std::string accuracy_table(const AccuracyReport& rep) {
         rep.width, rep.height, rep.repeats, rep.device, rep.seconds, "knob", "setting", "ref",
         "rmse", "dE00", "render ms", "encode ms", "bytes", "geom mm", "");
     std::string knob;
+    bool motion_header = false;
     for (const auto& r : rep.rows) {
+        if (r.is_motion()) {
+            if (!motion_header)
+                out += fmt::format("\n{:<18} {:<18} {:>5} {:>10} {:>8} {:>10}\n", "knob",
+                                   "setting", "ref", "p50 px", "p95 px", "client ms");
+            motion_header = true;
+            out += fmt::format("{:<18} {:<18} {:>5} {:>10.1f} {:>8.1f} {:>10.3f}  {}{}\n",
+                               r.knob, r.setting, r.reference, r.p50_px, r.p95_px,
+                               r.client_ms, r.pareto ? "pareto" : "",
+                               r.is_default ? " default" : "");
+            continue;
+        }
         if (r.knob != knob && !knob.empty())
             out += "\n";
         knob = r.knob;
@@ -561,20 +580,23 @@ Figure accuracy_plot(const AccuracyReport& rep) {
             if (r.knob != knob)
                 continue;
             all.x.push_back(r.cost_ms());
-            all.y.push_back(r.rmse);
+            all.y.push_back(r.error());
             all.labels.push_back(r.setting + (r.is_default ? " *" : ""));
             if (r.pareto)
                 fr.push_back(&r);
         }
         std::sort(fr.begin(), fr.end(),
                   [](auto* a, auto* b) { return a->cost_ms() < b->cost_ms(); });
-        for (const auto* r : fr) front.x.push_back(r->cost_ms()), front.y.push_back(r->rmse);
+        for (const auto* r : fr) front.x.push_back(r->cost_ms()), front.y.push_back(r->error());
         PlotOptions po;
         po.title = knob;
-        po.x_label = "ms per layer (render + encode), log";
-        po.y_label = "RMSE, linear radiance, log";
-        po.log_y = true;
-        po.log_x = true;
+        const bool motion = std::any_of(rep.rows.begin(), rep.rows.end(), [&](const auto& r) {
+            return r.knob == knob && r.is_motion();
+        });
+        po.x_label = motion ? "client ms per stereo frame" : "ms per layer (render + encode), log";
+        po.y_label = motion ? "p95 highlight error, profile px" : "RMSE, linear radiance, log";
+        po.log_y = !motion;
+        po.log_x = !motion;
         po.width = 520, po.height = 340;
         panels.push_back(line_plot({front, all}, po));
     }

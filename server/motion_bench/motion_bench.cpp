@@ -379,20 +379,29 @@ json row_json(const MotionRow& r) {
 
 }  // namespace
 
-int run_motion_bench(const MotionBenchOptions& in) {
+Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
+                                    const MotionBenchOptions& in,
+                                    const std::function<void(const std::string&)>& progress) {
     MotionBenchOptions o = in;
     if (o.quick) {
         o.seconds = std::min(o.seconds, 2.0);
         o.reference_frames = std::min(o.reference_frames, 20);
     }
-    const scene::Scene sc = scene::default_scene();
+    auto say = [&](const std::string& line) {
+        if (progress)
+            progress(line);
+    };
+    if (sc.viewers.empty())
+        return make_error(ErrorCode::kInvalidArgument, "the scene has no viewer");
+    if (!sc.viewing.heights_m.count(sc.viewing.default_height))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "the scene's viewing plan has no height '" +
+                              sc.viewing.default_height + "'");
     const scene::ViewerProfile* profile =
         o.profile.empty() ? &sc.viewers.front() : sc.find_viewer(o.profile);
-    if (!profile) {
-        std::fprintf(stderr, "hysar bench motion: --profile '%s': the scene has no such viewer\n",
-                     o.profile.c_str());
-        return 2;
-    }
+    if (!profile)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--profile '" + o.profile + "': the scene has no such viewer");
     const scene::Intrinsics full = scene::eye_intrinsics(*profile);
     proto::RegisterDisplay d;
     d.eye_width = std::max(1u, uint32_t(std::lround(full.width * o.scale)));
@@ -404,9 +413,37 @@ int run_motion_bench(const MotionBenchOptions& in) {
     d.format = proto::PixelFormat::kRgba8;
     d.encoding = proto::Encoding::kSparseTiles;
     d.mode = proto::FrameMode::kContinuous;
-    if (auto bad = proto::validate_display(d)) {
-        std::fprintf(stderr, "hysar bench motion: the served display is refused: %s\n",
-                     bad->c_str());
+    if (auto bad = proto::validate_display(d))
+        return make_error(ErrorCode::kInvalidArgument, "the served display is refused: " + *bad);
+    stream::LoopbackCreateInfo info;
+    info.clients = 4;
+    HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, sc, info));
+    say(fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
+                    "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row",
+                    profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
+                    full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds));
+    MotionReport rep;
+    rep.profile = profile->name;
+    rep.eye_width = d.eye_width, rep.eye_height = d.eye_height;
+    rep.device = device.name();
+    rep.seconds = o.seconds;
+    uint32_t seed = 1;
+    for (const auto& t : o.traces)
+        for (const auto& m : o.modes) {
+            HS_ASSIGN_OR_RETURN(auto r, run_row(*server, sc, d, o.scale, o, t, m, seed++));
+            say(fmt::format("bench motion: {:5} {:9} p50 {:6.1f} px p95 {:6.1f} px, m2p p50 "
+                            "{:5.1f} ms, client {:.2f} ms/frame, {} compared",
+                            t, m, r.p50_px, r.p95_px, r.m2p_p50_ms, r.client_ms, r.compared));
+            rep.rows.push_back(std::move(r));
+        }
+    return rep;
+}
+
+int run_motion_bench(const MotionBenchOptions& o) {
+    const scene::Scene sc = scene::default_scene();
+    if (!o.profile.empty() && !sc.find_viewer(o.profile)) {
+        std::fprintf(stderr, "hysar bench motion: --profile '%s': the scene has no such viewer\n",
+                     o.profile.c_str());
         return 2;
     }
     auto device = gpu::Device::create(gpu::device_info_from_environment());
@@ -414,35 +451,15 @@ int run_motion_bench(const MotionBenchOptions& in) {
         std::fprintf(stderr, "hysar bench motion: %s\n", device.error().message.c_str());
         return 1;
     }
-    stream::LoopbackCreateInfo info;
-    info.clients = 4;
-    auto server = stream::LoopbackServer::start(*device.value(), sc, info);
-    if (!server) {
-        std::fprintf(stderr, "hysar bench motion: %s\n", server.error().message.c_str());
-        return 1;
+    auto measured = measure_motion(*device.value(), sc, o, [](const std::string& line) {
+        std::fprintf(stderr, "%s\n", line.c_str());
+        std::fflush(stderr);
+    });
+    if (!measured) {
+        std::fprintf(stderr, "hysar bench motion: %s\n", measured.error().message.c_str());
+        return measured.error().code == ErrorCode::kInvalidArgument ? 2 : 1;
     }
-    fmt::print(stderr,
-               "bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
-               "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row\n",
-               profile->name, device.value()->name(), d.eye_width, d.eye_height, o.scale,
-               full.width, full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm,
-               o.seconds);
-    std::vector<MotionRow> rows;
-    uint32_t seed = 1;
-    for (const auto& t : o.traces)
-        for (const auto& m : o.modes) {
-            auto r = run_row(*server.value(), sc, d, o.scale, o, t, m, seed++);
-            if (!r) {
-                std::fprintf(stderr, "hysar bench motion: %s\n", r.error().message.c_str());
-                return 1;
-            }
-            fmt::print(stderr,
-                       "bench motion: {:5} {:9} p50 {:6.1f} px p95 {:6.1f} px, m2p p50 {:5.1f} "
-                       "ms, client {:.2f} ms/frame, {} compared\n",
-                       t, m, r->p50_px, r->p95_px, r->m2p_p50_ms, r->client_ms, r->compared);
-            std::fflush(stderr);
-            rows.push_back(*r);
-        }
+    const std::vector<MotionRow>& rows = measured->rows;
     fmt::print("{:6} {:10} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9} {:>9}\n", "trace",
                "mode", "p50_px", "p95_px", "max_px", "p50_deg", "p95_deg", "img_err", "m2p_p50",
                "m2p_p95", "client_ms");
@@ -455,12 +472,12 @@ int run_motion_bench(const MotionBenchOptions& in) {
         json j;
         j["traces"] = json::object();
         for (const auto& r : rows) j["traces"][r.trace][r.mode] = row_json(r);
-        j["profile"] = profile->name;
-        j["served_eye"] = {d.eye_width, d.eye_height};
+        j["profile"] = measured->profile;
+        j["served_eye"] = {measured->eye_width, measured->eye_height};
         j["refresh_hz"] = o.refresh_hz;
         j["delay_ms"] = o.delay_ms;
-        j["seconds"] = o.seconds;
-        j["device"] = device.value()->name();
+        j["seconds"] = measured->seconds;
+        j["device"] = measured->device;
         std::ofstream f(o.json_path);
         f << j.dump(2) << "\n";
         if (!f) {
@@ -485,7 +502,8 @@ int run_motion_bench(const MotionBenchOptions& in) {
             series.push_back(std::move(b));
         }
         PlotOptions po;
-        po.title = fmt::format("p95 highlight error, {} {:.0f} Hz", profile->name, o.refresh_hz);
+        po.title =
+            fmt::format("p95 highlight error, {} {:.0f} Hz", measured->profile, o.refresh_hz);
         po.y_label = "profile pixels";
         po.width = 640;
         if (auto w = write_figure(o.plot_path, bar_plot(o.traces, series, po)); !w) {

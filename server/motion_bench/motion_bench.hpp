@@ -8,12 +8,15 @@
 // hs_client_motion, hs_scene, hs_core.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "core/result.hpp"
 #include "gpu/device.hpp"
+#include "scene/scene.hpp"
 
 namespace hs::bench {
 
@@ -51,6 +54,23 @@ struct MotionRow {
     double pose_to_layer_ms = 0;            // the session's measured median
     double clock_offset_ms = 0, round_trip_ms = 0;
 };
+
+// Every row of a run, and what was served.
+struct MotionReport {
+    std::vector<MotionRow> rows;  // per trace, then per mode, in the options' order
+    std::string profile;          // the viewer profile served
+    uint32_t eye_width = 0, eye_height = 0;  // per eye, as served
+    std::string device;
+    double seconds = 0;  // served per row
+};
+
+// Runs every trace of `options` in every mode against a loopback server of `scene` on `device`
+// (what `hysar bench motion` and the motion rows of `hysar bench accuracy` share). `progress`,
+// when set, gets one line per step. Errors: kInvalidArgument for an option the scene cannot
+// serve (an unknown profile, a display it refuses), kIo when a row got no layer.
+Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& scene,
+                                    const MotionBenchOptions& options,
+                                    const std::function<void(const std::string&)>& progress = {});
 
 // Runs every trace in every mode; prints a table on stdout, progress on stderr; writes the
 // JSON of options.json_path. Returns the exit status: 0 ok, 1 a failure (device, server, a row

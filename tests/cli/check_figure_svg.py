@@ -10,8 +10,8 @@ usage: check_figure_svg.py FIGURE.svg [--accuracy-csv accuracy.csv] [--plots N]
 - where the plot records the data's range (data-x-range / data-y-range), the ticks reach both
   ends of it;
 - with --accuracy-csv (hysar bench accuracy's CSV): each plot titled after a knob has ticks that
-  cover that knob's cost (render_ms + encode_ms) and RMSE as the CSV has them, read
-  independently of the figure;
+  cover that knob's cost (render_ms + encode_ms) and RMSE as the CSV has them (for the motion
+  rows: client_ms and p95_px), read independently of the figure;
 - with --plots N: exactly N plots.
 Exit 0 when all hold, 1 with one line per failure otherwise.
 """
@@ -108,8 +108,12 @@ def main(argv):
     if csv_path:
         with open(csv_path, newline="") as f:
             for row in csv.DictReader(f):
-                cost = float(row["render_ms"]) + float(row["encode_ms"])
-                rmse = float(row["rmse"])
+                if row.get("p95_px"):  # a motion row: client ms and p95 pixels
+                    cost = float(row["client_ms"])
+                    rmse = float(row["p95_px"])
+                else:
+                    cost = float(row["render_ms"]) + float(row["encode_ms"])
+                    rmse = float(row["rmse"])
                 k = knobs.setdefault(row["knob"], [[math.inf, -math.inf], [math.inf, -math.inf]])
                 k[0] = [min(k[0][0], cost), max(k[0][1], cost)]
                 if rmse > 0:
