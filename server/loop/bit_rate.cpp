@@ -97,8 +97,8 @@ bool BitRateController::can_try(int quality, double hz, Clock::time_point now) c
 void BitRateController::remember_over(Clock::time_point now) {
     blocked_quality_ = quality_;
     blocked_hz_ = hz_cap_;
-    blocked_until_ = now + std::chrono::duration_cast<Clock::duration>(
-                               std::chrono::duration<double>(block_s_));
+    blocked_until_ =
+        now + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(block_s_));
     block_s_ = std::min(block_s_ * 2, 64 * options_.block_s);
 }
 
@@ -137,8 +137,8 @@ void BitRateController::judge(Clock::time_point now) {
             double hz = hz_cap_ * 1.25;
             if (options_.max_hz > 0 && hz >= options_.max_hz)
                 hz = 0;
-            const double predicted = per_frame * (hz > 0 ? hz : std::max(options_.max_hz,
-                                                                         hz_cap_ * 1.25));
+            const double predicted =
+                per_frame * (hz > 0 ? hz : std::max(options_.max_hz, hz_cap_ * 1.25));
             if (predicted <= 0.95 * budget_ && can_try(quality_, hz, now)) {
                 raised_from_quality_ = quality_, raised_from_hz_ = hz_cap_;
                 hz_cap_ = hz;

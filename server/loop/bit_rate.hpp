@@ -23,14 +23,14 @@
 namespace hs::loop {
 
 struct BitRateOptions {
-    int max_quality = 90;   // the server's quality (--layer-quality): where it starts
-    int min_quality = 50;   // the floor before the frame rate is lowered
-    int quality_step = 5;   // one step; two when far (1.5x) over
-    double max_hz = 60;     // the server's rate per viewer (--max-viewer-hz); 0: none
-    double min_hz = 2;      // the lowest rate it lowers a headset to
-    bool lossy = true;      // false: encodings 1/2, only the rate can be lowered
-    double hold_s = 0.5;    // measured at least this long before a change
-    double report_s = 1.0;  // the window of the reported rate
+    int max_quality = 90;      // the server's quality (--layer-quality): where it starts
+    int min_quality = 50;      // the floor before the frame rate is lowered
+    int quality_step = 5;      // one step; two when far (1.5x) over
+    double max_hz = 60;        // the server's rate per viewer (--max-viewer-hz); 0: none
+    double min_hz = 2;         // the lowest rate it lowers a headset to
+    bool lossy = true;         // false: encodings 1/2, only the rate can be lowered
+    double hold_s = 0.5;       // measured at least this long before a change
+    double report_s = 1.0;     // the window of the reported rate
     double raise_below = 0.8;  // quality up only below this share of the budget
     double aim = 0.9;          // a lowered rate aims at this share of the budget
     double block_s = 4.0;      // a failed step up is not tried again for this long (doubling)

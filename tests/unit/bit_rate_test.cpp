@@ -35,8 +35,8 @@ struct Sim {
     // Runs for `s` seconds of poses. A pose that comes before the cap allows a frame waits for
     // it (a newer one replaces it), as in the scheduler: the frame is taken when allowed.
     void run(double s) {
-        const auto end = t + std::chrono::duration_cast<Clock::duration>(
-                                 std::chrono::duration<double>(s));
+        const auto end =
+            t + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
         const auto pose = std::chrono::duration_cast<Clock::duration>(
             std::chrono::duration<double>(1.0 / pose_hz));
         for (;;) {
@@ -49,17 +49,16 @@ struct Sim {
             sent.push_back({t, b});
             trail.emplace_back(c.quality(), c.max_hz());
             c.sent(b, t);
-            next_allowed = c.max_hz() > 0
-                               ? t + std::chrono::duration_cast<Clock::duration>(
-                                         std::chrono::duration<double>(1.0 / c.max_hz()))
-                               : t;
+            next_allowed = c.max_hz() > 0 ? t + std::chrono::duration_cast<Clock::duration>(
+                                                    std::chrono::duration<double>(1.0 / c.max_hz()))
+                                          : t;
         }
         t = end;
     }
     // Bits per second sent over the last `s` seconds.
     double mbps_last(double s) const {
-        const auto from = t - std::chrono::duration_cast<Clock::duration>(
-                                  std::chrono::duration<double>(s));
+        const auto from =
+            t - std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s));
         uint64_t sum = 0;
         for (const auto& x : sent)
             if (x.t > from)
@@ -113,8 +112,9 @@ TEST(BitRate, StepsQualityBeforeFrameRate) {
     // Never a rate cap while the quality was above the floor, and the quality only went down.
     int last_q = 90;
     for (const auto& [q, hz] : s.trail) {
-        if (hz > 0)
+        if (hz > 0) {
             EXPECT_EQ(q, 50);
+        }
         EXPECT_LE(q, last_q);
         last_q = q;
     }
@@ -138,8 +138,9 @@ TEST(BitRate, RecoversWhenUnder) {
     for (size_t i = from; i < s.trail.size(); ++i) {
         if (s.trail[i].second == 0)
             rate_back = true;
-        if (s.trail[i].first > 50)
+        if (s.trail[i].first > 50) {
             EXPECT_TRUE(rate_back) << "the quality rose before the rate was given back";
+        }
     }
     // A larger budget lifts every limit too.
     at_90 = 20000;
