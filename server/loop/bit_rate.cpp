@@ -117,7 +117,11 @@ void BitRateController::judge(Clock::time_point now) {
             quality_ = raised_from_quality_;
             hz_cap_ = raised_from_hz_;
         } else if (options_.lossy && quality_ > options_.min_quality) {
-            const int step = options_.quality_step * (rate > 1.5 * budget_ ? 2 : 1);
+            // Twice over: more than the quality alone can save (q90 to q50 about halves a
+            // layer), so straight to the floor; 1.5 times: two steps.
+            const int step = rate > 2 * budget_     ? quality_
+                             : rate > 1.5 * budget_ ? 2 * options_.quality_step
+                                                    : options_.quality_step;
             quality_ = std::max(options_.min_quality, quality_ - step);
         } else {
             // The frame rate at which this setting's frames fit, with room to spare.

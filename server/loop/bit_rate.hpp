@@ -25,7 +25,7 @@ namespace hs::loop {
 struct BitRateOptions {
     int max_quality = 90;      // the server's quality (--layer-quality): where it starts
     int min_quality = 50;      // the floor before the frame rate is lowered
-    int quality_step = 5;      // one step; two when far (1.5x) over
+    int quality_step = 5;      // a step; two at 1.5x over, to the floor at 2x
     double max_hz = 60;        // the server's rate per viewer (--max-viewer-hz); 0: none
     double min_hz = 2;         // the lowest rate it lowers a headset to
     bool lossy = true;         // false: encodings 1/2, only the rate can be lowered

@@ -655,11 +655,11 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
             r.per_s_per_headset,
             r.mbps_per_headset ? fmt::format("{:.2f}", *r.mbps_per_headset) : "-",
             o.headset_mbps > 0 || o.room_mbps > 0
-                ? fmt::format(" (limits: layer quality {:.0f}, frame rate lowered to {} Hz)",
+                ? fmt::format(" (limits: layer quality {:.0f}, frame rate {})",
                               r.layer_quality_mean.value_or(0),
                               r.rate_limit_hz_mean && *r.rate_limit_hz_mean > 0
-                                  ? fmt::format("{:.1f}", *r.rate_limit_hz_mean)
-                                  : std::string("no"))
+                                  ? fmt::format("lowered to {:.1f} Hz", *r.rate_limit_hz_mean)
+                                  : std::string("not lowered"))
                 : "",
             r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
             r.first_layer_p50_ms ? fmt::format("{:.1f}", *r.first_layer_p50_ms) : "-",

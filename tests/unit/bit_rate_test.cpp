@@ -153,6 +153,21 @@ TEST(BitRate, RecoversWhenUnder) {
     EXPECT_FALSE(s.c.limited());
 }
 
+TEST(BitRate, FarOverReachesTheFloorAtTheFirstJudgement) {
+    // Four times over at q90: the quality cannot save that much, so the first judgement (after
+    // half a second) goes to the floor, and the next one lowers the rate.
+    Sim s;
+    s.bytes = [](int q) { return jpeg_like(q, 20000); };  // 9.6 Mbit/s at q90, 60 Hz
+    s.c.set_budget(2.4 * kMbit, s.t);
+    s.run(0.6);
+    EXPECT_EQ(s.c.quality(), 50);
+    EXPECT_EQ(s.c.max_hz(), 0.0);
+    s.run(0.7);
+    EXPECT_GT(s.c.max_hz(), 0.0);
+    s.run(3);
+    EXPECT_LE(s.mbps_last(2), 2.4);
+}
+
 TEST(BitRate, SteadyInputSettles) {
     for (double budget : {1.0, 2.5, 4.0, 6.0, 8.0}) {
         Sim s;
