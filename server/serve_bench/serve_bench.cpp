@@ -655,8 +655,10 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
             r.per_s_per_headset,
             r.mbps_per_headset ? fmt::format("{:.2f}", *r.mbps_per_headset) : "-",
             o.headset_mbps > 0 || o.room_mbps > 0
-                ? fmt::format(" (limits: layer quality {:.0f}, frame rate {})",
-                              r.layer_quality_mean.value_or(0),
+                ? fmt::format(" (limits: {}, frame rate {})",
+                              r.layer_quality_mean.value_or(0) > 0
+                                  ? fmt::format("layer quality {:.0f}", *r.layer_quality_mean)
+                                  : std::string("lossless layers"),
                               r.rate_limit_hz_mean && *r.rate_limit_hz_mean > 0
                                   ? fmt::format("lowered to {:.1f} Hz", *r.rate_limit_hz_mean)
                                   : std::string("not lowered"))
