@@ -14,7 +14,7 @@ using namespace hs::net_test;
 namespace {
 
 // The per-headset limit of the served test, Mbit/s.
-constexpr double kHeadsetMbps = 2.0;
+constexpr double kHeadsetMbps = 1.5;
 
 // What one headset received: each layer's arrival and wire bytes.
 struct Received {
@@ -92,7 +92,7 @@ nlohmann::json viewer_named(const nlohmann::json& stats, const std::string& name
 }
 
 TEST_F(BitRateTest, AHeadsetOverItsLimitSettlesUnderItAndOneUnderItIsLeftAlone) {
-    // The HoloLens' resolution: some 40 KB a frame at q90, over the limit from 6 frames a second
+    // The HoloLens' resolution: some 40 KB a frame at q90, over the limit from 5 frames a second
     // on (lavapipe with validation serves it faster); a sixteenth of it: well under the limit.
     auto big = headset(lossy_display(1), "big"), small = headset(lossy_display(16), "small");
     ASSERT_TRUE(big && small);
