@@ -1,5 +1,6 @@
 #include "admin/metrics.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -161,6 +162,26 @@ void viewer_families(Writer& w, const stream::ServerSnapshot& s,
              "Frames rendered but not sent (replaced by a newer one, or refused), per headset.");
     for (const auto& v : s.viewers)
         w.sample("hysar_viewer_dropped_frames_total", viewer_label(v.session), v.frames_dropped);
+    w.family("hysar_viewer_bit_rate_mbps", "gauge",
+             "Layer bytes sent to the headset over the last second, Mbit/s.");
+    for (const auto& v : s.viewers)
+        w.sample("hysar_viewer_bit_rate_mbps", viewer_label(v.session), v.bit_rate_mbps);
+    w.family("hysar_viewer_bit_rate_budget_mbps", "gauge",
+             "The headset's bit-rate budget (--headset-mbps, its share of --room-mbps), Mbit/s; "
+             "0: no limit.");
+    for (const auto& v : s.viewers)
+        w.sample("hysar_viewer_bit_rate_budget_mbps", viewer_label(v.session),
+                 v.bit_rate_budget_mbps);
+    w.family("hysar_viewer_layer_quality", "gauge",
+             "The JPEG quality of the headset's lossy layers now (its bit-rate limit lowers it); "
+             "0: lossless layers.");
+    for (const auto& v : s.viewers)
+        w.sample("hysar_viewer_layer_quality", viewer_label(v.session),
+                 uint64_t(std::max(v.layer_quality, 0)));
+    w.family("hysar_viewer_rate_limited_hertz", "gauge",
+             "The frame rate the headset's bit-rate limit lowered it to; 0: not lowered.");
+    for (const auto& v : s.viewers)
+        w.sample("hysar_viewer_rate_limited_hertz", viewer_label(v.session), v.rate_limit_hz);
     w.family("hysar_viewer_queued_bytes", "gauge", "Bytes waiting for the headset's socket.");
     for (const auto& v : s.viewers)
         w.sample("hysar_viewer_queued_bytes", viewer_label(v.session), v.queued_bytes);
@@ -291,6 +312,10 @@ nlohmann::json viewers_json(const stream::ServerSnapshot& s,
                            {"bytes_per_s", r.bytes_per_s},
                            {"superseded_poses", v.superseded_poses},
                            {"frames_dropped", v.frames_dropped},
+                           {"bit_rate_mbps", v.bit_rate_mbps},
+                           {"bit_rate_budget_mbps", v.bit_rate_budget_mbps},
+                           {"layer_quality", v.layer_quality},
+                           {"rate_limit_hz", v.rate_limit_hz},
                            {"layer_sequence", v.layer_sequence}});
     }
     return {{"viewers", viewers},

@@ -44,7 +44,8 @@ constexpr const char* kUsage =
     "        [--count N]      seconds (0.2..3600) until Ctrl-C or N tables; --json prints the\n"
     "                         server's stats JSON as it is\n"
     "  viewers                one row per headset: frames, pose-to-layer p50/p95, superseded\n"
-    "                         poses, bytes sent\n"
+    "                         poses, bytes sent, Mbit/s (its limit), the quality of its lossy\n"
+    "                         layers, the frame rate its bit-rate limit lowered it to\n"
     "  kick VIEWER            close a headset's session (Kick): VIEWER is its session id or its\n"
     "       [--reason TEXT]   name as `viewers` shows them; the headset is told why (error 16)\n"
     "                         and its client does not reconnect on its own. Waits until the\n"
@@ -242,17 +243,35 @@ std::string cell(const json& j, const char* key, const char* fmt_spec = "{}") {
 
 std::string viewers_table(const json& stats) {
     std::string out =
-        fmt::format("{:>8} {:<20} {:>9} {:>8} {:>9} {:>9} {:>11} {:>12}\n", "session", "name",
-                    "connected", "frames", "p50 ms", "p95 ms", "superseded", "bytes sent");
+        fmt::format("{:>8} {:<20} {:>9} {:>8} {:>9} {:>9} {:>11} {:>12} {:>15} {:>8} {:>8}\n",
+                    "session", "name", "connected", "frames", "p50 ms", "p95 ms", "superseded",
+                    "bytes sent", "Mbit/s (limit)", "quality", "Hz cap");
     size_t n = 0;
     const json& list = sub(stats, "viewers");
     for (const json& v : list.is_array() ? list : json::array()) {
         ++n;
+        // The bit rate over the last second and its limit, the quality of its lossy layers and
+        // the frame rate its limit lowered it to (docs/OPERATIONS.md, "Bit-rate limits").
+        const double budget = sub(v, "bit_rate_budget_mbps").is_number()
+                                  ? sub(v, "bit_rate_budget_mbps").get<double>()
+                                  : 0.0;
+        const std::string rate =
+            sub(v, "bit_rate_mbps").is_number()
+                ? cell(v, "bit_rate_mbps", "{:.2f}") +
+                      (budget > 0 ? fmt::format(" ({:.2f})", budget) : std::string(" (-)"))
+                : "-";
+        const json& q = sub(v, "layer_quality");
+        const std::string quality =
+            q.is_number() ? (q.get<double>() > 0 ? cell(v, "layer_quality") : "lossless") : "-";
+        const json& hz = sub(v, "rate_limit_hz");
+        const std::string cap =
+            hz.is_number() && hz.get<double>() > 0 ? cell(v, "rate_limit_hz", "{:.1f}") : "-";
         out +=
-            fmt::format("{:>8} {:<20} {:>9} {:>8} {:>9} {:>9} {:>11} {:>12}\n", cell(v, "session"),
-                        printable(cell(v, "name"), 20), cell(v, "connected"), cell(v, "frames"),
-                        cell(v, "latency_ms_p50", "{:.1f}"), cell(v, "latency_ms_p95", "{:.1f}"),
-                        cell(v, "superseded_poses"), cell(v, "bytes_sent"));
+            fmt::format("{:>8} {:<20} {:>9} {:>8} {:>9} {:>9} {:>11} {:>12} {:>15} {:>8} {:>8}\n",
+                        cell(v, "session"), printable(cell(v, "name"), 20), cell(v, "connected"),
+                        cell(v, "frames"), cell(v, "latency_ms_p50", "{:.1f}"),
+                        cell(v, "latency_ms_p95", "{:.1f}"), cell(v, "superseded_poses"),
+                        cell(v, "bytes_sent"), rate, quality, cap);
     }
     if (n == 0)
         out += "(no headsets)\n";

@@ -92,6 +92,7 @@ const char* kServeHelp =
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
+    "                         [--headset-mbps X] [--room-mbps Y]\n"
     "                         [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
@@ -119,6 +120,9 @@ const char* kServeHelp =
     "                       (default 3)\n"
     "  --planning-threads N threads planning a batch's layers (default as hysar serve: 0 on\n"
     "                       lavapipe, cores - 1 up to 7 on a GPU)\n"
+    "  --headset-mbps X, --room-mbps Y  the server's bit-rate limits, Mbit/s (as hysar\n"
+    "                       serve; default 0: none); each row then reports the Mbit/s per\n"
+    "                       headset, the layer quality and the frame rate they were kept at\n"
     "  --lp-threads N,M     repeat the served rows in a child process per value, with\n"
     "                       LP_NUM_THREADS set (lavapipe's rasteriser threads)\n"
     "  --quick              headsets 1,2, 1.5 s per row, baselines over 5 pairs: checks that\n"
@@ -158,7 +162,9 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--planning-threads",
                                             "--max-batch-viewers",
                                             "--max-target-mib",
-                                            "--submissions-in-flight"};
+                                            "--submissions-in-flight",
+                                            "--headset-mbps",
+                                            "--room-mbps"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -185,6 +191,16 @@ Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
     HS_TRY(read_count(f, "--max-target-mib", 1, 1u << 20, o.max_target_mib));
     HS_TRY(read_count(f, "--submissions-in-flight", 1, 16, o.submissions_in_flight));
     HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
+    for (auto [flag, field] :
+         {std::pair{"--headset-mbps", &o.headset_mbps}, std::pair{"--room-mbps", &o.room_mbps}}) {
+        if (!f.has(flag))
+            continue;
+        HS_ASSIGN_OR_RETURN(*field, parse_double(flag, f.get(flag, ""), 0, 100000));
+        if (*field > 0 && *field < 0.1)
+            return make_error(ErrorCode::kInvalidArgument,
+                              std::string(flag) + ": '" + f.get(flag, "") +
+                                  "' is below 0.1 Mbit/s (0: no limit)");
+    }
     if (f.has("--lp-threads")) {
         HS_ASSIGN_OR_RETURN(o.lp_threads,
                             int_list("--lp-threads", f.get("--lp-threads", ""), 1, 256));

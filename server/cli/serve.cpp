@@ -102,6 +102,10 @@ const char* kServeHelp =
     "  --tile-codec lz4|zstd|none (lz4)\n"
     "  --layer-quality Q (90): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
+    "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"
+    "                      Mbit/s, per headset and for all together (shared evenly); kept by\n"
+    "                      lowering a headset's layer quality to 50, then its frame rate,\n"
+    "                      never by queueing (docs/OPERATIONS.md, \"Bit-rate limits\")\n"
     "  --planning-threads N (0 on lavapipe, cores - 1 up to 7 on a GPU): threads that plan a\n"
     "                      batch's layers beside the render thread\n"
     "\n"
@@ -165,6 +169,20 @@ Result<uint64_t> parse_count(const Flags& f, const std::string& flag, uint64_t d
     return uint64_t(v);
 }
 
+// A bit-rate limit in Mbit/s for `flag`: 0 (none) or a number in [0.1, 100000].
+Result<double> parse_mbps(const Flags& f, const std::string& flag, double def) {
+    if (!f.has(flag))
+        return def;
+    const std::string text = f.get(flag, "");
+    HS_ASSIGN_OR_RETURN(double v, parse_double(flag, text, 0, 100000));
+    if (v > 0 && v < 0.1)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("{}: '{}' is below 0.1 Mbit/s, the least a headset's layers "
+                                      "can be kept to (0: no limit)",
+                                      flag, text));
+    return v;
+}
+
 Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
     constexpr uint64_t kDay = 86400000;
     HS_ASSIGN_OR_RETURN(l.max_sessions, parse_count(f, "--max-sessions", l.max_sessions, 1, 65536));
@@ -190,6 +208,8 @@ Result<void> parse_limits(const Flags& f, stream::ServerLimits& l) {
                         parse_count(f, "--max-viewer-hz", l.max_viewer_hz, 0, 1000));
     HS_ASSIGN_OR_RETURN(l.max_batch_viewers,
                         parse_count(f, "--max-batch-viewers", l.max_batch_viewers, 1, 1024));
+    HS_ASSIGN_OR_RETURN(l.headset_mbps, parse_mbps(f, "--headset-mbps", l.headset_mbps));
+    HS_ASSIGN_OR_RETURN(l.room_mbps, parse_mbps(f, "--room-mbps", l.room_mbps));
     HS_ASSIGN_OR_RETURN(l.scene.max_triangles,
                         parse_count(f, "--max-triangles", l.scene.max_triangles, 2, 1ull << 32));
     HS_ASSIGN_OR_RETURN(l.scene.max_projector_pixels,
@@ -247,6 +267,8 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--max-projector-pixels",
                                            "--max-viewer-hz",
                                            "--max-batch-viewers",
+                                           "--headset-mbps",
+                                           "--room-mbps",
                                            "--encoder-threads",
                                            "--planning-threads",
                                            "--tile-codec",

@@ -36,6 +36,8 @@ std::optional<std::string> Scheduler::add_viewer(uint32_t id, const Display& d) 
     s.pose.reset();
     s.pose_fresh = false;
     s.requests = 0;
+    s.max_hz = 0;
+    s.layer_quality = 0;
     auto why = served_.refusal(d);
     s.served = !why;
     return why;
@@ -95,6 +97,20 @@ bool Scheduler::request_frame(uint32_t id) {
         if (it == slots_.end())
             return false;
         it->second.requests = std::min<uint32_t>(it->second.requests + 1, kMaxInFlight);
+    }
+    cv_.notify_one();
+    return true;
+}
+
+bool Scheduler::set_viewer_rate(uint32_t id, double max_hz, int layer_quality) {
+    {
+        std::lock_guard lock(mutex_);
+        auto it = slots_.find(id);
+        if (it == slots_.end())
+            return false;
+        Slot& s = it->second;  // from its next frame taken on
+        s.max_hz = max_hz;
+        s.layer_quality = layer_quality;
     }
     cv_.notify_one();
     return true;
@@ -172,12 +188,16 @@ std::vector<ViewerJob> Scheduler::take_locked() {
     for (size_t i = 0; i < take; ++i) {
         Slot& s = *ready_now[i].slot;
         const uint32_t id = ready_now[i].id;
-        batch.push_back({id, s.next_frame++, s.display, *s.pose});
+        batch.push_back({id, s.next_frame++, s.display, *s.pose, s.layer_quality});
         s.pose_fresh = false;
         if (s.requests > 0)
             --s.requests;
         s.rendering = true;
-        s.next_allowed = now + interval;
+        if (s.max_hz > 0 && (options_.max_viewer_hz <= 0 || s.max_hz < options_.max_viewer_hz))
+            s.next_allowed = now + std::chrono::duration_cast<SteadyClock::duration>(
+                                       std::chrono::duration<double>(1.0 / s.max_hz));
+        else
+            s.next_allowed = now + interval;
         s.last_taken = now;
         ++s.counters.in_flight;
         last_taken_ = id;

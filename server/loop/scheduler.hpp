@@ -60,6 +60,11 @@ public:
     // Keeps only this pose; returns false when the session registered no display.
     bool set_pose(uint32_t session_id, const HeadPose& pose);
     bool request_frame(uint32_t session_id);
+    // What the viewer's bit-rate limit decided (loop/bit_rate.hpp): its frames per second at most
+    // (0: the options' rate alone; otherwise the lower of the two), from the frame taken after
+    // its next one on, and the JPEG quality of its lossy layers (0: the server's). Registering
+    // again forgets both. Returns false when the session registered no display.
+    bool set_viewer_rate(uint32_t session_id, double max_hz, int layer_quality);
     // The frame of `session_id` left the server: sent (its bytes and pose-to-socket latency),
     // or dropped (latency_ms < 0: replaced by a newer frame, refused, or its session closed).
     void complete(uint32_t session_id, uint64_t bytes, double latency_ms);
@@ -95,6 +100,8 @@ private:
         bool rendering = false;            // its frame is being rendered or encoded
         Clock::time_point next_allowed{};  // by the display's rate
         Clock::time_point last_taken{};    // its last frame taken (pacing: oldest first)
+        double max_hz = 0;                 // set_viewer_rate; 0: options_.max_viewer_hz alone
+        int layer_quality = 0;             // set_viewer_rate; 0: the server's
         ViewerCounters counters;
     };
     // Ready, rate aside: served, has a pose, room in flight, not rendering, and a reason (a

@@ -60,6 +60,9 @@ struct ViewerJob {
     uint32_t frame_id = 0;
     Display display;
     HeadPose pose;
+    // The JPEG quality of its lossy layers for this frame (its bit-rate limit's choice,
+    // Scheduler::set_viewer_rate); 0: the server's own.
+    int layer_quality = 0;
 };
 
 // The displays a scene version can serve: a captured material serves only the size it was

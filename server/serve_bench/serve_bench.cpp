@@ -492,6 +492,21 @@ void add_busy_shares(ServedRow& r, const RowWindow& m) {
     r.layers_replaced = uint64_t(std::max(0.0, m.c1.layers_replaced - m.c0.layers_replaced));
 }
 
+// The mean layer quality and lowered frame rate of the connected headsets in `stats`.
+void add_bit_rate_limits(ServedRow& r, const json& stats) {
+    double quality = 0, hz = 0;
+    int n = 0;
+    if (stats.contains("viewers") && stats["viewers"].is_array())
+        for (const auto& v : stats["viewers"])
+            if (v.value("connected", false) && v.contains("layer_quality")) {
+                quality += v.value("layer_quality", 0.0);
+                hz += v.value("rate_limit_hz", 0.0);
+                ++n;
+            }
+    if (n > 0)
+        r.layer_quality_mean = quality / n, r.rate_limit_hz_mean = hz / n;
+}
+
 // The row's figures from the headsets' tallies and the window's snapshots.
 ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
                    const ServeBenchOptions& o, int headsets) {
@@ -539,6 +554,8 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
         }
     if (r.eye_layers > 0)
         r.bytes_per_layer = double(bytes) / double(r.eye_layers);
+    if (o.seconds > 0 && headsets > 0)
+        r.mbps_per_headset = double(bytes) * 8e-6 / o.seconds / double(headsets);
     if (r.stereo_layers > 0)
         r.cpu_ms_per_stereo_layer = (m.cpu1 - m.cpu0) * 1000.0 / double(r.stereo_layers);
     if (m.c0.render_busy_ns && m.c1.render_busy_ns && m.c1.at_ns > m.c0.at_ns)
@@ -565,9 +582,11 @@ ServedRow serve_row(const stream::LoopbackServer& server, const scene::Scene& sc
     while (ready.load() < headsets && Clock::now() < connect_deadline)
         std::this_thread::sleep_for(std::chrono::milliseconds(5));
     const RowWindow m = measure_window(server, o, w, headsets);
+    const json at_end = server.stats();
     w.stop = true;
     for (auto& t : threads) t.join();
     ServedRow r = row_from(tallies, m, o, headsets);
+    add_bit_rate_limits(r, at_end);
     settle(server);
     return r;
 }
@@ -602,6 +621,8 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.submissions_in_flight = o.submissions_in_flight;
     info.planning_threads = o.planning_threads;
     info.encoder_threads = o.encoder_threads;
+    info.headset_mbps = o.headset_mbps;
+    info.room_mbps = o.room_mbps;
     const auto started = Clock::now();
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, scene, info));
     wait_until_ready(*server, started);
@@ -627,10 +648,22 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
         fmt::print(
             stderr,
             "bench serve: {}{} headset(s): {:.2f} stereo layers/s ({:.2f} per headset), "
+            "{} Mbit/s per headset{}, "
             "latency p50 {} ms, first layer {} ms, render thread busy {}, gap p99 {} ms, bound: {} "
             "({}), warm-up {:.1f} s, {} error(s){}\n",
             lp ? fmt::format("LP_NUM_THREADS={}, ", *lp) : "", h, r.per_s_total,
-            r.per_s_per_headset, r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
+            r.per_s_per_headset,
+            r.mbps_per_headset ? fmt::format("{:.2f}", *r.mbps_per_headset) : "-",
+            o.headset_mbps > 0 || o.room_mbps > 0
+                ? fmt::format(" (limits: {}, frame rate {})",
+                              r.layer_quality_mean.value_or(0) > 0
+                                  ? fmt::format("layer quality {:.0f}", *r.layer_quality_mean)
+                                  : std::string("lossless layers"),
+                              r.rate_limit_hz_mean && *r.rate_limit_hz_mean > 0
+                                  ? fmt::format("lowered to {:.1f} Hz", *r.rate_limit_hz_mean)
+                                  : std::string("not lowered"))
+                : "",
+            r.latency_p50_ms ? fmt::format("{:.1f}", *r.latency_p50_ms) : "-",
             r.first_layer_p50_ms ? fmt::format("{:.1f}", *r.first_layer_p50_ms) : "-",
             r.render_thread_busy ? fmt::format("{:.0f} %", 100 * *r.render_thread_busy) : "-",
             r.interval_p99_ms ? fmt::format("{:.1f}", *r.interval_p99_ms) : "-", r.bound,
@@ -885,6 +918,8 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"max_target_mib", o.max_target_mib},
             {"submissions_in_flight", o.submissions_in_flight},
             {"planning_threads", o.planning_threads},
+            {"headset_mbps", o.headset_mbps},
+            {"room_mbps", o.room_mbps},
             {"quick", o.quick}};
 }
 
@@ -901,6 +936,9 @@ const json& report_notes() {
         "latency (usually before the window opens), the median and the largest over the row's "
         "headsets; against latency_ms_p50 it shows what a new headset's first layer pays",
         "bytes_per_layer: wire bytes per eye layer, header included",
+        "mbps_per_headset: wire Mbit/s per headset over the window; layer_quality_mean, "
+        "rate_limit_hz_mean: what the bit-rate limits (headset_mbps, room_mbps) did at the "
+        "window's end, the mean over the headsets (0 Hz: no frame rate was lowered)",
         "render_thread_busy: the share of the row's wall time the server's render thread spent "
         "from taking a batch to the end of its turn (culling, recording, submitting, waiting for "
         "a free command buffer); near 1 it is the bound",

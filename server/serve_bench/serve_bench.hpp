@@ -58,6 +58,8 @@ struct ServeBenchOptions {
     uint32_t max_target_mib = 0;         // as `hysar serve --max-target-mib`; 0: its default
     uint32_t submissions_in_flight = 0;  // the server's VD submissions in flight; 0: default
     int planning_threads = -1;           // as `hysar serve --planning-threads`; -1: its default
+    double headset_mbps = 0;             // as `hysar serve --headset-mbps`; 0: no limit
+    double room_mbps = 0;                // as `hysar serve --room-mbps`; 0: no limit
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.
@@ -90,6 +92,11 @@ struct ServedRow {
     // it does not report is absent.
     std::map<std::string, double> stage_ms;
     std::optional<double> bytes_per_layer;          // wire bytes per eye layer (header included)
+    std::optional<double> mbps_per_headset;         // wire Mbit/s per headset over the window
+    // What the bit-rate limits did at the window's end, the mean over the headsets (the
+    // server's stats): the JPEG quality of their lossy layers (0: lossless) and the frame rate
+    // they were lowered to (0: none was).
+    std::optional<double> layer_quality_mean, rate_limit_hz_mean;
     std::optional<double> cpu_ms_per_stereo_layer;  // this process: server and clients
     std::optional<double> render_thread_busy;       // share of the row's wall time, 0..1
     // Pacing: the time between a headset's consecutive stereo layers in the window, over all

@@ -138,6 +138,9 @@ json row_json(const ServedRow& r) {
             {"first_layer_ms_max", opt(r.first_layer_max_ms)},
             {"stage_ms_mean", stages},
             {"bytes_per_layer", opt(r.bytes_per_layer)},
+            {"mbps_per_headset", opt(r.mbps_per_headset)},
+            {"layer_quality_mean", opt(r.layer_quality_mean)},
+            {"rate_limit_hz_mean", opt(r.rate_limit_hz_mean)},
             {"cpu_ms_per_stereo_layer", opt(r.cpu_ms_per_stereo_layer)},
             {"render_thread_busy", opt(r.render_thread_busy)},
             {"interval_ms_p50", opt(r.interval_p50_ms)},
@@ -173,6 +176,9 @@ ServedRow row_of(const json& j) {
             if (v.is_number())
                 r.stage_ms[k] = v.get<double>();
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
+    r.mbps_per_headset = opt_of(j, "mbps_per_headset");
+    r.layer_quality_mean = opt_of(j, "layer_quality_mean");
+    r.rate_limit_hz_mean = opt_of(j, "rate_limit_hz_mean");
     r.cpu_ms_per_stereo_layer = opt_of(j, "cpu_ms_per_stereo_layer");
     r.render_thread_busy = opt_of(j, "render_thread_busy");
     r.interval_p50_ms = opt_of(j, "interval_ms_p50");

@@ -207,6 +207,9 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         encoding == protocol::Encoding::kLossyTiles && format == protocol::PixelFormat::kRgba8
             ? protocol::TileCodec::kJpeg
             : codec_.value_or(codec::default_tile_codec(format));
+    // The viewer's bit-rate limit may lower its quality (loop/bit_rate.hpp); 0: the server's.
+    const int quality =
+        f.job.layer_quality > 0 ? std::clamp(f.job.layer_quality, 1, 100) : quality_;
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;
@@ -220,7 +223,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
-            append_served_layer(o, pixels, drive, encoding, codec, scratch, quality_);
+            append_served_layer(o, pixels, drive, encoding, codec, scratch, quality);
             return true;
         });
         if (err) {

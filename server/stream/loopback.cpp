@@ -46,6 +46,8 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     if (o.max_target_mib > 0)
         info.limits.max_target_bytes = o.max_target_mib << 20;
     info.encoder_threads = o.encoder_threads;
+    info.limits.headset_mbps = o.headset_mbps;
+    info.limits.room_mbps = o.room_mbps;
     info.renderer.planning_threads = o.planning_threads;
     info.calibration = o.calibration;
     return info;

@@ -40,6 +40,8 @@ struct LoopbackCreateInfo {
     uint32_t submissions_in_flight = 0;  // ServerLimits::submissions_in_flight; 0: its default
     uint32_t encoder_threads = 0;        // threads that encode layers beside the render thread
     int planning_threads = -1;           // the renderer's planning threads (-1: by device)
+    // Bit-rate limits, Mbit/s (ServerLimits::headset_mbps, room_mbps; 0: none).
+    double headset_mbps = 0, room_mbps = 0;
     // Calibrated output (docs/CALIBRATION.md): frame and layers sent as device drives; a scene
     // whose projector is not the calibrated size is refused. Null: sent as rendered.
     std::shared_ptr<const calib::ServingCalibration> calibration;

@@ -311,6 +311,7 @@ void Server::Impl::sweep() {
     const auto now = Clock::now();
     auto all = sessions;
     for (auto& [id, s] : all) s->check_deadlines(now);
+    for (auto& [id, b] : bit_rates) bit_rate_update(id, 0, false);  // idle headsets' rates age
     uint32_t shortest =
         std::min({limits.handshake_timeout_ms, limits.frame_timeout_ms, limits.shutdown_grace_ms});
     if (limits.idle_timeout_ms)
@@ -462,6 +463,8 @@ void Server::Impl::remove_session(uint32_t id) {
     const bool was_authed = it->second->authed();
     sessions.erase(it);
     auto counters = scheduler.remove_viewer(id);
+    if (bit_rates.erase(id) > 0)
+        share_bit_rate_budgets();  // the room's budget shared among the others
     if (auto r = target_bytes_of.find(id); r != target_bytes_of.end()) {
         reserved_target_bytes -= r->second;
         target_bytes_of.erase(r);
@@ -502,6 +505,61 @@ void Server::Impl::remove_session(uint32_t id) {
     }
 }
 
+void Server::Impl::watch_bit_rate(uint32_t id, const loop::Display& d) {
+    loop::BitRateOptions o;
+    o.max_quality = std::clamp(info.layer_quality, 1, 100);
+    o.min_quality = std::min(kMinLimitedQuality, o.max_quality);
+    o.max_hz = double(limits.max_viewer_hz);
+    // RGBA16F layers of a lossy headset go lossless: only their rate can be lowered.
+    o.lossy =
+        d.packing == loop::LayerPacking::kLossyTiles && d.encoding == render::LayerEncoding::kSrgb8;
+    bit_rates.insert_or_assign(id, BitRate{loop::BitRateController(o), o.lossy});
+    share_bit_rate_budgets();
+}
+
+void Server::Impl::share_bit_rate_budgets() {
+    if (bit_rates.empty())
+        return;
+    double each = limits.room_mbps > 0 ? limits.room_mbps * 1e6 / double(bit_rates.size()) : 0;
+    if (limits.headset_mbps > 0)
+        each = each > 0 ? std::min(each, limits.headset_mbps * 1e6) : limits.headset_mbps * 1e6;
+    const auto now = Clock::now();
+    for (auto& [id, b] : bit_rates) {
+        b.control.set_budget(each, now);
+        bit_rate_update(id, 0, false);
+    }
+}
+
+void Server::Impl::bit_rate_update(uint32_t id, uint64_t bytes, bool frame) {
+    auto it = bit_rates.find(id);
+    if (it == bit_rates.end())
+        return;
+    BitRate& b = it->second;
+    const auto now = Clock::now();
+    if (frame)
+        b.control.sent(bytes, now);
+    else
+        b.control.tick(now);
+    const int quality = b.lossy && b.control.quality() != std::clamp(info.layer_quality, 1, 100)
+                            ? b.control.quality()
+                            : 0;
+    if (quality != b.quality || b.control.max_hz() != b.max_hz) {
+        log::for_session(id).debug("bit rate {:.2f} of {:.2f} Mbit/s: layer quality {}, {}",
+                                   b.control.reported_bits_per_s(now) * 1e-6,
+                                   b.control.budget() * 1e-6, b.control.quality(),
+                                   b.control.max_hz() > 0
+                                       ? fmt::format("at most {:.1f} frames/s", b.control.max_hz())
+                                       : std::string("frame rate not lowered"));
+        b.quality = quality;
+        b.max_hz = b.control.max_hz();
+        scheduler.set_viewer_rate(id, b.max_hz, b.quality);
+    }
+    std::lock_guard lock(figures_mutex);
+    if (auto si = figures.session_info.find(id); si != figures.session_info.end())
+        si->second.bit_rate = {b.control.reported_bits_per_s(now), b.control.budget(),
+                               b.lossy ? b.control.quality() : 0, b.control.max_hz()};
+}
+
 void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
                            Clock::time_point pose_received) {
     auto it = sessions.find(id);
@@ -537,8 +595,11 @@ void Server::Impl::deliver(uint32_t id, std::array<Bytes, 2> layers,
                     figures.frame_stats.send.add(ms_since(handed));
                 }
                 pending->all_sent = pending->all_sent && sent;
-                if (--pending->remaining == 0)
+                if (--pending->remaining == 0) {
                     scheduler.complete(id, bytes, pending->all_sent ? ms_since(pose_received) : -1);
+                    if (pending->all_sent)
+                        bit_rate_update(id, bytes, true);
+                }
             },
             group);
     }

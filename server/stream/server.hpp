@@ -64,11 +64,22 @@ struct ServerLimits {
     // 0: no limit.
     uint32_t max_viewer_hz = 60;
     uint32_t max_batch_viewers = 8;  // viewers rendered in one submission
+    // Bit-rate limits, Mbit/s of layer bytes (`--headset-mbps`, `--room-mbps`; 0: none): each
+    // headset's budget is the room's shared evenly among the headsets that registered a display,
+    // at most the per-headset limit. The server keeps it per headset by lowering the JPEG quality
+    // of its lossy layers (down to kMinLimitedQuality), then its frame rate (poses skipped, latest
+    // first), never by queueing (loop/bit_rate.hpp); lossless headsets by their frame rate only.
+    double headset_mbps = 0;
+    double room_mbps = 0;
     // Submissions of VD layers in flight on the device at once (command buffers); a further
     // batch waits for the oldest. 1..16.
     uint32_t submissions_in_flight = 3;
     scene::SceneLimits scene;  // triangles and projector pixels of any scene it accepts
 };
+
+// The lowest JPEG quality a bit-rate limit lowers a headset's lossy layers to before it lowers
+// its frame rate (the server's --layer-quality when that is lower).
+inline constexpr int kMinLimitedQuality = 50;
 
 struct ServerCreateInfo {
     std::string host = "127.0.0.1";  // TCP address to bind; loopback unless told otherwise

@@ -18,6 +18,7 @@
 #include <asio.hpp>
 #include <asio/ssl.hpp>
 
+#include "loop/bit_rate.hpp"
 #include "loop/frame_loop.hpp"
 #include "loop/scheduler.hpp"
 #include "render/renderer.hpp"
@@ -83,6 +84,14 @@ inline void add_plan(FrameStats& st, const render::Renderer::LayerPlan& p) {
 // The stats' JSON (Server::stats(): the stats file, StatsRequest), a view of the snapshot.
 nlohmann::json stats_json(const ServerSnapshot& s);
 
+// A headset's bit rate and what its limit did to it (loop::BitRateController's decision).
+struct BitRateFigures {
+    double bits_per_s = 0;         // layer bytes sent over the last second
+    double budget_bits_per_s = 0;  // 0: no limit
+    int layer_quality = 0;         // JPEG quality of its lossy layers; 0: lossless layers
+    double max_hz = 0;             // the frame rate the limit lowered it to; 0: not lowered
+};
+
 // The figures the stats, /metrics, the dashboard and the admin tool show. One producer: the
 // network thread writes them (what the render thread and the encoder threads measured arrives
 // there with the frames and the scene versions); stats() and snapshot() copy them, on any
@@ -102,6 +111,7 @@ struct Figures {
         // keep_latest_layers: its latest delivered frame (left, right) and that frame's group.
         std::array<Bytes, 2> latest_layers;
         uint64_t latest_group = 0;
+        BitRateFigures bit_rate;  // a headset that registered a display
     };
     std::map<uint32_t, SessionInfo> session_info;
     Bytes current_projector_frame;  // for snapshot(); the network thread's projector_frame
@@ -163,6 +173,15 @@ struct Server::Impl final : loop::FrameLoopHost {
         std::shared_ptr<std::atomic<bool>> done;
     };
     std::vector<BusWriter> bus_writers;
+    // Per headset that registered a display: its bit rate, measured, and kept under its budget
+    // when a limit is set (with none, it only measures: nothing it decides is used).
+    struct BitRate {
+        loop::BitRateController control;
+        bool lossy = false;  // RGBA8 lossy tiles: the quality is its to lower
+        int quality = 0;     // what the scheduler was last told (0: the server's)
+        double max_hz = 0;
+    };
+    std::map<uint32_t, BitRate> bit_rates;
 
     // Gauges: one writer each (named), read by any thread.
     std::atomic<uint64_t> accepted{0}, accept_errors{0}, timeouts{0}, pending_evicted{0};  // net
@@ -212,6 +231,14 @@ struct Server::Impl final : loop::FrameLoopHost {
     uint32_t session_joined(uint32_t id, const std::string& name, proto::Role role,
                             std::shared_ptr<const SessionCounters> counters);
     void remove_session(uint32_t id);
+    // A headset registered `d`: its bit rate measured afresh and, with a limit, kept (the budgets
+    // of all shared again). Network thread.
+    void watch_bit_rate(uint32_t id, const loop::Display& d);
+    // Each headset's budget: the room's limit shared among them, at most the per-headset one.
+    void share_bit_rate_budgets();
+    // A frame of `bytes` was sent to headset `id` (or, bytes 0 and !frame, a sweep): the
+    // controller's decision to the scheduler when it changed, its figures to the stats.
+    void bit_rate_update(uint32_t id, uint64_t bytes, bool frame);
     nlohmann::json stats() const;
     ServerSnapshot snapshot() const;                           // snapshot.cpp
     LatestFrame latest_layer(uint32_t viewer, int eye) const;  // snapshot.cpp

@@ -407,7 +407,9 @@ void Session::register_display(const proto::RegisterDisplay& m, uint32_t seq) {
     registered_ = true;
     // The served scene may have changed since admit_display asked: then it is told as a scene
     // change would tell it (once, sequence 0).
-    if (auto why = srv_.scheduler.add_viewer(id_, display))
+    auto why = srv_.scheduler.add_viewer(id_, display);
+    srv_.watch_bit_rate(id_, display);  // after add_viewer, which forgot the old rate's limits
+    if (why)
         error(proto::ErrorCode::kInvalidDisplay, *why, false, 0);
 }
 

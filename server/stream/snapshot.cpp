@@ -69,6 +69,11 @@ void add_sessions(const Figures& f, ServerSnapshot& s) {
         v.layers_replaced = si->second.counters->layers_replaced;
         v.queued_bytes = si->second.counters->queued_bytes;
         v.connected_s = std::chrono::duration<double>(now - si->second.joined).count();
+        const BitRateFigures& b = si->second.bit_rate;
+        v.bit_rate_mbps = b.bits_per_s * 1e-6;
+        v.bit_rate_budget_mbps = b.budget_bits_per_s * 1e-6;
+        v.layer_quality = b.layer_quality;
+        v.rate_limit_hz = b.max_hz;
         v.layers = si->second.latest_layers;
         v.layer_sequence = si->second.latest_group;
         for (const auto& l : v.layers) s.latest_layer_bytes += l ? l->size() : 0;

@@ -99,6 +99,12 @@ struct ViewerSnapshot {
     uint64_t latency_samples = 0;
     double connected_s = 0;  // since its Hello
     bool connected = true;   // false: departed (ServerSnapshot::departed)
+    // Its bit rate (layer bytes sent over the last second) and what its limit did to it
+    // (ServerLimits::headset_mbps, room_mbps): its budget (0: no limit), the JPEG quality of its
+    // lossy layers (0: lossless layers) and the frame rate it was lowered to (0: not lowered).
+    double bit_rate_mbps = 0, bit_rate_budget_mbps = 0;
+    int layer_quality = 0;
+    double rate_limit_hz = 0;
     // Its latest delivered frame's two layers (left, right) as encoded frames, with the frame's
     // sequence number (0: none yet); only when ServerCreateInfo::keep_latest_layers is set.
     std::array<Bytes, 2> layers;

@@ -61,6 +61,12 @@ nlohmann::json viewer_json(const ViewerSnapshot& v) {
         j["layers_replaced"] = v.layers_replaced;
         j["queued_bytes"] = v.queued_bytes;
         j["in_flight"] = v.in_flight;
+        // Its bit rate over the last second, its budget (0: no limit), the JPEG quality of its
+        // lossy layers (0: lossless) and the frame rate its limit lowered it to (0: not lowered).
+        j["bit_rate_mbps"] = v.bit_rate_mbps;
+        j["bit_rate_budget_mbps"] = v.bit_rate_budget_mbps;
+        j["layer_quality"] = v.layer_quality;
+        j["rate_limit_hz"] = v.rate_limit_hz;
     }
     return j;
 }

@@ -281,7 +281,8 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
           "hysar_viewer_pose_to_layer_seconds", "hysar_viewer_sent_bytes_total",
           "hysar_viewer_send_rate_bytes_per_second", "hysar_viewer_superseded_poses_total",
           "hysar_stage_seconds", "hysar_sessions", "hysar_refusals_total", "hysar_gpu_info",
-          "hysar_memory_bytes"})
+          "hysar_memory_bytes", "hysar_viewer_bit_rate_mbps", "hysar_viewer_bit_rate_budget_mbps",
+          "hysar_viewer_layer_quality", "hysar_viewer_rate_limited_hertz"})
         EXPECT_TRUE(before.types.count(family)) << family;
     EXPECT_EQ(before.get("hysar_vd_layers_total"), 0.0);
     EXPECT_EQ(before.get("hysar_gpu_info", {{"device", device().name()},
@@ -328,6 +329,12 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     EXPECT_EQ(after.get("hysar_sessions", {{"role", "headset"}}), 1.0);
     EXPECT_EQ(after.get("hysar_refusals_total", {{"code", "6"}, {"error", "unauthorized"}}), 1.0);
     EXPECT_GT(after.get("hysar_memory_bytes", {{"kind", "latest_layers"}}), 0.0);
+    // No bit-rate limit: measured, its budget 0, nothing lowered (the display is RGBA8 sparse
+    // tiles: lossless, no quality to report).
+    // (over the last second: it may have aged to 0 on a slow machine, but it is there)
+    EXPECT_GE(after.get("hysar_viewer_bit_rate_mbps", {{"viewer", id}}), 0.0);
+    EXPECT_EQ(after.get("hysar_viewer_bit_rate_budget_mbps", {{"viewer", id}}), 0.0);
+    EXPECT_EQ(after.get("hysar_viewer_rate_limited_hertz", {{"viewer", id}}), 0.0);
 
     auto api = get("/api/viewers");
     ASSERT_TRUE(api && api->status == 200);
@@ -340,6 +347,9 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     EXPECT_EQ(std::to_string(j["viewers"][0]["id"].get<uint32_t>()), id);
     EXPECT_GE(j["viewers"][0]["frames"].get<uint64_t>(), 3u);
     EXPECT_GT(j["viewers"][0]["layer_sequence"].get<uint64_t>(), 0u);
+    EXPECT_GE(j["viewers"][0]["bit_rate_mbps"].get<double>(), 0.0);
+    EXPECT_EQ(j["viewers"][0]["bit_rate_budget_mbps"].get<double>(), 0.0);
+    EXPECT_EQ(j["viewers"][0]["rate_limit_hz"].get<double>(), 0.0);
 
     // The headset leaves: its series go, and so do the layers kept for it.
     hmd.reset();

@@ -155,7 +155,7 @@ def main():
         names = [e.text for e in driver.find_elements("css selector", "tr.viewer td.name")]
         if len(names) != 2 or not all(names):
             fail("the rows do not show the headsets' names: %r" % names)
-        for field in ("rate", "p50", "bps"):
+        for field in ("rate", "p50", "bps", "mbps", "quality", "cap"):
             cells = driver.find_elements("css selector", 'tr.viewer td[data-field="%s"]' % field)
             if len(cells) != 2 or not all(c.text for c in cells):
                 fail("the rows do not show " + field)

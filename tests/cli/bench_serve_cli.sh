@@ -77,6 +77,22 @@ assert l["bytes_per_layer"] < 0.5 * t, (l["bytes_per_layer"], t)
 print("bench serve: lossy %.0f bytes per layer against %.0f for tiles" % (l["bytes_per_layer"], t))
 PY
 
+# Under a bit-rate limit far below what the lossy headset takes, its quality is lowered within
+# the row, and the row says so.
+"$hysar" bench serve --quick --headsets 1 --encoding lossy --headset-mbps 0.3 \
+    --out "$out/limited" > /dev/null 2>&1 || { echo "bench serve --headset-mbps failed"; exit 1; }
+python3 - "$out/limited/bench-serve.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert j["config"]["headset_mbps"] == 0.3 and j["config"]["room_mbps"] == 0, j["config"]
+r = j["rows"][0]
+assert r["stereo_layers"] > 0 and r["errors"] == 0, r
+assert r["mbps_per_headset"] > 0, r
+assert 0 < r["layer_quality_mean"] < 90, r
+print("bench serve: under 0.3 Mbit/s, %.2f Mbit/s at quality %.0f, %.1f Hz" %
+      (r["mbps_per_headset"], r["layer_quality_mean"], r["rate_limit_hz_mean"]))
+PY
+
 # A bad flag: exit 2 and one line that names it.
 bad() {
     local flag=$1; shift
@@ -97,6 +113,8 @@ bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 1025
 bad --planning-threads --planning-threads 65
 bad --max-target-mib --max-target-mib 0
+bad --headset-mbps --headset-mbps 0.05
+bad --room-mbps --room-mbps x
 bad --bogus --bogus
 bad --profile --profile no-such-headset --quick
 echo "bench serve: files, rows and errors as documented"

@@ -61,6 +61,10 @@ refused --encoder-threads 65 "[0, 64]" "$hysar" "${S[@]}" --encoder-threads 65
 refused --planning-threads 65 "[0, 64]" "$hysar" "${S[@]}" --planning-threads 65
 refused --agent-port 0 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 0
 refused --agent-port 1e3 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 1e3
+refused --headset-mbps -1 "[0, 100000]" "$hysar" "${S[@]}" --headset-mbps -1
+refused --headset-mbps 3M "[0, 100000]" "$hysar" "${S[@]}" --headset-mbps 3M
+refused --room-mbps 1e6 "[0, 100000]" "$hysar" "${S[@]}" --room-mbps 1e6
+refused --room-mbps 0.05 "below 0.1 Mbit/s" "$hysar" "${S[@]}" --room-mbps 0.05
 
 # hysar cluster config
 refused --agent-port 70000 "[1, 65535]" "$hysar" cluster config --node a=h:1 --agent-port 70000
@@ -73,6 +77,8 @@ refused --seconds 5s "[0.1, 3600]" "$hysar" bench serve --seconds 5s
 refused --headsets 0 "[1, 256]" "$hysar" bench serve --headsets 1,0
 refused --headsets "" "[1, 256]" "$hysar" bench serve --headsets 1,,2
 refused --frames 1.5 "[1, 10000]" "$hysar" bench serve --frames 1.5
+refused --headset-mbps nan "[0, 100000]" "$hysar" bench serve --headset-mbps nan
+refused --room-mbps 0.01 "below 0.1 Mbit/s" "$hysar" bench serve --room-mbps 0.01
 refused --lp-threads 999 "[1, 256]" "$hysar" bench serve --lp-threads 1,999
 refused --repeats 0 "[1, 1000]" "$hysar" bench accuracy --repeats 0 --out "$work/acc"
 refused --repeats 1e3 "[1, 1000]" "$hysar" bench accuracy --repeats 1e3 --out "$work/acc"

@@ -100,4 +100,42 @@ TEST(Scheduler, UnderLoadEveryViewerIsServedEvenly) {
     EXPECT_LE(most_batches_between, 4);  // ceil(10 / 3) batches per round
 }
 
+TEST(Scheduler, AViewersBitRateLimitPacesItAndSetsItsQuality) {
+    // No rate of the server's: viewer 1 is held to 20 Hz by its limit, viewer 2 is not; the
+    // jobs carry the quality the limit chose (0: the server's).
+    Scheduler s({.max_batch = 8});
+    for (uint32_t id : {1u, 2u}) ASSERT_FALSE(s.add_viewer(id, continuous()));
+    ASSERT_TRUE(s.set_viewer_rate(1, 20, 55));
+    EXPECT_FALSE(s.set_viewer_rate(3, 20, 55));  // no such viewer
+    for (uint32_t id : {1u, 2u}) pose(s, id);
+    auto batch = s.take_batch();
+    ASSERT_EQ(ids(batch), (std::vector<uint32_t>{1, 2}));
+    EXPECT_EQ(batch[0].layer_quality, 55);
+    EXPECT_EQ(batch[1].layer_quality, 0);
+    for (uint32_t id : {1u, 2u}) {
+        done(s, id);
+        pose(s, id);
+    }
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{2}));  // 1 waits its 50 ms
+    const auto t0 = hs::loop::Clock::now();
+    batch = s.wait_for_batch();
+    EXPECT_EQ(ids(batch), (std::vector<uint32_t>{1}));
+    EXPECT_GE(hs::loop::Clock::now() - t0, std::chrono::milliseconds(30));
+    // Lifted, and registering again forgets it.
+    done(s, 1);
+    done(s, 2);
+    ASSERT_TRUE(s.set_viewer_rate(1, 0, 0));  // from its next frame on
+    pose(s, 1);
+    batch = s.wait_for_batch();
+    ASSERT_EQ(ids(batch), (std::vector<uint32_t>{1}));
+    EXPECT_EQ(batch[0].layer_quality, 0);
+    done(s, 1);
+    ASSERT_TRUE(s.set_viewer_rate(1, 5, 60));
+    ASSERT_FALSE(s.add_viewer(1, continuous()));
+    pose(s, 1);
+    batch = s.take_batch();
+    ASSERT_EQ(ids(batch), (std::vector<uint32_t>{1}));  // not held to 5 Hz
+    EXPECT_EQ(batch[0].layer_quality, 0);
+}
+
 }  // namespace
