@@ -100,10 +100,10 @@ std::shared_ptr<const T> make_charged(T value, MemoryCounter* counter, int64_t b
 // The scene's memory, by kind. Owned by the server (stream::Server), which outlives every
 // charge on it; the render thread, the network thread and the encoders charge it.
 struct SceneLedger {
-    MemoryCounter cpu;       // scene data on the CPU: meshes, textures, captured images,
-                             // the renderer's levels of detail, encoded projector frames
-    MemoryCounter device;    // device memory: mesh and uniform buffers, textures, the
-                             // renderer's own targets (holders: allocations)
+    MemoryCounter cpu;        // scene data on the CPU: meshes, textures, captured images,
+                              // the renderer's levels of detail, encoded projector frames
+    MemoryCounter device;     // device memory: mesh and uniform buffers, textures, the
+                              // renderer's own targets (holders: allocations)
     MemoryCounter versions;   // scene versions alive (a renderer built for one; bytes unused)
     MemoryCounter pipelines;  // their pipelines (holders; the driver's memory, not counted)
     std::atomic<uint64_t> versions_built{0}, versions_freed{0};

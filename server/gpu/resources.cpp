@@ -88,7 +88,8 @@ Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat form
     dev.set_name(VK_OBJECT_TYPE_IMAGE, uint64_t(image), name);
     VkMemoryRequirements req;
     vkGetImageMemoryRequirements(dev.vk(), image, &req);
-    HS_ASSIGN_OR_RETURN(parts.mem, allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, counter));
+    HS_ASSIGN_OR_RETURN(parts.mem,
+                        allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, counter));
     HS_VK_TRY(vkBindImageMemory(dev.vk(), image, parts.mem.get(), 0));
     VkImageViewCreateInfo vci{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
     vci.image = image;
@@ -215,23 +216,26 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     t.width_ = w;
     t.height_ = h;
     t.format_ = format;
-    HS_ASSIGN_OR_RETURN(auto color, make_image(dev, w, h, to_vk(format),
-                                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT |
-                                                   VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
-                                               VK_IMAGE_ASPECT_COLOR_BIT, name + ".color", counter));
+    HS_ASSIGN_OR_RETURN(
+        auto color,
+        make_image(dev, w, h, to_vk(format),
+                   VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                   VK_IMAGE_ASPECT_COLOR_BIT, name + ".color", counter));
     t.color_mem_ = std::move(color.mem);
     t.color_ = std::move(color.image);
     t.color_view_ = std::move(color.view);
     if (with_depth) {
-        HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
-                                                   VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
-                                                   VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth", counter));
+        HS_ASSIGN_OR_RETURN(
+            auto depth,
+            make_image(dev, w, h, VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
+                       VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth", counter));
         t.depth_mem_ = std::move(depth.mem);
         t.depth_ = std::move(depth.image);
         t.depth_view_ = std::move(depth.view);
     }
-    HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
-                                                    BufferUsage::kReadback, name + ".readback", counter));
+    HS_ASSIGN_OR_RETURN(t.readback_,
+                        Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
+                                       BufferUsage::kReadback, name + ".readback", counter));
     return t;
 }
 

@@ -121,23 +121,23 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         const auto& m = r->levels_[i].mesh;
         const std::string name = fmt::format("prop.lod{}", i);
         LevelBuffers b;
-        HS_ASSIGN_OR_RETURN(b.positions,
-                            gpu::Buffer::create(device, m.positions.size() * 12,
-                                                gpu::BufferUsage::kVertex, name + ".positions",
-                                                r->device_counter()));
+        HS_ASSIGN_OR_RETURN(
+            b.positions,
+            gpu::Buffer::create(device, m.positions.size() * 12, gpu::BufferUsage::kVertex,
+                                name + ".positions", r->device_counter()));
         HS_ASSIGN_OR_RETURN(
             b.normals, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex,
                                            name + ".normals", r->device_counter()));
         HS_ASSIGN_OR_RETURN(
             b.indices, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex,
                                            name + ".indices", r->device_counter()));
-        HS_ASSIGN_OR_RETURN(b.tangents,
-                            gpu::Buffer::create(device, m.tangents.size() * 12,
-                                                gpu::BufferUsage::kVertex, name + ".tangents",
-                                                r->device_counter()));
-        HS_ASSIGN_OR_RETURN(b.uvs, gpu::Buffer::create(device, m.uvs.size() * 8,
-                                                       gpu::BufferUsage::kVertex, name + ".uvs",
-                                                       r->device_counter()));
+        HS_ASSIGN_OR_RETURN(
+            b.tangents,
+            gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex,
+                                name + ".tangents", r->device_counter()));
+        HS_ASSIGN_OR_RETURN(b.uvs,
+                            gpu::Buffer::create(device, m.uvs.size() * 8, gpu::BufferUsage::kVertex,
+                                                name + ".uvs", r->device_counter()));
         b.positions.write(m.positions.data(), m.positions.size() * 12);
         b.normals.write(m.normals.data(), m.normals.size() * 12);
         b.tangents.write(m.tangents.data(), m.tangents.size() * 12);
@@ -147,9 +147,9 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     }
     const ImageRgba8 white{1, 1, {255, 255, 255, 255}};
     const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
-    HS_ASSIGN_OR_RETURN(r->albedo_texture_,
-                        gpu::Texture::create(device, tex, "material.albedo_texture",
-                                             r->device_counter()));
+    HS_ASSIGN_OR_RETURN(
+        r->albedo_texture_,
+        gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
                          : device.is_cpu()          ? 0

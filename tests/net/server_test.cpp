@@ -430,8 +430,10 @@ TEST_F(SceneMemoryTest, OneHundredFiftyUpdatesEndWhereTheFirstVersionWas) {
     std::printf("[scene memory] %d updates in %.1f s; first version %s; after %s\n", kUpdates, s,
                 base.dump().c_str(), end.dump().c_str());
     // Every old version was built and freed: one left, the one served.
-    EXPECT_EQ(end["versions_built"].get<uint64_t>(), base["versions_built"].get<uint64_t>() + kUpdates);
-    EXPECT_EQ(end["versions_freed"].get<uint64_t>(), base["versions_freed"].get<uint64_t>() + kUpdates);
+    EXPECT_EQ(end["versions_built"].get<uint64_t>(),
+              base["versions_built"].get<uint64_t>() + kUpdates);
+    EXPECT_EQ(end["versions_freed"].get<uint64_t>(),
+              base["versions_freed"].get<uint64_t>() + kUpdates);
     EXPECT_EQ(end["versions_held"].get<int64_t>(), 1) << end.dump();
     // While a version was built the old one was still held (the count went up), never more.
     EXPECT_EQ(end["versions_held_peak"].get<int64_t>(), 2) << end.dump();
