@@ -22,7 +22,12 @@ PY
   --admin-token-file "$D/admin" --device cpu > "$D/log" 2>&1 &
 pid=$!
 adm() { "$B/hysar" admin --connect 127.0.0.1:$PORT --token-file "$D/admin" "$@"; }
-for _ in $(seq 1 120); do adm stats --json > /dev/null 2>&1 && break; sleep 1; done
+# Started once the first scene version is built (the server answers before that).
+held() {
+  adm stats --json 2> /dev/null |
+    python3 -c 'import json, sys; print(json.load(sys.stdin)["scene_memory"]["versions_held"])'
+}
+for _ in $(seq 1 300); do [[ "$(held 2> /dev/null)" == 1 ]] && break; sleep 1; done
 rss() { awk '/VmRSS/{print $2}' "/proc/$pid/status"; }
 echo "started: RSS $(rss) KiB"
 t0=$(date +%s)
