@@ -257,6 +257,26 @@ void server_families(Writer& w, const stream::ServerSnapshot& s, const AdminFigu
         {"thumbnails", admin.thumbnail_bytes}};
     for (const auto& [kind, n] : memory)
         w.sample("hysar_memory_bytes", fmt::format("kind=\"{}\"", kind), n);
+    const auto& sm = s.scene_memory;
+    w.family("hysar_scene_bytes", "gauge",
+             "Bytes the scene versions hold, as the server counts them: CPU scene data (meshes, "
+             "textures, levels of detail, encoded projector frames) and device memory.");
+    w.sample("hysar_scene_bytes", "kind=\"cpu\"", uint64_t(std::max<int64_t>(sm.cpu_bytes, 0)));
+    w.sample("hysar_scene_bytes", "kind=\"device\"",
+             uint64_t(std::max<int64_t>(sm.device_bytes, 0)));
+    w.family("hysar_scene_device_allocations", "gauge",
+             "Device-memory allocations the scene versions hold.");
+    w.sample("hysar_scene_device_allocations", "",
+             uint64_t(std::max<int64_t>(sm.device_allocations, 0)));
+    w.family("hysar_scene_pipelines", "gauge", "Pipelines the scene versions hold.");
+    w.sample("hysar_scene_pipelines", "", uint64_t(std::max<int64_t>(sm.pipelines, 0)));
+    w.family("hysar_scene_versions_held", "gauge",
+             "Scene versions alive: the one served, and while a new one is built or an old one "
+             "is still in use, that one too.");
+    w.sample("hysar_scene_versions_held", "", uint64_t(std::max<int64_t>(sm.versions_held, 0)));
+    w.family("hysar_scene_versions_freed_total", "counter",
+             "Scene versions freed since start (replaced and no longer used by any frame).");
+    w.sample("hysar_scene_versions_freed_total", "", sm.versions_freed);
     w.family("hysar_admin_thumbnails_encoded_total", "counter",
              "Thumbnail PNGs made by this endpoint (at most once per frame and per 250 ms).");
     w.sample("hysar_admin_thumbnails_encoded_total", "", admin.thumbnails_encoded);

@@ -50,25 +50,27 @@ size_t bytes_per_pixel(ColorFormat f) {
 
 namespace {
 
-Result<MemoryHandle> allocate(Device& dev, VkMemoryRequirements req, VkMemoryPropertyFlags props) {
+// Device memory for `req`, charged to `counter` (null: not counted) until it is freed.
+Result<Allocation> allocate(Device& dev, VkMemoryRequirements req, VkMemoryPropertyFlags props,
+                            MemoryCounter* counter) {
     HS_ASSIGN_OR_RETURN(uint32_t type, dev.find_memory_type(req.memoryTypeBits, props));
     VkMemoryAllocateInfo ai{VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO};
     ai.allocationSize = req.size;
     ai.memoryTypeIndex = type;
     VkDeviceMemory mem;
     HS_VK_TRY(vkAllocateMemory(dev.vk(), &ai, nullptr, &mem));
-    return MemoryHandle(dev.vk(), mem);
+    return Allocation(MemoryHandle(dev.vk(), mem), req.size, counter);
 }
 
 struct ImageParts {
-    MemoryHandle mem;
+    Allocation mem;
     ImageHandle image;
     ImageViewHandle view;
 };
 
 Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat format,
                               VkImageUsageFlags usage, VkImageAspectFlags aspect,
-                              const std::string& name) {
+                              const std::string& name, MemoryCounter* counter) {
     VkImageCreateInfo ici{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
     ici.imageType = VK_IMAGE_TYPE_2D;
     ici.format = format;
@@ -86,7 +88,8 @@ Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat form
     dev.set_name(VK_OBJECT_TYPE_IMAGE, uint64_t(image), name);
     VkMemoryRequirements req;
     vkGetImageMemoryRequirements(dev.vk(), image, &req);
-    HS_ASSIGN_OR_RETURN(parts.mem, allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT));
+    HS_ASSIGN_OR_RETURN(parts.mem,
+                        allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, counter));
     HS_VK_TRY(vkBindImageMemory(dev.vk(), image, parts.mem.get(), 0));
     VkImageViewCreateInfo vci{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
     vci.image = image;
@@ -102,7 +105,7 @@ Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat form
 }  // namespace
 
 Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage,
-                              const std::string& name) {
+                              const std::string& name, MemoryCounter* counter) {
     if (size == 0)
         return make_error(ErrorCode::kInvalidArgument, fmt::format("buffer '{}' of size 0", name));
     VkBufferCreateInfo bci{VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO};
@@ -144,7 +147,7 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage,
         if (cached)
             props |= VK_MEMORY_PROPERTY_HOST_CACHED_BIT;
     }
-    HS_ASSIGN_OR_RETURN(b.memory_, allocate(dev, req, props));
+    HS_ASSIGN_OR_RETURN(b.memory_, allocate(dev, req, props, counter));
     HS_VK_TRY(vkBindBufferMemory(dev.vk(), buf, b.memory_.get(), 0));
     HS_VK_TRY(vkMapMemory(dev.vk(), b.memory_.get(), 0, VK_WHOLE_SIZE, 0, &b.mapped_));
     return b;
@@ -155,7 +158,8 @@ void Buffer::write(const void* data, uint64_t size, uint64_t offset) {
     std::memcpy(static_cast<char*>(mapped_) + offset, data, size);
 }
 
-Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::string& name) {
+Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::string& name,
+                                MemoryCounter* counter) {
     if (img.width == 0 || img.height == 0 || img.width > 8192 || img.height > 8192)
         return make_error(
             ErrorCode::kInvalidArgument,
@@ -164,12 +168,12 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
     HS_ASSIGN_OR_RETURN(auto parts,
                         make_image(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB,
                                    VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
-                                   VK_IMAGE_ASPECT_COLOR_BIT, name));
+                                   VK_IMAGE_ASPECT_COLOR_BIT, name, counter));
     t.memory_ = std::move(parts.mem);
     t.image_ = std::move(parts.image);
     t.view_ = std::move(parts.view);
     HS_ASSIGN_OR_RETURN(auto staging, Buffer::create(dev, img.pixels.size(), BufferUsage::kStaging,
-                                                     name + ".staging"));
+                                                     name + ".staging", counter));
     staging.write(img.pixels.data(), img.pixels.size());
     VkImage image = t.image_.get();
     HS_TRY(dev.submit_and_wait("upload.texture", [&](VkCommandBuffer cmd) {
@@ -202,7 +206,8 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
 }
 
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
-                                          const std::string& name, bool with_depth) {
+                                          const std::string& name, bool with_depth,
+                                          MemoryCounter* counter) {
     if (w == 0 || h == 0 || w > 16384 || h > 16384)
         return make_error(
             ErrorCode::kInvalidArgument,
@@ -211,23 +216,26 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     t.width_ = w;
     t.height_ = h;
     t.format_ = format;
-    HS_ASSIGN_OR_RETURN(auto color, make_image(dev, w, h, to_vk(format),
-                                               VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT |
-                                                   VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
-                                               VK_IMAGE_ASPECT_COLOR_BIT, name + ".color"));
+    HS_ASSIGN_OR_RETURN(
+        auto color,
+        make_image(dev, w, h, to_vk(format),
+                   VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
+                   VK_IMAGE_ASPECT_COLOR_BIT, name + ".color", counter));
     t.color_mem_ = std::move(color.mem);
     t.color_ = std::move(color.image);
     t.color_view_ = std::move(color.view);
     if (with_depth) {
-        HS_ASSIGN_OR_RETURN(auto depth, make_image(dev, w, h, VK_FORMAT_D32_SFLOAT,
-                                                   VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
-                                                   VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth"));
+        HS_ASSIGN_OR_RETURN(
+            auto depth,
+            make_image(dev, w, h, VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
+                       VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth", counter));
         t.depth_mem_ = std::move(depth.mem);
         t.depth_ = std::move(depth.image);
         t.depth_view_ = std::move(depth.view);
     }
-    HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
-                                                    BufferUsage::kReadback, name + ".readback"));
+    HS_ASSIGN_OR_RETURN(t.readback_,
+                        Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
+                                       BufferUsage::kReadback, name + ".readback", counter));
     return t;
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/image.hpp"
+#include "core/memory_ledger.hpp"
 #include "gpu/device.hpp"
 
 namespace hs::gpu {
@@ -19,12 +20,28 @@ float max_value(ColorFormat f);
 // Bytes of one pixel of a target of this format.
 size_t bytes_per_pixel(ColorFormat f);
 
+// One device-memory allocation, charged to a counter (null: not counted) from its allocation
+// to its free: the owner of a Buffer, Texture or RenderTarget made with a counter is on it
+// for exactly as long as it holds the memory.
+class Allocation {
+public:
+    Allocation() = default;
+    Allocation(MemoryHandle memory, uint64_t bytes, MemoryCounter* counter)
+        : memory_(std::move(memory)), charge_(counter, int64_t(bytes)) {}
+    VkDeviceMemory get() const { return memory_.get(); }
+
+private:
+    MemoryHandle memory_;
+    MemoryCharge charge_;  // released before the memory is freed
+};
+
 enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback, kStaging };
 
 class Buffer {
 public:
+    // `counter`: where its memory is counted (null: nowhere).
     static Result<Buffer> create(Device& device, uint64_t size_bytes, BufferUsage usage,
-                                 const std::string& name);
+                                 const std::string& name, MemoryCounter* counter = nullptr);
     Buffer() = default;
     Buffer(Buffer&&) noexcept = default;
     Buffer& operator=(Buffer&&) noexcept = default;
@@ -37,7 +54,7 @@ public:
     uint64_t size() const { return size_; }
 
 private:
-    MemoryHandle memory_;
+    Allocation memory_;
     BufferHandle buffer_;
     void* mapped_ = nullptr;  // valid while memory_ lives (unmapped implicitly on free)
     uint64_t size_ = 0;
@@ -47,7 +64,8 @@ private:
 // filtering, repeat in u, clamp to edge in v, no mipmaps. Uploaded once at creation.
 class Texture {
 public:
-    static Result<Texture> create(Device& device, const ImageRgba8& image, const std::string& name);
+    static Result<Texture> create(Device& device, const ImageRgba8& image, const std::string& name,
+                                  MemoryCounter* counter = nullptr);
     Texture() = default;
     Texture(Texture&&) noexcept = default;
     Texture& operator=(Texture&&) noexcept = default;
@@ -56,7 +74,7 @@ public:
     VkSampler sampler() const { return sampler_.get(); }
 
 private:
-    MemoryHandle memory_;
+    Allocation memory_;
     ImageHandle image_;
     ImageViewHandle view_;
     SamplerHandle sampler_;
@@ -68,7 +86,7 @@ class RenderTarget {
 public:
     static Result<RenderTarget> create(Device& device, uint32_t width, uint32_t height,
                                        ColorFormat format, const std::string& name,
-                                       bool with_depth = true);
+                                       bool with_depth = true, MemoryCounter* counter = nullptr);
     RenderTarget() = default;
     RenderTarget(RenderTarget&&) noexcept = default;
     RenderTarget& operator=(RenderTarget&&) noexcept = default;
@@ -91,7 +109,7 @@ public:
 private:
     uint32_t width_ = 0, height_ = 0;
     ColorFormat format_ = ColorFormat::kRgba16Float;
-    MemoryHandle color_mem_, depth_mem_;
+    Allocation color_mem_, depth_mem_;
     ImageHandle color_, depth_;
     ImageViewHandle color_view_, depth_view_;
     Buffer readback_;

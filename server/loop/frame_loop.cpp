@@ -1,6 +1,12 @@
 #include "loop/frame_loop.hpp"
 
+#include <cstdlib>
+#include <string_view>
 #include <tuple>
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include <fmt/format.h>
 
@@ -14,6 +20,20 @@ namespace hs::loop {
 namespace {
 double ms_since(Clock::time_point t) {
     return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+// After a scene version is freed: glibc keeps freed memory in its arenas for reuse, and a
+// version's meshes, levels and the driver's pipeline code are megabytes; hand what is free back
+// to the system. HYSAR_MALLOC_TRIM=0 leaves it to the allocator.
+void return_freed_memory() {
+#if defined(__GLIBC__)
+    static const bool enabled = [] {
+        const char* env = std::getenv("HYSAR_MALLOC_TRIM");
+        return !(env && std::string_view(env) == "0");
+    }();
+    if (enabled)
+        malloc_trim(0);
+#endif
 }
 }  // namespace
 
@@ -52,7 +72,7 @@ FrameLoop::~FrameLoop() {
     frames_.clear();
 }
 
-void FrameLoop::run(const scene::Scene& initial, uint32_t version) {
+void FrameLoop::run(scene::Scene initial, uint32_t version) {
     auto ring = gpu::SubmitRing::create(device_, std::max<uint32_t>(info_.submissions_in_flight, 1),
                                         "frames");
     if (!ring)
@@ -64,6 +84,7 @@ void FrameLoop::run(const scene::Scene& initial, uint32_t version) {
         host_.cannot_serve();
         return;
     }
+    initial = {};
     while (!scheduler_.stopped()) {
         std::vector<ViewerJob> batch;
         try {
@@ -156,10 +177,18 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     (void)ring_->wait_idle();
     sink_->drain();
     source_.reset();
-    renderer_ = std::move(r).value();
+    const bool replaced = renderer_ != nullptr;
+    renderer_ = std::move(r).value();  // the old version's renderer is destroyed here
     current_ = next;
-    source_ = current_.captured_material ? captured_source(*current_.captured_material)
+    MemoryCounter* cpu = info_.renderer.ledger ? &info_.renderer.ledger->cpu : nullptr;
+    source_ = current_.captured_material ? captured_source(*current_.captured_material, cpu)
                                          : rendered_source(*renderer_, current_.material.specular);
+    // No frame is in flight: what the viewers' frames kept of the old version goes now, not at
+    // each viewer's next frame (a headset that stopped asking would keep it).
+    for (auto& [id, f] : frames_) {
+        f->keep_alive.reset();
+        f->batch.reset();
+    }
     sink_->set_layer_drive(std::move(layer_drive).value());  // drained: no frame in flight
     built.version = version;
     built.name = current_.name;
@@ -167,6 +196,8 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     built.total_ms = ms_since(t0);
     update_held_bytes();
     host_.scene_built(std::move(built));
+    if (replaced)
+        return_freed_memory();
     return true;
 }
 

@@ -134,9 +134,10 @@ public:
     FrameLoop(const FrameLoopInfo& info, Scheduler& scheduler, LoopInbox& inbox,
               FrameLoopHost& host);
     ~FrameLoop();
-    // Builds `initial` as `version`, then serves until the scheduler stops. Throws only when
-    // the loop cannot start (no submit ring). Thread: the render thread.
-    void run(const scene::Scene& initial, uint32_t version);
+    // Builds `initial` as `version` (then lets go of it: the loop's copy is the one served),
+    // then serves until the scheduler stops. Throws only when the loop cannot start (no submit
+    // ring). Thread: the render thread.
+    void run(scene::Scene initial, uint32_t version);
 
 private:
     // One turn: the next scene if one waits, the viewers that left, a batch served.

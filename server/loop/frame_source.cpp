@@ -73,10 +73,14 @@ private:
 
 class Captured final : public FrameSource {
 public:
-    explicit Captured(const scene::CapturedMaterial& c) : captured_(c) {
+    Captured(const scene::CapturedMaterial& c, MemoryCounter* counter) : captured_(c) {
         const ImageRgba32f layer = codec::drive_as_layer(*c.viewer_image);
-        srgb8_ = std::make_shared<const std::vector<uint8_t>>(codec::srgb8_pixels(layer));
-        half_ = std::make_shared<const std::vector<uint8_t>>(codec::half_pixels(layer));
+        auto counted = [counter](std::vector<uint8_t>&& v) {
+            const auto n = int64_t(v.capacity());
+            return make_charged(std::move(v), counter, n);
+        };
+        srgb8_ = counted(codec::srgb8_pixels(layer));
+        half_ = counted(codec::half_pixels(layer));
     }
     bool uses_gpu() const override { return false; }
 
@@ -150,8 +154,9 @@ std::unique_ptr<FrameSource> rendered_source(render::Renderer& renderer,
     return std::make_unique<Rendered>(renderer, spec);
 }
 
-std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured) {
-    return std::make_unique<Captured>(captured);
+std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured,
+                                             MemoryCounter* counter) {
+    return std::make_unique<Captured>(captured, counter);
 }
 
 }  // namespace hs::loop

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/memory_ledger.hpp"
 #include "gpu/commands.hpp"
 #include "loop/viewer_frame.hpp"
 #include "render/renderer.hpp"
@@ -44,6 +45,9 @@ std::unique_ptr<FrameSource> rendered_source(render::Renderer& renderer,
 // Both eyes of a head within the capture's tolerance get that same image; any other head gets
 // black (it would show the highlight in the wrong place). The image is converted to each wire
 // format once, here.
-std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured);
+// Its converted images are counted on `counter` (null: nowhere) while a source or a frame holds
+// them.
+std::unique_ptr<FrameSource> captured_source(const scene::CapturedMaterial& captured,
+                                             MemoryCounter* counter = nullptr);
 
 }  // namespace hs::loop

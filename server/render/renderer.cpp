@@ -13,6 +13,7 @@
 #include "core/check.hpp"
 #include "gpu/shared_layout.hpp"
 #include "scene/camera.hpp"
+#include "scene/memory.hpp"
 #include "scene/mesh.hpp"
 #include "shaders/prop_frag.h"
 #include "shaders/prop_frag_f32.h"
@@ -105,26 +106,38 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     std::unique_ptr<Renderer> r(new Renderer(device, scene, info));
     HS_ASSIGN_OR_RETURN(scene::Mesh finest, scene::build_prop_mesh(scene.prop));
     r->levels_ = prop_levels(scene.prop, finest);
+    if (info.ledger) {
+        uint64_t cpu = 0;
+        for (const ClusteredMesh& l : r->levels_)
+            cpu += scene::mesh_bytes(l.mesh) +
+                   (l.clusters.capacity() + l.groups.capacity()) * sizeof(Cluster);
+        r->version_charge_ = MemoryCharge(&info.ledger->versions, 0);
+        r->cpu_charge_ = MemoryCharge(&info.ledger->cpu, int64_t(cpu));
+        ++info.ledger->versions_built;
+    }
     r->convex_ = scene.prop.kind == scene::Prop::Kind::kHemisphere;
     r->lit_ = lit_lights(scene, &r->lights_skipped_);
     for (size_t i = 0; i < r->levels_.size(); ++i) {
         const auto& m = r->levels_[i].mesh;
         const std::string name = fmt::format("prop.lod{}", i);
         LevelBuffers b;
-        HS_ASSIGN_OR_RETURN(b.positions,
-                            gpu::Buffer::create(device, m.positions.size() * 12,
-                                                gpu::BufferUsage::kVertex, name + ".positions"));
+        HS_ASSIGN_OR_RETURN(
+            b.positions,
+            gpu::Buffer::create(device, m.positions.size() * 12, gpu::BufferUsage::kVertex,
+                                name + ".positions", r->device_counter()));
         HS_ASSIGN_OR_RETURN(
             b.normals, gpu::Buffer::create(device, m.normals.size() * 12, gpu::BufferUsage::kVertex,
-                                           name + ".normals"));
+                                           name + ".normals", r->device_counter()));
         HS_ASSIGN_OR_RETURN(
             b.indices, gpu::Buffer::create(device, m.indices.size() * 4, gpu::BufferUsage::kIndex,
-                                           name + ".indices"));
-        HS_ASSIGN_OR_RETURN(b.tangents,
-                            gpu::Buffer::create(device, m.tangents.size() * 12,
-                                                gpu::BufferUsage::kVertex, name + ".tangents"));
-        HS_ASSIGN_OR_RETURN(b.uvs, gpu::Buffer::create(device, m.uvs.size() * 8,
-                                                       gpu::BufferUsage::kVertex, name + ".uvs"));
+                                           name + ".indices", r->device_counter()));
+        HS_ASSIGN_OR_RETURN(
+            b.tangents,
+            gpu::Buffer::create(device, m.tangents.size() * 12, gpu::BufferUsage::kVertex,
+                                name + ".tangents", r->device_counter()));
+        HS_ASSIGN_OR_RETURN(b.uvs,
+                            gpu::Buffer::create(device, m.uvs.size() * 8, gpu::BufferUsage::kVertex,
+                                                name + ".uvs", r->device_counter()));
         b.positions.write(m.positions.data(), m.positions.size() * 12);
         b.normals.write(m.normals.data(), m.normals.size() * 12);
         b.tangents.write(m.tangents.data(), m.tangents.size() * 12);
@@ -134,8 +147,9 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     }
     const ImageRgba8 white{1, 1, {255, 255, 255, 255}};
     const ImageRgba8& tex = scene.material.albedo_texture ? *scene.material.albedo_texture : white;
-    HS_ASSIGN_OR_RETURN(r->albedo_texture_,
-                        gpu::Texture::create(device, tex, "material.albedo_texture"));
+    HS_ASSIGN_OR_RETURN(
+        r->albedo_texture_,
+        gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
                          : device.is_cpu()          ? 0
@@ -143,6 +157,11 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     if (planners > 0)
         r->planners_ = std::make_unique<WorkerPool>(unsigned(planners));
     return r;
+}
+
+Renderer::~Renderer() {
+    if (version_charge_.active())
+        ++info_.ledger->versions_freed;
 }
 
 namespace {
@@ -231,8 +250,9 @@ Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Varia
     ++pipelines_built_;
     HS_ASSIGN_OR_RETURN(v.scene_block,
                         gpu::Buffer::create(device_, sizeof(block), gpu::BufferUsage::kUniform,
-                                            pi.name + ".scene"));
+                                            pi.name + ".scene", device_counter()));
     v.scene_block.write(&block, sizeof(block));
+    v.counted = MemoryCharge(info_.ledger ? &info_.ledger->pipelines : nullptr, 0);
     v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
     return &it->second;
@@ -309,7 +329,7 @@ Result<gpu::RenderTarget*> Renderer::target(uint32_t w, uint32_t h, uint32_t slo
     HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(device_, w, h, format,
                                                           fmt::format("target.{}x{}.{}.{}", w, h,
                                                                       slot, gpu::to_string(format)),
-                                                          uses_depth()));
+                                                          uses_depth(), device_counter()));
     auto [it, inserted] = targets_.emplace(key, std::move(t));
     return &it->second;
 }
@@ -479,7 +499,7 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::render_layers(
             HS_ASSIGN_OR_RETURN(
                 index_scratch_[i],
                 gpu::Buffer::create(device_, layer_index_bytes(), gpu::BufferUsage::kIndex,
-                                    fmt::format("layer.indices.{}", i)));
+                                    fmt::format("layer.indices.{}", i), device_counter()));
         }
         own[i].indices = &index_scratch_[i];
     }

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/image.hpp"
+#include "core/memory_ledger.hpp"
 #include "core/worker_pool.hpp"
 #include "gpu/commands.hpp"
 #include "gpu/device.hpp"
@@ -52,6 +53,10 @@ struct RendererCreateInfo {
     // cores rasterise), min(cores, 8) - 1 on a GPU (where planning bounds the served path,
     // README "On a GPU"); 0 or more: this many.
     int planning_threads = -1;
+    // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
+    // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
+    // outlive the renderer.
+    SceneLedger* ledger = nullptr;
 };
 
 // Whether the scene's material emits (any channel of its emission above 0).
@@ -85,6 +90,9 @@ class Renderer {
 public:
     static Result<std::unique_ptr<Renderer>> create(gpu::Device& device, const scene::Scene& scene,
                                                     const RendererCreateInfo& info);
+    ~Renderer();
+    Renderer(const Renderer&) = delete;
+    Renderer& operator=(const Renderer&) = delete;
 
     // The projector frame: per projector pixel, the diffuse radiance sum_i L_d of the prop
     // point it lights (VI). Counted in projector_render_count(). `index` picks the scene's
@@ -211,6 +219,7 @@ private:
         gpu::GraphicsPipeline pipeline;
         gpu::Buffer scene_block;
         std::vector<std::string> effects;
+        MemoryCharge counted;  // on the ledger's pipelines
     };
     Renderer(gpu::Device& device, const scene::Scene& scene, const RendererCreateInfo& info)
         : device_(device), scene_(scene), info_(info) {}
@@ -291,6 +300,10 @@ private:
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
+    // Device memory is charged here (info_.ledger's, or null).
+    MemoryCounter* device_counter() const { return info_.ledger ? &info_.ledger->device : nullptr; }
+    MemoryCharge version_charge_;  // one scene version alive
+    MemoryCharge cpu_charge_;      // levels_' meshes and clusters
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
     uint32_t light_variants_ = 0;  // VD pipelines compiled for a set of lights

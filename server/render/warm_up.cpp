@@ -69,10 +69,10 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     std::map<int, gpu::RenderTarget> tiny;
     for (const Use& u : uses)
         if (!tiny.count(int(u.format))) {
-            HS_ASSIGN_OR_RETURN(
-                auto t, gpu::RenderTarget::create(
-                            device_, 8, 8, u.format,
-                            fmt::format("warm_up.{}", gpu::to_string(u.format)), uses_depth()));
+            HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(
+                                            device_, 8, 8, u.format,
+                                            fmt::format("warm_up.{}", gpu::to_string(u.format)),
+                                            uses_depth(), device_counter()));
             tiny.emplace(int(u.format), std::move(t));
         }
     const scene::Intrinsics tiny_k = scene::intrinsics_from_fov(8, 8, 1.0, 1.0);
@@ -109,7 +109,7 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
                     HS_ASSIGN_OR_RETURN(
                         auto t, gpu::RenderTarget::create(device_, k.width, k.height,
                                                           layer_target_format(e), "warm_up.layer",
-                                                          uses_depth()));
+                                                          uses_depth(), device_counter()));
                     targets.push_back(std::move(t));
                     LayerRequest r;
                     r.spec = spec;

@@ -19,7 +19,11 @@ void Server::Impl::render_loop() {
         li.large_display_pixels = limits.large_display_pixels;
         li.submissions_in_flight = std::clamp<uint32_t>(limits.submissions_in_flight, 1, 16);
         li.pipeline_cache_file = info.pipeline_cache_file;
-        loop::FrameLoop(li, scheduler, inbox, *this).run(initial_scene, initial_version);
+        li.renderer.ledger = ledger.get();
+        // The loop holds the initial scene from here on, and only while it is served.
+        scene::Scene initial = std::move(initial_scene);
+        initial_scene = {};
+        loop::FrameLoop(li, scheduler, inbox, *this).run(std::move(initial), initial_version);
     } catch (const std::exception& e) {
         log::error("render: {}; stopping", e.what());
         asio::post(io, [this] { io.stop(); });
@@ -74,6 +78,13 @@ void Server::Impl::on_job_dropped(uint32_t viewer, const std::string& why) {
 
 namespace {
 
+// `bytes` counted on the ledger's CPU counter until their last holder (a session's send queue,
+// a watcher's snapshot) lets go of them.
+Bytes charged(std::vector<uint8_t>&& bytes, const std::shared_ptr<SceneLedger>& ledger) {
+    const auto n = int64_t(bytes.capacity());
+    return make_charged(std::move(bytes), &ledger->cpu, n, ledger);
+}
+
 // One projector's frame of a scene version on the wire (nullopt: it does not encode).
 std::optional<std::vector<uint8_t>> projector_frame_wire(uint32_t width, uint32_t height,
                                                          uint32_t version,
@@ -95,7 +106,7 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
     for (auto& more : v.more_projectors)
         if (auto b =
                 projector_frame_wire(more.width, more.height, v.version, std::move(more.rgba8)))
-            named[more.name] = std::make_shared<const std::vector<uint8_t>>(std::move(*b));
+            named[more.name] = charged(std::move(*b), ledger);
     {
         std::lock_guard lock(figures_mutex);
         Figures& f = figures;
@@ -110,7 +121,7 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
     for (const auto& [id, why] : v.unserved) answer(id, proto::ErrorCode::kInvalidDisplay, why, 0);
     if (!bytes)
         return;
-    Bytes frame = std::make_shared<const std::vector<uint8_t>>(std::move(*bytes));
+    Bytes frame = charged(std::move(*bytes), ledger);
     projector_frame = frame;
     named_projector_frames = std::move(named);
     {

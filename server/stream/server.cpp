@@ -15,6 +15,7 @@
 #include "gpu/pipeline_cache.hpp"
 #include "protocol/schema.hpp"
 #include "scene/config.hpp"
+#include "scene/memory.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
 
@@ -80,6 +81,7 @@ Result<std::unique_ptr<Server>> Server::create(gpu::Device& device, const scene:
     if (!checked)
         return checked.error();
     impl->initial_scene = scene;
+    scene::charge_shared_data(impl->initial_scene, &impl->ledger->cpu);
     impl->initial_version = std::max<uint32_t>(1, info.initial_scene_version);
     impl->figures.scene_version = impl->initial_version;
     impl->bus_version = impl->initial_version;
@@ -383,6 +385,8 @@ Result<scene::Scene> Server::Impl::accept_scene(const scene::Scene& s) const {
 
 void Server::Impl::queue_scene(scene::Scene s, uint32_t session, uint32_t sequence,
                                uint32_t version) {
+    // Its meshes and images count as scene memory while any copy of it is held.
+    scene::charge_shared_data(s, &ledger->cpu);
     auto replaced = inbox.put_scene({std::move(s), session, sequence, version});
     if (replaced && replaced->session != 0)
         asio::post(io, [this, id = replaced->session, seq = replaced->sequence] {

@@ -127,12 +127,16 @@ struct Figures {
 struct Server::Impl final : loop::FrameLoopHost {
     // Set once in create(), before run(); read by any thread.
     gpu::Device& device;
+    // What the scene versions hold (docs/OPERATIONS.md, "Scene memory"); every thread charges
+    // it. First, so that it outlives every member holding a charge; shared with the encoded
+    // projector frames, which watchers may hold a moment longer.
+    std::shared_ptr<SceneLedger> ledger = std::make_shared<SceneLedger>();
     ServerCreateInfo info;
     const ServerLimits& limits;
     std::string driver_info;  // the device's driver, name and version
     uint16_t bound_port = 0;
     uint32_t encoder_threads = 1;
-    scene::Scene initial_scene;  // handed to the render thread when it starts
+    scene::Scene initial_scene;  // handed to the render thread when it starts (then empty)
     uint32_t initial_version = 1;
 
     // Hand-offs between threads (each locks itself).

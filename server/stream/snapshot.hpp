@@ -138,6 +138,14 @@ struct ServerSnapshot {
     uint64_t receive_buffer_bytes = 0, pooled_layer_bytes = 0;
     uint64_t latest_layer_bytes = 0;  // the layers kept for watchers (ViewerSnapshot::layers)
     uint64_t reserved_target_bytes = 0, target_budget_bytes = 0, send_queue_max_session = 0;
+    // What the scene versions hold (SceneLedger): CPU scene data and device memory (bytes,
+    // now and the most at once), the versions alive (now and the most at once), the device
+    // allocations behind them, and the versions built and freed since start.
+    struct SceneMemory {
+        int64_t cpu_bytes = 0, device_bytes = 0, cpu_bytes_peak = 0, device_bytes_peak = 0;
+        int64_t versions_held = 0, versions_held_peak = 0, device_allocations = 0, pipelines = 0;
+        uint64_t versions_built = 0, versions_freed = 0;
+    } scene_memory;
     std::string device, driver;  // the Vulkan device and its driver
     // The render thread's time from taking a batch to the end of its turn, since start (ns).
     uint64_t render_busy_ns = 0;

@@ -282,7 +282,9 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
           "hysar_viewer_send_rate_bytes_per_second", "hysar_viewer_superseded_poses_total",
           "hysar_stage_seconds", "hysar_sessions", "hysar_refusals_total", "hysar_gpu_info",
           "hysar_memory_bytes", "hysar_viewer_bit_rate_mbps", "hysar_viewer_bit_rate_budget_mbps",
-          "hysar_viewer_layer_quality", "hysar_viewer_rate_limited_hertz"})
+          "hysar_viewer_layer_quality", "hysar_viewer_rate_limited_hertz", "hysar_scene_bytes",
+          "hysar_scene_versions_held", "hysar_scene_versions_freed_total", "hysar_scene_pipelines",
+          "hysar_scene_device_allocations"})
         EXPECT_TRUE(before.types.count(family)) << family;
     EXPECT_EQ(before.get("hysar_vd_layers_total"), 0.0);
     EXPECT_EQ(before.get("hysar_gpu_info", {{"device", device().name()},
@@ -335,6 +337,11 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     EXPECT_GE(after.get("hysar_viewer_bit_rate_mbps", {{"viewer", id}}), 0.0);
     EXPECT_EQ(after.get("hysar_viewer_bit_rate_budget_mbps", {{"viewer", id}}), 0.0);
     EXPECT_EQ(after.get("hysar_viewer_rate_limited_hertz", {{"viewer", id}}), 0.0);
+    // The served scene version, as the server counts its memory (frames were rendered with it).
+    EXPECT_EQ(after.get("hysar_scene_versions_held"), 1.0);
+    EXPECT_GT(after.get("hysar_scene_bytes", {{"kind", "device"}}), 0.0);
+    EXPECT_GT(after.get("hysar_scene_bytes", {{"kind", "cpu"}}), 0.0);
+    EXPECT_GT(after.get("hysar_scene_pipelines"), 0.0);
 
     auto api = get("/api/viewers");
     ASSERT_TRUE(api && api->status == 200);

@@ -342,6 +342,110 @@ TEST_F(ServerTest, AdminSceneUpdateRerendersTheProjectorOnce) {
     EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 2u);
 }
 
+// Scene memory has an owner and an end (docs/OPERATIONS.md, "Scene memory"): each scene
+// version's renderer (meshes, buffers, textures, pipelines) and projector frame is freed once
+// the next version replaced it, so the scene memory the server counts is back at what it held
+// after the first version, and only the version being built ever stands beside the served one.
+class SceneMemoryTest : public ServerTest {
+protected:
+    // A small projector and a coarse dome, so that 150 versions build quickly.
+    static void shrink(nlohmann::json& j) {
+        j["projector"]["width"] = 160;
+        j["projector"]["height"] = 100;
+        j["projector"]["fx"] = 250.0;
+        j["projector"]["fy"] = 250.0;
+        j["projector"]["cx"] = 79.5;
+        j["projector"]["cy"] = 49.5;
+        j["prop"]["segments"] = 48;
+        j["prop"]["rings"] = 12;
+    }
+    static std::string scene_json(std::array<double, 3> albedo) {
+        auto j = nlohmann::json::parse(scene::default_scene_json());
+        shrink(j);
+        j["material"]["albedo"] = albedo;
+        return j.dump();
+    }
+    scene::Scene make_scene() override {
+        auto s = scene::parse_scene(scene_json({0.8, 0.8, 0.8}), "test", {}, {});
+        EXPECT_TRUE(s.ok()) << s.error().message;
+        return std::move(s).value();
+    }
+    nlohmann::json scene_memory() { return server_->stats()["scene_memory"]; }
+    // Without the warm-up (each version's pipelines are compiled at its first use instead),
+    // a version builds in a fraction of the time on lavapipe.
+    void SetUp() override {
+        setenv("HYSAR_WARM_UP", "0", 1);
+        ServerTest::SetUp();
+    }
+    void TearDown() override {
+        ServerTest::TearDown();
+        unsetenv("HYSAR_WARM_UP");
+    }
+};
+
+TEST_F(SceneMemoryTest, OneHundredFiftyUpdatesEndWhereTheFirstVersionWas) {
+    auto proj = connect();
+    ASSERT_FALSE(proj->hello(proto::Role::kProjector, kToken, "projector"));
+    auto first = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(first);
+    auto hmd = headset(small_display(), "hmd");
+    uint64_t t = 1;
+    auto served = [&] {
+        ++t;
+        return hmd->send(pose_at(10, t)) && hmd->send(proto::FrameRequest{}) &&
+               frame_for(*hmd, t).size() == 2;
+    };
+    ASSERT_TRUE(served());
+    const auto base = scene_memory();
+    ASSERT_EQ(base["versions_held"].get<int64_t>(), 1) << base.dump();
+    ASSERT_GT(base["device_bytes"].get<int64_t>(), 0) << base.dump();
+    ASSERT_GT(base["cpu_bytes"].get<int64_t>(), 0) << base.dump();
+    ASSERT_GT(base["pipelines"].get<int64_t>(), 0) << base.dump();
+
+    auto admin = connect();
+    ASSERT_FALSE(admin->hello(proto::Role::kAdmin, kAdminToken, "admin"));
+    const std::string scenes[2] = {scene_json({0.2, 0.6, 0.9}), scene_json({0.9, 0.5, 0.1})};
+    constexpr int kUpdates = 150;
+    const auto t0 = std::chrono::steady_clock::now();
+    int64_t most_held = 0, most_device = 0, most_cpu = 0;
+    for (int i = 1; i <= kUpdates; ++i) {
+        ASSERT_TRUE(admin->send(proto::SceneUpdate{scenes[i % 2]}, uint32_t(i)));
+        // Applied once its projector frame arrives; by then the old version is gone.
+        std::optional<proto::ProjectorFrame> f;
+        do f = receive_a<proto::ProjectorFrame>(*proj, 60000);
+        while (f && f->scene_version < first->scene_version + uint32_t(i));
+        ASSERT_TRUE(f) << "update " << i << " was not applied";
+        const auto m = scene_memory();
+        most_held = std::max(most_held, m["versions_held"].get<int64_t>());
+        most_device = std::max(most_device, m["device_bytes"].get<int64_t>());
+        most_cpu = std::max(most_cpu, m["cpu_bytes"].get<int64_t>());
+        ASSERT_LE(m["versions_held"].get<int64_t>(), 2) << "after update " << i << ": " << m.dump();
+        if (i % 25 == 0) {
+            ASSERT_TRUE(served()) << "after update " << i;
+        }
+    }
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_TRUE(served()) << "no healthy headset after the updates";
+    const auto end = scene_memory();
+    std::printf("[scene memory] %d updates in %.1f s; first version %s; after %s\n", kUpdates, s,
+                base.dump().c_str(), end.dump().c_str());
+    // Every old version was built and freed: one left, the one served.
+    EXPECT_EQ(end["versions_built"].get<uint64_t>(),
+              base["versions_built"].get<uint64_t>() + kUpdates);
+    EXPECT_EQ(end["versions_freed"].get<uint64_t>(),
+              base["versions_freed"].get<uint64_t>() + kUpdates);
+    EXPECT_EQ(end["versions_held"].get<int64_t>(), 1) << end.dump();
+    // While a version was built the old one was still held (the count went up), never more.
+    EXPECT_EQ(end["versions_held_peak"].get<int64_t>(), 2) << end.dump();
+    // The same scene's sizes: what the server holds is back at the first version's.
+    for (const char* k : {"cpu_bytes", "device_bytes", "device_allocations", "pipelines"})
+        EXPECT_EQ(end[k].get<int64_t>(), base[k].get<int64_t>()) << k << ": " << end.dump();
+    EXPECT_LE(most_device, base["device_bytes"].get<int64_t>()) << end.dump();
+    EXPECT_LE(most_cpu, base["cpu_bytes"].get<int64_t>()) << end.dump();
+    EXPECT_LE(end["device_bytes_peak"].get<int64_t>(), 2 * base["device_bytes"].get<int64_t>())
+        << end.dump();
+}
+
 TEST_F(ServerTest, StalledClientDoesNotSlowOthersOrGrowMemory) {
     // A continuous-mode headset that sends poses and never reads.
     auto stalled = headset(

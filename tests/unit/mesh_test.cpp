@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "scene/memory.hpp"
 #include "scene/mesh.hpp"
 
 using namespace hs;
@@ -216,4 +217,49 @@ TEST(Mesh, PointLightsNearAMeshPropAreRefused) {
     EXPECT_TRUE(check_point_lights(s).ok());
     s.lights[0].position = {5, 5, 5};  // outside the box: no triangle searched
     EXPECT_TRUE(check_point_lights(s).ok());
+}
+
+// A scene's shared parts are counted once, however many copies share them, and stop counting
+// when the last copy is gone (the server's scene memory, docs/OPERATIONS.md).
+TEST(SceneMemory, SharedPartsCountOnceUntilTheLastCopyGoes) {
+    MemoryCounter counter;
+    {
+        Scene s;
+        s.material.albedo_texture = std::make_shared<const ImageRgba8>(
+            ImageRgba8{64, 32, std::vector<uint8_t>(64 * 32 * 4, 200)});
+        auto mesh = std::make_shared<Mesh>();
+        mesh->positions.resize(100);
+        mesh->indices.resize(300);
+        s.prop.gltf_mesh = mesh;
+        const uint64_t bytes = shared_data_bytes(s);
+        EXPECT_EQ(bytes, 64u * 32 * 4 + 100 * sizeof(glm::vec3) + 300 * sizeof(uint32_t));
+        charge_shared_data(s, &counter);
+        EXPECT_EQ(counter.bytes(), int64_t(bytes));
+        EXPECT_EQ(counter.holders(), 2);
+        Scene copy = s;
+        EXPECT_EQ(counter.bytes(), int64_t(bytes));  // shared, not counted again
+        s = Scene{};
+        EXPECT_EQ(counter.bytes(), int64_t(bytes));  // the copy still holds them
+        EXPECT_EQ(copy.material.albedo_texture->width, 64u);
+    }
+    EXPECT_EQ(counter.bytes(), 0);
+    EXPECT_EQ(counter.holders(), 0);
+    EXPECT_EQ(counter.peak_holders(), 2);
+}
+
+TEST(SceneMemory, ChargesFollowTheirOwner) {
+    MemoryCounter counter;
+    MemoryCharge a(&counter, 100);
+    {
+        auto shared = make_charged(std::vector<uint8_t>(10), &counter, 10);
+        auto other = shared;
+        EXPECT_EQ(counter.bytes(), 110);
+        MemoryCharge b = std::move(a);
+        b.set(40);
+        EXPECT_EQ(counter.bytes(), 50);
+        EXPECT_EQ(counter.holders(), 2);
+    }  // b and both pointers gone
+    EXPECT_EQ(counter.bytes(), 0);
+    EXPECT_EQ(counter.holders(), 0);
+    EXPECT_EQ(counter.peak_bytes(), 110);
 }
