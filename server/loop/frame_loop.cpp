@@ -217,7 +217,8 @@ void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projecto
     BlendTask* task = blend_.get();
     task->thread = std::thread([this, task, &mesh, projectors = std::move(projectors)] {
         const auto t0 = Clock::now();
-        task->blend = std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
+        task->blend =
+            std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
         task->ms = ms_since(t0);
         task->done.store(true, std::memory_order_release);
         scheduler_.wake();  // the render thread takes it on its next turn

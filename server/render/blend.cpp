@@ -178,50 +178,50 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
             in_band[size_t(band)].push_back(uint32_t(t));
     }
     parallel_rows(bands, [&](uint32_t band) {
-    const int band_y0 = int(band * kBandRows);
-    const int band_y1 = std::min(int(k.height), int((band + 1) * kBandRows)) - 1;
-    for (const uint32_t t : in_band[band]) {
-        const uint32_t i0 = mesh.indices[t], i1 = mesh.indices[t + 1], i2 = mesh.indices[t + 2];
-        const V a = verts[i0], b = verts[i1], c = verts[i2];
-        if (a.z <= 0 || b.z <= 0 || c.z <= 0)
-            continue;
-        const double area = (b.u - a.u) * (c.v - a.v) - (b.v - a.v) * (c.u - a.u);
-        if (std::abs(area) < 1e-12)
-            continue;
-        const int x0 = std::max(0, int(std::ceil(std::min({a.u, b.u, c.u}))));
-        const int x1 = std::min(int(k.width) - 1, int(std::floor(std::max({a.u, b.u, c.u}))));
-        const int y0 = std::max(band_y0, int(std::ceil(std::min({a.v, b.v, c.v}))));
-        const int y1 = std::min(band_y1, int(std::floor(std::max({a.v, b.v, c.v}))));
-        if (y0 > y1)
-            continue;
-        for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x) {
-                // Barycentric coordinates in the image, then perspective-correct weights.
-                const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
-                const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
-                const double w2 = 1.0 - w0 - w1;
-                // A little beyond the edge: no pixel falls between two triangles.
-                constexpr double kEdge = -1e-7;
-                if (w0 < kEdge || w1 < kEdge || w2 < kEdge)
-                    continue;
-                const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
-                const double inv_z = p0 + p1 + p2;
-                const double z = 1.0 / inv_z;
-                const size_t i = size_t(y) * k.width + x;
-                if (z >= view.depth[i])
-                    continue;
-                view.depth[i] = float(z);
-                const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
-                view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
-                                             q1 * glm::dvec3(mesh.positions[i1]) +
-                                             q2 * glm::dvec3(mesh.positions[i2]));
-                glm::dvec3 nn = q0 * glm::dvec3(mesh.normals[i0]) +
-                                q1 * glm::dvec3(mesh.normals[i1]) +
-                                q2 * glm::dvec3(mesh.normals[i2]);
-                const double len = glm::length(nn);
-                view.normal[i] = len > 1e-12 ? glm::vec3(nn / len) : glm::vec3(0.0f);
-            }
-    }
+        const int band_y0 = int(band * kBandRows);
+        const int band_y1 = std::min(int(k.height), int((band + 1) * kBandRows)) - 1;
+        for (const uint32_t t : in_band[band]) {
+            const uint32_t i0 = mesh.indices[t], i1 = mesh.indices[t + 1], i2 = mesh.indices[t + 2];
+            const V a = verts[i0], b = verts[i1], c = verts[i2];
+            if (a.z <= 0 || b.z <= 0 || c.z <= 0)
+                continue;
+            const double area = (b.u - a.u) * (c.v - a.v) - (b.v - a.v) * (c.u - a.u);
+            if (std::abs(area) < 1e-12)
+                continue;
+            const int x0 = std::max(0, int(std::ceil(std::min({a.u, b.u, c.u}))));
+            const int x1 = std::min(int(k.width) - 1, int(std::floor(std::max({a.u, b.u, c.u}))));
+            const int y0 = std::max(band_y0, int(std::ceil(std::min({a.v, b.v, c.v}))));
+            const int y1 = std::min(band_y1, int(std::floor(std::max({a.v, b.v, c.v}))));
+            if (y0 > y1)
+                continue;
+            for (int y = y0; y <= y1; ++y)
+                for (int x = x0; x <= x1; ++x) {
+                    // Barycentric coordinates in the image, then perspective-correct weights.
+                    const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
+                    const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
+                    const double w2 = 1.0 - w0 - w1;
+                    // A little beyond the edge: no pixel falls between two triangles.
+                    constexpr double kEdge = -1e-7;
+                    if (w0 < kEdge || w1 < kEdge || w2 < kEdge)
+                        continue;
+                    const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
+                    const double inv_z = p0 + p1 + p2;
+                    const double z = 1.0 / inv_z;
+                    const size_t i = size_t(y) * k.width + x;
+                    if (z >= view.depth[i])
+                        continue;
+                    view.depth[i] = float(z);
+                    const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
+                    view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
+                                                 q1 * glm::dvec3(mesh.positions[i1]) +
+                                                 q2 * glm::dvec3(mesh.positions[i2]));
+                    glm::dvec3 nn = q0 * glm::dvec3(mesh.normals[i0]) +
+                                    q1 * glm::dvec3(mesh.normals[i1]) +
+                                    q2 * glm::dvec3(mesh.normals[i2]);
+                    const double len = glm::length(nn);
+                    view.normal[i] = len > 1e-12 ? glm::vec3(nn / len) : glm::vec3(0.0f);
+                }
+        }
     });
     return view;
 }

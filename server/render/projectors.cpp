@@ -34,8 +34,8 @@ Result<ProjectorFrames> render_projector_frames(Renderer& renderer, const scene:
     if (out.frames.size() == 1)
         return out;
     const auto t0 = std::chrono::steady_clock::now();
-    auto blend = std::make_shared<const Blend>(
-        compute_blend(renderer.mesh(), scene.projectors(), options));
+    auto blend =
+        std::make_shared<const Blend>(compute_blend(renderer.mesh(), scene.projectors(), options));
     blend_projector_frames(
         out, std::move(blend),
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());

@@ -559,25 +559,25 @@ struct ProjectorClients {
     std::atomic<uint64_t> frames{0};
     ProjectorClients(const stream::LoopbackServer& server, const scene::Scene& scene) {
         for (const auto& p : scene.projectors())
-            threads.emplace_back([this, address = server.address(), token = server.token(),
-                                  name = p.name] {
-                auto c = client::Connection::open(address);
-                if (std::holds_alternative<std::string>(c))
-                    return;
-                auto& conn = *std::get<std::unique_ptr<client::Connection>>(c);
-                if (conn.hello(proto::Role::kProjector, token, name))
-                    return;
-                ++connected;
-                while (!stop.load()) {
-                    auto r = conn.receive(50);
-                    if (std::holds_alternative<std::string>(r))
+            threads.emplace_back(
+                [this, address = server.address(), token = server.token(), name = p.name] {
+                    auto c = client::Connection::open(address);
+                    if (std::holds_alternative<std::string>(c))
                         return;
-                    if (auto* m = std::get_if<proto::Message>(&r))
-                        frames += std::holds_alternative<proto::ProjectorFrame>(*m) ? 1 : 0;
-                }
-                conn.send(proto::Bye{0});
-                conn.close();
-            });
+                    auto& conn = *std::get<std::unique_ptr<client::Connection>>(c);
+                    if (conn.hello(proto::Role::kProjector, token, name))
+                        return;
+                    ++connected;
+                    while (!stop.load()) {
+                        auto r = conn.receive(50);
+                        if (std::holds_alternative<std::string>(r))
+                            return;
+                        if (auto* m = std::get_if<proto::Message>(&r))
+                            frames += std::holds_alternative<proto::ProjectorFrame>(*m) ? 1 : 0;
+                    }
+                    conn.send(proto::Bye{0});
+                    conn.close();
+                });
     }
     ~ProjectorClients() {
         stop = true;

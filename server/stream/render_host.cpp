@@ -150,8 +150,8 @@ void Server::Impl::on_projectors_reblended(loop::FrameLoopHost::Reblend r) {
     else
         log::info("projectors re-blended without {} ({:.0f} ms)", fmt::join(r.excluded, ", "),
                   r.blend_ms);
-    reblended_projector_frames = r.excluded.empty() ? std::map<std::string, Bytes>{}
-                                                    : std::move(frames);
+    reblended_projector_frames =
+        r.excluded.empty() ? std::map<std::string, Bytes>{} : std::move(frames);
     {
         std::lock_guard lock(figures_mutex);
         figures.projectors_excluded = {r.excluded.begin(), r.excluded.end()};

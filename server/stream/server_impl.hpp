@@ -164,9 +164,8 @@ struct Server::Impl final : loop::FrameLoopHost {
     const Bytes& projector_frame_for(const std::string& name) const {
         if (!reblended_projector_frames.empty()) {
             auto it = reblended_projector_frames.find(name);
-            const bool listed =
-                std::find(projector_names.begin(), projector_names.end(), name) !=
-                projector_names.end();
+            const bool listed = std::find(projector_names.begin(), projector_names.end(), name) !=
+                                projector_names.end();
             if (it == reblended_projector_frames.end() && !listed && !projector_names.empty())
                 it = reblended_projector_frames.find(projector_names.front());
             if (it != reblended_projector_frames.end())

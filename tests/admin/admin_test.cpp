@@ -324,8 +324,7 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
         after.get("hysar_viewer_pose_to_layer_seconds", {{"viewer", id}, {"quantile", "0.5"}}));
     EXPECT_GE(after.get("hysar_vd_layers_total"), 6.0);
     // No projector client: the scene's projector is reported missing.
-    EXPECT_EQ(after.get("hysar_projector_connected", {{"name", test_scene().projector.name}}),
-              0.0);
+    EXPECT_EQ(after.get("hysar_projector_connected", {{"name", test_scene().projector.name}}), 0.0);
     EXPECT_GE(after.get("hysar_stage_seconds_count", {{"stage", "encode"}}), 6.0);
     EXPECT_GT(after.get("hysar_stage_seconds_sum", {{"stage", "pass"}}), 0.0);
     EXPECT_EQ(after.get("hysar_sessions", {{"role", "headset"}}), 1.0);

@@ -303,8 +303,8 @@ TEST_F(FullResolutionProjectors, DISABLED_HeadsetGapAtASceneChange) {
         ASSERT_TRUE(hmd->send(proto::FrameRequest{}));
         ASSERT_EQ(frame_for(*hmd, t).size(), 2u);
         const auto now = C::now();
-        longest_ms = std::max(
-            longest_ms, std::chrono::duration<double, std::milli>(now - last).count());
+        longest_ms =
+            std::max(longest_ms, std::chrono::duration<double, std::milli>(now - last).count());
         last = now;
         const double at = std::chrono::duration<double, std::milli>(now - start).count();
         if (!sent && at > 2000) {
