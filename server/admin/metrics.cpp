@@ -219,6 +219,19 @@ void frame_families(Writer& w, const stream::ServerSnapshot& s) {
     w.family("hysar_projector_renders_total", "counter",
              "Projector frames rendered (one per scene version).");
     w.sample("hysar_projector_renders_total", "", s.projector_renders);
+    w.family("hysar_projector_connected", "gauge",
+             "1 while the scene's projector has a projector client connected, else 0.");
+    for (const auto& p : s.projectors)
+        w.sample("hysar_projector_connected", fmt::format("name=\"{}\"", escape_label(p.name)),
+                 uint64_t(p.connected ? 1 : 0));
+    w.family("hysar_projector_blended", "gauge",
+             "1 while the frames sent blend the projector in, 0 while a re-blend leaves it out.");
+    for (const auto& p : s.projectors)
+        w.sample("hysar_projector_blended", fmt::format("name=\"{}\"", escape_label(p.name)),
+                 uint64_t(p.blended ? 1 : 0));
+    w.family("hysar_projector_reblends_total", "counter",
+             "Re-blends published for missing or returning projectors (--reblend-missing).");
+    w.sample("hysar_projector_reblends_total", "", s.projector_reblends);
     w.family("hysar_scene_version", "gauge", "The scene version being served.");
     w.sample("hysar_scene_version", "", uint64_t(s.scene_version));
 }
@@ -342,6 +355,16 @@ nlohmann::json viewers_json(const stream::ServerSnapshot& s,
             {"projector",
              {{"scene_version", s.scene_version},
               {"renders", s.projector_renders},
+              {"projectors",
+               [&] {
+                   nlohmann::json list = nlohmann::json::array();
+                   for (const auto& p : s.projectors)
+                       list.push_back({{"name", p.name},
+                                       {"connected", p.connected},
+                                       {"clients", p.clients},
+                                       {"blended", p.blended}});
+                   return list;
+               }()},
               {"frame_sequence", s.projector_frame ? s.projector_frame_sequence : 0}}},
             {"sessions",
              {{"projector", s.sessions_projector},

@@ -69,6 +69,10 @@ const char* kServeHelp =
     "                           connect with --tls-ca or --tls-fingerprint (the start-up line\n"
     "                           prints it); the Unix socket stays plain (docs/OPERATIONS.md)\n"
     "  --tls-key FILE           its PEM private key (mode 600 or 640)\n"
+    "  --reblend-missing        with several projectors: while one has no projector client,\n"
+    "                           blend the others again without it so that they cover what\n"
+    "                           they can; back to the full blend when it returns (off: the\n"
+    "                           frames stay blended over all of them; docs/OPERATIONS.md)\n"
     "  --agent-port PORT        answer HAProxy's agent-check on this port of the --listen host:\n"
     "                           'ready up NN%' from the render load, 'drain', 'down' (hysar\n"
     "                           cluster config; docs/CLUSTER.md)\n"
@@ -356,6 +360,7 @@ std::optional<int> read_network(const Flags& f, ServeSetup& s) {
 // How the server renders and encodes: --tile-codec, the thread counts, --compensation.
 std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
     stream::ServerCreateInfo& info = s.info;
+    info.reblend_missing = f.has("--reblend-missing");
     if (f.has("--tile-codec")) {
         const std::string c = f.get("--tile-codec", "");
         if (c == "lz4")
@@ -795,7 +800,7 @@ int run_serve(const std::vector<std::string>& args) {
         std::fputs(kServeHelp, stdout);
         return 0;
     }
-    auto parsed = parse_flags(args, kServeFlags);
+    auto parsed = parse_flags(args, kServeFlags, {"--reblend-missing"});
     if (!parsed) {
         std::fprintf(stderr, "hysar serve: %s\n\n%s", parsed.error().message.c_str(), kServeHelp);
         return 2;

@@ -9,8 +9,10 @@
 #endif
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "codec/pixels.hpp"
+#include "core/check.hpp"
 #include "core/log.hpp"
 #include "render/projectors.hpp"
 #include "render/warm_up.hpp"
@@ -61,11 +63,27 @@ std::vector<uint32_t> LoopInbox::take_released() {
     return std::exchange(released_, {});
 }
 
+void LoopInbox::set_missing_projectors(std::set<std::string> names) {
+    std::lock_guard lock(mutex_);
+    missing_projectors_ = std::move(names);
+}
+
+std::set<std::string> LoopInbox::missing_projectors() {
+    std::lock_guard lock(mutex_);
+    return missing_projectors_;
+}
+
+FrameLoop::BlendTask::~BlendTask() {
+    if (thread.joinable())
+        thread.join();
+}
+
 FrameLoop::FrameLoop(const FrameLoopInfo& info, Scheduler& scheduler, LoopInbox& inbox,
                      FrameLoopHost& host)
     : info_(info), device_(*info.device), scheduler_(scheduler), inbox_(inbox), host_(host) {}
 
 FrameLoop::~FrameLoop() {
+    blend_.reset();  // waits for a blend still being computed
     if (ring_)
         (void)ring_->wait_idle();
     sink_.reset();  // encodes what is queued and joins
@@ -79,7 +97,14 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
         throw std::runtime_error(ring.error().message);
     ring_ = std::move(ring).value();
     sink_ = host_.make_sink(*ring_);
-    if (!rebuild(initial, version)) {
+    if (info_.reblend_missing && info_.calibration)
+        log::warn(
+            "--reblend-missing: not with a calibration (it covers the first projector only); "
+            "the projectors stay blended over all of them");
+    // The initial version is built before anything is served: its blend is waited for.
+    const bool built = start_build({initial, 0, 0, version}, version) &&
+                       (!build_ || (blend_ = take_blend(true), finish_build()));
+    if (!built) {
         log::error("render: the initial scene cannot be rendered; stopping");
         host_.cannot_serve();
         return;
@@ -109,15 +134,37 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
                 std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - from).count()));
         }
     } busy_time{host_};
-    if (auto next = inbox_.take_scene()) {
-        const uint32_t v = next->version ? next->version : version + 1;
-        if (rebuild(next->scene, v)) {
-            version = v;
-            log::info("scene version {}: '{}'", version, current_.name);
-            drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
+    // A blend computed on its thread: a scene version to apply, or a re-blend to publish.
+    if (auto done = take_blend(false)) {
+        if (build_) {
+            blend_ = std::move(done);
+            const uint32_t v = build_->version;
+            const PendingScene request = build_->request;
+            if (finish_build()) {
+                version = v;
+                log::info("scene version {}: '{}'", version, current_.name);
+                drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
+            } else {
+                host_.scene_failed(request);
+            }
         } else {
-            host_.scene_failed(*next);
+            publish_reblend(*done->blend, done->excluded, done->ms);
         }
+    }
+    if (!blend_) {
+        if (auto next = inbox_.take_scene()) {
+            const uint32_t v = next->version ? next->version : version + 1;
+            const PendingScene request = *next;
+            if (!start_build(std::move(*next), v)) {
+                host_.scene_failed(request);
+            } else if (!build_) {  // built at once: no blend to wait for
+                version = v;
+                log::info("scene version {}: '{}'", version, current_.name);
+                drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
+            }
+        }
+        if (!blend_)
+            reblend_if_needed();
     }
     std::vector<ViewerJob> small;
     sort_batch(batch, free_released(), small);
@@ -156,18 +203,73 @@ void FrameLoop::sort_batch(std::vector<ViewerJob>& batch, const std::set<uint32_
     batch.clear();
 }
 
-bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
+bool FrameLoop::start_build(PendingScene request, uint32_t version) {
     const auto t0 = Clock::now();
-    auto r = render::Renderer::create(device_, next, info_.renderer);
+    auto r = render::Renderer::create(device_, request.scene, info_.renderer);
     if (!r) {
         log::error("render: cannot build the scene: {}", r.error().message);
         return false;
     }
     // Before the version is announced (its projector frame), so that its first headset pays
     // for no pipeline compilation.
-    render::warm_up_for_serving(**r, device_, !next.captured_material, info_.pipeline_cache_file);
+    render::warm_up_for_serving(**r, device_, !request.scene.captured_material,
+                                info_.pipeline_cache_file);
+    Build b{std::move(request), version, t0, std::move(r).value(), {}};
+    if (!b.request.scene.captured_material) {
+        auto frames = render::render_unblended_projector_frames(*b.renderer, b.request.scene);
+        if (!frames) {
+            log::error("render: projector pass failed: {}", frames.error().message);
+            return false;
+        }
+        b.frames = std::move(frames).value();
+    }
+    const bool blended = b.frames.frames.size() > 1;
+    build_ = std::move(b);
+    if (!blended)
+        return finish_build();
+    start_blend(build_->renderer->mesh(), build_->request.scene.projectors(), {});
+    return true;
+}
+
+void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projector> projectors,
+                            std::set<std::string> excluded) {
+    blend_ = std::make_unique<BlendTask>();
+    blend_->excluded = std::move(excluded);
+    BlendTask* task = blend_.get();
+    task->thread = std::thread([this, task, &mesh, projectors = std::move(projectors)] {
+        const auto t0 = Clock::now();
+        task->blend =
+            std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
+        task->ms = ms_since(t0);
+        task->done.store(true, std::memory_order_release);
+        scheduler_.wake();  // the render thread takes it on its next turn
+    });
+}
+
+std::unique_ptr<FrameLoop::BlendTask> FrameLoop::take_blend(bool wait) {
+    if (!blend_ || (!wait && !blend_->done.load(std::memory_order_acquire)))
+        return nullptr;
+    blend_->thread.join();
+    return std::move(blend_);
+}
+
+bool FrameLoop::finish_build() {
+    Build b = std::move(*build_);
+    build_.reset();
+    std::unique_ptr<BlendTask> task = std::move(blend_);
+    const scene::Scene& next = b.request.scene;
+    std::optional<render::ProjectorFrames> frames;
+    std::vector<ImageRgba32f> unweighted;
+    if (!next.captured_material) {
+        if (task) {
+            if (info_.reblend_missing && !info_.calibration)
+                for (const auto& f : b.frames.frames) unweighted.push_back(f.image);
+            render::blend_projector_frames(b.frames, task->blend, task->ms);
+        }
+        frames = std::move(b.frames);
+    }
     SceneVersion built;
-    auto layer_drive = projector_frame(*r.value(), next, built);
+    auto layer_drive = projector_frame(*b.renderer, next, std::move(frames), built);
     if (!layer_drive) {
         log::error("render: {}", layer_drive.error().message);
         return false;
@@ -178,7 +280,7 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     sink_->drain();
     source_.reset();
     const bool replaced = renderer_ != nullptr;
-    renderer_ = std::move(r).value();  // the old version's renderer is destroyed here
+    renderer_ = std::move(b.renderer);  // the old version's renderer is destroyed here
     current_ = next;
     MemoryCounter* cpu = info_.renderer.ledger ? &info_.renderer.ledger->cpu : nullptr;
     source_ = current_.captured_material ? captured_source(*current_.captured_material, cpu)
@@ -190,10 +292,15 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
         f->batch.reset();
     }
     sink_->set_layer_drive(std::move(layer_drive).value());  // drained: no frame in flight
-    built.version = version;
+    unweighted_ = std::move(unweighted);
+    full_blend_ = task ? task->blend : nullptr;
+    excluded_.clear();
+    version_ = b.version;
+    built.version = b.version;
     built.name = current_.name;
+    for (const auto& p : current_.projectors()) built.projector_names.push_back(p.name);
     built.unserved = scheduler_.set_served(ServedDisplays::of(current_, info_.calibration));
-    built.total_ms = ms_since(t0);
+    built.total_ms = ms_since(b.started);
     update_held_bytes();
     host_.scene_built(std::move(built));
     if (replaced)
@@ -201,8 +308,51 @@ bool FrameLoop::rebuild(const scene::Scene& next, uint32_t version) {
     return true;
 }
 
+void FrameLoop::reblend_if_needed() {
+    if (!info_.reblend_missing || info_.calibration || !full_blend_ || unweighted_.empty())
+        return;
+    const auto all = current_.projectors();
+    const std::set<std::string> missing = inbox_.missing_projectors();
+    std::set<std::string> excluded;
+    std::vector<scene::Projector> included;
+    for (const auto& p : all)
+        if (missing.count(p.name))
+            excluded.insert(p.name);
+        else
+            included.push_back(p);
+    // With none of them connected there is nobody to cover for: the full blend stays.
+    if (included.empty())
+        excluded.clear();
+    if (excluded == excluded_)
+        return;
+    if (excluded.empty())
+        return publish_reblend(*full_blend_, excluded, 0.0);
+    log::info("re-blending {} of the {} projectors without {}", included.size(), all.size(),
+              fmt::join(excluded, ", "));
+    start_blend(renderer_->mesh(), std::move(included), std::move(excluded));
+}
+
+void FrameLoop::publish_reblend(const render::Blend& blend, const std::set<std::string>& excluded,
+                                double ms) {
+    const auto all = current_.projectors();
+    FrameLoopHost::Reblend out;
+    out.version = version_;
+    out.excluded.assign(excluded.begin(), excluded.end());
+    out.blend_ms = ms;
+    for (size_t j = 0, b = 0; j < all.size(); ++j) {
+        if (excluded.count(all[j].name))
+            continue;
+        ImageRgba32f img = unweighted_[j];
+        render::apply_weights(img, blend.projectors[b++].weight);
+        out.frames.push_back({all[j].name, img.width, img.height, codec::srgb8_pixels(img)});
+    }
+    excluded_ = excluded;
+    host_.projectors_reblended(std::move(out));
+}
+
 Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
-    render::Renderer& r, const scene::Scene& next, SceneVersion& out) {
+    render::Renderer& r, const scene::Scene& next, std::optional<render::ProjectorFrames> frames,
+    SceneVersion& out) {
     ImageRgba32f frame;
     std::shared_ptr<const calib::LayerDrive> layer_drive;
     if (next.captured_material) {
@@ -211,10 +361,7 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
         frame = codec::drive_as_layer(*next.captured_material->projector_image);
         out.report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
     } else {
-        auto frames = render::render_projector_frames(r, next);
-        if (!frames)
-            return make_error(frames.error().code,
-                              "projector pass failed: " + frames.error().message);
+        HS_CHECK(frames.has_value(), "projector_frame: a rendered scene without its frames");
         frame = std::move(frames->frames.front().image);
         const render::PassReport& p = frames->frames.front().report;
         out.pass_ms = p.gpu_ms, out.readback_ms = p.readback_ms;

@@ -12,6 +12,7 @@
 // a value over and returns at once.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <deque>
 #include <filesystem>
@@ -21,6 +22,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -32,6 +34,7 @@
 #include "loop/frame_source.hpp"
 #include "loop/scheduler.hpp"
 #include "loop/viewer_frame.hpp"
+#include "render/projectors.hpp"
 #include "render/renderer.hpp"
 #include "scene/scene.hpp"
 
@@ -55,11 +58,16 @@ public:
     void release_viewer(uint32_t viewer);
     std::optional<PendingScene> take_scene();
     std::vector<uint32_t> take_released();
+    // The scene's projectors that no projector client serves now, by name (latest wins): what
+    // FrameLoopInfo::reblend_missing leaves out of the blend.
+    void set_missing_projectors(std::set<std::string> names);
+    std::set<std::string> missing_projectors();
 
 private:
     std::mutex mutex_;
     std::optional<PendingScene> scene_;
     std::vector<uint32_t> released_;
+    std::set<std::string> missing_projectors_;
 };
 
 // A scene version built and applied: its projector frame (sRGB8 codes, or drives when
@@ -81,6 +89,8 @@ struct SceneVersion {
         std::vector<uint8_t> rgba8;
     };
     std::vector<ProjectorFrame> more_projectors;
+    // Every projector's name, the scene's order (scene.projectors()).
+    std::vector<std::string> projector_names;
     // Registered viewers whose display this version cannot serve, with why (told once).
     std::vector<std::pair<uint32_t, std::string>> unserved;
 };
@@ -106,6 +116,16 @@ public:
     // The sink of this loop's frames, which waits on `ring` (alive until the sink is gone).
     virtual std::unique_ptr<FrameSink> make_sink(const gpu::SubmitRing& ring) = 0;
     virtual void scene_built(SceneVersion version) = 0;
+    // FrameLoopInfo::reblend_missing: the running version's projectors blended again without
+    // `excluded` (empty: over all of them again, the version's own blend), each included
+    // projector's frame (the first's too) as sRGB8 codes.
+    struct Reblend {
+        uint32_t version = 0;
+        std::vector<std::string> excluded;
+        std::vector<SceneVersion::ProjectorFrame> frames;
+        double blend_ms = 0;
+    };
+    virtual void projectors_reblended(Reblend reblend) = 0;
     // A queued scene could not be built; the running one stays.
     virtual void scene_failed(const PendingScene& scene) = 0;
     // A job taken from the scheduler that will not reach the sink: `why` empty, dropped
@@ -127,6 +147,10 @@ struct FrameLoopInfo {
     uint32_t submissions_in_flight = 3;        // command buffers; a further batch waits
     // Written after each scene version's warm-up (render/warm_up.hpp); empty: not saved.
     std::filesystem::path pipeline_cache_file;
+    // With several projectors, blend them again without those that have no projector client
+    // (LoopInbox::set_missing_projectors) so that the others cover what they can, and over all
+    // of them when they are back (`hysar serve --reblend-missing`). Not with a calibration.
+    bool reblend_missing = false;
 };
 
 class FrameLoop {
@@ -140,14 +164,50 @@ public:
     void run(scene::Scene initial, uint32_t version);
 
 private:
-    // One turn: the next scene if one waits, the viewers that left, a batch served.
+    // One turn: a finished blend, the next scene if one waits, the viewers that left, a batch
+    // served.
     void turn(std::vector<ViewerJob>& batch, uint32_t& version);
-    // Builds and applies a new scene version; false (logged) when it cannot be built.
-    bool rebuild(const scene::Scene& scene, uint32_t version);
-    // The projector frame of `scene` (drives when calibrated) into `out`; its layer drive.
-    Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(render::Renderer& renderer,
-                                                                     const scene::Scene& scene,
-                                                                     SceneVersion& out);
+
+    // A scene version is built in two steps so that its blend (several projectors: seconds of
+    // CPU at full resolution) runs on a thread of its own while the running version goes on
+    // being served: start_build renders the renderer's projector frames and starts the blend;
+    // finish_build, once the blend is done, weights the frames and applies the version. With
+    // one projector (or a captured material) there is no blend and start_build finishes at
+    // once. One blend at a time; a scene queued meanwhile waits in the inbox (latest wins).
+    struct Build {
+        PendingScene request;
+        uint32_t version = 0;
+        Clock::time_point started;
+        std::unique_ptr<render::Renderer> renderer;
+        render::ProjectorFrames frames;  // rendered; weighted in finish_build
+    };
+    // A blend being computed on its thread, of `projectors` over `mesh`; `excluded` names
+    // the scene's projectors left out (a re-blend of the running version).
+    struct BlendTask {
+        std::thread thread;
+        std::atomic<bool> done{false};
+        std::shared_ptr<const render::Blend> blend;
+        double ms = 0;
+        std::set<std::string> excluded;
+        ~BlendTask();
+    };
+    // Starts building `request` as `version`; false (logged) when it cannot be built.
+    bool start_build(PendingScene request, uint32_t version);
+    // Applies the build (its blend done, when it has one); false (logged) when it cannot.
+    bool finish_build();
+    void start_blend(const scene::Mesh& mesh, std::vector<scene::Projector> projectors,
+                     std::set<std::string> excluded);
+    // The blend task, done (waits for it); null when none runs.
+    std::unique_ptr<BlendTask> take_blend(bool wait);
+    // reblend_missing: starts (or applies at once) the blend the missing projectors call for.
+    void reblend_if_needed();
+    void publish_reblend(const render::Blend& blend, const std::set<std::string>& excluded,
+                         double ms);
+    // The projector frame of `scene` (drives when calibrated) into `out`, from its projector
+    // frames (weighted); its layer drive.
+    Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(
+        render::Renderer& renderer, const scene::Scene& scene,
+        std::optional<render::ProjectorFrames> frames, SceneVersion& out);
     // The projector frame as drives; the headset drive for the sink.
     Result<calib::SceneDrives> calibrate(render::Renderer& renderer, const scene::Scene& scene,
                                          const ImageRgba32f& frame);
@@ -179,6 +239,15 @@ private:
     std::map<uint32_t, std::shared_ptr<ViewerFrame>> frames_;
     std::deque<ViewerJob> large_;   // large displays waiting for a turn of their own
     std::vector<FrameSlot> slots_;  // reused per batch
+
+    std::optional<Build> build_;
+    std::unique_ptr<BlendTask> blend_;
+    // reblend_missing: the running version's projector frames as rendered (not weighted),
+    // its blend over all projectors, and the projectors its published frames leave out.
+    std::vector<ImageRgba32f> unweighted_;
+    std::shared_ptr<const render::Blend> full_blend_;
+    std::set<std::string> excluded_;
+    uint32_t version_ = 0;
 };
 
 }  // namespace hs::loop

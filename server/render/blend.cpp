@@ -8,6 +8,7 @@
 #include <glm/mat4x4.hpp>
 
 #include "core/check.hpp"
+#include "core/parallel.hpp"
 #include "scene/camera.hpp"
 
 namespace hs::render {
@@ -38,8 +39,22 @@ double edge_factor(const scene::Intrinsics& k, double rolloff, double u, double 
 void dilate(std::vector<float>& weight, const SurfaceView& view) {
     const uint32_t w = view.intrinsics.width, h = view.intrinsics.height;
     std::vector<float> next = weight;
-    for (uint32_t y = 0; y < h; ++y)
-        for (uint32_t x = 0; x < w; ++x) {
+    // Per row, the span of its prop pixels (lo > hi: none): a pixel with no prop pixel among
+    // its neighbours keeps its 0, so each row is visited only over its rows' spans.
+    std::vector<int> lo(h, int(w)), hi(h, -1);
+    parallel_rows(h, [&](uint32_t y) {
+        for (uint32_t x = 0; x < w; ++x)
+            if (view.covered(size_t(y) * w + x)) {
+                lo[y] = std::min(lo[y], int(x));
+                hi[y] = int(x);
+            }
+    });
+    parallel_rows(h, [&](uint32_t y) {
+        int from = int(w), to = -1;
+        for (uint32_t r = y > 0 ? y - 1 : 0; r <= std::min(y + 1, h - 1); ++r)
+            from = std::min(from, lo[r] - 1), to = std::max(to, hi[r] + 1);
+        from = std::max(from, 0), to = std::min(to, int(w) - 1);
+        for (uint32_t x = uint32_t(from); int(x) <= to; ++x) {
             const size_t i = size_t(y) * w + x;
             if (view.covered(i))
                 continue;
@@ -54,6 +69,7 @@ void dilate(std::vector<float>& weight, const SurfaceView& view) {
                 }
             next[i] = count ? float(sum / count) : 0.0f;
         }
+    });
     weight.swap(next);
 }
 
@@ -69,13 +85,14 @@ std::vector<float> outline_distance(const SurfaceView& view) {
         return !view.covered(b) || std::abs(view.depth[a] - view.depth[b]) >
                                        0.02f * std::min(view.depth[a], view.depth[b]);
     };
-    for (uint32_t y = 0; y < h; ++y)
+    parallel_rows(h, [&](uint32_t y) {
         for (uint32_t x = 0; x < w; ++x) {
             const size_t i = size_t(y) * w + x;
             if (!view.covered(i) || (x > 0 && step(i, i - 1)) || (x + 1 < w && step(i, i + 1)) ||
                 (y > 0 && step(i, i - w)) || (y + 1 < h && step(i, i + w)))
                 d[i] = 0.0f;
         }
+    });
     // Two chamfer passes (1, sqrt 2).
     const float diag = 1.41421356f;
     for (uint32_t y = 0; y < h; ++y)
@@ -108,7 +125,8 @@ std::vector<float> outline_distance(const SurfaceView& view) {
 }
 
 std::optional<glm::dvec3> SurfaceView::project(const glm::dvec3& world) const {
-    const glm::dvec3 q = glm::dvec3(scene::frame_from_world(pose) * glm::dvec4(world, 1.0));
+    const glm::dmat4 m = frame_from_world ? *frame_from_world : scene::frame_from_world(pose);
+    const glm::dvec3 q = glm::dvec3(m * glm::dvec4(world, 1.0));
     const double z = -q.z;
     if (!(z > 1e-9))
         return std::nullopt;
@@ -126,56 +144,85 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
     view.position.assign(n, glm::vec3(0.0f));
     view.normal.assign(n, glm::vec3(0.0f));
     const glm::dmat4 view_m = scene::frame_from_world(pose);
+    view.frame_from_world = view_m;
     // Per vertex: pixel position and view depth (nothing behind the camera is drawn).
     struct V {
         double u, v, z;
     };
     std::vector<V> verts(mesh.positions.size());
-    for (size_t i = 0; i < mesh.positions.size(); ++i) {
-        const glm::dvec3 q = glm::dvec3(view_m * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
-        const double z = -q.z;
-        verts[i] = z > 1e-6 ? V{k.fx * q.x / z + k.cx, k.cy - k.fy * q.y / z, z} : V{0, 0, -1};
-    }
+    constexpr uint32_t kVertexChunk = 4096;
+    parallel_rows(uint32_t((verts.size() + kVertexChunk - 1) / kVertexChunk), [&](uint32_t c) {
+        const size_t end = std::min(verts.size(), size_t(c + 1) * kVertexChunk);
+        for (size_t i = size_t(c) * kVertexChunk; i < end; ++i) {
+            const glm::dvec3 q =
+                glm::dvec3(view_m * glm::dvec4(glm::dvec3(mesh.positions[i]), 1.0));
+            const double z = -q.z;
+            verts[i] = z > 1e-6 ? V{k.fx * q.x / z + k.cx, k.cy - k.fy * q.y / z, z} : V{0, 0, -1};
+        }
+    });
+    // The frame in bands of rows, one band per task: each band draws every triangle in the
+    // mesh's order over its own rows, so that every pixel sees the same triangles in the same
+    // order as one pass over the whole frame would (the same depth test, the same bits).
+    // Each band's triangles (their first index), found in one pass in the mesh's order.
+    constexpr uint32_t kBandRows = 32;
+    const uint32_t bands = (k.height + kBandRows - 1) / kBandRows;
+    std::vector<std::vector<uint32_t>> in_band(bands);
     for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3) {
-        const uint32_t i0 = mesh.indices[t], i1 = mesh.indices[t + 1], i2 = mesh.indices[t + 2];
-        const V a = verts[i0], b = verts[i1], c = verts[i2];
+        const V a = verts[mesh.indices[t]], b = verts[mesh.indices[t + 1]],
+                c = verts[mesh.indices[t + 2]];
         if (a.z <= 0 || b.z <= 0 || c.z <= 0)
             continue;
-        const double area = (b.u - a.u) * (c.v - a.v) - (b.v - a.v) * (c.u - a.u);
-        if (std::abs(area) < 1e-12)
-            continue;
-        const int x0 = std::max(0, int(std::ceil(std::min({a.u, b.u, c.u}))));
-        const int x1 = std::min(int(k.width) - 1, int(std::floor(std::max({a.u, b.u, c.u}))));
         const int y0 = std::max(0, int(std::ceil(std::min({a.v, b.v, c.v}))));
         const int y1 = std::min(int(k.height) - 1, int(std::floor(std::max({a.v, b.v, c.v}))));
-        for (int y = y0; y <= y1; ++y)
-            for (int x = x0; x <= x1; ++x) {
-                // Barycentric coordinates in the image, then perspective-correct weights.
-                const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
-                const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
-                const double w2 = 1.0 - w0 - w1;
-                // A little beyond the edge: no pixel falls between two triangles.
-                constexpr double kEdge = -1e-7;
-                if (w0 < kEdge || w1 < kEdge || w2 < kEdge)
-                    continue;
-                const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
-                const double inv_z = p0 + p1 + p2;
-                const double z = 1.0 / inv_z;
-                const size_t i = size_t(y) * k.width + x;
-                if (z >= view.depth[i])
-                    continue;
-                view.depth[i] = float(z);
-                const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
-                view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
-                                             q1 * glm::dvec3(mesh.positions[i1]) +
-                                             q2 * glm::dvec3(mesh.positions[i2]));
-                glm::dvec3 nn = q0 * glm::dvec3(mesh.normals[i0]) +
-                                q1 * glm::dvec3(mesh.normals[i1]) +
-                                q2 * glm::dvec3(mesh.normals[i2]);
-                const double len = glm::length(nn);
-                view.normal[i] = len > 1e-12 ? glm::vec3(nn / len) : glm::vec3(0.0f);
-            }
+        for (int band = y0 / int(kBandRows); y0 <= y1 && band <= y1 / int(kBandRows); ++band)
+            in_band[size_t(band)].push_back(uint32_t(t));
     }
+    parallel_rows(bands, [&](uint32_t band) {
+        const int band_y0 = int(band * kBandRows);
+        const int band_y1 = std::min(int(k.height), int((band + 1) * kBandRows)) - 1;
+        for (const uint32_t t : in_band[band]) {
+            const uint32_t i0 = mesh.indices[t], i1 = mesh.indices[t + 1], i2 = mesh.indices[t + 2];
+            const V a = verts[i0], b = verts[i1], c = verts[i2];
+            if (a.z <= 0 || b.z <= 0 || c.z <= 0)
+                continue;
+            const double area = (b.u - a.u) * (c.v - a.v) - (b.v - a.v) * (c.u - a.u);
+            if (std::abs(area) < 1e-12)
+                continue;
+            const int x0 = std::max(0, int(std::ceil(std::min({a.u, b.u, c.u}))));
+            const int x1 = std::min(int(k.width) - 1, int(std::floor(std::max({a.u, b.u, c.u}))));
+            const int y0 = std::max(band_y0, int(std::ceil(std::min({a.v, b.v, c.v}))));
+            const int y1 = std::min(band_y1, int(std::floor(std::max({a.v, b.v, c.v}))));
+            if (y0 > y1)
+                continue;
+            for (int y = y0; y <= y1; ++y)
+                for (int x = x0; x <= x1; ++x) {
+                    // Barycentric coordinates in the image, then perspective-correct weights.
+                    const double w0 = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) / area;
+                    const double w1 = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) / area;
+                    const double w2 = 1.0 - w0 - w1;
+                    // A little beyond the edge: no pixel falls between two triangles.
+                    constexpr double kEdge = -1e-7;
+                    if (w0 < kEdge || w1 < kEdge || w2 < kEdge)
+                        continue;
+                    const double p0 = w0 / a.z, p1 = w1 / b.z, p2 = w2 / c.z;
+                    const double inv_z = p0 + p1 + p2;
+                    const double z = 1.0 / inv_z;
+                    const size_t i = size_t(y) * k.width + x;
+                    if (z >= view.depth[i])
+                        continue;
+                    view.depth[i] = float(z);
+                    const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
+                    view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
+                                                 q1 * glm::dvec3(mesh.positions[i1]) +
+                                                 q2 * glm::dvec3(mesh.positions[i2]));
+                    glm::dvec3 nn = q0 * glm::dvec3(mesh.normals[i0]) +
+                                    q1 * glm::dvec3(mesh.normals[i1]) +
+                                    q2 * glm::dvec3(mesh.normals[i2]);
+                    const double len = glm::length(nn);
+                    view.normal[i] = len > 1e-12 ? glm::vec3(nn / len) : glm::vec3(0.0f);
+                }
+        }
+    });
     return view;
 }
 
@@ -273,24 +320,43 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                     const BlendOptions& options) {
     Blend blend;
     blend.options = options;
+    // The shadow maps one after another, each spread over the cores; the distances to the
+    // outline only where the roll-off toward it is on (they are all it uses).
     for (const auto& pr : projectors) {
         blend.views.push_back(rasterise(mesh, pr.intrinsics, pr.pose));
-        blend.views.back().edge_distance = outline_distance(blend.views.back());
+        if (options.silhouette_rolloff > 0.0)
+            blend.views.back().edge_distance = outline_distance(blend.views.back());
     }
-    for (size_t j = 0; j < projectors.size(); ++j) {
+    const size_t count = projectors.size();
+    for (size_t j = 0; j < count; ++j) {
         const SurfaceView& view = blend.views[j];
         const auto& k = view.intrinsics;
         ProjectorBlend pb;
         pb.name = projectors[j].name;
         pb.weight.assign(size_t(k.width) * k.height, 0.0f);
         pb.geometry = ImageRgba32f::zeros(k.width, k.height);
-        for (uint32_t y = 0; y < k.height; ++y)
+        // Row by row over the cores; each row's counts apart, summed after in row order.
+        std::vector<uint64_t> prop(k.height, 0), shared(k.height, 0);
+        parallel_rows(k.height, [&](uint32_t y) {
+            // blend_weights(blend, p, n)[j], with its arithmetic in its order, without
+            // allocating per pixel.
+            std::vector<double> raw(count), soft(count);
             for (uint32_t x = 0; x < k.width; ++x) {
                 const size_t i = size_t(y) * k.width + x;
                 if (!view.covered(i))
                     continue;
                 const glm::dvec3 p(view.position[i]), n(view.normal[i]);
-                const auto w = blend_weights(blend, p, n);
+                double sum = 0.0, raw_sum = 0.0;
+                for (size_t m = 0; m < count; ++m) {
+                    soft[m] = 0.0;
+                    raw_sum += raw[m] = raw_factor(blend.views[m], blend.options, p, n, &soft[m]);
+                    sum += raw[m] * soft[m];
+                }
+                double wj = raw[j] * soft[j];
+                if (!(sum > 0.0))
+                    wj = raw[j], sum = raw_sum;
+                if (sum > 0.0)
+                    wj /= sum;
                 const glm::dvec3 to = view.pose.position - p;
                 const double d2 = glm::dot(to, to);
                 const double cos_t = glm::dot(n, to / std::sqrt(d2));
@@ -298,10 +364,13 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                 g[0] = float(x), g[1] = float(y);
                 g[2] = cos_t > 0.0 ? float(cos_t / d2) : 0.0f;
                 g[3] = 1.0f;
-                pb.weight[i] = float(w[j]);
-                ++pb.prop_pixels;
-                pb.shared_pixels += w[j] > 0.0 && w[j] < 1.0;
+                pb.weight[i] = float(wj);
+                ++prop[y];
+                shared[y] += wj > 0.0 && wj < 1.0;
             }
+        });
+        for (uint32_t y = 0; y < k.height; ++y)
+            pb.prop_pixels += prop[y], pb.shared_pixels += shared[y];
         dilate(pb.weight, view);
         blend.projectors.push_back(std::move(pb));
     }

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include <glm/mat4x4.hpp>
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
@@ -65,6 +66,9 @@ struct SurfaceView {
     std::vector<float> depth;
     std::vector<glm::vec3> position;  // world, metres
     std::vector<glm::vec3> normal;    // world, unit (interpolated vertex normals)
+    // scene::frame_from_world(pose), as rasterise() found it (project() makes it from the
+    // pose when it is not set).
+    std::optional<glm::dmat4> frame_from_world;
     // Pixels to the prop's outline (outline_distance); empty: not computed.
     std::vector<float> edge_distance;
     bool covered(size_t i) const { return depth[i] < 3.0e38f; }

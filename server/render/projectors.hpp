@@ -29,4 +29,14 @@ struct ProjectorFrames {
 Result<ProjectorFrames> render_projector_frames(Renderer& renderer, const scene::Scene& scene,
                                                 const BlendOptions& options = {});
 
+// render_projector_frames in two steps, so that the blend (CPU only, from the prop's mesh) can
+// be computed on another thread: the frames rendered and not weighted (blend null), then
+// weighted by a blend of all the scene's projectors computed apart (compute_blend over
+// renderer.mesh() and scene.projectors()). With one projector, blend_projector_frames is not
+// needed: the frames are final.
+Result<ProjectorFrames> render_unblended_projector_frames(Renderer& renderer,
+                                                          const scene::Scene& scene);
+void blend_projector_frames(ProjectorFrames& frames, std::shared_ptr<const Blend> blend,
+                            double blend_ms);
+
 }  // namespace hs::render

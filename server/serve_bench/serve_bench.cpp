@@ -566,11 +566,54 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     return r;
 }
 
-// One row: `headsets` protocol-only headsets on their own threads against the server.
+// One projector client per scene projector, named as the scene names it (each gets its own
+// frame), on its own thread, reading until the window closes: a row is served as an
+// installation with its projectors connected is. Counts the frames they received.
+struct ProjectorClients {
+    std::vector<std::thread> threads;
+    std::atomic<bool> stop{false};
+    std::atomic<int> connected{0};
+    std::atomic<uint64_t> frames{0};
+    ProjectorClients(const stream::LoopbackServer& server, const scene::Scene& scene) {
+        for (const auto& p : scene.projectors())
+            threads.emplace_back(
+                [this, address = server.address(), token = server.token(), name = p.name] {
+                    auto c = client::Connection::open(address);
+                    if (std::holds_alternative<std::string>(c))
+                        return;
+                    auto& conn = *std::get<std::unique_ptr<client::Connection>>(c);
+                    if (conn.hello(proto::Role::kProjector, token, name))
+                        return;
+                    ++connected;
+                    while (!stop.load()) {
+                        auto r = conn.receive(50);
+                        if (std::holds_alternative<std::string>(r))
+                            return;
+                        if (auto* m = std::get_if<proto::Message>(&r))
+                            frames += std::holds_alternative<proto::ProjectorFrame>(*m) ? 1 : 0;
+                    }
+                    conn.send(proto::Bye{0});
+                    conn.close();
+                });
+    }
+    ~ProjectorClients() {
+        stop = true;
+        for (auto& t : threads) t.join();
+    }
+};
+
+// One row: `headsets` protocol-only headsets on their own threads against the server, beside
+// a projector client per scene projector.
 ServedRow serve_row(const stream::LoopbackServer& server, const scene::Scene& scene,
                     const ServeBenchOptions& o, const proto::RegisterDisplay& display,
                     int headsets) {
     const std::vector<HeadsetPlan> plans = plan_headsets(server, scene, o, display, headsets);
+    ProjectorClients projectors(server, scene);
+    for (const auto until = Clock::now() + std::chrono::seconds(30);
+         projectors.frames.load() < projectors.threads.size() && Clock::now() < until;)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    fmt::print(stderr, "bench serve: {} of {} projector clients connected, their frames received\n",
+               projectors.connected.load(), projectors.threads.size());
     Window w;
     std::atomic<int> ready{0};
     std::vector<HeadsetTally> tallies(static_cast<size_t>(headsets));

@@ -4,6 +4,8 @@
 // the sessions, feeds the scheduler and writes the figures, of which it is the one producer.
 #include <algorithm>
 
+#include <fmt/ranges.h>
+
 #include "core/log.hpp"
 #include "stream/server_impl.hpp"
 #include "stream/session.hpp"
@@ -20,6 +22,7 @@ void Server::Impl::render_loop() {
         li.submissions_in_flight = std::clamp<uint32_t>(limits.submissions_in_flight, 1, 16);
         li.pipeline_cache_file = info.pipeline_cache_file;
         li.renderer.ledger = ledger.get();
+        li.reblend_missing = info.reblend_missing;
         // The loop holds the initial scene from here on, and only while it is served.
         scene::Scene initial = std::move(initial_scene);
         initial_scene = {};
@@ -41,6 +44,10 @@ std::unique_ptr<loop::FrameSink> Server::Impl::make_sink(const gpu::SubmitRing& 
 
 void Server::Impl::scene_built(loop::SceneVersion v) {
     asio::post(io, [this, v = std::move(v)]() mutable { on_scene_built(std::move(v)); });
+}
+
+void Server::Impl::projectors_reblended(Reblend r) {
+    asio::post(io, [this, r = std::move(r)]() mutable { on_projectors_reblended(std::move(r)); });
 }
 
 void Server::Impl::scene_failed(const loop::PendingScene& scene) {
@@ -115,7 +122,12 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
         f.projector_cost.add(v.pass_ms, v.readback_ms, v.encode_ms);
         f.projector_ms_total += v.total_ms;
         f.last_projector_report = std::move(v.report);
+        f.projector_names = v.projector_names;
+        f.projectors_excluded.clear();
     }
+    projector_names = std::move(v.projector_names);
+    reblended_projector_frames.clear();
+    update_projector_presence();
     // Headsets whose display this version cannot serve are told once (PROTOCOL.md,
     // §Rules.Register); they get no frames until they register one it serves.
     for (const auto& [id, why] : v.unserved) answer(id, proto::ErrorCode::kInvalidDisplay, why, 0);
@@ -132,6 +144,83 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
     for (auto& [id, s] : sessions)
         if (s->is_projector())
             s->send(projector_frame_for(s->name()), nullptr, 0, true);
+}
+
+void Server::Impl::on_projectors_reblended(loop::FrameLoopHost::Reblend r) {
+    {
+        std::lock_guard lock(figures_mutex);
+        if (r.version != figures.scene_version)
+            return;  // a re-blend of a version that has been replaced
+    }
+    std::map<std::string, Bytes> frames;
+    for (auto& f : r.frames)
+        if (auto b = projector_frame_wire(f.width, f.height, r.version, std::move(f.rgba8)))
+            frames[f.name] = std::make_shared<const std::vector<uint8_t>>(std::move(*b));
+    if (r.excluded.empty())
+        log::info("projectors blended over all {} again", projector_names.size());
+    else
+        log::info("projectors re-blended without {} ({:.0f} ms)", fmt::join(r.excluded, ", "),
+                  r.blend_ms);
+    reblended_projector_frames =
+        r.excluded.empty() ? std::map<std::string, Bytes>{} : std::move(frames);
+    {
+        std::lock_guard lock(figures_mutex);
+        figures.projectors_excluded = {r.excluded.begin(), r.excluded.end()};
+        ++figures.projector_reblends;
+        if (!projector_names.empty() && projector_frame_for(projector_names.front())) {
+            figures.current_projector_frame = projector_frame_for(projector_names.front());
+            ++figures.projector_frames_published;
+        }
+    }
+    for (auto& [id, s] : sessions)
+        if (s->is_projector())
+            s->send(projector_frame_for(s->name()), nullptr, 0, true);
+}
+
+std::vector<uint32_t> projector_clients(const Figures& f) {
+    std::vector<uint32_t> n(f.projector_names.size(), 0);
+    for (const auto& [id, info] : f.session_info) {
+        if (info.role != proto::Role::kProjector || n.empty())
+            continue;
+        const auto it = std::find(f.projector_names.begin(), f.projector_names.end(), info.name);
+        ++n[it == f.projector_names.end() ? 0 : size_t(it - f.projector_names.begin())];
+    }
+    return n;
+}
+
+void Server::Impl::update_projector_presence() {
+    std::vector<std::string> names;
+    std::vector<uint32_t> clients;
+    {
+        std::lock_guard lock(figures_mutex);
+        names = figures.projector_names;
+        clients = projector_clients(figures);
+    }
+    std::map<std::string, bool> present;
+    std::set<std::string> missing;
+    for (size_t j = 0; j < names.size(); ++j) {
+        const bool now = clients[j] > 0;
+        present[names[j]] = now;
+        if (!now)
+            missing.insert(names[j]);
+        const auto before = projector_present.find(names[j]);
+        if (before != projector_present.end() && before->second == now)
+            continue;
+        if (!now)
+            log::warn("projector '{}' has no projector client connected: its light is missing{}",
+                      names[j],
+                      info.reblend_missing && names.size() > 1
+                          ? "; the others are re-blended to cover what they can"
+                          : "");
+        else if (before != projector_present.end())
+            log::info("projector '{}' has a projector client again", names[j]);
+    }
+    const bool changed = present != projector_present;
+    projector_present = std::move(present);
+    if (changed && info.reblend_missing) {
+        inbox.set_missing_projectors(std::move(missing));
+        scheduler.wake();  // the render thread looks at it on its next turn
+    }
 }
 
 void Server::Impl::on_encoded(EncodedFrame done) {

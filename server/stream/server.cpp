@@ -454,10 +454,16 @@ void Server::Impl::answer(uint32_t id, proto::ErrorCode code, std::string messag
 
 uint32_t Server::Impl::session_joined(uint32_t id, const std::string& name, proto::Role role,
                                       std::shared_ptr<const SessionCounters> counters) {
-    std::lock_guard lock(figures_mutex);
-    figures.session_info[id] = {name, role, std::move(counters)};
-    ++figures.sessions_total;
-    return figures.scene_version;
+    uint32_t version = 0;
+    {
+        std::lock_guard lock(figures_mutex);
+        figures.session_info[id] = {name, role, std::move(counters)};
+        ++figures.sessions_total;
+        version = figures.scene_version;
+    }
+    if (role == proto::Role::kProjector)
+        update_projector_presence();
+    return version;
 }
 
 void Server::Impl::remove_session(uint32_t id) {
@@ -465,6 +471,7 @@ void Server::Impl::remove_session(uint32_t id) {
     if (it == sessions.end())
         return;
     const bool was_authed = it->second->authed();
+    const bool was_projector = it->second->is_projector();
     sessions.erase(it);
     auto counters = scheduler.remove_viewer(id);
     if (bit_rates.erase(id) > 0)
@@ -503,6 +510,8 @@ void Server::Impl::remove_session(uint32_t id) {
     }
     if (was_authed)
         log::for_session(id).info("left");
+    if (was_projector)
+        update_projector_presence();
     if (stopping && sessions.empty()) {
         shutdown_timer.cancel();
         io.stop();

@@ -110,6 +110,11 @@ struct ServerCreateInfo {
     // by reference (the buffer that went to the socket), released when it leaves. Off: nothing
     // is kept and delivering a frame costs nothing more.
     bool keep_latest_layers = false;
+    // With several projectors: when one has no projector client, blend the others again
+    // without it so that they cover what they can, and over all of them when it is back
+    // (`hysar serve --reblend-missing`, docs/OPERATIONS.md). Off: the frames stay the
+    // version's blend over all of them, whoever is connected.
+    bool reblend_missing = false;
     // TLS on the TCP listener (`--tls-cert/--tls-key`): PEM certificate chain and private key,
     // both or neither. The Unix socket stays plain (local, guarded by its file mode).
     std::string tls_cert_file, tls_key_file;

@@ -5,6 +5,7 @@
 // and snapshot.cpp (the watchers' copy). Each member says which thread owns it.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
@@ -13,6 +14,8 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
+#include <string>
 #include <thread>
 
 #include <asio.hpp>
@@ -114,11 +117,21 @@ struct Figures {
         BitRateFigures bit_rate;  // a headset that registered a display
     };
     std::map<uint32_t, SessionInfo> session_info;
+    // The scene's projectors (its order), and those the published frames leave out
+    // (--reblend-missing; empty: blended over all), and how many re-blends were published.
+    std::vector<std::string> projector_names;
+    std::set<std::string> projectors_excluded;
+    uint64_t projector_reblends = 0;
     Bytes current_projector_frame;  // for snapshot(); the network thread's projector_frame
     uint64_t projector_frames_published = 0;  // numbers current_projector_frame
     std::deque<ViewerSnapshot> departed;      // the last kDepartedViewers viewers' final figures
     uint64_t sessions_total = 0;
 };
+
+// Per scene projector (Figures::projector_names' order), its projector clients now: those
+// whose Hello names it, and for the first, those whose name is none of the scene's (they are
+// sent the first projector's frame).
+std::vector<uint32_t> projector_clients(const Figures& f);
 
 // Who owns what: stream/server.hpp says it for the whole server; each member below names its
 // owner. The hand-offs: the scheduler (network -> render: jobs), the loop inbox (network ->
@@ -158,10 +171,26 @@ struct Server::Impl final : loop::FrameLoopHost {
     // projectors"): a projector client whose Hello names one gets that one, any other the
     // first projector's (projector_frame, below).
     std::map<std::string, Bytes> named_projector_frames;
+    // --reblend-missing: the frames of the projectors a re-blend covers (the first projector's
+    // too), by name; empty: the version's own frames.
+    std::map<std::string, Bytes> reblended_projector_frames;
+    std::vector<std::string> projector_names;  // the scene's, its order
     const Bytes& projector_frame_for(const std::string& name) const {
+        if (!reblended_projector_frames.empty()) {
+            auto it = reblended_projector_frames.find(name);
+            const bool listed = std::find(projector_names.begin(), projector_names.end(), name) !=
+                                projector_names.end();
+            if (it == reblended_projector_frames.end() && !listed && !projector_names.empty())
+                it = reblended_projector_frames.find(projector_names.front());
+            if (it != reblended_projector_frames.end())
+                return it->second;
+        }
         const auto it = named_projector_frames.find(name);
         return it == named_projector_frames.end() ? projector_frame : it->second;
     }
+    // Whether each of the scene's projectors has a projector client, as last logged and told
+    // to the render thread (update_projector_presence).
+    std::map<std::string, bool> projector_present;
     std::map<uint32_t, std::shared_ptr<Session>> sessions;
     uint32_t next_session_id = 1;
     uint32_t accept_backoff_ms = 0;
@@ -250,6 +279,11 @@ struct Server::Impl final : loop::FrameLoopHost {
 
     // Network thread: what came back from the render and encoder threads (render_host.cpp).
     void on_scene_built(loop::SceneVersion v);
+    void on_projectors_reblended(loop::FrameLoopHost::Reblend r);
+    // After a projector client came or left, or a new version: logs each of the scene's
+    // projectors that lost its last projector client or got one back, and tells the render
+    // thread which are missing (--reblend-missing).
+    void update_projector_presence();
     void on_encoded(EncodedFrame done);
     void on_job_dropped(uint32_t viewer, const std::string& why);
     // A frame's two layers to the session's queue (latest frame wins).
@@ -258,6 +292,7 @@ struct Server::Impl final : loop::FrameLoopHost {
     // loop::FrameLoopHost: called on the render thread (render_host.cpp).
     std::unique_ptr<loop::FrameSink> make_sink(const gpu::SubmitRing& ring) override;
     void scene_built(loop::SceneVersion version) override;
+    void projectors_reblended(Reblend reblend) override;
     void scene_failed(const loop::PendingScene& scene) override;
     void job_dropped(uint32_t viewer, std::string why) override;
     void held_bytes(uint64_t targets, uint64_t indices) override;

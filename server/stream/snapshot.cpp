@@ -88,6 +88,11 @@ void add_frames(const Figures& f, ServerSnapshot& s) {
     s.projector_renders = f.projector_renders;
     s.projector_frame = f.current_projector_frame;
     s.projector_frame_sequence = f.projector_frames_published;
+    const std::vector<uint32_t> clients = projector_clients(f);
+    for (size_t j = 0; j < f.projector_names.size(); ++j)
+        s.projectors.push_back({f.projector_names[j], clients[j], clients[j] > 0,
+                                !f.projectors_excluded.count(f.projector_names[j])});
+    s.projector_reblends = f.projector_reblends;
     const FrameStats& fs = f.frame_stats;
     s.frame_stats = fs;
     s.vd_frames = fs.frames;

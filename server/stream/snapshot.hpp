@@ -133,6 +133,17 @@ struct ServerSnapshot {
     StageTotals projector_pass, projector_readback, projector_encode;
     Bytes projector_frame;  // the current scene version's encoded frame (null before the first)
     uint64_t projector_frame_sequence = 0;  // counts the frames published; names this one
+    // The scene's projectors: each with its projector clients now (connected: at least one),
+    // and whether the frames published now blend it in (false: a re-blend leaves it out,
+    // --reblend-missing).
+    struct Projector {
+        std::string name;
+        uint32_t clients = 0;
+        bool connected = false;
+        bool blended = true;
+    };
+    std::vector<Projector> projectors;
+    uint64_t projector_reblends = 0;
     // Memory the server holds (bytes).
     uint64_t render_target_bytes = 0, index_buffer_bytes = 0, send_queue_bytes = 0;
     uint64_t receive_buffer_bytes = 0, pooled_layer_bytes = 0;

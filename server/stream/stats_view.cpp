@@ -93,6 +93,13 @@ nlohmann::json cost_json(const ServerSnapshot& s) {
 }  // namespace
 
 nlohmann::json stats_json(const ServerSnapshot& s) {
+    // The scene's projectors: who serves each (docs/OPERATIONS.md, "Several projectors").
+    nlohmann::json projectors = nlohmann::json::array();
+    for (const auto& p : s.projectors)
+        projectors.push_back({{"name", p.name},
+                              {"connected", p.connected},
+                              {"clients", p.clients},
+                              {"blended", p.blended}});
     nlohmann::json viewers = nlohmann::json::array();
     for (const auto& v : s.viewers) viewers.push_back(viewer_json(v));
     for (const auto& v : s.departed) viewers.push_back(viewer_json(v));
@@ -101,6 +108,8 @@ nlohmann::json stats_json(const ServerSnapshot& s) {
     const FrameStats& fs = s.frame_stats;
     return {{"scene_version", s.scene_version},
             {"projector_renders", s.projector_renders},
+            {"projectors", projectors},
+            {"projector_reblends", s.projector_reblends},
             // The render thread's time from taking a batch to the end of its turn, since start.
             {"render_busy_ns", s.render_busy_ns},
             // Busy time since start of the three stages that can bound the served rate

@@ -326,6 +326,8 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
         after.get("hysar_viewer_pose_to_layer_seconds", {{"viewer", id}, {"quantile", "0.99"}}),
         after.get("hysar_viewer_pose_to_layer_seconds", {{"viewer", id}, {"quantile", "0.5"}}));
     EXPECT_GE(after.get("hysar_vd_layers_total"), 6.0);
+    // No projector client: the scene's projector is reported missing.
+    EXPECT_EQ(after.get("hysar_projector_connected", {{"name", test_scene().projector.name}}), 0.0);
     EXPECT_GE(after.get("hysar_stage_seconds_count", {{"stage", "encode"}}), 6.0);
     EXPECT_GT(after.get("hysar_stage_seconds_sum", {{"stage", "pass"}}), 0.0);
     EXPECT_EQ(after.get("hysar_sessions", {{"role", "headset"}}), 1.0);
@@ -378,6 +380,8 @@ TEST_F(AdminTest, ThumbnailsAreTheLayersAndTheProjectorFrameScaledDown) {
     ASSERT_FALSE(proj->hello(proto::Role::kProjector, kToken, "projector"));
     auto frame = receive_a<proto::ProjectorFrame>(*proj);
     ASSERT_TRUE(frame);
+    EXPECT_EQ(metrics().get("hysar_projector_connected", {{"name", test_scene().projector.name}}),
+              1.0);
     auto hmd = headset(small_display(proto::PixelFormat::kRgba16f), "hmd");
     ASSERT_TRUE(hmd);
     auto layers = one_frame(*hmd, 0.0, 77);

@@ -1,6 +1,9 @@
 // Several projectors: the scene's `projectors` list, its errors, the blend weights and the
 // blend's hard cases (server/render/blend.hpp, server/bench/stability.hpp).
+#include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <functional>
 
 #include <gtest/gtest.h>
@@ -269,4 +272,41 @@ TEST(Blend, HardCasesAreFiniteBoundedAndSumToOne) {
         EXPECT_GT(r.points, 0u) << r.name;
     }
     std::printf("%s", bench::blend_cases_table(rows).c_str());
+}
+
+// The full-resolution blend of the three-projector room (three 1920 x 1200 frames): its time
+// and a digest of every weight and geometry value, so that a change to how the blend is
+// computed can be checked to give the same bits. Slow: run by name
+// (--gtest_also_run_disabled_tests --gtest_filter='*FullResolution*').
+TEST(Blend, DISABLED_FullResolutionTimeAndDigest) {
+    const Scene s = three_projector_room(1);
+    auto mesh = build_prop_mesh(s.prop);
+    ASSERT_TRUE(mesh.ok());
+    const auto all = s.projectors();
+    const auto t0 = std::chrono::steady_clock::now();
+    const render::Blend blend = render::compute_blend(*mesh, all);
+    const double ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    uint64_t h = 1469598103934665603ull;
+    const auto mix = [&](const void* data, size_t bytes) {
+        const auto* b = static_cast<const unsigned char*>(data);
+        for (size_t i = 0; i + 4 <= bytes; i += 4) {
+            uint32_t word;
+            std::memcpy(&word, b + i, 4);
+            h = (h ^ word) * 1099511628211ull;
+        }
+    };
+    for (const auto& p : blend.projectors) {
+        mix(p.weight.data(), p.weight.size() * sizeof(float));
+        mix(p.geometry.pixels.data(), p.geometry.pixels.size() * sizeof(float));
+        mix(&p.prop_pixels, sizeof p.prop_pixels);
+        mix(&p.shared_pixels, sizeof p.shared_pixels);
+    }
+    for (const auto& v : blend.views) {
+        mix(v.depth.data(), v.depth.size() * sizeof(float));
+        mix(v.position.data(), v.position.size() * sizeof(glm::vec3));
+        mix(v.normal.data(), v.normal.size() * sizeof(glm::vec3));
+    }
+    std::printf("blend of three 1920x1200 projectors: %.0f ms, digest %016llx\n", ms,
+                (unsigned long long)h);
 }
