@@ -57,7 +57,7 @@ for w in "${wings[@]}"; do
   links=$(tr '\n' ' ' < "$w/CMakeLists.txt" | grep -oE 'target_link_libraries\([^)]*\)' | grep -oE '\bhs_(protocol|stream|client[a-z_]*|admin)\b' || true)
   if [[ -n "$links" ]]; then echo "layers: $w links the wire's side: $(echo $links)"; fail=1; fi
 done
-adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token)\.hpp"' || true)
+adm=$(grep -rnE '#include "(gpu|render|shading|optics|calib|installation|bench)/|#include "stream/|#include <asio' server/admin --include='*.cpp' --include='*.hpp' | grep -vE '#include "stream/(snapshot|token|tls)\.hpp"' || true)
 if [[ -n "$adm" ]]; then echo "layers: server/admin/ reaches past the server's snapshot:"; echo "$adm"; fail=1; fi
 adm_links=$(tr '\n' ' ' < server/admin/CMakeLists.txt | grep -oE 'target_link_libraries\(hs_admin[^)]*\)' || true)
 for lib in $(echo "$adm_links" | grep -oE '\bhs_[a-z_]+' | grep -v '^hs_admin$'); do

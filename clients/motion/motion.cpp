@@ -263,8 +263,8 @@ constexpr uint32_t kSpan = 64;
 // integers): the 4 neighbours with 8-bit weights, neighbours outside the layer black. Red and
 // blue go through one 64-bit multiply per neighbour (a 32-bit lane each: 255 x 65536 fits),
 // green through another. Alpha: 0 exactly where the colour is 0, full elsewhere (PROTOCOL.md).
-[[gnu::always_inline]] inline uint32_t bilinear_at(const uint32_t* src, uint32_t width, uint32_t height, int64_t fu,
-                            int64_t fv) {
+[[gnu::always_inline]] inline uint32_t bilinear_at(const uint32_t* src, uint32_t width,
+                                                   uint32_t height, int64_t fu, int64_t fv) {
     const int64_t iu = fu >> 8, iv = fv >> 8;  // floor
     const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
     uint32_t p[4];
@@ -274,9 +274,8 @@ constexpr uint32_t kSpan = 64;
     } else {
         for (int t = 0; t < 4; ++t) {
             const int64_t x = iu + (t & 1), y = iv + (t >> 1);
-            p[t] = uint64_t(x) < width && uint64_t(y) < height
-                       ? src[size_t(y) * width + size_t(x)]
-                       : 0u;
+            p[t] = uint64_t(x) < width && uint64_t(y) < height ? src[size_t(y) * width + size_t(x)]
+                                                               : 0u;
         }
     }
     if ((p[0] | p[1] | p[2] | p[3]) == 0)
@@ -387,9 +386,8 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
             // Far outside (or out of fixed-point range): the span shows nothing.
             const double lo_u = std::min(u0, u1), hi_u = std::max(u0, u1);
             const double lo_v = std::min(v0, v1), hi_v = std::max(v0, v1);
-            if (hi_u <= kLow || hi_v <= kLow || lo_u >= fw || lo_v >= fh ||
-                !(std::abs(u0) < 1e6) || !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) ||
-                !(std::abs(v1) < 1e6)) {
+            if (hi_u <= kLow || hi_v <= kLow || lo_u >= fw || lo_v >= fh || !(std::abs(u0) < 1e6) ||
+                !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) || !(std::abs(v1) < 1e6)) {
                 std::fill(out + x0, out + x1, T(0));
                 continue;
             }

@@ -216,7 +216,7 @@ Result<std::unique_ptr<AdminServer>> AdminServer::start(const AdminOptions& opti
     if (!options.tls_cert_file.empty()) {
         HS_ASSIGN_OR_RETURN(impl->tls,
                             stream::make_tls_context(options.tls_cert_file, options.tls_key_file));
-        g.tls = impl->tls.context->native_handle();
+        g.tls = &impl->tls;
     }
     g.workers = std::max<uint32_t>(options.threads, 1);
     g.reserved_workers = std::min<uint32_t>(2, g.workers - 1);

@@ -17,11 +17,10 @@
 #include <vector>
 
 #include <httplib.h>  // and with it the socket calls (send, recv, getpeername)
-#include <openssl/err.h>
-#include <openssl/ssl.h>
 
 #include <fmt/format.h>
 
+#include "stream/tls.hpp"
 #include "stream/token.hpp"
 
 namespace hs::admin {
@@ -172,10 +171,10 @@ constexpr int kAnswerTimeouts = 4;
 
 class GateStream final : public httplib::Stream {
 public:
-    GateStream(int fd, SSL* ssl, std::string& buffer, const std::string& address,
+    GateStream(int fd, stream::TlsSocket* tls, std::string& buffer, const std::string& address,
                std::chrono::milliseconds io_timeout)
         : fd_(fd),
-          ssl_(ssl),
+          tls_(tls),
           buffer_(buffer),
           address_(address),
           io_timeout_(io_timeout),
@@ -190,16 +189,16 @@ public:
     }
     ssize_t write(const char* ptr, size_t size) override {
         const auto deadline = std::min(Clock::now() + io_timeout_, answer_deadline_);
-        if (ssl_) {
-            // Non-blocking: SSL_write is called again with the same bytes until it took them.
+        if (tls_) {
+            // Non-blocking: written again with the same bytes until TLS took them.
+            using S = stream::TlsSocket::Status;
             for (;;) {
-                ERR_clear_error();
-                const int n = SSL_write(ssl_, ptr, int(std::min<size_t>(size, 1 << 30)));
-                if (n > 0)
-                    return n;
-                const int e = SSL_get_error(ssl_, n);
-                if ((e != SSL_ERROR_WANT_WRITE && e != SSL_ERROR_WANT_READ) ||
-                    Clock::now() >= deadline || !wait(e == SSL_ERROR_WANT_WRITE ? POLLOUT : POLLIN))
+                size_t n = 0;
+                const S st = tls_->write(ptr, size, n);
+                if (st == S::kOk)
+                    return ssize_t(n);
+                if ((st != S::kWantWrite && st != S::kWantRead) || Clock::now() >= deadline ||
+                    !wait(st == S::kWantWrite ? POLLOUT : POLLIN))
                     return -1;
             }
         }
@@ -232,7 +231,7 @@ private:
         return r > 0;
     }
     const int fd_;
-    SSL* const ssl_;  // null: plain HTTP
+    stream::TlsSocket* const tls_;  // null: plain HTTP
     std::string& buffer_;
     const std::string& address_;
     const std::chrono::milliseconds io_timeout_;
@@ -240,15 +239,10 @@ private:
     size_t begin_ = 0;
 };
 
-struct SslFree {
-    void operator()(SSL* s) const { SSL_free(s); }
-};
-
 struct Conn {
     int fd = -1;
-    std::unique_ptr<SSL, SslFree> ssl;  // HTTPS: this connection's TLS
-    bool handshaken = false;            // its handshake is done
-    bool want_write = false;            // TLS waits for the socket to take bytes
+    std::unique_ptr<stream::TlsSocket> tls;  // HTTPS: this connection's TLS
+    bool want_write = false;                 // TLS waits for the socket to take bytes
     std::string address;
     std::string buffer;
     Clock::time_point since;     // when it started waiting for this request
@@ -295,16 +289,15 @@ std::string peer_address(int fd) {
 }
 
 // The same over TLS, then its close_notify; best effort, without waiting.
-void answer_and_close(SSL* ssl, int fd, int status, std::string_view reason,
+void answer_and_close(stream::TlsSocket& tls, int fd, int status, std::string_view reason,
                       const std::string& body) {
     const std::string text = fmt::format(
         "HTTP/1.1 {} {}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Length: {}\r\n"
         "{}Connection: close\r\n\r\n{}",
         status, reason, body.size(), status == 503 ? "Retry-After: 1\r\n" : "", body);
-    ERR_clear_error();
-    (void)SSL_write(ssl, text.data(), int(text.size()));
-    (void)SSL_shutdown(ssl);
-    ERR_clear_error();
+    size_t written = 0;
+    (void)tls.write(text.data(), text.size(), written);
+    tls.close_notify();
     ::shutdown(fd, SHUT_WR);
     ::close(fd);
 }
@@ -359,26 +352,22 @@ struct HttpGate::Impl {
             --held;
         }
         if (answered_already) {
-            if (c.ssl && c.handshaken) {
-                ERR_clear_error();
-                (void)SSL_shutdown(c.ssl.get());  // close_notify, if the socket takes it
-                ERR_clear_error();
-            }
+            if (c.tls)
+                c.tls->close_notify();  // if the socket takes it
             ::shutdown(c.fd, SHUT_RDWR);
             ::close(c.fd);
         }
-        c.ssl.reset();
+        c.tls.reset();
         c.fd = -1;
     }
     void refuse(Conn& c, int status, std::string_view reason, const std::string& body) {
         const int fd = c.fd;
-        auto ssl = std::move(c.ssl);
-        const bool handshaken = c.handshaken;
+        auto tls = std::move(c.tls);
         release(c, false);
-        if (!ssl)
+        if (!tls)
             answer_and_close(fd, status, reason, body);
-        else if (handshaken)
-            answer_and_close(ssl.get(), fd, status, reason, body);
+        else if (tls->handshaken())
+            answer_and_close(*tls, fd, status, reason, body);
         else
             ::close(fd);  // nothing can be said before the handshake
     }
@@ -416,14 +405,12 @@ struct HttpGate::Impl {
         }
         c.fresh = false;
         if (o.tls) {
-            c.ssl.reset(SSL_new(o.tls));
-            if (!c.ssl || SSL_set_fd(c.ssl.get(), c.fd) != 1) {
+            c.tls = stream::TlsSocket::server(*o.tls, c.fd);
+            if (!c.tls) {
                 ++counters.tls_failed;
-                c.ssl.reset();
                 release(c);
                 return;
             }
-            SSL_set_accept_state(c.ssl.get());
         }
         if (of_address >= o.per_address || all >= o.max_connections) {
             ++counters.refused;
@@ -435,59 +422,43 @@ struct HttpGate::Impl {
 
     // Reads what `c` sent over TLS (the handshake first); false when it is gone (closed here).
     bool read_tls(Conn& c) {
-        SSL* ssl = c.ssl.get();
-        auto waiting = [&c](int e) {
-            c.want_write = e == SSL_ERROR_WANT_WRITE;
-            return e == SSL_ERROR_WANT_READ || e == SSL_ERROR_WANT_WRITE;
-        };
-        if (!c.handshaken) {
-            ERR_clear_error();
-            const int r = SSL_accept(ssl);
-            if (r != 1) {
-                const int e = SSL_get_error(ssl, r);
-                if (waiting(e))
+        using S = stream::TlsSocket::Status;
+        stream::TlsSocket& tls = *c.tls;
+        S st = tls.handshaken() ? S::kOk : tls.handshake();
+        if (st == S::kOk)
+            st = tls.read(c.buffer, kMaxHead + kMaxBody + kMaxHead);
+        c.want_write = st == S::kWantWrite;
+        switch (st) {
+            case S::kOk:
+            case S::kWantRead:
+            case S::kWantWrite:
+                return true;
+            case S::kClosed:
+                if (!c.buffer.empty()) {
+                    c.eof = true;  // a request, then the client's close_notify: serve it
                     return true;
-                // A browser or curl that spoke plain HTTP to it: told so, in plain text.
-                const unsigned long why = ERR_peek_error();
-                ERR_clear_error();
-                if (ERR_GET_REASON(why) == SSL_R_HTTP_REQUEST) {
-                    ++counters.bad_requests;
-                    c.ssl.reset();
-                    refuse(c, 400, "Bad Request", kHttpsBody);
-                } else {
-                    ++counters.tls_failed;
-                    c.ssl.reset();  // no close_notify on a failed handshake
-                    release(c);
                 }
+                break;
+            case S::kPlainHttp:
+                // A browser or curl that spoke plain HTTP to it: told so, in plain text.
+                ++counters.bad_requests;
+                c.tls.reset();
+                refuse(c, 400, "Bad Request", kHttpsBody);
                 return false;
-            }
-            c.handshaken = true;
+            case S::kFailed:
+                if (!tls.handshaken()) {
+                    ++counters.tls_failed;
+                    c.tls.reset();  // no close_notify on a failed handshake
+                }
+                break;
         }
-        char chunk[4096];
-        while (c.buffer.size() < kMaxHead + kMaxBody + kMaxHead) {
-            ERR_clear_error();
-            const int n = SSL_read(ssl, chunk, sizeof chunk);
-            if (n > 0) {
-                c.buffer.append(chunk, size_t(n));
-                continue;
-            }
-            const int e = SSL_get_error(ssl, n);
-            if (waiting(e))
-                return true;
-            ERR_clear_error();
-            if (e == SSL_ERROR_ZERO_RETURN && !c.buffer.empty()) {
-                c.eof = true;  // a request, then the client's close_notify: serve it
-                return true;
-            }
-            release(c);
-            return false;
-        }
-        return true;
+        release(c);
+        return false;
     }
 
     // Reads what `c` sent; false when it is gone (closed here).
     bool read_some(Conn& c) {
-        if (c.ssl)
+        if (c.tls)
             return read_tls(c);
         char chunk[4096];
         while (c.buffer.size() < kMaxHead + kMaxBody + kMaxHead) {
@@ -633,7 +604,7 @@ struct HttpGate::Impl {
                 }
             }
             Conn& c = job.conn;
-            GateStream stream(c.fd, c.ssl.get(), c.buffer, c.address, o.io_timeout);
+            GateStream stream(c.fd, c.tls.get(), c.buffer, c.address, o.io_timeout);
             bool keep = serve(stream, job.head);
             std::string rest = stream.rest();
             {

@@ -24,7 +24,9 @@
 namespace httplib {
 class Stream;
 }
-struct ssl_ctx_st;  // OpenSSL's SSL_CTX
+namespace hs::stream {
+struct TlsContext;
+}
 
 namespace hs::admin {
 
@@ -63,7 +65,7 @@ struct GateOptions {
     // TLS on every connection (HTTPS) when set: the handshake is read without blocking like a
     // request head and within the same deadline; a plain HTTP request is answered 400 in
     // plain text, naming HTTPS. The context must outlive the gate.
-    ssl_ctx_st* tls = nullptr;
+    const stream::TlsContext* tls = nullptr;
 };
 
 struct GateCounters {

@@ -543,13 +543,12 @@ std::string accuracy_table(const AccuracyReport& rep) {
     for (const auto& r : rep.rows) {
         if (r.is_motion()) {
             if (!motion_header)
-                out += fmt::format("\n{:<18} {:<18} {:>5} {:>10} {:>8} {:>10}\n", "knob",
-                                   "setting", "ref", "p50 px", "p95 px", "client ms");
+                out += fmt::format("\n{:<18} {:<18} {:>5} {:>10} {:>8} {:>10}\n", "knob", "setting",
+                                   "ref", "p50 px", "p95 px", "client ms");
             motion_header = true;
-            out += fmt::format("{:<18} {:<18} {:>5} {:>10.1f} {:>8.1f} {:>10.3f}  {}{}\n",
-                               r.knob, r.setting, r.reference, r.p50_px, r.p95_px,
-                               r.client_ms, r.pareto ? "pareto" : "",
-                               r.is_default ? " default" : "");
+            out += fmt::format("{:<18} {:<18} {:>5} {:>10.1f} {:>8.1f} {:>10.3f}  {}{}\n", r.knob,
+                               r.setting, r.reference, r.p50_px, r.p95_px, r.client_ms,
+                               r.pareto ? "pareto" : "", r.is_default ? " default" : "");
             continue;
         }
         if (r.knob != knob && !knob.empty())

@@ -41,9 +41,9 @@ struct AccuracyRow {
                            // supersampling; a reduced scale's upsampling is the headset's)
     double encode_ms = 0;  // pixel conversion and layer encoding in the row's (or default) encoding
     double bytes = 0;      // encoded layer
-    double p95_px = -1;     // motion: the highlight's error against a fresh render for the
-                            // true pose at photon time, p95, the profile's pixels; -1 elsewhere
-    double p50_px = -1;     // motion: the same, p50
+    double p95_px = -1;    // motion: the highlight's error against a fresh render for the
+                           // true pose at photon time, p95, the profile's pixels; -1 elsewhere
+    double p50_px = -1;    // motion: the same, p50
     double client_ms = -1;  // motion: prediction and reprojection per stereo frame, CPU time of
                             // one core (mean); -1 elsewhere
     bool pareto = false;    // no other setting of this knob is both cheaper and more accurate

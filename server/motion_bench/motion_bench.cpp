@@ -394,9 +394,8 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     if (sc.viewers.empty())
         return make_error(ErrorCode::kInvalidArgument, "the scene has no viewer");
     if (!sc.viewing.heights_m.count(sc.viewing.default_height))
-        return make_error(ErrorCode::kInvalidArgument,
-                          "the scene's viewing plan has no height '" +
-                              sc.viewing.default_height + "'");
+        return make_error(ErrorCode::kInvalidArgument, "the scene's viewing plan has no height '" +
+                                                           sc.viewing.default_height + "'");
     const scene::ViewerProfile* profile =
         o.profile.empty() ? &sc.viewers.front() : sc.find_viewer(o.profile);
     if (!profile)
@@ -418,7 +417,8 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     stream::LoopbackCreateInfo info;
     info.clients = 4;
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, sc, info));
-    say(fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
+    say(
+        fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
                     "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row",
                     profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
                     full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds));
@@ -431,7 +431,8 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     for (const auto& t : o.traces)
         for (const auto& m : o.modes) {
             HS_ASSIGN_OR_RETURN(auto r, run_row(*server, sc, d, o.scale, o, t, m, seed++));
-            say(fmt::format("bench motion: {:5} {:9} p50 {:6.1f} px p95 {:6.1f} px, m2p p50 "
+            say(
+                fmt::format("bench motion: {:5} {:9} p50 {:6.1f} px p95 {:6.1f} px, m2p p50 "
                             "{:5.1f} ms, client {:.2f} ms/frame, {} compared",
                             t, m, r.p50_px, r.p95_px, r.m2p_p50_ms, r.client_ms, r.compared));
             rep.rows.push_back(std::move(r));

@@ -57,8 +57,8 @@ struct MotionRow {
 
 // Every row of a run, and what was served.
 struct MotionReport {
-    std::vector<MotionRow> rows;  // per trace, then per mode, in the options' order
-    std::string profile;          // the viewer profile served
+    std::vector<MotionRow> rows;             // per trace, then per mode, in the options' order
+    std::string profile;                     // the viewer profile served
     uint32_t eye_width = 0, eye_height = 0;  // per eye, as served
     std::string device;
     double seconds = 0;  // served per row

@@ -91,8 +91,8 @@ struct ServedRow {
     // readback, encode, send, ...) and in its own unit per stage (today: per eye layer); a stage
     // it does not report is absent.
     std::map<std::string, double> stage_ms;
-    std::optional<double> bytes_per_layer;          // wire bytes per eye layer (header included)
-    std::optional<double> mbps_per_headset;         // wire Mbit/s per headset over the window
+    std::optional<double> bytes_per_layer;   // wire bytes per eye layer (header included)
+    std::optional<double> mbps_per_headset;  // wire Mbit/s per headset over the window
     // What the bit-rate limits did at the window's end, the mean over the headsets (the
     // server's stats): the JPEG quality of their lossy layers (0: lossless) and the frame rate
     // they were lowered to (0: none was).

@@ -4,6 +4,8 @@
 #include <openssl/ssl.h>
 #include <openssl/x509.h>
 
+#include <algorithm>
+
 #include <fmt/format.h>
 
 namespace hs::stream {
@@ -78,6 +80,93 @@ Result<TlsContext> make_tls_context(const std::string& cert_file, const std::str
             ErrorCode::kInvalidArgument,
             fmt::format("--tls-cert {}: the certificate expired on {}", cert_file, out.not_after));
     return out;
+}
+
+struct TlsSocket::Impl {
+    SSL* ssl = nullptr;
+    bool handshaken = false;
+    ~Impl() {
+        if (ssl)
+            SSL_free(ssl);
+    }
+    // What SSL_get_error says after a call that returned `r`; the error queue emptied.
+    Status status(int r) const {
+        const int e = SSL_get_error(ssl, r);
+        if (e == SSL_ERROR_WANT_READ)
+            return Status::kWantRead;
+        if (e == SSL_ERROR_WANT_WRITE)
+            return Status::kWantWrite;
+        if (e == SSL_ERROR_ZERO_RETURN) {
+            ERR_clear_error();
+            return Status::kClosed;
+        }
+        const unsigned long why = ERR_peek_error();
+        ERR_clear_error();
+        return ERR_GET_REASON(why) == SSL_R_HTTP_REQUEST ? Status::kPlainHttp : Status::kFailed;
+    }
+};
+
+TlsSocket::TlsSocket(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TlsSocket::~TlsSocket() = default;
+
+std::unique_ptr<TlsSocket> TlsSocket::server(const TlsContext& ctx, int fd) {
+    if (!ctx.context)
+        return nullptr;
+    auto impl = std::make_unique<Impl>();
+    impl->ssl = SSL_new(ctx.context->native_handle());
+    if (!impl->ssl || SSL_set_fd(impl->ssl, fd) != 1) {
+        ERR_clear_error();
+        return nullptr;
+    }
+    SSL_set_accept_state(impl->ssl);
+    return std::unique_ptr<TlsSocket>(new TlsSocket(std::move(impl)));
+}
+
+bool TlsSocket::handshaken() const {
+    return impl_->handshaken;
+}
+
+TlsSocket::Status TlsSocket::handshake() {
+    if (impl_->handshaken)
+        return Status::kOk;
+    ERR_clear_error();
+    const int r = SSL_accept(impl_->ssl);
+    if (r == 1) {
+        impl_->handshaken = true;
+        return Status::kOk;
+    }
+    return impl_->status(r);
+}
+
+TlsSocket::Status TlsSocket::read(std::string& out, size_t max) {
+    char chunk[4096];
+    while (out.size() < max) {
+        ERR_clear_error();
+        const int n = SSL_read(impl_->ssl, chunk, int(std::min(sizeof chunk, max - out.size())));
+        if (n <= 0)
+            return impl_->status(n);
+        out.append(chunk, size_t(n));
+    }
+    return Status::kOk;
+}
+
+TlsSocket::Status TlsSocket::write(const char* data, size_t size, size_t& written) {
+    written = 0;
+    ERR_clear_error();
+    const int n = SSL_write(impl_->ssl, data, int(std::min<size_t>(size, 1u << 30)));
+    if (n > 0) {
+        written = size_t(n);
+        return Status::kOk;
+    }
+    return impl_->status(n);
+}
+
+void TlsSocket::close_notify() {
+    if (!impl_->handshaken)
+        return;
+    ERR_clear_error();
+    (void)SSL_shutdown(impl_->ssl);
+    ERR_clear_error();
 }
 
 }  // namespace hs::stream

@@ -276,15 +276,26 @@ TEST_F(AdminTest, EveryFigureNeedsTheTokenThePageDoesNot) {
 
 TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
     auto before = metrics();
-    for (const char* family :
-         {"hysar_viewer_frames_total", "hysar_viewer_frame_rate_hertz",
-          "hysar_viewer_pose_to_layer_seconds", "hysar_viewer_sent_bytes_total",
-          "hysar_viewer_send_rate_bytes_per_second", "hysar_viewer_superseded_poses_total",
-          "hysar_stage_seconds", "hysar_sessions", "hysar_refusals_total", "hysar_gpu_info",
-          "hysar_memory_bytes", "hysar_viewer_bit_rate_mbps", "hysar_viewer_bit_rate_budget_mbps",
-          "hysar_viewer_layer_quality", "hysar_viewer_rate_limited_hertz", "hysar_scene_bytes",
-          "hysar_scene_versions_held", "hysar_scene_versions_freed_total", "hysar_scene_pipelines",
-          "hysar_scene_device_allocations"})
+    for (const char* family : {"hysar_viewer_frames_total",
+                               "hysar_viewer_frame_rate_hertz",
+                               "hysar_viewer_pose_to_layer_seconds",
+                               "hysar_viewer_sent_bytes_total",
+                               "hysar_viewer_send_rate_bytes_per_second",
+                               "hysar_viewer_superseded_poses_total",
+                               "hysar_stage_seconds",
+                               "hysar_sessions",
+                               "hysar_refusals_total",
+                               "hysar_gpu_info",
+                               "hysar_memory_bytes",
+                               "hysar_viewer_bit_rate_mbps",
+                               "hysar_viewer_bit_rate_budget_mbps",
+                               "hysar_viewer_layer_quality",
+                               "hysar_viewer_rate_limited_hertz",
+                               "hysar_scene_bytes",
+                               "hysar_scene_versions_held",
+                               "hysar_scene_versions_freed_total",
+                               "hysar_scene_pipelines",
+                               "hysar_scene_device_allocations"})
         EXPECT_TRUE(before.types.count(family)) << family;
     EXPECT_EQ(before.get("hysar_vd_layers_total"), 0.0);
     EXPECT_EQ(before.get("hysar_gpu_info", {{"device", device().name()},

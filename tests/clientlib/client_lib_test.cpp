@@ -521,8 +521,8 @@ public:
     struct Log {
         int connections = 0;
         int refused_poses = 0, refused_displays = 0;
-        std::vector<uint32_t> pose_bytes;     // every Pose's payload length, refused ones too
-        std::vector<int> display_encodings;   // every RegisterDisplay's encoding, refused too
+        std::vector<uint32_t> pose_bytes;    // every Pose's payload length, refused ones too
+        std::vector<int> display_encodings;  // every RegisterDisplay's encoding, refused too
         int layers_sent = 0;
     };
 
@@ -649,9 +649,9 @@ private:
                     std::lock_guard lock(mutex_);
                     ++log_.refused_poses;
                 }
-                return refuse(fd, proto::ErrorCode::kTooLarge,
-                              "Pose: payload of " + std::to_string(payload_bytes) +
-                                  " bytes, at most 64");
+                return refuse(
+                    fd, proto::ErrorCode::kTooLarge,
+                    "Pose: payload of " + std::to_string(payload_bytes) + " bytes, at most 64");
             }
             std::vector<uint8_t> frame(header.begin(), header.end());
             frame.resize(proto::kHeaderBytes + payload_bytes);
@@ -727,8 +727,8 @@ hysar_client_config old_server_config(const std::string& address) {
 }
 
 hysar_display old_server_display(uint32_t encoding) {
-    return {64, 48, 60.0, 60.0, 31.5, 23.5, 0.063, HYSAR_FORMAT_RGBA8, encoding,
-            HYSAR_MODE_CONTINUOUS};
+    return {
+        64, 48, 60.0, 60.0, 31.5, 23.5, 0.063, HYSAR_FORMAT_RGBA8, encoding, HYSAR_MODE_CONTINUOUS};
 }
 
 hysar_pose old_server_pose() {
@@ -785,8 +785,8 @@ TEST(ClientLibOldServer, PosesGoWithoutDisplayTimeAfterTooLarge) {
     EXPECT_GE(seen[HYSAR_EVENT_DISCONNECTED], 1);
     // Later poses with a display time keep being served, as 64-byte poses on the same session.
     for (int i = 0; i < 3; ++i) {
-        ASSERT_EQ(
-            hysar_client_send_pose_at(c.get(), &p, hysar_now_ns() + 30000000, &stamp), HYSAR_OK);
+        ASSERT_EQ(hysar_client_send_pose_at(c.get(), &p, hysar_now_ns() + 30000000, &stamp),
+                  HYSAR_OK);
         bool answered = false;
         for (int k = 0; k < 8 && !answered; ++k) {
             ASSERT_TRUE(layer_from(c.get(), seen, &e)) << "pose " << i << " was not served";

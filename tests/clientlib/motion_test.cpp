@@ -297,12 +297,10 @@ TEST(Reproject, BilinearMatchesThePerPixelFilter) {
     const Quat large = multiply(from_rotation_vector({0.1, 0.35, 0.05}), kLook);
     const Quat behind = multiply(from_rotation_vector({0, 1.7, 0}), kLook);
     const std::array<double, 9> cases[] = {
-        rotation_homography(kK, kLook, small),
-        rotation_homography(kK, kLook, large),
-        plane_homography(kK, from,
-                         eye_pose({kHead[0] + 0.05, kHead[1] - 0.02, kHead[2] + 0.03}, small,
-                                  0.063, 0),
-                         0.8),
+        rotation_homography(kK, kLook, small), rotation_homography(kK, kLook, large),
+        plane_homography(
+            kK, from,
+            eye_pose({kHead[0] + 0.05, kHead[1] - 0.02, kHead[2] + 0.03}, small, 0.063, 0), 0.8),
         rotation_homography(kK, kLook, behind)};
     for (const auto& src : {render(kHead, kLook), field}) {
         for (size_t i = 0; i < std::size(cases); ++i) {
