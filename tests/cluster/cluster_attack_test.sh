@@ -10,8 +10,9 @@
 #      those they saw, and a SceneUpdate afterwards reaches every node;
 #   4. the signed value of an older version put again is refused on every node (it follows an
 #      older version, and the bus stores it after its write's deadline);
-#   5. the bus frozen (SIGSTOP) during a SceneUpdate: it is refused, and after SIGCONT the copy
-#      the bus then stores is taken by no node; the next update reaches every node;
+#   5. the bus frozen (SIGSTOP) during a SceneUpdate and thawed (SIGCONT) while its writer waits
+#      to look: it is refused, the copy the bus then stores is taken by no node, and the next
+#      update reaches every node;
 #   6. a healthy headset is served at the end, the version equal on every node.
 set -euo pipefail
 bin="$1"
@@ -157,8 +158,18 @@ echo "4. the signed value of an older version put again: refused on every node (
 # 5. The bus frozen during a push: refused, and the copy stored after the thaw lands nowhere.
 before=$want
 kill -STOP "$nats"
-if out=$(push a frozen 2>&1); then kill -CONT "$nats"; fail "a push to a frozen bus was taken: $out"; fi
+push a frozen > "$dir/push-frozen.txt" 2>&1 &
+push_pid=$!
+# Past the write's deadline and the clock margin: the writer is looking whether the bus stored
+# it, and keeps asking while the bus does not answer; thawed, the bus stores the copy late and
+# answers, and the writer refuses for good.
+sleep 6
+if ! kill -0 "$push_pid" 2>/dev/null; then
+  kill -CONT "$nats"; fail "the writer answered while the bus was frozen: $(cat "$dir/push-frozen.txt")"
+fi
 kill -CONT "$nats"
+if wait "$push_pid"; then fail "a push to a frozen bus was taken: $(cat "$dir/push-frozen.txt")"; fi
+out=$(cat "$dir/push-frozen.txt")
 grep -q "stays refused" <<< "$out" || fail "the push to a frozen bus: $out"
 sleep 3
 same_everywhere "$before" a b c || fail "the refused update landed: a: $(applied a); b: $(applied b); c: $(applied c)"
