@@ -105,7 +105,7 @@ TEST(Scheduler, AViewersBitRateLimitPacesItAndSetsItsQuality) {
     // jobs carry the quality the limit chose (0: the server's).
     Scheduler s({.max_batch = 8});
     for (uint32_t id : {1u, 2u}) ASSERT_FALSE(s.add_viewer(id, continuous()));
-    ASSERT_TRUE(s.set_viewer_rate(1, 20, 55));
+    ASSERT_TRUE(s.set_viewer_rate(1, 2, 55));  // 2 Hz: a wide margin on a loaded machine
     EXPECT_FALSE(s.set_viewer_rate(3, 20, 55));  // no such viewer
     for (uint32_t id : {1u, 2u}) pose(s, id);
     auto batch = s.take_batch();
@@ -116,11 +116,11 @@ TEST(Scheduler, AViewersBitRateLimitPacesItAndSetsItsQuality) {
         done(s, id);
         pose(s, id);
     }
-    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{2}));  // 1 waits its 50 ms
+    EXPECT_EQ(ids(s.take_batch()), (std::vector<uint32_t>{2}));  // 1 waits its 500 ms
     const auto t0 = hs::loop::Clock::now();
     batch = s.wait_for_batch();
     EXPECT_EQ(ids(batch), (std::vector<uint32_t>{1}));
-    EXPECT_GE(hs::loop::Clock::now() - t0, std::chrono::milliseconds(30));
+    EXPECT_GE(hs::loop::Clock::now() - t0, std::chrono::milliseconds(300));
     // Lifted, and registering again forgets it.
     done(s, 1);
     done(s, 2);
