@@ -105,7 +105,7 @@ TEST(Scheduler, AViewersBitRateLimitPacesItAndSetsItsQuality) {
     // jobs carry the quality the limit chose (0: the server's).
     Scheduler s({.max_batch = 8});
     for (uint32_t id : {1u, 2u}) ASSERT_FALSE(s.add_viewer(id, continuous()));
-    ASSERT_TRUE(s.set_viewer_rate(1, 2, 55));  // 2 Hz: a wide margin on a loaded machine
+    ASSERT_TRUE(s.set_viewer_rate(1, 2, 55));    // 2 Hz: a wide margin on a loaded machine
     EXPECT_FALSE(s.set_viewer_rate(3, 20, 55));  // no such viewer
     for (uint32_t id : {1u, 2u}) pose(s, id);
     auto batch = s.take_batch();
