@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
+#include <exception>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -18,12 +20,25 @@ void parallel_rows(uint32_t rows, Fn&& fn) {
         return;
     }
     std::atomic<uint32_t> next{0};
+    // The first exception a row throws stops the others and is thrown again here, as a loop
+    // on one thread would (in a worker it would end the process).
+    std::mutex failed;
+    std::exception_ptr first;
     std::vector<std::thread> pool;
     for (unsigned t = 0; t < n; ++t)
         pool.emplace_back([&] {
-            for (uint32_t y; (y = next.fetch_add(1)) < rows;) fn(y);
+            try {
+                for (uint32_t y; (y = next.fetch_add(1)) < rows;) fn(y);
+            } catch (...) {
+                std::lock_guard lock(failed);
+                if (!first)
+                    first = std::current_exception();
+                next = rows;
+            }
         });
     for (auto& t : pool) t.join();
+    if (first)
+        std::rethrow_exception(first);
 }
 
 }  // namespace hs

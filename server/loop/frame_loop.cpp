@@ -147,8 +147,11 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
             } else {
                 host_.scene_failed(request);
             }
-        } else {
+        } else if (done->blend) {
             publish_reblend(*done->blend, done->excluded, done->ms);
+        } else {
+            log::error("render: re-blending the projectors failed ({}); the frames stay",
+                       done->error);
         }
     }
     if (!blend_) {
@@ -238,8 +241,14 @@ void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projecto
     BlendTask* task = blend_.get();
     task->thread = std::thread([this, task, &mesh, projectors = std::move(projectors)] {
         const auto t0 = Clock::now();
-        task->blend =
-            std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
+        // A failure here (memory at full resolution) fails this version or re-blend on the
+        // render thread, as it did when the blend ran there; it never ends the process.
+        try {
+            task->blend =
+                std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
+        } catch (const std::exception& e) {
+            task->error = e.what();
+        }
         task->ms = ms_since(t0);
         task->done.store(true, std::memory_order_release);
         scheduler_.wake();  // the render thread takes it on its next turn
@@ -257,6 +266,11 @@ bool FrameLoop::finish_build() {
     Build b = std::move(*build_);
     build_.reset();
     std::unique_ptr<BlendTask> task = std::move(blend_);
+    if (task && !task->blend) {
+        log::error("render: the projectors' blend of version {} failed: {}", b.version,
+                   task->error);
+        return false;
+    }
     const scene::Scene& next = b.request.scene;
     std::optional<render::ProjectorFrames> frames;
     std::vector<ImageRgba32f> unweighted;

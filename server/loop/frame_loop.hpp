@@ -186,7 +186,8 @@ private:
     struct BlendTask {
         std::thread thread;
         std::atomic<bool> done{false};
-        std::shared_ptr<const render::Blend> blend;
+        std::shared_ptr<const render::Blend> blend;  // null when it failed
+        std::string error;                           // why it failed (out of memory, ...)
         double ms = 0;
         std::set<std::string> excluded;
         ~BlendTask();

@@ -3,12 +3,14 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
+#include <new>
 #include <set>
 #include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "core/parallel.hpp"
 #include "core/worker_pool.hpp"
 
 using namespace hs;
@@ -49,4 +51,21 @@ TEST(WorkerPool, NoWorkersRunsOnTheCaller) {
     pool.run(5, [&](size_t) { ids.push_back(std::this_thread::get_id()); });
     ASSERT_EQ(ids.size(), 5u);
     for (auto id : ids) EXPECT_EQ(id, std::this_thread::get_id());
+}
+
+// parallel_rows: every row once, and a row that throws is thrown again to the caller (in a
+// worker thread it would end the process), the other rows stopping early.
+TEST(ParallelRows, EveryRowOnceAndAThrowReachesTheCaller) {
+    std::vector<std::atomic<int>> seen(1000);
+    hs::parallel_rows(1000, [&](uint32_t y) { ++seen[y]; });
+    for (const auto& s : seen) EXPECT_EQ(s.load(), 1);
+    std::atomic<int> ran{0};
+    EXPECT_THROW(hs::parallel_rows(100000,
+                                   [&](uint32_t y) {
+                                       ++ran;
+                                       if (y == 7)
+                                           throw std::bad_alloc();
+                                   }),
+                 std::bad_alloc);
+    EXPECT_LT(ran.load(), 100000);
 }
