@@ -46,12 +46,13 @@ constexpr uint64_t kSettleLookMs = 15000;
 
 // HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
 // token (so that the token itself is never the key of anything else), as 64 hex digits.
-std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms, bool refill,
                 std::string_view json) {
     const std::string label = "hysar scene bus key\n" + admin_token;
     unsigned char key[SHA256_DIGEST_LENGTH];
     SHA256(reinterpret_cast<const unsigned char*>(label.data()), label.size(), key);
-    const std::string head = fmt::format("hysar-scene 1\n{}\n{}\n", base, deadline_ms);
+    const std::string head =
+        fmt::format("hysar-scene 1\n{}\n{}\n{}", base, deadline_ms, refill ? "refill\n" : "");
     unsigned char out[EVP_MAX_MD_SIZE];
     unsigned int len = 0;
     std::string data;
@@ -99,9 +100,10 @@ BurstLog& burst_log() {
 }  // namespace
 
 std::string SceneBus::sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
-                           const std::string& json) {
-    return fmt::format("{}{} {} {}\n{}", kMagic, base, deadline_ms,
-                       mac(admin_token, base, deadline_ms, json), json);
+                           const std::string& json, bool refill) {
+    return fmt::format("{}{} {} {}{}\n{}", kMagic, base, deadline_ms,
+                       mac(admin_token, base, deadline_ms, refill, json), refill ? " refill" : "",
+                       json);
 }
 
 Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::string_view value) {
@@ -130,8 +132,15 @@ Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::s
     };
     Signed out;
     const bool ok = number(out.base) && number(out.deadline_ms);
+    // The HMAC, then " refill" on a value put back on a bus found empty or behind.
+    constexpr std::string_view kRefill = " refill";
+    if (head.size() > kRefill.size() && head.substr(head.size() - kRefill.size()) == kRefill) {
+        out.refill = true;
+        head.remove_suffix(kRefill.size());
+    }
     out.json = std::string(value.substr(eol + 1));
-    const std::string want = ok ? mac(admin_token, out.base, out.deadline_ms, out.json) : "";
+    const std::string want =
+        ok ? mac(admin_token, out.base, out.deadline_ms, out.refill, out.json) : "";
     if (!ok || head.size() != want.size() ||
         CRYPTO_memcmp(head.data(), want.data(), want.size()) != 0)
         return make_error(ErrorCode::kInvalidArgument,
@@ -301,17 +310,21 @@ bool SceneBus::connected() const {
 }
 
 std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored_ns,
-                                               std::string_view raw) {
+                                               std::string_view raw, bool count) {
     for (uint64_t t = tail_.load(); revision > t && !tail_.compare_exchange_weak(t, revision);) {
     }
     auto v = verify(s_->options.admin_token, raw);
     if (!v) {
-        ++counters_.unsigned_values;
-        burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
+        if (count) {
+            ++counters_.unsigned_values;
+            burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
+        }
         return std::nullopt;
     }
     // Stored after its deadline: its writer was told the write failed, so no node takes it.
     if (stored_ns > 0 && uint64_t(stored_ns / 1000000) > v->deadline_ms) {
+        if (!count)
+            return std::nullopt;
         ++counters_.late_values;
         burst_log().note(
             fmt::format("version {} ignored: the bus stored it {} ms after its "
@@ -322,10 +335,14 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     for (uint64_t t = signed_tail_.load();
          revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
     }
-    return Value{revision, v->base, v->deadline_ms, std::move(v->json)};
+    return Value{revision, v->base, v->deadline_ms, std::move(v->json), v->refill};
 }
 
 Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
+    return read_signed(true);
+}
+
+Result<std::vector<SceneBus::Value>> SceneBus::read_signed(bool count) {
     kvEntryList list{};
     kvWatchOptions wo;
     kvWatchOptions_Init(&wo);
@@ -342,7 +359,8 @@ Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
             continue;
         auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
                        std::string_view(static_cast<const char*>(kvEntry_Value(e)),
-                                        size_t(kvEntry_ValueLen(e))));
+                                        size_t(kvEntry_ValueLen(e))),
+                       count);
         if (v)
             out.push_back(std::move(*v));
     }
@@ -442,9 +460,11 @@ BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
         kvWatchOptions_Init(&wo);
         wo.IgnoreDeletes = true;
         const natsStatus s = kvStore_History(&list, s_->kv, kKey, &wo);
-        if (s == NATS_OK || s == NATS_NOT_FOUND) {
+        // Only a history read counts as a look: a bus that answers it has no key (lost its
+        // store) cannot say whether it had stored the value in time.
+        if (s == NATS_OK) {
             looked = true;
-            for (int i = 0; s == NATS_OK && i < list.Count; ++i) {
+            for (int i = 0; i < list.Count; ++i) {
                 kvEntry* e = list.Entries[i];
                 const int64_t at = kvEntry_Created(e);
                 if (size_t(kvEntry_ValueLen(e)) == value.size() &&
@@ -452,8 +472,7 @@ BusWrite SceneBus::settle(const std::string& value, uint64_t deadline_ms) {
                     uint64_t(at / 1000000) <= deadline_ms)
                     stored = kvEntry_Revision(e);
             }
-            if (s == NATS_OK)
-                kvEntryList_Destroy(&list);
+            kvEntryList_Destroy(&list);
         } else if (now_unix_ms() >= give_up) {
             break;
         } else {
@@ -572,7 +591,8 @@ std::optional<SceneBus::Refill> SceneBus::plan_refill(const Value& held, uint64_
         return std::nullopt;
     // A later admin's write on the bus (made after the held one, following a version): it goes
     // back, not the held one. A node's start-up scene on an empty bus follows none (base 0).
-    if (bus_newest && bus_newest->base > 0 && bus_newest->deadline_ms > held.deadline_ms)
+    if (bus_newest && !bus_newest->refill && bus_newest->base > 0 &&
+        bus_newest->deadline_ms > held.deadline_ms)
         return Refill{std::max(held.revision + 1, last + 1), false};
     return Refill{std::max(held.revision, last + 1), true};
 }
@@ -631,15 +651,20 @@ bool SceneBus::refill() {
         bus_revision = kvEntry_Revision(e);
         kvEntry_Destroy(e);
     }
+    // The key has a value and the stream (its leader) is at or past the held version: the read
+    // that looked behind came from a follower of a replicated bucket that lags. Not behind.
+    if (bus_revision != 0 && last >= held.revision)
+        return made;
     std::optional<Value> newest;
-    if (auto listed = signed_values(); listed && !listed->empty())
+    if (auto listed = read_signed(false); listed && !listed->empty())
         newest = listed->front();
     const auto plan = plan_refill(held, bus_revision, last, newest);
     if (!plan)
         return made;
     const Value& from = plan->ours ? held : *newest;
     // Every revision below the refill's goes (the bus's next sequence becomes its revision),
-    // then it is written only if no other node refilled first.
+    // then it is written only if the key still has no value (another node's refill first makes
+    // this one fail).
     jsOptions po;
     jsOptions_Init(&po);
     po.Stream.Purge.Sequence = plan->revision;
@@ -650,11 +675,16 @@ bool SceneBus::refill() {
     }
     const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
     const std::string value =
-        sign(s_->options.admin_token, plan->revision - 1, deadline, from.json);
+        sign(s_->options.admin_token, plan->revision - 1, deadline, from.json, true);
     uint64_t rev = 0;
     s = kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()));
     if (s != NATS_OK)
         return true;  // another node refilled it first: the watch is made again and takes it
+    if (rev != plan->revision)
+        log::warn(
+            "scene bus: the refill landed at revision {}, not {} (another node purged or "
+            "wrote meanwhile)",
+            rev, plan->revision);
     tail_ = rev;
     signed_tail_ = rev;
     ++counters_.refills;

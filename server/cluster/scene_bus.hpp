@@ -4,7 +4,8 @@
 // Every value is signed: "hysar-scene 1 BASE DEADLINE HMAC\n" then the JSON, where BASE is the
 // version the write follows, DEADLINE the time (UNIX ms) by which the bus must store it, and
 // HMAC is HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON", keyed by a key derived from
-// the admin token, so only a holder of the admin credential changes the scene even
+// the admin token (a refill ends the line with " refill", and "refill\n" follows DEADLINE in
+// the HMAC's input), so only a holder of the admin credential changes the scene even
 // on a bus anyone can write; a value not so signed is ignored and counted. Writes are
 // compare-and-set on the revision the writing node has applied (or on the unsigned values put
 // after it); no node applies its own write: every node applies what its watch delivers, if and
@@ -65,6 +66,7 @@ public:
         uint64_t base = 0;         // the version the write followed (signed)
         uint64_t deadline_ms = 0;  // when the bus had to store it by (signed): its write time
         std::string json;
+        bool refill = false;  // a node put it back on a bus found empty or behind (signed)
     };
     // What the bus ignored, for /metrics.
     struct Counters {
@@ -85,6 +87,7 @@ public:
         uint64_t base = 0;         // the version the write followed
         uint64_t deadline_ms = 0;  // the bus must have stored it by then (UNIX ms)
         std::string json;
+        bool refill = false;
     };
     // Connects and opens (or creates) the bucket. An error naming the URL when the bus cannot be
     // reached at start: a node that cannot learn the current scene must not serve another.
@@ -114,7 +117,9 @@ public:
     // sequence (the revisions below are purged first); unless the bus's newest signed value
     // `bus_newest` is an admin's write made after the held one (a later deadline, following a
     // version, i.e. not a node's own start-up scene on an empty bus), which then goes back at
-    // max(held + 1, last + 1), so the node that held the older one applies it too.
+    // max(held + 1, last + 1), so the node that held the older one applies it too. Another
+    // node's refill never counts as such a write: its deadline is the time of the refill, not of
+    // the write it puts back (a lagging node's refill must not outrank a newer held version).
     static std::optional<Refill> plan_refill(const Value& held, uint64_t bus_revision,
                                              uint64_t last, const std::optional<Value>& bus_newest);
 
@@ -136,8 +141,9 @@ public:
     }
     // The signed form of `json` following version `base`, to be stored by `deadline_ms`
     // (unit-tested), and its check: the signed parts, or an error saying why it is refused.
+    // `refill`: a value put back on a bus found empty or behind ("... HMAC refill").
     static std::string sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
-                            const std::string& json);
+                            const std::string& json, bool refill = false);
     static Result<Signed> verify(const std::string& admin_token, std::string_view value);
 
 private:
@@ -147,7 +153,11 @@ private:
     void watch_loop(void* first);
     std::unique_ptr<State> s_;
     // A raw entry seen: its signed value, if any; counts and notes the tail revision.
-    std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw);
+    // `count`: whether an ignored value is counted and logged (not when a refill reads again).
+    std::optional<Value> check(uint64_t revision, int64_t stored_ns, std::string_view raw,
+                               bool count = true);
+    // signed_values(), counting ignored values or not.
+    Result<std::vector<Value>> read_signed(bool count);
     // write() with the compare-and-set on `over` when that is later (a value no node takes).
     BusWrite write_on(uint64_t applied, const std::string& json, uint64_t over, int attempts);
     // The 2-s check of the watch: true when the watch must be made again (it is behind the

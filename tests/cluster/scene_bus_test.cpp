@@ -130,6 +130,19 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
     EXPECT_FALSE(SceneBus::verify(kAdmin, rebased).ok());
     for (const char* junk : {"{{{", "", "{\"name\":\"x\"}", "hysar-scene 1 7 9 00\n{}"})
         EXPECT_FALSE(SceneBus::verify(kAdmin, junk).ok()) << junk;
+    EXPECT_FALSE(ok->refill);
+    // A refill is signed as one: the flag cannot be added to a write, nor taken off a refill.
+    const std::string r = SceneBus::sign(kAdmin, 7, 1700000000000, "{\"name\":\"x\"}", true);
+    auto refill = SceneBus::verify(kAdmin, r);
+    ASSERT_TRUE(refill.ok()) << refill.error().message;
+    EXPECT_TRUE(refill->refill);
+    EXPECT_EQ(refill->json, "{\"name\":\"x\"}");
+    std::string flagged = v;
+    flagged.insert(flagged.find('\n'), " refill");
+    EXPECT_FALSE(SceneBus::verify(kAdmin, flagged).ok());
+    std::string unflagged = r;
+    unflagged.erase(unflagged.find(" refill"), 7);
+    EXPECT_FALSE(SceneBus::verify(kAdmin, unflagged).ok());
     // The rule: newer, and following the applied version (an old value put again is not).
     EXPECT_TRUE(SceneBus::follows({9, 5, 0, ""}, 5));
     EXPECT_FALSE(SceneBus::follows({9, 3, 0, ""}, 5));
@@ -346,6 +359,13 @@ TEST(SceneBus, RefillPlan) {
     auto old = SceneBus::plan_refill(held, 2, 2, SceneBus::Value{2, 1, 500, "old"});
     ASSERT_TRUE(old);
     EXPECT_TRUE(old->ours);
+    // A lagging node refilled version 6 first (a refill: its deadline is the refill's time, not
+    // the write's): it never outranks the held, acknowledged version 7, which goes back at 7.
+    SceneBus::Value lagging{6, 5, 9000, "six", true};
+    auto over = SceneBus::plan_refill(held, 6, 6, lagging);
+    ASSERT_TRUE(over);
+    EXPECT_TRUE(over->ours);
+    EXPECT_EQ(over->revision, 7u);
     // The key deleted after revision 9 (no value, its sequence at 10): one past the sequence.
     auto deleted = SceneBus::plan_refill(held, 0, 10, std::nullopt);
     ASSERT_TRUE(deleted);
