@@ -137,9 +137,12 @@ void BitRateController::judge(Clock::time_point now) {
             block_s_ = options_.block_s;
         raised_ = false;
         if (hz_cap_ > 0) {
-            // A quarter more frames, or none held back, if this setting's frames still fit.
+            // A quarter more frames, or none held back, if this setting's frames still fit: no
+            // cap once it reaches the server's rate, or (with none, --max-viewer-hz 0) once it
+            // is well past the rate the headset gets anyway, where it no longer holds it back.
+            const double got_hz = double(frames_) / elapsed;
             double hz = hz_cap_ * 1.25;
-            if (options_.max_hz > 0 && hz >= options_.max_hz)
+            if (options_.max_hz > 0 ? hz >= options_.max_hz : hz_cap_ > 1.2 * got_hz)
                 hz = 0;
             const double predicted =
                 per_frame * (hz > 0 ? hz : std::max(options_.max_hz, hz_cap_ * 1.25));

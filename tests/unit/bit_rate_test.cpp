@@ -153,6 +153,24 @@ TEST(BitRate, RecoversWhenUnder) {
     EXPECT_FALSE(s.c.limited());
 }
 
+// With no server rate (--max-viewer-hz 0) a lowered rate is still given back, then the quality:
+// the cap goes once it is well past the rate the headset asks for.
+TEST(BitRate, RecoversWithNoServerRate) {
+    BitRateOptions o;
+    o.max_hz = 0;
+    Sim s(o);
+    double at_90 = 20000;
+    s.bytes = [&](int q) { return jpeg_like(q, at_90); };
+    s.c.set_budget(2 * kMbit, s.t);
+    s.run(15);
+    ASSERT_GT(s.c.max_hz(), 0.0);
+    at_90 = 2000;  // 0.96 Mbit/s at q90, 60 Hz
+    s.run(30);
+    EXPECT_EQ(s.c.max_hz(), 0.0);
+    EXPECT_EQ(s.c.quality(), 90);
+    EXPECT_FALSE(s.c.limited());
+}
+
 TEST(BitRate, FarOverReachesTheFloorAtTheFirstJudgement) {
     // Four times over at q90: the quality cannot save that much, so the first judgement (after
     // half a second) goes to the floor, and the next one lowers the rate.
