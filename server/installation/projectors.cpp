@@ -66,8 +66,11 @@ MapError pair_registration(const calib::DeviceLut& a, const std::vector<float>& 
     std::vector<double> d;
     uint64_t untrue = 0;
     const uint32_t w = a.camera_width, h = a.camera_height;
-    if (b.camera_width != w || b.camera_height != h || ax.size() != size_t(w) * h ||
-        bx.size() != ax.size())
+    const size_t n = size_t(w) * h;
+    for (const auto* v : {&ax, &ay, &bx, &by, &a.x, &a.y, &b.x, &b.y})
+        if (v->size() != n)
+            return map_error({}, 0);
+    if (b.camera_width != w || b.camera_height != h || a.state.size() != n || b.state.size() != n)
         return map_error({}, 0);
     for (uint32_t y = 0; y < h; ++y)
         for (uint32_t x = 0; x < w; ++x) {

@@ -9,6 +9,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include "clientlib/bilinear_reference.hpp"
 #include "clients/motion/motion.hpp"
 
 namespace {
@@ -50,43 +51,8 @@ BENCHMARK(BM_ReprojectStereo)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// The plain form of the bilinear filter, for comparison: one division per pixel and the four
-// neighbours' 8-bit weights everywhere, black or not (what warp() did before it stepped the
-// position and skipped the black; the same output to within 2 codes, tests/clientlib).
-void plain_bilinear(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
-                    const std::array<double, 9>& h) {
-    const double fw = width, fh = height;
-    for (uint32_t y = 0; y < height; ++y) {
-        uint8_t* out = dst + size_t(y) * width * 4;
-        double sx = h[1] * y + h[2], sy = h[4] * y + h[5], sw = h[7] * y + h[8];
-        for (uint32_t x = 0; x < width; ++x, sx += h[0], sy += h[3], sw += h[6]) {
-            uint8_t* o = out + size_t(x) * 4;
-            const double inv = sw > 1e-9 ? 1 / sw : 0;
-            const double u = sx * inv, v = sy * inv;
-            if (!(sw > 1e-9) || !(u > -1 && v > -1 && u < fw && v < fh)) {
-                std::memset(o, 0, 4);
-                continue;
-            }
-            const auto fu = int64_t((u + 1) * 256 + 0.5) - 256;
-            const auto fv = int64_t((v + 1) * 256 + 0.5) - 256;
-            const int64_t iu = fu >> 8, iv = fv >> 8;
-            const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
-            const uint32_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av,
-                                    au * av};
-            uint32_t acc[3] = {0, 0, 0};
-            for (int t = 0; t < 4; ++t) {
-                const int64_t px = iu + (t & 1), py = iv + (t >> 1);
-                if (uint64_t(px) >= width || uint64_t(py) >= height)
-                    continue;
-                const uint8_t* p = src + (size_t(py) * width + size_t(px)) * 4;
-                for (int c = 0; c < 3; ++c) acc[c] += wt[t] * p[c];
-            }
-            for (int c = 0; c < 3; ++c) o[c] = uint8_t((acc[c] + 32768) >> 16);
-            o[3] = (o[0] | o[1] | o[2]) ? 255 : 0;
-        }
-    }
-}
-
+// The plain form of the bilinear filter (clientlib/bilinear_reference.hpp), for comparison:
+// what warp() did before it stepped the position and skipped the black.
 void BM_ReprojectStereoPlainBilinear(benchmark::State& state) {
     std::vector<uint8_t> src(size_t(kW) * kH * 4, 0);
     for (uint32_t y = kH / 3; y < 2 * kH / 3; ++y)
@@ -100,7 +66,7 @@ void BM_ReprojectStereoPlainBilinear(benchmark::State& state) {
     for (auto _ : state) {
         const auto h = rotation_homography(k, Quat{1, 0, 0, 0}, display);
         for (auto& d : dst) {
-            plain_bilinear(src.data(), d.data(), kW, kH, h);
+            hs::test::bilinear_reference(src.data(), d.data(), kW, kH, h);
             benchmark::DoNotOptimize(d.data());
         }
         benchmark::ClobberMemory();

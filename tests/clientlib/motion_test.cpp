@@ -10,6 +10,7 @@
 #include <limits>
 #include <vector>
 
+#include "clientlib/bilinear_reference.hpp"
 #include "clients/lib/hysar_client.h"
 #include "clients/motion/motion.hpp"
 #include "protocol/protocol.hpp"
@@ -254,33 +255,7 @@ TEST(Reproject, PureRotationMatchesAFreshRender) {
 std::vector<uint8_t> bilinear_reference(const std::vector<uint8_t>& src,
                                         const std::array<double, 9>& h) {
     std::vector<uint8_t> dst(src.size(), 0);
-    for (uint32_t y = 0; y < kH; ++y)
-        for (uint32_t x = 0; x < kW; ++x) {
-            const double sw = h[6] * x + h[7] * y + h[8];
-            if (!(sw > 1e-9))
-                continue;
-            const double u = (h[0] * x + h[1] * y + h[2]) / sw;
-            const double v = (h[3] * x + h[4] * y + h[5]) / sw;
-            if (!(u > -1 && v > -1 && u < kW && v < kH))
-                continue;
-            const auto fu = int64_t((u + 1) * 256 + 0.5) - 256;
-            const auto fv = int64_t((v + 1) * 256 + 0.5) - 256;
-            const int64_t iu = fu >> 8, iv = fv >> 8;
-            const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
-            const uint32_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av,
-                                    au * av};
-            uint32_t acc[3] = {0, 0, 0};
-            for (int t = 0; t < 4; ++t) {
-                const int64_t px = iu + (t & 1), py = iv + (t >> 1);
-                if (px < 0 || py < 0 || px >= int64_t(kW) || py >= int64_t(kH))
-                    continue;
-                const uint8_t* p = &src[(size_t(py) * kW + size_t(px)) * 4];
-                for (int c = 0; c < 3; ++c) acc[c] += wt[t] * p[c];
-            }
-            uint8_t* o = &dst[(size_t(y) * kW + x) * 4];
-            for (int c = 0; c < 3; ++c) o[c] = uint8_t((acc[c] + 32768) >> 16);
-            o[3] = (o[0] | o[1] | o[2]) ? 255 : 0;
-        }
+    hs::test::bilinear_reference(src.data(), dst.data(), kW, kH, h);
     return dst;
 }
 

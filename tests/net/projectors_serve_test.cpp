@@ -16,15 +16,25 @@ using namespace hs::net_test;
 
 namespace {
 
+// The test scene with the three projectors of configs/exp1-room-3proj.json.
+scene::Scene three_projector_room() {
+    auto loaded =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    EXPECT_TRUE(loaded.ok()) << loaded.error().message;
+    scene::Scene s = test_scene();
+    if (loaded.ok()) {
+        s.projector = loaded->projector;
+        s.more_projectors = loaded->more_projectors;
+    }
+    return s;
+}
+
 class ProjectorsServer : public ServerTest {
 protected:
     scene::Scene make_scene() override {
-        auto loaded =
-            scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
-        EXPECT_TRUE(loaded.ok()) << loaded.error().message;
-        scene::Scene s = test_scene();
-        s.projector = loaded->projector;
-        s.more_projectors = loaded->more_projectors;
+        scene::Scene s = three_projector_room();
+        if (s.more_projectors.size() != 2)
+            return s;  // the load failed, and said so
         for (scene::Projector* p : {&s.projector, &s.more_projectors[0], &s.more_projectors[1]})
             p->intrinsics = {480, 300, 750, 750, 239.5, 149.5};
         return s;
@@ -267,15 +277,7 @@ namespace {
 // The three-projector room at its full resolution (three 1920 x 1200 projectors).
 class FullResolutionProjectors : public ServerTest {
 protected:
-    scene::Scene make_scene() override {
-        auto loaded =
-            scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
-        EXPECT_TRUE(loaded.ok()) << loaded.error().message;
-        scene::Scene s = test_scene();
-        s.projector = loaded->projector;
-        s.more_projectors = loaded->more_projectors;
-        return s;
-    }
+    scene::Scene make_scene() override { return three_projector_room(); }
 };
 
 }  // namespace
