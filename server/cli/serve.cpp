@@ -829,6 +829,9 @@ int run_serve(const std::vector<std::string>& args) {
     if (!server)
         return start_error(server.error().message);
     print_started(*server.value(), info, s.value(), *device.value());
+    // The server holds its own copy of the scene, only while it serves it: this one goes, with
+    // its meshes and textures, so that a replaced first scene is freed (docs/OPERATIONS.md).
+    s.value() = scene::Scene{};
     if (bus)
         watch_bus(*bus, *server.value());
     std::unique_ptr<admin::AdminServer> admin_endpoint;
