@@ -68,6 +68,9 @@ static const std::string kUsage =
         "  --reproject      with --window: warp each layer from the pose it was rendered for to\n"
         "                   the newest pose sent before showing it (libhysar-client's late\n"
         "                   reprojection, rotation only)\n"
+        "  --encoding E     how the layers come: lossy (default: JPEG-coded tiles at the server's\n"
+        "                   --layer-quality, black exact; RGBA16F layers stay lossless), sparse\n"
+        "                   (lossless tiles, for measurement or a wired headset) or raw\n"
         "  --summary FILE   also write the run's figures as JSON\n"
         "  --device auto    use the profile of the one known headset attached over USB (none: the\n"
         "                   --profile, with a message; two different ones: an error naming both)\n"
@@ -412,7 +415,7 @@ proto::RegisterDisplay read_display(const Args& args, const std::string& configu
         args.fail("--profile " + *err);
     const std::string fmt = args.choice("--format", "rgba8", {"rgba8", "rgba16f"});
     display.format = fmt == "rgba8" ? proto::PixelFormat::kRgba8 : proto::PixelFormat::kRgba16f;
-    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse", "lossy"});
+    const std::string enc = args.choice("--encoding", "lossy", {"raw", "sparse", "lossy"});
     display.encoding = enc == "raw"     ? proto::Encoding::kRaw
                        : enc == "lossy" ? proto::Encoding::kLossyTiles
                                         : proto::Encoding::kSparseTiles;

@@ -44,6 +44,7 @@ static const std::string kUsage =
         "  --profile F   headset profile (default devices/hololens.json in the configs:\n"
         "                ../share/hysar/configs beside the binary, else the source tree's)\n"
         "  --scale S     resolution multiplier of the profile (default 0.25)\n"
+        "  --encoding E  lossy (default, as headsets register), sparse (lossless) or raw\n"
         "  --json FILE   also write the results as JSON\n"
         "  --out DIR     write each headset's last layer pair as loadgen-I_left.png, "
         "_right.png\n"
@@ -141,7 +142,7 @@ Run read_options(const Args& args, std::ofstream& json_file) {
     r.display.format = args.choice("--format", "rgba8", {"rgba8", "rgba16f"}) == "rgba16f"
                            ? proto::PixelFormat::kRgba16f
                            : proto::PixelFormat::kRgba8;
-    const std::string enc = args.choice("--encoding", "sparse", {"raw", "sparse", "lossy"});
+    const std::string enc = args.choice("--encoding", "lossy", {"raw", "sparse", "lossy"});
     r.display.encoding = enc == "raw"     ? proto::Encoding::kRaw
                          : enc == "lossy" ? proto::Encoding::kLossyTiles
                                           : proto::Encoding::kSparseTiles;

@@ -1,10 +1,13 @@
 #include "protocol/lossy_tiles.hpp"
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <csetjmp>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
 
 // jpeglib.h wants size_t and FILE declared first.
 #include <jpeglib.h>
@@ -45,9 +48,138 @@ void hook(ErrorJump& e) {
     e.warnings = 0;
 }
 
-// `rgb` (w x h x 3) as a baseline JPEG in *buf (malloc'd by libjpeg; the caller frees it).
-bool jpeg_encode(const uint8_t* rgb, uint32_t w, uint32_t h, int quality, unsigned char** buf,
-                 unsigned long* size) {
+// One Huffman table as JPEG's DHT segment holds it: the count of codes of each length 1..16
+// (bits[0] unused) and the symbols in code order.
+struct HuffTable {
+    uint8_t bits[17];
+    uint8_t val[256];
+};
+
+// The table of minimal total length for `freq` (256 symbols; 0: no code), no code longer than 16
+// bits and none all ones: the procedure of ITU T.81 Annex K.2, as libjpeg's optimiser runs it.
+HuffTable build_table(const std::array<uint64_t, 256>& counts) {
+    uint64_t freq[257];
+    std::copy(counts.begin(), counts.end(), freq);
+    freq[256] = 1;  // a reserved symbol, so that no real code is all ones
+    int size[257] = {}, next[257];
+    std::fill(std::begin(next), std::end(next), -1);
+    for (;;) {
+        int c1 = -1, c2 = -1;
+        for (int i = 0; i <= 256; ++i)  // the least frequent; the highest symbol on a tie
+            if (freq[i] && (c1 < 0 || freq[i] <= freq[c1]))
+                c1 = i;
+        for (int i = 0; i <= 256; ++i)
+            if (freq[i] && i != c1 && (c2 < 0 || freq[i] <= freq[c2]))
+                c2 = i;
+        if (c2 < 0)
+            break;
+        freq[c1] += freq[c2];
+        freq[c2] = 0;
+        for (int c = c1;; c = next[c]) {
+            ++size[c];
+            if (next[c] < 0) {
+                next[c] = c2;
+                break;
+            }
+        }
+        for (int c = c2; c >= 0; c = next[c]) ++size[c];
+    }
+    int bits[258] = {};
+    for (int i = 0; i <= 256; ++i)
+        if (size[i])
+            ++bits[size[i]];
+    // Lengths past 16: a pair of them becomes one shorter code and a longer one (Annex K.3).
+    for (int i = 257; i > 16; --i)
+        while (bits[i] > 0) {
+            int j = i - 2;
+            while (bits[j] == 0) --j;
+            bits[i] -= 2;
+            ++bits[i - 1];
+            bits[j + 1] += 2;
+            --bits[j];
+        }
+    int longest = 16;
+    while (bits[longest] == 0) --longest;
+    --bits[longest];  // the reserved symbol's code
+    HuffTable t{};
+    for (int i = 1; i <= 16; ++i) t.bits[i] = uint8_t(bits[i]);
+    int p = 0;
+    for (int len = 1; len <= 256; ++len)
+        for (int sym = 0; sym < 256; ++sym)
+            if (size[sym] == len)
+                t.val[p++] = uint8_t(sym);
+    return t;
+}
+
+// A table that codes every symbol `valid` accepts, close to the fitted `lengths`: a symbol with a
+// fitted code weighs 2^(40 - length), one without weighs 1, so the fitted codes keep (nearly)
+// their lengths and the rest share the longest codes.
+template <size_t N, typename Valid>
+HuffTable complete_table(const std::array<uint8_t, N>& lengths, Valid valid) {
+    std::array<uint64_t, 256> w{};
+    for (int sym = 0; sym < 256; ++sym)
+        if (valid(sym))
+            w[sym] = size_t(sym) < N && lengths[sym] ? uint64_t(1) << (40 - lengths[sym]) : 1;
+    return build_table(w);
+}
+
+bool dc_symbol(int s) {
+    return s <= 11;
+}  // 8-bit samples: differences of up to 11 bits
+bool ac_symbol(int s) {  // EOB, ZRL, and run 0..15 with size 1..10
+    return s == 0x00 || s == 0xF0 || ((s & 15) >= 1 && (s & 15) <= 10);
+}
+
+// The per-symbol lengths that `t` gives.
+template <size_t N>
+void lengths_of(const JHUFF_TBL& t, std::array<uint8_t, N>& out) {
+    out.fill(0);
+    int p = 0;
+    for (int len = 1; len <= 16; ++len)
+        for (int k = 0; k < t.bits[len]; ++k, ++p)
+            if (t.huffval[p] < N)
+                out[t.huffval[p]] = uint8_t(len);
+}
+
+// The completed tables a layer is coded with.
+struct Tables {
+    HuffTable dc, ac;
+};
+
+// Tables completed from what libjpeg's optimiser fitted to a layer.
+Tables complete(const JHUFF_TBL& dc, const JHUFF_TBL& ac) {
+    std::array<uint8_t, 12> dl;
+    std::array<uint8_t, 256> al;
+    lengths_of(dc, dl);
+    lengths_of(ac, al);
+    return {complete_table(dl, dc_symbol), complete_table(al, ac_symbol)};
+}
+
+// Per thread and quality: the tables fitted to a recent layer, and how many layers have been
+// coded with them since. Consecutive layers of one thread show the same scene, mostly from
+// nearby poses, so tables fitted to one suit the next ones (bytes within 1 % of fitting each
+// layer on the moving headset, `hysar bench encoding`) at no statistics pass.
+struct Reused {
+    bool fitted = false;
+    uint32_t uses = 0;
+    Tables tables;
+};
+constexpr uint32_t kRefitEvery = 32;  // layers coded with one fit before the next is made
+
+Reused& reused_for(int quality) {
+    thread_local std::unique_ptr<std::array<Reused, 101>> per_quality;
+    if (!per_quality)
+        per_quality = std::make_unique<std::array<Reused, 101>>();
+    return (*per_quality)[size_t(std::clamp(quality, 0, 100))];
+}
+
+// The three planes at `planes` (R, G, B, each w x h, one after the other) as a baseline JPEG in
+// *buf (malloc'd by libjpeg; the caller frees it), with `tables`, or when null with libjpeg's
+// standard tables, or tables fitted to the image (`optimal`), completed into *fitted when
+// `fitted` is not null. Planes go in as libjpeg's raw data, so it neither converts colour nor
+// copies the rows into its own buffer.
+bool jpeg_encode(const uint8_t* planes, uint32_t w, uint32_t h, int quality, const Tables* tables,
+                 bool optimal, Tables* fitted, unsigned char** buf, unsigned long* size) {
     jpeg_compress_struct c;
     ErrorJump e;
     hook(e);
@@ -71,22 +203,40 @@ bool jpeg_encode(const uint8_t* rgb, uint32_t w, uint32_t h, int quality, unsign
     for (int i = 0; i < c.num_components; ++i)
         c.comp_info[i].h_samp_factor = c.comp_info[i].v_samp_factor = 1;
     c.dct_method = JDCT_ISLOW;
-    c.optimize_coding = TRUE;  // a fifth fewer bytes than the standard Huffman tables
+    // One table pair serves all three components (jpeg_set_colorspace's choice for RGB).
+    c.optimize_coding = optimal && !tables ? TRUE : FALSE;
+    if (tables) {
+        for (JHUFF_TBL* t : {c.dc_huff_tbl_ptrs[0], c.ac_huff_tbl_ptrs[0]}) {
+            const HuffTable& from = t == c.dc_huff_tbl_ptrs[0] ? tables->dc : tables->ac;
+            std::memcpy(t->bits, from.bits, sizeof from.bits);
+            std::memcpy(t->huffval, from.val, sizeof from.val);
+            t->sent_table = FALSE;
+        }
+    }
+    c.raw_data_in = TRUE;
     jpeg_start_compress(&c, TRUE);
-    JSAMPROW rows[16];
-    while (c.next_scanline < h) {
-        const uint32_t n = std::min<uint32_t>(16, h - c.next_scanline);
-        for (uint32_t i = 0; i < n; ++i)
-            rows[i] = const_cast<JSAMPROW>(rgb + size_t(c.next_scanline + i) * w * 3);
-        jpeg_write_scanlines(&c, rows, n);
+    const size_t plane = size_t(w) * h;
+    JSAMPROW rows[3][DCTSIZE];
+    JSAMPARRAY comps[3] = {rows[0], rows[1], rows[2]};
+    while (c.next_scanline < h) {  // h is a multiple of 16: whole blocks of DCTSIZE rows
+        for (int k = 0; k < 3; ++k)
+            for (uint32_t i = 0; i < DCTSIZE; ++i)
+                rows[k][i] = const_cast<JSAMPROW>(planes + size_t(k) * plane +
+                                                  size_t(c.next_scanline + i) * w);
+        jpeg_write_raw_data(&c, comps, DCTSIZE);
     }
     jpeg_finish_compress(&c);
+    if (fitted && c.optimize_coding)  // the optimiser left its tables in the standard ones' place
+        *fitted = complete(*c.dc_huff_tbl_ptrs[0], *c.ac_huff_tbl_ptrs[0]);
     jpeg_destroy_compress(&c);
     return true;
 }
 
-// The JPEG in `data` into `rgb` (w x h x 3); null, or why it is refused.
-const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h, uint8_t* rgb) {
+// The JPEG in `data` into `img` (w x h): R, G, B planes one after the other (`planar` set) when
+// it holds R, G, B at full resolution (what the reference encoder writes: read as libjpeg's raw
+// data, with no colour conversion or row copy), else interleaved RGB; null, or why it is refused.
+const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h, uint8_t* img,
+                        bool& planar) {
     jpeg_decompress_struct d;
     ErrorJump e;
     hook(e);
@@ -115,16 +265,36 @@ const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h
         jpeg_destroy_decompress(&d);
         return "lossy tiles: the JPEG must be baseline (sequential, Huffman)";
     }
-    d.out_color_space = JCS_RGB;
+    planar = d.jpeg_color_space == JCS_RGB;
+    for (int i = 0; i < 3; ++i)
+        planar = planar && d.comp_info[i].h_samp_factor == 1 && d.comp_info[i].v_samp_factor == 1;
     d.dct_method = JDCT_ISLOW;
-    d.do_fancy_upsampling = FALSE;  // no colour from one packed tile in its neighbour
+    if (planar) {
+        d.raw_data_out = TRUE;
+    } else {
+        d.out_color_space = JCS_RGB;
+        d.do_fancy_upsampling = FALSE;  // no colour from one packed tile in its neighbour
+    }
     jpeg_start_decompress(&d);
-    JSAMPROW rows[16];
-    while (d.output_scanline < h) {
-        const uint32_t n = std::min<uint32_t>(16, h - d.output_scanline);
-        for (uint32_t i = 0; i < n; ++i) rows[i] = rgb + size_t(d.output_scanline + i) * w * 3;
-        if (jpeg_read_scanlines(&d, rows, n) == 0)
-            break;  // cannot happen with a memory source; guards the loop
+    if (planar) {
+        const size_t plane = size_t(w) * h;
+        JSAMPROW rows[3][DCTSIZE];
+        JSAMPARRAY comps[3] = {rows[0], rows[1], rows[2]};
+        while (d.output_scanline < h) {  // h is a multiple of 16: whole blocks of rows
+            for (int k = 0; k < 3; ++k)
+                for (uint32_t i = 0; i < DCTSIZE; ++i)
+                    rows[k][i] = img + size_t(k) * plane + size_t(d.output_scanline + i) * w;
+            if (jpeg_read_raw_data(&d, comps, DCTSIZE) == 0)
+                break;  // cannot happen with a memory source; guards the loop
+        }
+    } else {
+        JSAMPROW rows[16];
+        while (d.output_scanline < h) {
+            const uint32_t n = std::min<uint32_t>(16, h - d.output_scanline);
+            for (uint32_t i = 0; i < n; ++i) rows[i] = img + size_t(d.output_scanline + i) * w * 3;
+            if (jpeg_read_scanlines(&d, rows, n) == 0)
+                break;  // cannot happen with a memory source; guards the loop
+        }
     }
     const bool whole = d.output_scanline == h;
     if (whole)
@@ -141,47 +311,81 @@ inline bool lit(const uint8_t* p) {
     return v != 0;
 }
 
-// The tile at `t` into the packed image at `img` (row pitch `pitch`, RGB) and its coverage bits
-// into `bits`. Lit pixels go as they are; the others (and the padding past the layer's edge)
-// continue the lit ones: along each row from the nearest lit pixel, and rows without one from
-// the nearest row with one, so that the JPEG sees no edge where the coverage cuts anyway (an
-// edge costs bits and rings into the lit pixels beside it).
+// The first x in [from, end) whose bit in the row mask `m` is `set`; `end` when none is.
+inline uint32_t next_bit(const uint64_t* m, uint32_t from, uint32_t end, bool set) {
+    for (uint32_t x = from; x < end;) {
+        uint64_t w = m[x >> 6] >> (x & 63);
+        if (!set)
+            w = ~w & (~uint64_t(0) >> (x & 63));
+        if (w)
+            return std::min(end, x + uint32_t(std::countr_zero(w)));
+        x = (x | 63) + 1;
+    }
+    return end;
+}
+
+// The tile at `t` into the packed planes at `img` (R, G, B planes `plane` bytes apart, row pitch
+// `pitch`) and its coverage bits into `bits` (zeroed). Lit pixels go as they are; the others (and
+// the padding past the layer's edge) continue the lit ones: along each row from the nearest lit
+// pixel, and rows without one from the nearest row with one, so that the JPEG sees no edge where
+// the coverage cuts anyway (an edge costs bits and rings into the lit pixels beside it).
 void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t ts, uint8_t* img,
-               size_t pitch, uint8_t* bits) {
+               size_t plane, size_t pitch, uint8_t* bits) {
     constexpr uint32_t kNone = UINT32_MAX;
     uint32_t lit_row = kNone;  // a row with a lit pixel, the last one seen
     uint32_t row_src[256];     // per row: itself when it has a lit pixel, else kNone
     for (uint32_t y = 0; y < ts; ++y) {
-        uint8_t* dst = img + size_t(y) * pitch;
-        uint32_t first = kNone, last = kNone;
-        if (y < t.ch) {
-            const uint8_t* src = raw + size_t(t.y0 + y) * stride + size_t(t.x0) * 4;
-            for (uint32_t x = 0; x < t.cw; ++x) {
-                const uint8_t* p = src + size_t(x) * 4;
-                if (!lit(p))
-                    continue;
-                const uint32_t i = y * ts + x;
-                bits[i / 8] |= uint8_t(1u << (i % 8));
-                uint8_t* d = dst + size_t(x) * 3;
-                d[0] = p[0], d[1] = p[1], d[2] = p[2];
-                if (first == kNone)
-                    first = x;
-                else if (last != kNone && last + 1 < x)
-                    // The gap between two lit pixels: the left one's colour up to the middle,
-                    // the right one's after it.
-                    for (uint32_t g = last + 1; g < x; ++g)
-                        std::memcpy(dst + size_t(g) * 3,
-                                    dst + size_t(g - last <= x - g ? last : x) * 3, 3);
-                last = x;
-            }
-        }
-        if (first == kNone) {
-            row_src[y] = kNone;
+        uint8_t* r = img + size_t(y) * pitch;
+        uint8_t* g = r + plane;
+        uint8_t* b = g + plane;
+        row_src[y] = kNone;
+        if (y >= t.ch)
             continue;
+        // Every pixel of the row into the planes, and which are lit, without a branch per pixel.
+        const uint8_t* src = raw + size_t(t.y0 + y) * stride + size_t(t.x0) * 4;
+        const uint32_t cw = t.cw;  // a local: the plane stores could alias `t`
+        uint64_t m[4] = {};
+        for (uint32_t x0 = 0; x0 < cw; x0 += 64) {
+            const uint32_t n = std::min<uint32_t>(64, cw - x0);
+            uint64_t word = 0;
+            for (uint32_t i = 0; i < n; ++i) {
+                uint32_t v;
+                std::memcpy(&v, src + size_t(x0 + i) * 4, 4);
+                r[x0 + i] = uint8_t(v), g[x0 + i] = uint8_t(v >> 8), b[x0 + i] = uint8_t(v >> 16);
+                word |= uint64_t(v != 0) << i;
+            }
+            m[x0 >> 6] = word;
         }
-        for (uint32_t x = 0; x < first; ++x) std::memcpy(dst + size_t(x) * 3, dst + first * 3, 3);
-        for (uint32_t x = last + 1; x < ts; ++x)
-            std::memcpy(dst + size_t(x) * 3, dst + last * 3, 3);
+        uint8_t* row_bits = bits + size_t(y) * ts / 8;  // ts is a multiple of 16
+        for (uint32_t j = 0; j < ts / 8; ++j) row_bits[j] = uint8_t(m[j >> 3] >> (8 * (j & 7)));
+        const uint32_t first = next_bit(m, 0, cw, true);
+        if (first == cw)
+            continue;
+        uint32_t last = first;
+        for (int k = 3; k >= 0; --k)
+            if (m[k]) {
+                last = uint32_t(k) * 64 + 63 - uint32_t(std::countl_zero(m[k]));
+                break;
+            }
+        // Gaps between two lit pixels: the left one's colour up to the middle, the right one's
+        // after it.
+        for (uint32_t x = first;;) {
+            const uint32_t gap = next_bit(m, x, last, false);
+            if (gap >= last)
+                break;
+            const uint32_t right = next_bit(m, gap, last + 1, true), left = gap - 1;
+            const uint32_t mid = left + (right - left) / 2;
+            for (uint32_t k = gap; k <= mid; ++k) r[k] = r[left], g[k] = g[left], b[k] = b[left];
+            for (uint32_t k = mid + 1; k < right; ++k)
+                r[k] = r[right], g[k] = g[right], b[k] = b[right];
+            x = right;
+        }
+        std::memset(r, r[first], first);
+        std::memset(g, g[first], first);
+        std::memset(b, b[first], first);
+        std::memset(r + last + 1, r[last], ts - last - 1);
+        std::memset(g + last + 1, g[last], ts - last - 1);
+        std::memset(b + last + 1, b[last], ts - last - 1);
         row_src[y] = y;
         lit_row = y;
     }
@@ -203,7 +407,9 @@ void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t t
             from = above;
         else
             from = y - above <= below - y ? above : below;
-        std::memcpy(img + size_t(y) * pitch, img + size_t(from) * pitch, size_t(ts) * 3);
+        for (int k = 0; k < 3; ++k)
+            std::memcpy(img + k * plane + size_t(y) * pitch, img + k * plane + size_t(from) * pitch,
+                        ts);
     }
 }
 
@@ -211,7 +417,7 @@ void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t t
 
 bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride,
                     const std::vector<TilePlace>& tiles, uint32_t ts, int quality,
-                    std::vector<uint8_t>& scratch) {
+                    std::vector<uint8_t>& scratch, Huffman huffman) {
     const size_t at = out.size();
     out.resize(at + kHead, 0);
     const size_t n = tiles.size();
@@ -219,21 +425,23 @@ bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride
         return true;
     const uint32_t cols = columns_for(n, ts), rows = uint32_t((n + cols - 1) / cols);
     const uint32_t w = cols * ts, h = rows * ts;
-    const size_t img_bytes = size_t(w) * h * 3, bits_per_tile = size_t(ts) * ts / 8;
-    scratch.resize(img_bytes + n * bits_per_tile);
+    const size_t plane = size_t(w) * h, bits_per_tile = size_t(ts) * ts / 8;
+    scratch.resize(3 * plane + n * bits_per_tile);
     uint8_t* img = scratch.data();
-    uint8_t* bits = img + img_bytes;
+    uint8_t* bits = img + 3 * plane;
     std::memset(bits, 0, n * bits_per_tile);
-    const size_t pitch = size_t(w) * 3;
+    const size_t pitch = w;
     for (size_t k = 0; k < n; ++k)
         pack_tile(raw, stride, tiles[k], ts,
-                  img + size_t(k / cols) * ts * pitch + size_t(k % cols) * ts * 3, pitch,
+                  img + size_t(k / cols) * ts * pitch + size_t(k % cols) * ts, plane, pitch,
                   bits + k * bits_per_tile);
     // Slots past the last tile: grey, cheap to code.
     for (size_t k = n; k < size_t(cols) * rows; ++k)
-        for (uint32_t y = 0; y < ts; ++y)
-            std::memset(img + (size_t(k / cols) * ts + y) * pitch + size_t(k % cols) * ts * 3, 128,
-                        size_t(ts) * 3);
+        for (int c = 0; c < 3; ++c)
+            for (uint32_t y = 0; y < ts; ++y)
+                std::memset(
+                    img + c * plane + (size_t(k / cols) * ts + y) * pitch + size_t(k % cols) * ts,
+                    128, ts);
     const size_t bound = ZSTD_compressBound(n * bits_per_tile);
     out.resize(at + kHead + bound);
     const size_t cov = ZSTD_compress(out.data() + at + kHead, bound, bits, n * bits_per_tile, 1);
@@ -242,7 +450,22 @@ bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride
     out.resize(at + kHead + cov);
     unsigned char* jpeg = nullptr;
     unsigned long jpeg_size = 0;
-    const bool ok = jpeg_encode(img, w, h, std::clamp(quality, 1, 100), &jpeg, &jpeg_size);
+    quality = std::clamp(quality, 1, 100);
+    bool ok;
+    if (huffman == Huffman::kReused) {
+        Reused& r = reused_for(quality);
+        if (!r.fitted || r.uses >= kRefitEvery) {
+            ok = jpeg_encode(img, w, h, quality, nullptr, true, &r.tables, &jpeg, &jpeg_size);
+            r.fitted = ok;
+            r.uses = 0;
+        } else {
+            ok = jpeg_encode(img, w, h, quality, &r.tables, false, nullptr, &jpeg, &jpeg_size);
+            ++r.uses;
+        }
+    } else {
+        ok = jpeg_encode(img, w, h, quality, nullptr, huffman == Huffman::kOptimal, nullptr, &jpeg,
+                         &jpeg_size);
+    }
     if (ok) {
         out.insert(out.end(), jpeg, jpeg + jpeg_size);
         const uint16_t c16 = uint16_t(cols);
@@ -288,24 +511,28 @@ std::string decode_payload(const uint8_t* data, size_t size, const std::vector<T
         return "lossy tiles: the coverage is corrupt or of the wrong size";
     const uint32_t w = uint32_t(cols) * ts, h = uint32_t(rows) * ts;
     std::vector<uint8_t> img(size_t(w) * h * 3);
-    if (const char* why = jpeg_decode(data + kHead + cov, size - kHead - cov, w, h, img.data()))
+    bool planar = false;
+    if (const char* why =
+            jpeg_decode(data + kHead + cov, size - kHead - cov, w, h, img.data(), planar))
         return why;
-    const size_t pitch = size_t(w) * 3;
+    // A pixel's R, G, B lie `step` bytes apart and pixels `px` bytes apart; rows `pitch`.
+    const size_t step = planar ? size_t(w) * h : 1, px = planar ? 1 : 3, pitch = size_t(w) * px;
     for (size_t k = 0; k < n; ++k) {
         const TilePlace& t = tiles[k];
-        const uint8_t* src = img.data() + (k / cols) * ts * pitch + (k % cols) * ts * 3;
+        const uint8_t* src = img.data() + (k / cols) * ts * pitch + (k % cols) * ts * px;
         const uint8_t* b = bits.data() + k * bits_per_tile;
         for (uint32_t y = 0; y < t.ch; ++y) {
             uint8_t* dst = rgba + (size_t(t.y0 + y) * width + t.x0) * 4;
             const uint8_t* s = src + size_t(y) * pitch;
-            for (uint32_t x = 0; x < t.cw; ++x, dst += 4, s += 3) {
+            for (uint32_t x = 0; x < t.cw; ++x, dst += 4, s += px) {
                 const uint32_t i = y * ts + x;
                 if (!((b[i / 8] >> (i % 8)) & 1u))
                     continue;  // stays black: the layer is zeroed
-                const bool zero = (s[0] | s[1] | s[2]) == 0;
-                dst[0] = zero ? 1 : s[0];
-                dst[1] = zero ? 1 : s[1];
-                dst[2] = zero ? 1 : s[2];
+                const uint8_t r = s[0], g = s[step], bl = s[2 * step];
+                const bool zero = (r | g | bl) == 0;
+                dst[0] = zero ? 1 : r;
+                dst[1] = zero ? 1 : g;
+                dst[2] = zero ? 1 : bl;
                 dst[3] = 255;
             }
         }

@@ -21,16 +21,17 @@ inline bool tile_lit(const uint8_t* raw, size_t stride, uint32_t x0, uint32_t y0
     const size_t row_bytes = size_t(cw) * bpp;  // a multiple of 4
     for (uint32_t y = 0; y < ch; ++y) {
         const uint8_t* row = raw + size_t(y0 + y) * stride + size_t(x0) * bpp;
-        // Eight bytes at a time: most tiles of a VD layer are black.
-        uint64_t acc = 0;
+        // 32 bytes at a time into four accumulators: most tiles of a VD layer are black, and
+        // reading them is most of the time a layer's tiles take.
+        uint64_t acc[4] = {};
         size_t i = 0;
-        for (; i + 8 <= row_bytes; i += 8) {
-            uint64_t w;
-            std::memcpy(&w, row + i, 8);
-            acc |= w;
+        for (; i + 32 <= row_bytes; i += 32) {
+            uint64_t w[4];
+            std::memcpy(w, row + i, 32);
+            acc[0] |= w[0], acc[1] |= w[1], acc[2] |= w[2], acc[3] |= w[3];
         }
-        for (; i < row_bytes; ++i) acc |= row[i];
-        if (acc != 0)
+        for (; i < row_bytes; ++i) acc[0] |= row[i];
+        if ((acc[0] | acc[1] | acc[2] | acc[3]) != 0)
             return true;
     }
     return false;
@@ -68,7 +69,8 @@ size_t compress_into(std::vector<uint8_t>& out, size_t at, const std::vector<uin
 
 void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
                        uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
-                       std::vector<uint8_t>& packed, uint16_t ts, int quality) {
+                       std::vector<uint8_t>& packed, uint16_t ts, int quality,
+                       lossy::Huffman huffman) {
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
     region.x1 = std::min(region.x1, tx);
     region.y1 = std::min(region.y1, ty);
@@ -115,7 +117,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     if (lossy) {
         // Never more than the tiles themselves: the bound that registration checks
         // (codec::max_layer_payload_bytes) holds for every codec.
-        if (lossy::encode_payload(out, raw, stride, places, ts, quality, packed) &&
+        if (lossy::encode_payload(out, raw, stride, places, ts, quality, packed, huffman) &&
             out.size() - len_at - 4 <= size_t(present) * tile_bytes) {
             const uint32_t n32 = uint32_t(out.size() - len_at - 4);
             std::memcpy(out.data() + len_at, &n32, 4);
@@ -132,10 +134,11 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
 }
 
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
-                                  uint32_t bpp, TileCodec codec, uint16_t ts, int quality) {
+                                  uint32_t bpp, TileCodec codec, uint16_t ts, int quality,
+                                  lossy::Huffman huffman) {
     std::vector<uint8_t> out, packed;
     encode_tiles_into(out, raw.data(), size_t(w) * bpp, w, h, bpp, codec, TileRegion{}, packed, ts,
-                      quality);
+                      quality, huffman);
     return out;
 }
 

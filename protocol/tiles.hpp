@@ -11,12 +11,14 @@
 #include <variant>
 #include <vector>
 
+#include "protocol/lossy_tiles.hpp"
+
 namespace hs::protocol {
 
 enum class TileCodec : uint8_t { kNone = 0, kLz4 = 1, kZstd = 2, kJpeg = 3 };
 inline constexpr uint16_t kDefaultTileSize = 32;
 // The JPEG quality of codec 3, 1..100 (`hysar serve --layer-quality`).
-inline constexpr int kDefaultLayerQuality = 90;
+inline constexpr int kDefaultLayerQuality = 92;
 
 // Encodes raw pixel bytes (width x height x bytes_per_pixel, rows top to bottom). kJpeg, at
 // `quality`, applies to 4 bytes per pixel with a tile size that is a multiple of 16; otherwise,
@@ -24,7 +26,8 @@ inline constexpr int kDefaultLayerQuality = 90;
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t width, uint32_t height,
                                   uint32_t bytes_per_pixel, TileCodec codec,
                                   uint16_t tile_size = kDefaultTileSize,
-                                  int quality = kDefaultLayerQuality);
+                                  int quality = kDefaultLayerQuality,
+                                  lossy::Huffman huffman = lossy::Huffman::kReused);
 
 // The tiles that may hold non-zero pixels, in tile units [x0, x1) x [y0, y1): tiles outside are
 // sent absent without being read.
@@ -38,7 +41,8 @@ struct TileRegion {
 void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t width,
                        uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
                        TileRegion region, std::vector<uint8_t>& scratch,
-                       uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality);
+                       uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality,
+                       lossy::Huffman huffman = lossy::Huffman::kReused);
 
 // Decodes to raw pixel bytes, or an error sentence; never reads or writes out of bounds,
 // whatever the input. Codec 3 (lossy) is accepted for 4 bytes per pixel.

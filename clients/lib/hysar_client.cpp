@@ -163,7 +163,7 @@ hysar_status hysar_display_from_profile(const char* path, double scale, hysar_di
                              d.cy,
                              d.ipd_m,
                              HYSAR_FORMAT_RGBA8,
-                             HYSAR_ENCODING_SPARSE,
+                             HYSAR_ENCODING_LOSSY,
                              HYSAR_MODE_CONTINUOUS};
         return HYSAR_OK;
     });

@@ -160,7 +160,8 @@ HYSAR_API uint64_t hysar_now_ns(void);
 /* Fills the defaults (struct_size included); address, token and name stay to be set. */
 HYSAR_API void hysar_client_config_init(hysar_client_config* config);
 /* Reads a headset profile (a JSON file in configs/devices) into a display, its resolution times
- * `scale`; format RGBA8, encoding SPARSE, mode CONTINUOUS. */
+ * `scale`; format RGBA8, encoding LOSSY (a server that predates it is asked again for SPARSE),
+ * mode CONTINUOUS. */
 HYSAR_API hysar_status hysar_display_from_profile(const char* path, double scale,
                                                   hysar_display* out);
 

@@ -392,11 +392,11 @@ Result<void> Sweep::formats_and_encodings(std::vector<AccuracyRow>& rows) {
          protocol::TileCodec::kZstd},
         {"srgb8 tiles+zstd", protocol::PixelFormat::kRgba8, protocol::Encoding::kSparseTiles,
          protocol::TileCodec::kZstd},
-        // Lossy tiles (`hysar serve --layer-quality`): the quality knob, default 90.
+        // Lossy tiles (`hysar serve --layer-quality`): the quality knob, default 92.
         {"srgb8 lossy q70", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
          protocol::TileCodec::kJpeg, 70},
-        {"srgb8 lossy q90", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
-         protocol::TileCodec::kJpeg, 90},
+        {"srgb8 lossy q92", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
+         protocol::TileCodec::kJpeg, 92},
         {"srgb8 lossy q95", protocol::PixelFormat::kRgba8, protocol::Encoding::kLossyTiles,
          protocol::TileCodec::kJpeg, 95}};
     auto encoded_row = [&](const std::string& knob, const std::string& setting, bool is_default,

@@ -78,6 +78,7 @@ struct Variant {
     protocol::Encoding encoding;
     protocol::TileCodec codec;
     int quality;
+    protocol::lossy::Huffman huffman = protocol::lossy::Huffman::kReused;
 };
 
 // Error of `got` against the lossless RGBA8 layer `ref` over ref's lit pixels.
@@ -124,9 +125,14 @@ Result<EncodingRow> measure(const Views& views, const std::vector<std::vector<ui
         std::vector<uint8_t> data, out;
         for (int r = 0; r < repeats; ++r) {
             enc_ms.push_back(time_ms([&] {
-                data =
-                    codec::encode_layer(raw[l], w, h, var.format, var.encoding, var.codec,
-                                        var.quality ? var.quality : protocol::kDefaultLayerQuality);
+                if (var.huffman != protocol::lossy::Huffman::kReused)
+                    data = protocol::encode_tiles(raw[l], w, h, bpp, var.codec,
+                                                  protocol::kDefaultTileSize, var.quality,
+                                                  var.huffman);
+                else
+                    data = codec::encode_layer(
+                        raw[l], w, h, var.format, var.encoding, var.codec,
+                        var.quality ? var.quality : protocol::kDefaultLayerQuality);
             }));
             std::string why;
             dec_ms.push_back(time_ms([&] {
@@ -258,7 +264,13 @@ Result<std::vector<EncodingRow>> run_encoding_bench(render::Renderer& renderer,
         variants.push_back({"tiles+lz4", f, E::kSparseTiles, C::kLz4, 0});
         variants.push_back({"tiles+zstd", f, E::kSparseTiles, C::kZstd, 0});
     }
-    for (int q : o.qualities) variants.push_back({"lossy", F::kRgba8, E::kLossyTiles, C::kJpeg, q});
+    for (int q : o.qualities) {
+        variants.push_back({"lossy", F::kRgba8, E::kLossyTiles, C::kJpeg, q});
+        variants.push_back({"lossy-opt", F::kRgba8, E::kLossyTiles, C::kJpeg, q,
+                            protocol::lossy::Huffman::kOptimal});
+        variants.push_back({"lossy-std", F::kRgba8, E::kLossyTiles, C::kJpeg, q,
+                            protocol::lossy::Huffman::kStandard});
+    }
     std::vector<EncodingRow> rows;
     for (const Views& v : sets) {
         std::vector<std::vector<uint8_t>> srgb8, half;

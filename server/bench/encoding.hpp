@@ -26,10 +26,13 @@ struct EncodingBenchOptions {
 };
 
 struct EncodingRow {
-    std::string views;     // "fig7" or "moving"
-    std::string format;    // "rgba8" or "rgba16f"
-    std::string encoding;  // "raw", "tiles", "tiles+lz4", "tiles+zstd", "lossy"
-    int quality = 0;       // lossy: the JPEG quality; 0: lossless
+    std::string views;   // "fig7" or "moving"
+    std::string format;  // "rgba8" or "rgba16f"
+    // "raw", "tiles", "tiles+lz4", "tiles+zstd", "lossy" (the server's: Huffman tables fitted
+    // to a recent layer), "lossy-opt" (fitted to each layer), "lossy-std" (libjpeg's standard
+    // tables), "delta+lz4", "delta+zstd"
+    std::string encoding;
+    int quality = 0;  // lossy: the JPEG quality; 0: lossless
     size_t layers = 0;
     double bytes_per_layer = 0;  // mean over the layers
     double bytes_per_layer_max = 0;

@@ -104,7 +104,7 @@ const char* kServeHelp =
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
     "  --encoder-threads N (0: 1 on lavapipe, half the cores up to 8 on a GPU)\n"
     "  --tile-codec lz4|zstd|none (lz4)\n"
-    "  --layer-quality Q (90): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
+    "  --layer-quality Q (92): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"
     "                      Mbit/s, per headset and for all together (shared evenly); kept by\n"

@@ -314,6 +314,7 @@ void Server::Impl::sweep() {
     auto all = sessions;
     for (auto& [id, s] : all) s->check_deadlines(now);
     for (auto& [id, b] : bit_rates) bit_rate_update(id, 0, false);  // idle headsets' rates age
+    check_bit_rate_sharing();
     uint32_t shortest =
         std::min({limits.handshake_timeout_ms, limits.frame_timeout_ms, limits.shutdown_grace_ms});
     if (limits.idle_timeout_ms)
@@ -526,21 +527,45 @@ void Server::Impl::watch_bit_rate(uint32_t id, const loop::Display& d) {
     // RGBA16F layers of a lossy headset go lossless: only their rate can be lowered.
     o.lossy =
         d.packing == loop::LayerPacking::kLossyTiles && d.encoding == render::LayerEncoding::kSrgb8;
-    bit_rates.insert_or_assign(id, BitRate{loop::BitRateController(o), o.lossy});
+    BitRate b{loop::BitRateController(o), o.lossy};
+    b.active_until = Clock::now() + kBitRateIdleAfter;
+    bit_rates.insert_or_assign(id, std::move(b));
     share_bit_rate_budgets();
 }
 
 void Server::Impl::share_bit_rate_budgets() {
     if (bit_rates.empty())
         return;
-    double each = limits.room_mbps > 0 ? limits.room_mbps * 1e6 / double(bit_rates.size()) : 0;
-    if (limits.headset_mbps > 0)
-        each = each > 0 ? std::min(each, limits.headset_mbps * 1e6) : limits.headset_mbps * 1e6;
     const auto now = Clock::now();
+    size_t active = 0;
     for (auto& [id, b] : bit_rates) {
-        b.control.set_budget(each, now);
+        b.sharing = b.active_until > now;
+        active += b.sharing;
+    }
+    // The room's budget evenly among the active headsets; an idle one is given what it would
+    // have on waking, and its first layer pair shares the room again.
+    auto share = [&](size_t n) {
+        double each =
+            limits.room_mbps > 0 ? limits.room_mbps * 1e6 / double(std::max<size_t>(n, 1)) : 0;
+        if (limits.headset_mbps > 0)
+            each = each > 0 ? std::min(each, limits.headset_mbps * 1e6) : limits.headset_mbps * 1e6;
+        return each;
+    };
+    for (auto& [id, b] : bit_rates) {
+        b.control.set_budget(b.sharing ? share(active) : share(active + 1), now);
         bit_rate_update(id, 0, false);
     }
+}
+
+void Server::Impl::check_bit_rate_sharing() {
+    if (limits.room_mbps <= 0)
+        return;
+    const auto now = Clock::now();
+    for (const auto& [id, b] : bit_rates)
+        if ((b.active_until > now) != b.sharing) {
+            share_bit_rate_budgets();
+            return;
+        }
 }
 
 void Server::Impl::bit_rate_update(uint32_t id, uint64_t bytes, bool frame) {
@@ -549,10 +574,16 @@ void Server::Impl::bit_rate_update(uint32_t id, uint64_t bytes, bool frame) {
         return;
     BitRate& b = it->second;
     const auto now = Clock::now();
-    if (frame)
+    if (frame) {
         b.control.sent(bytes, now);
-    else
+        b.active_until = now + kBitRateIdleAfter;
+        if (!b.sharing && limits.room_mbps > 0) {
+            share_bit_rate_budgets();  // awake again: the room is shared once more
+            return;
+        }
+    } else {
         b.control.tick(now);
+    }
     const int quality = b.lossy && b.control.quality() != std::clamp(info.layer_quality, 1, 100)
                             ? b.control.quality()
                             : 0;

@@ -213,7 +213,14 @@ struct Server::Impl final : loop::FrameLoopHost {
         bool lossy = false;  // RGBA8 lossy tiles: the quality is its to lower
         int quality = 0;     // what the scheduler was last told (0: the server's)
         double max_hz = 0;
+        // Active (sharing the room's budget) until then: a layer pair or the display's
+        // registration in the last kBitRateIdleAfter. `sharing`: counted in the last share.
+        Clock::time_point active_until{};
+        bool sharing = false;
     };
+    // A headset that has received nothing for this long (it stopped asking, or the scene has
+    // no view for its display) leaves its share of the room's budget to the others.
+    static constexpr std::chrono::seconds kBitRateIdleAfter{2};
     std::map<uint32_t, BitRate> bit_rates;
 
     // Gauges: one writer each (named), read by any thread.
@@ -267,8 +274,11 @@ struct Server::Impl final : loop::FrameLoopHost {
     // A headset registered `d`: its bit rate measured afresh and, with a limit, kept (the budgets
     // of all shared again). Network thread.
     void watch_bit_rate(uint32_t id, const loop::Display& d);
-    // Each headset's budget: the room's limit shared among them, at most the per-headset one.
+    // Each headset's budget: the room's limit shared among the active ones, at most the
+    // per-headset one.
     void share_bit_rate_budgets();
+    // Shares the room again when a headset went idle or woke up since the last share.
+    void check_bit_rate_sharing();
     // A frame of `bytes` was sent to headset `id` (or, bytes 0 and !frame, a sweep): the
     // controller's decision to the scheduler when it changed, its figures to the stats.
     void bit_rate_update(uint32_t id, uint64_t bytes, bool frame);

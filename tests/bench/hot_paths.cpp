@@ -178,6 +178,38 @@ void BM_DecodeLayer(benchmark::State& state) {
 }
 BENCHMARK(BM_DecodeLayer)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
+// The lossy layer (sRGB8 tiles, JPEG-coded) at quality range(0): encode alone, from the sRGB8
+// pixels the server holds, so the figure is the codec's; the bytes are a counter.
+void BM_EncodeLossy(benchmark::State& state) {
+    const auto& img = vd_layer();
+    const auto px = codec::encode_pixels(img, protocol::PixelFormat::kRgba8);
+    size_t bytes = 0;
+    for (auto _ : state) {
+        auto data = codec::encode_layer(px, img.width, img.height, protocol::PixelFormat::kRgba8,
+                                        protocol::Encoding::kSparseTiles,
+                                        protocol::TileCodec::kJpeg, int(state.range(0)));
+        bytes = data.size();
+        benchmark::DoNotOptimize(data);
+    }
+    state.counters["bytes"] = double(bytes);
+}
+BENCHMARK(BM_EncodeLossy)->Arg(90)->Arg(92)->Unit(benchmark::kMillisecond);
+
+void BM_DecodeLossy(benchmark::State& state) {
+    const auto& img = vd_layer();
+    const auto data = codec::encode_layer(codec::encode_pixels(img, protocol::PixelFormat::kRgba8),
+                                          img.width, img.height, protocol::PixelFormat::kRgba8,
+                                          protocol::Encoding::kSparseTiles,
+                                          protocol::TileCodec::kJpeg, int(state.range(0)));
+    for (auto _ : state) {
+        auto px = protocol::decode_tiles(data, img.width, img.height, 4);
+        if (!std::holds_alternative<std::vector<uint8_t>>(px))
+            state.SkipWithError("the layer did not decode");
+        benchmark::DoNotOptimize(px);
+    }
+}
+BENCHMARK(BM_DecodeLossy)->Arg(92)->Unit(benchmark::kMillisecond);
+
 // One eye's layer data as the encoder thread appends it, from the layer's pixels in the wire
 // format (sRGB8 or halves, as in the mapped readback) over the tile-aligned rectangle of its
 // lit pixels, sparse tiles + LZ4 (the server's default). range(0): 0 the encoder's call before
