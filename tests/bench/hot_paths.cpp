@@ -1,7 +1,7 @@
 // Google Benchmark suite of the hot paths (built by default, run on request; not part of the
-// test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding,
-// the served layer with and without the headset drive of a calibration, the calibration's
-// kernel regression and CIEDE2000 over an image.
+// test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding
+// (lossless, and lossy tiles at two qualities), the served layer with and without the headset
+// drive of a calibration, the calibration's kernel regression and CIEDE2000 over an image.
 //   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
 #include <array>
 #include <cmath>
