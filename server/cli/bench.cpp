@@ -94,7 +94,7 @@ const char* kServeHelp =
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
-    "                         [--headset-mbps X] [--room-mbps Y]\n"
+    "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
     "                         [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
@@ -108,7 +108,9 @@ const char* kServeHelp =
     "                       or until every headset has had its first stereo layer\n"
     "  --profile NAME       the scene's viewer profile (default its first)\n"
     "  --format, --encoding what the headsets register (default srgb8, tiles; lossy: JPEG\n"
-    "                       tiles at the server's default quality)\n"
+    "                       tiles at the server's quality)\n"
+    "  --layer-quality Q    the server's JPEG quality of lossy tiles (as hysar serve; 1..100,\n"
+    "                       default 92); the error each quality costs: hysar bench encoding\n"
     "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
     "  --out DIR            default out/bench-serve\n"
     "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
@@ -166,7 +168,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--max-target-mib",
                                             "--submissions-in-flight",
                                             "--headset-mbps",
-                                            "--room-mbps"};
+                                            "--room-mbps",
+                                            "--layer-quality"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -193,6 +196,7 @@ Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
     HS_TRY(read_count(f, "--max-target-mib", 1, 1u << 20, o.max_target_mib));
     HS_TRY(read_count(f, "--submissions-in-flight", 1, 16, o.submissions_in_flight));
     HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
+    HS_TRY(read_count(f, "--layer-quality", 1, 100, o.layer_quality));
     for (auto [flag, field] :
          {std::pair{"--headset-mbps", &o.headset_mbps}, std::pair{"--room-mbps", &o.room_mbps}}) {
         if (!f.has(flag))

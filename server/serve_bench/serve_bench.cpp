@@ -484,6 +484,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.encoder_threads = o.encoder_threads;
     info.headset_mbps = o.headset_mbps;
     info.room_mbps = o.room_mbps;
+    info.layer_quality = o.layer_quality;
     const auto started = Clock::now();
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, scene, info));
     wait_until_ready(*server, started);
@@ -781,6 +782,7 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"planning_threads", o.planning_threads},
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
+            {"layer_quality", o.layer_quality},
             {"quick", o.quick}};
 }
 

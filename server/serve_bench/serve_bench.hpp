@@ -60,6 +60,7 @@ struct ServeBenchOptions {
     int planning_threads = -1;           // as `hysar serve --planning-threads`; -1: its default
     double headset_mbps = 0;             // as `hysar serve --headset-mbps`; 0: no limit
     double room_mbps = 0;                // as `hysar serve --room-mbps`; 0: no limit
+    int layer_quality = 0;               // as `hysar serve --layer-quality`; 0: its default
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.

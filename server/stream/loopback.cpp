@@ -48,6 +48,8 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     info.encoder_threads = o.encoder_threads;
     info.limits.headset_mbps = o.headset_mbps;
     info.limits.room_mbps = o.room_mbps;
+    if (o.layer_quality > 0)
+        info.layer_quality = o.layer_quality;
     info.renderer.planning_threads = o.planning_threads;
     info.calibration = o.calibration;
     return info;

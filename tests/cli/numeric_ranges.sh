@@ -79,6 +79,7 @@ refused --headsets "" "[1, 256]" "$hysar" bench serve --headsets 1,,2
 refused --frames 1.5 "[1, 10000]" "$hysar" bench serve --frames 1.5
 refused --headset-mbps nan "[0, 100000]" "$hysar" bench serve --headset-mbps nan
 refused --room-mbps 0.01 "below 0.1 Mbit/s" "$hysar" bench serve --room-mbps 0.01
+refused --layer-quality 101 "[1, 100]" "$hysar" bench serve --layer-quality 101
 refused --lp-threads 999 "[1, 256]" "$hysar" bench serve --lp-threads 1,999
 refused --repeats 0 "[1, 1000]" "$hysar" bench accuracy --repeats 0 --out "$work/acc"
 refused --repeats 1e3 "[1, 1000]" "$hysar" bench accuracy --repeats 1e3 --out "$work/acc"
