@@ -305,11 +305,6 @@ const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h
     return nullptr;
 }
 
-inline bool lit(const uint8_t* p) {
-    uint32_t v;
-    std::memcpy(&v, p, 4);
-    return v != 0;
-}
 
 // The first x in [from, end) whose bit in the row mask `m` is `set`; `end` when none is.
 inline uint32_t next_bit(const uint64_t* m, uint32_t from, uint32_t end, bool set) {
