@@ -123,10 +123,12 @@ HuffTable complete_table(const std::array<uint8_t, N>& lengths, Valid valid) {
     return build_table(w);
 }
 
+// The symbols of 8-bit samples: DC differences of 0..11 bits; AC end of block, a run of 16
+// zeros, and runs of 0..15 zeros before a coefficient of 1..10 bits.
 bool dc_symbol(int s) {
     return s <= 11;
-}  // 8-bit samples: differences of up to 11 bits
-bool ac_symbol(int s) {  // EOB, ZRL, and run 0..15 with size 1..10
+}
+bool ac_symbol(int s) {
     return s == 0x00 || s == 0xF0 || ((s & 15) >= 1 && (s & 15) <= 10);
 }
 
@@ -304,7 +306,6 @@ const char* jpeg_decode(const uint8_t* data, size_t size, uint32_t w, uint32_t h
         return "lossy tiles: the JPEG is truncated or corrupt";
     return nullptr;
 }
-
 
 // The first x in [from, end) whose bit in the row mask `m` is `set`; `end` when none is.
 inline uint32_t next_bit(const uint64_t* m, uint32_t from, uint32_t end, bool set) {
