@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <chrono>
 #include <csetjmp>
 #include <cstdio>
 #include <cstdlib>
@@ -157,16 +158,18 @@ Tables complete(const JHUFF_TBL& dc, const JHUFF_TBL& ac) {
     return {complete_table(dl, dc_symbol), complete_table(al, ac_symbol)};
 }
 
-// Per thread and quality: the tables fitted to a recent layer, and how many layers have been
-// coded with them since. Consecutive layers of one thread show the same scene, mostly from
-// nearby poses, so tables fitted to one suit the next ones (bytes within 1 % of fitting each
-// layer on the moving headset, `hysar bench encoding`) at no statistics pass.
+// Per thread and quality: the tables fitted to a recent layer, when, and how many layers have
+// been coded with them. Consecutive layers of one thread show the same scene, mostly from nearby
+// poses, so tables fitted to one suit the next ones (`hysar bench encoding`: 1-5 % more bytes
+// than fitting every layer, by content and quality) at no statistics pass.
 struct Reused {
     bool fitted = false;
-    uint32_t uses = 0;
+    uint32_t layers = 0;  // coded with these tables, the fitted one included
+    std::chrono::steady_clock::time_point at{};
     Tables tables;
 };
-constexpr uint32_t kRefitEvery = 32;  // layers coded with one fit before the next is made
+constexpr uint32_t kRefitEvery = 32;            // layers coded with one fit at most
+constexpr std::chrono::seconds kRefitAfter{1};  // and never a fit older than this
 
 Reused& reused_for(int quality) {
     thread_local std::unique_ptr<std::array<Reused, 101>> per_quality;
@@ -345,9 +348,10 @@ void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t t
             const uint32_t n = std::min<uint32_t>(64, cw - x0);
             uint64_t word = 0;
             for (uint32_t i = 0; i < n; ++i) {
+                const uint8_t* p = src + size_t(x0 + i) * 4;
                 uint32_t v;
-                std::memcpy(&v, src + size_t(x0 + i) * 4, 4);
-                r[x0 + i] = uint8_t(v), g[x0 + i] = uint8_t(v >> 8), b[x0 + i] = uint8_t(v >> 16);
+                std::memcpy(&v, p, 4);
+                r[x0 + i] = p[0], g[x0 + i] = p[1], b[x0 + i] = p[2];
                 word |= uint64_t(v != 0) << i;
             }
             m[x0 >> 6] = word;
@@ -414,6 +418,8 @@ void pack_tile(const uint8_t* raw, size_t stride, const TilePlace& t, uint32_t t
 bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride,
                     const std::vector<TilePlace>& tiles, uint32_t ts, int quality,
                     std::vector<uint8_t>& scratch, Huffman huffman) {
+    if (ts % 16 != 0 || ts > 256)
+        return false;  // the packer's row masks and the JPEG's blocks assume these
     const size_t at = out.size();
     out.resize(at + kHead, 0);
     const size_t n = tiles.size();
@@ -450,13 +456,15 @@ bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride
     bool ok;
     if (huffman == Huffman::kReused) {
         Reused& r = reused_for(quality);
-        if (!r.fitted || r.uses >= kRefitEvery) {
+        const auto now = std::chrono::steady_clock::now();
+        if (!r.fitted || r.layers >= kRefitEvery || now - r.at > kRefitAfter) {
             ok = jpeg_encode(img, w, h, quality, nullptr, true, &r.tables, &jpeg, &jpeg_size);
             r.fitted = ok;
-            r.uses = 0;
+            r.layers = 1;
+            r.at = now;
         } else {
             ok = jpeg_encode(img, w, h, quality, &r.tables, false, nullptr, &jpeg, &jpeg_size);
-            ++r.uses;
+            ++r.layers;
         }
     } else {
         ok = jpeg_encode(img, w, h, quality, nullptr, huffman == Huffman::kOptimal, nullptr, &jpeg,

@@ -18,15 +18,16 @@ struct TilePlace {
 };
 
 // The JPEG's Huffman tables. kReused: the tables fitted to a recent layer coded on this thread
-// at this quality, fitted again every 32 layers (a layer with fitted tables first needs a
-// statistics pass over all its coefficients: about two fifths more encode time for a percent
+// at this quality, fitted again after 32 layers or 1 s (a layer with fitted tables first needs a
+// statistics pass over all its coefficients: about half as much encode time again, for 1-5 %
 // fewer bytes). kOptimal: fitted to every layer. kStandard: libjpeg's (ITU T.81 Annex K) tables.
 // Each JPEG carries its tables, so a decoder needs to know none of this.
 enum class Huffman : uint8_t { kReused, kOptimal, kStandard };
 
 // Appends the payload (the part after compressed_bytes) for `tiles` of an RGBA8 layer whose rows
 // lie `stride` bytes apart; `scratch` keeps its capacity. False when the JPEG library failed
-// (the caller sends the tiles lossless instead).
+// (the caller sends the tiles lossless instead) or the tile size is not a multiple of 16 up to
+// 256.
 bool encode_payload(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride,
                     const std::vector<TilePlace>& tiles, uint32_t tile_size, int quality,
                     std::vector<uint8_t>& scratch, Huffman huffman = Huffman::kReused);

@@ -76,7 +76,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     region.y1 = std::min(region.y1, ty);
     const size_t tile_bytes = size_t(ts) * ts * bpp;
     const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
-    const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0;
+    const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0 && ts <= 256;
     if (codec == TileCodec::kJpeg && !lossy)
         codec = TileCodec::kLz4;
     const size_t header_at = out.size();

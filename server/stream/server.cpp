@@ -537,6 +537,7 @@ void Server::Impl::share_bit_rate_budgets() {
     if (bit_rates.empty())
         return;
     const auto now = Clock::now();
+    last_bit_rate_share = now;
     size_t active = 0;
     for (auto& [id, b] : bit_rates) {
         b.sharing = b.active_until > now;
@@ -561,6 +562,10 @@ void Server::Impl::check_bit_rate_sharing() {
     if (limits.room_mbps <= 0)
         return;
     const auto now = Clock::now();
+    // Each new share restarts the measurement of every headset whose budget it changes: at most
+    // one a second, however often headsets in a big room look away and back.
+    if (now - last_bit_rate_share < kBitRateReshareEvery)
+        return;
     for (const auto& [id, b] : bit_rates)
         if ((b.active_until > now) != b.sharing) {
             share_bit_rate_budgets();
@@ -576,11 +581,7 @@ void Server::Impl::bit_rate_update(uint32_t id, uint64_t bytes, bool frame) {
     const auto now = Clock::now();
     if (frame) {
         b.control.sent(bytes, now);
-        b.active_until = now + kBitRateIdleAfter;
-        if (!b.sharing && limits.room_mbps > 0) {
-            share_bit_rate_budgets();  // awake again: the room is shared once more
-            return;
-        }
+        b.active_until = now + kBitRateIdleAfter;  // awake again: sweep() shares the room anew
     } else {
         b.control.tick(now);
     }

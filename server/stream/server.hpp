@@ -65,10 +65,11 @@ struct ServerLimits {
     uint32_t max_viewer_hz = 60;
     uint32_t max_batch_viewers = 8;  // viewers rendered in one submission
     // Bit-rate limits, Mbit/s of layer bytes (`--headset-mbps`, `--room-mbps`; 0: none): each
-    // headset's budget is the room's shared evenly among the headsets that registered a display,
-    // at most the per-headset limit. The server keeps it per headset by lowering the JPEG quality
-    // of its lossy layers (down to kMinLimitedQuality), then its frame rate (poses skipped, latest
-    // first), never by queueing (loop/bit_rate.hpp); lossless headsets by their frame rate only.
+    // headset's budget is the room's shared evenly among the active headsets (a registration or
+    // a layer pair in the last 2 s), at most the per-headset limit. The server keeps it per headset
+    // by lowering the JPEG quality of its lossy layers (down to kMinLimitedQuality), then its frame
+    // rate (poses skipped, latest first), never by queueing (loop/bit_rate.hpp); lossless headsets
+    // by their frame rate only.
     double headset_mbps = 0;
     double room_mbps = 0;
     // Submissions of VD layers in flight on the device at once (command buffers); a further

@@ -221,6 +221,8 @@ struct Server::Impl final : loop::FrameLoopHost {
     // A headset that has received nothing for this long (it stopped asking, or the scene has
     // no view for its display) leaves its share of the room's budget to the others.
     static constexpr std::chrono::seconds kBitRateIdleAfter{2};
+    static constexpr std::chrono::seconds kBitRateReshareEvery{1};  // idle and awake, at most
+    Clock::time_point last_bit_rate_share{};
     std::map<uint32_t, BitRate> bit_rates;
 
     // Gauges: one writer each (named), read by any thread.
@@ -277,7 +279,8 @@ struct Server::Impl final : loop::FrameLoopHost {
     // Each headset's budget: the room's limit shared among the active ones, at most the
     // per-headset one.
     void share_bit_rate_budgets();
-    // Shares the room again when a headset went idle or woke up since the last share.
+    // Shares the room again when a headset went idle or woke up since the last share (from
+    // sweep(), at most every kBitRateReshareEvery).
     void check_bit_rate_sharing();
     // A frame of `bytes` was sent to headset `id` (or, bytes 0 and !frame, a sweep): the
     // controller's decision to the scheduler when it changed, its figures to the stats.

@@ -182,8 +182,9 @@ TEST_F(RoomBudgetTest, TheRoomIsSharedAmongTheHeadsets) {
         std::thread t;
         uint64_t first = 1;
         void start() {
-            t = std::thread([this] { drive(*c, stop, got, first); });
+            const uint64_t from = first;
             first += 1'000'000;
+            t = std::thread([this, from] { drive(*c, stop, got, from); });
         }
         void halt() {
             stop = true;
@@ -194,28 +195,36 @@ TEST_F(RoomBudgetTest, TheRoomIsSharedAmongTheHeadsets) {
     };
     Driven a, b, c;
     a.c = headset(lossy_display(8), "a");
+    ASSERT_TRUE(a.c);
     a.start();
     EXPECT_TRUE(wait_for("a", 20)) << budget_of("a");  // alone: the per-headset limit
     b.c = headset(small_display(proto::PixelFormat::kRgba8, proto::FrameMode::kContinuous), "b");
+    ASSERT_TRUE(b.c);
     b.start();
     EXPECT_TRUE(wait_for("b", 15)) << budget_of("b");
     EXPECT_TRUE(wait_for("a", 15)) << budget_of("a");
     c.c = headset(small_display(proto::PixelFormat::kRgba8, proto::FrameMode::kContinuous), "c");
+    ASSERT_TRUE(c.c);
     c.start();
     EXPECT_TRUE(wait_for("c", 10)) << budget_of("c");
     EXPECT_TRUE(wait_for("a", 10)) << budget_of("a");
     // A lossless headset has no quality to lower: reported as 0.
     EXPECT_EQ(viewer_named(server_->stats(), "b").value("layer_quality", -1), 0);
-    // c stops asking but stays connected: after two seconds with no layer its share goes back
-    // to a and b, and it is told what it would get on waking; once it asks again, thirds.
+    // c, then b, stop asking but stay connected: two seconds after its last layer each leaves
+    // its share to those still active, and is told what it would get on waking (the room over
+    // one more headset).
     c.halt();
     EXPECT_TRUE(wait_for("a", 15)) << budget_of("a");
     EXPECT_TRUE(wait_for("b", 15)) << budget_of("b");
-    EXPECT_TRUE(wait_for("c", 10)) << budget_of("c");
+    b.halt();
+    EXPECT_TRUE(wait_for("a", 20)) << budget_of("a");  // 30 alone, kept at the headset's 20
+    EXPECT_TRUE(wait_for("b", 15)) << budget_of("b");
+    EXPECT_TRUE(wait_for("c", 15)) << budget_of("c");
+    // c asks again: the room is shared between a and c.
     c.stop = false;
     c.start();
-    EXPECT_TRUE(wait_for("a", 10)) << budget_of("a");
-    b.halt();
+    EXPECT_TRUE(wait_for("c", 15)) << budget_of("c");
+    EXPECT_TRUE(wait_for("a", 15)) << budget_of("a");
     c.halt();
     b.c->close();
     c.c->close();
