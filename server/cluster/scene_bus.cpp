@@ -179,6 +179,12 @@ std::string SceneBus::metrics_text() const {
         "# TYPE hysar_scene_bus_refills_total counter\nhysar_scene_bus_refills_total {}\n",
         counters_.refills.load());
     t += fmt::format(
+        "# HELP hysar_scene_bus_caught_up_total Scenes this node read from the bus directly "
+        "because its watch was behind (its consumer lived on a bus server that died, and the "
+        "servers had not yet elected a new JetStream leader to make it again).\n"
+        "# TYPE hysar_scene_bus_caught_up_total counter\nhysar_scene_bus_caught_up_total {}\n",
+        counters_.caught_up.load());
+    t += fmt::format(
         "# HELP hysar_scene_bus_connected Whether this node is connected to the scene bus.\n"
         "# TYPE hysar_scene_bus_connected gauge\nhysar_scene_bus_connected {}\n",
         connected() ? 1 : 0);
@@ -259,6 +265,10 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         s = natsOptions_SetServers(opts, servers.data(), int(servers.size()));
     if (s == NATS_OK)
         s = natsOptions_SetTimeout(opts, o.timeout_ms);
+    // Named in the bus's monitoring (connz): which connection is which node.
+    const std::string name = "hysar node " + o.node_id;
+    if (s == NATS_OK)
+        s = natsOptions_SetName(opts, name.c_str());
     if (s == NATS_OK)
         s = natsOptions_SetMaxReconnect(opts, -1);  // forever: nodes outlive a bus outage
     if (s == NATS_OK)
@@ -551,16 +561,12 @@ void SceneBus::watch_loop(void* first) {
                 auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
                                std::string_view(static_cast<const char*>(kvEntry_Value(e)),
                                                 size_t(kvEntry_ValueLen(e))));
+                watched_ = std::max(watched_, kvEntry_Revision(e));
                 kvEntry_Destroy(e);
                 if (v) {
                     if (newest)
                         ++counters_.superseded_values;
-                    // The newest write: the greatest base (an old value put again has an old
-                    // one), then the first stored of that base (a later one is a copy put
-                    // again; see read_values).
-                    if (!newest || v->base > newest->base ||
-                        (v->base == newest->base && v->revision < newest->revision))
-                        newest = std::move(v);
+                    keep_newest(newest, std::move(*v));
                 }
             }
             if (newest)
@@ -610,7 +616,13 @@ bool SceneBus::check_bus(int& behind) {
         kvEntry_Destroy(e);
         if (rev < held)
             return refill();
-        behind = rev > tail_.load() ? behind + 1 : 0;
+        // Values stored since the last one seen are read one by one and the newest delivered
+        // now: a watch whose consumer lived on a server that died is only made again once the
+        // bus's servers elect a new JetStream leader (seconds to tens of seconds on a loaded
+        // machine), but a read needs only the stream's leader.
+        if (rev > tail_.load())
+            catch_up(rev);
+        behind = rev > watched_ ? behind + 1 : 0;
         return behind >= 2;
     }
     // No value (deleted or purged), or no bucket at all (a bus that restarted without its
@@ -618,6 +630,42 @@ bool SceneBus::check_bus(int& behind) {
     if (held > 0 && connected() && (s == NATS_NOT_FOUND || s == NATS_TIMEOUT))
         return refill();
     return false;
+}
+
+void SceneBus::keep_newest(std::optional<Value>& newest, Value v) {
+    // The newest write: the greatest base (an old value put again has an old one), then the
+    // first stored of that base (a later one is a copy put again; see read_signed).
+    if (!newest || v.base > newest->base ||
+        (v.base == newest->base && v.revision < newest->revision))
+        newest = std::move(v);
+}
+
+void SceneBus::catch_up(uint64_t revision) {
+    const uint64_t tail = tail_.load();
+    const uint64_t from =
+        std::max(tail + 1, revision > kCatchUpMax ? revision - kCatchUpMax + 1 : 1);
+    std::optional<Value> newest;
+    for (uint64_t r = from; r <= revision && !stop_; ++r) {
+        kvEntry* e = nullptr;
+        if (kvStore_GetRevision(&e, s_->kv, kKey, r) != NATS_OK)
+            continue;  // another key's, deleted, or purged
+        if (kvEntry_Operation(e) == kvOp_Put) {
+            // Not counted here: the watch, once it runs again, sees and counts each value.
+            auto v = check(r, kvEntry_Created(e),
+                           std::string_view(static_cast<const char*>(kvEntry_Value(e)),
+                                            size_t(kvEntry_ValueLen(e))),
+                           false);
+            if (v)
+                keep_newest(newest, std::move(*v));
+        }
+        kvEntry_Destroy(e);
+    }
+    if (newest) {
+        ++counters_.caught_up;
+        log::info("scene bus: the watch is behind the bus; version {} read directly",
+                  newest->revision);
+        on_scene_(*newest);
+    }
 }
 
 bool SceneBus::refill() {

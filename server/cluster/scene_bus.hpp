@@ -75,7 +75,8 @@ public:
         std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
         std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
         std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
-        std::atomic<uint64_t> refills{0};  // the bus came back empty or behind and was refilled
+        std::atomic<uint64_t> refills{0};    // the bus came back empty or behind and was refilled
+        std::atomic<uint64_t> caught_up{0};  // a scene read directly: the watch was behind
     };
     // How a bus found empty or behind the version a node holds is refilled (unit-tested).
     struct Refill {
@@ -163,6 +164,12 @@ private:
     // The 2-s check of the watch: true when the watch must be made again (it is behind the
     // bus, or the bus was refilled).
     bool check_bus(int& behind);
+    // Reads the values stored after the newest one seen, up to `revision` (the newest
+    // kCatchUpMax at most), and delivers the newest signed one, as the watch would.
+    void catch_up(uint64_t revision);
+    static constexpr uint64_t kCatchUpMax = 256;
+    // Keeps in `newest` the newest write of the two (the watch's rule for a burst).
+    static void keep_newest(std::optional<Value>& newest, Value v);
     // Puts the held value back on a bus found empty or behind it; true if the bus changed.
     bool refill();
     // A write the bus did not confirm in time: stored by its deadline (then applied), or never.
@@ -172,6 +179,9 @@ private:
     // The newest revision seen of any value, and of a signed one (writes go on the former when
     // only unsigned values came after the latter).
     std::atomic<uint64_t> tail_{0}, signed_tail_{0};
+    // The newest revision the watch itself delivered (its thread only): a watch behind the
+    // bus twice in a row is made again.
+    uint64_t watched_ = 0;
     std::atomic<bool> stop_{false};
     std::thread thread_;
     std::mutex held_mutex_;
