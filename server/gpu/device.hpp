@@ -60,8 +60,9 @@ public:
     // Names an object for debuggers and validation messages (VK_EXT_debug_utils); no-op without.
     void set_name(VkObjectType type, uint64_t handle, const std::string& name) const;
 
-    // Records with `record`, submits to the queue and waits. Thread: any one thread at a time;
-    // holds the device's submit lock. `label` names the command buffer's debug region.
+    // Records with `record`, submits to the queue and waits. Thread: any; holds the device's
+    // submit lock throughout (callers are serialised). `label` names the command buffer's debug
+    // region.
     Result<void> submit_and_wait(const char* label,
                                  const std::function<void(VkCommandBuffer)>& record);
 

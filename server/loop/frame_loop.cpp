@@ -101,10 +101,12 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
         log::warn(
             "--reblend-missing: not with a calibration (it covers the first projector only); "
             "the projectors stay blended over all of them");
-    // The initial version is built before anything is served: its blend is waited for.
-    const bool built = start_build({initial, 0, 0, version}, version) &&
-                       (!build_ || (blend_ = take_blend(true), finish_build()));
-    if (!built) {
+    // The initial version is built before anything is served: it is waited for.
+    start_build({initial, 0, 0, version}, version);
+    auto first = take_blend(true);
+    if (!first->build)
+        log::error("render: {}", first->error);
+    if (!first->build || !finish_build(std::move(first))) {
         log::error("render: the initial scene cannot be rendered; stopping");
         host_.cannot_serve();
         return;
@@ -134,13 +136,14 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
                 std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - from).count()));
         }
     } busy_time{host_};
-    // A blend computed on its thread: a scene version to apply, or a re-blend to publish.
+    // A task done on its thread: a scene version to apply, or a re-blend to publish.
     if (auto done = take_blend(false)) {
-        if (build_) {
-            blend_ = std::move(done);
-            const uint32_t v = build_->version;
-            const PendingScene request = build_->request;
-            if (finish_build()) {
+        if (done->builds) {
+            const uint32_t v = done->version;
+            const PendingScene request = done->request;
+            if (!done->build)
+                log::error("render: {}", done->error);
+            if (done->build && finish_build(std::move(done))) {
                 version = v;
                 log::info("scene version {}: '{}'", version, current_.name);
                 drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
@@ -156,15 +159,7 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
     }
     if (!blend_) {
         if (auto next = inbox_.take_scene()) {
-            const uint32_t v = next->version ? next->version : version + 1;
-            const PendingScene request = *next;
-            if (!start_build(std::move(*next), v)) {
-                host_.scene_failed(request);
-            } else if (!build_) {  // built at once: no blend to wait for
-                version = v;
-                log::info("scene version {}: '{}'", version, current_.name);
-                drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
-            }
+            start_build(std::move(*next), next->version ? next->version : version + 1);
         }
         if (!blend_)
             reblend_if_needed();
@@ -206,31 +201,91 @@ void FrameLoop::sort_batch(std::vector<ViewerJob>& batch, const std::set<uint32_
     batch.clear();
 }
 
-bool FrameLoop::start_build(PendingScene request, uint32_t version) {
+void FrameLoop::start_build(PendingScene request, uint32_t version) {
+    blend_ = std::make_unique<BlendTask>();
+    BlendTask* task = blend_.get();
+    task->builds = true;
+    task->request = std::move(request);
+    task->version = version;
+    task->thread = std::thread([this, task] {
+        // A failure (memory at full resolution) fails this version on the render thread; it
+        // never ends the process.
+        try {
+            (void)build_scene(*task);
+        } catch (const std::exception& e) {
+            task->build.reset();
+            task->error = e.what();
+        }
+        task->done.store(true, std::memory_order_release);
+        scheduler_.wake();  // the render thread takes it on its next turn
+    });
+}
+
+bool FrameLoop::build_scene(BlendTask& task) {
     const auto t0 = Clock::now();
-    auto r = render::Renderer::create(device_, request.scene, info_.renderer);
+    const scene::Scene& sc = task.request.scene;
+    // Between the steps a stopping server gives up (it does not wait seconds to shut down).
+    auto stopping = [&] {
+        if (!scheduler_.stopped())
+            return false;
+        task.error = "the server is stopping";
+        return true;
+    };
+    auto r = render::Renderer::create(device_, sc, info_.renderer);
     if (!r) {
-        log::error("render: cannot build the scene: {}", r.error().message);
+        task.error = "cannot build the scene: " + r.error().message;
         return false;
     }
+    if (stopping())
+        return false;
     // Before the version is announced (its projector frame), so that its first headset pays
     // for no pipeline compilation.
-    render::warm_up_for_serving(**r, device_, !request.scene.captured_material,
-                                info_.pipeline_cache_file);
-    Build b{std::move(request), version, t0, std::move(r).value(), {}};
-    if (!b.request.scene.captured_material) {
-        auto frames = render::render_unblended_projector_frames(*b.renderer, b.request.scene);
+    render::warm_up_for_serving(**r, device_, !sc.captured_material, info_.pipeline_cache_file);
+    if (stopping())
+        return false;
+    Build b;
+    b.started = t0;
+    b.renderer = std::move(r).value();
+    if (!sc.captured_material) {
+        auto frames = render::render_unblended_projector_frames(*b.renderer, sc);
         if (!frames) {
-            log::error("render: projector pass failed: {}", frames.error().message);
+            task.error = "projector pass failed: " + frames.error().message;
             return false;
         }
         b.frames = std::move(frames).value();
     }
-    const bool blended = b.frames.frames.size() > 1;
-    build_ = std::move(b);
-    if (!blended)
-        return finish_build();
-    start_blend(build_->renderer->mesh(), build_->request.scene.projectors(), {});
+    if (b.frames.frames.size() > 1) {
+        if (stopping())
+            return false;
+        const auto b0 = Clock::now();
+        try {
+            task.blend = std::make_shared<const render::Blend>(
+                render::compute_blend(b.renderer->mesh(), sc.projectors()));
+        } catch (const std::exception& e) {
+            task.error = fmt::format("the projectors' blend of version {} failed: {}", task.version,
+                                     e.what());
+            return false;
+        }
+        task.ms = ms_since(b0);
+    }
+    // The frames weighted and made into the version's projector frames (drives when
+    // calibrated), here too: the render thread only swaps the version in.
+    std::optional<render::ProjectorFrames> frames;
+    if (!sc.captured_material) {
+        if (task.blend) {
+            if (info_.reblend_missing && !info_.calibration)
+                for (const auto& f : b.frames.frames) b.unweighted.push_back(f.image);
+            render::blend_projector_frames(b.frames, task.blend, task.ms);
+        }
+        frames = std::move(b.frames);
+    }
+    auto layer_drive = projector_frame(*b.renderer, sc, std::move(frames), b.built);
+    if (!layer_drive) {
+        task.error = layer_drive.error().message;
+        return false;
+    }
+    b.layer_drive = std::move(layer_drive).value();
+    task.build = std::move(b);
     return true;
 }
 
@@ -262,32 +317,10 @@ std::unique_ptr<FrameLoop::BlendTask> FrameLoop::take_blend(bool wait) {
     return std::move(blend_);
 }
 
-bool FrameLoop::finish_build() {
-    Build b = std::move(*build_);
-    build_.reset();
-    std::unique_ptr<BlendTask> task = std::move(blend_);
-    if (task && !task->blend) {
-        log::error("render: the projectors' blend of version {} failed: {}", b.version,
-                   task->error);
-        return false;
-    }
-    const scene::Scene& next = b.request.scene;
-    std::optional<render::ProjectorFrames> frames;
-    std::vector<ImageRgba32f> unweighted;
-    if (!next.captured_material) {
-        if (task) {
-            if (info_.reblend_missing && !info_.calibration)
-                for (const auto& f : b.frames.frames) unweighted.push_back(f.image);
-            render::blend_projector_frames(b.frames, task->blend, task->ms);
-        }
-        frames = std::move(b.frames);
-    }
-    SceneVersion built;
-    auto layer_drive = projector_frame(*b.renderer, next, std::move(frames), built);
-    if (!layer_drive) {
-        log::error("render: {}", layer_drive.error().message);
-        return false;
-    }
+bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
+    Build b = std::move(*task->build);
+    const scene::Scene& next = task->request.scene;
+    SceneVersion built = std::move(b.built);
     // Built: only now does it replace the running scene, once no submission of the old one is
     // in flight and no frame of it is being encoded.
     (void)ring_->wait_idle();
@@ -305,12 +338,12 @@ bool FrameLoop::finish_build() {
         f->keep_alive.reset();
         f->batch.reset();
     }
-    sink_->set_layer_drive(std::move(layer_drive).value());  // drained: no frame in flight
-    unweighted_ = std::move(unweighted);
-    full_blend_ = task ? task->blend : nullptr;
+    sink_->set_layer_drive(std::move(b.layer_drive));  // drained: no frame in flight
+    unweighted_ = std::move(b.unweighted);
+    full_blend_ = task->blend;
     excluded_.clear();
-    version_ = b.version;
-    built.version = b.version;
+    version_ = task->version;
+    built.version = task->version;
     built.name = current_.name;
     for (const auto& p : current_.projectors()) built.projector_names.push_back(p.name);
     built.unserved = scheduler_.set_served(ServedDisplays::of(current_, info_.calibration));

@@ -168,44 +168,52 @@ private:
     // served.
     void turn(std::vector<ViewerJob>& batch, uint32_t& version);
 
-    // A scene version is built in two steps so that its blend (several projectors: seconds of
-    // CPU at full resolution) runs on a thread of its own while the running version goes on
-    // being served: start_build renders the renderer's projector frames and starts the blend;
-    // finish_build, once the blend is done, weights the frames and applies the version. With
-    // one projector (or a captured material) there is no blend and start_build finishes at
-    // once. One blend at a time; a scene queued meanwhile waits in the inbox (latest wins).
+    // A scene version is built on a thread of its own while the running version goes on being
+    // served: its renderer made and warmed up (pipelines compiled, sample layers drawn), its
+    // projector frames rendered and, with several projectors, their blend computed (seconds
+    // of CPU at full resolution). The render thread then applies it (finish_build): it weights
+    // the frames and swaps the renderer once nothing of the old version is in flight. One task
+    // at a time (a build or a re-blend); a scene queued meanwhile waits in the inbox (latest
+    // wins).
     struct Build {
-        PendingScene request;
-        uint32_t version = 0;
         Clock::time_point started;
         std::unique_ptr<render::Renderer> renderer;
-        render::ProjectorFrames frames;  // rendered; weighted in finish_build
+        render::ProjectorFrames frames;  // rendered, then weighted and made into `built`
+        SceneVersion built;              // the projector frames sent with the version
+        std::shared_ptr<const calib::LayerDrive> layer_drive;  // calibrated output's
+        std::vector<ImageRgba32f> unweighted;  // the frames before weighting (re-blends)
     };
-    // A blend being computed on its thread, of `projectors` over `mesh`; `excluded` names
-    // the scene's projectors left out (a re-blend of the running version).
+    // A build (`builds`) or a re-blend of the running version being computed on its thread;
+    // `excluded` names the scene's projectors a re-blend leaves out.
     struct BlendTask {
         std::thread thread;
         std::atomic<bool> done{false};
-        std::shared_ptr<const render::Blend> blend;  // null when it failed
+        bool builds = false;
+        PendingScene request;                        // a build's scene
+        uint32_t version = 0;                        // a build's version
+        std::optional<Build> build;                  // a build's result; none when it failed
+        std::shared_ptr<const render::Blend> blend;  // null when none or it failed
         std::string error;                           // why it failed (out of memory, ...)
         double ms = 0;
         std::set<std::string> excluded;
         ~BlendTask();
     };
-    // Starts building `request` as `version`; false (logged) when it cannot be built.
-    bool start_build(PendingScene request, uint32_t version);
-    // Applies the build (its blend done, when it has one); false (logged) when it cannot.
-    bool finish_build();
+    // Starts building `request` as `version` on the task's thread.
+    void start_build(PendingScene request, uint32_t version);
+    // The build's steps, on its thread: false (task.error says why) when it cannot be built.
+    bool build_scene(BlendTask& task);
+    // Applies a done build; false (logged) when it cannot.
+    bool finish_build(std::unique_ptr<BlendTask> task);
     void start_blend(const scene::Mesh& mesh, std::vector<scene::Projector> projectors,
                      std::set<std::string> excluded);
-    // The blend task, done (waits for it); null when none runs.
+    // The task, done (waits for it); null when none runs.
     std::unique_ptr<BlendTask> take_blend(bool wait);
     // reblend_missing: starts (or applies at once) the blend the missing projectors call for.
     void reblend_if_needed();
     void publish_reblend(const render::Blend& blend, const std::set<std::string>& excluded,
                          double ms);
     // The projector frame of `scene` (drives when calibrated) into `out`, from its projector
-    // frames (weighted); its layer drive.
+    // frames (weighted); its layer drive. Thread: the build's (reads info_ only).
     Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(
         render::Renderer& renderer, const scene::Scene& scene,
         std::optional<render::ProjectorFrames> frames, SceneVersion& out);
@@ -241,7 +249,6 @@ private:
     std::deque<ViewerJob> large_;   // large displays waiting for a turn of their own
     std::vector<FrameSlot> slots_;  // reused per batch
 
-    std::optional<Build> build_;
     std::unique_ptr<BlendTask> blend_;
     // reblend_missing: the running version's projector frames as rendered (not weighted),
     // its blend over all projectors, and the projectors its published frames leave out.
