@@ -221,6 +221,15 @@ void FrameLoop::start_build(PendingScene request, uint32_t version) {
     });
 }
 
+MemoryCounter* FrameLoop::cpu_ledger() const {
+    return info_.renderer.ledger ? &info_.renderer.ledger->cpu : nullptr;
+}
+
+std::shared_ptr<const render::Blend> FrameLoop::charged_blend(render::Blend blend) const {
+    const auto bytes = int64_t(render::blend_bytes(blend));
+    return make_charged(std::move(blend), cpu_ledger(), bytes);
+}
+
 bool FrameLoop::build_scene(BlendTask& task) {
     const auto t0 = Clock::now();
     const scene::Scene& sc = task.request.scene;
@@ -259,8 +268,7 @@ bool FrameLoop::build_scene(BlendTask& task) {
             return false;
         const auto b0 = Clock::now();
         try {
-            task.blend = std::make_shared<const render::Blend>(
-                render::compute_blend(b.renderer->mesh(), sc.projectors()));
+            task.blend = charged_blend(render::compute_blend(b.renderer->mesh(), sc.projectors()));
         } catch (const std::exception& e) {
             task.error = fmt::format("the projectors' blend of version {} failed: {}", task.version,
                                      e.what());
@@ -299,8 +307,7 @@ void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projecto
         // A failure here (memory at full resolution) fails this version or re-blend on the
         // render thread, as it did when the blend ran there; it never ends the process.
         try {
-            task->blend =
-                std::make_shared<const render::Blend>(render::compute_blend(mesh, projectors));
+            task->blend = charged_blend(render::compute_blend(mesh, projectors));
         } catch (const std::exception& e) {
             task->error = e.what();
         }
@@ -329,9 +336,9 @@ bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     const bool replaced = renderer_ != nullptr;
     renderer_ = std::move(b.renderer);  // the old version's renderer is destroyed here
     current_ = next;
-    MemoryCounter* cpu = info_.renderer.ledger ? &info_.renderer.ledger->cpu : nullptr;
-    source_ = current_.captured_material ? captured_source(*current_.captured_material, cpu)
-                                         : rendered_source(*renderer_, current_.material.specular);
+    source_ = current_.captured_material
+                  ? captured_source(*current_.captured_material, cpu_ledger())
+                  : rendered_source(*renderer_, current_.material.specular);
     // No frame is in flight: what the viewers' frames kept of the old version goes now, not at
     // each viewer's next frame (a headset that stopped asking would keep it).
     for (auto& [id, f] : frames_) {
@@ -340,7 +347,12 @@ bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     }
     sink_->set_layer_drive(std::move(b.layer_drive));  // drained: no frame in flight
     unweighted_ = std::move(b.unweighted);
-    full_blend_ = task->blend;
+    int64_t unweighted_bytes = 0;
+    for (const auto& f : unweighted_) unweighted_bytes += int64_t(f.pixels.size() * sizeof(float));
+    unweighted_charge_ = MemoryCharge(cpu_ledger(), unweighted_bytes);
+    // Kept only to re-blend without a missing projector (--reblend-missing): three 1920 x 1200
+    // projectors' blend holds about 360 MB.
+    full_blend_ = info_.reblend_missing && !info_.calibration ? task->blend : nullptr;
     excluded_.clear();
     version_ = task->version;
     built.version = task->version;

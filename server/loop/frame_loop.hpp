@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "calib/serving.hpp"
+#include "core/memory_ledger.hpp"
 #include "gpu/device.hpp"
 #include "gpu/submit_ring.hpp"
 #include "loop/frame_source.hpp"
@@ -198,6 +199,9 @@ private:
         std::set<std::string> excluded;
         ~BlendTask();
     };
+    // The ledger's CPU counter (null: none), and `blend` shared, counted on it.
+    MemoryCounter* cpu_ledger() const;
+    std::shared_ptr<const render::Blend> charged_blend(render::Blend blend) const;
     // Starts building `request` as `version` on the task's thread.
     void start_build(PendingScene request, uint32_t version);
     // The build's steps, on its thread: false (task.error says why) when it cannot be built.
@@ -252,7 +256,9 @@ private:
     std::unique_ptr<BlendTask> blend_;
     // reblend_missing: the running version's projector frames as rendered (not weighted),
     // its blend over all projectors, and the projectors its published frames leave out.
+    // Both on the ledger's CPU counter.
     std::vector<ImageRgba32f> unweighted_;
+    MemoryCharge unweighted_charge_;
     std::shared_ptr<const render::Blend> full_blend_;
     std::set<std::string> excluded_;
     uint32_t version_ = 0;

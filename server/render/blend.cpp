@@ -316,6 +316,16 @@ uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm:
     return count;
 }
 
+uint64_t blend_bytes(const Blend& blend) {
+    auto bytes = [](const auto& v) { return uint64_t(v.size()) * sizeof(v[0]); };
+    uint64_t n = 0;
+    for (const SurfaceView& v : blend.views)
+        n += bytes(v.depth) + bytes(v.position) + bytes(v.normal) + bytes(v.edge_distance);
+    for (const ProjectorBlend& p : blend.projectors)
+        n += bytes(p.weight) + bytes(p.geometry.pixels);
+    return n;
+}
+
 Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
                     const BlendOptions& options) {
     Blend blend;

@@ -106,6 +106,9 @@ double blend_factor(const SurfaceView& view, const BlendOptions& options, const 
 // The weights w_j at a point (all 0 where no projector reaches it).
 std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n);
 
+// The bytes a blend holds (its shadow maps, weights and geometry images), for the ledger.
+uint64_t blend_bytes(const Blend& blend);
+
 // The blend of the scene's projectors over `mesh` (the prop as the renderer draws it).
 Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
                     const BlendOptions& options = {});

@@ -237,6 +237,36 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     EXPECT_EQ(again1->data, full1->data);
 }
 
+// What the projectors' blend keeps is on the scene-memory ledger: with --reblend-missing the
+// version's blend (shadow maps, weights, geometry images) and its unweighted float frames are
+// kept to re-blend without a missing projector, and counted; without it neither is kept.
+namespace {
+// The least those hold for the three 480 x 300 projectors of make_scene(): per pixel an
+// unweighted RGBA float frame (16 B), a weight and a geometry image (4 + 16 B), a shadow map's
+// depth, position and normal (4 + 12 + 12 B).
+constexpr int64_t kKeptBlendBytes = int64_t(3) * 480 * 300 * (16 + 4 + 16 + 4 + 12 + 12);
+}  // namespace
+
+TEST_F(ReblendingServer, TheKeptBlendAndFramesAreOnTheLedger) {
+    ASSERT_TRUE(stats_until([](const nlohmann::json& st) {
+        return st["projector_renders"].get<uint64_t>() >= 1;  // the first version applied
+    }));
+    const int64_t cpu = server_->stats()["scene_memory"]["cpu_bytes"].get<int64_t>();
+    std::printf("[ledger] --reblend-missing: scene CPU bytes %lld (kept blend at least %lld)\n",
+                (long long)cpu, (long long)kKeptBlendBytes);
+    EXPECT_GE(cpu, kKeptBlendBytes);
+}
+
+TEST_F(ProjectorsServer, NoBlendIsKeptWithoutReblending) {
+    ASSERT_TRUE(stats_until([](const nlohmann::json& st) {
+        return st["projector_renders"].get<uint64_t>() >= 1;  // the first version applied
+    }));
+    const int64_t cpu = server_->stats()["scene_memory"]["cpu_bytes"].get<int64_t>();
+    std::printf("[ledger] scene CPU bytes %lld\n", (long long)cpu);
+    EXPECT_GT(cpu, 0);
+    EXPECT_LT(cpu, kKeptBlendBytes);
+}
+
 // A scene update to a three-projector scene: its blend is computed beside the render thread,
 // the version is applied once it is done, and every projector client gets its new frame, each
 // rendered once.
