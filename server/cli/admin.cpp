@@ -46,6 +46,9 @@ constexpr const char* kUsage =
     "  viewers                one row per headset: frames, pose-to-layer p50/p95, superseded\n"
     "                         poses, bytes sent, Mbit/s (its limit), the quality of its lossy\n"
     "                         layers, the frame rate its bit-rate limit lowered it to\n"
+    "  projectors             one row per projector of the scene: whether a projector client\n"
+    "                         serves it, how many do, and whether the frames sent blend it in\n"
+    "                         (with --reblend-missing a missing one is left out)\n"
     "  kick VIEWER            close a headset's session (Kick): VIEWER is its session id or its\n"
     "       [--reason TEXT]   name as `viewers` shows them; the headset is told why (error 16)\n"
     "                         and its client does not reconnect on its own. Waits until the\n"
@@ -278,6 +281,21 @@ std::string viewers_table(const json& stats) {
     return out;
 }
 
+std::string projectors_table(const json& stats) {
+    std::string out =
+        fmt::format("{:<40} {:>9} {:>8} {:>8}\n", "projector", "connected", "clients", "blended");
+    size_t n = 0;
+    const json& list = sub(stats, "projectors");
+    for (const json& p : list.is_array() ? list : json::array()) {
+        ++n;
+        out += fmt::format("{:<40} {:>9} {:>8} {:>8}\n", printable(cell(p, "name"), 40),
+                           cell(p, "connected"), cell(p, "clients"), cell(p, "blended"));
+    }
+    if (n == 0)
+        out += "(no projectors)\n";
+    return out;
+}
+
 // The headset `what` names in the stats: its session id (digits) or its name, which must be
 // one headset's alone. Returns its id and name.
 std::pair<uint32_t, std::string> find_viewer(const json& stats, const std::string& what) {
@@ -326,7 +344,7 @@ std::string stats_table(const json& s) {
     const json& mem = sub(s, "memory_bytes");
     row("render targets (bytes)", cell(mem, "render_targets"));
     row("send queues (bytes)", cell(mem, "send_queues"));
-    return out + "\n" + viewers_table(s);
+    return out + "\n" + projectors_table(s) + "\n" + viewers_table(s);
 }
 
 // `stats`: the server's stats as a table (or JSON lines with --json), every `watch_s` seconds
@@ -378,21 +396,22 @@ int run(const std::vector<std::string>& args) {
     const auto& w = p.words;
     if (w.empty())
         throw Failure{2,
-                      "no command (scene push FILE, stats, viewers, kick VIEWER; see hysar "
-                      "admin --help)"};
+                      "no command (scene push FILE, stats, viewers, projectors, kick VIEWER; "
+                      "see hysar admin --help)"};
     const bool push = w.size() >= 2 && w[0] == "scene" && w[1] == "push";
     const bool stats = w[0] == "stats" && w.size() == 1;
     const bool viewers = w[0] == "viewers" && w.size() == 1;
+    const bool projectors = w[0] == "projectors" && w.size() == 1;
     const bool kick = w[0] == "kick";
     if (push && w.size() != 3)
         throw Failure{2, "scene push needs one FILE (hysar admin scene push room.json)"};
     if (kick && w.size() != 2)
         throw Failure{2, "kick needs one VIEWER, its session id or name (hysar admin kick 12)"};
-    if (!push && !stats && !viewers && !kick) {
+    if (!push && !stats && !viewers && !projectors && !kick) {
         std::string words;
         for (const auto& x : w) words += (words.empty() ? "" : " ") + x;
         throw Failure{2, "unknown command '" + words +
-                             "' (scene push FILE, stats, viewers, kick "
+                             "' (scene push FILE, stats, viewers, projectors, kick "
                              "VIEWER)"};
     }
     if (p.options.count("--reason") && !kick)
@@ -417,6 +436,10 @@ int run(const std::vector<std::string>& args) {
     }
     if (viewers) {
         std::fputs(viewers_table(session.stats()).c_str(), stdout);
+        return 0;
+    }
+    if (projectors) {
+        std::fputs(projectors_table(session.stats()).c_str(), stdout);
         return 0;
     }
     if (kick) {

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# `hysar admin` against a running server with two headsets: viewers lists both, stats prints a
+# `hysar admin` against a running server with two headsets: viewers lists both, projectors the
+# scene's projector served by one client, stats prints a
 # table (twice with --watch/--count) and --json the server's JSON, scene push applies a changed
 # scene (a newer scene version, and the projector gets its frame), a broken scene file is refused
 # before anything is sent, a scene the server refuses comes back with its error (exit 1), kick
@@ -58,6 +59,16 @@ if echo "$out" | grep -q $'\x1b'; then fail "viewers: an escape character reache
 # The server itself keeps the name's control characters out of its log: no forged line.
 grep -q "'?\[2Jevil??FORGED' joined" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve log: the name is not shown as ?[2Jevil??FORGED"; }
 if grep -q "^FORGED" "$dir/serve.log" || grep -q $'\x1b' "$dir/serve.log"; then fail "serve log: the name's newline or escape reached the log"; fi
+
+# The scene's projector, served by the projector client above.
+for _ in $(seq 150); do
+  out=$("${admin[@]}" projectors)
+  echo "$out" | grep -q " yes  *1 " && break
+  sleep 0.2
+done
+echo "$out"
+echo "$out" | head -1 | grep -q "projector.*connected.*clients.*blended" || fail "projectors: no header"
+echo "$out" | grep -q "^Epson EB-U32 (ceiling)  *yes  *1 " || fail "projectors: the scene's projector is not shown served by one client"
 
 out=$("${admin[@]}" stats --watch 0.2 --count 2)
 [[ $(echo "$out" | grep -c "^scene version") -eq 2 ]] || { echo "$out"; fail "stats --watch 0.2 --count 2: not two tables"; }
