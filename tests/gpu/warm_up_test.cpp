@@ -126,11 +126,14 @@ void wait_for_version(const stream::LoopbackServer& srv, uint32_t version) {
 
 // A new headset's first layer against its steady ones, in one run: a ratio, not a time, so a
 // slow machine does not fail it. Three headsets join after start-up one after another, each
-// new to the server (its own display size and place): the first one's ratio and the median of
-// the three are held to 2. Without the warm-up the first one's is over 10 on lavapipe
-// (HYSAR_WARM_UP=0). Then the scene changes to another specular model (other pipelines): the
-// first headset after the new version is announced is held to 2 as well.
-TEST_F(WarmUp, ANewHeadsetsFirstLayerIsWithinTwiceTheSteadyLatency) {
+// new to the server (its own display size and place): the median of the three ratios is held
+// to 2, and the first one's, a single layer against a median, to kSingle. Without the warm-up
+// the first one's is 16-28 on lavapipe (HYSAR_WARM_UP=0); with it 1.2-1.5 on an idle machine,
+// and up to 2.8 with a build running beside the test. Then the scene changes to another
+// specular model (other pipelines): the first headset after the new version is announced is
+// held to kSingle as well.
+TEST_F(WarmUp, ANewHeadsetsFirstLayerIsNearItsSteadyLatency) {
+    constexpr double kSingle = 5.0;
     const scene::Scene s = scene::default_scene();
     auto server = stream::LoopbackServer::start(device(), s, {});
     ASSERT_TRUE(server.ok()) << server.error().message;
@@ -143,7 +146,7 @@ TEST_F(WarmUp, ANewHeadsetsFirstLayerIsWithinTwiceTheSteadyLatency) {
     for (double r : ratios) ASSERT_GT(r, 0);
     // The first headset after start is the one a missing warm-up makes wait (the later ones
     // find the pipelines its layers compiled).
-    EXPECT_LE(ratios[0], 2.0) << "the first headset's first layer over its steady median";
+    EXPECT_LE(ratios[0], kSingle) << "the first headset's first layer over its steady median";
     std::nth_element(ratios.begin(), ratios.begin() + 1, ratios.end());
     EXPECT_LE(ratios[1], 2.0) << "the headsets' median ratio";
 
@@ -157,7 +160,7 @@ TEST_F(WarmUp, ANewHeadsetsFirstLayerIsWithinTwiceTheSteadyLatency) {
     wait_for_version(srv, 2);
     const double after_change = first_over_steady(srv, next, small_eye(2), -10.0);
     ASSERT_GT(after_change, 0);
-    EXPECT_LE(after_change, 2.0) << "the first headset after a scene change";
+    EXPECT_LE(after_change, kSingle) << "the first headset after a scene change";
 }
 
 // A renderer's warm-up compiles the VD pipelines a served layer needs: a layer recorded after
