@@ -104,13 +104,13 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
     // The initial version is built before anything is served: it is waited for.
     start_build({initial, 0, 0, version}, version);
     auto first = take_blend(true);
-    if (!first->build)
+    if (!first->build) {
         log::error("render: {}", first->error);
-    if (!first->build || !finish_build(std::move(first))) {
         log::error("render: the initial scene cannot be rendered; stopping");
         host_.cannot_serve();
         return;
     }
+    finish_build(std::move(first));
     initial = {};
     while (!scheduler_.stopped()) {
         std::vector<ViewerJob> batch;
@@ -141,13 +141,13 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
         if (done->builds) {
             const uint32_t v = done->version;
             const PendingScene request = done->request;
-            if (!done->build)
-                log::error("render: {}", done->error);
-            if (done->build && finish_build(std::move(done))) {
+            if (done->build) {
+                finish_build(std::move(done));
                 version = v;
                 log::info("scene version {}: '{}'", version, current_.name);
                 drop_unserved(batch, ServedDisplays::of(current_, info_.calibration));
             } else {
+                log::error("render: {}", done->error);
                 host_.scene_failed(request);
             }
         } else if (done->blend) {
@@ -324,7 +324,7 @@ std::unique_ptr<FrameLoop::BlendTask> FrameLoop::take_blend(bool wait) {
     return std::move(blend_);
 }
 
-bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
+void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     Build b = std::move(*task->build);
     const scene::Scene& next = task->request.scene;
     SceneVersion built = std::move(b.built);
@@ -351,7 +351,7 @@ bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     for (const auto& f : unweighted_) unweighted_bytes += int64_t(f.pixels.size() * sizeof(float));
     unweighted_charge_ = MemoryCharge(cpu_ledger(), unweighted_bytes);
     // Kept only to re-blend without a missing projector (--reblend-missing): three 1920 x 1200
-    // projectors' blend holds about 360 MB.
+    // projectors' blend holds about 330 MB.
     full_blend_ = info_.reblend_missing && !info_.calibration ? task->blend : nullptr;
     excluded_.clear();
     version_ = task->version;
@@ -364,7 +364,6 @@ bool FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     host_.scene_built(std::move(built));
     if (replaced)
         return_freed_memory();
-    return true;
 }
 
 void FrameLoop::reblend_if_needed() {

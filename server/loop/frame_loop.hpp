@@ -206,8 +206,8 @@ private:
     void start_build(PendingScene request, uint32_t version);
     // The build's steps, on its thread: false (task.error says why) when it cannot be built.
     bool build_scene(BlendTask& task);
-    // Applies a done build; false (logged) when it cannot.
-    bool finish_build(std::unique_ptr<BlendTask> task);
+    // Applies a done build (its `build` set): swaps the version in.
+    void finish_build(std::unique_ptr<BlendTask> task);
     void start_blend(const scene::Mesh& mesh, std::vector<scene::Projector> projectors,
                      std::set<std::string> excluded);
     // The task, done (waits for it); null when none runs.
