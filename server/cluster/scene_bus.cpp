@@ -579,6 +579,7 @@ void SceneBus::watch_loop(void* first) {
         }
         kvWatcher_Destroy(w);
         w = nullptr;
+        watched_ = 0;  // the new watch has delivered nothing yet (a refill may have gone back)
     }
     if (w)
         kvWatcher_Destroy(w);
@@ -647,10 +648,14 @@ void SceneBus::catch_up(uint64_t revision) {
     std::optional<Value> newest;
     for (uint64_t r = from; r <= revision && !stop_; ++r) {
         kvEntry* e = nullptr;
-        if (kvStore_GetRevision(&e, s_->kv, kKey, r) != NATS_OK)
+        const natsStatus got = kvStore_GetRevision(&e, s_->kv, kKey, r);
+        if (got == NATS_NOT_FOUND)
             continue;  // another key's, deleted, or purged
+        if (got != NATS_OK)
+            break;  // the bus is slow or away: the next check tries again (no 256 timeouts)
         if (kvEntry_Operation(e) == kvOp_Put) {
-            // Not counted here: the watch, once it runs again, sees and counts each value.
+            // Not counted here: a watch that runs again counts what it sees (a remade one sees
+            // only the newest value, so ignored values of the gap may go uncounted).
             auto v = check(r, kvEntry_Created(e),
                            std::string_view(static_cast<const char*>(kvEntry_Value(e)),
                                             size_t(kvEntry_ValueLen(e))),

@@ -353,6 +353,7 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     // Kept only to re-blend without a missing projector (--reblend-missing): three 1920 x 1200
     // projectors' blend holds about 330 MB.
     full_blend_ = info_.reblend_missing && !info_.calibration ? task->blend : nullptr;
+    task->blend.reset();  // not kept: off the ledger before the version is announced
     excluded_.clear();
     version_ = task->version;
     built.version = task->version;

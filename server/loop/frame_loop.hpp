@@ -172,10 +172,11 @@ private:
     // A scene version is built on a thread of its own while the running version goes on being
     // served: its renderer made and warmed up (pipelines compiled, sample layers drawn), its
     // projector frames rendered and, with several projectors, their blend computed (seconds
-    // of CPU at full resolution). The render thread then applies it (finish_build): it weights
-    // the frames and swaps the renderer once nothing of the old version is in flight. One task
-    // at a time (a build or a re-blend); a scene queued meanwhile waits in the inbox (latest
-    // wins).
+    // of CPU at full resolution) and the frames weighted. The render thread then applies it
+    // (finish_build): it swaps the renderer in once nothing of the old version is in flight.
+    // Build submissions hold the device's submit lock while they run (submit_and_wait), so the
+    // render thread's next submission waits for each of them. One task at a time (a build or a
+    // re-blend); a scene queued meanwhile waits in the inbox (latest wins).
     struct Build {
         Clock::time_point started;
         std::unique_ptr<render::Renderer> renderer;
