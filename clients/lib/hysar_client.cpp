@@ -434,6 +434,90 @@ uint64_t hysar_next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uin
     return hs::motion::next_display_time_ns(earliest_ns, refresh_hz, vsync_ns);
 }
 
+}  // extern "C"
+
+namespace {
+
+// Both reprojection entry points: `rendered` is the display the layer was rendered for, `shown`
+// the one dst is for (the same display unless the session registered an overscanned one).
+hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
+                       const hysar_display* shown, uint32_t dst_width, uint32_t dst_height,
+                       const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns,
+                       double plane_depth_m, uint32_t filter, uint8_t* dst, size_t dst_bytes,
+                       uint32_t* cleared) {
+    const hysar_image& im = layer->image;
+    // The image's own fields must agree: the warp reads width x height x bpp.
+    if (im.bytes_per_pixel != 4 && im.bytes_per_pixel != 8)
+        return fail(HYSAR_E_INVALID_ARGUMENT, "the image's bytes_per_pixel is " +
+                                                  std::to_string(im.bytes_per_pixel) +
+                                                  ", not 4 (rgba8) or 8 (rgba16f)");
+    if (uint64_t(im.width) * im.height * im.bytes_per_pixel != uint64_t(im.size_bytes))
+        return fail(HYSAR_E_INVALID_ARGUMENT,
+                    "the image's size_bytes " + std::to_string(im.size_bytes) +
+                        " is not width x height x bytes_per_pixel (" + std::to_string(im.width) +
+                        " x " + std::to_string(im.height) + " x " +
+                        std::to_string(im.bytes_per_pixel) + ")");
+    const uint64_t dst_needed = uint64_t(dst_width) * dst_height * im.bytes_per_pixel;
+    if (dst_bytes < dst_needed)
+        return fail(HYSAR_E_INVALID_ARGUMENT, "dst_bytes " + std::to_string(dst_bytes) +
+                                                  " is less than the " +
+                                                  std::to_string(dst_needed) + " shown");
+    if (filter > HYSAR_FILTER_BILINEAR)
+        return fail(HYSAR_E_INVALID_ARGUMENT,
+                    "filter " + std::to_string(filter) + " is not 0 (nearest) or 1 (bilinear)");
+    for (const hysar_display* d : {rendered, shown})
+        if (!(d->fx > 0 && d->fy > 0 && std::isfinite(d->fx) && std::isfinite(d->fy) &&
+              std::isfinite(d->cx) && std::isfinite(d->cy)))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "display intrinsics must be finite, fx, fy > 0");
+    if (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m))
+        return fail(HYSAR_E_INVALID_ARGUMENT, "plane_depth_m " + std::to_string(plane_depth_m) +
+                                                  " must be finite and >= 0 (0: rotation only)");
+    hs::motion::Quat render, now;
+    hs::motion::Vec3 render_at, now_at;
+    for (size_t i = 0; i < 4; ++i) {
+        render[i] = layer->pose.orientation_wxyz[i];
+        now[i] = latest->orientation_wxyz[i];
+    }
+    for (size_t i = 0; i < 3; ++i) {
+        render_at[i] = layer->pose.position_m[i];
+        now_at[i] = latest->position_m[i];
+    }
+    for (size_t i = 0; i < 4; ++i)
+        if (!std::isfinite(now[i]) || !std::isfinite(render[i]))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is not finite");
+    for (size_t i = 0; i < 3; ++i)
+        if (!std::isfinite(now_at[i]) || !std::isfinite(render_at[i]))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's position is not finite");
+    const auto n2 = [](const hs::motion::Quat& q) {
+        return q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+    };
+    if (!(n2(render) > 1e-12) || !(n2(now) > 1e-12))
+        return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is zero");
+    const bool stale = stale_limit_ns != 0 && now_ns > layer->pose.time_ns &&
+                       now_ns - layer->pose.time_ns > stale_limit_ns;
+    if (cleared)
+        *cleared = stale ? 1 : 0;
+    if (stale) {
+        std::memset(dst, 0, size_t(dst_needed));
+        return HYSAR_OK;
+    }
+    const hs::motion::Pinhole kr{rendered->fx, rendered->fy, rendered->cx, rendered->cy};
+    const hs::motion::Pinhole kd{shown->fx, shown->fy, shown->cx, shown->cy};
+    const int eye = layer->eye == 1 ? 1 : 0;
+    const double ipd = std::isfinite(shown->ipd_m) ? shown->ipd_m : 0;
+    hs::motion::warp(
+        im.pixels, im.width, im.height, dst, dst_width, dst_height, im.bytes_per_pixel,
+        hs::motion::plane_homography(kr, kd, hs::motion::eye_pose(render_at, render, ipd, eye),
+                                     hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
+        filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
+                                        : hs::motion::Filter::kNearest);
+    return HYSAR_OK;
+}
+
+}  // namespace
+
+extern "C" {
+
 hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display* display,
                                    const hysar_pose* latest, uint64_t now_ns,
                                    uint64_t stale_limit_ns, double plane_depth_m, uint32_t filter,
@@ -444,71 +528,58 @@ hysar_status hysar_reproject_layer(const hysar_event* layer, const hysar_display
                         "layer, display, latest and dst must not be NULL");
         if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
             return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
-        const hysar_image& im = layer->image;
-        // The image's own fields must agree: the warp reads and writes width x height x bpp.
-        if (im.bytes_per_pixel != 4 && im.bytes_per_pixel != 8)
-            return fail(HYSAR_E_INVALID_ARGUMENT, "the image's bytes_per_pixel is " +
-                                                      std::to_string(im.bytes_per_pixel) +
-                                                      ", not 4 (rgba8) or 8 (rgba16f)");
-        if (uint64_t(im.width) * im.height * im.bytes_per_pixel != uint64_t(im.size_bytes))
+        return reproject(layer, display, display, layer->image.width, layer->image.height, latest,
+                         now_ns, stale_limit_ns, plane_depth_m, filter, dst, dst_bytes, cleared);
+    });
+}
+
+hysar_status hysar_reproject_layer_to(const hysar_event* layer, const hysar_display* rendered,
+                                      const hysar_display* shown, const hysar_pose* latest,
+                                      uint64_t now_ns, uint64_t stale_limit_ns,
+                                      double plane_depth_m, uint32_t filter, uint8_t* dst,
+                                      size_t dst_bytes, uint32_t* cleared) {
+    return guarded([&] {
+        if (!layer || !rendered || !shown || !latest || !dst)
             return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "the image's size_bytes " + std::to_string(im.size_bytes) +
-                            " is not width x height x bytes_per_pixel (" +
-                            std::to_string(im.width) + " x " + std::to_string(im.height) + " x " +
-                            std::to_string(im.bytes_per_pixel) + ")");
-        if (dst_bytes < im.size_bytes)
-            return fail(HYSAR_E_INVALID_ARGUMENT, "dst_bytes " + std::to_string(dst_bytes) +
-                                                      " is less than the image's " +
-                                                      std::to_string(im.size_bytes));
-        if (filter > HYSAR_FILTER_BILINEAR)
+                        "layer, rendered, shown, latest and dst must not be NULL");
+        if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
+        if (layer->image.width != rendered->eye_width ||
+            layer->image.height != rendered->eye_height)
             return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "filter " + std::to_string(filter) + " is not 0 (nearest) or 1 (bilinear)");
-        if (!(display->fx > 0 && display->fy > 0 && std::isfinite(display->fx) &&
-              std::isfinite(display->fy) && std::isfinite(display->cx) &&
-              std::isfinite(display->cy)))
-            return fail(HYSAR_E_INVALID_ARGUMENT, "display intrinsics must be finite, fx, fy > 0");
-        if (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m))
+                        "the layer is " + std::to_string(layer->image.width) + "x" +
+                            std::to_string(layer->image.height) + ", not the rendered display's " +
+                            std::to_string(rendered->eye_width) + "x" +
+                            std::to_string(rendered->eye_height));
+        if (shown->eye_width == 0 || shown->eye_height == 0 || shown->eye_width > 8192 ||
+            shown->eye_height > 8192)
             return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "plane_depth_m " + std::to_string(plane_depth_m) +
-                            " must be finite and >= 0 (0: rotation only)");
-        hs::motion::Quat render, now;
-        hs::motion::Vec3 render_at, now_at;
-        for (size_t i = 0; i < 4; ++i) {
-            render[i] = layer->pose.orientation_wxyz[i];
-            now[i] = latest->orientation_wxyz[i];
-        }
-        for (size_t i = 0; i < 3; ++i) {
-            render_at[i] = layer->pose.position_m[i];
-            now_at[i] = latest->position_m[i];
-        }
-        for (size_t i = 0; i < 4; ++i)
-            if (!std::isfinite(now[i]) || !std::isfinite(render[i]))
-                return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is not finite");
-        for (size_t i = 0; i < 3; ++i)
-            if (!std::isfinite(now_at[i]) || !std::isfinite(render_at[i]))
-                return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's position is not finite");
-        const auto n2 = [](const hs::motion::Quat& q) {
-            return q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
-        };
-        if (!(n2(render) > 1e-12) || !(n2(now) > 1e-12))
-            return fail(HYSAR_E_INVALID_ARGUMENT, "a pose's quaternion is zero");
-        const bool stale = stale_limit_ns != 0 && now_ns > layer->pose.time_ns &&
-                           now_ns - layer->pose.time_ns > stale_limit_ns;
-        if (cleared)
-            *cleared = stale ? 1 : 0;
-        if (stale) {
-            std::memset(dst, 0, im.size_bytes);
-            return HYSAR_OK;
-        }
-        const hs::motion::Pinhole k{display->fx, display->fy, display->cx, display->cy};
-        const int eye = layer->eye == 1 ? 1 : 0;
-        const double ipd = std::isfinite(display->ipd_m) ? display->ipd_m : 0;
-        hs::motion::warp(im.pixels, dst, im.width, im.height, im.bytes_per_pixel,
-                         hs::motion::plane_homography(
-                             k, hs::motion::eye_pose(render_at, render, ipd, eye),
-                             hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
-                         filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
-                                                         : hs::motion::Filter::kNearest);
+                        "the shown display is " + std::to_string(shown->eye_width) + "x" +
+                            std::to_string(shown->eye_height) + ", not within 1..8192");
+        return reproject(layer, rendered, shown, shown->eye_width, shown->eye_height, latest,
+                         now_ns, stale_limit_ns, plane_depth_m, filter, dst, dst_bytes, cleared);
+    });
+}
+
+hysar_status hysar_display_overscan(const hysar_display* display, double margin_deg,
+                                    hysar_display* out) {
+    return guarded([&] {
+        if (!display || !out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "display and out must not be NULL");
+        if (!(margin_deg >= 0 && margin_deg <= hs::motion::kMaxOverscanDeg))
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "margin_deg " + std::to_string(margin_deg) + " is outside [0, 30]");
+        const auto o = hs::motion::overscan({display->fx, display->fy, display->cx, display->cy},
+                                            display->eye_width, display->eye_height, margin_deg);
+        if (!o)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "the display cannot be widened by " + std::to_string(margin_deg) +
+                            " degrees: its size must be 1..8192, its intrinsics finite with fx, "
+                            "fy > 0, and the widened display within 8192 pixels and 90 degrees");
+        hysar_display d = *display;
+        d.eye_width = o->width, d.eye_height = o->height;
+        d.cx = o->k.cx, d.cy = o->k.cy;
+        *out = d;
         return HYSAR_OK;
     });
 }

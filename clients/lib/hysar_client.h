@@ -33,7 +33,7 @@ extern "C" {
 #endif
 
 /* The version of this API; hysar_client_api_version() returns the library's. */
-#define HYSAR_CLIENT_API_VERSION 2
+#define HYSAR_CLIENT_API_VERSION 3
 
 typedef enum hysar_status {
     HYSAR_OK = 0,
@@ -265,6 +265,30 @@ HYSAR_API hysar_status hysar_reproject_layer(const hysar_event* layer, const hys
                                              uint64_t stale_limit_ns, double plane_depth_m,
                                              uint32_t filter, uint8_t* dst, size_t dst_bytes,
                                              uint32_t* cleared);
+
+/* ---- Overscan (library 1.3, API version 3, added functions only) ----
+ *
+ * A late warp can show only what was rendered: when the head turns, the side it turns to comes
+ * into view from outside the layer, and a highlight near the edge of the field of view is cut
+ * off there. Register the display widened by a guard band (hysar_display_overscan) and warp
+ * each layer back onto the real display (hysar_reproject_layer_to): the server renders the band
+ * (its pixels cost render and read-back time there; on the wire only where they are lit). */
+
+/* `display` widened by margin_deg (0..30) of field of view on every side, with the same focal
+ * lengths: out's size and principal point are the rendered layer's; out->eye_width/eye_height
+ * stay <= 8192. The rest of the display is copied. HYSAR_E_INVALID_ARGUMENT (with a sentence)
+ * when a pointer is NULL, the intrinsics are not finite and positive, the margin is outside
+ * [0, 30], or the widened display would exceed 8192 pixels or 90 degrees from its centre. */
+HYSAR_API hysar_status hysar_display_overscan(const hysar_display* display, double margin_deg,
+                                              hysar_display* out);
+/* As hysar_reproject_layer, from a layer rendered for `rendered` (the display the session
+ * registered, e.g. an overscanned one: the image must be rendered->eye_width x eye_height) onto
+ * `shown` (the physical display: dst holds shown->eye_width x eye_height pixels of the image's
+ * format, dst_bytes at least that). The eye's pose and ipd are the shown display's. */
+HYSAR_API hysar_status hysar_reproject_layer_to(
+    const hysar_event* layer, const hysar_display* rendered, const hysar_display* shown,
+    const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
+    uint32_t filter, uint8_t* dst, size_t dst_bytes, uint32_t* cleared);
 
 #ifdef __cplusplus
 }

@@ -169,9 +169,14 @@ uint64_t next_display_time_ns(uint64_t earliest_ns, double refresh_hz, uint64_t 
 
 std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
                                           const Quat& display) {
+    return rotation_homography(k, k, render, display);
+}
+
+std::array<double, 9> rotation_homography(const Pinhole& kr, const Pinhole& kd, const Quat& render,
+                                          const Quat& display) {
     // Display pixel -> ray in the display eye (OpenCV axes) -> head axes (y, z flipped) ->
     // world -> the render pose's head -> OpenCV axes -> render pixel:
-    // H = K S R_render^T R_display S K^-1, S = diag(1, -1, -1).
+    // H = K_r S R_render^T R_display S K_d^-1, S = diag(1, -1, -1).
     const Quat rel = multiply(conjugate(normalized(render)), normalized(display));
     const double w = rel[0], x = rel[1], y = rel[2], z = rel[3];
     double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
@@ -181,8 +186,8 @@ std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
     double m[9];  // S R S
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) m[i * 3 + j] = s[i] * r[i * 3 + j] * s[j];
-    const double kk[9] = {k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1};
-    const double ki[9] = {1 / k.fx, 0, -k.cx / k.fx, 0, 1 / k.fy, -k.cy / k.fy, 0, 0, 1};
+    const double kk[9] = {kr.fx, 0, kr.cx, 0, kr.fy, kr.cy, 0, 0, 1};
+    const double ki[9] = {1 / kd.fx, 0, -kd.cx / kd.fx, 0, 1 / kd.fy, -kd.cy / kd.fy, 0, 0, 1};
     double t[9], h[9];
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) {
@@ -199,6 +204,38 @@ std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
     return out;
 }
 
+std::optional<Overscan> overscan(const Pinhole& k, uint32_t width, uint32_t height,
+                                 double margin_deg, uint32_t max_side) {
+    if (!(k.fx > 0 && k.fy > 0 && std::isfinite(k.fx) && std::isfinite(k.fy) &&
+          std::isfinite(k.cx) && std::isfinite(k.cy)) ||
+        width == 0 || height == 0 || !(margin_deg >= 0 && margin_deg <= kMaxOverscanDeg))
+        return std::nullopt;
+    const double m = margin_deg * kPi / 180;
+    // The pixels a side gains: its edge (a pixel's outer border, at -0.5 or size - 0.5) turned
+    // out by the margin, whole pixels, rounded up. An edge already past 90 - margin degrees
+    // cannot widen by that much: refused.
+    const auto grow = [m](double edge_px, double f) -> std::optional<uint32_t> {
+        const double a = std::atan2(edge_px, f) + m;
+        if (!(a < kPi / 2 - 1e-3))
+            return std::nullopt;
+        const double gained = std::ceil(f * std::tan(a) - edge_px - 1e-9);
+        if (!(gained >= 0 && gained < 1e6))
+            return std::nullopt;
+        return uint32_t(gained);
+    };
+    const auto left = grow(k.cx + 0.5, k.fx), right = grow(double(width) - 0.5 - k.cx, k.fx);
+    const auto top = grow(k.cy + 0.5, k.fy), bottom = grow(double(height) - 0.5 - k.cy, k.fy);
+    if (!left || !right || !top || !bottom)
+        return std::nullopt;
+    Overscan o;
+    o.width = width + *left + *right, o.height = height + *top + *bottom;
+    if (o.width > max_side || o.height > max_side)
+        return std::nullopt;
+    o.k = {k.fx, k.fy, k.cx + *left, k.cy + *top};
+    o.left = *left, o.top = *top;
+    return o;
+}
+
 EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye) {
     const Vec3 right = rotate(normalized(head), {1, 0, 0});
     const double side = (eye == 0 ? -0.5 : 0.5) * ipd_m;
@@ -208,11 +245,16 @@ EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye) {
 
 std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
                                        const EyePose& display, double depth_m) {
+    return plane_homography(k, k, render, display, depth_m);
+}
+
+std::array<double, 9> plane_homography(const Pinhole& kr, const Pinhole& kd, const EyePose& render,
+                                       const EyePose& display, double depth_m) {
     if (!(depth_m > 0) || !std::isfinite(depth_m))
-        return rotation_homography(k, render.orientation_wxyz, display.orientation_wxyz);
+        return rotation_homography(kr, kd, render.orientation_wxyz, display.orientation_wxyz);
     // Render eye (OpenCV axes) to display eye: X_d = A X_r + t with A = S R_d^T R_r S and
     // t = S R_d^T (p_r - p_d); on the plane n.X_r = d (n = +z) X_d = (A + t n^T / d) X_r.
-    // The pixel map render -> display is K (A + t n^T / d) K^-1; the warp needs its inverse.
+    // The pixel map render -> display is K_d (A + t n^T / d) K_r^-1; the warp needs its inverse.
     const Quat rel = multiply(conjugate(display.orientation_wxyz), render.orientation_wxyz);
     const double w = rel[0], x = rel[1], y = rel[2], z = rel[3];
     const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
@@ -228,8 +270,8 @@ std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) a[i * 3 + j] = s[i] * r[i * 3 + j] * s[j];
     for (int i = 0; i < 3; ++i) a[i * 3 + 2] += t[i] / depth_m;
-    const double kk[9] = {k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1};
-    const double ki[9] = {1 / k.fx, 0, -k.cx / k.fx, 0, 1 / k.fy, -k.cy / k.fy, 0, 0, 1};
+    const double kk[9] = {kd.fx, 0, kd.cx, 0, kd.fy, kd.cy, 0, 0, 1};
+    const double ki[9] = {1 / kr.fx, 0, -kr.cx / kr.fx, 0, 1 / kr.fy, -kr.cy / kr.fy, 0, 0, 1};
     auto mul = [](const double* p, const double* q, double* o) {
         for (int i = 0; i < 3; ++i)
             for (int j = 0; j < 3; ++j) {
@@ -299,12 +341,12 @@ inline int64_t fixed8(double v) {
 }
 
 template <typename T, bool kBilinear>
-void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uint32_t height,
-               const std::array<double, 9>& h) {
+void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_bytes, uint32_t dw,
+               uint32_t dh, const std::array<double, 9>& h) {
     static_assert(!kBilinear || sizeof(T) == 4, "bilinear: RGBA8 only");
     const auto* src = reinterpret_cast<const T*>(src_bytes);
     auto* dst = reinterpret_cast<T*>(dst_bytes);
-    const double fw = width, fh = height;
+    const double fw = sw, fh = sh;  // the source's bounds
     // Nearest takes the pixel whose square holds the position (+0.5, floored); bilinear the
     // four around it (pixel centres at integers), so it reads one more column and row, and a
     // position down to -1 still weighs pixel 0.
@@ -315,28 +357,28 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
     // weights; for nearest, 1/32 of its own half-pixel rounding.
     constexpr double kTol = kBilinear ? 1.0 / 512 : 1.0 / 64;
     // One destination pixel, the position exact (behind the eye somewhere in its span).
-    const auto exact = [&](double sx, double sy, double sw) -> T {
-        if (!(sw > 1e-9))
+    const auto exact = [&](double sx, double sy, double sz) -> T {
+        if (!(sz > 1e-9))
             return T(0);
-        const double u = sx / sw + kOff, v = sy / sw + kOff;
+        const double u = sx / sz + kOff, v = sy / sz + kOff;
         if constexpr (kBilinear) {
             if (!(u > -1 && v > -1 && u < fw && v < fh))
                 return T(0);
-            return bilinear_at(src, width, height, fixed8(u), fixed8(v));
+            return bilinear_at(src, sw, sh, fixed8(u), fixed8(v));
         } else {
             const bool in = u >= 0 && v >= 0 && u < fw && v < fh;
-            return in ? src[size_t(v) * width + size_t(u)] : T(0);
+            return in ? src[size_t(v) * sw + size_t(u)] : T(0);
         }
     };
     // A layer is black (see-through) but for the prop's highlight: each source row's lit
     // columns [first, last], so that a span whose source holds nothing lit is filled with 0
     // without a gather (kept per thread: no allocation once it is large enough).
     thread_local std::vector<uint32_t> first, last;
-    first.resize(height), last.resize(height);
-    for (uint32_t y = 0; y < height; ++y) {
-        const T* row = src + size_t(y) * width;
-        uint32_t a = 0, b = width;
-        for (; a + 8 <= width; a += 8) {  // eight at a time through the black, in 64-bit words
+    first.resize(sh), last.resize(sh);
+    for (uint32_t y = 0; y < sh; ++y) {
+        const T* row = src + size_t(y) * sw;
+        uint32_t a = 0, b = sw;
+        for (; a + 8 <= sw; a += 8) {  // eight at a time through the black, in 64-bit words
             const auto* p = reinterpret_cast<const uint8_t*>(row + a);
             const auto word = [p](int i) {
                 uint64_t v;
@@ -349,32 +391,33 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
             if (any)
                 break;
         }
-        while (a < width && row[a] == T(0)) ++a;
+        while (a < sw && row[a] == T(0)) ++a;
         while (b > a && row[b - 1] == T(0)) --b;
         first[y] = a, last[y] = b;  // empty: a == b
     }
     // Prefix counts of lit source rows: a destination row whose source rows hold nothing lit
     // is filled with 0 at once.
     thread_local std::vector<uint32_t> lit_rows;
-    lit_rows.assign(size_t(height) + 1, 0);
-    for (uint32_t y = 0; y < height; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
-    for (uint32_t y = 0; y < height; ++y) {
-        T* out = dst + size_t(y) * width;
+    lit_rows.assign(size_t(sh) + 1, 0);
+    for (uint32_t y = 0; y < sh; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
+    const double last_x = double(dw) - 1;  // the destination row's last pixel
+    for (uint32_t y = 0; y < dh; ++y) {
+        T* out = dst + size_t(y) * dw;
         const double bx = h[1] * y + h[2], by = h[4] * y + h[5], bw = h[7] * y + h[8];
         {
-            const double wa = bw, wb = bw + h[6] * (fw - 1);
+            const double wa = bw, wb = bw + h[6] * last_x;
             if (wa > 1e-9 && wb > 1e-9) {
-                const double va = by / wa + kOff, vb = (by + h[3] * (fw - 1)) / wb + kOff;
+                const double va = by / wa + kOff, vb = (by + h[3] * last_x) / wb + kOff;
                 const double lo = std::max(0.0, std::min(va, vb) - kSlack);
                 const double hi = std::min(fh - 1, std::max(va, vb) + kSlack);
                 if (hi < lo || lit_rows[size_t(hi) + 1] == lit_rows[size_t(lo)]) {
-                    std::fill(out, out + width, T(0));
+                    std::fill(out, out + dw, T(0));
                     continue;
                 }
             }
         }
-        for (uint32_t x0 = 0; x0 < width; x0 += kSpan) {
-            const uint32_t x1 = std::min(x0 + kSpan, width);
+        for (uint32_t x0 = 0; x0 < dw; x0 += kSpan) {
+            const uint32_t x1 = std::min(x0 + kSpan, dw);
             const double w0 = bw + h[6] * x0, w1 = bw + h[6] * x1;
             if (!(w0 > 1e-9 && w1 > 1e-9)) {  // behind the eye somewhere: pixel by pixel
                 for (uint32_t x = x0; x < x1; ++x)
@@ -431,12 +474,12 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
                 const int64_t du = fixed((b_u - a_u) / n), dv = fixed((b_v - a_v) / n);
                 if constexpr (kBilinear) {
                     for (uint32_t x = s0; x < s1; ++x, fu += du, fv += dv)  // 24.8, rounded
-                        out[x] = bilinear_at(src, width, height, (fu + 128) >> 8, (fv + 128) >> 8);
+                        out[x] = bilinear_at(src, sw, sh, (fu + 128) >> 8, (fv + 128) >> 8);
                 } else {
                     for (uint32_t x = s0; x < s1; ++x, fu += du, fv += dv) {
                         const int64_t iu = fu >> 16, iv = fv >> 16;  // floor
-                        out[x] = uint64_t(iu) < width && uint64_t(iv) < height
-                                     ? src[size_t(iv) * width + size_t(iu)]
+                        out[x] = uint64_t(iu) < sw && uint64_t(iv) < sh
+                                     ? src[size_t(iv) * sw + size_t(iu)]
                                      : T(0);
                     }
                 }
@@ -447,14 +490,20 @@ void warp_rows(const uint8_t* src_bytes, uint8_t* dst_bytes, uint32_t width, uin
 
 }  // namespace
 
+void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
+          uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
+          const std::array<double, 9>& h, Filter filter) {
+    if (filter == Filter::kBilinear && bytes_per_pixel == 4)
+        warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h);
+    else if (bytes_per_pixel == 8)
+        warp_rows<uint64_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h);
+    else
+        warp_rows<uint32_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h);
+}
+
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
           uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter) {
-    if (filter == Filter::kBilinear && bytes_per_pixel == 4)
-        warp_rows<uint32_t, true>(src, dst, width, height, h);
-    else if (bytes_per_pixel == 8)
-        warp_rows<uint64_t, false>(src, dst, width, height, h);
-    else
-        warp_rows<uint32_t, false>(src, dst, width, height, h);
+    warp(src, width, height, dst, width, height, bytes_per_pixel, h, filter);
 }
 
 }  // namespace hs::motion

@@ -86,6 +86,10 @@ struct Pinhole {
 // only: exact for a pure rotation about the eye, and for points far away).
 std::array<double, 9> rotation_homography(const Pinhole& k, const Quat& render,
                                           const Quat& display);
+// As above, from a layer rendered with `render_k` to a display with `display_k` (an overscanned
+// layer shown on the display it was widened from: see overscan()).
+std::array<double, 9> rotation_homography(const Pinhole& render_k, const Pinhole& display_k,
+                                          const Quat& render, const Quat& display);
 
 // An eye's pose in the world: position (metres) and orientation (world from head axes).
 struct EyePose {
@@ -101,6 +105,25 @@ EyePose eye_pose(const Vec3& head_m, const Quat& head, double ipd_m, int eye);
 // turns the head while the prop stays in view). depth_m <= 0 or not finite: rotation only.
 std::array<double, 9> plane_homography(const Pinhole& k, const EyePose& render,
                                        const EyePose& display, double depth_m);
+std::array<double, 9> plane_homography(const Pinhole& render_k, const Pinhole& display_k,
+                                       const EyePose& render, const EyePose& display,
+                                       double depth_m);
+
+// Overscan: the layer rendered wider than the display, by `margin_deg` of field of view on every
+// side, with the display's focal lengths. A late warp then has what a turn of up to that angle
+// brings into view; without it the frame's edge cuts the highlight off (a prop near the edge of
+// the field of view shows a clipped highlight, its centre tens of pixels off). Costs the
+// margin's pixels on the server (render, read-back) and on the wire only where they are lit.
+constexpr double kMaxOverscanDeg = 30;
+struct Overscan {
+    Pinhole k;                       // the rendered layer's pinhole: the display's, shifted
+    uint32_t width = 0, height = 0;  // the rendered layer's size
+    uint32_t left = 0, top = 0;      // the display's pixel (0, 0) in the layer
+};
+// Nullopt when the intrinsics are not finite and positive, the size is 0, the margin is outside
+// [0, kMaxOverscanDeg], an edge would reach 90 degrees, or a side would exceed `max_side`.
+std::optional<Overscan> overscan(const Pinhole& k, uint32_t width, uint32_t height,
+                                 double margin_deg, uint32_t max_side = 8192);
 
 enum class Filter { kNearest, kBilinear };
 
@@ -113,6 +136,11 @@ enum class Filter { kNearest, kBilinear };
 // "Registration").
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
           uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter);
+// As above, from a source of one size to a destination of another (an overscanned layer to its
+// display); h takes a destination pixel to a source pixel.
+void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
+          uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
+          const std::array<double, 9>& h, Filter filter);
 
 // Quaternion helpers (Hamilton, w first).
 Quat multiply(const Quat& a, const Quat& b);

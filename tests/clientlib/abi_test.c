@@ -14,7 +14,8 @@ _Static_assert(offsetof(hysar_client_config, address) == 8, "config.address move
 _Static_assert(offsetof(hysar_client_config, role) == 32, "config.role moved");
 _Static_assert(offsetof(hysar_client_config, queue_limit) == 56, "config.queue_limit moved");
 _Static_assert(offsetof(hysar_client_config, tls) == 60, "config.tls moved");
-_Static_assert(offsetof(hysar_client_config, tls_fingerprint) == 72, "config.tls_fingerprint moved");
+_Static_assert(offsetof(hysar_client_config, tls_fingerprint) == 72,
+               "config.tls_fingerprint moved");
 _Static_assert(sizeof(hysar_display) == 64, "hysar_display layout changed");
 _Static_assert(offsetof(hysar_display, fx) == 8, "display.fx moved");
 _Static_assert(offsetof(hysar_display, mode) == 56, "display.mode moved");
@@ -27,7 +28,7 @@ _Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
 _Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
 _Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
 #endif
-_Static_assert(HYSAR_CLIENT_API_VERSION == 2, "API version");
+_Static_assert(HYSAR_CLIENT_API_VERSION == 3, "API version");
 
 static int failures = 0;
 #define CHECK(cond)                                                                           \
@@ -91,6 +92,22 @@ int main(int argc, char** argv) {
     CHECK(hysar_display_from_profile(argv[1], 0.5, &display) == HYSAR_OK);
     CHECK(display.eye_width > 0 && display.eye_height > 0 && display.fx > 0);
     CHECK(display.format == HYSAR_FORMAT_RGBA8 && display.mode == HYSAR_MODE_CONTINUOUS);
+    hysar_pose pose0;
+    memset(&pose0, 0, sizeof pose0);
+    pose0.orientation_wxyz[0] = 1;
+    {
+        /* Overscan (API 3): wider on every side, same focal lengths, the rest copied. */
+        hysar_display wide;
+        CHECK(hysar_display_overscan(&display, 5, &wide) == HYSAR_OK);
+        CHECK(wide.eye_width > display.eye_width && wide.eye_height > display.eye_height);
+        CHECK(wide.fx == display.fx && wide.fy == display.fy);
+        CHECK(wide.cx > display.cx && wide.cy > display.cy && wide.ipd_m == display.ipd_m);
+        CHECK(hysar_display_overscan(&display, 31, &wide) == HYSAR_E_INVALID_ARGUMENT);
+        CHECK(strstr(hysar_last_error(), "margin_deg") != NULL);
+        CHECK(hysar_display_overscan(NULL, 5, &wide) == HYSAR_E_INVALID_ARGUMENT);
+        CHECK(hysar_reproject_layer_to(NULL, &display, &wide, &pose0, 0, 0, 0, 0, NULL, 0, NULL) ==
+              HYSAR_E_INVALID_ARGUMENT);
+    }
     CHECK(hysar_display_from_profile("/nonexistent/profile.json", 1, &display) ==
           HYSAR_E_INVALID_ARGUMENT);
     CHECK(strstr(hysar_last_error(), "/nonexistent/profile.json") != NULL);

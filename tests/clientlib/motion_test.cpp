@@ -157,7 +157,8 @@ const Pinhole kK{kW / 2.0 / std::tan(15 * kPi / 180), kH / 2.0 / std::tan(8.5 * 
 // A fresh render, ray-cast: from an eye at `eye` with orientation q, a sphere (the prop,
 // radius 0.12 m at (0, 0.7, 0)) shows a specular lobe around the reflection of a light: RGBA8,
 // black (see-through) where nothing is lit.
-std::vector<uint8_t> render(const Vec3& eye, const Quat& q) {
+std::vector<uint8_t> render(const Vec3& eye, const Quat& q, const Pinhole& kK = kK,
+                            uint32_t kW = kW, uint32_t kH = kH) {
     std::vector<uint8_t> img(size_t(kW) * kH * 4, 0);
     const Vec3 c{0, 0.7, 0}, light{1.5, 2.5, 1.5};
     const double r = 0.12;
@@ -194,7 +195,7 @@ std::vector<uint8_t> render(const Vec3& eye, const Quat& q) {
 struct Centroid {
     double x = 0, y = 0, mass = 0;
 };
-Centroid centroid(const std::vector<uint8_t>& img) {
+Centroid centroid(const std::vector<uint8_t>& img, uint32_t kW = kW, uint32_t kH = kH) {
     Centroid c;
     for (uint32_t y = 0; y < kH; ++y)
         for (uint32_t x = 0; x < kW; ++x) {
@@ -246,6 +247,72 @@ TEST(Reproject, PureRotationMatchesAFreshRender) {
                 err += std::abs(int(fresh[i]) - int(warped[i])), ++lit;
         EXPECT_LT(err / double(lit), 8) << deg << " deg";
     }
+}
+
+// Overscan: a layer rendered wider than the display, warped back onto it. With no motion the
+// display shows exactly the layer's middle; after a turn that brought the highlight in from
+// beyond the display's edge, the overscanned layer still has it (within 0.25 px of a fresh
+// render), where the display-sized one had cut it off.
+TEST(Reproject, OverscanIsTheIdentityCropWithoutMotion) {
+    const auto o = overscan(kK, kW, kH, 6);
+    ASSERT_TRUE(o);
+    EXPECT_GT(o->width, kW + 2 * 30) << "6 deg is over 60 px on each side at 10.6 px/deg";
+    EXPECT_EQ(o->k.fx, kK.fx);
+    EXPECT_EQ(o->k.cx - o->left, kK.cx);
+    EXPECT_EQ(o->k.cy - o->top, kK.cy);
+    const auto wide = render(kHead, kLook, o->k, o->width, o->height);
+    for (Filter f : {Filter::kNearest, Filter::kBilinear}) {
+        std::vector<uint8_t> dst(size_t(kW) * kH * 4, 7);
+        warp(wide.data(), o->width, o->height, dst.data(), kW, kH, 4,
+             plane_homography(o->k, kK, {kHead, kLook}, {kHead, kLook}, 0.8), f);
+        for (uint32_t y = 0; y < kH; ++y)
+            ASSERT_EQ(0, std::memcmp(&dst[size_t(y) * kW * 4],
+                                     &wide[(size_t(y + o->top) * o->width + o->left) * 4],
+                                     size_t(kW) * 4))
+                << "row " << y;
+    }
+    // Refused: a margin out of range, an edge pushed to 90 degrees, a side over the limit.
+    EXPECT_FALSE(overscan(kK, kW, kH, -1));
+    EXPECT_FALSE(overscan(kK, kW, kH, kMaxOverscanDeg + 1));
+    EXPECT_FALSE(overscan(kK, kW, kH, 6, kW + 10));
+    EXPECT_FALSE(overscan({1, 1, 0, 0}, 4000, 10, 30));
+    EXPECT_FALSE(overscan({0, kK.fy, kK.cx, kK.cy}, kW, kH, 6));
+    EXPECT_FALSE(overscan({std::nan(""), kK.fy, kK.cx, kK.cy}, kW, kH, 6));
+}
+
+TEST(Reproject, OverscanKeepsWhatATurnBringsIntoView) {
+    const auto fresh = render(kHead, kLook);
+    const Centroid want = centroid(fresh);
+    ASSERT_GT(want.mass, 1000);
+    // The head turned away (about the world's vertical) until the display shows under a third
+    // of the highlight: a layer rendered there, shown after the head turned back.
+    double deg = 1;
+    Quat away = kLook;
+    for (; deg < 25; deg += 0.5) {
+        away = multiply(from_rotation_vector({0, deg * kPi / 180, 0}), kLook);
+        if (centroid(render(kHead, away)).mass < want.mass / 3)
+            break;
+    }
+    ASSERT_LT(deg, 25) << "no turn took the highlight out of view";
+    const auto o = overscan(kK, kW, kH, deg + 2);
+    ASSERT_TRUE(o);
+    const auto plain = render(kHead, away);
+    const auto wide = render(kHead, away, o->k, o->width, o->height);
+    std::vector<uint8_t> from_plain(fresh.size()), from_wide(fresh.size());
+    warp(plain.data(), from_plain.data(), kW, kH, 4, rotation_homography(kK, away, kLook),
+         Filter::kBilinear);
+    warp(wide.data(), o->width, o->height, from_wide.data(), kW, kH, 4,
+         rotation_homography(o->k, kK, away, kLook), Filter::kBilinear);
+    const Centroid a = centroid(from_plain), b = centroid(from_wide);
+    EXPECT_LT(a.mass, want.mass / 2) << "without overscan the turn's side was never rendered";
+    EXPECT_GT(b.mass, want.mass * 0.95);
+    EXPECT_LT(std::hypot(b.x - want.x, b.y - want.y), 0.25) << deg << " deg";
+    double err = 0;
+    size_t lit = 0;
+    for (size_t i = 0; i < fresh.size(); i += 4)
+        if (fresh[i] || from_wide[i])
+            err += std::abs(int(fresh[i]) - int(from_wide[i])), ++lit;
+    EXPECT_LT(err / double(lit), 8);
 }
 
 // The bilinear warp steps the source position in fixed point along each row and skips the
@@ -371,6 +438,61 @@ TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
     latest.orientation_wxyz[0] = std::numeric_limits<double>::quiet_NaN();
     EXPECT_EQ(hysar_reproject_layer(&e, &d, &latest, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
               HYSAR_E_INVALID_ARGUMENT);
+}
+
+// The overscanned path through the C API: a display widened, a layer of the widened size
+// shown on the real one (the identity crop without motion), and what does not fit refused.
+TEST(Reproject, CApiShowsAnOverscannedLayerOnItsDisplay) {
+    hysar_display d{};
+    d.eye_width = kW, d.eye_height = kH, d.fx = kK.fx, d.fy = kK.fy, d.cx = kK.cx, d.cy = kK.cy;
+    d.ipd_m = 0.064;
+    hysar_display wide{};
+    ASSERT_EQ(hysar_display_overscan(&d, 4, &wide), HYSAR_OK) << hysar_last_error();
+    const auto o = overscan(kK, kW, kH, 4);
+    ASSERT_TRUE(o);
+    EXPECT_EQ(wide.eye_width, o->width);
+    EXPECT_EQ(wide.eye_height, o->height);
+    EXPECT_EQ(wide.cx, o->k.cx);
+    EXPECT_EQ(wide.ipd_m, d.ipd_m);
+    auto src = render(kHead, kLook, o->k, o->width, o->height);
+    hysar_event e{};
+    e.kind = HYSAR_EVENT_LAYER;
+    e.pose.time_ns = 100 * kMs;
+    for (size_t i = 0; i < 4; ++i) e.pose.orientation_wxyz[i] = kLook[i];
+    for (size_t i = 0; i < 3; ++i) e.pose.position_m[i] = kHead[i];
+    e.image =
+        hysar_image{wide.eye_width, wide.eye_height, HYSAR_FORMAT_RGBA8, 4, src.size(), src.data()};
+    std::vector<uint8_t> dst(size_t(kW) * kH * 4, 9);
+    uint32_t cleared = 7;
+    ASSERT_EQ(hysar_reproject_layer_to(&e, &wide, &d, &e.pose, 120 * kMs, 0, 0.8,
+                                       HYSAR_FILTER_NEAREST, dst.data(), dst.size(), &cleared),
+              HYSAR_OK)
+        << hysar_last_error();
+    EXPECT_EQ(cleared, 0u);
+    EXPECT_EQ(dst, render(kHead, kLook));
+    // Stale: the shown display's pixels cleared, not the layer's.
+    std::vector<uint8_t> big(src.size() + 64, 9);
+    ASSERT_EQ(hysar_reproject_layer_to(&e, &wide, &d, &e.pose, 200 * kMs, 50 * kMs, 0, 0,
+                                       big.data(), big.size(), &cleared),
+              HYSAR_OK);
+    EXPECT_EQ(cleared, 1u);
+    EXPECT_EQ(size_t(std::count(big.begin(), big.end(), uint8_t(0))), size_t(kW) * kH * 4);
+    // The layer must be the rendered display's size; dst must hold the shown display.
+    EXPECT_EQ(
+        hysar_reproject_layer_to(&e, &d, &d, &e.pose, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
+        HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("not the rendered display's"),
+              std::string::npos);
+    EXPECT_EQ(hysar_reproject_layer_to(&e, &wide, &d, &e.pose, 0, 0, 0, 0, dst.data(),
+                                       dst.size() - 1, nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("dst_bytes"), std::string::npos);
+    hysar_display none = d;
+    none.eye_width = 0;
+    EXPECT_EQ(hysar_reproject_layer_to(&e, &wide, &none, &e.pose, 0, 0, 0, 0, dst.data(),
+                                       dst.size(), nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_EQ(hysar_display_overscan(&d, std::nan(""), &wide), HYSAR_E_INVALID_ARGUMENT);
 }
 
 TEST(Predictor, CApi) {
