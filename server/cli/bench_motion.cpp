@@ -15,7 +15,8 @@ namespace {
 constexpr const char* kMotionHelp =
     "usage: hysar bench motion [--traces walk,turn,nod] [--modes none,predict,reproject,both]\n"
     "                          [--seconds S] [--delay-ms MS] [--refresh-hz HZ] [--scale F]\n"
-    "                          [--noise-deg D] [--noise-mm MM] [--reference-frames N]\n"
+    "                          [--noise-deg D] [--noise-mm MM] [--overscan-deg D]\n"
+    "                          [--reference-frames N]\n"
     "                          [--profile NAME] [--json FILE] [--plot FILE.png] [--quick]\n"
     "\n"
     "  Registration while heads move: a headset through `hysar serve` in-process on loopback\n"
@@ -37,6 +38,9 @@ constexpr const char* kMotionHelp =
     "                       are in the profile's own pixels\n"
     "  --noise-deg D        tracker noise per sample, degrees (default 0.05)\n"
     "  --noise-mm MM        tracker noise per sample, millimetres (default 0.5)\n"
+    "  --overscan-deg D     reproject and both: the layer is rendered D degrees wider on every\n"
+    "                       side than the display and warped back onto it, so that a turn has\n"
+    "                       what it brings into view (default 4; 0: none; at most 30)\n"
     "  --reference-frames N shown frames compared per row (default 60; 20 with --quick)\n"
     "  --profile NAME       a viewer profile of the default scene (default its first)\n"
     "  --json FILE          {\"traces\": {NAME: {MODE: {\"p50_px\", \"p95_px\", \"max_px\",\n"
@@ -73,8 +77,8 @@ Result<bench::MotionBenchOptions> parse(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
         Flags f, parse_flags(args,
                              {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz",
-                              "--scale", "--noise-deg", "--noise-mm", "--reference-frames",
-                              "--profile", "--json", "--plot"},
+                              "--scale", "--noise-deg", "--noise-mm", "--overscan-deg",
+                              "--reference-frames", "--profile", "--json", "--plot"},
                              {"--quick"}));
     bench::MotionBenchOptions o;
     const std::vector<std::string> traces(std::begin(bench::kMotionTraces),
@@ -89,6 +93,7 @@ Result<bench::MotionBenchOptions> parse(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(o.scale, parse_number(f, {"--scale", 0.05, 1}, o.scale));
     HS_ASSIGN_OR_RETURN(o.noise_deg, parse_number(f, {"--noise-deg", 0, 5}, o.noise_deg));
     HS_ASSIGN_OR_RETURN(o.noise_mm, parse_number(f, {"--noise-mm", 0, 50}, o.noise_mm));
+    HS_ASSIGN_OR_RETURN(o.overscan_deg, parse_number(f, {"--overscan-deg", 0, 30}, o.overscan_deg));
     HS_ASSIGN_OR_RETURN(
         double refs,
         parse_number(f, {"--reference-frames", 1, 10000, NumericFlag::kWhole}, o.reference_frames));

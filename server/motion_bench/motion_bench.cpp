@@ -155,9 +155,25 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                           const std::string& mode, uint32_t seed) {
     const bool predict = mode == "predict" || mode == "both";
     const bool reproject = mode == "reproject" || mode == "both";
-    HS_ASSIGN_OR_RETURN(auto session, open(server, display, "motion-" + trace + "-" + mode));
     const uint32_t w = display.eye_width, h = display.eye_height;
     const motion::Pinhole k{display.fx, display.fy, display.cx, display.cy};
+    // With reprojection the session registers the display widened by the overscan margin and
+    // warps each layer back onto the display itself.
+    proto::RegisterDisplay served = display;
+    motion::Pinhole served_k = k;
+    if (reproject && o.overscan_deg > 0) {
+        const auto wide = motion::overscan(k, w, h, o.overscan_deg);
+        if (!wide)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--overscan-deg {}: the display cannot be widened so "
+                                          "far (8192 pixels or 90 degrees from its centre)",
+                                          o.overscan_deg));
+        served.eye_width = wide->width, served.eye_height = wide->height;
+        served.cx = wide->k.cx, served.cy = wide->k.cy;
+        served_k = wide->k;
+    }
+    HS_ASSIGN_OR_RETURN(auto session, open(server, served, "motion-" + trace + "-" + mode));
+    const uint32_t sw = served.eye_width, sh = served.eye_height;
     motion::Predictor predictor;
     std::mt19937 rng(seed);
     std::normal_distribution<double> gauss(0, 1);
@@ -214,6 +230,13 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
             Pair& p = partial[ev.frame_id];
             p.frame_id = ev.frame_id;
             p.pose = ev.pose;
+            if (size_t(ev.pixels.size()) != size_t(sw) * sh * 4) {  // never, from our server
+                if (error.empty())
+                    error = fmt::format("a layer of {} bytes, not {}x{} RGBA8", ev.pixels.size(),
+                                        sw, sh);
+                incoming.pop_front();
+                continue;
+            }
             p.eye[ev.eye & 1] = std::move(ev.pixels);
             p.have[ev.eye & 1] = true;
             if (p.have[0] && p.have[1]) {
@@ -245,8 +268,8 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                     const double depth = (sc.viewing.target.x - from.position_m[0]) * fwd[0] +
                                          (sc.viewing.target.y - from.position_m[1]) * fwd[1] +
                                          (sc.viewing.target.z - from.position_m[2]) * fwd[2];
-                    motion::warp(shown->eye[e].data(), warped[e].data(), w, h, 4,
-                                 motion::plane_homography(k, from, to, depth),
+                    motion::warp(shown->eye[e].data(), sw, sh, warped[e].data(), w, h, 4,
+                                 motion::plane_homography(served_k, k, from, to, depth),
                                  motion::Filter::kNearest);
                 }
                 left = &warped[0];
@@ -285,6 +308,7 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
     }
     MotionRow row;
     row.trace = trace, row.mode = mode, row.frames = frames;
+    row.served_width = sw, row.served_height = sh;
     const auto clock = session->clock();
     row.pose_to_layer_ms = double(clock.pose_to_layer_ns) * 1e-6;
     row.clock_offset_ms = double(clock.offset_ns) * 1e-6;
@@ -374,7 +398,8 @@ json row_json(const MotionRow& r) {
             {"missing", r.missing},
             {"pose_to_layer_ms", r.pose_to_layer_ms},
             {"clock_offset_ms", r.clock_offset_ms},
-            {"round_trip_ms", r.round_trip_ms}};
+            {"round_trip_ms", r.round_trip_ms},
+            {"served_eye", {r.served_width, r.served_height}}};
 }
 
 }  // namespace
@@ -417,11 +442,12 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     stream::LoopbackCreateInfo info;
     info.clients = 4;
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, sc, info));
-    say(
-        fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
-                    "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row",
-                    profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
-                    full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds));
+    say(fmt::format(
+        "bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
+        "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row, "
+        "overscan {} deg with reprojection",
+        profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width, full.height,
+        o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds, o.overscan_deg));
     MotionReport rep;
     rep.profile = profile->name;
     rep.eye_width = d.eye_width, rep.eye_height = d.eye_height;
@@ -477,6 +503,7 @@ int run_motion_bench(const MotionBenchOptions& o) {
         j["served_eye"] = {measured->eye_width, measured->eye_height};
         j["refresh_hz"] = o.refresh_hz;
         j["delay_ms"] = o.delay_ms;
+        j["overscan_deg"] = o.overscan_deg;
         j["seconds"] = measured->seconds;
         j["device"] = measured->device;
         std::ofstream f(o.json_path);

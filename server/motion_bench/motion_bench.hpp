@@ -30,6 +30,8 @@ struct MotionBenchOptions {
     double noise_mm = 0.5;      // tracker noise per sample, position (millimetres, 1 sigma)
     double scale = 0.5;         // the profile's resolution times this is served; errors are
                                 // reported in the profile's own pixels
+    double overscan_deg = 4;    // reproject and both: the layer rendered this much wider on
+                                // every side (degrees) than the display it is warped onto; 0: none
     int reference_frames = 60;  // displayed frames compared with a fresh render, per row
     std::string profile;        // the scene's viewer profile; empty: the scene's first
     std::string json_path;      // --json FILE; empty: none
@@ -52,6 +54,7 @@ struct MotionRow {
     double m2p_p50_ms = 0, m2p_p95_ms = 0;  // pose sampled to photon time of its layer
     double client_ms = 0;                   // prediction and reprojection per stereo frame (mean)
     double pose_to_layer_ms = 0;            // the session's measured median
+    uint32_t served_width = 0, served_height = 0;  // per eye, as rendered (overscan included)
     double clock_offset_ms = 0, round_trip_ms = 0;
 };
 
