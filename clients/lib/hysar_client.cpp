@@ -384,8 +384,10 @@ hysar_status hysar_predictor_create(const hysar_predictor_config* config, hysar_
                             "predictor config struct_size " + std::to_string(config->struct_size) +
                                 " is not " + std::to_string(sizeof(hysar_predictor_config)) +
                                 " (call hysar_predictor_config_init)");
-            c = {config->window_ms, config->filter_ms, config->max_horizon_ms,
-                 config->max_angle_deg, config->max_distance_m};
+            // smooth_ms keeps its default: the C struct has no field for it.
+            c.window_ms = config->window_ms, c.filter_ms = config->filter_ms;
+            c.max_horizon_ms = config->max_horizon_ms, c.max_angle_deg = config->max_angle_deg;
+            c.max_distance_m = config->max_distance_m;
         }
         if (auto bad = hs::motion::check(c))
             return fail(HYSAR_E_INVALID_ARGUMENT, *bad);

@@ -78,6 +78,8 @@ std::optional<std::string> check(const PredictorConfig& c) {
     };
     if (!(c.window_ms > 0 && c.window_ms <= 1000))
         return bad("window_ms", c.window_ms, "(0, 1000]");
+    if (!(c.smooth_ms >= 0 && c.smooth_ms <= 1000))
+        return bad("smooth_ms", c.smooth_ms, "[0, 1000]");
     if (!(c.filter_ms >= 0 && c.filter_ms <= 1000))
         return bad("filter_ms", c.filter_ms, "[0, 1000]");
     if (!(c.max_horizon_ms >= 0 && c.max_horizon_ms <= 1000))
@@ -93,8 +95,113 @@ Predictor::Predictor(const PredictorConfig& config) : config_(config) {}
 
 void Predictor::reset() {
     samples_.clear();
+    current_ = {};
     omega_ = velocity_ = Vec3{};
     have_velocity_ = false;
+    noise_rot_ = noise_pos_ = 0;
+    have_noise_ = false;
+    window_rot_ms_ = window_pos_ms_ = 0;
+}
+
+namespace {
+
+// A polynomial in tau (seconds before the newest sample, <= 0) fitted by least squares to one
+// 3-vector per sample: c[0] + c[1] tau (+ c[2] tau^2).
+struct Fit {
+    Vec3 c[3]{};
+    size_t n = 0;
+};
+
+// The samples from index `from` to the end; degree 1 or 2. Times are scaled by `scale` (the
+// window) so that the normal equations stay well conditioned.
+Fit fit(const std::vector<double>& tau, const std::vector<Vec3>& x, size_t from, int degree,
+        double scale) {
+    Fit f;
+    f.n = tau.size() - from;
+    const int m = degree + 1;
+    if (f.n < size_t(m))
+        return f;
+    double a[3][3] = {}, b[3][3] = {};  // normal matrix; right-hand side per component
+    for (size_t i = from; i < tau.size(); ++i) {
+        const double t = tau[i] / scale;
+        const double pw[5] = {1, t, t * t, t * t * t, t * t * t * t};
+        for (int r = 0; r < m; ++r) {
+            for (int c = 0; c < m; ++c) a[r][c] += pw[r + c];
+            for (size_t k = 0; k < 3; ++k) b[r][k] += pw[r] * x[i][k];
+        }
+    }
+    // Gaussian elimination with partial pivoting (m <= 3).
+    for (int c = 0; c < m; ++c) {
+        int piv = c;
+        for (int r = c + 1; r < m; ++r)
+            if (std::abs(a[r][c]) > std::abs(a[piv][c]))
+                piv = r;
+        if (!(std::abs(a[piv][c]) > 1e-300)) {
+            f.n = 0;
+            return f;
+        }
+        std::swap(a[piv], a[c]);
+        std::swap(b[piv], b[c]);
+        for (int r = 0; r < m; ++r) {
+            if (r == c)
+                continue;
+            const double q = a[r][c] / a[c][c];
+            for (int k = 0; k < m; ++k) a[r][k] -= q * a[c][k];
+            for (size_t k = 0; k < 3; ++k) b[r][k] -= q * b[c][k];
+        }
+    }
+    double unscale = 1;
+    for (int r = 0; r < m; ++r, unscale /= scale)
+        for (size_t k = 0; k < 3; ++k) f.c[r][k] = b[r][k] / a[r][r] * unscale;
+    return f;
+}
+
+// The acceleration that picks the windows is the curvature of a parabola over this much of the
+// newest samples (seconds): long enough to see through the noise, short enough to follow a fast
+// turn's reversal (a 200 deg/s turn of 20 degrees reverses in about 0.3 s).
+constexpr double kAccelerationWindowS = 0.1;
+
+// The window (seconds) with the least expected error of a line's value at its newest end:
+// bias a W^2 / 12 from an acceleration a, noise 2 sigma / sqrt(W rate).
+double best_window(double noise_var, double accel, double rate, double longest) {
+    const double a2 = accel * accel;
+    if (!(a2 * rate > 0))
+        return longest;
+    return std::min(longest, std::pow(144 * noise_var / (a2 * rate), 0.2));
+}
+
+}  // namespace
+
+// The tracker's noise from the newest three samples: their second difference (of the rotation
+// vectors relative to the newest, and of the positions) has variance (1 + (1 + r)^2 + r^2)
+// sigma^2 per axis for spacings in the ratio r; the motion's own share is a dt^2, far below.
+void Predictor::update_noise() {
+    const size_t n = samples_.size();
+    if (n < 3)
+        return;
+    const PoseSample &s0 = samples_[n - 3], &s1 = samples_[n - 2], &s2 = samples_[n - 1];
+    const double t0 = double(s1.time_ns - s0.time_ns), t1 = double(s2.time_ns - s1.time_ns);
+    const double r = t1 / t0;
+    const double gain = 1 + (1 + r) * (1 + r) + r * r;
+    const Quat back = conjugate(s2.orientation_wxyz);
+    const Vec3 a = to_rotation_vector(multiply(s0.orientation_wxyz, back));
+    const Vec3 b = to_rotation_vector(multiply(s1.orientation_wxyz, back));
+    double er = 0, ep = 0;
+    for (size_t i = 0; i < 3; ++i) {
+        // Second difference at s1: (s2 - s1) - (s1 - s0) r, s2's rotation vector being 0.
+        const double dr = -b[i] - (b[i] - a[i]) * r;
+        const double dp =
+            (s2.position_m[i] - s1.position_m[i]) - (s1.position_m[i] - s0.position_m[i]) * r;
+        er += dr * dr, ep += dp * dp;
+    }
+    er /= 3 * gain, ep /= 3 * gain;
+    if (!have_noise_) {
+        noise_rot_ = er, noise_pos_ = ep, have_noise_ = true;
+        return;
+    }
+    const double alpha = 1 - std::exp(-t1 * 1e-9 / 0.5);  // half a second
+    noise_rot_ += alpha * (er - noise_rot_);
+    noise_pos_ += alpha * (ep - noise_pos_);
 }
 
 bool Predictor::add(const PoseSample& in) {
@@ -110,18 +217,78 @@ bool Predictor::add(const PoseSample& in) {
     s.orientation_wxyz = normalized(q);
     const uint64_t previous = samples_.empty() ? 0 : samples_.back().time_ns;
     samples_.push_back(s);
-    const auto window_ns = uint64_t(config_.window_ms * 1e6);
-    while (samples_.size() > 2 && samples_.front().time_ns + window_ns < s.time_ns)
+    current_ = s;
+    const auto keep_ns = uint64_t(std::max(config_.window_ms, config_.smooth_ms) * 1e6);
+    while (samples_.size() > 2 && samples_.front().time_ns + keep_ns < s.time_ns)
         samples_.pop_front();
+    window_rot_ms_ = window_pos_ms_ = 0;
     if (samples_.size() < 2)
         return true;
-    const PoseSample& a = samples_.front();
-    const double dt = double(s.time_ns - a.time_ns) * 1e-9;
-    Vec3 v, w;
-    for (int i = 0; i < 3; ++i)
-        v[size_t(i)] = (s.position_m[size_t(i)] - a.position_m[size_t(i)]) / dt;
-    w = scaled(to_rotation_vector(multiply(s.orientation_wxyz, conjugate(a.orientation_wxyz))),
-               1 / dt);
+    update_noise();
+    // Each sample relative to the newest: seconds before it, the rotation vector that turns the
+    // newest orientation into the sample's (world frame), and the displacement.
+    const size_t n = samples_.size();
+    std::vector<double>& tau = tau_;
+    std::vector<Vec3>&rot = rot_, &pos = pos_;
+    tau.resize(n), rot.resize(n), pos.resize(n);
+    const Quat back = conjugate(s.orientation_wxyz);
+    for (size_t i = 0; i < n; ++i) {
+        const PoseSample& p = samples_[i];
+        tau[i] = -double(s.time_ns - p.time_ns) * 1e-9;
+        rot[i] = to_rotation_vector(multiply(p.orientation_wxyz, back));
+        for (size_t k = 0; k < 3; ++k) pos[i][k] = p.position_m[k] - s.position_m[k];
+    }
+    const auto first_within = [&](double seconds) {
+        size_t i = 0;
+        while (i + 1 < n && -tau[i] > seconds + 1e-12) ++i;
+        return i;
+    };
+    // The velocities: each line's slope over its window, at least window_ms (and two samples).
+    const double short_s = config_.window_ms * 1e-3;
+    double w_rot = short_s, w_pos = short_s;
+    if (config_.smooth_ms > 0 && n >= 4) {
+        const double longest = config_.smooth_ms * 1e-3;
+        const size_t from = first_within(std::min(longest, kAccelerationWindowS));
+        const double span = -tau[from];
+        if (n - from >= 4 && span > 0) {
+            const double rate = double(n - from - 1) / span;
+            const Fit pr = fit(tau, rot, from, 2, span), pp = fit(tau, pos, from, 2, span);
+            if (pr.n && pp.n) {
+                // The parabola's acceleration is taken as it is, its own noise included: that
+                // keeps the window short of where the motion's jerk (a curve that changes
+                // within the window, as a walk's bob) would bend a longer line.
+                w_rot = best_window(noise_rot_, 2 * norm(pr.c[2]), rate, longest);
+                w_pos = best_window(noise_pos_, 2 * norm(pp.c[2]), rate, longest);
+                // The current pose: each line's value at the newest sample, where its window
+                // holds at least three samples.
+                const size_t fr = first_within(w_rot), fp = first_within(w_pos);
+                if (n - fr >= 3) {
+                    const Fit lr = fit(tau, rot, fr, 1, std::max(w_rot, 1e-6));
+                    if (lr.n) {
+                        current_.orientation_wxyz =
+                            normalized(multiply(from_rotation_vector(lr.c[0]), s.orientation_wxyz));
+                        window_rot_ms_ = -tau[fr] * 1e3;
+                    }
+                }
+                if (n - fp >= 3) {
+                    const Fit lp = fit(tau, pos, fp, 1, std::max(w_pos, 1e-6));
+                    if (lp.n) {
+                        for (size_t k = 0; k < 3; ++k) current_.position_m[k] += lp.c[0][k];
+                        window_pos_ms_ = -tau[fp] * 1e3;
+                    }
+                }
+            }
+        }
+    }
+    const auto slope = [&](const std::vector<Vec3>& x, double seconds) {
+        size_t from = first_within(std::max(seconds, short_s));
+        from = std::min(from, n - 2);
+        const Fit l = fit(tau, x, from, 1, std::max(-tau[from], 1e-6));
+        return l.n ? l.c[1] : Vec3{};
+    };
+    // A sample's rotation vector relative to the newest is omega tau at a constant angular
+    // velocity (world frame), its displacement v tau: the slopes are the velocities.
+    const Vec3 w = slope(rot, w_rot), v = slope(pos, w_pos);
     if (!have_velocity_ || config_.filter_ms <= 0) {
         velocity_ = v, omega_ = w;
         have_velocity_ = true;
@@ -139,7 +306,7 @@ bool Predictor::add(const PoseSample& in) {
 std::optional<PoseSample> Predictor::predict(uint64_t time_ns) const {
     if (samples_.empty())
         return std::nullopt;
-    PoseSample out = samples_.back();
+    PoseSample out = current_;
     if (!have_velocity_ || time_ns <= out.time_ns)
         return out;
     const double h = std::min(double(time_ns - out.time_ns) * 1e-9, config_.max_horizon_ms * 1e-3);

@@ -10,11 +10,13 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace hs::motion {
 
@@ -35,6 +37,14 @@ struct PredictorConfig {
     // The velocities then pass an exponential filter with this time constant (milliseconds; 0:
     // none). A constant velocity passes it unchanged.
     double filter_ms = 20;
+    // The current pose the prediction starts from is the samples' least-squares line over the
+    // last W milliseconds at the newest sample's time, W chosen per sample for the least error
+    // from tracker noise and from the motion's curvature (W^5 = 144 noise^2 / (acceleration^2
+    // rate): long for a slow walk, a few samples in a fast turn's reversal), at most this
+    // (milliseconds; 0: the newest sample as it is). The noise is measured from the samples'
+    // second differences, the acceleration from a parabola over this window. The velocities
+    // are that line's slopes over at least window_ms.
+    double smooth_ms = 250;
     // The cap: never extrapolate further than this past the newest sample (milliseconds), nor
     // turn by more than max_angle_deg, nor move by more than max_distance_m.
     double max_horizon_ms = 100;
@@ -55,20 +65,34 @@ public:
     // Adds a tracker sample. A sample with a non-finite number, a zero quaternion or a time not
     // after the newest one is ignored (false); the velocities are then as they were.
     bool add(const PoseSample& s);
-    // The pose at `time_ns` (the display time): the newest sample moved by the filtered
-    // velocities over min(time_ns - newest, max_horizon) (not backwards: a time before the newest
-    // sample gives the newest). Nullopt before the first sample.
+    // The pose at `time_ns` (the display time): the current pose (the newest sample, smoothed:
+    // smooth_ms) moved by the filtered velocities over min(time_ns - newest, max_horizon) (not
+    // backwards: a time before the newest sample gives the current pose). Nullopt before the
+    // first sample.
     std::optional<PoseSample> predict(uint64_t time_ns) const;
     // The filtered velocities: world-frame angular (rad/s, axis times rate) and linear (m/s).
     Vec3 angular_velocity() const { return omega_; }
     Vec3 linear_velocity() const { return velocity_; }
+    // The tracker noise measured so far (one sigma per axis: radians, metres), and the windows
+    // the current pose was last averaged over (milliseconds; 0: the newest sample as it is).
+    double orientation_noise() const { return std::sqrt(noise_rot_); }
+    double position_noise() const { return std::sqrt(noise_pos_); }
+    double orientation_window_ms() const { return window_rot_ms_; }
+    double position_window_ms() const { return window_pos_ms_; }
     void reset();
 
 private:
+    void update_noise();
     PredictorConfig config_;
     std::deque<PoseSample> samples_;
+    PoseSample current_;  // the newest sample, smoothed
     Vec3 omega_{}, velocity_{};
     bool have_velocity_ = false;
+    double noise_rot_ = 0, noise_pos_ = 0;  // variances per axis
+    bool have_noise_ = false;
+    double window_rot_ms_ = 0, window_pos_ms_ = 0;
+    std::vector<double> tau_;  // add()'s scratch: no allocation per sample once grown
+    std::vector<Vec3> rot_, pos_;
 };
 
 // The photon time of the first refresh of a display at `refresh_hz` whose refreshes fall at

@@ -40,7 +40,7 @@ constexpr const char* kMotionHelp =
     "  --noise-mm MM        tracker noise per sample, millimetres (default 0.5)\n"
     "  --overscan-deg D     reproject and both: the layer is rendered D degrees wider on every\n"
     "                       side than the display and warped back onto it, so that a turn has\n"
-    "                       what it brings into view (default 4; 0: none; at most 30)\n"
+    "                       what it brings into view (default 5; 0: none; at most 30)\n"
     "  --reference-frames N shown frames compared per row (default 60; 20 with --quick)\n"
     "  --profile NAME       a viewer profile of the default scene (default its first)\n"
     "  --json FILE          {\"traces\": {NAME: {MODE: {\"p50_px\", \"p95_px\", \"max_px\",\n"

@@ -214,9 +214,14 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
         // The compositor's cut-off: the tracker samples up to kLeadNs before the refresh, in
         // simulated time, whenever this thread wakes (a loaded machine wakes it late).
         const uint64_t now = now_ns();
+        // Every tracker sample goes to the predictor (its cost is the client's).
         while (tracker_next + kLeadNs <= vsync) {
             latest = sample(tracker_next);
-            predictor.add(latest);
+            if (predict) {
+                const uint64_t t_add = thread_cpu_ns();
+                predictor.add(latest);
+                client_ms_total += double(thread_cpu_ns() - t_add) * 1e-6;
+            }
             tracker_next += kTrackerPeriodNs;
         }
         while (auto e = session->poll(0)) {

@@ -30,7 +30,7 @@ struct MotionBenchOptions {
     double noise_mm = 0.5;      // tracker noise per sample, position (millimetres, 1 sigma)
     double scale = 0.5;         // the profile's resolution times this is served; errors are
                                 // reported in the profile's own pixels
-    double overscan_deg = 4;    // reproject and both: the layer rendered this much wider on
+    double overscan_deg = 5;    // reproject and both: the layer rendered this much wider on
                                 // every side (degrees) than the display it is warped onto; 0: none
     int reference_frames = 60;  // displayed frames compared with a fresh render, per row
     std::string profile;        // the scene's viewer profile; empty: the scene's first

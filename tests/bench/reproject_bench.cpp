@@ -51,6 +51,68 @@ BENCHMARK(BM_ReprojectStereo)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// As above, from a layer overscanned by 5 degrees on every side (hysar_display_overscan) onto
+// the display: the source is larger, the destination the same.
+void BM_ReprojectStereoOverscanned(benchmark::State& state) {
+    const auto filter = state.range(0) ? Filter::kBilinear : Filter::kNearest;
+    const Pinhole k{kW / 2.0 / std::tan(15 * kPi / 180), kH / 2.0 / std::tan(8.5 * kPi / 180),
+                    (kW - 1) / 2.0, (kH - 1) / 2.0};
+    const auto o = overscan(k, kW, kH, 5);
+    if (!o) {
+        state.SkipWithError("overscan refused");
+        return;
+    }
+    std::vector<uint8_t> src(size_t(o->width) * o->height * 4, 0);
+    for (uint32_t y = o->top + kH / 3; y < o->top + 2 * kH / 3; ++y)
+        for (uint32_t x = o->left + kW / 3; x < o->left + kW / 3 + kW / 10 * 3; ++x)
+            for (uint32_t c = 0; c < 4; ++c) src[(size_t(y) * o->width + x) * 4 + c] = 200;
+    std::vector<uint8_t> dst[2] = {std::vector<uint8_t>(size_t(kW) * kH * 4),
+                                   std::vector<uint8_t>(size_t(kW) * kH * 4)};
+    const Quat display = from_rotation_vector({0.01, 0.05, 0});
+    for (auto _ : state) {
+        const auto h = rotation_homography(o->k, k, Quat{1, 0, 0, 0}, display);
+        for (auto& d : dst) {
+            warp(src.data(), o->width, o->height, d.data(), kW, kH, 4, h, filter);
+            benchmark::DoNotOptimize(d.data());
+        }
+        benchmark::ClobberMemory();
+    }
+    state.SetLabel(std::string(filter == Filter::kBilinear ? "bilinear" : "nearest") +
+                   " RGBA8, 2 x " + std::to_string(o->width) + " x " + std::to_string(o->height) +
+                   " (5 deg overscan) onto 2 x 1268 x 720");
+}
+BENCHMARK(BM_ReprojectStereoOverscanned)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// One tracker sample into the predictor (a 500 Hz tracker: about 8 per 60 Hz frame), with the
+// current pose smoothed over up to 250 ms (the default) and without (smooth_ms 0).
+void BM_PredictorAdd(benchmark::State& state) {
+    PredictorConfig c;
+    c.smooth_ms = double(state.range(0));
+    Predictor p(c);
+    uint32_t seed = 1;
+    auto noise = [&] {
+        seed = seed * 1664525u + 1013904223u;
+        return (double(seed >> 8) / double(1u << 24) - 0.5) * 2e-3;
+    };
+    uint64_t t = 1000000000;
+    for (auto _ : state) {
+        PoseSample s;
+        s.time_ns = t;
+        const double sec = double(t) * 1e-9;
+        s.orientation_wxyz = from_rotation_vector({noise(), 0.14 * sec + noise(), noise()});
+        s.position_m = {0.8 * std::cos(0.14 * sec), 1.6, 0.8 * std::sin(0.14 * sec)};
+        p.add(s);
+        benchmark::DoNotOptimize(p.angular_velocity());
+        t += 2000000;
+    }
+    state.SetLabel("smooth_ms " + std::to_string(state.range(0)));
+}
+BENCHMARK(BM_PredictorAdd)->Arg(250)->Arg(0)->Unit(benchmark::kMicrosecond);
+
 // The plain form of the bilinear filter (clientlib/bilinear_reference.hpp), for comparison:
 // what warp() did before it stepped the position and skipped the black.
 void BM_ReprojectStereoPlainBilinear(benchmark::State& state) {
