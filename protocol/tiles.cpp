@@ -234,4 +234,33 @@ std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uin
     return raw;
 }
 
+bool tile_rows(std::span<const uint8_t> d, uint32_t w, uint32_t h, std::vector<uint32_t>& first,
+               std::vector<uint32_t>& last) {
+    if (w == 0 || h == 0 || w > 16384 || h > 16384 || d.size() < kFixedHeader)
+        return false;
+    const uint16_t ts = uint16_t(d[0] | (d[1] << 8));
+    if (ts < 4 || ts > 256)
+        return false;
+    const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
+    if (d.size() < kFixedHeader + mask_bytes)
+        return false;
+    const uint8_t* mask = &d[kFixedHeader];
+    first.assign(h, 0), last.assign(h, 0);
+    for (uint32_t by = 0; by < ty; ++by) {
+        uint32_t a = UINT32_MAX, b = 0;
+        for (uint32_t bx = 0; bx < tx; ++bx) {
+            const size_t tile = size_t(by) * tx + bx;
+            if ((mask[tile / 8] >> (tile % 8)) & 1u) {
+                a = std::min(a, bx * ts);
+                b = std::max(b, std::min(w, (bx + 1) * ts));
+            }
+        }
+        if (a == UINT32_MAX)
+            continue;
+        for (uint32_t y = by * ts; y < std::min(h, (by + 1) * ts); ++y) first[y] = a, last[y] = b;
+    }
+    return true;
+}
+
 }  // namespace hs::protocol

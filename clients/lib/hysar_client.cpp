@@ -503,6 +503,14 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
         std::memset(dst, 0, size_t(dst_needed));
         return HYSAR_OK;
     }
+    // A layer the library decoded knows where it may be lit (its tiles): the warp need not
+    // scan it. Only if the event's image is still the library's own.
+    hs::motion::LitRows lit;
+    if (const auto* held = static_cast<const SessionEvent*>(layer->internal_);
+        held && held->pixels.data() == im.pixels && held->width == im.width &&
+        held->height == im.height && held->lit_first.size() == im.height &&
+        held->lit_last.size() == im.height)
+        lit = {held->lit_first.data(), held->lit_last.data()};
     const hs::motion::Pinhole kr{rendered->fx, rendered->fy, rendered->cx, rendered->cy};
     const hs::motion::Pinhole kd{shown->fx, shown->fy, shown->cx, shown->cy};
     const int eye = layer->eye == 1 ? 1 : 0;
@@ -512,7 +520,8 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
         hs::motion::plane_homography(kr, kd, hs::motion::eye_pose(render_at, render, ipd, eye),
                                      hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
         filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
-                                        : hs::motion::Filter::kNearest);
+                                        : hs::motion::Filter::kNearest,
+        lit);
     return HYSAR_OK;
 }
 

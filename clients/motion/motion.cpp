@@ -509,7 +509,7 @@ inline int64_t fixed8(double v) {
 
 template <typename T, bool kBilinear>
 void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_bytes, uint32_t dw,
-               uint32_t dh, const std::array<double, 9>& h) {
+               uint32_t dh, const std::array<double, 9>& h, const LitRows& known) {
     static_assert(!kBilinear || sizeof(T) == 4, "bilinear: RGBA8 only");
     const auto* src = reinterpret_cast<const T*>(src_bytes);
     auto* dst = reinterpret_cast<T*>(dst_bytes);
@@ -540,9 +540,14 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
     // A layer is black (see-through) but for the prop's highlight: each source row's lit
     // columns [first, last], so that a span whose source holds nothing lit is filled with 0
     // without a gather (kept per thread: no allocation once it is large enough).
-    thread_local std::vector<uint32_t> first, last;
-    first.resize(sh), last.resize(sh);
-    for (uint32_t y = 0; y < sh; ++y) {
+    thread_local std::vector<uint32_t> first_scanned, last_scanned;
+    const uint32_t* first = known.first;
+    const uint32_t* last = known.last;
+    for (uint32_t y = 0; !(known.first && known.last) && y < sh; ++y) {
+        if (y == 0) {
+            first_scanned.resize(sh), last_scanned.resize(sh);
+            first = first_scanned.data(), last = last_scanned.data();
+        }
         const T* row = src + size_t(y) * sw;
         uint32_t a = 0, b = sw;
         for (; a + 8 <= sw; a += 8) {  // eight at a time through the black, in 64-bit words
@@ -560,13 +565,14 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
         }
         while (a < sw && row[a] == T(0)) ++a;
         while (b > a && row[b - 1] == T(0)) --b;
-        first[y] = a, last[y] = b;  // empty: a == b
+        first_scanned[y] = a, last_scanned[y] = b;  // empty: a == b
     }
     // Prefix counts of lit source rows: a destination row whose source rows hold nothing lit
     // is filled with 0 at once.
     thread_local std::vector<uint32_t> lit_rows;
     lit_rows.assign(size_t(sh) + 1, 0);
-    for (uint32_t y = 0; y < sh; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
+    for (uint32_t y = 0; y < sh; ++y)
+        lit_rows[y + 1] = lit_rows[y] + (first[y] < std::min(last[y], sw));
     const double last_x = double(dw) - 1;  // the destination row's last pixel
     for (uint32_t y = 0; y < dh; ++y) {
         T* out = dst + size_t(y) * dw;
@@ -659,13 +665,13 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
 
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
           uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
-          const std::array<double, 9>& h, Filter filter) {
+          const std::array<double, 9>& h, Filter filter, const LitRows& lit) {
     if (filter == Filter::kBilinear && bytes_per_pixel == 4)
-        warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h);
+        warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
     else if (bytes_per_pixel == 8)
-        warp_rows<uint64_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h);
+        warp_rows<uint64_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
     else
-        warp_rows<uint32_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h);
+        warp_rows<uint32_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
 }
 
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,

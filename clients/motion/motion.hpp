@@ -160,11 +160,19 @@ enum class Filter { kNearest, kBilinear };
 // "Registration").
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,
           uint32_t bytes_per_pixel, const std::array<double, 9>& h, Filter filter);
+// Where a source may be lit, per source row: columns [first[y], last[y]) (first == last:
+// none), a superset of its non-zero pixels, as a layer's encoding tells it
+// (protocol::tile_rows). Given, the warp does not scan the source for it (the scan reads every
+// source byte: about a third of a nearest warp's time). Null: scanned.
+struct LitRows {
+    const uint32_t* first = nullptr;  // src_height entries each
+    const uint32_t* last = nullptr;
+};
 // As above, from a source of one size to a destination of another (an overscanned layer to its
 // display); h takes a destination pixel to a source pixel.
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
           uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
-          const std::array<double, 9>& h, Filter filter);
+          const std::array<double, 9>& h, Filter filter, const LitRows& lit = {});
 
 // Quaternion helpers (Hamilton, w first).
 Quat multiply(const Quat& a, const Quat& b);

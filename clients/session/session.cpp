@@ -355,6 +355,8 @@ void Session::handle(Message m, uint64_t received_ns) {
                 return false;
             }
             e.pixels = std::move(std::get<std::vector<uint8_t>>(raw));
+            if (!proto::tile_rows(data, w, h, e.lit_first, e.lit_last))
+                e.lit_first.clear(), e.lit_last.clear();
         }
         e.decoded_ns = now_ns();
         return true;

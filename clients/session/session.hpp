@@ -66,6 +66,9 @@ struct SessionEvent {
     uint32_t width = 0, height = 0;
     protocol::PixelFormat format = protocol::PixelFormat::kRgba8;
     std::vector<uint8_t> pixels;  // decoded, tightly packed rows
+    // Tiled encodings: per row of pixels, the columns [lit_first, lit_last) of the tiles that
+    // came (protocol::tile_rows): where the image may be lit. Empty for raw images.
+    std::vector<uint32_t> lit_first, lit_last;
     std::string text;
 };
 

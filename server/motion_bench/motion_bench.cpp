@@ -128,6 +128,7 @@ struct Pair {
     uint32_t frame_id = 0;
     proto::Pose pose;
     std::vector<uint8_t> eye[2];
+    std::vector<uint32_t> lit_first[2], lit_last[2];  // where each eye may be lit (its tiles)
     bool have[2] = {false, false};
 };
 
@@ -243,6 +244,8 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                 continue;
             }
             p.eye[ev.eye & 1] = std::move(ev.pixels);
+            p.lit_first[ev.eye & 1] = std::move(ev.lit_first);
+            p.lit_last[ev.eye & 1] = std::move(ev.lit_last);
             p.have[ev.eye & 1] = true;
             if (p.have[0] && p.have[1]) {
                 if (!shown || p.frame_id > shown->frame_id)
@@ -273,9 +276,12 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                     const double depth = (sc.viewing.target.x - from.position_m[0]) * fwd[0] +
                                          (sc.viewing.target.y - from.position_m[1]) * fwd[1] +
                                          (sc.viewing.target.z - from.position_m[2]) * fwd[2];
+                    motion::LitRows lit;
+                    if (shown->lit_first[e].size() == sh && shown->lit_last[e].size() == sh)
+                        lit = {shown->lit_first[e].data(), shown->lit_last[e].data()};
                     motion::warp(shown->eye[e].data(), sw, sh, warped[e].data(), w, h, 4,
                                  motion::plane_homography(served_k, k, from, to, depth),
-                                 motion::Filter::kNearest);
+                                 motion::Filter::kNearest, lit);
                 }
                 left = &warped[0];
             }

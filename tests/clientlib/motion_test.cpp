@@ -14,6 +14,7 @@
 #include "clients/lib/hysar_client.h"
 #include "clients/motion/motion.hpp"
 #include "protocol/protocol.hpp"
+#include "protocol/tiles.hpp"
 
 namespace hs::motion {
 namespace {
@@ -386,6 +387,45 @@ TEST(Reproject, OverscanKeepsWhatATurnBringsIntoView) {
         if (fresh[i] || from_wide[i])
             err += std::abs(int(fresh[i]) - int(from_wide[i])), ++lit;
     EXPECT_LT(err / double(lit), 8);
+}
+
+// A layer's tiles say where it may be lit (protocol::tile_rows): a superset of its non-zero
+// pixels, and a warp given them writes the same bytes as one that scans the layer, for both
+// filters and both pixel formats' codecs. A header that is not a layer's is refused.
+TEST(Reproject, TheTilesSayWhereALayerMayBeLitAndTheWarpAgrees) {
+    const auto src = render(kHead, kLook);
+    ASSERT_GT(centroid(src).mass, 1000);
+    for (auto codec : {protocol::TileCodec::kLz4, protocol::TileCodec::kJpeg}) {
+        const auto enc = protocol::encode_tiles(src, kW, kH, 4, codec, 16);
+        std::vector<uint32_t> first, last;
+        ASSERT_TRUE(protocol::tile_rows(enc, kW, kH, first, last));
+        ASSERT_EQ(first.size(), size_t(kH));
+        size_t rows_lit = 0;
+        for (uint32_t y = 0; y < kH; ++y) {
+            rows_lit += first[y] < last[y];
+            for (uint32_t x = 0; x < kW; ++x) {
+                const uint8_t* p = &src[(size_t(y) * kW + x) * 4];
+                if (p[0] | p[1] | p[2] | p[3]) {
+                    ASSERT_TRUE(x >= first[y] && x < last[y]) << x << "," << y;
+                }
+            }
+        }
+        EXPECT_GT(rows_lit, 0u);
+        EXPECT_LT(rows_lit, size_t(kH)) << "the highlight does not span every row";
+        const Quat turned = multiply(from_rotation_vector({0.01, 0.04, 0}), kLook);
+        for (Filter f : {Filter::kNearest, Filter::kBilinear}) {
+            std::vector<uint8_t> scanned(src.size()), told(src.size(), 9);
+            const auto h = rotation_homography(kK, kLook, turned);
+            warp(src.data(), kW, kH, scanned.data(), kW, kH, 4, h, f);
+            warp(src.data(), kW, kH, told.data(), kW, kH, 4, h, f, {first.data(), last.data()});
+            EXPECT_EQ(told, scanned);
+        }
+    }
+    std::vector<uint32_t> first{1}, last{2};
+    const std::vector<uint8_t> junk{1, 0, 0, 0, 0, 0, 0, 0};  // a tile size of 1
+    EXPECT_FALSE(protocol::tile_rows(junk, kW, kH, first, last));
+    EXPECT_FALSE(protocol::tile_rows({}, kW, kH, first, last));
+    EXPECT_EQ(first, std::vector<uint32_t>{1}) << "untouched when refused";
 }
 
 // The bilinear warp steps the source position in fixed point along each row and skips the

@@ -61,6 +61,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     // The raw bytes as a tile stream, and as one of lossy tiles (codec 3, tile size 16: the
     // seeds' lossy-tiles-* files) so that mutations reach the JPEG and coverage decoders.
     (void)decode_tiles(bytes, 61, 37, 4);
+    {
+        // Where the tiles say a layer may be lit: any header, never out of bounds.
+        std::vector<uint32_t> first, last;
+        if (tile_rows(bytes, 61, 37, first, last))
+            for (size_t y = 0; y < first.size(); ++y)
+                if (first[y] > last[y] || last[y] > 61)
+                    fail("tile_rows gave columns outside the layer", "");
+    }
     if (size >= 4) {
         std::vector<uint8_t> lossy(bytes.begin(), bytes.end());
         lossy[0] = 16, lossy[1] = 0, lossy[2] = uint8_t(TileCodec::kJpeg);
