@@ -34,6 +34,7 @@ static const std::string kUsage =
         "                 [--target X,Y,Z] [--format rgba8|rgba16f] [--encoding raw|sparse|lossy]\n"
         "                 [--name NAME] [--out DIR] [--window] [--clear-after-ms MS] "
         "[--reproject]\n"
+        "                 [--overscan-deg D]\n"
         "                 [--summary FILE] [--device auto] [--device-table DIR]\n"
         "                 [--retries N] [--backoff-ms MS]\n"
         "                 [--tls | --tls-ca FILE | --tls-fingerprint SHA256]\n"
@@ -68,6 +69,9 @@ static const std::string kUsage =
         "  --reproject      with --window: warp each layer from the pose it was rendered for to\n"
         "                   the newest pose sent before showing it (libhysar-client's late\n"
         "                   reprojection, rotation only)\n"
+        "  --overscan-deg D with --reproject: the server renders each layer D degrees wider on\n"
+        "                   every side than the display (0..30, default 5; 0: none), so that a\n"
+        "                   head turn shows what it brings into view instead of a cut edge\n"
         "  --encoding E     how the layers come: lossy (default: JPEG-coded tiles at the server's\n"
         "                   --layer-quality, black exact; RGBA16F layers stay lossless), sparse\n"
         "                   (lossless tiles, for measurement or a wired headset) or raw\n"
@@ -109,9 +113,11 @@ class Run {
 public:
     Run(hysar_client* client, const proto::RegisterDisplay& display, std::string name,
         std::filesystem::path out, bool write_layers, ImageWindow* window, int clear_after_ms,
-        bool reproject = false)
+        bool reproject = false, const hysar_display* rendered = nullptr)
         : client_(client),
           display_(display),
+          shown_c_(to_c(display)),
+          rendered_(rendered ? *rendered : to_c(display)),
           name_(std::move(name)),
           out_(std::move(out)),
           write_layers_(write_layers),
@@ -231,25 +237,29 @@ private:
         const std::string label =
             it != labels_.end() && !it->second.empty() ? it->second : std::to_string(e.frame_id);
         if (window_ && e.eye <= 1 && format == proto::PixelFormat::kRgba8 &&
-            im.width == display_.eye_width && im.height == display_.eye_height) {
-            const size_t row = size_t(im.width) * 4;
+            im.width == rendered_.eye_width && im.height == rendered_.eye_height) {
+            // What the window shows: the display's own size (an overscanned layer is larger).
+            const uint32_t w = display_.eye_width, h = display_.eye_height;
+            const size_t row = size_t(w) * 4;
             const uint8_t* pixels = im.pixels;
+            bool shown = w == im.width && h == im.height;
             if (reproject_ && newest_.time_ns != 0) {
                 // Late reprojection: the layer as the newest pose sees it (--clear-after-ms
-                // clears stale ones, so no stale limit here).
-                warped_.resize(im.size_bytes);
-                const hysar_display d = to_c(display_);
-                if (hysar_reproject_layer(&e, &d, &newest_, hysar_now_ns(), 0, 0,
-                                          HYSAR_FILTER_NEAREST, warped_.data(), warped_.size(),
-                                          nullptr) == HYSAR_OK)
-                    pixels = warped_.data();
+                // clears stale ones, so no stale limit here), overscan cut off.
+                warped_.resize(row * h);
+                if (hysar_reproject_layer_to(&e, &rendered_, &shown_c_, &newest_, hysar_now_ns(), 0,
+                                             0, HYSAR_FILTER_NEAREST, warped_.data(),
+                                             warped_.size(), nullptr) == HYSAR_OK)
+                    pixels = warped_.data(), shown = true;
             }
-            for (uint32_t y = 0; y < im.height; ++y)
+            if (!shown)
+                return;  // an overscanned layer before the first pose: nothing to warp it to
+            for (uint32_t y = 0; y < h; ++y)
                 for (size_t i = 0; i < row; ++i)
-                    side_by_side_[(size_t(y) * 2 * im.width) * 4 + e.eye * row + i] =
+                    side_by_side_[(size_t(y) * 2 * w) * 4 + e.eye * row + i] =
                         i % 4 == 3 ? 255 : pixels[y * row + i];
             if (e.eye == 1) {
-                window_->show(side_by_side_, 2 * im.width, im.height);
+                window_->show(side_by_side_, 2 * w, h);
                 shown_ = std::chrono::steady_clock::now();
                 cleared_ = false;
             }
@@ -278,7 +288,9 @@ private:
     }
 
     hysar_client* client_;
-    const proto::RegisterDisplay display_;
+    const proto::RegisterDisplay display_;  // the display shown
+    const hysar_display shown_c_;
+    const hysar_display rendered_;  // the display registered: overscanned with --reproject
     const std::string name_;
     const std::filesystem::path out_;
     const bool write_layers_;
@@ -526,16 +538,33 @@ bool write_summary(std::ofstream& file, const nlohmann::json& summary, const std
 }
 
 int hmd_main(int argc, char** argv) {
-    Args args(
-        argc, argv,
-        with(with(kConnectionOptions, kAddDeviceOptions),
-             {"--connect",      "--token",         "--token-file",    "--profile",  "--scale",
-              "--angles",       "--orbit",         "--csv",           "--distance", "--height",
-              "--target",       "--format",        "--encoding",      "--name",     "--out",
-              "--summary",      "--poses",         "--frames",        "--stale-ms", "--device",
-              "--device-table", "--watch-devices", "--clear-after-ms"}),
-        with(kConnectionFlags, {"--window", "--list-devices", "--reproject"}), kUsage.c_str(),
-        HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
+    Args args(argc, argv,
+              with(with(kConnectionOptions, kAddDeviceOptions), {"--connect",
+                                                                 "--token",
+                                                                 "--token-file",
+                                                                 "--profile",
+                                                                 "--scale",
+                                                                 "--angles",
+                                                                 "--orbit",
+                                                                 "--csv",
+                                                                 "--distance",
+                                                                 "--height",
+                                                                 "--target",
+                                                                 "--format",
+                                                                 "--encoding",
+                                                                 "--name",
+                                                                 "--out",
+                                                                 "--summary",
+                                                                 "--poses",
+                                                                 "--frames",
+                                                                 "--stale-ms",
+                                                                 "--device",
+                                                                 "--device-table",
+                                                                 "--watch-devices",
+                                                                 "--clear-after-ms",
+                                                                 "--overscan-deg"}),
+              with(kConnectionFlags, {"--window", "--list-devices", "--reproject"}), kUsage.c_str(),
+              HYSAR_CLIENT_VERSION_TEXT("hysar-hmd"));
     // USB listing and watching: no token, no server.
     const std::string configured_profile = profile_option(args);
     if (wants_usb_command(args))
@@ -557,6 +586,9 @@ int hmd_main(int argc, char** argv) {
     const int clear_after_ms = int(args.integer("--clear-after-ms", 1000, 1, 600000));
     if (!args.has("--window") && args.has("--reproject"))
         args.fail("--reproject goes with --window");
+    if (!args.has("--reproject") && args.has("--overscan-deg"))
+        args.fail("--overscan-deg goes with --reproject");
+    const double overscan_deg = args.number("--overscan-deg", 5, 0, 30);
     const std::vector<Step> steps = read_steps(args, live);
     const std::filesystem::path out = args.get("--out", "out/hmd");
     if (auto err = make_output_dir(out.string()))
@@ -588,14 +620,22 @@ int hmd_main(int argc, char** argv) {
         return 2;
     }
     hysar_client* client = std::get<ClientPtr>(connected).get();
-    const hysar_display d = to_c(display);
+    hysar_display d = to_c(display);
+    if (args.has("--reproject") && overscan_deg > 0) {
+        hysar_display wide;
+        if (hysar_display_overscan(&d, overscan_deg, &wide) != HYSAR_OK) {
+            std::fprintf(stderr, "hysar-hmd: --overscan-deg: %s\n", hysar_last_error());
+            return 2;
+        }
+        d = wide;
+    }
     if (hysar_client_register_display(client, &d) != HYSAR_OK) {
         std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
         return 1;
     }
     stop_on_signals();
     Run run(client, display, name, out, stills || args.has("--out"), window.get(), clear_after_ms,
-            args.has("--reproject"));
+            args.has("--reproject"), &d);
     const int rc = live     ? follow_live_poses(run, *source, mode.frame_limit, mode.stale_ms)
                    : stills ? play_stills(run, steps, mode.frame_limit, client)
                             : play_trajectory(run, steps, mode.frame_limit);

@@ -26,12 +26,18 @@ for name, r in modes.items():
         assert isinstance(r[k], (int, float)) and math.isfinite(r[k]) and r[k] >= 0, (name, k, r)
     assert r["p50_px"] <= r["p95_px"] <= r["max_px"], (name, r)
     assert r["frames"] > 0 and r["m2p_p50_ms"] > 0, (name, r)
+# With reprojection the layer is served overscanned (5 degrees each side by default).
+assert j["overscan_deg"] == 5, j["overscan_deg"]
+plain, wide = modes["none"]["served_eye"], modes["both"]["served_eye"]
+assert wide[0] > plain[0] and wide[1] > plain[1], (plain, wide)
+assert plain == j["served_eye"], (plain, j["served_eye"])
 print("bench motion: JSON as documented")
 PY
 grep -q '^turn' "$out/table.txt" || { cat "$out/table.txt"; exit 1; }
 [[ -s "$out/motion.png" && -s "$out/motion.svg" ]] || { echo "no plot written"; exit 1; }
 
-for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" "--frobnicate"; do
+for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" \
+        "--overscan-deg 31" "--frobnicate"; do
     set +e
     # shellcheck disable=SC2086
     "$hysar" bench motion $bad > "$out/o.txt" 2> "$out/e.txt"

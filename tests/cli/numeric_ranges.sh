@@ -136,6 +136,8 @@ refused --viewers 12abc "[1, 1024]" "$build/clients/hysar-loadgen" "${T[@]}" --v
 refused --retries -2 "[-1, 1000000]" "$build/clients/hysar-projector" "${T[@]}" --retries -2
 refused --backoff-ms 0 "[1, 60000]" "$build/clients/hysar-hmd" "${T[@]}" --backoff-ms 0
 refused --clear-after-ms 1e9 "[1, 600000]" "$build/clients/hysar-hmd" "${T[@]}" --window --clear-after-ms 1e9
+refused --overscan-deg 31 "[0, 30]" "$build/clients/hysar-hmd" "${T[@]}" --window --reproject --overscan-deg 31
+refused --overscan-deg nan "[0, 30]" "$build/clients/hysar-hmd" "${T[@]}" --window --reproject --overscan-deg nan
 refused --seconds -1 "[0, 86400]" "$build/clients/hysar-loadgen" "${T[@]}" --seconds -1
 
 # Values inside the ranges: a leading '+', the bounds themselves (a small device, no GPU).

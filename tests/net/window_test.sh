@@ -50,5 +50,14 @@ if [[ -z "$peak" || "$peak" -lt 50 ]]; then
 fi
 xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:$dir/s.sock" \
   --token-file "$dir/token" --out "$dir" --window --angles 20 --scale 0.5 --name windowed
+# With late reprojection the headset registers its display overscanned (5 degrees each side by
+# default): the layers it receives, and writes, are wider and taller than the display's.
+xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:$dir/s.sock" \
+  --token-file "$dir/token" --out "$dir" --window --reproject --angles 20 --scale 0.5 --name warped
+png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{print ($1*16777216+$2*65536+$3*256+$4) "x" ($5*16777216+$6*65536+$7*256+$8)}'; }
+plain=$(png_size "$(ls "$dir"/windowed_*_left.png | head -1)") wide=$(png_size "$(ls "$dir"/warped_*_left.png | head -1)")
+if [[ "${plain%x*}" -ge "${wide%x*}" || "${plain#*x}" -ge "${wide#*x}" ]]; then
+  echo "an overscanned layer ($wide) is not larger than the display's ($plain)"; exit 1
+fi
 kill -TERM "$server"; wait "$server" 2>/dev/null || true
-echo "window test: the projector window showed the new scene's frame after a reconnect and a scene change; the headset window showed its layers"
+echo "window test: the projector window showed the new scene's frame after a reconnect and a scene change; the headset window showed its layers, and overscanned ones with --reproject ($plain -> $wide)"
