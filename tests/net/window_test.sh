@@ -55,7 +55,8 @@ xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:
 xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:$dir/s.sock" \
   --token-file "$dir/token" --out "$dir" --window --reproject --angles 20 --scale 0.5 --name warped
 png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{print ($1*16777216+$2*65536+$3*256+$4) "x" ($5*16777216+$6*65536+$7*256+$8)}'; }
-plain=$(png_size "$(ls "$dir"/windowed_*_left.png | head -1)") wide=$(png_size "$(ls "$dir"/warped_*_left.png | head -1)")
+plain_pngs=("$dir"/windowed_*_left.png) wide_pngs=("$dir"/warped_*_left.png)
+plain=$(png_size "${plain_pngs[0]}") wide=$(png_size "${wide_pngs[0]}")
 if [[ "${plain%x*}" -ge "${wide%x*}" || "${plain#*x}" -ge "${wide#*x}" ]]; then
   echo "an overscanned layer ($wide) is not larger than the display's ($plain)"; exit 1
 fi
