@@ -5,6 +5,10 @@
 #include <cstring>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace hs::motion {
 
 namespace {
@@ -489,6 +493,28 @@ constexpr uint32_t kSpan = 64;
     }
     if ((p[0] | p[1] | p[2] | p[3]) == 0)
         return 0;
+#if defined(__SSE2__)
+    // The same sums, separably: each row's pair weighted by (256 - au, au) in 16-bit lanes (at
+    // most 255 x 256), then the two rows by (256 - av, av) in 32 bits. Integer arithmetic
+    // throughout, so the result is the scalar form's bit for bit.
+    const __m128i z = _mm_setzero_si128();
+    const auto ru = short(256 - au), u = short(au), rv = short(256 - av), v = short(av);
+    const __m128i wh = _mm_set_epi16(u, u, u, u, ru, ru, ru, ru);
+    const __m128i top =
+        _mm_mullo_epi16(_mm_unpacklo_epi8(_mm_set_epi32(0, 0, int(p[1]), int(p[0])), z), wh);
+    const __m128i bot =
+        _mm_mullo_epi16(_mm_unpacklo_epi8(_mm_set_epi32(0, 0, int(p[3]), int(p[2])), z), wh);
+    const __m128i t = _mm_add_epi16(top, _mm_srli_si128(top, 8));
+    const __m128i b = _mm_add_epi16(bot, _mm_srli_si128(bot, 8));
+    const __m128i wt = _mm_set1_epi16(rv), wb = _mm_set1_epi16(v);
+    const __m128i t32 = _mm_unpacklo_epi16(_mm_mullo_epi16(t, wt), _mm_mulhi_epu16(t, wt));
+    const __m128i b32 = _mm_unpacklo_epi16(_mm_mullo_epi16(b, wb), _mm_mulhi_epu16(b, wb));
+    const __m128i sum =
+        _mm_srli_epi32(_mm_add_epi32(_mm_add_epi32(t32, b32), _mm_set1_epi32(32768)), 16);
+    const __m128i packed = _mm_packus_epi16(_mm_packs_epi32(sum, z), z);
+    const uint32_t rgb = uint32_t(_mm_cvtsi128_si32(packed)) & 0xFFFFFFu;
+    return rgb ? rgb | 0xFF000000u : 0u;
+#else
     const uint64_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av, au * av};
     uint64_t rb = 0, g = 0;
     for (int t = 0; t < 4; ++t) {
@@ -500,6 +526,7 @@ constexpr uint32_t kSpan = 64;
     const uint32_t gg = uint32_t((g + 32768) >> 16);
     const uint32_t rgb = r | (gg << 8) | (b << 16);
     return rgb ? rgb | 0xFF000000u : 0u;
+#endif
 }
 
 // 24.8 fixed point of a position known to be > -1 (truncation rounds).
