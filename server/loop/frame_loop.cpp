@@ -104,6 +104,11 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
     // The initial version is built before anything is served: it is waited for.
     start_build({initial, 0, 0, version}, version);
     auto first = take_blend(true);
+    if (!first->build && scheduler_.stopped()) {
+        // Stopped while the build ran (it gives up between its steps): a clean stop.
+        log::info("render: stopped before the initial scene was built");
+        return;
+    }
     if (!first->build) {
         log::error("render: {}", first->error);
         log::error("render: the initial scene cannot be rendered; stopping");
