@@ -280,6 +280,16 @@ Centroid centroid(const std::vector<uint8_t>& img, uint32_t kW = kW, uint32_t kH
     return c;
 }
 
+// The mean |difference| of the red channel over the pixels lit in either image (8-bit codes).
+double lit_error(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+    double err = 0;
+    size_t lit = 0;
+    for (size_t i = 0; i < a.size(); i += 4)
+        if (a[i] || b[i])
+            err += std::abs(int(a[i]) - int(b[i])), ++lit;
+    return lit ? err / double(lit) : 0;
+}
+
 const Quat kLook = normalized(Quat{0.963414, -0.204158, 0.169876, 0.035999});  // PROTOCOL.md
 const Vec3 kHead{0.273616, 1.1, 0.751754};
 
@@ -314,12 +324,7 @@ TEST(Reproject, PureRotationMatchesAFreshRender) {
         const auto a = centroid(warped), b = centroid(fresh), o = centroid(old_render);
         EXPECT_GT(std::hypot(o.x - b.x, o.y - b.y), deg * 5) << "the turn moves the highlight";
         EXPECT_LT(std::hypot(a.x - b.x, a.y - b.y), 0.25) << deg << " deg";
-        double err = 0;
-        size_t lit = 0;
-        for (size_t i = 0; i < fresh.size(); i += 4)
-            if (fresh[i] || warped[i])
-                err += std::abs(int(fresh[i]) - int(warped[i])), ++lit;
-        EXPECT_LT(err / double(lit), 8) << deg << " deg";
+        EXPECT_LT(lit_error(fresh, warped), 8) << deg << " deg";
     }
 }
 
@@ -381,12 +386,7 @@ TEST(Reproject, OverscanKeepsWhatATurnBringsIntoView) {
     EXPECT_LT(a.mass, want.mass / 2) << "without overscan the turn's side was never rendered";
     EXPECT_GT(b.mass, want.mass * 0.95);
     EXPECT_LT(std::hypot(b.x - want.x, b.y - want.y), 0.25) << deg << " deg";
-    double err = 0;
-    size_t lit = 0;
-    for (size_t i = 0; i < fresh.size(); i += 4)
-        if (fresh[i] || from_wide[i])
-            err += std::abs(int(fresh[i]) - int(from_wide[i])), ++lit;
-    EXPECT_LT(err / double(lit), 8);
+    EXPECT_LT(lit_error(fresh, from_wide), 8);
 }
 
 // A layer's tiles say where it may be lit (protocol::tile_rows): a superset of its non-zero
