@@ -220,6 +220,9 @@ public:
         std::printf("%s: %llu frames, latency p50 %.1f ms, %.1f MB, %u reconnects, %llu errors\n",
                     name_.c_str(), (unsigned long long)(layers_ / 2), percentile(latency_ms_, 0.5),
                     info.bytes_received / 1e6, reconnects_, (unsigned long long)errors_);
+        if (reproject_)
+            std::printf("%s: %llu layers reprojected onto the display\n", name_.c_str(),
+                        (unsigned long long)reprojected_);
     }
 
 private:
@@ -249,8 +252,18 @@ private:
                 warped_.resize(row * h);
                 if (hysar_reproject_layer_to(&e, &rendered_, &shown_c_, &newest_, hysar_now_ns(), 0,
                                              0, HYSAR_FILTER_NEAREST, warped_.data(),
-                                             warped_.size(), nullptr) == HYSAR_OK)
+                                             warped_.size(), nullptr) == HYSAR_OK) {
                     pixels = warped_.data(), shown = true;
+                    ++reprojected_;
+                } else {
+                    // Not shown, counted as an error (the exit status says so), said once.
+                    ++errors_;
+                    if (!warp_failed_)
+                        std::fprintf(stderr, "hysar-hmd: a layer cannot be reprojected: %s\n",
+                                     hysar_last_error());
+                    warp_failed_ = true;
+                    return;
+                }
             }
             if (!shown)
                 return;  // an overscanned layer before the first pose: nothing to warp it to
@@ -307,6 +320,8 @@ private:
     bool last_answered_ = true;
     uint32_t last_eye_ = 0, reconnects_ = 0;
     uint64_t layers_ = 0, errors_ = 0, clears_ = 0;
+    bool warp_failed_ = false;  // a reprojection failed (said once)
+    uint64_t reprojected_ = 0;  // layers shown warped
     std::vector<double> latency_ms_;
 };
 

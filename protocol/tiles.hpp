@@ -53,7 +53,8 @@ std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uin
 // Where a decoded layer may be lit, from the presence mask of its encoding alone: per pixel row,
 // the columns [first, last) of its present tiles (first == last: none), a superset of its
 // non-zero pixels. A late warp reads these instead of scanning the image (clients/motion/).
-// False, the vectors untouched, when the header is not that of a valid encoding of w x h.
+// Only the header's tile size and mask are read (call it on data decode_tiles accepted); false,
+// the vectors untouched, when those do not fit a w x h layer.
 bool tile_rows(std::span<const uint8_t> data, uint32_t width, uint32_t height,
                std::vector<uint32_t>& first, std::vector<uint32_t>& last);
 

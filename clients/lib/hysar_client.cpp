@@ -3,9 +3,13 @@
 #include "clients/lib/hysar_client.h"
 
 #include <cmath>
+#include <cstddef>
 #include <cstring>
+#include <mutex>
 #include <new>
 #include <string>
+#include <unordered_set>
+#include <vector>
 
 #include "clients/common/common.hpp"
 #include "clients/motion/motion.hpp"
@@ -41,6 +45,18 @@ static_assert(int(proto::PixelFormat::kRgba8) == HYSAR_FORMAT_RGBA8 &&
 namespace {
 
 thread_local std::string t_error;
+
+// The events hysar_client_poll handed out and hysar_event_release has not taken back: only
+// those have an internal_ the library may look into. Never destroyed (a release may come from
+// another static's destructor).
+std::mutex& live_events_mutex() {
+    static auto* m = new std::mutex;
+    return *m;
+}
+std::unordered_set<const void*>& live_events() {
+    static auto* s = new std::unordered_set<const void*>;
+    return *s;
+}
 
 hysar_status fail(hysar_status s, std::string text) {
     t_error = std::move(text);
@@ -306,6 +322,10 @@ hysar_status hysar_client_poll(hysar_client* client, int32_t timeout_ms, hysar_e
         }
         out->text = held->text.c_str();
         out->internal_ = held;
+        {
+            std::lock_guard lock(live_events_mutex());
+            live_events().insert(held);
+        }
         return HYSAR_OK;
     });
 }
@@ -313,6 +333,10 @@ hysar_status hysar_client_poll(hysar_client* client, int32_t timeout_ms, hysar_e
 void hysar_event_release(hysar_event* event) {
     if (!event)
         return;
+    {
+        std::lock_guard lock(live_events_mutex());
+        live_events().erase(event->internal_);
+    }
     delete static_cast<SessionEvent*>(event->internal_);
     *event = hysar_event{};
     event->text = "";
@@ -369,7 +393,8 @@ void hysar_predictor_config_init(hysar_predictor_config* config) {
                                      d.filter_ms,
                                      d.max_horizon_ms,
                                      d.max_angle_deg,
-                                     d.max_distance_m};
+                                     d.max_distance_m,
+                                     d.smooth_ms};
 }
 
 hysar_status hysar_predictor_create(const hysar_predictor_config* config, hysar_predictor** out) {
@@ -379,15 +404,20 @@ hysar_status hysar_predictor_create(const hysar_predictor_config* config, hysar_
         *out = nullptr;
         hs::motion::PredictorConfig c;
         if (config) {
-            if (config->struct_size != sizeof(hysar_predictor_config))
+            // API 2's struct ends before smooth_ms.
+            constexpr uint32_t kSize2 = offsetof(hysar_predictor_config, smooth_ms);
+            if (config->struct_size != sizeof(hysar_predictor_config) &&
+                config->struct_size != kSize2)
                 return fail(HYSAR_E_INVALID_ARGUMENT,
                             "predictor config struct_size " + std::to_string(config->struct_size) +
                                 " is not " + std::to_string(sizeof(hysar_predictor_config)) +
-                                " (call hysar_predictor_config_init)");
-            // smooth_ms keeps its default: the C struct has no field for it.
+                                " (or " + std::to_string(kSize2) +
+                                " before smooth_ms; call hysar_predictor_config_init)");
             c.window_ms = config->window_ms, c.filter_ms = config->filter_ms;
             c.max_horizon_ms = config->max_horizon_ms, c.max_angle_deg = config->max_angle_deg;
             c.max_distance_m = config->max_distance_m;
+            if (config->struct_size == sizeof(hysar_predictor_config))
+                c.smooth_ms = config->smooth_ms;
         }
         if (auto bad = hs::motion::check(c))
             return fail(HYSAR_E_INVALID_ARGUMENT, *bad);
@@ -448,7 +478,12 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
                        double plane_depth_m, uint32_t filter, uint8_t* dst, size_t dst_bytes,
                        uint32_t* cleared) {
     const hysar_image& im = layer->image;
-    // The image's own fields must agree: the warp reads width x height x bpp.
+    // The image's own fields must agree: the warp reads width x height x bpp (sizes bounded
+    // first, so that the product cannot wrap).
+    if (im.width == 0 || im.height == 0 || im.width > 16384 || im.height > 16384)
+        return fail(HYSAR_E_INVALID_ARGUMENT, "the image is " + std::to_string(im.width) + "x" +
+                                                  std::to_string(im.height) +
+                                                  ", not within 1..16384 on each side");
     if (im.bytes_per_pixel != 4 && im.bytes_per_pixel != 8)
         return fail(HYSAR_E_INVALID_ARGUMENT, "the image's bytes_per_pixel is " +
                                                   std::to_string(im.bytes_per_pixel) +
@@ -505,12 +540,23 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
     }
     // A layer the library decoded knows where it may be lit (its tiles): the warp need not
     // scan it. Only if the event's image is still the library's own.
+    // internal_ is looked at only if the library handed it out and it was not released since
+    // (a caller may build or copy an event itself).
+    // The rows are copied (a few kB): another thread may release the event meanwhile.
     hs::motion::LitRows lit;
-    if (const auto* held = static_cast<const SessionEvent*>(layer->internal_);
-        held && held->pixels.data() == im.pixels && held->width == im.width &&
-        held->height == im.height && held->lit_first.size() == im.height &&
-        held->lit_last.size() == im.height)
-        lit = {held->lit_first.data(), held->lit_last.data()};
+    thread_local std::vector<uint32_t> lit_first, lit_last;
+    {
+        std::lock_guard live_lock(live_events_mutex());
+        if (live_events().count(layer->internal_)) {
+            const auto* held = static_cast<const SessionEvent*>(layer->internal_);
+            if (held->pixels.data() == im.pixels && held->width == im.width &&
+                held->height == im.height && held->lit_first.size() == im.height &&
+                held->lit_last.size() == im.height) {
+                lit_first = held->lit_first, lit_last = held->lit_last;
+                lit = {lit_first.data(), lit_last.data()};
+            }
+        }
+    }
     const hs::motion::Pinhole kr{rendered->fx, rendered->fy, rendered->cx, rendered->cy};
     const hs::motion::Pinhole kd{shown->fx, shown->fy, shown->cx, shown->cy};
     const int eye = layer->eye == 1 ? 1 : 0;

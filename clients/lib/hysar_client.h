@@ -224,13 +224,19 @@ HYSAR_API uint64_t hysar_event_display_time_ns(const hysar_event* event);
 
 typedef struct hysar_predictor hysar_predictor;
 typedef struct hysar_predictor_config {
-    uint32_t struct_size; /* sizeof(hysar_predictor_config) */
+    uint32_t struct_size; /* sizeof(hysar_predictor_config); 48 (API 2, without smooth_ms) is
+                             accepted too and gets smooth_ms's default */
     uint32_t reserved_;
-    double window_ms;      /* velocities over the samples of the last window_ms (default 40) */
+    double window_ms;      /* velocities: least-squares slopes over at least the last window_ms
+                              of samples (default 40) */
     double filter_ms;      /* their exponential filter's time constant, 0: none (default 20) */
     double max_horizon_ms; /* extrapolate at most this far past the newest sample (default 100) */
     double max_angle_deg;  /* ... nor turn further (default 30) */
     double max_distance_m; /* ... nor move further (default 0.3) */
+    /* API 3: the current pose the prediction starts from is the samples' least-squares line at
+     * the newest sample, over a window fitted to the tracker's noise and the motion, at most
+     * smooth_ms (default 250; 0: the newest sample as it is; README, "Registration") */
+    double smooth_ms;
 } hysar_predictor_config;
 HYSAR_API void hysar_predictor_config_init(hysar_predictor_config* config);
 /* config NULL: the defaults. */
@@ -240,9 +246,9 @@ HYSAR_API void hysar_predictor_destroy(hysar_predictor* predictor);
 /* A tracker sample (time_ns must be set). One with a non-finite number, a zero quaternion or a
  * time not after the newest is refused (HYSAR_E_INVALID_ARGUMENT) and changes nothing. */
 HYSAR_API hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample);
-/* The pose predicted for display_time_ns (constant angular and linear velocity, filtered,
- * capped); its time_ns is the newest sample's, so a layer's pose says when it was sampled.
- * HYSAR_E_INVALID_ARGUMENT before the first sample. */
+/* The pose predicted for display_time_ns (the smoothed current pose at constant angular and
+ * linear velocity, filtered, capped); its time_ns is the newest sample's, so a layer's pose says
+ * when it was sampled. HYSAR_E_INVALID_ARGUMENT before the first sample. */
 HYSAR_API hysar_status hysar_predictor_predict(const hysar_predictor* predictor,
                                                uint64_t display_time_ns, hysar_pose* out);
 /* The first refresh at or after earliest_ns of a display whose refreshes fall at

@@ -199,6 +199,8 @@ void Predictor::update_noise() {
         er += dr * dr, ep += dp * dp;
     }
     er /= 3 * gain, ep /= 3 * gain;
+    if (!std::isfinite(er) || !std::isfinite(ep))
+        return;  // positions so large that their differences overflow: not noise
     if (!have_noise_) {
         noise_rot_ = er, noise_pos_ = ep, have_noise_ = true;
         return;
@@ -379,7 +381,8 @@ std::optional<Overscan> overscan(const Pinhole& k, uint32_t width, uint32_t heig
                                  double margin_deg, uint32_t max_side) {
     if (!(k.fx > 0 && k.fy > 0 && std::isfinite(k.fx) && std::isfinite(k.fy) &&
           std::isfinite(k.cx) && std::isfinite(k.cy)) ||
-        width == 0 || height == 0 || !(margin_deg >= 0 && margin_deg <= kMaxOverscanDeg))
+        width == 0 || height == 0 || width > max_side || height > max_side ||
+        !(margin_deg >= 0 && margin_deg <= kMaxOverscanDeg))
         return std::nullopt;
     const double m = margin_deg * kPi / 180;
     // The pixels a side gains: its edge (a pixel's outer border, at -0.5 or size - 0.5) turned
@@ -398,10 +401,11 @@ std::optional<Overscan> overscan(const Pinhole& k, uint32_t width, uint32_t heig
     const auto top = grow(k.cy + 0.5, k.fy), bottom = grow(double(height) - 0.5 - k.cy, k.fy);
     if (!left || !right || !top || !bottom)
         return std::nullopt;
-    Overscan o;
-    o.width = width + *left + *right, o.height = height + *top + *bottom;
-    if (o.width > max_side || o.height > max_side)
+    const uint64_t w = uint64_t(width) + *left + *right, h = uint64_t(height) + *top + *bottom;
+    if (w > max_side || h > max_side)
         return std::nullopt;
+    Overscan o;
+    o.width = uint32_t(w), o.height = uint32_t(h);
     o.k = {k.fx, k.fy, k.cx + *left, k.cy + *top};
     o.left = *left, o.top = *top;
     return o;
@@ -565,16 +569,19 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
         }
     };
     // A layer is black (see-through) but for the prop's highlight: each source row's lit
-    // columns [first, last], so that a span whose source holds nothing lit is filled with 0
+    // columns [first, last), so that a span whose source holds nothing lit is filled with 0
     // without a gather (kept per thread: no allocation once it is large enough).
+    // Rows a caller gave are clamped to the source's width (columns [first, last), last <= sw).
     thread_local std::vector<uint32_t> first_scanned, last_scanned;
-    const uint32_t* first = known.first;
-    const uint32_t* last = known.last;
-    for (uint32_t y = 0; !(known.first && known.last) && y < sh; ++y) {
-        if (y == 0) {
-            first_scanned.resize(sh), last_scanned.resize(sh);
-            first = first_scanned.data(), last = last_scanned.data();
+    first_scanned.resize(sh), last_scanned.resize(sh);
+    const uint32_t* first = first_scanned.data();
+    const uint32_t* last = last_scanned.data();
+    if (known.first && known.last)
+        for (uint32_t y = 0; y < sh; ++y) {
+            last_scanned[y] = std::min(known.last[y], sw);
+            first_scanned[y] = std::min(known.first[y], last_scanned[y]);
         }
+    for (uint32_t y = 0; !(known.first && known.last) && y < sh; ++y) {
         const T* row = src + size_t(y) * sw;
         uint32_t a = 0, b = sw;
         for (; a + 8 <= sw; a += 8) {  // eight at a time through the black, in 64-bit words
@@ -598,8 +605,7 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
     // is filled with 0 at once.
     thread_local std::vector<uint32_t> lit_rows;
     lit_rows.assign(size_t(sh) + 1, 0);
-    for (uint32_t y = 0; y < sh; ++y)
-        lit_rows[y + 1] = lit_rows[y] + (first[y] < std::min(last[y], sw));
+    for (uint32_t y = 0; y < sh; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
     const double last_x = double(dw) - 1;  // the destination row's last pixel
     for (uint32_t y = 0; y < dh; ++y) {
         T* out = dst + size_t(y) * dw;
@@ -693,6 +699,12 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
           uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
           const std::array<double, 9>& h, Filter filter, const LitRows& lit) {
+    if (dst_width == 0 || dst_height == 0)
+        return;
+    if (src_width == 0 || src_height == 0) {  // nothing to show: see-through
+        std::memset(dst, 0, size_t(dst_width) * dst_height * bytes_per_pixel);
+        return;
+    }
     if (filter == Filter::kBilinear && bytes_per_pixel == 4)
         warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
     else if (bytes_per_pixel == 8)

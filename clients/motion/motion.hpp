@@ -30,9 +30,9 @@ struct PoseSample {
 };
 
 struct PredictorConfig {
-    // Velocities are the displacement between the newest sample and the oldest one at most
-    // this old (milliseconds): a longer window averages more tracker noise, and lags more when
-    // the motion changes.
+    // The shortest window of the velocities (milliseconds): they are the least-squares slopes
+    // of the samples over this, or over the smoothing window below when that is longer (a
+    // longer window averages more tracker noise, and lags more when the motion changes).
     double window_ms = 40;
     // The velocities then pass an exponential filter with this time constant (milliseconds; 0:
     // none). A constant velocity passes it unchanged.
@@ -42,8 +42,8 @@ struct PredictorConfig {
     // from tracker noise and from the motion's curvature (W^5 = 144 noise^2 / (acceleration^2
     // rate): long for a slow walk, a few samples in a fast turn's reversal), at most this
     // (milliseconds; 0: the newest sample as it is). The noise is measured from the samples'
-    // second differences, the acceleration from a parabola over this window. The velocities
-    // are that line's slopes over at least window_ms.
+    // second differences, the acceleration from a parabola over the last 100 ms (or this, if
+    // shorter). The velocities are that line's slopes over at least window_ms.
     double smooth_ms = 250;
     // The cap: never extrapolate further than this past the newest sample (milliseconds), nor
     // turn by more than max_angle_deg, nor move by more than max_distance_m.

@@ -421,6 +421,31 @@ TEST(Reproject, TheTilesSayWhereALayerMayBeLitAndTheWarpAgrees) {
             EXPECT_EQ(told, scanned);
         }
     }
+    // An overscanned layer onto its display, told its tiles, as scanned; rows a caller gives
+    // past the layer's width are clamped to it.
+    const auto o = overscan(kK, kW, kH, 4);
+    ASSERT_TRUE(o);
+    const auto wide = render(kHead, kLook, o->k, o->width, o->height);
+    const auto enc =
+        protocol::encode_tiles(wide, o->width, o->height, 4, protocol::TileCodec::kLz4, 16);
+    std::vector<uint32_t> wf, wl;
+    ASSERT_TRUE(protocol::tile_rows(enc, o->width, o->height, wf, wl));
+    const Quat turned = multiply(from_rotation_vector({0.02, -0.05, 0}), kLook);
+    const auto h = rotation_homography(o->k, kK, kLook, turned);
+    std::vector<uint8_t> scanned(size_t(kW) * kH * 4), told(scanned.size(), 9);
+    warp(wide.data(), o->width, o->height, scanned.data(), kW, kH, 4, h, Filter::kBilinear);
+    warp(wide.data(), o->width, o->height, told.data(), kW, kH, 4, h, Filter::kBilinear,
+         {wf.data(), wl.data()});
+    EXPECT_EQ(told, scanned);
+    EXPECT_GT(centroid(scanned).mass, 1000);
+    for (auto& l : wl)
+        if (l > 0)
+            l = UINT32_MAX;
+    std::fill(told.begin(), told.end(), 9);
+    warp(wide.data(), o->width, o->height, told.data(), kW, kH, 4, h, Filter::kBilinear,
+         {wf.data(), wl.data()});
+    EXPECT_EQ(told, scanned) << "rows past the width";
+
     std::vector<uint32_t> first{1}, last{2};
     const std::vector<uint8_t> junk{1, 0, 0, 0, 0, 0, 0, 0};  // a tile size of 1
     EXPECT_FALSE(protocol::tile_rows(junk, kW, kH, first, last));
@@ -606,6 +631,29 @@ TEST(Reproject, CApiShowsAnOverscannedLayerOnItsDisplay) {
                                        dst.size(), nullptr),
               HYSAR_E_INVALID_ARGUMENT);
     EXPECT_EQ(hysar_display_overscan(&d, std::nan(""), &wide), HYSAR_E_INVALID_ARGUMENT);
+    // Image sizes whose product would wrap, or empty, are refused before anything is read.
+    hysar_event huge = e;
+    huge.image.width = huge.image.height = 1u << 31;
+    huge.image.size_bytes = 0;  // 2^31 * 2^31 * 4 wraps to 0
+    EXPECT_EQ(
+        hysar_reproject_layer(&huge, &d, &e.pose, 0, 0, 0, 0, dst.data(), dst.size(), nullptr),
+        HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("1..16384"), std::string::npos);
+    hysar_event empty = e;
+    empty.image.height = 0, empty.image.size_bytes = 0;
+    hysar_display flat = wide;
+    flat.eye_height = 0;
+    EXPECT_EQ(hysar_reproject_layer_to(&empty, &flat, &d, &e.pose, 0, 0, 0, 0, dst.data(),
+                                       dst.size(), nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    // An event whose internal_ the library never handed out is not looked into.
+    hysar_event forged = e;
+    int not_an_event = 0;
+    forged.internal_ = &not_an_event;
+    EXPECT_EQ(hysar_reproject_layer_to(&forged, &wide, &d, &e.pose, 120 * kMs, 0, 0.8,
+                                       HYSAR_FILTER_NEAREST, dst.data(), dst.size(), nullptr),
+              HYSAR_OK);
+    EXPECT_EQ(dst, render(kHead, kLook));
 }
 
 TEST(Predictor, CApi) {
@@ -630,6 +678,20 @@ TEST(Predictor, CApi) {
     EXPECT_NEAR(out.position_m[0], want.position_m[0], 1e-6);
     EXPECT_EQ(out.time_ns, truth(0.1, {0, 0, 0}, v).time_ns) << "the newest sample's time";
     hysar_predictor_destroy(p);
+    // smooth_ms (API 3): set, checked; a struct of API 2 (without it) is still accepted.
+    hysar_predictor_config_init(&c);
+    EXPECT_EQ(c.smooth_ms, PredictorConfig{}.smooth_ms);
+    c.smooth_ms = -5;
+    EXPECT_EQ(hysar_predictor_create(&c, &p), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("smooth_ms"), std::string::npos);
+    c.smooth_ms = 0;
+    ASSERT_EQ(hysar_predictor_create(&c, &p), HYSAR_OK);
+    hysar_predictor_destroy(p);
+    c.struct_size = uint32_t(offsetof(hysar_predictor_config, smooth_ms));
+    ASSERT_EQ(hysar_predictor_create(&c, &p), HYSAR_OK) << hysar_last_error();
+    hysar_predictor_destroy(p);
+    c.struct_size = 12;
+    EXPECT_EQ(hysar_predictor_create(&c, &p), HYSAR_E_INVALID_ARGUMENT);
 }
 
 // ---- The wire: the optional display time -------------------------------------------------

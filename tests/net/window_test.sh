@@ -53,7 +53,10 @@ xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:
 # With late reprojection the headset registers its display overscanned (5 degrees each side by
 # default): the layers it receives, and writes, are wider and taller than the display's.
 xvfb-run -a -s "-screen 0 1400x500x24" "$bin/clients/hysar-hmd" --connect "unix:$dir/s.sock" \
-  --token-file "$dir/token" --out "$dir" --window --reproject --angles 20 --scale 0.5 --name warped
+  --token-file "$dir/token" --out "$dir" --window --reproject --angles 20 --scale 0.5 --name warped \
+  | tee "$dir/warped.log"
+reprojected=$(sed -n 's/^warped: \([0-9]*\) layers reprojected.*/\1/p' "$dir/warped.log")
+[[ "${reprojected:-0}" -ge 2 ]] || { echo "hysar-hmd --reproject showed no warped layer"; exit 1; }
 png_size() { od -An -tu1 -j16 -N8 "$1" | awk '{print ($1*16777216+$2*65536+$3*256+$4) "x" ($5*16777216+$6*65536+$7*256+$8)}'; }
 plain_pngs=("$dir"/windowed_*_left.png) wide_pngs=("$dir"/warped_*_left.png)
 plain=$(png_size "${plain_pngs[0]}") wide=$(png_size "${wide_pngs[0]}")
