@@ -95,6 +95,7 @@ const char* kServeHelp =
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
     "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
+    "                         [--overscan-deg D]\n"
     "                         [--quick]\n"
     "\n"
     "  What the server serves against full-frame baselines, in one process and one sitting:\n"
@@ -111,6 +112,8 @@ const char* kServeHelp =
     "                       tiles at the server's quality)\n"
     "  --layer-quality Q    the server's JPEG quality of lossy tiles (as hysar serve; 1..100,\n"
     "                       default 92); the error each quality costs: hysar bench encoding\n"
+    "  --overscan-deg D     each headset registers its display D degrees wider on every side,\n"
+    "                       as hysar-hmd --reproject does (0..30, default 0: not widened)\n"
     "  --frames N           timed stereo pairs per baseline, after 5 warm-up (default 30)\n"
     "  --out DIR            default out/bench-serve\n"
     "  --lean-baseline CMD  run CMD through the shell first; its lean_stereo_ms=<ms> and\n"
@@ -169,7 +172,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--submissions-in-flight",
                                             "--headset-mbps",
                                             "--room-mbps",
-                                            "--layer-quality"};
+                                            "--layer-quality",
+                                            "--overscan-deg"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -197,6 +201,10 @@ Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
     HS_TRY(read_count(f, "--submissions-in-flight", 1, 16, o.submissions_in_flight));
     HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
     HS_TRY(read_count(f, "--layer-quality", 1, 100, o.layer_quality));
+    if (f.has("--overscan-deg")) {
+        HS_ASSIGN_OR_RETURN(o.overscan_deg,
+                            parse_double("--overscan-deg", f.get("--overscan-deg", ""), 0, 30));
+    }
     for (auto [flag, field] :
          {std::pair{"--headset-mbps", &o.headset_mbps}, std::pair{"--room-mbps", &o.room_mbps}}) {
         if (!f.has(flag))

@@ -1,4 +1,5 @@
 #include "serve_bench/serve_bench.hpp"
+#include "clients/motion/motion.hpp"
 #include "serve_bench/headsets.hpp"
 #include "serve_bench/serve_report.hpp"
 
@@ -498,6 +499,22 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     d.mode = proto::FrameMode::kContinuous;
     std::vector<ServedRow> rows;
     std::optional<Error> failure;
+    if (o.overscan_deg > 0) {
+        // What a reprojecting headset registers (clients/motion/motion.hpp, overscan()).
+        const auto wide =
+            motion::overscan({d.fx, d.fy, d.cx, d.cy}, d.eye_width, d.eye_height, o.overscan_deg);
+        if (!wide)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("--overscan-deg {}: profile '{}' cannot be widened so "
+                                          "far",
+                                          o.overscan_deg, profile.name));
+        d.eye_width = wide->width, d.eye_height = wide->height;
+        d.cx = wide->k.cx, d.cy = wide->k.cy;
+        fmt::print(stderr,
+                   "bench serve: headsets register {}x{} per eye ({} deg of overscan on every "
+                   "side of {}x{})\n",
+                   d.eye_width, d.eye_height, o.overscan_deg, k.width, k.height);
+    }
     if (auto bad = proto::validate_display(d))
         failure = make_error(ErrorCode::kInvalidArgument, "profile '" + profile.name +
                                                               "' is not a display the protocol "
@@ -762,6 +779,13 @@ void add_lp_thread_rows(const ServeBenchOptions& o, const fs::path& dir, Report&
 json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
                  const scene::ViewerProfile& profile) {
     const scene::Intrinsics k = scene::eye_intrinsics(profile);
+    // What the headsets register: the profile's eye, widened by the overscan.
+    uint32_t served_w = k.width, served_h = k.height;
+    if (o.overscan_deg > 0)
+        if (const auto wide =
+                motion::overscan({k.fx, k.fy, k.cx, k.cy}, k.width, k.height, o.overscan_deg)) {
+            served_w = wide->width, served_h = wide->height;
+        }
     return {{"scene", o.scene_path.empty() ? "default (embedded)" : o.scene_path},
             {"scene_tessellation", tessellation_of(sc)},
             {"profile", profile.name},
@@ -783,6 +807,8 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
             {"layer_quality", o.layer_quality},
+            {"overscan_deg", o.overscan_deg},
+            {"served_eye", {served_w, served_h}},
             {"quick", o.quick}};
 }
 

@@ -61,6 +61,8 @@ struct ServeBenchOptions {
     double headset_mbps = 0;             // as `hysar serve --headset-mbps`; 0: no limit
     double room_mbps = 0;                // as `hysar serve --room-mbps`; 0: no limit
     int layer_quality = 0;               // as `hysar serve --layer-quality`; 0: its default
+    double overscan_deg = 0;  // each headset registers its display widened by this on every side
+                              // (degrees), as `hysar-hmd --reproject` does; 0: not widened
     bool quick = false;
     // Internal (the --lp-threads children): serve the rows only and write them to this file
     // as JSON; no baselines, table or plot.

@@ -77,6 +77,24 @@ assert l["bytes_per_layer"] < 0.5 * t, (l["bytes_per_layer"], t)
 print("bench serve: lossy %.0f bytes per layer against %.0f for tiles" % (l["bytes_per_layer"], t))
 PY
 
+# Overscan: the headsets register a wider display (as hysar-hmd --reproject does) and are served.
+"$hysar" bench serve --quick --headsets 1 --overscan-deg 5 --out "$out/wide" > /dev/null 2>&1 ||
+    { echo "bench serve --overscan-deg failed"; exit 1; }
+python3 - "$out/bs/bench-serve.json" "$out/wide/bench-serve.json" <<'PY'
+import json, sys
+plain = json.load(open(sys.argv[1]))["config"]
+wide = json.load(open(sys.argv[2]))
+c = wide["config"]
+assert c["overscan_deg"] == 5 and plain["overscan_deg"] == 0, (c, plain)
+assert plain["served_eye"] == [plain["eye_width"], plain["eye_height"]], plain
+assert c["served_eye"][0] > c["eye_width"] and c["served_eye"][1] > c["eye_height"], c
+r = wide["rows"][0]
+assert r["stereo_layers"] > 0 and r["errors"] == 0, r
+print("bench serve: overscanned %s per eye served" % c["served_eye"])
+PY
+"$hysar" bench serve --overscan-deg 31 > /dev/null 2> "$out/e.txt" && { echo "--overscan-deg 31 accepted"; exit 1; }
+grep -q -- "--overscan-deg" "$out/e.txt" || { echo "the error does not name --overscan-deg"; cat "$out/e.txt"; exit 1; }
+
 # Under a bit-rate limit far below what the lossy headset takes, its quality is lowered within
 # the row, and the row says so.
 "$hysar" bench serve --quick --headsets 1 --encoding lossy --headset-mbps 0.3 \
