@@ -19,9 +19,14 @@ layout(constant_id = HS_SC_OUTPUT_ENCODING) const int kOutputEncoding = 0;
 layout(constant_id = HS_SC_ANALYTIC_SPHERE) const bool kAnalyticSphere = false;
 layout(constant_id = HS_SC_LIGHTS_LO) const uint kLightsLo = 0xffffffffu;
 layout(constant_id = HS_SC_LIGHTS_HI) const uint kLightsHi = 0xffffffffu;
+layout(constant_id = HS_SC_FILL) const bool kFill = false;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
+layout(std430, set = 0, binding = HS_BINDING_FILL) readonly buffer FillBlock {
+    GpuFillHeader fill;
+    float fill_depth[];
+};
 layout(push_constant) uniform Push { GpuPush pc; };
 
 layout(location = 0) in vec3 in_position;
@@ -142,6 +147,54 @@ vec3 sphere_tangent(vec3 n) {
     return len > 1e-12 ? t / len : vec3(1.0, 0.0, 0.0);
 }
 
+// Whether some projector reaches p (normal n): render/blend.hpp's V_j, as the blend computes it
+// on the CPU from the same shadow maps. p must project inside the projector's frame, face it,
+// and the farthest of the 2 x 2 shadow-map depths around its projection must not lie in front
+// of it by more than the bias (a nearer surface beside p, at a silhouette, does not hide it).
+bool fill_covered(vec3 p, vec3 n) {
+    for (uint j = 0u; j < fill.count.x; ++j) {
+        vec3 to = fill.projectors[j].position.xyz - p;
+        float d2 = dot(to, to);
+        if (!(d2 > 0.0)) continue;
+        float cos_t = dot(n, to * inversesqrt(d2));
+        if (!(cos_t > 0.0)) continue;
+        vec3 q = (fill.projectors[j].frame_from_world * vec4(p, 1.0)).xyz;
+        float z = -q.z;
+        if (!(z > 1e-9)) continue;
+        vec4 k = fill.projectors[j].k;
+        uvec4 size = fill.projectors[j].size;
+        float u = k.x * q.x / z + k.z, v = k.w - k.y * q.y / z;
+        float w = float(size.x), h = float(size.y);
+        if (!(min(min(u + 0.5, w - 0.5 - u), min(v + 0.5, h - 0.5 - v)) > 0.0)) continue;
+        float bias = fill.projectors[j].position.w * (z / min(k.x, k.y)) / max(cos_t, 0.05) + 5e-4;
+        int x0 = int(floor(u)), y0 = int(floor(v));
+        float farthest = -1.0;
+        for (int y = y0; y <= y0 + 1; ++y)
+            for (int x = x0; x <= x0 + 1; ++x)
+                if (x >= 0 && y >= 0 && x < int(size.x) && y < int(size.y)) {
+                    float d = fill_depth[size.z + uint(y) * size.x + uint(x)];
+                    if (d < 3.0e38) farthest = max(farthest, d);
+                }
+        if (farthest >= 0.0 && farthest < z - bias) continue;
+        return true;
+    }
+    return false;
+}
+
+// Paper eq. (2), VI: sum_i L_d(p, l_i), every light (the projector pass and the fill-in).
+vec3 vi_radiance(vec3 p, vec3 n, vec2 uv) {
+    vec3 sum = vec3(0.0);
+    for (int i = 0; i < kNumLights; ++i)
+        for (int j = 0; j < samples_of(i); ++j) {
+            vec3 l, E;
+            light_sample(i, j, p, n, l, E);
+            sum += E * max(dot(n, l), 0.0);
+        }
+    sum *= scene.albedo_over_pi.rgb;
+    if (kAlbedoTexture) sum *= texture(albedo_texture, uv).rgb;  // sRGB decoded by the sampler
+    return sum;
+}
+
 void main() {
     if (kPassKind == 3) {
         out_radiance = vec4(0.0);
@@ -156,15 +209,7 @@ void main() {
     vec3 mesh_tangent = kAnalyticSphere ? sphere_tangent(n) : in_tangent;
     vec3 sum = vec3(0.0);
     if (kPassKind == 0) {
-        // Paper eq. (2), VI: sum_i L_d(p, l_i).
-        for (int i = 0; i < kNumLights; ++i)
-            for (int j = 0; j < samples_of(i); ++j) {
-                vec3 l, E;
-                light_sample(i, j, p, n, l, E);
-                sum += E * max(dot(n, l), 0.0);
-            }
-        sum *= scene.albedo_over_pi.rgb;
-        if (kAlbedoTexture) sum *= texture(albedo_texture, uv).rgb;  // sRGB decoded by the sampler
+        sum = vi_radiance(p, n, uv);
     } else if (kPassKind == 2) {
         // Capture geometry (docs/OPTICS.md): where this camera pixel meets the projector image,
         // and how much of a projector pixel's intensity arrives here per unit area.
@@ -206,6 +251,9 @@ void main() {
             sum += scene.spec_colour.rgb * s;
         }
         if (kEmission) sum += scene.emission.rgb;
+        // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): no projector lights this point, so
+        // the viewer's layer carries its VI part as well.
+        if (kFill && !fill_covered(p, n)) sum += vi_radiance(p, n, uv);
     }
     out_radiance = encode_output(sum);
 }

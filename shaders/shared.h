@@ -18,6 +18,8 @@ using uvec4 = glm::uvec4;
 #define HS_MAX_LIGHTS 64
 #define HS_BINDING_SCENE 0
 #define HS_BINDING_ALBEDO_TEXTURE 1
+#define HS_BINDING_FILL 2  // the headsets' fill-in: the projectors' shadow maps (GpuFillHeader)
+#define HS_MAX_FILL_PROJECTORS 16  // scene::kMaxProjectors
 #define HS_BINDING_PROBE_IN 0
 #define HS_BINDING_PROBE_OUT 1
 #define HS_PROBE_LOCAL_SIZE 64
@@ -53,6 +55,9 @@ using uvec4 = glm::uvec4;
 #define HS_SC_LOBE_EXPONENT \
     15  // int: the lobe exponent when it is a whole number in 1..4095 (x^e by squaring, exact
         // to a few ulp and without pow's exp2/log2); 0: pow with the scene block's exponent
+#define HS_SC_FILL \
+    16  // bool: VD pass, the headsets' fill-in (docs/OPTICS.md, "Fill-in"): where no projector
+        // reaches the shaded point (the fill block's shadow maps), the VI term is added too
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit
@@ -76,6 +81,22 @@ struct GpuScene {
     vec4 projector_position;          // xyz: projector centre, metres, world
     vec4 sheen_params;                // x: Phong exponent of the prop's sheen
     vec4 prop_sphere;  // xyz: the analytic prop's sphere centre (m, world), w: its radius
+};
+
+// One projector as the fill-in's coverage test sees it (render/blend.hpp's V_j): the point must
+// project inside its frame, face it, and not lie behind the surfaces of its shadow map.
+struct GpuFillProjector {
+    mat4 frame_from_world;  // the projector frame (x right, y up, looking along -z)
+    vec4 k;                 // fx, fy, cx, cy in pixels (OpenCV convention)
+    vec4 position;          // xyz: projector centre, metres, world; w: shadow bias in pixels
+    uvec4 size;             // x width, y height, z: first float of its depth map in `depth`
+};
+// The fill block (std430): the projectors, then their shadow maps one after another (per
+// pixel the distance along the projector's axis to the nearest prop surface, +FLT_MAX where
+// none). `count` 0: nothing is covered.
+struct GpuFillHeader {
+    uvec4 count;  // x: projectors
+    GpuFillProjector projectors[HS_MAX_FILL_PROJECTORS];
 };
 
 struct GpuPush {

@@ -268,18 +268,34 @@ bool FrameLoop::build_scene(BlendTask& task) {
         }
         b.frames = std::move(frames).value();
     }
-    if (b.frames.frames.size() > 1) {
+    // The blend splits the VI part between several projectors; the headsets' fill-in needs
+    // the projectors' shadow maps whatever their number (one projector's blend is not kept).
+    const bool several = b.frames.frames.size() > 1;
+    const bool fill = sc.effects.headset_fill && !sc.captured_material;
+    double fill_ms = 0;
+    if (several || fill) {
         if (stopping())
             return false;
         const auto b0 = Clock::now();
+        std::shared_ptr<const render::Blend> blend;
         try {
-            task.blend = charged_blend(render::compute_blend(b.renderer->mesh(), sc.projectors()));
+            blend = charged_blend(render::compute_blend(b.renderer->mesh(), sc.projectors()));
         } catch (const std::exception& e) {
             task.error = fmt::format("the projectors' blend of version {} failed: {}", task.version,
                                      e.what());
             return false;
         }
         task.ms = ms_since(b0);
+        if (fill) {
+            const auto f0 = Clock::now();
+            if (auto f = b.renderer->set_fill(*blend); !f) {
+                task.error = "the headsets' fill-in: " + f.error().message;
+                return false;
+            }
+            fill_ms = ms_since(f0);
+        }
+        if (several)
+            task.blend = std::move(blend);
     }
     // The frames weighted and made into the version's projector frames (drives when
     // calibrated), here too: the render thread only swaps the version in.
@@ -298,6 +314,12 @@ bool FrameLoop::build_scene(BlendTask& task) {
         return false;
     }
     b.layer_drive = std::move(layer_drive).value();
+    // The fill-in's state, with the projector pass in the stats.
+    b.built.report["headset_fill"] = {{"enabled", fill},
+                                      {"active", b.renderer->fill()},
+                                      {"uncovered_clusters", b.renderer->fill_clusters()},
+                                      {"clusters", b.renderer->levels().front().clusters.size()},
+                                      {"setup_ms", fill_ms}};
     task.build = std::move(b);
     return true;
 }

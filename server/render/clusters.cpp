@@ -370,6 +370,10 @@ uint64_t cluster_light_mask(const Cluster& rasterised, const Shell& shell, const
     return total >= b.threshold ? mask : 0;
 }
 
+bool cluster_may_face(const Cluster& cl, const Shell& shell, const glm::dvec3& eye) {
+    return !view_bound(shaded_bounds(cl, shell, eye), eye).dark;
+}
+
 bool cluster_may_light(const Cluster& cl, const Shell& shell, const glm::dvec3& eye,
                        const VdBound& b) {
     return cluster_light_mask(cl, shell, eye, b) != 0;

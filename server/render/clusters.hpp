@@ -112,6 +112,9 @@ double layer_threshold(bool srgb8);
 // thickness; grazing: the chord through the shell).
 Cluster shaded_bounds(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye);
 
+// Whether any point a VD pass shades on `cluster` may face `eye` (n.v > 0; conservative).
+bool cluster_may_face(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye);
+
 // `shell`: the cluster's level's (ClusteredMesh::shell).
 bool cluster_may_light(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye,
                        const VdBound& bound);

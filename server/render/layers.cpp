@@ -45,7 +45,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.lights_skipped = lights_skipped_;
     if (!check_layer_request(r, w))
         return;
-    if (!has_vd_term(r.spec)) {
+    if (!has_vd_term(r.spec) && !fill_) {
         plan.skipped_because = vd_skip_reason(r.spec);
         return;
     }
@@ -79,8 +79,13 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     // (0: dark).
     auto& rects = w.rects;
     auto& masks = w.masks;
+    auto& fills = w.fills;
     rects.assign(level.clusters.size(), PixelRect{});
     masks.assign(level.clusters.size(), 0);
+    fills.assign(level.clusters.size(), 0);
+    // The fill-in: clusters with uncovered surface that may face the eye are drawn too.
+    const size_t level_index = size_t(&level - levels_.data());
+    const std::vector<uint8_t>* fill_clusters = fill_ ? &fill_clusters_[level_index] : nullptr;
     const uint64_t all_lights = lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
     // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
     // otherwise each cluster on its own, needing at most the group's lights.
@@ -96,18 +101,23 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
         const uint64_t group_mask =
             r.sparse ? cluster_light_mask(group, level.shell, r.eye.position, bound)
                      : all_lights | 1;
-        if (group_mask == 0 && convex_)
+        const bool group_fill = fill_clusters && fill_groups_[level_index][g] &&
+                                cluster_may_face(group, level.shell, r.eye.position);
+        if (group_mask == 0 && convex_ && !group_fill)
             continue;
         const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
         for (size_t c = g * per_group; c < end; ++c) {
             const Cluster& cl = level.clusters[c];
             rects[c] = project_sphere(cl.centre, cl.radius, k, view, info_.near_m);
-            if (rects[c].empty() || group_mask == 0)
+            if (rects[c].empty())
                 continue;
-            masks[c] = r.sparse
-                           ? cluster_light_mask(cl, level.shell, r.eye.position, bound) & group_mask
-                           : group_mask;
-            if (masks[c] != 0)
+            fills[c] = group_fill && (*fill_clusters)[c] &&
+                       cluster_may_face(cl, level.shell, r.eye.position);
+            if (group_mask != 0)
+                masks[c] = r.sparse ? cluster_light_mask(cl, level.shell, r.eye.position, bound) &
+                                          group_mask
+                                    : group_mask;
+            if (masks[c] != 0 || fills[c])
                 rect = unite(rect, rects[c]);
         }
     }
@@ -120,6 +130,8 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
                               LayerWork& w) const {
     LayerPlan& plan = w.plan;
     auto& masks = w.masks;
+    const auto& fills = w.fills;
+    const auto drawn = [&](size_t c) { return masks[c] != 0 || fills[c] != 0; };
     // The drawn clusters' indices, gathered: one draw call each for the occluders and the
     // lit clusters (on lavapipe a draw call costs more than the triangles it skips).
     auto* gathered = static_cast<uint32_t*>(r.indices->mapped());
@@ -130,7 +142,7 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     uint32_t occ_clusters = 0;
     if (!convex_ && r.sparse)
         for (size_t c = 0; c < level.clusters.size(); ++c) {
-            if (masks[c] != 0 || !overlaps(w.rects[c], plan.rect))
+            if (drawn(c) || !overlaps(w.rects[c], plan.rect))
                 continue;
             const Cluster& cc = level.clusters[c];
             std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
@@ -138,29 +150,33 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
             ++occ_clusters;
         }
     w.occ_count = written;
-    // The lit clusters grouped by the lights they need: one draw per group, each evaluating
-    // only its lights (a handful of groups; past kMaxLightGroups, one group with every light
-    // any of them needs).
+    // The lit clusters grouped by the lights they need (and whether they draw the fill-in):
+    // one draw per group, each evaluating only its lights (a handful of groups; past
+    // kMaxLightGroups, one group with every light any of them needs, per fill class).
     auto& order = w.order;
     order.clear();
     for (size_t c = 0; c < level.clusters.size(); ++c)
-        if (masks[c] != 0)
+        if (drawn(c))
             order.push_back(uint32_t(c));
+    const auto key = [&](uint32_t c) { return std::make_pair(fills[c], masks[c]); };
     std::stable_sort(order.begin(), order.end(),
-                     [&](uint32_t a, uint32_t b) { return masks[a] < masks[b]; });
+                     [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
     size_t distinct = 0;
-    uint64_t union_mask = 0;
+    uint64_t union_mask[2] = {0, 0};
     for (size_t i = 0; i < order.size(); ++i) {
-        union_mask |= masks[order[i]];
-        distinct += i == 0 || masks[order[i]] != masks[order[i - 1]];
+        union_mask[fills[order[i]]] |= masks[order[i]];
+        distinct += i == 0 || key(order[i]) != key(order[i - 1]);
     }
     if (distinct > kMaxLightGroups)
-        for (uint32_t c : order) masks[c] = union_mask;
+        for (uint32_t c : order) masks[c] = union_mask[fills[c]];
     const uint32_t lit_first = written;
+    uint32_t filled = 0;
     for (uint32_t c : order) {
         const Cluster& cc = level.clusters[c];
-        if (w.groups.empty() || w.groups.back().mask != masks[c])
-            w.groups.push_back({masks[c], written, 0});
+        filled += fills[c];
+        if (w.groups.empty() || w.groups.back().mask != masks[c] ||
+            w.groups.back().fill != bool(fills[c]))
+            w.groups.push_back({masks[c], written, 0, bool(fills[c])});
         std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
         written += cc.index_count;
         w.groups.back().count += cc.index_count;
@@ -168,6 +184,7 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     const uint32_t lit_count = written - lit_first;
     plan.clusters_occluding = occ_clusters;
     plan.clusters_lit = uint32_t(order.size());
+    plan.clusters_filled = filled;
     plan.triangles = (w.occ_count + lit_count) / 3;
 }
 
@@ -204,7 +221,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             cl.draw_range(0, w.occ_count);
         }
         for (const auto& g : w.groups) {
-            HS_ASSIGN_OR_RETURN(Variant * lit, vd_variant(r.spec, 1 + int(r.encoding), g.mask));
+            HS_ASSIGN_OR_RETURN(Variant * lit,
+                                vd_variant(r.spec, 1 + int(r.encoding), g.mask, g.fill));
             gpu::GpuPush gp = push;
             gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
             cl.bind(lit->pipeline);

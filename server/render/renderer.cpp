@@ -14,6 +14,7 @@
 #include "gpu/shared_layout.hpp"
 #include "scene/camera.hpp"
 #include "scene/memory.hpp"
+#include "render/fill.hpp"
 #include "scene/mesh.hpp"
 #include "shaders/prop_frag.h"
 #include "shaders/prop_frag_f32.h"
@@ -150,6 +151,12 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     HS_ASSIGN_OR_RETURN(
         r->albedo_texture_,
         gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
+    // Until set_fill: no projector, nothing covered (only fill pipelines read it).
+    const std::vector<uint8_t> empty_fill = fill_block(Blend{});
+    HS_ASSIGN_OR_RETURN(r->fill_block_, gpu::Buffer::create(device, empty_fill.size(),
+                                                            gpu::BufferUsage::kStorage,
+                                                            "fill.block", r->device_counter()));
+    r->fill_block_.write(empty_fill.data(), empty_fill.size());
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
                          : device.is_cpu()          ? 0
@@ -183,14 +190,16 @@ int whole_exponent(const scene::Specular& sp) {
 }
 
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
-                                             int encoding, uint64_t lights) {
+                                             int encoding, uint64_t lights, bool fill) {
     const bool vd = kind == PassKind::kVd;
+    fill = fill && vd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
     const std::string key = fmt::format(
         "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model), sp.colour.r,
         sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
-        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding, lights);
+        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding, lights) +
+        (fill ? "|fill" : "");
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
 
@@ -199,6 +208,8 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         v.effects = {"occluder"};
     else
         v.effects = effects_of(scene_, vd, sp, info_.area_light_samples);
+    if (fill)
+        v.effects.push_back("headset-fill");
     const bool area = has_light(scene_, scene::LightType::kRect);
     const bool falloff = scene_.effects.point_light_falloff;
     const gpu::ColorFormat format =
@@ -222,7 +233,9 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
-        .set_bool(HS_SC_ALBEDO_TEXTURE, !vd && scene_.material.albedo_texture != nullptr)
+        .set_bool(HS_SC_ALBEDO_TEXTURE,
+                  (!vd || fill) && scene_.material.albedo_texture != nullptr)
+        .set_bool(HS_SC_FILL, fill)
         .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0)
         .set_int(HS_SC_OUTPUT_ENCODING, encoding)
         .set_bool(HS_SC_ANALYTIC_SPHERE, convex_)
@@ -233,11 +246,11 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
 }
 
 Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int encoding,
-                                                uint64_t lights) {
+                                                uint64_t lights, bool fill) {
     if (light_variants_ >= info_.max_light_variants)
-        return variant(PassKind::kVd, spec, encoding);
+        return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill);
     const uint64_t before = pipelines_built_;
-    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights));
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights, fill));
     light_variants_ += uint32_t(pipelines_built_ - before);
     return v;
 }
@@ -253,7 +266,7 @@ Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Varia
                                             pi.name + ".scene", device_counter()));
     v.scene_block.write(&block, sizeof(block));
     v.counted = MemoryCharge(info_.ledger ? &info_.ledger->pipelines : nullptr, 0);
-    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_);
+    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_, fill_block_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
     return &it->second;
 }
@@ -412,6 +425,45 @@ uint64_t Renderer::target_bytes() const {
 
 std::vector<std::string> Renderer::vd_effects(const scene::Specular& spec) const {
     return effects_of(scene_, true, spec, info_.area_light_samples);
+}
+
+Result<void> Renderer::set_fill(const Blend& blend) {
+    if (blend.views.size() > HS_MAX_FILL_PROJECTORS)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("the fill-in takes at most {} projectors, got {}",
+                                      HS_MAX_FILL_PROJECTORS, blend.views.size()));
+    std::vector<std::vector<uint8_t>> clusters(levels_.size()), groups(levels_.size());
+    for (size_t l = 0; l < levels_.size(); ++l) {
+        const ClusteredMesh& level = levels_[l];
+        clusters[l] = uncovered_clusters(level, blend, scene_.prop);
+        groups[l].assign(level.groups.size(), 0);
+        for (size_t c = 0; c < clusters[l].size(); ++c)
+            if (clusters[l][c])
+                groups[l][c / level.clusters_per_group] = 1;
+    }
+    const auto count = uint32_t(std::count(clusters[0].begin(), clusters[0].end(), uint8_t(1)));
+    const bool any = std::any_of(clusters.begin(), clusters.end(), [](const auto& c) {
+        return std::find(c.begin(), c.end(), uint8_t(1)) != c.end();
+    });
+    if (!any) {  // every point of the prop is covered: nothing to add, no block to hold
+        fill_ = false;
+        fill_cluster_count_ = 0;
+        fill_clusters_.clear();
+        fill_groups_.clear();
+        return {};
+    }
+    const std::vector<uint8_t> bytes = fill_block(blend);
+    HS_ASSIGN_OR_RETURN(gpu::Buffer block,
+                        gpu::Buffer::create(device_, bytes.size(), gpu::BufferUsage::kStorage,
+                                            "fill.block", device_counter()));
+    block.write(bytes.data(), bytes.size());
+    for (auto& [key, v] : variants_) v.pipeline.bind_storage(device_, block);
+    fill_block_ = std::move(block);
+    fill_clusters_ = std::move(clusters);
+    fill_groups_ = std::move(groups);
+    fill_cluster_count_ = count;
+    fill_ = true;
+    return {};
 }
 
 bool Renderer::has_vd_term(const scene::Specular& spec) const {

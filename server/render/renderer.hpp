@@ -22,6 +22,7 @@
 #include "gpu/device.hpp"
 #include "gpu/pipeline.hpp"
 #include "gpu/shared_layout.hpp"
+#include "render/blend.hpp"
 #include "render/clusters.hpp"
 #include "scene/scene.hpp"
 
@@ -141,6 +142,9 @@ public:
         std::string skipped_because;  // when rect is empty
         uint32_t level = 0;
         uint32_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0;
+        // Of the drawn clusters, those drawn with the headsets' fill-in (set_fill): uncovered
+        // surface that may face the eye. 0: the layer is what it is without the fill-in.
+        uint32_t clusters_filled = 0;
         uint64_t triangles = 0;  // drawn, lit and occluding
         uint32_t lights_skipped = 0;
     };
@@ -176,6 +180,16 @@ public:
     Result<RenderResult> render_capture_geometry(const scene::Intrinsics& k,
                                                  const scene::Pose& camera,
                                                  std::optional<double> sheen_exponent);
+
+    // The headsets' fill-in (render/fill.hpp): from now on, served VD layers (record_layers)
+    // carry the VI term wherever no projector of `blend` reaches the surface they show. The
+    // blend's shadow maps go to the device; its clusters that hold uncovered surface are found
+    // here. A blend that covers all of the prop turns the fill-in off (nothing to add). Thread:
+    // the renderer's, while no submission of it is in flight.
+    Result<void> set_fill(const Blend& blend);
+    // Whether served layers draw the fill-in, and over how many clusters of the finest level.
+    bool fill() const { return fill_; }
+    uint32_t fill_clusters() const { return fill_ ? fill_cluster_count_ : 0; }
 
     // What warm_up() prepared.
     struct WarmUpReport {
@@ -227,11 +241,13 @@ private:
     // encoding: 0 linear radiance in info_.format, else 1 + LayerEncoding. lights: the VD
     // lights compiled in (bit i: lit_[i]); all ones: every light, chosen per draw by the push
     // constants' light_mask.
+    // fill: a VD pass with the headsets' fill-in (HS_SC_FILL).
     Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0,
-                             uint64_t lights = ~uint64_t(0));
+                             uint64_t lights = ~uint64_t(0), bool fill = false);
     // The VD pipeline for a draw that needs `lights`: one compiled for exactly those lights, or
     // past info_.max_light_variants of them the generic one.
-    Result<Variant*> vd_variant(const scene::Specular& spec, int encoding, uint64_t lights);
+    Result<Variant*> vd_variant(const scene::Specular& spec, int encoding, uint64_t lights,
+                                bool fill = false);
     Result<Variant*> variant(bool vd, const scene::Specular& spec) {
         return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
     }
@@ -272,6 +288,7 @@ private:
     struct LayerWork {
         std::vector<PixelRect> rects;
         std::vector<uint64_t> masks;
+        std::vector<uint8_t> fills;  // per cluster: drawn with the fill-in
         std::vector<uint32_t> order;
         LayerPlan plan;
         std::string error;  // the request is invalid: record_layers returns this
@@ -280,6 +297,7 @@ private:
         struct Group {
             uint64_t mask;
             uint32_t first, count;
+            bool fill;
         };
         std::vector<Group> groups;
     };
@@ -298,6 +316,12 @@ private:
     std::unique_ptr<WorkerPool> planners_;    // null: plan on the caller
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
+    // The fill-in (set_fill): the block every pipeline binds (count 0 until set), and per level
+    // per cluster (and per group) whether it holds uncovered surface.
+    gpu::Buffer fill_block_;
+    bool fill_ = false;
+    uint32_t fill_cluster_count_ = 0;
+    std::vector<std::vector<uint8_t>> fill_clusters_, fill_groups_;
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
     // Device memory is charged here (info_.ledger's, or null).

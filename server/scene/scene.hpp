@@ -152,6 +152,10 @@ struct Viewing {
 
 struct Effects {
     bool point_light_falloff = true;  // 1/d^2 for point lights; off makes them constant irradiance
+    // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): surface a viewer sees but no projector
+    // reaches gets its VI part in the viewer's VD layer. Costs nothing where every visible
+    // point is covered.
+    bool headset_fill = true;
 };
 
 // Device levels as a user-perspective camera measures them (paper Sec. 4.4): mean camera value

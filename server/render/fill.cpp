@@ -1,0 +1,99 @@
+#include "render/fill.hpp"
+
+#include <algorithm>
+#include <cstring>
+
+#include <glm/geometric.hpp>
+
+#include "core/check.hpp"
+#include "core/parallel.hpp"
+#include "gpu/shared_layout.hpp"
+#include "scene/camera.hpp"
+
+namespace hs::render {
+
+static_assert(HS_MAX_FILL_PROJECTORS == scene::kMaxProjectors,
+              "the fill block holds every projector a scene may have");
+
+std::vector<uint8_t> uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
+                                        const scene::Prop& prop) {
+    const scene::Mesh& mesh = level.mesh;
+    const bool dome = level.shell.sphere_radius > 0;
+    const glm::dvec3 centre = prop.hemisphere.centre;
+    const double radius = level.shell.sphere_radius;
+    // Where the pass shades a sample: the point itself and its interpolated normal, or on a
+    // shell level the dome's point along the ray from the centre (the base's rim at most).
+    auto uncovered = [&](glm::dvec3 p, glm::dvec3 n) {
+        if (dome) {
+            glm::dvec3 d = p - centre;
+            d.y = std::max(d.y, 0.0);
+            const double len = glm::length(d);
+            if (!(len > 0))
+                return false;
+            n = d / len;
+            p = centre + radius * n;
+        } else {
+            const double len = glm::length(n);
+            if (!(len > 1e-12))
+                return false;
+            n /= len;
+        }
+        return projectors_reaching(blend, p, n) == 0;
+    };
+    std::vector<uint8_t> out(level.clusters.size(), 0);
+    constexpr uint32_t kChunk = 64;
+    const auto chunks = uint32_t((level.clusters.size() + kChunk - 1) / kChunk);
+    parallel_rows(chunks, [&](uint32_t chunk) {
+        const size_t end = std::min(level.clusters.size(), size_t(chunk + 1) * kChunk);
+        for (size_t c = size_t(chunk) * kChunk; c < end; ++c) {
+            const Cluster& cl = level.clusters[c];
+            for (uint32_t t = cl.first_index; t + 2 < cl.first_index + cl.index_count && !out[c];
+                 t += 3) {
+                glm::dvec3 p[3], n[3];
+                for (int i = 0; i < 3; ++i) {
+                    const uint32_t v = mesh.indices[t + i];
+                    p[i] = glm::dvec3(mesh.positions[v]);
+                    n[i] = glm::dvec3(mesh.normals[v]);
+                }
+                const glm::dvec3 pc = (p[0] + p[1] + p[2]) / 3.0, nc = n[0] + n[1] + n[2];
+                bool any = uncovered(pc, nc);
+                for (int i = 0; i < 3 && !any; ++i) {
+                    const int j = (i + 1) % 3;
+                    any = uncovered(p[i], n[i]) || uncovered(0.5 * (p[i] + p[j]), n[i] + n[j]);
+                }
+                out[c] = any;
+            }
+        }
+    });
+    return out;
+}
+
+std::vector<uint8_t> fill_block(const Blend& blend) {
+    HS_CHECK(blend.views.size() <= HS_MAX_FILL_PROJECTORS, "fill_block: too many projectors");
+    gpu::GpuFillHeader header{};
+    header.count.x = uint32_t(blend.views.size());
+    uint64_t floats = 0;
+    for (size_t j = 0; j < blend.views.size(); ++j) {
+        const SurfaceView& v = blend.views[j];
+        const auto& k = v.intrinsics;
+        auto& g = header.projectors[j];
+        g.frame_from_world = glm::mat4(v.frame_from_world ? *v.frame_from_world
+                                                          : scene::frame_from_world(v.pose));
+        g.k = glm::vec4(float(k.fx), float(k.fy), float(k.cx), float(k.cy));
+        g.position = glm::vec4(glm::vec3(v.pose.position), float(blend.options.shadow_bias_px));
+        HS_CHECK(floats + v.depth.size() < (uint64_t(1) << 32), "fill_block: shadow maps too large");
+        g.size = glm::uvec4(k.width, k.height, uint32_t(floats), 0);
+        floats += v.depth.size();
+    }
+    // At least one float after the header: the block's runtime array is never empty.
+    std::vector<uint8_t> bytes(sizeof(header) + std::max<uint64_t>(floats, 1) * sizeof(float), 0);
+    std::memcpy(bytes.data(), &header, sizeof(header));
+    size_t at = sizeof(header);
+    for (const SurfaceView& v : blend.views) {
+        std::memcpy(bytes.data() + at, v.depth.data(), v.depth.size() * sizeof(float));
+        at += v.depth.size() * sizeof(float);
+    }
+    return bytes;
+}
+
+}  // namespace hs::render

@@ -1,0 +1,30 @@
+// The headsets' fill-in (docs/OPTICS.md, "Fill-in"): surface a viewer sees but no projector
+// reaches gets its VI part in that viewer's VD layer. The coverage test is the blend's own
+// (V_j of render/blend.hpp, from the same shadow maps), evaluated per pixel on the GPU; the
+// clusters that hold uncovered surface are found once per scene version here, so that a layer
+// draws the fill-in only over them, and a view where every visible point is covered draws
+// nothing more than without it.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "render/blend.hpp"
+#include "render/clusters.hpp"
+#include "scene/scene.hpp"
+
+namespace hs::render {
+
+// Per cluster of `level`, 1 where some of its surface may be reached by no projector: any of
+// its triangles' vertices, edge midpoints or centroid (on the hemisphere's shell levels, moved
+// onto the dome the shader shades, with the dome's normal there) that no projector reaches.
+// Clusters are a few triangles (kTrianglesPerCluster), so a shadow's edge cannot pass through
+// one far from every sample; a sliver narrower than a triangle's half may be missed.
+std::vector<uint8_t> uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
+                                        const scene::Prop& prop);
+
+// The fill block's bytes (shaders/shared.h, GpuFillHeader then the depth maps): each
+// projector's pinhole and shadow map from `blend`. Empty blend: count 0.
+std::vector<uint8_t> fill_block(const Blend& blend);
+
+}  // namespace hs::render

@@ -1,0 +1,184 @@
+// The headsets' fill-in (render/fill.hpp): where no projector reaches the surface a viewer sees,
+// the served VD layer carries the VI term too; where every visible point is covered it changes
+// nothing and draws nothing more.
+#include <cmath>
+#include <cstring>
+
+#include "core/srgb.hpp"
+#include "gpu_fixture.hpp"
+#include "render/blend.hpp"
+#include "render/fill.hpp"
+#include "render/simulation.hpp"
+
+using namespace hs;
+
+namespace {
+
+class Fill : public test::GpuTest {
+protected:
+    void SetUp() override {
+        GpuTest::SetUp();
+        scene_ = scene::default_scene();
+        auto& k = scene_.projector.intrinsics;
+        k = {k.width / 4, k.height / 4, k.fx / 4, k.fy / 4, (k.width / 4 - 1) * 0.5,
+             (k.height / 4 - 1) * 0.5};
+    }
+    // The eye at the scene's viewing distance and height M, `angle` degrees about the prop.
+    scene::Pose eye_at(double angle) const {
+        auto vp = render::viewing_viewpoint(scene_, scene_.viewers.front(), angle, "M");
+        EXPECT_TRUE(vp.ok());
+        return vp.ok() ? vp->camera : scene::Pose{};
+    }
+    struct Layer {
+        std::vector<uint8_t> codes;  // RGBA8, black outside the plan's rectangle
+        render::Renderer::LayerPlan plan;
+    };
+    Layer layer(render::Renderer& r, const scene::Intrinsics& k, const scene::Pose& eye) {
+        auto t = gpu::RenderTarget::create(test::device(), k.width, k.height,
+                                           gpu::ColorFormat::kRgba8Unorm, "fill.t", r.uses_depth())
+                     .value();
+        render::Renderer::LayerRequest req{scene_.material.specular, k, eye,
+                                           render::LayerEncoding::kSrgb8, &t, true};
+        auto plans = r.render_layers(std::span(&req, 1));
+        EXPECT_TRUE(plans.ok()) << (plans.ok() ? "" : plans.error().message);
+        Layer out;
+        out.codes.assign(size_t(k.width) * k.height * 4, 0);
+        if (!plans.ok())
+            return out;
+        out.plan = (*plans)[0];
+        const auto& pr = out.plan.rect;
+        for (uint32_t y = pr.y0; y < pr.y1; ++y)
+            std::memcpy(out.codes.data() + (size_t(y) * k.width + pr.x0) * 4,
+                        t.readback_data() + (size_t(y) * k.width + pr.x0) * 4,
+                        size_t(pr.x1 - pr.x0) * 4);
+        return out;
+    }
+    scene::Scene scene_;
+};
+
+}  // namespace
+
+// Behind the prop, where the one projector cannot reach: the layer is VI + VD there (the
+// projector pass's own radiance, within one sRGB8 code), and exactly the layer without the
+// fill-in wherever the projector reaches.
+TEST_F(Fill, UncoveredSurfaceGetsItsViInTheLayer) {
+    auto with = make_renderer(scene_), without = make_renderer(scene_);
+    auto reference = make_renderer(scene_, gpu::ColorFormat::kRgba32Float);
+    ASSERT_TRUE(with && without && reference);
+    const render::Blend blend = render::compute_blend(with->mesh(), scene_.projectors());
+    ASSERT_TRUE(with->set_fill(blend).ok());
+    ASSERT_TRUE(with->fill());
+    EXPECT_GT(with->fill_clusters(), 0u);
+    EXPECT_LT(with->fill_clusters(), with->levels().front().clusters.size());
+
+    const scene::Intrinsics k = small_eye(4);
+    const scene::Pose eye = eye_at(180.0);
+    const Layer a = layer(*with, k, eye), b = layer(*without, k, eye);
+    EXPECT_GT(a.plan.clusters_filled, 0u);
+    EXPECT_EQ(b.plan.clusters_filled, 0u);
+    auto vi = reference->render_eye_diffuse(k, eye);
+    auto vd = reference->render_eye(scene_.material.specular, k, eye);
+    ASSERT_TRUE(vi.ok() && vd.ok());
+    // Per pixel, whether the projector reaches the surface point the eye sees there (the CPU's
+    // view of the prop); pixels whose 3 x 3 neighbourhood disagrees are on the boundary.
+    const render::SurfaceView view = render::rasterise(with->mesh(), k, eye);
+    const uint32_t w = k.width, h = k.height;
+    std::vector<int8_t> reach(size_t(w) * h, -1);
+    for (size_t i = 0; i < reach.size(); ++i)
+        if (view.covered(i))
+            reach[i] = render::projectors_reaching(blend, glm::dvec3(view.position[i]),
+                                                   glm::dvec3(view.normal[i])) > 0;
+    size_t uncovered = 0, covered = 0, off = 0, worst = 0, lit = 0;
+    for (uint32_t y = 1; y + 1 < h; ++y)
+        for (uint32_t x = 1; x + 1 < w; ++x) {
+            const size_t i = size_t(y) * w + x;
+            bool same = reach[i] >= 0;
+            for (int dy = -1; dy <= 1 && same; ++dy)
+                for (int dx = -1; dx <= 1 && same; ++dx)
+                    same = reach[(y + dy) * w + (x + dx)] == reach[i];
+            if (!same)
+                continue;
+            if (reach[i] == 1) {
+                ++covered;
+                off += std::memcmp(&a.codes[i * 4], &b.codes[i * 4], 4) != 0;
+                continue;
+            }
+            ++uncovered;
+            for (int c = 0; c < 3; ++c) {
+                const float lin = vi->image.pixels[i * 4 + c] + vd->image.pixels[i * 4 + c];
+                ASSERT_TRUE(std::isfinite(lin));
+                const int want = int(std::lround(srgb_oetf(lin) * 255.0f));
+                worst = std::max<size_t>(worst, size_t(std::abs(int(a.codes[i * 4 + c]) - want)));
+            }
+            const bool colour = a.codes[i * 4] || a.codes[i * 4 + 1] || a.codes[i * 4 + 2];
+            lit += colour;
+            EXPECT_EQ(a.codes[i * 4 + 3], colour ? 255 : 0) << "alpha marks the lit pixels";
+        }
+    EXPECT_GT(uncovered, 500u) << "the back of the dome is seen and uncovered";
+    EXPECT_GT(lit, uncovered / 4) << "the lights reach some of it";
+    EXPECT_GT(covered, 100u);
+    EXPECT_EQ(off, 0u) << "covered pixels changed by the fill-in";
+    EXPECT_LE(worst, 1u) << "the fill-in is the VI radiance within one sRGB8 code";
+}
+
+// In front, where the projector reaches every point the eye sees, the layer is bit for bit the
+// layer without the fill-in; only clusters on the coverage boundary (their uncovered part
+// facing away) are drawn in addition. At 20 degrees aside the eye sees uncovered surface by
+// the dome's rim, and the fill-in adds it there.
+TEST_F(Fill, WhereEveryVisiblePointIsCoveredTheLayerIsUnchanged) {
+    auto with = make_renderer(scene_), without = make_renderer(scene_);
+    ASSERT_TRUE(with && without);
+    ASSERT_TRUE(with->set_fill(render::compute_blend(with->mesh(), scene_.projectors())).ok());
+    const scene::Intrinsics k = small_eye(4);
+    const Layer a = layer(*with, k, eye_at(0.0)), b = layer(*without, k, eye_at(0.0));
+    EXPECT_LE(a.plan.clusters_filled, b.plan.clusters_lit / 8);
+    EXPECT_EQ(a.plan.clusters_lit, b.plan.clusters_lit + a.plan.clusters_filled);
+    EXPECT_TRUE(a.codes == b.codes);
+    const Layer c = layer(*with, k, eye_at(20.0)), d = layer(*without, k, eye_at(20.0));
+    size_t added = 0, changed = 0;
+    for (size_t i = 0; i < c.codes.size(); i += 4) {
+        added += c.codes[i + 3] != 0 && d.codes[i + 3] == 0;
+        changed += std::memcmp(&c.codes[i], &d.codes[i], 4) != 0;
+    }
+    EXPECT_GT(added, 0u);
+    EXPECT_EQ(changed, added) << "only pixels the layer left black change";
+}
+
+// Three projectors around the dome reach all of it: set_fill finds nothing to add and turns
+// the fill-in off; with no projector at all (a frame that misses the prop), every cluster is
+// uncovered and the whole visible prop carries its VI.
+TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
+    auto loaded =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+    scene::Scene three = loaded.value();
+    for (auto* p : {&three.projector, &three.more_projectors[0], &three.more_projectors[1]}) {
+        auto& k = p->intrinsics;
+        k = {k.width / 8, k.height / 8, k.fx / 8, k.fy / 8, (k.width / 8 - 1) * 0.5,
+             (k.height / 8 - 1) * 0.5};
+    }
+    auto r3 = make_renderer(three);
+    ASSERT_TRUE(r3);
+    const render::Blend b3 = render::compute_blend(r3->mesh(), three.projectors());
+    const auto u3 = render::uncovered_clusters(r3->levels().front(), b3, three.prop);
+    const size_t n3 = size_t(std::count(u3.begin(), u3.end(), uint8_t(1)));
+    ASSERT_TRUE(r3->set_fill(b3).ok());
+    EXPECT_EQ(r3->fill(), n3 > 0);
+    EXPECT_LT(n3, u3.size() / 50) << "three projectors leave at most a rim uncovered";
+
+    // The projector moved 50 m aside, its frame off the prop: nothing is covered.
+    scene::Scene away = scene_;
+    away.projector.pose.position += glm::dvec3(50.0, 0.0, 0.0);
+    auto r = make_renderer(away);
+    ASSERT_TRUE(r);
+    ASSERT_TRUE(r->set_fill(render::compute_blend(r->mesh(), away.projectors())).ok());
+    ASSERT_TRUE(r->fill());
+    EXPECT_EQ(r->fill_clusters(), r->levels().front().clusters.size());
+    const scene::Intrinsics k = small_eye(4);
+    scene_ = away;
+    const Layer a = layer(*r, k, eye_at(0.0));
+    size_t lit = 0;
+    for (size_t i = 0; i < a.codes.size(); i += 4) lit += a.codes[i + 3] != 0;
+    EXPECT_GT(lit, 1000u);
+    EXPECT_EQ(a.plan.clusters_filled, a.plan.clusters_lit);
+}
