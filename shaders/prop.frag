@@ -19,7 +19,7 @@ layout(constant_id = HS_SC_OUTPUT_ENCODING) const int kOutputEncoding = 0;
 layout(constant_id = HS_SC_ANALYTIC_SPHERE) const bool kAnalyticSphere = false;
 layout(constant_id = HS_SC_LIGHTS_LO) const uint kLightsLo = 0xffffffffu;
 layout(constant_id = HS_SC_LIGHTS_HI) const uint kLightsHi = 0xffffffffu;
-layout(constant_id = HS_SC_FILL) const bool kFill = false;
+layout(constant_id = HS_SC_FILL) const int kFillProjectors = 0;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
@@ -152,7 +152,7 @@ vec3 sphere_tangent(vec3 n) {
 // and the farthest of the 2 x 2 shadow-map depths around its projection must not lie in front
 // of it by more than the bias (a nearer surface beside p, at a silhouette, does not hide it).
 bool fill_covered(vec3 p, vec3 n) {
-    for (uint j = 0u; j < fill.count.x; ++j) {
+    for (int j = 0; j < kFillProjectors; ++j) {
         vec3 to = fill.projectors[j].position.xyz - p;
         float d2 = dot(to, to);
         if (!(d2 > 0.0)) continue;
@@ -253,7 +253,7 @@ void main() {
         if (kEmission) sum += scene.emission.rgb;
         // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): no projector lights this point, so
         // the viewer's layer carries its VI part as well.
-        if (kFill && !fill_covered(p, n)) sum += vi_radiance(p, n, uv);
+        if (kFillProjectors > 0 && !fill_covered(p, n)) sum += vi_radiance(p, n, uv);
     }
     out_radiance = encode_output(sum);
 }

@@ -56,8 +56,10 @@ using uvec4 = glm::uvec4;
     15  // int: the lobe exponent when it is a whole number in 1..4095 (x^e by squaring, exact
         // to a few ulp and without pow's exp2/log2); 0: pow with the scene block's exponent
 #define HS_SC_FILL \
-    16  // bool: VD pass, the headsets' fill-in (docs/OPTICS.md, "Fill-in"): where no projector
-        // reaches the shaded point (the fill block's shadow maps), the VI term is added too
+    16  // int: VD pass, the headsets' fill-in (docs/OPTICS.md, "Fill-in") over this many
+        // projectors of the fill block (0: off): where none reaches the shaded point, the VI
+        // term is added too. A constant count lets the loop unroll, so that the projectors'
+        // parameters are read at constant offsets (one load for all lanes, not one per lane)
 
 struct GpuLight {
     vec4 position_or_direction;  // xyz: point position or rect centre (m, world), or unit

@@ -1,8 +1,10 @@
 // `hysar render`: the projector frame, one VD image per model, angle, height and eye, a
 // Fig. 7-style contact sheet, and render.json (the first entry of the accuracy/cost table).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -16,6 +18,7 @@
 #include "cli/flags.hpp"
 #include "core/image.hpp"
 #include "core/log.hpp"
+#include "core/srgb.hpp"
 #include "optics/colour.hpp"
 #include "options/options.hpp"
 #include "plot/draw.hpp"
@@ -551,6 +554,80 @@ ImageRgba32f delivered_image(const ImageRgba32f& vi, const render::ViewBlend& v,
     return out;
 }
 
+double median_of(std::vector<double> v) {
+    if (v.empty())
+        return 0.0;
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+}
+
+// One served VD layer (the wire's sRGB8 codes, black outside its rectangle) and its time.
+struct ServedLayer {
+    std::vector<uint8_t> codes;
+    render::Renderer::LayerPlan plan;
+    double ms = 0;  // median of the timed renders
+};
+Result<ServedLayer> served_layer(gpu::Device& device, render::Renderer& r,
+                                 const scene::Specular& spec, const scene::Intrinsics& k,
+                                 const scene::Pose& eye, int repeats) {
+    HS_ASSIGN_OR_RETURN(
+        auto t, gpu::RenderTarget::create(device, k.width, k.height, gpu::ColorFormat::kRgba8Unorm,
+                                          "around.layer", r.uses_depth()));
+    const render::Renderer::LayerRequest req{spec, k, eye, render::LayerEncoding::kSrgb8, &t, true};
+    ServedLayer out;
+    std::vector<double> ms;
+    for (int i = 0; i < std::max(1, repeats) + 1; ++i) {  // the first compiles its pipelines
+        const auto t0 = std::chrono::steady_clock::now();
+        HS_ASSIGN_OR_RETURN(auto plans, r.render_layers(std::span(&req, 1)));
+        if (i > 0)
+            ms.push_back(
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                    .count());
+        out.plan = plans[0];
+    }
+    std::sort(ms.begin(), ms.end());
+    out.ms = ms[ms.size() / 2];
+    out.codes.assign(size_t(k.width) * k.height * 4, 0);
+    const auto& pr = out.plan.rect;
+    for (uint32_t y = pr.y0; y < pr.y1; ++y)
+        std::memcpy(out.codes.data() + (size_t(y) * k.width + pr.x0) * 4,
+                    t.readback_data() + (size_t(y) * k.width + pr.x0) * 4,
+                    size_t(pr.x1 - pr.x0) * 4);
+    return out;
+}
+
+// The headsets' fill-in at one viewpoint (render/fill.hpp): over the prop pixels no projector
+// reaches (share 0, at least kInteriorPx from the outline), the fill layer's colour against the
+// target appearance VI + VD (CIEDE2000, both scaled by the white), and what it adds.
+struct FillStats {
+    uint64_t uncovered = 0;  // interior prop pixels no projector reaches
+    uint64_t filled = 0;     // of which the fill layer lights
+    double mean_de00 = 0, max_de00 = 0;
+};
+FillStats fill_stats(const render::ViewBlend& v, const std::vector<float>& interior_dist,
+                     const ImageRgba32f& vi, const ImageRgba32f& vd,
+                     const std::vector<uint8_t>& fill_codes, float white) {
+    FillStats st;
+    double sum = 0;
+    for (size_t i = 0; i < v.share.size(); ++i) {
+        if (v.share[i] != 0.0f || interior_dist[i] < render::kInteriorPx)
+            continue;
+        ++st.uncovered;
+        glm::dvec3 want, got;
+        for (int c = 0; c < 3; ++c) {
+            want[c] = (double(vi.pixels[i * 4 + c]) + double(vd.pixels[i * 4 + c])) / white;
+            got[c] = srgb_eotf(fill_codes[i * 4 + c] / 255.0) / white;
+        }
+        st.filled += fill_codes[i * 4 + 3] != 0;
+        const double de = optics::delta_e_2000(optics::lab_from_linear_srgb(got),
+                                               optics::lab_from_linear_srgb(want));
+        sum += de;
+        st.max_de00 = std::max(st.max_de00, de);
+    }
+    st.mean_de00 = st.uncovered ? sum / double(st.uncovered) : 0.0;
+    return st;
+}
+
 Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o) {
     const uint32_t div = o.around_div;
     scene::Scene s = p.s;
@@ -573,19 +650,37 @@ Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o)
                            render::compute_blend(renderer->mesh(), all)});
     const double blend_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    // The headsets' fill-in: per configuration, a renderer whose served layers carry it; the
+    // layers without it come from `renderer`.
+    std::vector<std::unique_ptr<render::Renderer>> filled;
+    std::vector<double> fill_setup_ms;
+    for (const Config& c : configs) {
+        HS_ASSIGN_OR_RETURN(auto fr, render::Renderer::create(device, s, ri));
+        const auto f0 = std::chrono::steady_clock::now();
+        HS_TRY(fr->set_fill(c.blend));
+        fill_setup_ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - f0)
+                .count());
+        filled.push_back(std::move(fr));
+    }
+    const scene::Specular& spec = s.material.specular;
+    constexpr int kLayerRepeats = 5;
     const scene::Intrinsics k = scaled(scene::eye_intrinsics(*p.viewer), div);
     const uint32_t n = o.around;
     // The sheet: a column per angle, a row per configuration and height.
     const int label_w = 200, header_h = 28, gap = 4;
     const uint32_t factor = std::max<uint32_t>(1, (k.width + 239) / 240);
     const int cw = int(k.width / factor), ch = int(k.height / factor);
-    const size_t rows = configs.size() * p.heights.size();
+    const size_t rows = 2 * configs.size() * p.heights.size();
     ImageRgba8 sheet =
         make_canvas(uint32_t(label_w + n * (cw + gap)), uint32_t(header_h + rows * (ch + gap)), 24);
     json views = json::array();
     json summary = json::object();
     std::vector<double> worst_cov(configs.size(), 1.0), worst_step(configs.size(), 0.0),
-        worst_step_de(configs.size(), 0.0), worst_mean_de(configs.size(), 0.0);
+        worst_step_de(configs.size(), 0.0), worst_mean_de(configs.size(), 0.0),
+        fill_worst_mean_de(configs.size(), 0.0), fill_worst_max_de(configs.size(), 0.0);
+    std::vector<std::vector<double>> fill_ms(configs.size()), plain_ms(configs.size());
+    std::vector<uint64_t> fill_uncovered(configs.size(), 0), fill_lit(configs.size(), 0);
     for (uint32_t a = 0; a < n; ++a) {
         const double angle = 360.0 * a / n;
         draw_text(sheet, label_w + int(a) * (cw + gap) + cw / 2 - 30, 6,
@@ -595,10 +690,23 @@ Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o)
             // viewing_pose takes |angle| <= 360; 0..360 is inside.
             HS_ASSIGN_OR_RETURN(scene::Pose head, scene::viewing_pose(s.viewing, angle, hm));
             HS_ASSIGN_OR_RETURN(auto vi, renderer->render_eye_diffuse(k, head));
-            const render::SurfaceView camera = render::rasterise(renderer->mesh(), k, head);
+            render::SurfaceView camera = render::rasterise(renderer->mesh(), k, head);
+            const std::vector<float> interior = render::outline_distance(camera);
+            HS_ASSIGN_OR_RETURN(auto vd, renderer->render_eye(spec, k, head));
+            HS_ASSIGN_OR_RETURN(ServedLayer plain,
+                                served_layer(device, *renderer, spec, k, head, kLayerRepeats));
             for (size_t c = 0; c < configs.size(); ++c) {
                 const AroundStats st = around_stats(configs[c].blend, camera, vi.image, o.white);
                 const auto& v = st.view;
+                HS_ASSIGN_OR_RETURN(ServedLayer fl,
+                                    served_layer(device, *filled[c], spec, k, head, kLayerRepeats));
+                const FillStats fs = fill_stats(v, interior, vi.image, vd.image, fl.codes, o.white);
+                fill_ms[c].push_back(fl.ms);
+                plain_ms[c].push_back(plain.ms);
+                fill_uncovered[c] += fs.uncovered;
+                fill_lit[c] += fs.filled;
+                fill_worst_mean_de[c] = std::max(fill_worst_mean_de[c], fs.mean_de00);
+                fill_worst_max_de[c] = std::max(fill_worst_max_de[c], fs.max_de00);
                 worst_cov[c] = std::min(worst_cov[c], v.coverage());
                 worst_step[c] = std::max(worst_step[c], v.max_step);
                 worst_step_de[c] = std::max(worst_step_de[c], st.step_de00);
@@ -617,21 +725,51 @@ Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o)
                                  {"max_seam_step_with_outline_pct", 100 * v.max_step_all},
                                  {"max_seam_step_de00", st.step_de00},
                                  {"mean_de00", st.mean_de00},
-                                 {"max_de00", st.max_de00}});
+                                 {"max_de00", st.max_de00},
+                                 {"headset_fill",
+                                  {{"uncovered_interior_pixels", fs.uncovered},
+                                   {"lit_pixels", fs.filled},
+                                   {"mean_de00", fs.mean_de00},
+                                   {"max_de00", fs.max_de00},
+                                   {"clusters_filled", fl.plan.clusters_filled},
+                                   {"rect_pixels", fl.plan.rect.area()},
+                                   {"rect_pixels_without", plain.plan.rect.area()},
+                                   {"layer_ms", fl.ms},
+                                   {"layer_ms_without", plain.ms}}}});
                 log::info(
                     "around {:.0f} deg h={} {}: coverage {:.2f} %, seam step {:.2f} % "
                     "(dE00 {:.2f}), mean dE00 {:.3f}",
                     angle, hname, configs[c].name, 100 * v.coverage(), 100 * v.max_step,
                     st.step_de00, st.mean_de00);
-                const int y = header_h + int(c * p.heights.size() + hi) * (ch + gap);
-                blit(sheet,
-                     downscale(tonemap_srgb8(delivered_image(vi.image, v, o.white), o.white),
-                               factor),
-                     label_w + int(a) * (cw + gap), y);
-                if (a == 0) {
-                    draw_text(sheet, 6, y + ch / 2 - 14, configs[c].name, 2, 230, 230, 230);
-                    draw_text(sheet, 6, y + ch / 2 + 4, fmt::format("h={}", hname), 2, 160, 160,
-                              160);
+                if (fs.uncovered > 0)
+                    log::info(
+                        "around {:.0f} deg h={} {} + headsets: {} uncovered pixels filled, "
+                        "dE00 mean {:.3f} max {:.2f}; layer {:.2f} ms against {:.2f} without",
+                        angle, hname, configs[c].name, fs.uncovered, fs.mean_de00, fs.max_de00,
+                        fl.ms, plain.ms);
+                // Two rows per configuration: the projectors alone (uncovered surface in dim
+                // red), then with the headsets' fill-in added where they reach nothing.
+                ImageRgba32f with_fill = delivered_image(vi.image, v, o.white);
+                for (size_t i = 0; i < v.share.size(); ++i)
+                    if (v.share[i] == 0.0f)
+                        for (int ch3 = 0; ch3 < 3; ++ch3)
+                            with_fill.pixels[i * 4 + ch3] =
+                                float(srgb_eotf(fl.codes[i * 4 + ch3] / 255.0));
+                for (int row = 0; row < 2; ++row) {
+                    const int y =
+                        header_h + int((2 * c + size_t(row)) * p.heights.size() + hi) * (ch + gap);
+                    blit(sheet,
+                         downscale(tonemap_srgb8(
+                                       row == 0 ? delivered_image(vi.image, v, o.white) : with_fill,
+                                       o.white),
+                                   factor),
+                         label_w + int(a) * (cw + gap), y);
+                    if (a == 0) {
+                        draw_text(sheet, 6, y + ch / 2 - 14,
+                                  row == 0 ? configs[c].name : "+ headsets", 2, 230, 230, 230);
+                        draw_text(sheet, 6, y + ch / 2 + 4, fmt::format("h={}", hname), 2, 160, 160,
+                                  160);
+                    }
                 }
             }
         }
@@ -641,7 +779,16 @@ Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o)
         summary[configs[c].name] = {{"min_coverage", worst_cov[c]},
                                     {"max_seam_step_pct", 100 * worst_step[c]},
                                     {"max_seam_step_de00", worst_step_de[c]},
-                                    {"max_mean_de00", worst_mean_de[c]}};
+                                    {"max_mean_de00", worst_mean_de[c]},
+                                    {"headset_fill",
+                                     {{"uncovered_interior_pixels", fill_uncovered[c]},
+                                      {"lit_pixels", fill_lit[c]},
+                                      {"max_mean_de00", fill_worst_mean_de[c]},
+                                      {"max_de00", fill_worst_max_de[c]},
+                                      {"uncovered_clusters", filled[c]->fill_clusters()},
+                                      {"setup_ms", fill_setup_ms[c]},
+                                      {"layer_ms_median", median_of(fill_ms[c])},
+                                      {"layer_ms_median_without", median_of(plain_ms[c])}}}};
     summary["views"] = n;
     summary["eye"] = {{"width", k.width}, {"height", k.height}};
     summary["projector"] = {{"width", all.front().intrinsics.width},

@@ -41,8 +41,8 @@ struct GraphicsPipelineInfo {
 
 // Vertex input is fixed: binding 0 positions (vec3), 1 normals (vec3), 2 tangents (vec3),
 // 3 UVs (vec2). Descriptor set 0: a uniform buffer at binding 0, a combined image sampler
-// at binding 1 and a storage buffer at binding 2 (fragment stage). Depth test as GraphicsPipelineInfo::depth says, back faces
-// culled (counter-clockwise is front).
+// at binding 1 and a storage buffer at binding 2 (fragment stage). Depth test as
+// GraphicsPipelineInfo::depth says, back faces culled (counter-clockwise is front).
 class GraphicsPipeline {
 public:
     static Result<GraphicsPipeline> create(Device& device, const GraphicsPipelineInfo& info);

@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 
 #include "core/check.hpp"
 #include "core/parallel.hpp"
@@ -15,53 +16,80 @@ namespace hs::render {
 static_assert(HS_MAX_FILL_PROJECTORS == scene::kMaxProjectors,
               "the fill block holds every projector a scene may have");
 
-std::vector<uint8_t> uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
-                                        const scene::Prop& prop) {
+UncoveredClusters uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
+                                     const scene::Prop& prop) {
     const scene::Mesh& mesh = level.mesh;
     const bool dome = level.shell.sphere_radius > 0;
     const glm::dvec3 centre = prop.hemisphere.centre;
     const double radius = level.shell.sphere_radius;
     // Where the pass shades a sample: the point itself and its interpolated normal, or on a
     // shell level the dome's point along the ray from the centre (the base's rim at most).
+    // Returns the unit normal where no projector reaches it, else a zero vector.
     auto uncovered = [&](glm::dvec3 p, glm::dvec3 n) {
         if (dome) {
             glm::dvec3 d = p - centre;
             d.y = std::max(d.y, 0.0);
             const double len = glm::length(d);
             if (!(len > 0))
-                return false;
+                return glm::dvec3(0.0);
             n = d / len;
             p = centre + radius * n;
         } else {
             const double len = glm::length(n);
             if (!(len > 1e-12))
-                return false;
+                return glm::dvec3(0.0);
             n /= len;
         }
-        return projectors_reaching(blend, p, n) == 0;
+        return projectors_reaching(blend, p, n) == 0 ? n : glm::dvec3(0.0);
     };
-    std::vector<uint8_t> out(level.clusters.size(), 0);
+    UncoveredClusters out;
+    out.any.assign(level.clusters.size(), 0);
+    out.bounds = level.clusters;
     constexpr uint32_t kChunk = 64;
     const auto chunks = uint32_t((level.clusters.size() + kChunk - 1) / kChunk);
     parallel_rows(chunks, [&](uint32_t chunk) {
         const size_t end = std::min(level.clusters.size(), size_t(chunk + 1) * kChunk);
+        std::vector<glm::dvec3> normals;
         for (size_t c = size_t(chunk) * kChunk; c < end; ++c) {
             const Cluster& cl = level.clusters[c];
-            for (uint32_t t = cl.first_index; t + 2 < cl.first_index + cl.index_count && !out[c];
-                 t += 3) {
+            normals.clear();
+            const auto sample = [&](const glm::dvec3& p, const glm::dvec3& n) {
+                const glm::dvec3 u = uncovered(p, n);
+                if (u != glm::dvec3(0.0))
+                    normals.push_back(u);
+            };
+            for (uint32_t t = cl.first_index; t + 2 < cl.first_index + cl.index_count; t += 3) {
                 glm::dvec3 p[3], n[3];
                 for (int i = 0; i < 3; ++i) {
                     const uint32_t v = mesh.indices[t + i];
                     p[i] = glm::dvec3(mesh.positions[v]);
                     n[i] = glm::dvec3(mesh.normals[v]);
                 }
-                const glm::dvec3 pc = (p[0] + p[1] + p[2]) / 3.0, nc = n[0] + n[1] + n[2];
-                bool any = uncovered(pc, nc);
-                for (int i = 0; i < 3 && !any; ++i) {
+                sample((p[0] + p[1] + p[2]) / 3.0, n[0] + n[1] + n[2]);
+                for (int i = 0; i < 3; ++i) {
                     const int j = (i + 1) % 3;
-                    any = uncovered(p[i], n[i]) || uncovered(0.5 * (p[i] + p[j]), n[i] + n[j]);
+                    sample(p[i], n[i]);
+                    sample(0.5 * (p[i] + p[j]), n[i] + n[j]);
                 }
-                out[c] = any;
+            }
+            if (normals.empty())
+                continue;
+            out.any[c] = 1;
+            glm::dvec3 axis(0.0);
+            for (const auto& n : normals) axis += n;
+            const double len = glm::length(axis);
+            Cluster& b = out.bounds[c];
+            if (!(len > 1e-9) || cl.cone_angle >= 0.25 * glm::pi<double>()) {
+                continue;  // no tighter cone than the cluster's own
+            }
+            axis /= len;
+            double spread = 0;
+            for (const auto& n : normals)
+                spread = std::max(spread, std::acos(std::clamp(glm::dot(axis, n), -1.0, 1.0)));
+            const double angle = spread + 2.0 * cl.cone_angle + 1e-6;
+            if (angle < b.cone_angle) {
+                b.cone_axis = axis;
+                b.cone_angle = angle;
             }
         }
     });
@@ -77,11 +105,12 @@ std::vector<uint8_t> fill_block(const Blend& blend) {
         const SurfaceView& v = blend.views[j];
         const auto& k = v.intrinsics;
         auto& g = header.projectors[j];
-        g.frame_from_world = glm::mat4(v.frame_from_world ? *v.frame_from_world
-                                                          : scene::frame_from_world(v.pose));
+        g.frame_from_world =
+            glm::mat4(v.frame_from_world ? *v.frame_from_world : scene::frame_from_world(v.pose));
         g.k = glm::vec4(float(k.fx), float(k.fy), float(k.cx), float(k.cy));
         g.position = glm::vec4(glm::vec3(v.pose.position), float(blend.options.shadow_bias_px));
-        HS_CHECK(floats + v.depth.size() < (uint64_t(1) << 32), "fill_block: shadow maps too large");
+        HS_CHECK(floats + v.depth.size() < (uint64_t(1) << 32),
+                 "fill_block: shadow maps too large");
         g.size = glm::uvec4(k.width, k.height, uint32_t(floats), 0);
         floats += v.depth.size();
     }

@@ -15,13 +15,20 @@
 
 namespace hs::render {
 
-// Per cluster of `level`, 1 where some of its surface may be reached by no projector: any of
+// Per cluster of `level`, whether some of its surface may be reached by no projector: any of
 // its triangles' vertices, edge midpoints or centroid (on the hemisphere's shell levels, moved
 // onto the dome the shader shades, with the dome's normal there) that no projector reaches.
 // Clusters are a few triangles (kTrianglesPerCluster), so a shadow's edge cannot pass through
 // one far from every sample; a sliver narrower than a triangle's half may be missed.
-std::vector<uint8_t> uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
-                                        const scene::Prop& prop);
+struct UncoveredClusters {
+    std::vector<uint8_t> any;
+    // Per cluster with `any`: the cluster's bounds with the normal cone of its uncovered
+    // samples, widened by twice the cluster's own cone (a normal between samples), so that a
+    // view that sees only its covered side does not draw it.
+    std::vector<Cluster> bounds;
+};
+UncoveredClusters uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
+                                     const scene::Prop& prop);
 
 // The fill block's bytes (shaders/shared.h, GpuFillHeader then the depth maps): each
 // projector's pinhole and shadow map from `blend`. Empty blend: count 0.

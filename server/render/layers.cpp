@@ -112,7 +112,7 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
             if (rects[c].empty())
                 continue;
             fills[c] = group_fill && (*fill_clusters)[c] &&
-                       cluster_may_face(cl, level.shell, r.eye.position);
+                       cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position);
             if (group_mask != 0)
                 masks[c] = r.sparse ? cluster_light_mask(cl, level.shell, r.eye.position, bound) &
                                           group_mask

@@ -12,9 +12,9 @@
 
 #include "core/check.hpp"
 #include "gpu/shared_layout.hpp"
+#include "render/fill.hpp"
 #include "scene/camera.hpp"
 #include "scene/memory.hpp"
-#include "render/fill.hpp"
 #include "scene/mesh.hpp"
 #include "shaders/prop_frag.h"
 #include "shaders/prop_frag_f32.h"
@@ -153,9 +153,9 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
     // Until set_fill: no projector, nothing covered (only fill pipelines read it).
     const std::vector<uint8_t> empty_fill = fill_block(Blend{});
-    HS_ASSIGN_OR_RETURN(r->fill_block_, gpu::Buffer::create(device, empty_fill.size(),
-                                                            gpu::BufferUsage::kStorage,
-                                                            "fill.block", r->device_counter()));
+    HS_ASSIGN_OR_RETURN(r->fill_block_,
+                        gpu::Buffer::create(device, empty_fill.size(), gpu::BufferUsage::kStorage,
+                                            "fill.block", r->device_counter()));
     r->fill_block_.write(empty_fill.data(), empty_fill.size());
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
@@ -195,10 +195,11 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
     fill = fill && vd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
-    const std::string key = fmt::format(
-        "{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model), sp.colour.r,
-        sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y, sp.tangent_axis.x,
-        sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source), encoding, lights) +
+    const std::string key =
+        fmt::format("{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model),
+                    sp.colour.r, sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
+                    sp.tangent_axis.x, sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source),
+                    encoding, lights) +
         (fill ? "|fill" : "");
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
@@ -233,9 +234,8 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
-        .set_bool(HS_SC_ALBEDO_TEXTURE,
-                  (!vd || fill) && scene_.material.albedo_texture != nullptr)
-        .set_bool(HS_SC_FILL, fill)
+        .set_bool(HS_SC_ALBEDO_TEXTURE, (!vd || fill) && scene_.material.albedo_texture != nullptr)
+        .set_int(HS_SC_FILL, fill ? int(fill_projectors_) : 0)
         .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0)
         .set_int(HS_SC_OUTPUT_ENCODING, encoding)
         .set_bool(HS_SC_ANALYTIC_SPHERE, convex_)
@@ -433,9 +433,12 @@ Result<void> Renderer::set_fill(const Blend& blend) {
                           fmt::format("the fill-in takes at most {} projectors, got {}",
                                       HS_MAX_FILL_PROJECTORS, blend.views.size()));
     std::vector<std::vector<uint8_t>> clusters(levels_.size()), groups(levels_.size());
+    std::vector<std::vector<Cluster>> bounds(levels_.size());
     for (size_t l = 0; l < levels_.size(); ++l) {
         const ClusteredMesh& level = levels_[l];
-        clusters[l] = uncovered_clusters(level, blend, scene_.prop);
+        UncoveredClusters u = uncovered_clusters(level, blend, scene_.prop);
+        clusters[l] = std::move(u.any);
+        bounds[l] = std::move(u.bounds);
         groups[l].assign(level.groups.size(), 0);
         for (size_t c = 0; c < clusters[l].size(); ++c)
             if (clusters[l][c])
@@ -450,6 +453,7 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         fill_cluster_count_ = 0;
         fill_clusters_.clear();
         fill_groups_.clear();
+        fill_bounds_.clear();
         return {};
     }
     const std::vector<uint8_t> bytes = fill_block(blend);
@@ -461,7 +465,9 @@ Result<void> Renderer::set_fill(const Blend& blend) {
     fill_block_ = std::move(block);
     fill_clusters_ = std::move(clusters);
     fill_groups_ = std::move(groups);
+    fill_bounds_ = std::move(bounds);
     fill_cluster_count_ = count;
+    fill_projectors_ = uint32_t(blend.views.size());
     fill_ = true;
     return {};
 }

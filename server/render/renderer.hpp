@@ -321,7 +321,9 @@ private:
     gpu::Buffer fill_block_;
     bool fill_ = false;
     uint32_t fill_cluster_count_ = 0;
+    uint32_t fill_projectors_ = 0;  // compiled into the fill pipelines (HS_SC_FILL)
     std::vector<std::vector<uint8_t>> fill_clusters_, fill_groups_;
+    std::vector<std::vector<Cluster>> fill_bounds_;  // per cluster: its uncovered part's bounds
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
     // Device memory is charged here (info_.ledger's, or null).

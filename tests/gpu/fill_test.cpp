@@ -20,7 +20,11 @@ protected:
         GpuTest::SetUp();
         scene_ = scene::default_scene();
         auto& k = scene_.projector.intrinsics;
-        k = {k.width / 4, k.height / 4, k.fx / 4, k.fy / 4, (k.width / 4 - 1) * 0.5,
+        k = {k.width / 4,
+             k.height / 4,
+             k.fx / 4,
+             k.fy / 4,
+             (k.width / 4 - 1) * 0.5,
              (k.height / 4 - 1) * 0.5};
     }
     // The eye at the scene's viewing distance and height M, `angle` degrees about the prop.
@@ -37,7 +41,7 @@ protected:
         auto t = gpu::RenderTarget::create(test::device(), k.width, k.height,
                                            gpu::ColorFormat::kRgba8Unorm, "fill.t", r.uses_depth())
                      .value();
-        render::Renderer::LayerRequest req{scene_.material.specular, k, eye,
+        render::Renderer::LayerRequest req{scene_.material.specular,      k,  eye,
                                            render::LayerEncoding::kSrgb8, &t, true};
         auto plans = r.render_layers(std::span(&req, 1));
         EXPECT_TRUE(plans.ok()) << (plans.ok() ? "" : plans.error().message);
@@ -154,13 +158,17 @@ TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
     scene::Scene three = loaded.value();
     for (auto* p : {&three.projector, &three.more_projectors[0], &three.more_projectors[1]}) {
         auto& k = p->intrinsics;
-        k = {k.width / 8, k.height / 8, k.fx / 8, k.fy / 8, (k.width / 8 - 1) * 0.5,
+        k = {k.width / 8,
+             k.height / 8,
+             k.fx / 8,
+             k.fy / 8,
+             (k.width / 8 - 1) * 0.5,
              (k.height / 8 - 1) * 0.5};
     }
     auto r3 = make_renderer(three);
     ASSERT_TRUE(r3);
     const render::Blend b3 = render::compute_blend(r3->mesh(), three.projectors());
-    const auto u3 = render::uncovered_clusters(r3->levels().front(), b3, three.prop);
+    const auto u3 = render::uncovered_clusters(r3->levels().front(), b3, three.prop).any;
     const size_t n3 = size_t(std::count(u3.begin(), u3.end(), uint8_t(1)));
     ASSERT_TRUE(r3->set_fill(b3).ok());
     EXPECT_EQ(r3->fill(), n3 > 0);
