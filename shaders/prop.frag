@@ -23,10 +23,9 @@ layout(constant_id = HS_SC_FILL) const int kFillProjectors = 0;
 
 layout(set = 0, binding = HS_BINDING_SCENE, std140) uniform SceneBlock { GpuScene scene; };
 layout(set = 0, binding = HS_BINDING_ALBEDO_TEXTURE) uniform sampler2D albedo_texture;
-layout(std430, set = 0, binding = HS_BINDING_FILL) readonly buffer FillBlock {
-    GpuFillHeader fill;
-    float fill_depth[];
-};
+// An R32F texture, not a storage buffer: lavapipe grew its memory by about 0.6 MB with every
+// draw whose fragment shader read a storage buffer (Mesa 22.3).
+layout(set = 0, binding = HS_BINDING_FILL) uniform sampler2D fill_depth;
 layout(push_constant) uniform Push { GpuPush pc; };
 
 layout(location = 0) in vec3 in_position;
@@ -153,26 +152,26 @@ vec3 sphere_tangent(vec3 n) {
 // of it by more than the bias (a nearer surface beside p, at a silhouette, does not hide it).
 bool fill_covered(vec3 p, vec3 n) {
     for (int j = 0; j < kFillProjectors; ++j) {
-        vec3 to = fill.projectors[j].position.xyz - p;
+        vec3 to = scene.fill_projectors[j].position.xyz - p;
         float d2 = dot(to, to);
         if (!(d2 > 0.0)) continue;
         float cos_t = dot(n, to * inversesqrt(d2));
         if (!(cos_t > 0.0)) continue;
-        vec3 q = (fill.projectors[j].frame_from_world * vec4(p, 1.0)).xyz;
+        vec3 q = (scene.fill_projectors[j].frame_from_world * vec4(p, 1.0)).xyz;
         float z = -q.z;
         if (!(z > 1e-9)) continue;
-        vec4 k = fill.projectors[j].k;
-        uvec4 size = fill.projectors[j].size;
+        vec4 k = scene.fill_projectors[j].k;
+        uvec4 size = scene.fill_projectors[j].size;
         float u = k.x * q.x / z + k.z, v = k.w - k.y * q.y / z;
         float w = float(size.x), h = float(size.y);
         if (!(min(min(u + 0.5, w - 0.5 - u), min(v + 0.5, h - 0.5 - v)) > 0.0)) continue;
-        float bias = fill.projectors[j].position.w * (z / min(k.x, k.y)) / max(cos_t, 0.05) + 5e-4;
+        float bias = scene.fill_projectors[j].position.w * (z / min(k.x, k.y)) / max(cos_t, 0.05) + 5e-4;
         int x0 = int(floor(u)), y0 = int(floor(v));
         float farthest = -1.0;
         for (int y = y0; y <= y0 + 1; ++y)
             for (int x = x0; x <= x0 + 1; ++x)
                 if (x >= 0 && y >= 0 && x < int(size.x) && y < int(size.y)) {
-                    float d = fill_depth[size.z + uint(y) * size.x + uint(x)];
+                    float d = texelFetch(fill_depth, ivec2(size.zw) + ivec2(x, y), 0).r;
                     if (d < 3.0e38) farthest = max(farthest, d);
                 }
         if (farthest >= 0.0 && farthest < z - bias) continue;

@@ -18,7 +18,7 @@ using uvec4 = glm::uvec4;
 #define HS_MAX_LIGHTS 64
 #define HS_BINDING_SCENE 0
 #define HS_BINDING_ALBEDO_TEXTURE 1
-#define HS_BINDING_FILL 2  // the headsets' fill-in: the projectors' shadow maps (GpuFillHeader)
+#define HS_BINDING_FILL 2  // the headsets' fill-in: the projectors' shadow maps (an R32F atlas)
 #define HS_MAX_FILL_PROJECTORS 16  // scene::kMaxProjectors
 #define HS_BINDING_PROBE_IN 0
 #define HS_BINDING_PROBE_OUT 1
@@ -70,6 +70,17 @@ struct GpuLight {
     vec4 edge_v;      // rect: xyz the second edge; the panel emits towards edge_u x edge_v
 };
 
+// One projector as the fill-in's coverage test sees it (render/blend.hpp's V_j): the point must
+// project inside its frame, face it, and not lie behind the surfaces of its shadow map. The
+// shadow maps lie side by side in one R32F texture (HS_BINDING_FILL): per pixel the distance
+// along the projector's axis to the nearest prop surface, +FLT_MAX where none.
+struct GpuFillProjector {
+    mat4 frame_from_world;  // the projector frame (x right, y up, looking along -z)
+    vec4 k;                 // fx, fy, cx, cy in pixels (OpenCV convention)
+    vec4 position;          // xyz: projector centre, metres, world; w: shadow bias in pixels
+    uvec4 size;             // x width, y height; z, w: its shadow map's corner in the atlas
+};
+
 struct GpuScene {
     vec4 albedo_over_pi;  // rgb: rho_d / pi
     vec4 spec_colour;     // rgb: k_s or rho_s
@@ -83,22 +94,8 @@ struct GpuScene {
     vec4 projector_position;          // xyz: projector centre, metres, world
     vec4 sheen_params;                // x: Phong exponent of the prop's sheen
     vec4 prop_sphere;  // xyz: the analytic prop's sphere centre (m, world), w: its radius
-};
-
-// One projector as the fill-in's coverage test sees it (render/blend.hpp's V_j): the point must
-// project inside its frame, face it, and not lie behind the surfaces of its shadow map.
-struct GpuFillProjector {
-    mat4 frame_from_world;  // the projector frame (x right, y up, looking along -z)
-    vec4 k;                 // fx, fy, cx, cy in pixels (OpenCV convention)
-    vec4 position;          // xyz: projector centre, metres, world; w: shadow bias in pixels
-    uvec4 size;             // x width, y height, z: first float of its depth map in `depth`
-};
-// The fill block (std430): the projectors, then their shadow maps one after another (per
-// pixel the distance along the projector's axis to the nearest prop surface, +FLT_MAX where
-// none). `count` 0: nothing is covered.
-struct GpuFillHeader {
-    uvec4 count;  // x: projectors
-    GpuFillProjector projectors[HS_MAX_FILL_PROJECTORS];
+    // The headsets' fill-in (VD pass with HS_SC_FILL projectors): the first HS_SC_FILL.
+    GpuFillProjector fill_projectors[HS_MAX_FILL_PROJECTORS];
 };
 
 struct GpuPush {

@@ -170,7 +170,7 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     HS_ASSIGN_OR_RETURN(auto set, make_set(dev,
                                            {VK_DESCRIPTOR_TYPE_UNIFORM_BUFFER,
                                             VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER,
-                                            VK_DESCRIPTOR_TYPE_STORAGE_BUFFER},
+                                            VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER},
                                            VK_SHADER_STAGE_FRAGMENT_BIT, info.name));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);
@@ -214,13 +214,13 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
 }
 
 void GraphicsPipeline::bind_resources(Device& dev, const Buffer& uniform, const Texture& texture,
-                                      const Buffer& storage) {
+                                      const Texture& second) {
     VkDescriptorBufferInfo bi{uniform.vk(), 0, uniform.size()};
     VkDescriptorImageInfo ii{texture.sampler(), texture.view(),
                              VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
     VkWriteDescriptorSet w[2] = {{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET},
                                  {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET}};
-    bind_storage(dev, storage);
+    bind_second_texture(dev, second);
     w[0].dstSet = set_;
     w[0].dstBinding = 0;
     w[0].descriptorCount = 1;
@@ -234,14 +234,15 @@ void GraphicsPipeline::bind_resources(Device& dev, const Buffer& uniform, const 
     vkUpdateDescriptorSets(dev.vk(), 2, w, 0, nullptr);
 }
 
-void GraphicsPipeline::bind_storage(Device& dev, const Buffer& storage) {
-    VkDescriptorBufferInfo si{storage.vk(), 0, storage.size()};
+void GraphicsPipeline::bind_second_texture(Device& dev, const Texture& texture) {
+    VkDescriptorImageInfo ii{texture.sampler(), texture.view(),
+                             VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
     VkWriteDescriptorSet w{VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
     w.dstSet = set_;
     w.dstBinding = 2;
     w.descriptorCount = 1;
-    w.descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-    w.pBufferInfo = &si;
+    w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+    w.pImageInfo = &ii;
     vkUpdateDescriptorSets(dev.vk(), 1, &w, 0, nullptr);
 }
 

@@ -40,8 +40,8 @@ struct GraphicsPipelineInfo {
 };
 
 // Vertex input is fixed: binding 0 positions (vec3), 1 normals (vec3), 2 tangents (vec3),
-// 3 UVs (vec2). Descriptor set 0: a uniform buffer at binding 0, a combined image sampler
-// at binding 1 and a storage buffer at binding 2 (fragment stage). Depth test as
+// 3 UVs (vec2). Descriptor set 0: a uniform buffer at binding 0 and combined image samplers at
+// bindings 1 and 2 (fragment stage). Depth test as
 // GraphicsPipelineInfo::depth says, back faces culled (counter-clockwise is front).
 class GraphicsPipeline {
 public:
@@ -50,12 +50,12 @@ public:
     GraphicsPipeline(GraphicsPipeline&&) noexcept = default;
     GraphicsPipeline& operator=(GraphicsPipeline&&) noexcept = default;
 
-    // Points binding 0 at `uniform`, binding 1 at `texture` and binding 2 at `storage`. Call
+    // Points binding 0 at `uniform`, binding 1 at `texture` and binding 2 at `second`. Call
     // before recording, not while a submission uses the set.
     void bind_resources(Device& device, const Buffer& uniform, const Texture& texture,
-                        const Buffer& storage);
-    // Points binding 2 at `storage` alone (the same rule).
-    void bind_storage(Device& device, const Buffer& storage);
+                        const Texture& second);
+    // Points binding 2 at `texture` alone (the same rule).
+    void bind_second_texture(Device& device, const Texture& texture);
 
     VkPipeline vk() const { return pipeline_.get(); }
     VkPipelineLayout layout() const { return layout_.get(); }

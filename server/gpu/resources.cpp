@@ -160,21 +160,35 @@ void Buffer::write(const void* data, uint64_t size, uint64_t offset) {
 
 Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::string& name,
                                 MemoryCounter* counter) {
-    if (img.width == 0 || img.height == 0 || img.width > 8192 || img.height > 8192)
+    return upload(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB, img.pixels.data(),
+                  img.pixels.size(), true, name, counter);
+}
+
+Result<Texture> Texture::create_r32f(Device& dev, uint32_t width, uint32_t height,
+                                     const float* values, const std::string& name,
+                                     MemoryCounter* counter) {
+    return upload(dev, width, height, VK_FORMAT_R32_SFLOAT, values,
+                  size_t(width) * height * sizeof(float), false, name, counter);
+}
+
+Result<Texture> Texture::upload(Device& dev, uint32_t width, uint32_t height, VkFormat format,
+                                const void* bytes, size_t size, bool linear,
+                                const std::string& name, MemoryCounter* counter) {
+    if (width == 0 || height == 0 || width > 8192 || height > 8192)
         return make_error(
             ErrorCode::kInvalidArgument,
-            fmt::format("texture '{}': size {}x{} outside 1..8192", name, img.width, img.height));
+            fmt::format("texture '{}': size {}x{} outside 1..8192", name, width, height));
     Texture t;
     HS_ASSIGN_OR_RETURN(auto parts,
-                        make_image(dev, img.width, img.height, VK_FORMAT_R8G8B8A8_SRGB,
+                        make_image(dev, width, height, format,
                                    VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
                                    VK_IMAGE_ASPECT_COLOR_BIT, name, counter));
     t.memory_ = std::move(parts.mem);
     t.image_ = std::move(parts.image);
     t.view_ = std::move(parts.view);
-    HS_ASSIGN_OR_RETURN(auto staging, Buffer::create(dev, img.pixels.size(), BufferUsage::kStaging,
-                                                     name + ".staging", counter));
-    staging.write(img.pixels.data(), img.pixels.size());
+    HS_ASSIGN_OR_RETURN(
+        auto staging, Buffer::create(dev, size, BufferUsage::kStaging, name + ".staging", counter));
+    staging.write(bytes, size);
     VkImage image = t.image_.get();
     HS_TRY(dev.submit_and_wait("upload.texture", [&](VkCommandBuffer cmd) {
         image_barrier(cmd, image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_UNDEFINED,
@@ -182,7 +196,7 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
                       VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);
         VkBufferImageCopy region{};
         region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-        region.imageExtent = {img.width, img.height, 1};
+        region.imageExtent = {width, height, 1};
         vkCmdCopyBufferToImage(cmd, staging.vk(), image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1,
                                &region);
         image_barrier(cmd, image, VK_IMAGE_ASPECT_COLOR_BIT, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL,
@@ -191,10 +205,11 @@ Result<Texture> Texture::create(Device& dev, const ImageRgba8& img, const std::s
                       VK_ACCESS_2_SHADER_SAMPLED_READ_BIT);
     }));
     VkSamplerCreateInfo sci{VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO};
-    sci.magFilter = VK_FILTER_LINEAR;
-    sci.minFilter = VK_FILTER_LINEAR;
+    sci.magFilter = linear ? VK_FILTER_LINEAR : VK_FILTER_NEAREST;
+    sci.minFilter = linear ? VK_FILTER_LINEAR : VK_FILTER_NEAREST;
     sci.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
-    sci.addressModeU = VK_SAMPLER_ADDRESS_MODE_REPEAT;
+    sci.addressModeU =
+        linear ? VK_SAMPLER_ADDRESS_MODE_REPEAT : VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     sci.addressModeV = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     sci.maxLod = 0.0f;

@@ -66,6 +66,11 @@ class Texture {
 public:
     static Result<Texture> create(Device& device, const ImageRgba8& image, const std::string& name,
                                   MemoryCounter* counter = nullptr);
+    // One 32-bit float channel (R32_SFLOAT), `width` x `height` values row by row, read with
+    // texelFetch (nearest, clamped).
+    static Result<Texture> create_r32f(Device& device, uint32_t width, uint32_t height,
+                                       const float* values, const std::string& name,
+                                       MemoryCounter* counter = nullptr);
     Texture() = default;
     Texture(Texture&&) noexcept = default;
     Texture& operator=(Texture&&) noexcept = default;
@@ -74,6 +79,9 @@ public:
     VkSampler sampler() const { return sampler_.get(); }
 
 private:
+    static Result<Texture> upload(Device& device, uint32_t width, uint32_t height, VkFormat format,
+                                  const void* bytes, size_t size, bool linear,
+                                  const std::string& name, MemoryCounter* counter);
     Allocation memory_;
     ImageHandle image_;
     ImageViewHandle view_;

@@ -279,7 +279,10 @@ bool FrameLoop::build_scene(BlendTask& task) {
         const auto b0 = Clock::now();
         std::shared_ptr<const render::Blend> blend;
         try {
-            blend = charged_blend(render::compute_blend(b.renderer->mesh(), sc.projectors()));
+            // One projector: its shadow map alone (what the fill-in reads).
+            blend = charged_blend(
+                several ? render::compute_blend(b.renderer->mesh(), sc.projectors())
+                        : render::compute_visibility(b.renderer->mesh(), sc.projectors()));
         } catch (const std::exception& e) {
             task.error = fmt::format("the projectors' blend of version {} failed: {}", task.version,
                                      e.what());
@@ -360,7 +363,6 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     (void)ring_->wait_idle();
     sink_->drain();
     source_.reset();
-    const bool replaced = renderer_ != nullptr;
     renderer_ = std::move(b.renderer);  // the old version's renderer is destroyed here
     current_ = next;
     source_ = current_.captured_material
@@ -390,8 +392,8 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     built.total_ms = ms_since(b.started);
     update_held_bytes();
     host_.scene_built(std::move(built));
-    if (replaced)
-        return_freed_memory();
+    // The old version, and the build's own transients (the shadow maps, the blend), go back.
+    return_freed_memory();
 }
 
 void FrameLoop::reblend_if_needed() {

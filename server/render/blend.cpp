@@ -134,15 +134,17 @@ std::optional<glm::dvec3> SurfaceView::project(const glm::dvec3& world) const {
     return glm::dvec3(k.fx * q.x / z + k.cx, k.cy - k.fy * q.y / z, z);
 }
 
-SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
-                      const scene::Pose& pose) {
+SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const scene::Pose& pose,
+                      bool with_surface) {
     SurfaceView view;
     view.intrinsics = k;
     view.pose = pose;
     const size_t n = size_t(k.width) * k.height;
     view.depth.assign(n, kFar);
-    view.position.assign(n, glm::vec3(0.0f));
-    view.normal.assign(n, glm::vec3(0.0f));
+    if (with_surface) {
+        view.position.assign(n, glm::vec3(0.0f));
+        view.normal.assign(n, glm::vec3(0.0f));
+    }
     const glm::dmat4 view_m = scene::frame_from_world(pose);
     view.frame_from_world = view_m;
     // Per vertex: pixel position and view depth (nothing behind the camera is drawn).
@@ -211,6 +213,8 @@ SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k,
                     if (z >= view.depth[i])
                         continue;
                     view.depth[i] = float(z);
+                    if (!with_surface)
+                        continue;
                     const double q0 = p0 * z, q1 = p1 * z, q2 = p2 * z;
                     view.position[i] = glm::vec3(q0 * glm::dvec3(mesh.positions[i0]) +
                                                  q1 * glm::dvec3(mesh.positions[i1]) +
@@ -324,6 +328,15 @@ uint64_t blend_bytes(const Blend& blend) {
     for (const ProjectorBlend& p : blend.projectors)
         n += bytes(p.weight) + bytes(p.geometry.pixels);
     return n;
+}
+
+Blend compute_visibility(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
+                         const BlendOptions& options) {
+    Blend blend;
+    blend.options = options;
+    for (const auto& pr : projectors)
+        blend.views.push_back(rasterise(mesh, pr.intrinsics, pr.pose, false));
+    return blend;
 }
 
 Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,

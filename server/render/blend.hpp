@@ -75,7 +75,9 @@ struct SurfaceView {
     // Where a world point lands: pixel (u, v) and its depth; nullopt behind the camera.
     std::optional<glm::dvec3> project(const glm::dvec3& world) const;
 };
-SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const scene::Pose& pose);
+// with_surface false: the depth alone (position and normal stay empty), a shadow map.
+SurfaceView rasterise(const scene::Mesh& mesh, const scene::Intrinsics& k, const scene::Pose& pose,
+                      bool with_surface = true);
 
 // Per pixel, the distance in pixels to the nearest pixel off the prop or on a depth step of
 // more than 2 % (where a part of the prop passes in front of another): 0 there.
@@ -112,6 +114,12 @@ uint64_t blend_bytes(const Blend& blend);
 // The blend of the scene's projectors over `mesh` (the prop as the renderer draws it).
 Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
                     const BlendOptions& options = {});
+
+// The projectors' shadow maps alone (views with depth only, no weights): what the visibility
+// test V_j (projectors_reaching, blend_factor) and the headsets' fill-in need, 4 bytes per
+// projector pixel against the blend's 48.
+Blend compute_visibility(const scene::Mesh& mesh, std::span<const scene::Projector> projectors,
+                         const BlendOptions& options = {});
 
 // Multiplies a projector frame's RGB by its weights (alpha untouched). Sizes must agree.
 void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight);

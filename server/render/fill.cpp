@@ -1,14 +1,17 @@
 #include "render/fill.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <limits>
+
+#include <fmt/format.h>
 
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
 
 #include "core/check.hpp"
 #include "core/parallel.hpp"
-#include "gpu/shared_layout.hpp"
 #include "scene/camera.hpp"
 
 namespace hs::render {
@@ -96,33 +99,44 @@ UncoveredClusters uncovered_clusters(const ClusteredMesh& level, const Blend& bl
     return out;
 }
 
-std::vector<uint8_t> fill_block(const Blend& blend) {
-    HS_CHECK(blend.views.size() <= HS_MAX_FILL_PROJECTORS, "fill_block: too many projectors");
-    gpu::GpuFillHeader header{};
-    header.count.x = uint32_t(blend.views.size());
-    uint64_t floats = 0;
-    for (size_t j = 0; j < blend.views.size(); ++j) {
+Result<FillAtlas> fill_atlas(const Blend& blend) {
+    const size_t n = blend.views.size();
+    if (n == 0 || n > HS_MAX_FILL_PROJECTORS)
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("the fill-in takes 1 to {} projectors, got {}", HS_MAX_FILL_PROJECTORS, n));
+    uint32_t cell_w = 1, cell_h = 1;
+    for (const SurfaceView& v : blend.views) {
+        cell_w = std::max(cell_w, v.intrinsics.width);
+        cell_h = std::max(cell_h, v.intrinsics.height);
+    }
+    const auto cols = uint32_t(std::ceil(std::sqrt(double(n))));
+    const auto rows = uint32_t((n + cols - 1) / cols);
+    FillAtlas a;
+    a.width = cols * cell_w;
+    a.height = rows * cell_h;
+    if (a.width > 8192 || a.height > 8192)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("the fill-in's shadow maps ({} of up to {}x{}) need a {}x{} "
+                                      "atlas; at most 8192x8192",
+                                      n, cell_w, cell_h, a.width, a.height));
+    a.depth.assign(size_t(a.width) * a.height, std::numeric_limits<float>::max());
+    for (size_t j = 0; j < n; ++j) {
         const SurfaceView& v = blend.views[j];
         const auto& k = v.intrinsics;
-        auto& g = header.projectors[j];
+        const uint32_t x0 = uint32_t(j % cols) * cell_w, y0 = uint32_t(j / cols) * cell_h;
+        for (uint32_t y = 0; y < k.height; ++y)
+            std::memcpy(&a.depth[size_t(y0 + y) * a.width + x0], &v.depth[size_t(y) * k.width],
+                        k.width * sizeof(float));
+        gpu::GpuFillProjector g{};
         g.frame_from_world =
             glm::mat4(v.frame_from_world ? *v.frame_from_world : scene::frame_from_world(v.pose));
         g.k = glm::vec4(float(k.fx), float(k.fy), float(k.cx), float(k.cy));
         g.position = glm::vec4(glm::vec3(v.pose.position), float(blend.options.shadow_bias_px));
-        HS_CHECK(floats + v.depth.size() < (uint64_t(1) << 32),
-                 "fill_block: shadow maps too large");
-        g.size = glm::uvec4(k.width, k.height, uint32_t(floats), 0);
-        floats += v.depth.size();
+        g.size = glm::uvec4(k.width, k.height, x0, y0);
+        a.projectors.push_back(g);
     }
-    // At least one float after the header: the block's runtime array is never empty.
-    std::vector<uint8_t> bytes(sizeof(header) + std::max<uint64_t>(floats, 1) * sizeof(float), 0);
-    std::memcpy(bytes.data(), &header, sizeof(header));
-    size_t at = sizeof(header);
-    for (const SurfaceView& v : blend.views) {
-        std::memcpy(bytes.data() + at, v.depth.data(), v.depth.size() * sizeof(float));
-        at += v.depth.size() * sizeof(float);
-    }
-    return bytes;
+    return a;
 }
 
 }  // namespace hs::render

@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/result.hpp"
+#include "gpu/shared_layout.hpp"
 #include "render/blend.hpp"
 #include "render/clusters.hpp"
 #include "scene/scene.hpp"
@@ -30,8 +32,15 @@ struct UncoveredClusters {
 UncoveredClusters uncovered_clusters(const ClusteredMesh& level, const Blend& blend,
                                      const scene::Prop& prop);
 
-// The fill block's bytes (shaders/shared.h, GpuFillHeader then the depth maps): each
-// projector's pinhole and shadow map from `blend`. Empty blend: count 0.
-std::vector<uint8_t> fill_block(const Blend& blend);
+// The projectors of `blend` as the fill pipelines read them: their pinholes (GpuScene's
+// fill_projectors) and their shadow maps side by side in one R32F atlas (a grid of cells of the
+// largest projector's size). At most HS_MAX_FILL_PROJECTORS projectors, an atlas of at most
+// 8192 x 8192 (an error names the sizes otherwise).
+struct FillAtlas {
+    uint32_t width = 0, height = 0;
+    std::vector<float> depth;  // width x height, row by row
+    std::vector<gpu::GpuFillProjector> projectors;
+};
+Result<FillAtlas> fill_atlas(const Blend& blend);
 
 }  // namespace hs::render

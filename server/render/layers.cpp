@@ -221,8 +221,13 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             cl.draw_range(0, w.occ_count);
         }
         for (const auto& g : w.groups) {
-            HS_ASSIGN_OR_RETURN(Variant * lit,
-                                vd_variant(r.spec, 1 + int(r.encoding), g.mask, g.fill));
+            // The fill-in's draws share one pipeline per format (the lights chosen by the push
+            // constants): a pipeline per set of lights would double the compiles, each of
+            // which holds tens of MB of JIT memory on lavapipe, for a few clusters per layer.
+            HS_ASSIGN_OR_RETURN(
+                Variant * lit,
+                g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true)
+                       : vd_variant(r.spec, 1 + int(r.encoding), g.mask));
             gpu::GpuPush gp = push;
             gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
             cl.bind(lit->pipeline);

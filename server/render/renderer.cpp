@@ -151,12 +151,11 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     HS_ASSIGN_OR_RETURN(
         r->albedo_texture_,
         gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
-    // Until set_fill: no projector, nothing covered (only fill pipelines read it).
-    const std::vector<uint8_t> empty_fill = fill_block(Blend{});
-    HS_ASSIGN_OR_RETURN(r->fill_block_,
-                        gpu::Buffer::create(device, empty_fill.size(), gpu::BufferUsage::kStorage,
-                                            "fill.block", r->device_counter()));
-    r->fill_block_.write(empty_fill.data(), empty_fill.size());
+    // Until set_fill: a 1 x 1 atlas (only fill pipelines read it).
+    const float far = 3.4e38f;
+    HS_ASSIGN_OR_RETURN(
+        r->fill_texture_,
+        gpu::Texture::create_r32f(device, 1, 1, &far, "fill.shadow_maps", r->device_counter()));
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
                          : device.is_cpu()          ? 0
@@ -266,7 +265,7 @@ Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Varia
                                             pi.name + ".scene", device_counter()));
     v.scene_block.write(&block, sizeof(block));
     v.counted = MemoryCharge(info_.ledger ? &info_.ledger->pipelines : nullptr, 0);
-    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_, fill_block_);
+    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_, fill_texture_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
     return &it->second;
 }
@@ -304,6 +303,8 @@ gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
     if (scene_.prop.kind == scene::Prop::Kind::kHemisphere)
         block.prop_sphere = glm::vec4(glm::vec3(scene_.prop.hemisphere.centre),
                                       float(scene_.prop.hemisphere.radius));
+    for (size_t j = 0; j < fill_params_.size() && j < HS_MAX_FILL_PROJECTORS; ++j)
+        block.fill_projectors[j] = fill_params_[j];
     return block;
 }
 
@@ -456,13 +457,14 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         fill_bounds_.clear();
         return {};
     }
-    const std::vector<uint8_t> bytes = fill_block(blend);
-    HS_ASSIGN_OR_RETURN(gpu::Buffer block,
-                        gpu::Buffer::create(device_, bytes.size(), gpu::BufferUsage::kStorage,
-                                            "fill.block", device_counter()));
-    block.write(bytes.data(), bytes.size());
-    for (auto& [key, v] : variants_) v.pipeline.bind_storage(device_, block);
-    fill_block_ = std::move(block);
+    HS_ASSIGN_OR_RETURN(FillAtlas atlas, fill_atlas(blend));
+    HS_ASSIGN_OR_RETURN(
+        gpu::Texture texture,
+        gpu::Texture::create_r32f(device_, atlas.width, atlas.height, atlas.depth.data(),
+                                  "fill.shadow_maps", device_counter()));
+    for (auto& [key, v] : variants_) v.pipeline.bind_second_texture(device_, texture);
+    fill_texture_ = std::move(texture);
+    fill_params_ = std::move(atlas.projectors);
     fill_clusters_ = std::move(clusters);
     fill_groups_ = std::move(groups);
     fill_bounds_ = std::move(bounds);

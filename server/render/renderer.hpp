@@ -316,9 +316,10 @@ private:
     std::unique_ptr<WorkerPool> planners_;    // null: plan on the caller
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
-    // The fill-in (set_fill): the block every pipeline binds (count 0 until set), and per level
+    // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level
     // per cluster (and per group) whether it holds uncovered surface.
-    gpu::Buffer fill_block_;
+    gpu::Texture fill_texture_;  // the shadow maps' atlas; 1 x 1 until set_fill
+    std::vector<gpu::GpuFillProjector> fill_params_;  // into every scene block made after
     bool fill_ = false;
     uint32_t fill_cluster_count_ = 0;
     uint32_t fill_projectors_ = 0;  // compiled into the fill pipelines (HS_SC_FILL)

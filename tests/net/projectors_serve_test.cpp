@@ -37,6 +37,7 @@ protected:
             return s;  // the load failed, and said so
         for (scene::Projector* p : {&s.projector, &s.more_projectors[0], &s.more_projectors[1]})
             p->intrinsics = {480, 300, 750, 750, 239.5, 149.5};
+        s.effects.headset_fill = true;  // the scene opts in (off by default)
         return s;
     }
     std::optional<proto::ProjectorFrame> frame_as(const std::string& name) {
@@ -154,6 +155,11 @@ TEST_F(ProjectorsServer, EachProjectorClientGetsItsOwnFrame) {
     EXPECT_EQ(pass["projector_renders"].get<uint64_t>(), 3u) << pass.dump();
     ASSERT_EQ(pass["projectors"].size(), 3u) << pass.dump();
     EXPECT_GT(pass["projectors"][1]["shared_pixels"].get<uint64_t>(), 0u) << pass.dump();
+    // The scene turned the headsets' fill-in on; the three projectors leave at most the rim.
+    const auto& fill = pass["headset_fill"];
+    EXPECT_TRUE(fill["enabled"].get<bool>()) << pass.dump();
+    EXPECT_LT(fill["uncovered_clusters"].get<uint64_t>() * 50, fill["clusters"].get<uint64_t>())
+        << pass.dump();
 }
 
 TEST_F(ProjectorsServer, MissingProjectorsAreReportedAndComeBackServed) {

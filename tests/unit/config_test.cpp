@@ -255,3 +255,14 @@ TEST(Config, PointLightOnOrInsideThePropIsRefused) {
                     j["lights"][1]["position"] = {0.0, 0.8461, 0.0};
                 }).ok());
 }
+
+TEST(Config, HeadsetFillIsOffUnlessTheSceneTurnsItOn) {
+    EXPECT_FALSE(default_scene().effects.headset_fill);
+    auto on = parse_edited([](auto& j) { j["effects"]["headset_fill"] = true; });
+    ASSERT_TRUE(on.ok()) << on.error().message;
+    EXPECT_TRUE(on->effects.headset_fill);
+    auto bad = parse_edited([](auto& j) { j["effects"]["headset_fill"] = "yes"; });
+    ASSERT_FALSE(bad.ok());
+    EXPECT_NE(bad.error().message.find("effects.headset_fill"), std::string::npos)
+        << bad.error().message;
+}
