@@ -587,12 +587,7 @@ Result<ServedLayer> served_layer(gpu::Device& device, render::Renderer& r,
     }
     std::sort(ms.begin(), ms.end());
     out.ms = ms[ms.size() / 2];
-    out.codes.assign(size_t(k.width) * k.height * 4, 0);
-    const auto& pr = out.plan.rect;
-    for (uint32_t y = pr.y0; y < pr.y1; ++y)
-        std::memcpy(out.codes.data() + (size_t(y) * k.width + pr.x0) * 4,
-                    t.readback_data() + (size_t(y) * k.width + pr.x0) * 4,
-                    size_t(pr.x1 - pr.x0) * 4);
+    out.codes = render::Renderer::layer_bytes(t, out.plan);
     return out;
 }
 

@@ -188,6 +188,17 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     plan.triangles = (w.occ_count + lit_count) / 3;
 }
 
+std::vector<uint8_t> Renderer::layer_bytes(const gpu::RenderTarget& t, const LayerPlan& plan) {
+    const size_t px = t.format() == gpu::ColorFormat::kRgba8Unorm ? 4 : 8;
+    const size_t w = t.width();
+    std::vector<uint8_t> out(w * t.height() * px, 0);
+    const PixelRect& r = plan.rect;
+    for (uint32_t y = r.y0; y < r.y1; ++y)
+        std::memcpy(out.data() + (y * w + r.x0) * px, t.readback_data() + (y * w + r.x0) * px,
+                    size_t(r.x1 - r.x0) * px);
+    return out;
+}
+
 Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
     gpu::CommandList& cl, std::span<const LayerRequest> reqs) {
     if (layer_work_.size() < reqs.size())

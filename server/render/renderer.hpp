@@ -148,6 +148,9 @@ public:
         uint64_t triangles = 0;  // drawn, lit and occluding
         uint32_t lights_skipped = 0;
     };
+    // A rendered layer's readback as the wire's pixel bytes over the whole image: the plan's
+    // rectangle from the target, 0 elsewhere (nothing was drawn or read back there).
+    static std::vector<uint8_t> layer_bytes(const gpu::RenderTarget& target, const LayerPlan& plan);
     // Records the layers' passes into `cl` (the caller submits). Plans are in request order.
     // An invalid request is an error for the whole batch, and then nothing is recorded.
     Result<std::vector<LayerPlan>> record_layers(gpu::CommandList& cl,

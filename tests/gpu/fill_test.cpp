@@ -19,13 +19,16 @@ protected:
     void SetUp() override {
         GpuTest::SetUp();
         scene_ = scene::default_scene();
-        auto& k = scene_.projector.intrinsics;
-        k = {k.width / 4,
-             k.height / 4,
-             k.fx / 4,
-             k.fy / 4,
-             (k.width / 4 - 1) * 0.5,
-             (k.height / 4 - 1) * 0.5};
+        shrink(scene_.projector, 4);
+    }
+    static void shrink(scene::Projector& p, uint32_t div) {
+        auto& k = p.intrinsics;
+        k = {k.width / div,
+             k.height / div,
+             k.fx / div,
+             k.fy / div,
+             (k.width / div - 1) * 0.5,
+             (k.height / div - 1) * 0.5};
     }
     // The eye at the scene's viewing distance and height M, `angle` degrees about the prop.
     scene::Pose eye_at(double angle) const {
@@ -50,11 +53,7 @@ protected:
         if (!plans.ok())
             return out;
         out.plan = (*plans)[0];
-        const auto& pr = out.plan.rect;
-        for (uint32_t y = pr.y0; y < pr.y1; ++y)
-            std::memcpy(out.codes.data() + (size_t(y) * k.width + pr.x0) * 4,
-                        t.readback_data() + (size_t(y) * k.width + pr.x0) * 4,
-                        size_t(pr.x1 - pr.x0) * 4);
+        out.codes = render::Renderer::layer_bytes(t, out.plan);
         return out;
     }
     scene::Scene scene_;
@@ -156,15 +155,8 @@ TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
         scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
     ASSERT_TRUE(loaded.ok()) << loaded.error().message;
     scene::Scene three = loaded.value();
-    for (auto* p : {&three.projector, &three.more_projectors[0], &three.more_projectors[1]}) {
-        auto& k = p->intrinsics;
-        k = {k.width / 8,
-             k.height / 8,
-             k.fx / 8,
-             k.fy / 8,
-             (k.width / 8 - 1) * 0.5,
-             (k.height / 8 - 1) * 0.5};
-    }
+    for (auto* p : {&three.projector, &three.more_projectors[0], &three.more_projectors[1]})
+        shrink(*p, 8);
     auto r3 = make_renderer(three);
     ASSERT_TRUE(r3);
     const render::Blend b3 = render::compute_blend(r3->mesh(), three.projectors());
