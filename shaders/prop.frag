@@ -181,7 +181,9 @@ bool fill_covered(vec3 p, vec3 n) {
 }
 
 // Paper eq. (2), VI: sum_i L_d(p, l_i), every light (the projector pass and the fill-in).
-vec3 vi_radiance(vec3 p, vec3 n, vec2 uv) {
+// lod0: the texture read at level 0 explicitly (inside control flow that varies per pixel,
+// where implicit derivatives are undefined; the texture has one level).
+vec3 vi_radiance(vec3 p, vec3 n, vec2 uv, bool lod0) {
     vec3 sum = vec3(0.0);
     for (int i = 0; i < kNumLights; ++i)
         for (int j = 0; j < samples_of(i); ++j) {
@@ -190,7 +192,8 @@ vec3 vi_radiance(vec3 p, vec3 n, vec2 uv) {
             sum += E * max(dot(n, l), 0.0);
         }
     sum *= scene.albedo_over_pi.rgb;
-    if (kAlbedoTexture) sum *= texture(albedo_texture, uv).rgb;  // sRGB decoded by the sampler
+    if (kAlbedoTexture)  // sRGB decoded by the sampler
+        sum *= (lod0 ? textureLod(albedo_texture, uv, 0.0) : texture(albedo_texture, uv)).rgb;
     return sum;
 }
 
@@ -208,7 +211,7 @@ void main() {
     vec3 mesh_tangent = kAnalyticSphere ? sphere_tangent(n) : in_tangent;
     vec3 sum = vec3(0.0);
     if (kPassKind == 0) {
-        sum = vi_radiance(p, n, uv);
+        sum = vi_radiance(p, n, uv, false);
     } else if (kPassKind == 2) {
         // Capture geometry (docs/OPTICS.md): where this camera pixel meets the projector image,
         // and how much of a projector pixel's intensity arrives here per unit area.
@@ -252,7 +255,7 @@ void main() {
         if (kEmission) sum += scene.emission.rgb;
         // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): no projector lights this point, so
         // the viewer's layer carries its VI part as well.
-        if (kFillProjectors > 0 && !fill_covered(p, n)) sum += vi_radiance(p, n, uv);
+        if (kFillProjectors > 0 && !fill_covered(p, n)) sum += vi_radiance(p, n, uv, true);
     }
     out_radiance = encode_output(sum);
 }

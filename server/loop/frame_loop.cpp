@@ -252,11 +252,6 @@ bool FrameLoop::build_scene(BlendTask& task) {
     }
     if (stopping())
         return false;
-    // Before the version is announced (its projector frame), so that its first headset pays
-    // for no pipeline compilation.
-    render::warm_up_for_serving(**r, device_, !sc.captured_material, info_.pipeline_cache_file);
-    if (stopping())
-        return false;
     Build b;
     b.started = t0;
     b.renderer = std::move(r).value();
@@ -273,6 +268,7 @@ bool FrameLoop::build_scene(BlendTask& task) {
     const bool several = b.frames.frames.size() > 1;
     const bool fill = sc.effects.headset_fill && !sc.captured_material;
     double fill_ms = 0;
+    std::string fill_error;
     if (several || fill) {
         if (stopping())
             return false;
@@ -291,15 +287,24 @@ bool FrameLoop::build_scene(BlendTask& task) {
         task.ms = ms_since(b0);
         if (fill) {
             const auto f0 = Clock::now();
+            // A fill-in that cannot be set up (shadow maps too large for one texture) is
+            // served without: the version itself is fine.
             if (auto f = b.renderer->set_fill(*blend); !f) {
-                task.error = "the headsets' fill-in: " + f.error().message;
-                return false;
+                fill_error = f.error().message;
+                log::warn("scene version {}: the headsets' fill-in is off: {}", task.version,
+                          fill_error);
             }
             fill_ms = ms_since(f0);
         }
         if (several)
             task.blend = std::move(blend);
     }
+    // Before the version is announced (its projector frame), and after the fill-in is set up,
+    // so that its first headset pays for no pipeline compilation.
+    render::warm_up_for_serving(*b.renderer, device_, !sc.captured_material,
+                                info_.pipeline_cache_file);
+    if (stopping())
+        return false;
     // The frames weighted and made into the version's projector frames (drives when
     // calibrated), here too: the render thread only swaps the version in.
     std::optional<render::ProjectorFrames> frames;
@@ -322,7 +327,8 @@ bool FrameLoop::build_scene(BlendTask& task) {
                                       {"active", b.renderer->fill()},
                                       {"uncovered_clusters", b.renderer->fill_clusters()},
                                       {"clusters", b.renderer->levels().front().clusters.size()},
-                                      {"setup_ms", fill_ms}};
+                                      {"setup_ms", fill_ms},
+                                      {"error", fill_error}};
     task.build = std::move(b);
     return true;
 }

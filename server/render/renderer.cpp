@@ -151,11 +151,6 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     HS_ASSIGN_OR_RETURN(
         r->albedo_texture_,
         gpu::Texture::create(device, tex, "material.albedo_texture", r->device_counter()));
-    // Until set_fill: a 1 x 1 atlas (only fill pipelines read it).
-    const float far = 3.4e38f;
-    HS_ASSIGN_OR_RETURN(
-        r->fill_texture_,
-        gpu::Texture::create_r32f(device, 1, 1, &far, "fill.shadow_maps", r->device_counter()));
     const int cores = int(std::clamp(std::thread::hardware_concurrency(), 1u, 8u));
     const int planners = info.planning_threads >= 0 ? std::min(info.planning_threads, 64)
                          : device.is_cpu()          ? 0
@@ -265,7 +260,9 @@ Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Varia
                                             pi.name + ".scene", device_counter()));
     v.scene_block.write(&block, sizeof(block));
     v.counted = MemoryCharge(info_.ledger ? &info_.ledger->pipelines : nullptr, 0);
-    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_, fill_texture_);
+    // Until set_fill, binding 2 (read only by the fill pipelines) holds the albedo texture.
+    v.pipeline.bind_resources(device_, v.scene_block, albedo_texture_,
+                              fill_ ? fill_texture_ : albedo_texture_);
     auto [it, inserted] = variants_.emplace(key, std::move(v));
     return &it->second;
 }
@@ -463,6 +460,8 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         gpu::Texture::create_r32f(device_, atlas.width, atlas.height, atlas.depth.data(),
                                   "fill.shadow_maps", device_counter()));
     for (auto& [key, v] : variants_) v.pipeline.bind_second_texture(device_, texture);
+    // Fill pipelines of an earlier call read its projectors from their scene blocks: made anew.
+    std::erase_if(variants_, [](const auto& kv) { return kv.first.ends_with("|fill"); });
     fill_texture_ = std::move(texture);
     fill_params_ = std::move(atlas.projectors);
     fill_clusters_ = std::move(clusters);

@@ -187,8 +187,9 @@ public:
     // The headsets' fill-in (render/fill.hpp): from now on, served VD layers (record_layers)
     // carry the VI term wherever no projector of `blend` reaches the surface they show. The
     // blend's shadow maps go to the device; its clusters that hold uncovered surface are found
-    // here. A blend that covers all of the prop turns the fill-in off (nothing to add). Thread:
-    // the renderer's, while no submission of it is in flight.
+    // here. A blend that covers all of the prop turns the fill-in off (nothing to add). Call it
+    // before warm_up() so that the fill pipelines are prepared too. Thread: the renderer's,
+    // while no submission of it is in flight.
     Result<void> set_fill(const Blend& blend);
     // Whether served layers draw the fill-in, and over how many clusters of the finest level.
     bool fill() const { return fill_; }
@@ -321,7 +322,7 @@ private:
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level
     // per cluster (and per group) whether it holds uncovered surface.
-    gpu::Texture fill_texture_;  // the shadow maps' atlas; 1 x 1 until set_fill
+    gpu::Texture fill_texture_;                       // the shadow maps' atlas (set_fill)
     std::vector<gpu::GpuFillProjector> fill_params_;  // into every scene block made after
     bool fill_ = false;
     uint32_t fill_cluster_count_ = 0;

@@ -35,9 +35,9 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     WarmUpReport report;
     const uint64_t built_before = pipelines_built_;
     const scene::Specular& spec = scene_.material.specular;
-    if (!has_vd_term(spec) || encodings.empty()) {
+    if ((!has_vd_term(spec) && !fill_) || encodings.empty()) {
         report.skipped_because =
-            has_vd_term(spec) ? "no layer format to prepare" : vd_skip_reason(spec);
+            encodings.empty() ? "no layer format to prepare" : vd_skip_reason(spec);
         return report;
     }
     // 1. The pipelines: per format the occluder (a prop that is not convex), the generic VD
@@ -57,6 +57,10 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
         }
         HS_ASSIGN_OR_RETURN(Variant * generic, variant(PassKind::kVd, spec, enc));
         uses.push_back({generic, format});
+        if (fill_) {  // the headsets' fill-in: one pipeline per format (record_layers)
+            HS_ASSIGN_OR_RETURN(Variant * f, variant(PassKind::kVd, spec, enc, ~uint64_t(0), true));
+            uses.push_back({f, format});
+        }
         if (n == 0 || n > kEverySubsetUpTo)
             continue;
         for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {

@@ -182,3 +182,40 @@ TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
     EXPECT_GT(lit, 1000u);
     EXPECT_EQ(a.plan.clusters_filled, a.plan.clusters_lit);
 }
+
+// The fill pipelines are prepared with the others when the fill-in is set up before the
+// warm-up: a headset's first filled layer compiles nothing.
+TEST_F(Fill, WarmUpPreparesTheFillPipelines) {
+    auto r = make_renderer(scene_);
+    ASSERT_TRUE(r);
+    ASSERT_TRUE(r->set_fill(render::compute_visibility(r->mesh(), scene_.projectors())).ok());
+    ASSERT_TRUE(r->fill());
+    const render::LayerEncoding enc = render::LayerEncoding::kSrgb8;
+    auto warm = r->warm_up(std::span(&enc, 1));
+    ASSERT_TRUE(warm.ok()) << warm.error().message;
+    const uint64_t built = r->pipelines_built();
+    const Layer a = layer(*r, small_eye(4), eye_at(180.0));
+    EXPECT_GT(a.plan.clusters_filled, 0u);
+    EXPECT_EQ(r->pipelines_built(), built);
+}
+
+// Shadow maps that do not fit one texture are refused with the sizes named (the server then
+// serves the version without the fill-in).
+TEST(FillAtlas, TooLargeIsAnErrorNamingTheSizes) {
+    render::Blend blend;
+    for (int j = 0; j < 2; ++j) {
+        render::SurfaceView v;
+        v.intrinsics = {5000, 4, 1000, 1000, 2499.5, 1.5};
+        v.depth.assign(5000 * 4, 1.0f);
+        blend.views.push_back(std::move(v));
+    }
+    auto a = render::fill_atlas(blend);
+    ASSERT_FALSE(a.ok());
+    EXPECT_NE(a.error().message.find("10000x4"), std::string::npos) << a.error().message;
+    blend.views.pop_back();
+    auto one = render::fill_atlas(blend);
+    ASSERT_TRUE(one.ok()) << one.error().message;
+    EXPECT_EQ(one->width, 5000u);
+    EXPECT_EQ(one->projectors.size(), 1u);
+    EXPECT_EQ(one->depth.size(), size_t(5000) * 4);
+}
