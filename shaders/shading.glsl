@@ -137,20 +137,23 @@ float hs_specular_factor(int model, bool aniso, vec3 n, vec3 l, vec3 v, vec3 axi
 // Direction to a directional (w = 0) or point (w = 1) light and its irradiance at normal
 // incidence at surface point p (docs/SHADING.md, "Lights"): a point light's intensity falls off
 // as 1 / max(d, d_min)^2, and a light on the surface shines along the normal.
+// The light's kind is selected, not branched on: lavapipe (Mesa 22.3) compiles a new copy of a
+// shader whose branches depend on uniform values alone every time its pipeline or descriptors
+// are bound, once such values are used often enough, and never frees the copies (the fill-in's
+// second use of every light grew the process by 1.2 MB a layer; tests/gpu/fill_test.cpp).
 void hs_light(vec4 position_or_direction, vec3 irradiance, vec3 p, vec3 n, float d_min,
               bool falloff, out vec3 l, out vec3 E) {
-    E = irradiance;
-    if (position_or_direction.w == 0.0) {
-        l = position_or_direction.xyz;
-        return;
-    }
+    const bool directional = position_or_direction.w == 0.0;
     vec3 d = position_or_direction.xyz - p;
     float dist = length(d);
-    l = dist > 1e-9 ? d / dist : n;
-    if (falloff) {
+    vec3 to_point = dist > 1e-9 ? d / dist : n;
+    vec3 at_point = irradiance;
+    if (falloff) {  // a specialisation constant
         float dc = max(dist, d_min);
-        E /= dc * dc;
+        at_point /= dc * dc;
     }
+    l = directional ? position_or_direction.xyz : to_point;
+    E = directional ? irradiance : at_point;
 }
 
 // Radiance as a half-float layer carries it: NaN as 0, clamped to [0, 65504] (the largest

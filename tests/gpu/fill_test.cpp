@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "../rss.hpp"
 #include "core/srgb.hpp"
 #include "gpu_fixture.hpp"
 #include "render/blend.hpp"
@@ -218,4 +219,35 @@ TEST(FillAtlas, TooLargeIsAnErrorNamingTheSizes) {
     EXPECT_EQ(one->width, 5000u);
     EXPECT_EQ(one->projectors.size(), 1u);
     EXPECT_EQ(one->depth.size(), size_t(5000) * 4);
+}
+
+// lavapipe (Mesa 22.3) compiles a new copy of a fragment shader whose branches or loop exits
+// depend on uniform values alone each time its pipeline or descriptors are bound, when such
+// values are used often enough ("uniform inlining"), and never frees the copies: the fill-in's
+// second use of every light made a filled layer grow the process by about 1.2 MB. The shaders
+// keep uniform values out of branches (hs_light selects rather than branches on the light's
+// kind). 150 filled layers on one target must not grow the process by more than noise.
+TEST_F(Fill, ManyFilledLayersDoNotGrowTheDriversMemory) {
+    auto r = make_renderer(scene_);
+    ASSERT_TRUE(r);
+    ASSERT_TRUE(r->set_fill(render::compute_visibility(r->mesh(), scene_.projectors())).ok());
+    const scene::Intrinsics k = small_eye(4);
+    auto t = gpu::RenderTarget::create(test::device(), k.width, k.height,
+                                       gpu::ColorFormat::kRgba8Unorm, "fill.t", r->uses_depth());
+    ASSERT_TRUE(t.ok()) << t.error().message;
+    render::Renderer::LayerRequest req{scene_.material.specular,      k,          eye_at(180.0),
+                                       render::LayerEncoding::kSrgb8, &t.value(), true};
+    auto run = [&](int n) {
+        for (int i = 0; i < n; ++i) {
+            auto plans = r->render_layers(std::span(&req, 1));
+            ASSERT_TRUE(plans.ok()) << plans.error().message;
+            ASSERT_GT((*plans)[0].clusters_filled, 0u);
+        }
+    };
+    run(20);
+    const size_t before = test::rss_kib();
+    run(150);
+    const size_t after = test::rss_kib();
+    EXPECT_LT(after, before + 40 * 1024) << "150 filled layers grew the process from "
+                                         << before / 1024 << " to " << after / 1024 << " MiB";
 }

@@ -17,6 +17,7 @@
 #include "clients/net/connection.hpp"
 #include "gpu/device.hpp"
 #include "render/renderer.hpp"
+#include "rss.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
 #include "stream/server.hpp"
@@ -84,13 +85,7 @@ inline std::string test_scene_json(std::array<double, 3> albedo) {
     return j.dump();
 }
 
-// The process's resident set, KiB.
-inline size_t rss_kib() {
-    std::ifstream f("/proc/self/statm");
-    size_t pages = 0, resident = 0;
-    f >> pages >> resident;
-    return resident * size_t(sysconf(_SC_PAGESIZE)) / 1024;
-}
+using hs::test::rss_kib;
 
 // Frame bytes of `m` as `sender` would send them (tests of what a server must refuse).
 inline std::vector<uint8_t> frame_bytes(const proto::Message& m, proto::Side sender,
