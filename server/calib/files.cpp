@@ -306,23 +306,40 @@ Result<ColourCalibration> load_colour(const fs::path& file) {
 
 Result<void> save_optics(const fs::path& file, const OpticalConstants& c) {
     const auto& l = c.levels;
-    return write_json(
-        file, {{"kind", "hysar-optics"},
-               {"comment",
-                "Optical constants of the installation (docs/CALIBRATION.md, optics.json): the "
-                "headset's transparency alpha, the scene-to-signal scale k (0: per scene, the "
-                "largest the projector can show), the device levels and room light in camera DN/s "
-                "(docs/OPTICS.md), the prop's albedo"},
-               {"source", c.source},
-               {"alpha", c.alpha},
-               {"scene_to_signal", c.scene_to_signal},
-               {"levels",
-                {{"projector_max", l.projector_max},
-                 {"projector_min", l.projector_min},
-                 {"hmd_max", l.hmd_max},
-                 {"hmd_min", l.hmd_min},
-                 {"environment", l.environment}}},
-               {"prop_albedo", {c.prop_albedo.r, c.prop_albedo.g, c.prop_albedo.b}}});
+    json j = {
+        {"kind", "hysar-optics"},
+        {"comment",
+         "Optical constants of the installation (docs/CALIBRATION.md, optics.json): the "
+         "headset's transparency alpha, the scene-to-signal scale k (0: per scene, the "
+         "largest the projector can show), the device levels and room light in camera DN/s "
+         "(docs/OPTICS.md), the prop's albedo; projectors: the levels of each projector whose "
+         "own differ"},
+        {"source", c.source},
+        {"alpha", c.alpha},
+        {"scene_to_signal", c.scene_to_signal},
+        {"levels",
+         {{"projector_max", l.projector_max},
+          {"projector_min", l.projector_min},
+          {"hmd_max", l.hmd_max},
+          {"hmd_min", l.hmd_min},
+          {"environment", l.environment}}},
+        {"prop_albedo", {c.prop_albedo.r, c.prop_albedo.g, c.prop_albedo.b}}};
+    if (!c.projector_levels.empty()) {
+        json each = json::object();
+        for (const auto& [name, lv] : c.projector_levels)
+            each[name] = {{"projector_max", lv.max}, {"projector_min", lv.min}};
+        j["projectors"] = std::move(each);
+    }
+    return write_json(file, j);
+}
+
+scene::DeviceLevels OpticalConstants::levels_of(const std::string& name) const {
+    scene::DeviceLevels l = levels;
+    if (auto it = projector_levels.find(name); it != projector_levels.end()) {
+        l.projector_max = it->second.max;
+        l.projector_min = it->second.min;
+    }
+    return l;
 }
 
 Result<OpticalConstants> load_optics(const fs::path& file) {
@@ -356,6 +373,31 @@ Result<OpticalConstants> load_optics(const fs::path& file) {
         if (!(c.levels.hmd_max > c.levels.hmd_min))
             throw FieldError(fmt::format("levels.hmd_max ({}) must be above levels.hmd_min ({})",
                                          c.levels.hmd_max, c.levels.hmd_min));
+        if (j.contains("projectors")) {
+            const json& each = j.at("projectors");
+            if (!each.is_object())
+                throw FieldError("projectors is not an object of projector names to their levels");
+            for (const auto& [name, lj] : each.items()) {
+                const std::string at = "projectors." + name;
+                if (!lj.is_object())
+                    throw FieldError(fmt::format("{} is not an object", at));
+                auto level = [&](const char* key) {
+                    const std::string n = at + "." + key;
+                    const double v = finite_number(lj, key, n);
+                    if (v < 0)
+                        throw FieldError(fmt::format("{} is {} DN/s; levels are >= 0", n, v));
+                    return v;
+                };
+                OpticalConstants::ProjectorLevels pl{level("projector_max"),
+                                                     level("projector_min")};
+                if (!(pl.max > pl.min))
+                    throw FieldError(
+                        fmt::format("{0}.projector_max ({1}) must be above "
+                                    "{0}.projector_min ({2})",
+                                    at, pl.max, pl.min));
+                c.projector_levels[name] = pl;
+            }
+        }
         const json& albedo = array_of(j, "prop_albedo", 3, "prop_albedo");
         for (int k = 0; k < 3; ++k) {
             const std::string name = fmt::format("prop_albedo[{}]", k);

@@ -5,12 +5,15 @@
 //   white.exr, black.exr       the camera's captures of the device showing white and black (DN)
 //   inverse.exr, inverse.json  device-to-camera map: R = camera x, G = camera y, B = 1 valid
 //   colour.json                the colour calibration
-// and an installation's folder (what `hysar serve --calibration DIR` reads) holds projector/
-// and hmd/, each such a directory, and
+// and an installation's folder (what `hysar serve --calibration DIR` reads) holds hmd/ and
+// projector/ (a room of one, or the scene's first projector) or projectors/NAME/ (each named
+// projector of a room of several), each such a directory, and
 //   optics.json                the optical constants (OpticalConstants)
 #pragma once
 
 #include <filesystem>
+#include <map>
+#include <string>
 
 #include "calib/colour_calib.hpp"
 #include "calib/graycode.hpp"
@@ -31,6 +34,14 @@ struct OpticalConstants {
     scene::DeviceLevels levels;   // P^M, P^m, H^M, H^m, E
     glm::dvec3 prop_albedo{1.0};  // the prop's albedo relative to the white P^M was measured on
     std::string source;           // where the values come from, for people
+    // A room of several projectors: the white (P^M) and black (P^m) of each projector whose own
+    // differ from `levels` (optics.json "projectors": {NAME: {projector_max, projector_min}}).
+    struct ProjectorLevels {
+        double max = 0, min = 0;
+    };
+    std::map<std::string, ProjectorLevels> projector_levels;
+    // The levels projector `name` is driven with: its own where given, else `levels`.
+    scene::DeviceLevels levels_of(const std::string& name) const;
 };
 
 Result<void> save_lut(const std::filesystem::path& dir, const DeviceLut& lut,

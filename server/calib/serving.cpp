@@ -4,12 +4,14 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <sstream>
 
 #include <fmt/format.h>
 #include <glm/gtc/packing.hpp>
 #include <glm/mat3x3.hpp>
 
+#include "core/check.hpp"
 #include "core/parallel.hpp"
 #include "optics/capture.hpp"
 
@@ -57,13 +59,13 @@ Result<glm::dvec3> white_span(const ServedDevice& d) {
     return w;
 }
 
-Result<ServedDevice> load_device(const fs::path& dir, const char* name) {
+Result<ServedDevice> load_device(const fs::path& sub) {
     std::error_code ec;
-    const fs::path sub = dir / name;
     if (!fs::is_directory(sub, ec))
         return make_error(ErrorCode::kNotFound,
-                          fmt::format("{}: missing; a calibration folder holds projector/, hmd/ "
-                                      "and optics.json (docs/CALIBRATION.md)",
+                          fmt::format("{}: missing; a calibration folder holds hmd/, projector/ "
+                                      "or projectors/NAME/ for each projector, and optics.json "
+                                      "(docs/CALIBRATION.md)",
                                       sub.string()));
     ServedDevice d;
     d.dir = sub;
@@ -73,6 +75,16 @@ Result<ServedDevice> load_device(const fs::path& dir, const char* name) {
     HS_ASSIGN_OR_RETURN(d.colour, load_colour(sub / "colour.json"));
     HS_TRY(white_span(d));
     return d;
+}
+
+// Whether `image` has light where the geometry says the projector lights the prop.
+bool lights_the_prop(const ImageRgba32f& image, const ImageRgba32f& geometry) {
+    for (size_t i = 0, n = size_t(image.width) * image.height; i < n; ++i)
+        if (geometry.pixels[i * 4 + 3] > 0.5f && geometry.pixels[i * 4 + 2] > 0.0f &&
+            std::max({image.pixels[i * 4], image.pixels[i * 4 + 1], image.pixels[i * 4 + 2]}) >
+                1e-9f)
+            return true;
+    return false;
 }
 
 }  // namespace
@@ -200,17 +212,35 @@ void LayerDrive::apply_rgba16f(const uint8_t* src, size_t src_stride, uint8_t* d
 
 // ---- ServingCalibration -----------------------------------------------------------------------
 
+const ServedDevice* ServingCalibration::device_for(const std::string& name, size_t index) const {
+    if (auto it = named_projectors.find(name); it != named_projectors.end())
+        return &it->second;
+    return index == 0 && projector.width > 0 ? &projector : nullptr;
+}
+
 Result<void> ServingCalibration::check_scene(const scene::Scene& s) const {
-    const auto& k = s.projector.intrinsics;
-    if (k.width == projector.width && k.height == projector.height)
-        return {};
-    return make_error(ErrorCode::kInvalidArgument,
-                      fmt::format("the calibrated projector ({}) is {}, the scene's projector "
-                                  "'{}' is {}: serve the scene it was calibrated for, or "
-                                  "calibrate this projector",
-                                  (projector.dir / "lut.json").string(),
-                                  size_str(projector.width, projector.height), s.projector.name,
-                                  size_str(k.width, k.height)));
+    const auto all = s.projectors();
+    for (size_t j = 0; j < all.size(); ++j) {
+        const auto& k = all[j].intrinsics;
+        const ServedDevice* d = device_for(all[j].name, j);
+        if (!d)
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("the calibration {} has no folder for the scene's projector '{}' "
+                            "({}): calibrate it (docs/CALIBRATION.md, \"Several projectors\"), "
+                            "or serve without --calibration",
+                            dir.string(), all[j].name,
+                            (dir / "projectors" / all[j].name).string()));
+        if (k.width == d->width && k.height == d->height)
+            continue;
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("the calibrated projector ({}) is {}, the scene's projector "
+                                      "'{}' is {}: serve the scene it was calibrated for, or "
+                                      "calibrate this projector",
+                                      (d->dir / "lut.json").string(), size_str(d->width, d->height),
+                                      all[j].name, size_str(k.width, k.height)));
+    }
+    return {};
 }
 
 std::optional<std::string> ServingCalibration::check_display(uint32_t w, uint32_t h) const {
@@ -222,9 +252,9 @@ std::optional<std::string> ServingCalibration::check_display(uint32_t w, uint32_
         (hmd.dir / "lut.json").string(), size_str(hmd.width, hmd.height), size_str(w, h));
 }
 
-scene::Optics ServingCalibration::drive_optics() const {
+scene::Optics ServingCalibration::drive_optics(const std::string& projector_name) const {
     scene::Optics o;
-    o.levels = optics.levels;
+    o.levels = optics.levels_of(projector_name);
     o.prop_albedo = optics.prop_albedo;
     o.prop_sheen = 0.0;
     o.scene_to_signal = optics.scene_to_signal;
@@ -233,56 +263,118 @@ scene::Optics ServingCalibration::drive_optics() const {
     return o;
 }
 
+uint64_t SceneDrives::lit() const {
+    uint64_t n = 0;
+    for (const auto& p : projectors) n += p.lit;
+    return n;
+}
+
+uint64_t SceneDrives::clipped() const {
+    uint64_t n = 0;
+    for (const auto& p : projectors) n += p.clipped;
+    return n;
+}
+
 Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s, const ImageRgba32f& vi,
                                                      const ImageRgba32f& geometry) const {
+    const ProjectorShare one{&vi, &geometry, nullptr};
+    return scene_drives(s, std::span(&one, 1));
+}
+
+Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
+                                                     std::span<const ProjectorShare> shares) const {
     HS_TRY(check_scene(s));
-    const auto& k = s.projector.intrinsics;
-    if (vi.width != k.width || vi.height != k.height || geometry.width != k.width ||
-        geometry.height != k.height)
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            fmt::format("calibrated output: the projector frame is {} and its "
-                        "geometry {}, the projector {}",
-                        size_str(vi.width, vi.height), size_str(geometry.width, geometry.height),
-                        size_str(k.width, k.height)));
+    const auto all = s.projectors();
+    if (shares.size() != all.size())
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("calibrated output: {} projector frame(s) for the scene's {} "
+                                      "projector(s)",
+                                      shares.size(), all.size()));
     SceneDrives out;
-    HS_ASSIGN_OR_RETURN(out.g_ref, optics::reference_falloff(geometry, k));
-    const scene::Optics o = drive_optics();
-    out.scene_to_signal = optics.scene_to_signal > 0
-                              ? optics.scene_to_signal
-                              : optics::auto_scene_to_signal(o, vi, geometry, out.g_ref);
+    std::vector<scene::Optics> o(all.size());
+    for (size_t j = 0; j < all.size(); ++j) {
+        const auto& k = all[j].intrinsics;
+        const ProjectorShare& sh = shares[j];
+        HS_CHECK(sh.vi && sh.geometry, "scene_drives: a projector share without its images");
+        const ImageRgba32f &vi = *sh.vi, &geometry = *sh.geometry;
+        if (vi.width != k.width || vi.height != k.height || geometry.width != k.width ||
+            geometry.height != k.height ||
+            (sh.weight && sh.weight->size() != size_t(k.width) * k.height))
+            return make_error(
+                ErrorCode::kInvalidArgument,
+                fmt::format("calibrated output: projector '{}''s frame is {}, its geometry {}{}, "
+                            "the projector {}",
+                            all[j].name, size_str(vi.width, vi.height),
+                            size_str(geometry.width, geometry.height),
+                            sh.weight ? fmt::format(", its blend {} weights", sh.weight->size())
+                                      : std::string(),
+                            size_str(k.width, k.height)));
+        ProjectorDrives d;
+        d.name = all[j].name;
+        d.dir = device_for(all[j].name, j)->dir;
+        HS_ASSIGN_OR_RETURN(d.g_ref, optics::reference_falloff(geometry, k));
+        out.projectors.push_back(std::move(d));
+        o[j] = drive_optics(all[j].name);
+    }
+    // One k for the room: the largest that every projector can show its share at.
+    out.scene_to_signal = optics.scene_to_signal;
+    if (!(out.scene_to_signal > 0)) {
+        double k = std::numeric_limits<double>::infinity();
+        for (size_t j = 0; j < all.size(); ++j)
+            if (lights_the_prop(*shares[j].vi, *shares[j].geometry))
+                k = std::min(k,
+                             optics::auto_scene_to_signal(o[j], *shares[j].vi, *shares[j].geometry,
+                                                          out.projectors[j].g_ref));
+        out.scene_to_signal = std::isfinite(k) ? k : 1.0;  // nothing lit: any k shows it
+    }
     if (!(out.scene_to_signal > 0) || !std::isfinite(out.scene_to_signal))
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("calibrated output: the scene-to-signal scale k = {} is "
                                       "not a positive number",
                                       out.scene_to_signal));
-    // The light the projector must emit relative to its white (docs/OPTICS.md), then the
-    // projector's colour model: r^-1(M^-1 (W o p)).
-    const ImageRgba32f p =
-        optics::projector_drive(o, scaled(vi, out.scene_to_signal), geometry, out.g_ref, 0.0);
-    HS_ASSIGN_OR_RETURN(glm::dvec3 w, white_span(projector));
-    out.projector = ImageRgba32f::zeros(k.width, k.height);
-    std::atomic<uint64_t> clipped{0}, lit{0};
-    parallel_rows(k.height, [&](uint32_t y) {
-        uint64_t c_row = 0, l_row = 0;
-        for (uint32_t x = 0; x < k.width; ++x) {
-            const size_t i = p.index(x, y);
-            bool clip = false;
-            const glm::dvec3 d = projector.colour.drive_for(
-                projector.colour.offset +
-                    w * glm::dvec3(p.pixels[i], p.pixels[i + 1], p.pixels[i + 2]),
-                &clip);
-            clip |= p.pixels[i + 3] > 0.0f;
-            out.projector.set(x, y, {float(d.r), float(d.g), float(d.b), 0.0f});
-            const bool lights = geometry.pixels[i + 3] > 0.5f && geometry.pixels[i + 2] > 0.0f;
-            l_row += lights;
-            c_row += lights && clip;
+    for (size_t j = 0; j < all.size(); ++j) {
+        const auto& k = all[j].intrinsics;
+        const ImageRgba32f& geometry = *shares[j].geometry;
+        ProjectorDrives& pd = out.projectors[j];
+        // The light the projector must emit relative to its white (docs/OPTICS.md), then the
+        // projector's colour model: r^-1(M^-1 (W o p)). In a blend, with the black levels
+        // compensated, each projector takes off only its weight's share of the room light
+        // (render::blended_projector_drive): the others take off the rest where they reach.
+        ImageRgba32f target = scaled(*shares[j].vi, out.scene_to_signal);
+        if (shares[j].weight && compensation.black_levels) {
+            const double base = optics::effective_levels(o[j]).environment;
+            const auto& w = *shares[j].weight;
+            for (size_t i = 0; i < w.size(); ++i)
+                if (w[i] > 0.0f)
+                    for (int c = 0; c < 3; ++c)
+                        target.pixels[i * 4 + c] += float((1.0 - w[i]) * base);
         }
-        clipped += c_row;
-        lit += l_row;
-    });
-    out.clipped = clipped;
-    out.lit = lit;
+        const ImageRgba32f p = optics::projector_drive(o[j], target, geometry, pd.g_ref, 0.0);
+        const ServedDevice& dev = *device_for(all[j].name, j);
+        HS_ASSIGN_OR_RETURN(glm::dvec3 white, white_span(dev));
+        pd.drive = ImageRgba32f::zeros(k.width, k.height);
+        std::atomic<uint64_t> clipped{0}, lit{0};
+        parallel_rows(k.height, [&](uint32_t y) {
+            uint64_t c_row = 0, l_row = 0;
+            for (uint32_t x = 0; x < k.width; ++x) {
+                const size_t i = p.index(x, y);
+                bool clip = false;
+                const glm::dvec3 d = dev.colour.drive_for(
+                    dev.colour.offset +
+                        white * glm::dvec3(p.pixels[i], p.pixels[i + 1], p.pixels[i + 2]),
+                    &clip);
+                clip |= p.pixels[i + 3] > 0.0f;
+                pd.drive.set(x, y, {float(d.r), float(d.g), float(d.b), 0.0f});
+                const bool lights = geometry.pixels[i + 3] > 0.5f && geometry.pixels[i + 2] > 0.0f;
+                l_row += lights;
+                c_row += lights && clip;
+            }
+            clipped += c_row;
+            lit += l_row;
+        });
+        pd.clipped = clipped;
+        pd.lit = lit;
+    }
     // The headset: alpha k L_s above its black (hmd_alpha compensated; without the black-level
     // compensation the model's span is H^M instead of H^M - H^m, as optics::hmd_drive).
     const auto& lv = optics.levels;
@@ -296,16 +388,20 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s, cons
 std::string ServingCalibration::summary() const {
     std::string comp;
     for (const auto& n : compensation_names(compensation)) comp += (comp.empty() ? "" : ", ") + n;
-    return fmt::format(
-        "calibration {}: projector {} ({} model), headset {} ({} model); alpha {}, k {}; "
-        "compensation {}",
-        dir.string(), size_str(projector.width, projector.height),
-        to_string(projector.colour.model), size_str(hmd.width, hmd.height),
-        to_string(hmd.colour.model), optics.alpha,
-        optics.scene_to_signal > 0
-            ? fmt::format("{:.6g} DN/s per unit radiance", optics.scene_to_signal)
-            : std::string("per scene"),
-        comp.empty() ? "none" : comp);
+    std::string proj;
+    if (projector.width > 0)
+        proj = fmt::format("projector {} ({} model)", size_str(projector.width, projector.height),
+                           to_string(projector.colour.model));
+    for (const auto& [name, d] : named_projectors)
+        proj += fmt::format("{}projector '{}' {} ({} model)", proj.empty() ? "" : ", ", name,
+                            size_str(d.width, d.height), to_string(d.colour.model));
+    return fmt::format("calibration {}: {}, headset {} ({} model); alpha {}, k {}; compensation {}",
+                       dir.string(), proj, size_str(hmd.width, hmd.height),
+                       to_string(hmd.colour.model), optics.alpha,
+                       optics.scene_to_signal > 0
+                           ? fmt::format("{:.6g} DN/s per unit radiance", optics.scene_to_signal)
+                           : std::string("per scene"),
+                       comp.empty() ? "none" : comp);
 }
 
 Result<ServingCalibration> load_serving_calibration(const fs::path& dir,
@@ -324,8 +420,31 @@ Result<ServingCalibration> load_serving_calibration(const fs::path& dir,
     ServingCalibration cal;
     cal.dir = dir;
     cal.compensation = compensation;
-    HS_ASSIGN_OR_RETURN(cal.projector, load_device(dir, "projector"));
-    HS_ASSIGN_OR_RETURN(cal.hmd, load_device(dir, "hmd"));
+    // A room of one: projector/. A room of several: projectors/NAME/ for each, and projector/
+    // still for the first where it has no folder of its own.
+    const fs::path named = dir / "projectors";
+    const bool has_named = fs::is_directory(named, ec);
+    if (!has_named || fs::exists(dir / "projector", ec)) {
+        HS_ASSIGN_OR_RETURN(cal.projector, load_device(dir / "projector"));
+    }
+    if (has_named) {
+        for (const auto& e : fs::directory_iterator(named, ec)) {
+            if (!e.is_directory(ec))
+                continue;
+            HS_ASSIGN_OR_RETURN(ServedDevice d, load_device(e.path()));
+            cal.named_projectors.emplace(e.path().filename().string(), std::move(d));
+        }
+        if (ec)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("{}: cannot list it: {}", named.string(), ec.message()));
+        if (cal.named_projectors.empty() && cal.projector.width == 0)
+            return make_error(
+                ErrorCode::kNotFound,
+                fmt::format("{}: no projector folder in it, and no {}: calibrate "
+                            "each projector into {}/NAME/ (docs/CALIBRATION.md)",
+                            named.string(), (dir / "projector").string(), named.string()));
+    }
+    HS_ASSIGN_OR_RETURN(cal.hmd, load_device(dir / "hmd"));
     const fs::path optics_file = dir / "optics.json";
     if (!fs::exists(optics_file, ec))
         return make_error(ErrorCode::kNotFound,

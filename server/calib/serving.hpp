@@ -2,7 +2,9 @@
 // calibration folder `hysar serve --calibration DIR` reads, its checks against the scene and the
 // headsets, and what turns rendered radiance into device drives.
 //
-//   DIR/projector/lut.json, colour.json   the calibrated projector's size and colour model
+//   DIR/projector/lut.json, colour.json   the calibrated projector's size and colour model (a
+//                                         room of one, or the scene's first projector)
+//   DIR/projectors/NAME/...               each named projector's, in a room of several
 //   DIR/hmd/lut.json, colour.json         the calibrated headset's
 //   DIR/optics.json                       the optical constants (calib::OpticalConstants)
 //
@@ -24,8 +26,10 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -85,31 +89,65 @@ private:
     std::array<std::vector<uint16_t>, 3> to_half_;  // and as the half of srgb_eotf(d)
 };
 
+// One projector's part of a scene version, as rendered (ServingCalibration::scene_drives).
+struct ProjectorShare {
+    const ImageRgba32f* vi = nullptr;        // its frame: its share of the VI radiance
+    const ImageRgba32f* geometry = nullptr;  // its capture geometry (g per pixel)
+    // Its blend weight per pixel (render/blend.hpp); null: 1 everywhere (a room of one).
+    const std::vector<float>* weight = nullptr;
+};
+
+// One projector's drives (ServingCalibration::scene_drives).
+struct ProjectorDrives {
+    std::string name;
+    ImageRgba32f drive;         // drives in [0, 1] per projector pixel; alpha 0
+    double g_ref = 0;           // the projector's reference falloff
+    uint64_t lit = 0;           // projector pixels that light the prop
+    uint64_t clipped = 0;       // of those, pixels whose drive was clipped to [0, 1]
+    std::filesystem::path dir;  // the calibrated device it was driven with
+};
+
 // What one scene version is served with (ServingCalibration::scene_drives).
 struct SceneDrives {
-    ImageRgba32f projector;  // drives in [0, 1] per projector pixel; alpha 0
+    std::vector<ProjectorDrives> projectors;  // the scene's order
     std::shared_ptr<const LayerDrive> layers;
-    double scene_to_signal = 0;  // k used
-    double g_ref = 0;            // the projector's reference falloff
-    uint64_t lit = 0;            // projector pixels that light the prop
-    uint64_t clipped = 0;        // of those, pixels whose drive was clipped to [0, 1]
+    double scene_to_signal = 0;  // k used, one for every projector and the headsets
+    // The first projector's, as a room of one has them.
+    const ImageRgba32f& projector() const { return projectors.front().drive; }
+    uint64_t lit() const;
+    uint64_t clipped() const;
 };
 
 struct ServingCalibration {
     std::filesystem::path dir;
-    ServedDevice projector, hmd;
+    // DIR/projector/ (unset width 0 where the folder has only projectors/NAME/), and each
+    // DIR/projectors/NAME/.
+    ServedDevice projector;
+    std::map<std::string, ServedDevice> named_projectors;
+    ServedDevice hmd;
     OpticalConstants optics;
     Compensation compensation;
 
-    // The scene's projector must be the calibrated one's size: an error naming both otherwise.
+    // The calibrated device of the scene's projector `index`, named `name`: DIR/projectors/NAME/
+    // where the folder has one, else DIR/projector/ for the first; null where neither.
+    const ServedDevice* device_for(const std::string& name, size_t index) const;
+    // Every projector of the scene must have a calibrated device of its size: an error naming
+    // the projector, the folder and both sizes otherwise.
     Result<void> check_scene(const scene::Scene& scene) const;
     // A headset display must be the calibrated headset's size: the refusal's sentence otherwise.
     std::optional<std::string> check_display(uint32_t eye_width, uint32_t eye_height) const;
     // The optics the drives are computed under: every effect of the real world on, the
-    // constants' levels and albedo, the chosen compensations.
-    scene::Optics drive_optics() const;
-    // The drives of one scene version from its projector frame (radiance, projector pixels) and
-    // the capture geometry rendered from the projector (render_capture_geometry: g per pixel).
+    // constants' levels (projector `name`'s own where optics.json gives them) and albedo, the
+    // chosen compensations.
+    scene::Optics drive_optics(const std::string& projector_name = {}) const;
+    // The drives of one scene version from each projector's frame (its share of the radiance,
+    // projector pixels) and its capture geometry (render_capture_geometry: g per pixel), one
+    // share per projector of the scene in its order. k is one for the whole room: optics.json's,
+    // or the largest every projector can show. With the black-level compensation each projector
+    // takes off its own black and its share of the room light (render::blended_projector_drive).
+    Result<SceneDrives> scene_drives(const scene::Scene& scene,
+                                     std::span<const ProjectorShare> shares) const;
+    // A room of one: its projector's frame and geometry.
     Result<SceneDrives> scene_drives(const scene::Scene& scene, const ImageRgba32f& projector_vi,
                                      const ImageRgba32f& projector_geometry) const;
     // One line for the log: the folder, the sizes, the compensations.

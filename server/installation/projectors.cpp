@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 
+#include "core/check.hpp"
+
 namespace hs::installation {
 
 namespace {
@@ -57,7 +59,43 @@ scene::Scene single_projector_scene(const scene::Scene& s, size_t index) {
     scene::Scene one = s;
     one.projector = s.projectors().at(index);
     one.more_projectors.clear();
+    // Its own levels, where the scene gives them (as render::blended_projector_drive).
+    one.optics.levels.projector_max =
+        one.projector.white_level.value_or(s.optics.levels.projector_max);
+    one.optics.levels.projector_min =
+        one.projector.black_level.value_or(s.optics.levels.projector_min);
     return one;
+}
+
+scene::Scene installed_scene(std::span<const std::unique_ptr<VirtualInstallation>> installations) {
+    HS_CHECK(!installations.empty(), "installed_scene: no installation");
+    scene::Scene s = installations.front()->scene();
+    s.more_projectors.clear();
+    for (size_t j = 1; j < installations.size(); ++j)
+        s.more_projectors.push_back(installations[j]->scene().projector);
+    return s;
+}
+
+Result<ImageRgba32f> capture_together(
+    std::span<const std::unique_ptr<VirtualInstallation>> installations,
+    std::span<const ImageRgba32f> drives, uint64_t seed) {
+    if (installations.empty() || drives.size() != installations.size())
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("capture_together: {} drive image(s) for {} projector(s)",
+                                      drives.size(), installations.size()));
+    // sum_j (alpha (P_j + E) + H) - (K - 1) (alpha E + H): each signal is linear in the light.
+    HS_ASSIGN_OR_RETURN(ImageRgba32f sum, installations[0]->signal(drives[0], {}));
+    HS_ASSIGN_OR_RETURN(const ImageRgba32f base, installations[0]->signal({}, {}, false));
+    for (size_t j = 1; j < installations.size(); ++j) {
+        HS_ASSIGN_OR_RETURN(const ImageRgba32f s, installations[j]->signal(drives[j], {}));
+        if (s.width != sum.width || s.height != sum.height)
+            return make_error(ErrorCode::kInvalidArgument,
+                              "capture_together: the installations' cameras differ in size");
+        for (size_t i = 0; i < sum.pixels.size(); ++i)
+            if (i % 4 != 3)
+                sum.pixels[i] += s.pixels[i] - base.pixels[i];
+    }
+    return installations[0]->expose(sum, seed);
 }
 
 MapError pair_registration(const calib::DeviceLut& a, const std::vector<float>& ax,
@@ -112,6 +150,7 @@ Result<ProjectorsReport> calibrate_projectors(gpu::Device& device, const scene::
         rep.projectors.push_back(
             {name, std::move(r),
              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()});
+        rep.installations.push_back(std::move(inst));
     }
     for (size_t j = 0; j < all.size(); ++j)
         for (size_t k = j + 1; k < all.size(); ++k) {

@@ -4,6 +4,8 @@
 // point, how far apart their calibrated pixels put their light on it.
 #pragma once
 
+#include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -27,6 +29,8 @@ struct ProjectorPair {
 struct ProjectorsReport {
     std::vector<ProjectorCalibration> projectors;  // the scene's order
     std::vector<ProjectorPair> pairs;              // every pair, in order
+    // Each projector's virtual installation (the same camera, viewpoint and flaws).
+    std::vector<std::unique_ptr<VirtualInstallation>> installations;
 };
 
 // `s` with only its projector `index` (the one the virtual installation lights).
@@ -37,6 +41,18 @@ scene::Scene single_projector_scene(const scene::Scene& s, size_t index);
 Result<ProjectorsReport> calibrate_projectors(gpu::Device& device, const scene::Scene& s,
                                               const Options& io, const ChainOptions& co,
                                               const Log& log = {});
+
+// The room's scene as the installations have it (their scale): every projector of
+// `installations`, in order.
+scene::Scene installed_scene(std::span<const std::unique_ptr<VirtualInstallation>> installations);
+
+// What the camera records when every projector shows its drive at once (`drives[j]` on
+// `installations[j]`, an empty image: black): the light of each projector added, the room light
+// and the headset's black (the headset shows black) counted once; then the camera's exposure,
+// noise and quantisation (`seed`).
+Result<ImageRgba32f> capture_together(
+    std::span<const std::unique_ptr<VirtualInstallation>> installations,
+    std::span<const ImageRgba32f> drives, uint64_t seed);
 
 // The registration of two projectors from their look-up tables and true maps (device pixel per
 // camera pixel, NaN where none; camera size cw x ch): for a camera pixel both decode, the error

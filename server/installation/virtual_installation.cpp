@@ -215,12 +215,6 @@ Result<std::unique_ptr<VirtualInstallation>> VirtualInstallation::create(gpu::De
     return vi;
 }
 
-ImageRgba32f VirtualInstallation::expose_ref(const ImageRgba32f& signal, uint64_t seed) const {
-    scene::Optics o = scene_.optics;
-    o.noise_dn = options_.noise_dn;
-    return optics::expose(o, signal, nullptr, seed);
-}
-
 uint32_t VirtualInstallation::device_width(Device d) const {
     return d == Device::kProjector ? scene_.projector.intrinsics.width : hmd_k_.width;
 }
@@ -256,9 +250,10 @@ ImageRgba32f VirtualInstallation::emit(Device d, const ImageRgba32f& drive) cons
     return out;
 }
 
-Result<ImageRgba32f> VirtualInstallation::capture(const ImageRgba32f& projector,
-                                                  const ImageRgba32f& hmd, uint64_t seed,
-                                                  bool noiseless, double exposure_ms) const {
+Result<optics::Capture> VirtualInstallation::simulate(const ImageRgba32f& projector,
+                                                      const ImageRgba32f& hmd, uint64_t seed,
+                                                      bool noiseless, double exposure_ms,
+                                                      bool projector_present) const {
     for (Device d : {Device::kProjector, Device::kHmd}) {
         const ImageRgba32f& img = d == Device::kProjector ? projector : hmd;
         if (!img.empty() && (img.width != device_width(d) || img.height != device_height(d)))
@@ -269,6 +264,7 @@ Result<ImageRgba32f> VirtualInstallation::capture(const ImageRgba32f& projector,
                                           device_height(d)));
     }
     optics::DeviceImages dev;
+    dev.projector_present = projector_present;
     if (!projector.empty())
         dev.projector = emit(Device::kProjector, projector);
     if (!hmd.empty()) {
@@ -290,9 +286,29 @@ Result<ImageRgba32f> VirtualInstallation::capture(const ImageRgba32f& projector,
         o.exposure_ms = exposure_ms;
     if (noiseless)
         o.effects.quantisation = false;
+    return optics::simulate_capture(o, alpha_, {geometry_, g_ref_}, dev, seed);
+}
+
+Result<ImageRgba32f> VirtualInstallation::capture(const ImageRgba32f& projector,
+                                                  const ImageRgba32f& hmd, uint64_t seed,
+                                                  bool noiseless, double exposure_ms) const {
     HS_ASSIGN_OR_RETURN(optics::Capture cap,
-                        optics::simulate_capture(o, alpha_, {geometry_, g_ref_}, dev, seed));
+                        simulate(projector, hmd, seed, noiseless, exposure_ms, true));
     return std::move(cap.dn);
+}
+
+Result<ImageRgba32f> VirtualInstallation::signal(const ImageRgba32f& projector,
+                                                 const ImageRgba32f& hmd,
+                                                 bool projector_present) const {
+    HS_ASSIGN_OR_RETURN(optics::Capture cap,
+                        simulate(projector, hmd, 1, true, 0.0, projector_present));
+    return std::move(cap.signal);
+}
+
+ImageRgba32f VirtualInstallation::expose(const ImageRgba32f& signal, uint64_t seed) const {
+    scene::Optics o = scene_.optics;
+    o.noise_dn = options_.noise_dn;
+    return optics::expose(o, signal, nullptr, seed);
 }
 
 }  // namespace hs::installation

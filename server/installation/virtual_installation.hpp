@@ -21,6 +21,7 @@
 #include "core/image.hpp"
 #include "core/result.hpp"
 #include "gpu/device.hpp"
+#include "optics/capture.hpp"
 #include "render/renderer.hpp"
 #include "render/simulation.hpp"
 #include "scene/scene.hpp"
@@ -65,6 +66,14 @@ public:
                                  uint64_t seed, bool noiseless = false,
                                  double exposure_ms = 0) const;
 
+    // The light that reaches the camera (DN/s, before the camera: no exposure, noise or
+    // quantisation) when the projector shows `projector` (empty: black; `projector_present`
+    // false: the projector adds nothing, its black level neither) and the headset `hmd`.
+    Result<ImageRgba32f> signal(const ImageRgba32f& projector, const ImageRgba32f& hmd,
+                                bool projector_present = true) const;
+    // The camera's values of a signal (exposure, noise, saturation, quantisation).
+    ImageRgba32f expose(const ImageRgba32f& signal, uint64_t seed) const;
+
     // The exposure a careful operator calibrates device `d` at: its full white (over the other
     // device's black) at 85 % of the camera's full scale, so that no calibration image
     // saturates.
@@ -85,7 +94,7 @@ public:
         ImageRgba32f vi, vi_vd;
     };
     Reference reference(uint64_t seed) const {
-        return {expose_ref(ref_vi_, seed), expose_ref(ref_vivd_, seed + 1)};
+        return {expose(ref_vi_, seed), expose(ref_vivd_, seed + 1)};
     }
 
     uint32_t device_width(Device d) const;
@@ -104,7 +113,9 @@ public:
 
 private:
     VirtualInstallation() = default;
-    ImageRgba32f expose_ref(const ImageRgba32f& signal, uint64_t seed) const;
+    Result<optics::Capture> simulate(const ImageRgba32f& projector, const ImageRgba32f& hmd,
+                                     uint64_t seed, bool noiseless, double exposure_ms,
+                                     bool projector_present) const;
     // The steps of create(), in order: the scene, projector and headset at the installation's
     // scale; (after the capture geometry) the camera's exposures of the calibration captures;
     // the true maps from camera pixels to device pixels and the devices' emission tables; the

@@ -99,8 +99,9 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
     sink_ = host_.make_sink(*ring_);
     if (info_.reblend_missing && info_.calibration)
         log::warn(
-            "--reblend-missing: not with a calibration (it covers the first projector only); "
-            "the projectors stay blended over all of them");
+            "--reblend-missing: not with a calibration (the drives are made once per scene "
+            "version, for the blend of every projector); the projectors stay blended over all "
+            "of them");
     // The initial version is built before anything is served: it is waited for.
     start_build({initial, 0, 0, version}, version);
     auto first = take_blend(true);
@@ -456,7 +457,6 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
         out.report = {{"pass", "captured-vi"}, {"effects", {"captured"}}, {"render_ms", 0.0}};
     } else {
         HS_CHECK(frames.has_value(), "projector_frame: a rendered scene without its frames");
-        frame = std::move(frames->frames.front().image);
         const render::PassReport& p = frames->frames.front().report;
         out.pass_ms = p.gpu_ms, out.readback_ms = p.readback_ms;
         out.report = {{"pass", p.pass},
@@ -468,9 +468,35 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
                       {"lights_skipped", p.lights_skipped},
                       {"render_ms", p.render_ms},
                       {"projector_renders", r.projector_render_count()}};
+        // Calibrated: every projector's share through its own calibrated device, one k for all.
+        std::optional<calib::SceneDrives> drives;
+        if (info_.calibration) {
+            const auto t_cal = Clock::now();
+            auto d = calibrate(r, next, *frames);
+            if (!d)
+                return make_error(d.error().code, "calibrated output: " + d.error().message);
+            drives = std::move(d).value();
+            layer_drive = drives->layers;
+            nlohmann::json each = nlohmann::json::array();
+            for (const auto& pd : drives->projectors)
+                each.push_back({{"name", pd.name},
+                                {"folder", pd.dir.string()},
+                                {"lit_pixels", pd.lit},
+                                {"clipped_pixels", pd.clipped}});
+            out.report["calibration"] = {
+                {"folder", info_.calibration->dir.string()},
+                {"compensation", calib::compensation_names(info_.calibration->compensation)},
+                {"scene_to_signal", drives->scene_to_signal},
+                {"projector_lit_pixels", drives->projectors.front().lit},
+                {"projector_clipped_pixels", drives->projectors.front().clipped},
+                {"projectors", std::move(each)},
+                {"hmd_camera_per_radiance", drives->layers->camera_per_radiance()},
+                {"ms", ms_since(t_cal)}};
+        }
+        frame = drives ? codec::drive_as_layer(drives->projector())
+                       : std::move(frames->frames.front().image);
         if (frames->frames.size() > 1) {
-            // The other projectors' shares, as rendered radiance (a calibration covers the
-            // first projector only).
+            // The other projectors' shares: drives when calibrated, else rendered radiance.
             nlohmann::json list = nlohmann::json::array();
             for (size_t j = 0; j < frames->frames.size(); ++j) {
                 const auto& b = frames->blend->projectors[j];
@@ -480,34 +506,13 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
                                 {"render_ms", frames->frames[j].report.render_ms}});
                 if (j == 0)
                     continue;
-                const ImageRgba32f& img = frames->frames[j].image;
+                const ImageRgba32f img = drives ? codec::drive_as_layer(drives->projectors[j].drive)
+                                                : std::move(frames->frames[j].image);
                 out.more_projectors.push_back(
                     {frames->names[j], img.width, img.height, codec::srgb8_pixels(img)});
             }
             out.report["projectors"] = std::move(list);
             out.report["blend_ms"] = frames->blend_ms;
-            if (info_.calibration)
-                log::warn(
-                    "calibrated output: the calibration covers the first projector only; "
-                    "the other {} are sent as rendered",
-                    frames->frames.size() - 1);
-        }
-        if (info_.calibration) {
-            const auto t_cal = Clock::now();
-            auto drives = calibrate(r, next, frame);
-            if (!drives)
-                return make_error(drives.error().code,
-                                  "calibrated output: " + drives.error().message);
-            frame = codec::drive_as_layer(drives->projector);
-            layer_drive = drives->layers;
-            out.report["calibration"] = {
-                {"folder", info_.calibration->dir.string()},
-                {"compensation", calib::compensation_names(info_.calibration->compensation)},
-                {"scene_to_signal", drives->scene_to_signal},
-                {"projector_lit_pixels", drives->lit},
-                {"projector_clipped_pixels", drives->clipped},
-                {"hmd_camera_per_radiance", drives->layers->camera_per_radiance()},
-                {"ms", ms_since(t_cal)}};
         }
     }
     const auto t_encode = Clock::now();
@@ -519,17 +524,29 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
 }
 
 Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene::Scene& next,
-                                                const ImageRgba32f& frame) {
-    // The projector's per-pixel falloff (docs/OPTICS.md), once per scene version.
-    HS_ASSIGN_OR_RETURN(
-        render::RenderResult geometry,
-        r.render_capture_geometry(next.projector.intrinsics, next.projector.pose, std::nullopt));
-    HS_ASSIGN_OR_RETURN(calib::SceneDrives d,
-                        info_.calibration->scene_drives(next, frame, geometry.image));
+                                                const render::ProjectorFrames& frames) {
+    // Each projector's per-pixel falloff (docs/OPTICS.md), once per scene version: a blend
+    // holds every projector's (the capture geometry pass lights the prop from the scene's
+    // first projector only); a room of one renders it.
+    const auto all = next.projectors();
+    HS_CHECK(frames.frames.size() == all.size(), "calibrate: a frame per projector");
+    std::vector<calib::ProjectorShare> shares;
+    std::optional<render::RenderResult> rendered;
+    if (!frames.blend) {
+        HS_CHECK(all.size() == 1, "calibrate: several projectors without their blend");
+        HS_ASSIGN_OR_RETURN(
+            rendered, r.render_capture_geometry(all[0].intrinsics, all[0].pose, std::nullopt));
+        shares.push_back({&frames.frames[0].image, &rendered->image, nullptr});
+    } else {
+        for (size_t j = 0; j < all.size(); ++j)
+            shares.push_back({&frames.frames[j].image, &frames.blend->projectors[j].geometry,
+                              &frames.blend->projectors[j].weight});
+    }
+    HS_ASSIGN_OR_RETURN(calib::SceneDrives d, info_.calibration->scene_drives(next, shares));
     log::info(
         "calibrated output: k {:.6g} DN/s per unit radiance, {} of {} lit projector pixels "
-        "clipped",
-        d.scene_to_signal, d.clipped, d.lit);
+        "clipped ({} projector(s))",
+        d.scene_to_signal, d.clipped(), d.lit(), d.projectors.size());
     return d;
 }
 

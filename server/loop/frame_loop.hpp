@@ -83,7 +83,8 @@ struct SceneVersion {
     double total_ms = 0;                                 // building the whole version
     nlohmann::json report;                               // the projector pass (stats "passes")
     // The scene's other projectors' frames (scene.more_projectors' order), each its blended
-    // share of the VI radiance as sRGB8 codes; empty with one projector.
+    // share of the VI radiance as sRGB8 codes (drives when calibrated, as `rgba8`); empty
+    // with one projector.
     struct ProjectorFrame {
         std::string name;
         uint32_t width = 0, height = 0;
@@ -222,9 +223,10 @@ private:
     Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(
         render::Renderer& renderer, const scene::Scene& scene,
         std::optional<render::ProjectorFrames> frames, SceneVersion& out);
-    // The projector frame as drives; the headset drive for the sink.
+    // Every projector's frame as drives, each through its own calibrated device; the headset
+    // drive for the sink.
     Result<calib::SceneDrives> calibrate(render::Renderer& renderer, const scene::Scene& scene,
-                                         const ImageRgba32f& frame);
+                                         const render::ProjectorFrames& frames);
     // After a scene change: the jobs in hand that the new scene cannot serve are dropped.
     void drop_unserved(std::vector<ViewerJob>& batch, const ServedDisplays& served);
     std::set<uint32_t> free_released();

@@ -1,5 +1,6 @@
 #include "served_installation/served.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -125,11 +126,24 @@ calib::OpticalConstants optical_constants(const VirtualInstallation& inst) {
 
 Result<void> save_calibration(const std::filesystem::path& dir, const VirtualInstallation& inst,
                               const DeviceResult& projector, const DeviceResult& hmd,
-                              const ChainOptions& options) {
-    HS_TRY(calib::save_device_directory(dir / "projector", projector.lut, options.decode,
-                                        projector.calibration));
+                              const ChainOptions& options, const ProjectorsReport* several) {
+    calib::OpticalConstants c = optical_constants(inst);
+    if (several) {
+        for (size_t j = 0; j < several->projectors.size(); ++j) {
+            const ProjectorCalibration& p = several->projectors[j];
+            HS_TRY(calib::save_device_directory(dir / "projectors" / p.name, p.result.lut,
+                                                options.decode, p.result.calibration));
+            if (j < several->installations.size()) {
+                const auto l = optics::effective_levels(several->installations[j]->scene().optics);
+                c.projector_levels[p.name] = {l.projector_max, l.projector_min};
+            }
+        }
+    } else {
+        HS_TRY(calib::save_device_directory(dir / "projector", projector.lut, options.decode,
+                                            projector.calibration));
+    }
     HS_TRY(calib::save_device_directory(dir / "hmd", hmd.lut, options.decode, hmd.calibration));
-    return calib::save_optics(dir / "optics.json", optical_constants(inst));
+    return calib::save_optics(dir / "optics.json", c);
 }
 
 Result<ServedCapture> serve_and_capture(
@@ -179,6 +193,101 @@ Result<ServedCapture> serve_and_capture(
     if (out.vd_pixels) {
         out.vd_mean_de00 = mean_de00(cap8, out.areas.reference);
         out.noise_vd_mean_de00 = mean_de00(again8, out.areas.reference);
+    }
+    return out;
+}
+
+Result<BlendCapture> serve_blend_and_capture(
+    gpu::Device& device, const ProjectorsReport& several,
+    std::shared_ptr<const calib::ServingCalibration> calibration, const ServeOptions& o) {
+    const auto& insts = several.installations;
+    if (insts.size() < 2)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "the blend on the simulated capture needs two or more projectors");
+    const scene::Scene room = installed_scene(insts);
+    stream::LoopbackCreateInfo info;
+    info.token = "virtual-installation";
+    info.clients = uint32_t(insts.size()) + 1;
+    info.calibration = std::move(calibration);
+    HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, room, info));
+    // A projector client per projector, by name: each receives its own frame.
+    BlendCapture out;
+    std::vector<ImageRgba32f> drives;
+    for (const auto& pj : room.projectors()) {
+        auto c = client::Connection::open(server->address());
+        if (auto* e = std::get_if<std::string>(&c))
+            return make_error(ErrorCode::kIo, *e);
+        auto& conn = *std::get<std::unique_ptr<client::Connection>>(c);
+        if (auto e = conn.hello(proto::Role::kProjector, server->token(), pj.name))
+            return make_error(ErrorCode::kIo, fmt::format("projector '{}' hello: {}", pj.name, *e));
+        HS_ASSIGN_OR_RETURN(
+            proto::ProjectorFrame pf,
+            await<proto::ProjectorFrame>(conn, o.timeout_ms, "a projector's frame"));
+        HS_ASSIGN_OR_RETURN(ImageRgba32f d,
+                            received_drive(pf.data, pf.width, pf.height, pf.format, pf.encoding));
+        drives.push_back(std::move(d));
+        out.names.push_back(pj.name);
+    }
+    server->stop();
+
+    const VirtualInstallation& first = *insts.front();
+    out.reference = first.reference(o.seed).vi;
+    HS_ASSIGN_OR_RETURN(out.capture, capture_together(insts, drives, o.seed + 101));
+    // Camera pixels of the prop by how many projectors light them.
+    const size_t n = out.reference.pixels.size() / 4;
+    std::vector<uint8_t> single(n, 0), overlap(n, 0);
+    for (size_t i = 0; i < n; ++i) {
+        int lit = 0;
+        for (const auto& inst : insts) lit += !std::isnan(inst->truth_x(Device::kProjector)[i]);
+        single[i] = lit == 1;
+        overlap[i] = lit >= 2;
+        out.single_pixels += single[i];
+        out.overlap_pixels += overlap[i];
+    }
+    const ImageRgba8 ref8 = optics::to_rgba8(out.reference), cap8 = optics::to_rgba8(out.capture);
+    const ImageRgba8 again8 = optics::to_rgba8(first.reference(o.seed + 202).vi);
+    auto de00 = [&](const ImageRgba8& img, const std::vector<uint8_t>& mask,
+                    double* p95) -> double {
+        auto lab = optics::lab_differences(ref8, img, mask, optics::PixelEncoding::kLinear);
+        if (!lab.ok())
+            return NAN;
+        if (p95 && !lab->de00.empty()) {
+            std::vector<double> v = lab->de00;
+            const size_t k = size_t(0.95 * double(v.size() - 1));
+            std::nth_element(v.begin(), v.begin() + k, v.end());
+            *p95 = v[k];
+        }
+        return lab->s00.mean;
+    };
+    // The capture's luminance over the reference's, sorted, over `mask` (where the reference
+    // is above a DN).
+    auto ratios = [&](const std::vector<uint8_t>& mask) {
+        auto luminance = [](const float* p) {
+            return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+        };
+        std::vector<double> ratio;
+        for (size_t i = 0; i < n; ++i) {
+            const double r = luminance(&out.reference.pixels[i * 4]);
+            if (mask[i] && r > 1.0)
+                ratio.push_back(luminance(&out.capture.pixels[i * 4]) / r);
+        }
+        std::sort(ratio.begin(), ratio.end());
+        return ratio;
+    };
+    auto at = [](const std::vector<double>& v, double q) {
+        return v.empty() ? 0.0 : v[size_t(q * double(v.size() - 1))];
+    };
+    if (out.single_pixels) {
+        out.single_mean_de00 = de00(cap8, single, nullptr);
+        out.single_luminance_ratio = at(ratios(single), 0.5);
+    }
+    if (out.overlap_pixels) {
+        out.overlap_mean_de00 = de00(cap8, overlap, &out.overlap_p95_de00);
+        out.noise_overlap_mean_de00 = de00(again8, overlap, nullptr);
+        const std::vector<double> r = ratios(overlap);
+        out.overlap_luminance_ratio = at(r, 0.5);
+        out.overlap_ratio_p05 = at(r, 0.05);
+        out.overlap_ratio_p95 = at(r, 0.95);
     }
     return out;
 }

@@ -6,7 +6,9 @@
 #include "gpu_fixture.hpp"
 #include "installation/chain.hpp"
 #include "installation/projectors.hpp"
+#include "optics/capture.hpp"
 #include "scene/config.hpp"
+#include "served_installation/served.hpp"
 
 using namespace hs;
 using namespace hs::test;
@@ -77,13 +79,16 @@ TEST_F(Calibration, ChainMeetsEveryTargetOnTheVirtualInstallation) {
 }
 
 // Several projectors (configs/exp1-room-3proj.json), each calibrated in turn with the one
-// camera: each meets the targets of one projector, and every pair that lights common surface
-// is registered there to within a few camera pixels.
+// camera: each meets the targets of one projector, every pair that lights common surface is
+// registered there to within a few camera pixels, and the room served with each projector's
+// calibration puts the reference's light where they overlap.
 TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
     auto s =
         scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
     ASSERT_TRUE(s.ok()) << s.error().message;
     ASSERT_EQ(s->projector_count(), 3u);
+    // The second projector is dimmer than the others: its own white level.
+    s->more_projectors[0].white_level = 0.7 * s->optics.levels.projector_max;
     installation::Options o;
     o.scale = 0.3;
     const installation::ChainOptions options;
@@ -109,6 +114,55 @@ TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
         EXPECT_LE(q.error.median_px, 2.0);
         EXPECT_LE(q.error.p95_px, 6.0);
     }
+
+    // The room served with each projector's own calibration (its colour model and, for the
+    // dimmer second projector, its own white level), every frame shown at once: where two or
+    // more projectors light the prop the capture has the reference's VI light, as where one
+    // does (the blend on the capture).
+    ASSERT_EQ(rep->installations.size(), 3u);
+    calib::ServingCalibration cal;
+    cal.dir = "in-memory";
+    cal.optics = installation::optical_constants(*rep->installations[0]);
+    for (size_t j = 0; j < 3; ++j) {
+        const auto& inst = *rep->installations[j];
+        const std::string& name = rep->projectors[j].name;
+        cal.named_projectors[name] = {
+            "in-memory/projectors/" + name, inst.device_width(Device::kProjector),
+            inst.device_height(Device::kProjector), rep->projectors[j].result.curve};
+        const auto l = optics::effective_levels(inst.scene().optics);
+        cal.optics.projector_levels[name] = {l.projector_max, l.projector_min};
+    }
+    EXPECT_LT(cal.optics.levels_of(rep->projectors[1].name).projector_max,
+              0.8 * cal.optics.levels_of(rep->projectors[0].name).projector_max);
+    const auto& first = *rep->installations[0];
+    cal.hmd = {"in-memory/hmd", first.device_width(Device::kHmd), first.device_height(Device::kHmd),
+               rep->projectors[0].result.curve};
+    auto blend = installation::serve_blend_and_capture(
+        device(), *rep, std::make_shared<const calib::ServingCalibration>(cal));
+    ASSERT_TRUE(blend.ok()) << blend.error().message;
+    std::printf(
+        "blend on the capture: one %llu px, dE00 %.2f, luminance %.3f; two or more %llu "
+        "px, dE00 %.2f (p95 %.2f), luminance %.3f (p5 %.3f, p95 %.3f); noise %.2f\n",
+        (unsigned long long)blend->single_pixels, blend->single_mean_de00,
+        blend->single_luminance_ratio, (unsigned long long)blend->overlap_pixels,
+        blend->overlap_mean_de00, blend->overlap_p95_de00, blend->overlap_luminance_ratio,
+        blend->overlap_ratio_p05, blend->overlap_ratio_p95, blend->noise_overlap_mean_de00);
+    EXPECT_EQ(blend->names.size(), 3u);
+    EXPECT_GT(blend->single_pixels, 2000u);
+    EXPECT_GT(blend->overlap_pixels, 1000u);
+    EXPECT_LE(blend->overlap_mean_de00, 3.0);
+    EXPECT_LE(blend->overlap_mean_de00, blend->single_mean_de00 + 1.0);
+    EXPECT_NEAR(blend->overlap_luminance_ratio, 1.0, 0.05);
+
+    // Served with the first projector's calibration for every projector, the dimmer one puts
+    // too little light where it shares the prop: the capture no longer matches.
+    calib::ServingCalibration same = cal;
+    for (auto& [name, lv] : same.optics.projector_levels)
+        lv = same.optics.projector_levels.at(rep->projectors[0].name);
+    auto wrong = installation::serve_blend_and_capture(
+        device(), *rep, std::make_shared<const calib::ServingCalibration>(same));
+    ASSERT_TRUE(wrong.ok()) << wrong.error().message;
+    EXPECT_LT(wrong->overlap_luminance_ratio, blend->overlap_luminance_ratio - 0.04);
 }
 
 // The pair registration on maps made by hand: the true map device = 2 x camera; a look-up

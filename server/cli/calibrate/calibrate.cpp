@@ -47,8 +47,9 @@ const char* kHelp =
     "  optics --calibration DIR [--scene FILE] [--viewer NAME] [--params FILE]\n"
     "      the optical constants `hysar serve --calibration DIR` needs besides DIR/projector/ and\n"
     "      DIR/hmd/: DIR/optics.json (alpha of the headset profile; k, levels and prop albedo of\n"
-    "      the scene's optics section; --params FILE, as `hysar eval optics --params` reads it,\n"
-    "      gives the installation's measured levels, E and alpha)\n"
+    "      the scene's optics section, and each projector's own white and black levels where\n"
+    "      the scene gives them; --params FILE, as `hysar eval optics --params` reads it, gives\n"
+    "      the installation's measured levels, E and alpha)\n"
     "  capture --projector DIR --hmd DIR --vi FILE --vivd FILE --exposure-ms MS --out DIR\n"
     "          [--scene FILE]\n"
     "          [--angle DEG] [--height NAME] [--noise-floor DN]\n"
@@ -59,6 +60,10 @@ const char* kHelp =
     "      the whole chain on the virtual installation, checked against its ground truth, and\n"
     "      its scene served on loopback with and without the calibration; --out DIR is a\n"
     "      calibration folder for hysar serve --calibration; exit code 1 when a target is missed\n"
+    "\n"
+    "several projectors: run patterns, decode, invert and colour for each projector in turn\n"
+    "with --out / --calibration DIR/projectors/NAME (NAME: the projector's name in the scene);\n"
+    "hysar serve --calibration DIR drives each projector through its own folder\n"
     "\n"
     "every numeric flag's unit, range and default: docs/LIMITS.md\n"
     "\n"
@@ -271,6 +276,11 @@ Result<void> cmd_optics(const Flags& f) {
     c.levels = s.optics.levels;
     c.prop_albedo = s.optics.prop_albedo;
     c.source = fmt::format("the scene's optics section and its headset profile '{}'", v->name);
+    // A room of several projectors: each projector's own levels, where the scene gives them.
+    for (const auto& pj : s.projectors())
+        if (pj.white_level || pj.black_level)
+            c.projector_levels[pj.name] = {pj.white_level.value_or(s.optics.levels.projector_max),
+                                           pj.black_level.value_or(s.optics.levels.projector_min)};
     if (f.has("--params")) {
         const std::string params = f.get("--params", "");
         HS_ASSIGN_OR_RETURN(optics::PaperOptics p, optics::load_paper_optics(params));
@@ -293,6 +303,8 @@ Result<void> cmd_optics(const Flags& f) {
         c.scene_to_signal > 0 ? fmt::format("{:.6g}", c.scene_to_signal).c_str() : "per scene",
         c.levels.projector_max, c.levels.projector_min, c.levels.hmd_max, c.levels.hmd_min,
         c.levels.environment, dir_s.c_str());
+    for (const auto& [name, l] : c.projector_levels)
+        std::printf("  projector '%s': P^M %.6g, P^m %.6g DN/s\n", name.c_str(), l.max, l.min);
     return {};
 }
 

@@ -71,22 +71,29 @@ json served_json(const installation::ServedCapture& c) {
 
 // The calibration folder `hysar serve --calibration` reads (in --out, or a temporary folder),
 // and the installation's scene served on loopback with it and without it.
+// With several projectors, the folder holds projectors/NAME/ for each, and the room is served
+// as well: every projector's calibrated frame shown at once (the blend on the capture).
 struct Served {
     installation::ServedCapture with, without;
+    std::optional<installation::BlendCapture> blend;
 };
 Result<Served> serve_both(gpu::Device& device, const installation::VirtualInstallation& inst,
                           const installation::ChainReport& rep,
-                          const installation::ChainOptions& co, const fs::path& dir) {
-    HS_TRY(installation::save_calibration(dir, inst, rep.projector, rep.hmd, co));
-    HS_ASSIGN_OR_RETURN(calib::ServingCalibration cal,
+                          const installation::ChainOptions& co, const fs::path& dir,
+                          const installation::ProjectorsReport* several) {
+    HS_TRY(installation::save_calibration(dir, inst, rep.projector, rep.hmd, co, several));
+    HS_ASSIGN_OR_RETURN(calib::ServingCalibration loaded,
                         calib::load_serving_calibration(dir, calib::Compensation{}));
-    log::info("served: {}", cal.summary());
+    log::info("served: {}", loaded.summary());
+    auto cal = std::make_shared<const calib::ServingCalibration>(std::move(loaded));
     Served s;
-    HS_ASSIGN_OR_RETURN(
-        s.with,
-        installation::serve_and_capture(
-            device, inst, std::make_shared<const calib::ServingCalibration>(std::move(cal))));
+    HS_ASSIGN_OR_RETURN(s.with, installation::serve_and_capture(device, inst, cal));
     HS_ASSIGN_OR_RETURN(s.without, installation::serve_and_capture(device, inst, nullptr));
+    if (several) {
+        log::info("served: the room's {} projectors at once, each with its own calibration",
+                  several->installations.size());
+        HS_ASSIGN_OR_RETURN(s.blend, installation::serve_blend_and_capture(device, *several, cal));
+    }
     return s;
 }
 
@@ -185,6 +192,22 @@ std::string outcome_rows(const installation::ChainReport& rep, const Served& ser
         served.without.prop_mean_de00, served.without.rmse_dn,
         100 * served.without.areas.mr1.value_or(0.0), sw.noise_vd_mean_de00,
         sw.noise_prop_mean_de00, sw.vd_pixels, sw.prop_pixels);
+    if (served.blend) {
+        // Several projectors, each with its own calibration, showing their frames at once.
+        const auto& b = *served.blend;
+        const bool blend_ok = b.overlap_pixels > 0 && b.overlap_mean_de00 <= kServedPropDe00;
+        if (!blend_ok)
+            missed.push_back("the blend on the capture");
+        t += fmt::format(
+            "\nthe room's {} projectors at once, each with its own calibration (the blend on "
+            "the capture), mean dE00 against the reference's VI:\n  where one projector lights "
+            "the prop   {:.2f}   ({} pixels)\n  where two or more do        {:.2f}, p95 {:.2f} "
+            "(target <= {}: {}), luminance {:.3f} of the reference (p5 {:.3f}, p95 {:.3f})   "
+            "({} pixels)\n  a second capture of the reference itself there {:.2f}\n",
+            b.names.size(), b.single_mean_de00, b.single_pixels, b.overlap_mean_de00,
+            b.overlap_p95_de00, kServedPropDe00, verdict(blend_ok), b.overlap_luminance_ratio,
+            b.overlap_ratio_p05, b.overlap_ratio_p95, b.overlap_pixels, b.noise_overlap_mean_de00);
+    }
     t += "time:";
     for (const auto& [stage, sec] : rep.seconds) t += fmt::format(" {} {:.1f} s,", stage, sec);
     t.back() = '\n';
@@ -276,6 +299,20 @@ json simulate_json(const installation::VirtualInstallation& inst, const Simulate
                        {"hmd_clipped", trip.hmd_stats.clipped}};
     j["served"] = {{"with_calibration", served_json(served.with)},
                    {"without_calibration", served_json(served.without)}};
+    if (served.blend) {
+        const auto& b = *served.blend;
+        j["served"]["projectors_together"] = {
+            {"projectors", b.names},
+            {"single_pixels", b.single_pixels},
+            {"single_mean_de00", b.single_mean_de00},
+            {"overlap_pixels", b.overlap_pixels},
+            {"overlap_mean_de00", b.overlap_mean_de00},
+            {"overlap_p95_de00", b.overlap_p95_de00},
+            {"overlap_luminance_ratio", b.overlap_luminance_ratio},
+            {"overlap_luminance_ratio_p05", b.overlap_ratio_p05},
+            {"overlap_luminance_ratio_p95", b.overlap_ratio_p95},
+            {"reference_again_overlap_mean_de00", b.noise_overlap_mean_de00}};
+    }
     for (const auto& [stage, sec] : rep.seconds) j["seconds"][stage] = sec;
     return j;
 }
@@ -300,6 +337,11 @@ Result<void> write_simulate_outputs(const Flags& f, const fs::path& out,
     HS_TRY(write_png(out / "served.png", hstack({optics::to_rgba8(served.with.reference),
                                                  optics::to_rgba8(served.with.capture),
                                                  optics::to_rgba8(served.without.capture)})));
+    // The reference's VI | every projector's calibrated frame at once.
+    if (served.blend)
+        HS_TRY(write_png(out / "projectors-together.png",
+                         hstack({optics::to_rgba8(served.blend->reference),
+                                 optics::to_rgba8(served.blend->capture)})));
     if (o.io.scale == 1.0) {
         HS_ASSIGN_OR_RETURN(std::string sj, captured_scene_json(f, inst.viewpoint().camera));
         HS_TRY(write_material(out / "material", trip.projector, trip.hmd, trip.vd, sj));
@@ -314,9 +356,11 @@ Result<void> write_simulate_outputs(const Flags& f, const fs::path& out,
             o.io.scale);
     }
     std::printf(
-        "wrote %s (report.json, roundtrip.png, served.png, projector/, hmd/, optics.json; "
+        "wrote %s (report.json, roundtrip.png, served.png, %s, hmd/, optics.json; "
         "hysar serve --calibration %s)\n",
-        out.string().c_str(), out.string().c_str());
+        out.string().c_str(),
+        several ? "projectors-together.png, projectors/NAME/ for each projector" : "projector/",
+        out.string().c_str());
     return {};
 }
 
@@ -328,7 +372,7 @@ Result<void> calibrate_simulate(const Flags& f) {
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
     // Several projectors: each calibrated in turn with the one camera, and every pair
     // registered; the chain below (headset, round trip, serving) then runs with the first
-    // projector alone, as for a room of one.
+    // projector alone, as for a room of one, and the room is served with every projector.
     std::optional<installation::ProjectorsReport> several;
     if (s.projector_count() > 1) {
         HS_ASSIGN_OR_RETURN(several, installation::calibrate_projectors(
@@ -345,7 +389,7 @@ Result<void> calibrate_simulate(const Flags& f) {
     const fs::path cal_dir =
         keep ? fs::path(f.get("--out", ""))
              : fs::temp_directory_path() / fmt::format("hysar-calibration-{}", ::getpid());
-    auto served = serve_both(*device, *inst, rep, o.co, cal_dir);
+    auto served = serve_both(*device, *inst, rep, o.co, cal_dir, several ? &*several : nullptr);
     if (!keep) {
         std::error_code ec;
         fs::remove_all(cal_dir, ec);
