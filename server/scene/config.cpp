@@ -832,7 +832,7 @@ Result<Scene> parse_scene_tree(const json& root, const std::string& source,
     if (const json* e = r.member(root, "", "effects", false)) {
         r.only(*e, "effects", {"point_light_falloff", "headset_fill"});
         s.effects.point_light_falloff = r.boolean(*e, "effects", "point_light_falloff", true);
-        s.effects.headset_fill = r.boolean(*e, "effects", "headset_fill", false);
+        s.effects.headset_fill = r.boolean(*e, "effects", "headset_fill", true);
     }
     if (const json* o = r.member(root, "", "optics", false))
         read_optics(r, *o, &s.optics);

@@ -153,9 +153,9 @@ struct Viewing {
 struct Effects {
     bool point_light_falloff = true;  // 1/d^2 for point lights; off makes them constant irradiance
     // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): surface a viewer sees but no projector
-    // reaches gets its VI part in the viewer's VD layer. Off by default: on lavapipe the
-    // process grows by about 1.2 MB with every layer that draws it (not found yet).
-    bool headset_fill = false;
+    // reaches gets its VI part in the viewer's VD layer. On by default; it costs nothing where
+    // the projectors reach everything a viewer sees.
+    bool headset_fill = true;
 };
 
 // Device levels as a user-perspective camera measures them (paper Sec. 4.4): mean camera value

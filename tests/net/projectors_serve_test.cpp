@@ -37,7 +37,6 @@ protected:
             return s;  // the load failed, and said so
         for (scene::Projector* p : {&s.projector, &s.more_projectors[0], &s.more_projectors[1]})
             p->intrinsics = {480, 300, 750, 750, 239.5, 149.5};
-        s.effects.headset_fill = true;  // the scene opts in (off by default)
         return s;
     }
     std::optional<proto::ProjectorFrame> frame_as(const std::string& name) {

@@ -256,11 +256,11 @@ TEST(Config, PointLightOnOrInsideThePropIsRefused) {
                 }).ok());
 }
 
-TEST(Config, HeadsetFillIsOffUnlessTheSceneTurnsItOn) {
-    EXPECT_FALSE(default_scene().effects.headset_fill);
-    auto on = parse_edited([](auto& j) { j["effects"]["headset_fill"] = true; });
-    ASSERT_TRUE(on.ok()) << on.error().message;
-    EXPECT_TRUE(on->effects.headset_fill);
+TEST(Config, HeadsetFillIsOnUnlessTheSceneTurnsItOff) {
+    EXPECT_TRUE(default_scene().effects.headset_fill);
+    auto off = parse_edited([](auto& j) { j["effects"]["headset_fill"] = false; });
+    ASSERT_TRUE(off.ok()) << off.error().message;
+    EXPECT_FALSE(off->effects.headset_fill);
     auto bad = parse_edited([](auto& j) { j["effects"]["headset_fill"] = "yes"; });
     ASSERT_FALSE(bad.ok());
     EXPECT_NE(bad.error().message.find("effects.headset_fill"), std::string::npos)
