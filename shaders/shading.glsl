@@ -152,8 +152,9 @@ void hs_light(vec4 position_or_direction, vec3 irradiance, vec3 p, vec3 n, float
         float dc = max(dist, d_min);
         at_point /= dc * dc;
     }
-    l = directional ? position_or_direction.xyz : to_point;
-    E = directional ? irradiance : at_point;
+    // mix with a bool vector is a per-component select (OpSelect), whatever its operands.
+    l = mix(to_point, position_or_direction.xyz, bvec3(directional));
+    E = mix(at_point, irradiance, bvec3(directional));
 }
 
 // Radiance as a half-float layer carries it: NaN as 0, clamped to [0, 65504] (the largest

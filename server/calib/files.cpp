@@ -342,6 +342,19 @@ scene::DeviceLevels OpticalConstants::levels_of(const std::string& name) const {
     return l;
 }
 
+namespace {
+
+// A device level (camera DN/s) at `key` of `j`, named `at`.key in errors: finite and >= 0.
+double level_of(const json& j, const char* key, const std::string& at) {
+    const std::string name = at + "." + key;
+    const double v = finite_number(j, key, name);
+    if (v < 0)
+        throw FieldError(fmt::format("{} is {} DN/s; levels are >= 0", name, v));
+    return v;
+}
+
+}  // namespace
+
 Result<OpticalConstants> load_optics(const fs::path& file) {
     return from_json<OpticalConstants>(file, "hysar-optics", [](const json& j) {
         OpticalConstants c;
@@ -354,13 +367,7 @@ Result<OpticalConstants> load_optics(const fs::path& file) {
             throw FieldError(fmt::format("scene_to_signal is {}; it must be >= 0 (0: per scene)",
                                          c.scene_to_signal));
         const json& l = field(j, "levels", "levels");
-        auto level = [&](const char* key) {
-            const std::string name = std::string("levels.") + key;
-            const double v = finite_number(l, key, name);
-            if (v < 0)
-                throw FieldError(fmt::format("{} is {} DN/s; levels are >= 0", name, v));
-            return v;
-        };
+        auto level = [&](const char* key) { return level_of(l, key, "levels"); };
         c.levels.projector_max = level("projector_max");
         c.levels.projector_min = level("projector_min");
         c.levels.hmd_max = level("hmd_max");
@@ -381,13 +388,7 @@ Result<OpticalConstants> load_optics(const fs::path& file) {
                 const std::string at = "projectors." + name;
                 if (!lj.is_object())
                     throw FieldError(fmt::format("{} is not an object", at));
-                auto level = [&](const char* key) {
-                    const std::string n = at + "." + key;
-                    const double v = finite_number(lj, key, n);
-                    if (v < 0)
-                        throw FieldError(fmt::format("{} is {} DN/s; levels are >= 0", n, v));
-                    return v;
-                };
+                auto level = [&](const char* key) { return level_of(lj, key, at); };
                 OpticalConstants::ProjectorLevels pl{level("projector_max"),
                                                      level("projector_min")};
                 if (!(pl.max > pl.min))

@@ -77,16 +77,6 @@ Result<ServedDevice> load_device(const fs::path& sub) {
     return d;
 }
 
-// Whether `image` has light where the geometry says the projector lights the prop.
-bool lights_the_prop(const ImageRgba32f& image, const ImageRgba32f& geometry) {
-    for (size_t i = 0, n = size_t(image.width) * image.height; i < n; ++i)
-        if (geometry.pixels[i * 4 + 3] > 0.5f && geometry.pixels[i * 4 + 2] > 0.0f &&
-            std::max({image.pixels[i * 4], image.pixels[i * 4 + 1], image.pixels[i * 4 + 2]}) >
-                1e-9f)
-            return true;
-    return false;
-}
-
 }  // namespace
 
 Result<Compensation> parse_compensation(const std::string& list) {
@@ -312,19 +302,23 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
         ProjectorDrives d;
         d.name = all[j].name;
         d.dir = device_for(all[j].name, j)->dir;
-        HS_ASSIGN_OR_RETURN(d.g_ref, optics::reference_falloff(geometry, k));
+        auto g_ref = optics::reference_falloff(geometry, k);
+        if (!g_ref)
+            return make_error(g_ref.error().code, fmt::format("projector '{}': {}", all[j].name,
+                                                              g_ref.error().message));
+        d.g_ref = *g_ref;
         out.projectors.push_back(std::move(d));
         o[j] = drive_optics(all[j].name);
     }
     // One k for the room: the largest that every projector can show its share at.
     out.scene_to_signal = optics.scene_to_signal;
     if (!(out.scene_to_signal > 0)) {
+        // A projector whose share wants no light on its well-lit prop sets no limit.
         double k = std::numeric_limits<double>::infinity();
         for (size_t j = 0; j < all.size(); ++j)
-            if (lights_the_prop(*shares[j].vi, *shares[j].geometry))
-                k = std::min(k,
-                             optics::auto_scene_to_signal(o[j], *shares[j].vi, *shares[j].geometry,
-                                                          out.projectors[j].g_ref));
+            if (auto kj = optics::largest_scene_to_signal(o[j], *shares[j].vi, *shares[j].geometry,
+                                                          out.projectors[j].g_ref))
+                k = std::min(k, *kj);
         out.scene_to_signal = std::isfinite(k) ? k : 1.0;  // nothing lit: any k shows it
     }
     if (!(out.scene_to_signal > 0) || !std::isfinite(out.scene_to_signal))
@@ -429,7 +423,8 @@ Result<ServingCalibration> load_serving_calibration(const fs::path& dir,
     }
     if (has_named) {
         for (const auto& e : fs::directory_iterator(named, ec)) {
-            if (!e.is_directory(ec))
+            std::error_code entry_ec;
+            if (!e.is_directory(entry_ec))
                 continue;
             HS_ASSIGN_OR_RETURN(ServedDevice d, load_device(e.path()));
             cal.named_projectors.emplace(e.path().filename().string(), std::move(d));

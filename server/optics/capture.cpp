@@ -177,6 +177,11 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
 
 double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
                             const ImageRgba32f& geo, double g_ref) {
+    return largest_scene_to_signal(o, image, geo, g_ref).value_or(1.0);
+}
+
+std::optional<double> largest_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
+                                              const ImageRgba32f& geo, double g_ref) {
     const glm::dvec3 rho = o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     const double rho_min = std::max(std::min({rho.r, rho.g, rho.b}), 1e-6);
     HS_CHECK(geo.width == image.width && geo.height == image.height,
@@ -196,7 +201,9 @@ double auto_scene_to_signal(const scene::Optics& o, const ImageRgba32f& image,
             k = std::min(k, rho_min * f * o.levels.projector_max / l);
         }
     }
-    return std::isfinite(k) ? 0.95 * k : 1.0;
+    if (!std::isfinite(k))
+        return std::nullopt;
+    return 0.95 * k;
 }
 
 ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,

@@ -8,6 +8,7 @@
 // what a device is sent, linear in [0, 1]; camera values in DN.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -68,6 +69,11 @@ ImageRgba32f expose(const scene::Optics& optics, const ImageRgba32f& signal,
 // the body of the prop does not.
 double auto_scene_to_signal(const scene::Optics& optics, const ImageRgba32f& image,
                             const ImageRgba32f& projector_geometry, double g_ref);
+// The same without the 1.0 it falls back to: none where no well-lit pixel of the prop wants
+// light (a projector whose share is black, or lights only grazing surface).
+std::optional<double> largest_scene_to_signal(const scene::Optics& optics,
+                                              const ImageRgba32f& image,
+                                              const ImageRgba32f& projector_geometry, double g_ref);
 
 // Projector drive for a wanted projector signal `target` (DN/s at the camera, without the
 // headset; projector pixels), corrected as optics.compensation says. `hmd_min_through` is the

@@ -43,8 +43,8 @@ struct LoopbackCreateInfo {
     // Bit-rate limits, Mbit/s (ServerLimits::headset_mbps, room_mbps; 0: none).
     double headset_mbps = 0, room_mbps = 0;
     int layer_quality = 0;  // JPEG quality of lossy tiles, 1..100; 0: the server's default
-    // Calibrated output (docs/CALIBRATION.md): frame and layers sent as device drives; a scene
-    // whose projector is not the calibrated size is refused. Null: sent as rendered.
+    // Calibrated output (docs/CALIBRATION.md): frames and layers sent as device drives; a scene
+    // with a projector that has no calibrated folder of its size is refused. Null: as rendered.
     std::shared_ptr<const calib::ServingCalibration> calibration;
 };
 

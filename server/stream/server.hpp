@@ -103,8 +103,9 @@ struct ServerCreateInfo {
     // (`hysar serve --layer-quality`); the others get the lossless encodings they ask for.
     int layer_quality = protocol::kDefaultLayerQuality;
     // Calibrated output (`hysar serve --calibration`, docs/CALIBRATION.md): the projector frame
-    // and every rendered VD layer are sent as device drives; a scene whose projector or a
-    // headset whose display is not the calibrated size is refused. Null: sent as rendered.
+    // and every rendered VD layer are sent as device drives; a scene with a projector that has
+    // no calibrated folder of its size, or a headset whose display is not the calibrated size,
+    // is refused. Null: sent as rendered.
     std::shared_ptr<const calib::ServingCalibration> calibration;
     // Keeps each headset's latest delivered frame (its two encoded layers) for snapshot(), so a
     // watcher can show what it sees (`hysar serve --admin-listen`): one frame per headset, held

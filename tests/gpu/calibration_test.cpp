@@ -87,8 +87,10 @@ TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
         scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
     ASSERT_TRUE(s.ok()) << s.error().message;
     ASSERT_EQ(s->projector_count(), 3u);
-    // The second projector is dimmer than the others: its own white level.
+    // The second projector is dimmer than the others (its own white level), and the room has
+    // some light of its own, which the projectors' shares must take off once.
     s->more_projectors[0].white_level = 0.7 * s->optics.levels.projector_max;
+    s->optics.levels.environment = 60.0;
     installation::Options o;
     o.scale = 0.3;
     const installation::ChainOptions options;
@@ -135,6 +137,7 @@ TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
     EXPECT_LT(cal.optics.levels_of(rep->projectors[1].name).projector_max,
               0.8 * cal.optics.levels_of(rep->projectors[0].name).projector_max);
     const auto& first = *rep->installations[0];
+    // The headset shows black here: any colour model serves for it.
     cal.hmd = {"in-memory/hmd", first.device_width(Device::kHmd), first.device_height(Device::kHmd),
                rep->projectors[0].result.curve};
     auto blend = installation::serve_blend_and_capture(
@@ -154,15 +157,15 @@ TEST_F(Calibration, SeveralProjectorsEachMeetTheTargetsOfOne) {
     EXPECT_LE(blend->overlap_mean_de00, blend->single_mean_de00 + 1.0);
     EXPECT_NEAR(blend->overlap_luminance_ratio, 1.0, 0.05);
 
-    // Served with the first projector's calibration for every projector, the dimmer one puts
-    // too little light where it shares the prop: the capture no longer matches.
+    // Served with the first projector's levels for every projector, the dimmer one puts too
+    // little light where it shares the prop: the capture no longer matches.
     calib::ServingCalibration same = cal;
     for (auto& [name, lv] : same.optics.projector_levels)
         lv = same.optics.projector_levels.at(rep->projectors[0].name);
     auto wrong = installation::serve_blend_and_capture(
         device(), *rep, std::make_shared<const calib::ServingCalibration>(same));
     ASSERT_TRUE(wrong.ok()) << wrong.error().message;
-    EXPECT_LT(wrong->overlap_luminance_ratio, blend->overlap_luminance_ratio - 0.04);
+    EXPECT_LT(wrong->overlap_luminance_ratio, blend->overlap_luminance_ratio - 0.02);
 }
 
 // The pair registration on maps made by hand: the true map device = 2 x camera; a look-up

@@ -40,6 +40,14 @@ TEST_F(ServerTest, ProjectorFrameIsRenderedOnceForEveryProjector) {
 class HeadsetCount : public ServerTest,
                      public ::testing::WithParamInterface<std::tuple<int, uint32_t>> {
 protected:
+    // Each layer is compared with a one-off render of its pose (render_eye), which does not draw
+    // the headsets' fill-in: the served layers leave it out too (it is tested against the VI
+    // in tests/gpu/fill_test.cpp and served in tests/net/projectors_serve_test.cpp).
+    scene::Scene make_scene() override {
+        scene::Scene s = test_scene();
+        s.effects.headset_fill = false;
+        return s;
+    }
     void configure(stream::ServerCreateInfo& info) override {
         info.encoder_threads = std::get<1>(GetParam());
     }
@@ -485,7 +493,10 @@ TEST_F(SceneMemoryTest, OneHundredFiftyUpdatesEndWhereTheFirstVersionWas) {
         EXPECT_EQ(end[k].get<int64_t>(), base[k].get<int64_t>()) << k << ": " << end.dump();
     EXPECT_LE(most_device, base["device_bytes"].get<int64_t>()) << end.dump();
     EXPECT_LE(most_cpu, base["cpu_bytes"].get<int64_t>()) << end.dump();
-    EXPECT_LE(end["device_bytes_peak"].get<int64_t>(), 2 * base["device_bytes"].get<int64_t>())
+    // Two versions at most, and beside them, while a version is built, the staging copy of a
+    // texture it uploads (the headsets' fill-in's shadow maps: 5 % of a version here).
+    EXPECT_LE(end["device_bytes_peak"].get<int64_t>(),
+              2 * base["device_bytes"].get<int64_t>() + base["device_bytes"].get<int64_t>() / 10)
         << end.dump();
 }
 

@@ -395,7 +395,9 @@ TEST_F(Folder, ProjectorDriveMakesTheTargetThroughTheColourModel) {
 
 // Two projectors, each through its own folder: each drive makes its weight's share of the
 // target through its own colour model and its own levels, with one k for the room (the largest
-// both can show), and the black levels' compensation takes off each one's own black.
+// both can show); the black levels' compensation takes off each one's own black and its
+// weight's share of the room light, so that together they make the target less the room light
+// once.
 TEST_F(Folder, EachProjectorIsDrivenForItsShareWithItsOwnLevels) {
     fs::create_directories(dir_ / "projectors");
     fs::rename(dir_ / "projector", dir_ / "projectors" / "front");
@@ -403,7 +405,8 @@ TEST_F(Folder, EachProjectorIsDrivenForItsShareWithItsOwnLevels) {
     fs::copy(dir_ / "projectors" / "front", dir_ / "projectors" / "rear",
              fs::copy_options::recursive);
     json j = read(dir_ / "optics.json");
-    j["scene_to_signal"] = 0;  // per scene: the largest both can show
+    j["scene_to_signal"] = 0;           // per scene: the largest both can show
+    j["levels"]["environment"] = 40.0;  // the room light E, which the two must share
     j["projectors"] = {{"rear", {{"projector_max", 1200.0}, {"projector_min", 30.0}}}};
     write(dir_ / "optics.json", j);
     auto cal = load_serving_calibration(dir_, Compensation{});
@@ -443,6 +446,7 @@ TEST_F(Folder, EachProjectorIsDrivenForItsShareWithItsOwnLevels) {
     EXPECT_DOUBLE_EQ(d->scene_to_signal, std::min(k_each[0], k_each[1]));
     EXPECT_LT(k_each[1], k_each[0]);  // the rear is dimmer
     const glm::dvec3 rho = cal->optics.prop_albedo;
+    const double room = 40.0;
     const glm::dvec3 white = device(glm::dvec3(1.0)) - device(glm::dvec3(0.0));
     for (uint32_t x : {5u, 32u, 58u}) {
         glm::dvec3 total(0.0);
@@ -458,9 +462,9 @@ TEST_F(Folder, EachProjectorIsDrivenForItsShareWithItsOwnLevels) {
                 total[c] += made;
                 // Within 0.5 % of the projector's white (a small share is a low drive, where
                 // the fitted response curve is least exact).
-                if (w * d->scene_to_signal * radiance[c] > rho[c] * lv.projector_min) {
-                    EXPECT_NEAR(made, w * d->scene_to_signal * radiance[c],
-                                0.005 * rho[c] * lv.projector_max)
+                const double share = w * (d->scene_to_signal * radiance[c] - room);
+                if (share > rho[c] * lv.projector_min) {
+                    EXPECT_NEAR(made, share, 0.005 * rho[c] * lv.projector_max)
                         << "x " << x << " projector " << p << " channel " << c;
                 }
             }
@@ -468,7 +472,7 @@ TEST_F(Folder, EachProjectorIsDrivenForItsShareWithItsOwnLevels) {
         // Together: the target where neither is held at its black.
         if (x == 32u) {
             for (int c = 0; c < 3; ++c)
-                EXPECT_NEAR(total[c] / (d->scene_to_signal * radiance[c]), 1.0, 0.01) << c;
+                EXPECT_NEAR(total[c] / (d->scene_to_signal * radiance[c] - room), 1.0, 0.01) << c;
         }
     }
     // One share per projector, of the projector's size.

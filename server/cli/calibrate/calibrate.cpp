@@ -276,11 +276,6 @@ Result<void> cmd_optics(const Flags& f) {
     c.levels = s.optics.levels;
     c.prop_albedo = s.optics.prop_albedo;
     c.source = fmt::format("the scene's optics section and its headset profile '{}'", v->name);
-    // A room of several projectors: each projector's own levels, where the scene gives them.
-    for (const auto& pj : s.projectors())
-        if (pj.white_level || pj.black_level)
-            c.projector_levels[pj.name] = {pj.white_level.value_or(s.optics.levels.projector_max),
-                                           pj.black_level.value_or(s.optics.levels.projector_min)};
     if (f.has("--params")) {
         const std::string params = f.get("--params", "");
         HS_ASSIGN_OR_RETURN(optics::PaperOptics p, optics::load_paper_optics(params));
@@ -292,6 +287,12 @@ Result<void> cmd_optics(const Flags& f) {
             "the scene's optics section",
             params);
     }
+    // Each projector's own levels, where the scene gives them (a room of one too), the others
+    // from the levels above.
+    for (const auto& pj : s.projectors())
+        if (pj.white_level || pj.black_level)
+            c.projector_levels[pj.name] = {pj.white_level.value_or(c.levels.projector_max),
+                                           pj.black_level.value_or(c.levels.projector_min)};
     const fs::path file = fs::path(dir_s) / "optics.json";
     HS_TRY(make_dirs(dir_s));
     HS_TRY(calib::save_optics(file, c));

@@ -201,12 +201,14 @@ std::string outcome_rows(const installation::ChainReport& rep, const Served& ser
         t += fmt::format(
             "\nthe room's {} projectors at once, each with its own calibration (the blend on "
             "the capture), mean dE00 against the reference's VI:\n  where one projector lights "
-            "the prop   {:.2f}   ({} pixels)\n  where two or more do        {:.2f}, p95 {:.2f} "
+            "the prop   {:.2f}, luminance {:.3f} of the reference   ({} pixels)\n  where two or "
+            "more do        {:.2f}, p95 {:.2f} "
             "(target <= {}: {}), luminance {:.3f} of the reference (p5 {:.3f}, p95 {:.3f})   "
             "({} pixels)\n  a second capture of the reference itself there {:.2f}\n",
-            b.names.size(), b.single_mean_de00, b.single_pixels, b.overlap_mean_de00,
-            b.overlap_p95_de00, kServedPropDe00, verdict(blend_ok), b.overlap_luminance_ratio,
-            b.overlap_ratio_p05, b.overlap_ratio_p95, b.overlap_pixels, b.noise_overlap_mean_de00);
+            b.names.size(), b.single_mean_de00, b.single_luminance_ratio, b.single_pixels,
+            b.overlap_mean_de00, b.overlap_p95_de00, kServedPropDe00, verdict(blend_ok),
+            b.overlap_luminance_ratio, b.overlap_ratio_p05, b.overlap_ratio_p95, b.overlap_pixels,
+            b.noise_overlap_mean_de00);
     }
     t += "time:";
     for (const auto& [stage, sec] : rep.seconds) t += fmt::format(" {} {:.1f} s,", stage, sec);
@@ -305,6 +307,7 @@ json simulate_json(const installation::VirtualInstallation& inst, const Simulate
             {"projectors", b.names},
             {"single_pixels", b.single_pixels},
             {"single_mean_de00", b.single_mean_de00},
+            {"single_luminance_ratio", b.single_luminance_ratio},
             {"overlap_pixels", b.overlap_pixels},
             {"overlap_mean_de00", b.overlap_mean_de00},
             {"overlap_p95_de00", b.overlap_p95_de00},
