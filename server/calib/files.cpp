@@ -388,9 +388,8 @@ Result<OpticalConstants> load_optics(const fs::path& file) {
                 const std::string at = "projectors." + name;
                 if (!lj.is_object())
                     throw FieldError(fmt::format("{} is not an object", at));
-                auto level = [&](const char* key) { return level_of(lj, key, at); };
-                OpticalConstants::ProjectorLevels pl{level("projector_max"),
-                                                     level("projector_min")};
+                OpticalConstants::ProjectorLevels pl{level_of(lj, "projector_max", at),
+                                                     level_of(lj, "projector_min", at)};
                 if (!(pl.max > pl.min))
                     throw FieldError(
                         fmt::format("{0}.projector_max ({1}) must be above "
