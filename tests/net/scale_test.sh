@@ -19,6 +19,10 @@ HYSAR_VALIDATION=1 "$bin/hysar" serve --listen 127.0.0.1:0 --unix "$dir/hysar.so
 server=$!
 for _ in $(seq 100); do [[ -S "$dir/hysar.sock" ]] && break; sleep 0.1; done
 [[ -S "$dir/hysar.sock" ]] || { echo "the server did not start:"; cat "$dir/serve.log"; exit 1; }
+# The socket opens before the first scene version is built and warmed up (2-3 s under
+# AddressSanitizer, as long as the first run): the runs below measure serving, so they wait.
+for _ in $(seq 1200); do grep -q "warm-up:" "$dir/serve.log" && break; sleep 0.1; done
+grep -q "warm-up:" "$dir/serve.log" || { echo "the server did not warm up:"; cat "$dir/serve.log"; exit 1; }
 for n in 1 8 32; do
   # Every headset must get a frame: 32 of them share one renderer, and on a slow machine (or
   # under AddressSanitizer) one round over all of them takes several seconds, so they get
