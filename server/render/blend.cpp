@@ -22,6 +22,22 @@ double smoothstep01(double t) {
     return t * t * (3.0 - 2.0 * t);
 }
 
+// The roll-off toward grazing: 1 from cos theta = c1 (incidence_rolloff) up, 0 from c0
+// (incidence_cutoff) down, and between them a smoothstep of sin theta rather than of cos theta.
+// Where a projector meets a curved surface at a slant its image of the surface is compressed:
+// across a limb its pixel coordinate moves with sin theta, while cos theta changes ever faster
+// per pixel toward grazing (d cos / d sin = -tan theta). A ramp in cos theta put the whole
+// change of the weight into a few pixels next to c0, too steep for the weight image sampled at
+// the projector's pixels; a ramp in sin theta is spread evenly over the band's pixels.
+double incidence_rolloff(const BlendOptions& o, double cos_t) {
+    const auto sin_of = [](double c) { return std::sqrt(std::max(0.0, 1.0 - c * c)); };
+    const double c0 = o.incidence_cutoff, c1 = o.incidence_rolloff;
+    if (!(c1 > c0))
+        return cos_t >= c1 ? 1.0 : 0.0;
+    const double s0 = sin_of(c0), s1 = sin_of(std::clamp(c1, 0.0, 1.0));
+    return smoothstep01((s0 - sin_of(std::clamp(cos_t, 0.0, 1.0))) / std::max(s0 - s1, 1e-12));
+}
+
 // The roll-off toward the frame's edges at pixel (u, v): 1 inside, smoothly to 0 at the edge.
 double edge_factor(const scene::Intrinsics& k, double rolloff, double u, double v) {
     const double dx = std::min(u + 0.5, double(k.width) - 0.5 - u);
@@ -267,8 +283,7 @@ double raw_factor(const SurfaceView& view, const BlendOptions& o, const glm::dve
     if (farthest >= 0.0 && farthest < uvz->z - bias)
         return 0.0;
     // The roll-offs toward grazing and toward the prop's outline in j's frame.
-    double soft = smoothstep01((cos_t - o.incidence_cutoff) /
-                               std::max(o.incidence_rolloff - o.incidence_cutoff, 1e-9));
+    double soft = incidence_rolloff(o, cos_t);
     if (!view.edge_distance.empty() && o.silhouette_rolloff > 0.0) {
         const double band = o.silhouette_rolloff * double(std::min(k.width, k.height));
         double dist = 0.0, norm = 0.0;

@@ -7,11 +7,13 @@
 // and its normal. For a point p with normal n, projector j's blend factor is
 //
 //   a_j(p) = V_j(p) * max(0, cos theta_j) / d_j^2 * (f + (1 - f) s_j(p)) * e_j(p)
-//   s_j(p) = S((cos theta_j - c0) / (c1 - c0)) [* S(outline distance / band), when enabled]
+//   s_j(p) = S((sin_0 - sin theta_j) / (sin_0 - sin_1)) [* S(outline distance / band), when
+//            enabled], sin_0 = sqrt(1 - c0^2), sin_1 = sqrt(1 - c1^2)
 //
 // V_j: 1 when p is inside j's frame, faces j and no nearer surface hides it from j (the shadow
 // test), theta_j and d_j: the incidence angle and distance of j's light at p, S: the smoothstep
-// 3t^2 - 2t^3 on [0, 1], s_j: the roll-off toward grazing, from cos theta = c1 down to c0 (a
+// 3t^2 - 2t^3 on [0, 1], s_j: the roll-off toward grazing, from cos theta = c1 down to c0, a
+// ramp in sin theta, which is even in a projector's pixels across a limb (a
 // projector's light there moves far across the surface for a small misregistration, and its
 // pixels' footprints stretch), f: a small floor (rolloff_floor) that keeps the weights
 // continuous where every projector is in a roll-off, e_j: the roll-off over the `edge_rolloff`

@@ -237,9 +237,12 @@ TEST(Blend, ViewsAllAroundSeeTheSingleProjectorLight) {
         ASSERT_GT(view.prop_pixels, 5000u);
         EXPECT_GE(view.coverage(), 0.99) << angle;
         EXPECT_GT(view.overlap, 0u) << angle;
-        // What the sampled weight images deliver: the single projector's light.
-        EXPECT_LT(view.mean_error, 0.005) << angle;
-        EXPECT_LT(view.p99_error, 0.06) << angle;
+        // What the sampled weight images deliver: the single projector's light. At this
+        // resolution the roll-off toward grazing as a ramp in sin theta gives a mean error of
+        // 0.0023-0.0027 and a p99 of 0.016-0.027 over these views; the ramp in cos theta it
+        // replaced gave 0.0037-0.0042 and 0.038-0.050 (docs/OPTICS.md, "Several projectors").
+        EXPECT_LT(view.mean_error, 0.0033) << angle;
+        EXPECT_LT(view.p99_error, 0.034) << angle;
         std::printf("angle %d: coverage %.4f overlap %llu mean %.4f p99 %.4f max %.4f step %.4f\n",
                     angle, view.coverage(), (unsigned long long)view.overlap, view.mean_error,
                     view.p99_error, view.max_error, view.max_step);
