@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "../rss.hpp"
+#include "../shrink.hpp"
 #include "core/srgb.hpp"
 #include "gpu_fixture.hpp"
 #include "render/blend.hpp"
@@ -20,16 +21,7 @@ protected:
     void SetUp() override {
         GpuTest::SetUp();
         scene_ = scene::default_scene();
-        shrink(scene_.projector, 4);
-    }
-    static void shrink(scene::Projector& p, uint32_t div) {
-        auto& k = p.intrinsics;
-        k = {k.width / div,
-             k.height / div,
-             k.fx / div,
-             k.fy / div,
-             (k.width / div - 1) * 0.5,
-             (k.height / div - 1) * 0.5};
+        test::shrink(scene_.projector, 4);
     }
     // The eye at the scene's viewing distance and height M, `angle` degrees about the prop.
     scene::Pose eye_at(double angle) const {
@@ -157,7 +149,7 @@ TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
     ASSERT_TRUE(loaded.ok()) << loaded.error().message;
     scene::Scene three = loaded.value();
     for (auto* p : {&three.projector, &three.more_projectors[0], &three.more_projectors[1]})
-        shrink(*p, 8);
+        test::shrink(*p, 8);
     auto r3 = make_renderer(three);
     ASSERT_TRUE(r3);
     const render::Blend b3 = render::compute_blend(r3->mesh(), three.projectors());

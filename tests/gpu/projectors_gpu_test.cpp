@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "../shrink.hpp"
 #include "gpu_fixture.hpp"
 #include "render/projectors.hpp"
 
@@ -12,15 +13,7 @@ namespace {
 
 class Projectors : public test::GpuTest {};
 
-void shrink(scene::Projector& p, uint32_t div) {
-    auto& k = p.intrinsics;
-    k = {k.width / div,
-         k.height / div,
-         k.fx / div,
-         k.fy / div,
-         (k.width / div - 1) * 0.5,
-         (k.height / div - 1) * 0.5};
-}
+using test::shrink;
 
 }  // namespace
 

@@ -11,6 +11,7 @@
 #include <glm/trigonometric.hpp>
 #include <nlohmann/json.hpp>
 
+#include "../shrink.hpp"
 #include "bench/stability.hpp"
 #include "render/blend.hpp"
 #include "scene/camera.hpp"
@@ -47,17 +48,8 @@ Scene three_projector_room(uint32_t div) {
     auto s = load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
     EXPECT_TRUE(s.ok()) << s.error().message;
     Scene scene = s.value();
-    const auto shrink = [&](Projector& p) {
-        auto& k = p.intrinsics;
-        k = {k.width / div,
-             k.height / div,
-             k.fx / div,
-             k.fy / div,
-             (k.width / div - 1) * 0.5,
-             (k.height / div - 1) * 0.5};
-    };
-    shrink(scene.projector);
-    for (auto& p : scene.more_projectors) shrink(p);
+    test::shrink(scene.projector, div);
+    for (auto& p : scene.more_projectors) test::shrink(p, div);
     return scene;
 }
 
