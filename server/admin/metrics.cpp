@@ -219,6 +219,10 @@ void frame_families(Writer& w, const stream::ServerSnapshot& s) {
     w.family("hysar_projector_renders_total", "counter",
              "Projector frames rendered (one per scene version).");
     w.sample("hysar_projector_renders_total", "", s.projector_renders);
+    w.family("hysar_scene_relabels_total", "counter",
+             "Scene versions that were the running scene under a new number (a node put it back "
+             "on a scene bus found empty): announced again, not rendered.");
+    w.sample("hysar_scene_relabels_total", "", s.scene_relabels);
     w.family("hysar_projector_connected", "gauge",
              "1 while the scene's projector has a projector client connected, else 0.");
     for (const auto& p : s.projectors)

@@ -638,11 +638,21 @@ void print_started(const stream::Server& server, const stream::ServerCreateInfo&
 }
 
 // Every node (this one's writes too) applies what the bus's watch delivers (signed, the newest
-// of a burst), if newer and following what it applied.
-void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
+// of a burst), if newer and following what it applied. A refill of the scene this node applied
+// last (the bus was found empty, by a delete or a restart without its store) is that scene
+// again: relabelled with the new version, not rebuilt. An admin's write of the same JSON is
+// built again (it may be meant to reload a changed glTF or texture). `started` is the JSON
+// this node started on.
+void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string started) {
     stream::Server* watched = &server;
     cluster::SceneBus* b = &bus;
-    bus.watch([watched, b](const cluster::SceneBus::Value& v) {
+    struct Applied {
+        std::mutex mutex;
+        std::string json;
+    };
+    auto applied_json = std::make_shared<Applied>();
+    applied_json->json = std::move(started);
+    bus.watch([watched, b, applied_json](const cluster::SceneBus::Value& v) {
         const uint64_t applied = watched->bus_version();
         if (v.revision > 0xffffffffu || !cluster::SceneBus::newer(v.revision, applied))
             return;
@@ -657,11 +667,20 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server) {
         // Held even if it cannot be built here: it is the cluster's scene, which this node
         // puts back on a bus that comes back empty or behind.
         b->hold(v);
+        std::lock_guard lock(applied_json->mutex);
+        if (v.refill && v.json == applied_json->json) {
+            ++b->counters().relabelled;
+            watched->relabel_scene_version(uint32_t(v.revision));
+            log::info("scene bus: version {} arrived, the scene already applied: relabelled",
+                      v.revision);
+            return;
+        }
         if (auto r = watched->apply_scene_version(v.json, uint32_t(v.revision)); !r) {
             ++b->counters().invalid_values;
             log::error("scene bus: version {} cannot be served here: {}; the running scene stays",
                        v.revision, r.error().message);
         } else {
+            applied_json->json = v.json;
             log::info("scene bus: version {} arrived", v.revision);
         }
     });
@@ -835,7 +854,7 @@ int run_serve(const std::vector<std::string>& args) {
     // its meshes and textures, so that a replaced first scene is freed (docs/OPERATIONS.md).
     s.value() = scene::Scene{};
     if (bus)
-        watch_bus(*bus, *server.value());
+        watch_bus(*bus, *server.value(), bus->held().json);
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (setup.admin) {
         auto a = start_admin(*setup.admin, info.token, info.tls_cert_file, info.tls_key_file,

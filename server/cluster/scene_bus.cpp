@@ -185,6 +185,12 @@ std::string SceneBus::metrics_text() const {
         "# TYPE hysar_scene_bus_caught_up_total counter\nhysar_scene_bus_caught_up_total {}\n",
         counters_.caught_up.load());
     t += fmt::format(
+        "# HELP hysar_scene_bus_relabelled_total Refills of the scene this node had applied "
+        "(another node, or this one, put it back on a bus found empty): applied as the new "
+        "version without building the scene again.\n"
+        "# TYPE hysar_scene_bus_relabelled_total counter\nhysar_scene_bus_relabelled_total {}\n",
+        counters_.relabelled.load());
+    t += fmt::format(
         "# HELP hysar_scene_bus_connected Whether this node is connected to the scene bus.\n"
         "# TYPE hysar_scene_bus_connected gauge\nhysar_scene_bus_connected {}\n",
         connected() ? 1 : 0);
@@ -589,6 +595,11 @@ void SceneBus::hold(const Value& value) {
     std::lock_guard lock(held_mutex_);
     if (value.revision >= held_.revision)
         held_ = value;
+}
+
+SceneBus::Value SceneBus::held() const {
+    std::lock_guard lock(held_mutex_);
+    return held_;
 }
 
 std::optional<SceneBus::Refill> SceneBus::plan_refill(const Value& held, uint64_t bus_revision,

@@ -75,8 +75,9 @@ public:
         std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
         std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
         std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
-        std::atomic<uint64_t> refills{0};    // the bus came back empty or behind and was refilled
-        std::atomic<uint64_t> caught_up{0};  // a scene read directly: the watch was behind
+        std::atomic<uint64_t> refills{0};     // the bus came back empty or behind and was refilled
+        std::atomic<uint64_t> caught_up{0};   // a scene read directly: the watch was behind
+        std::atomic<uint64_t> relabelled{0};  // a refill of the applied scene: not rebuilt
     };
     // How a bus found empty or behind the version a node holds is refilled (unit-tested).
     struct Refill {
@@ -113,6 +114,7 @@ public:
     // reads the key; a bus behind the held version gets its newest scene again, at a revision
     // no node has applied yet, so every node converges on it and nobody's version goes back.
     void hold(const Value& value);
+    Value held() const;
     // The rule (unit-tested): nullopt while the bus holds `held` or a later revision. Else the
     // held value goes back, at revision max(held, last + 1) where `last` is the bus's last
     // sequence (the revisions below are purged first); unless the bus's newest signed value
@@ -184,7 +186,7 @@ private:
     uint64_t watched_ = 0;
     std::atomic<bool> stop_{false};
     std::thread thread_;
-    std::mutex held_mutex_;
+    mutable std::mutex held_mutex_;
     Value held_;
 };
 

@@ -41,6 +41,10 @@ void return_freed_memory() {
 
 std::optional<PendingScene> LoopInbox::put_scene(PendingScene s) {
     std::lock_guard lock(mutex_);
+    if (s.relabel && scene_ && !scene_->relabel) {
+        scene_->version = std::max(scene_->version, s.version);
+        return std::nullopt;
+    }
     std::optional<PendingScene> replaced = std::move(scene_);
     scene_ = std::move(s);
     return replaced;
@@ -165,7 +169,10 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
     }
     if (!blend_) {
         if (auto next = inbox_.take_scene()) {
-            start_build(std::move(*next), next->version ? next->version : version + 1);
+            if (next->relabel)
+                relabel(next->version, version);
+            else
+                start_build(std::move(*next), next->version ? next->version : version + 1);
         }
         if (!blend_)
             reblend_if_needed();
@@ -181,6 +188,15 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
         serve(batch, true);
     }
     batch.clear();
+}
+
+void FrameLoop::relabel(uint32_t to, uint32_t& version) {
+    if (to <= version_)
+        return;
+    version = version_ = to;
+    log::info("scene version {}: '{}' (the same scene again: relabelled, not rebuilt)", version,
+              current_.name);
+    host_.scene_relabelled(version);
 }
 
 void FrameLoop::drop_unserved(std::vector<ViewerJob>& batch, const ServedDisplays& served) {

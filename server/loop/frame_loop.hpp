@@ -47,6 +47,10 @@ struct PendingScene {
     uint32_t session = 0;   // who asked (0: a reload or the bus), answered if it cannot be built
     uint32_t sequence = 0;  // the SceneUpdate's
     uint32_t version = 0;   // the bus's version for it; 0: the next one
+    // The same scene as the newest one queued or served, under the bus's new `version` (a node
+    // put it back on a bus found empty): that version is relabelled, not built again (`scene`
+    // is empty).
+    bool relabel = false;
 };
 
 // What the network thread hands the render thread besides the scheduler's jobs: the next scene
@@ -55,6 +59,7 @@ struct PendingScene {
 class LoopInbox {
 public:
     // Queues `s`; returns the scene it replaced before it was built, if any (to be answered).
+    // A relabel never replaces a scene waiting to be built: that one takes its version.
     std::optional<PendingScene> put_scene(PendingScene s);
     void release_viewer(uint32_t viewer);
     std::optional<PendingScene> take_scene();
@@ -118,6 +123,9 @@ public:
     // The sink of this loop's frames, which waits on `ring` (alive until the sink is gone).
     virtual std::unique_ptr<FrameSink> make_sink(const gpu::SubmitRing& ring) = 0;
     virtual void scene_built(SceneVersion version) = 0;
+    // The running version's frames are now those of `version` (PendingScene::relabel): nothing
+    // was rendered again.
+    virtual void scene_relabelled(uint32_t version) = 0;
     // FrameLoopInfo::reblend_missing: the running version's projectors blended again without
     // `excluded` (empty: over all of them again, the version's own blend), each included
     // projector's frame (the first's too) as sRGB8 codes.
@@ -227,6 +235,9 @@ private:
     // drive for the sink.
     Result<calib::SceneDrives> calibrate(render::Renderer& renderer, const scene::Scene& scene,
                                          const render::ProjectorFrames& frames);
+    // PendingScene::relabel: the running version becomes `to` (if newer), its frames announced
+    // again under that number.
+    void relabel(uint32_t to, uint32_t& version);
     // After a scene change: the jobs in hand that the new scene cannot serve are dropped.
     void drop_unserved(std::vector<ViewerJob>& batch, const ServedDisplays& served);
     std::set<uint32_t> free_released();

@@ -46,6 +46,10 @@ void Server::Impl::scene_built(loop::SceneVersion v) {
     asio::post(io, [this, v = std::move(v)]() mutable { on_scene_built(std::move(v)); });
 }
 
+void Server::Impl::scene_relabelled(uint32_t version) {
+    asio::post(io, [this, version] { on_scene_relabelled(version); });
+}
+
 void Server::Impl::projectors_reblended(Reblend r) {
     asio::post(io, [this, r = std::move(r)]() mutable { on_projectors_reblended(std::move(r)); });
 }
@@ -105,6 +109,21 @@ std::optional<std::vector<uint8_t>> projector_frame_wire(uint32_t width, uint32_
     return wire(pf);
 }
 
+// An encoded projector frame as it would be encoded for `version` (null if `frame` is null or
+// not a projector frame of ours, which never happens).
+Bytes relabelled(const Bytes& frame, uint32_t version, const std::shared_ptr<SceneLedger>& ledger) {
+    if (!frame)
+        return nullptr;
+    auto m = proto::decode_frame(*frame, proto::Side::kServer);
+    auto* pf = std::get_if<proto::Message>(&m);
+    auto* f = pf ? std::get_if<proto::ProjectorFrame>(pf) : nullptr;
+    if (!f)
+        return nullptr;
+    f->scene_version = version;
+    auto bytes = wire(*f);
+    return bytes ? charged(std::move(*bytes), ledger) : nullptr;
+}
+
 }  // namespace
 
 void Server::Impl::on_scene_built(loop::SceneVersion v) {
@@ -141,6 +160,29 @@ void Server::Impl::on_scene_built(loop::SceneVersion v) {
         figures.current_projector_frame = frame;
         ++figures.projector_frames_published;
     }
+    for (auto& [id, s] : sessions)
+        if (s->is_projector())
+            s->send(projector_frame_for(s->name()), nullptr, 0, true);
+}
+
+void Server::Impl::on_scene_relabelled(uint32_t version) {
+    // The same pixels, announced as `version`: every frame held is encoded again with it.
+    projector_frame = relabelled(projector_frame, version, ledger);
+    for (auto* frames : {&named_projector_frames, &reblended_projector_frames})
+        for (auto& [name, bytes] : *frames) bytes = relabelled(bytes, version, ledger);
+    {
+        std::lock_guard lock(figures_mutex);
+        figures.scene_version = version;
+        ++figures.scene_relabels;
+        if (projector_frame) {
+            figures.current_projector_frame = projector_names.empty()
+                                                  ? projector_frame
+                                                  : projector_frame_for(projector_names.front());
+            ++figures.projector_frames_published;
+        }
+    }
+    if (!projector_frame)
+        return;
     for (auto& [id, s] : sessions)
         if (s->is_projector())
             s->send(projector_frame_for(s->name()), nullptr, 0, true);

@@ -437,6 +437,20 @@ Result<void> Server::apply_scene_version(const std::string& json, uint32_t versi
     return {};
 }
 
+void Server::relabel_scene_version(uint32_t version) {
+    {
+        std::lock_guard lock(impl_->bus_mutex);
+        if (version <= impl_->bus_version)
+            return;
+        impl_->bus_version = version;
+    }
+    loop::PendingScene relabel;
+    relabel.version = version;
+    relabel.relabel = true;
+    (void)impl_->inbox.put_scene(std::move(relabel));  // replaces at most an earlier relabel
+    impl_->scheduler.wake();
+}
+
 uint32_t Server::bus_version() const {
     std::lock_guard lock(impl_->bus_mutex);
     return impl_->bus_version;

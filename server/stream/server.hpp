@@ -157,6 +157,10 @@ public:
     // limits, then applied as that version if it is newer than the applied or queued one
     // (older or equal: ignored, true). An error when it cannot be used here. Thread: any.
     Result<void> apply_scene_version(const std::string& json, uint32_t version);
+    // The bus delivered the scene this server serves (or has queued) again as `version`: a node
+    // put it back on a bus found empty. If newer, the running version takes that number and its
+    // projector frames go out again with it; nothing is parsed or rendered. Thread: any.
+    void relabel_scene_version(uint32_t version);
     // The scene version this server serves, and the newest it took from a cluster's bus (the
     // same, or newer while that one is being built). Thread: any.
     uint32_t scene_version() const;

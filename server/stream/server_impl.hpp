@@ -102,6 +102,8 @@ struct BitRateFigures {
 struct Figures {
     uint32_t scene_version = 1;
     uint64_t projector_renders = 0;
+    // Versions that were the running scene again under a new number (a bus refill): not rendered.
+    uint64_t scene_relabels = 0;
     nlohmann::json last_projector_report;
     double projector_ms_total = 0;
     PassCost projector_cost;  // per projector frame
@@ -292,6 +294,7 @@ struct Server::Impl final : loop::FrameLoopHost {
 
     // Network thread: what came back from the render and encoder threads (render_host.cpp).
     void on_scene_built(loop::SceneVersion v);
+    void on_scene_relabelled(uint32_t version);
     void on_projectors_reblended(loop::FrameLoopHost::Reblend r);
     // After a projector client came or left, or a new version: logs each of the scene's
     // projectors that lost its last projector client or got one back, and tells the render
@@ -305,6 +308,7 @@ struct Server::Impl final : loop::FrameLoopHost {
     // loop::FrameLoopHost: called on the render thread (render_host.cpp).
     std::unique_ptr<loop::FrameSink> make_sink(const gpu::SubmitRing& ring) override;
     void scene_built(loop::SceneVersion version) override;
+    void scene_relabelled(uint32_t version) override;
     void projectors_reblended(Reblend reblend) override;
     void scene_failed(const loop::PendingScene& scene) override;
     void job_dropped(uint32_t viewer, std::string why) override;

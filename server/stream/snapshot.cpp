@@ -86,6 +86,7 @@ void add_sessions(const Figures& f, ServerSnapshot& s) {
 void add_frames(const Figures& f, ServerSnapshot& s) {
     s.scene_version = f.scene_version;
     s.projector_renders = f.projector_renders;
+    s.scene_relabels = f.scene_relabels;
     s.projector_frame = f.current_projector_frame;
     s.projector_frame_sequence = f.projector_frames_published;
     const std::vector<uint32_t> clients = projector_clients(f);

@@ -130,6 +130,7 @@ struct ServerSnapshot {
     // Projector frames: renders, and per-frame totals of the pass, readback and encode.
     uint32_t scene_version = 0;
     uint64_t projector_renders = 0;
+    uint64_t scene_relabels = 0;  // versions that were the running scene renumbered (a bus refill)
     StageTotals projector_pass, projector_readback, projector_encode;
     Bytes projector_frame;  // the current scene version's encoded frame (null before the first)
     uint64_t projector_frame_sequence = 0;  // counts the frames published; names this one

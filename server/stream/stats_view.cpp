@@ -108,6 +108,7 @@ nlohmann::json stats_json(const ServerSnapshot& s) {
     const FrameStats& fs = s.frame_stats;
     return {{"scene_version", s.scene_version},
             {"projector_renders", s.projector_renders},
+            {"scene_relabels", s.scene_relabels},
             {"projectors", projectors},
             {"projector_reblends", s.projector_reblends},
             // The render thread's time from taking a batch to the end of its turn, since start.

@@ -13,6 +13,8 @@
 #   5. the bus frozen (SIGSTOP) during a SceneUpdate and thawed (SIGCONT) while its writer waits
 #      to look: it is refused, the copy the bus then stores is taken by no node, and the next
 #      update reaches every node;
+#   5b. the key deleted (a delete marker, as any NATS client may put): a node puts the scene
+#      back, and every node takes it as the same scene under a new version, rebuilding nothing;
 #   6. a healthy headset is served at the end, the version equal on every node.
 set -euo pipefail
 bin="$1"
@@ -183,6 +185,37 @@ within 15 'push b thawed > "$dir/push.log" 2>&1' || fail "push after the thaw: $
 want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
 within 10 'same_everywhere $want a b c' || fail "version $want not on every node: a: $(applied a); b: $(applied b); c: $(applied c)"
 echo "5. a push while the bus was frozen: refused ($(grep -oE 'did not confirm[^;]*' <<< "$out")); after the thaw no node took it (node a counts $late late values); v$want on a, b, c"
+
+# 5b. A delete marker on the key: the bus found empty is refilled with the scene every node
+# holds; they relabel it as the new version and render nothing again.
+metric() {  # NAME: node a's /metrics sample
+  curl -sf -H "Authorization: Bearer $(cat "$dir/token")" "http://127.0.0.1:$admin_port/metrics" \
+    | grep -E "^$1 " | awk '{print $2}'
+}
+renders=$(metric hysar_projector_renders_total)
+python3 - "$np" <<'PY'
+import socket, sys
+s = socket.create_connection(("127.0.0.1", int(sys.argv[1])), timeout=10)
+s.sendall(b'CONNECT {"verbose":false,"pedantic":false,"headers":true,"user":"intruder","pass":"open"}\r\n')
+hdr = b"NATS/1.0\r\nKV-Operation: DEL\r\n\r\n"
+s.sendall(b"HPUB $KV.hysar.scene %d %d\r\n" % (len(hdr), len(hdr)) + hdr + b"\r\nPING\r\n")
+buf = b""
+while b"PONG" not in buf:
+    buf += s.recv(4096)
+assert b"-ERR" not in buf, buf
+PY
+deleted=$want
+within 15 '(( $(last_applied a) > deleted )) && same_everywhere $(last_applied a) a b c' \
+  || fail "the nodes did not converge on a refilled version after the delete: a: $(applied a); b: $(applied b); c: $(applied c)"
+want=$(last_applied a)
+for n in a b c; do
+  grep -q "scene version $want: '.*' (the same scene again: relabelled, not rebuilt)" "$dir/node-$n.log" \
+    || fail "node $n did not relabel version $want: $(grep -E "scene version $want" "$dir/node-$n.log")"
+done
+[[ "$(metric hysar_projector_renders_total)" == "$renders" ]] \
+  || fail "node a rendered again for the refill: $renders -> $(metric hysar_projector_renders_total)"
+(( $(metric hysar_scene_relabels_total) >= 1 )) || fail "node a counts no relabel"
+echo "5b. the key deleted: refilled as v$want, relabelled on a, b and c with no render (node a: $renders projector renders before and after)"
 
 # 6. A healthy headset at the end, served the version every node holds.
 mkdir "$dir/p"

@@ -350,6 +350,59 @@ TEST_F(ServerTest, AdminSceneUpdateRerendersTheProjectorOnce) {
     EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 2u);
 }
 
+// A cluster node that finds the scene it serves delivered again under a newer version (another
+// node put it back on a bus found empty: docs/CLUSTER.md) relabels it: the projector receives
+// the same pixels under the new version and nothing is rendered. An older number changes
+// nothing, and a relabel that arrives while a scene waits to be built gives that scene its number.
+TEST_F(ServerTest, TheSameSceneUnderANewVersionIsRelabelledNotRendered) {
+    auto proj = connect();
+    ASSERT_FALSE(proj->hello(proto::Role::kProjector, kToken, "projector"));
+    auto first = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(first);
+    ASSERT_TRUE(server_->apply_scene_version(test_scene_json({0.2, 0.6, 0.9}), 5));
+    auto built = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(built);
+    EXPECT_EQ(built->scene_version, 5u);
+    EXPECT_EQ(server_->stats()["projector_renders"].get<uint64_t>(), 2u);
+
+    server_->relabel_scene_version(8);
+    auto relabelled = receive_a<proto::ProjectorFrame>(*proj);
+    ASSERT_TRUE(relabelled);
+    EXPECT_EQ(relabelled->scene_version, 8u);
+    EXPECT_EQ(relabelled->data, built->data);
+    auto st = server_->stats();
+    EXPECT_EQ(st["projector_renders"].get<uint64_t>(), 2u);
+    EXPECT_EQ(st["scene_relabels"].get<uint64_t>(), 1u);
+    EXPECT_EQ(st["scene_version"].get<uint32_t>(), 8u);
+    EXPECT_EQ(server_->bus_version(), 8u);
+
+    server_->relabel_scene_version(7);  // older: nothing
+    EXPECT_EQ(server_->bus_version(), 8u);
+
+    // A scene queued, then relabelled at once: whether the render thread took it before the
+    // relabel or not, its frame ends up under the relabelled number, rendered once.
+    ASSERT_TRUE(server_->apply_scene_version(test_scene_json({0.9, 0.3, 0.2}), 9));
+    server_->relabel_scene_version(10);
+    std::optional<proto::ProjectorFrame> last;
+    while (auto f = receive_a<proto::ProjectorFrame>(*proj)) {
+        last = std::move(f);
+        if (last->scene_version >= 10)
+            break;
+    }
+    ASSERT_TRUE(last);
+    EXPECT_EQ(last->scene_version, 10u);
+    EXPECT_NE(last->data, built->data);
+    st = server_->stats();
+    EXPECT_EQ(st["projector_renders"].get<uint64_t>(), 3u);
+    EXPECT_EQ(st["scene_version"].get<uint32_t>(), 10u);
+    // Still serving headsets.
+    auto hmd = headset(small_display(), "hmd");
+    ASSERT_TRUE(hmd);
+    ASSERT_TRUE(hmd->send(pose_at(0, 1)));
+    ASSERT_TRUE(hmd->send(proto::FrameRequest{}));
+    EXPECT_EQ(frame_for(*hmd, 1).size(), 2u);
+}
+
 // A new scene version is built (renderer made, pipelines warmed up, projector frames rendered)
 // beside the render thread, which goes on serving the running version meanwhile: a headset's
 // longest wait between two frames across the change is well below the time the new version took
