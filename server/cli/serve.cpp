@@ -656,6 +656,14 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
         const uint64_t applied = watched->bus_version();
         if (v.revision > 0xffffffffu || !cluster::SceneBus::newer(v.revision, applied))
             return;
+        if (cluster::SceneBus::stale_refill(v, applied)) {
+            ++b->counters().stale_refills;
+            log::warn(
+                "scene bus: version {} ignored: a refill of version {}, older than the applied "
+                "{} (two nodes refilled an emptied bus at once); this node puts its own back",
+                v.revision, v.of, applied);
+            return;
+        }
         if (!cluster::SceneBus::follows(v, applied)) {
             ++b->counters().replayed_values;
             log::warn(

@@ -46,13 +46,13 @@ constexpr uint64_t kSettleLookMs = 15000;
 
 // HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
 // token (so that the token itself is never the key of anything else), as 64 hex digits.
-std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms, bool refill,
-                std::string_view json) {
+std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
+                uint64_t refill_of, std::string_view json) {
     const std::string label = "hysar scene bus key\n" + admin_token;
     unsigned char key[SHA256_DIGEST_LENGTH];
     SHA256(reinterpret_cast<const unsigned char*>(label.data()), label.size(), key);
-    const std::string head =
-        fmt::format("hysar-scene 1\n{}\n{}\n{}", base, deadline_ms, refill ? "refill\n" : "");
+    const std::string head = fmt::format("hysar-scene 1\n{}\n{}\n{}", base, deadline_ms,
+                                         refill_of ? fmt::format("refill {}\n", refill_of) : "");
     unsigned char out[EVP_MAX_MD_SIZE];
     unsigned int len = 0;
     std::string data;
@@ -100,10 +100,10 @@ BurstLog& burst_log() {
 }  // namespace
 
 std::string SceneBus::sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
-                           const std::string& json, bool refill) {
+                           const std::string& json, uint64_t refill_of) {
     return fmt::format("{}{} {} {}{}\n{}", kMagic, base, deadline_ms,
-                       mac(admin_token, base, deadline_ms, refill, json), refill ? " refill" : "",
-                       json);
+                       mac(admin_token, base, deadline_ms, refill_of, json),
+                       refill_of ? fmt::format(" refill {}", refill_of) : "", json);
 }
 
 Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::string_view value) {
@@ -132,21 +132,44 @@ Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::s
     };
     Signed out;
     const bool ok = number(out.base) && number(out.deadline_ms);
-    // The HMAC, then " refill" on a value put back on a bus found empty or behind.
-    constexpr std::string_view kRefill = " refill";
-    if (head.size() > kRefill.size() && head.substr(head.size() - kRefill.size()) == kRefill) {
+    // The HMAC, then " refill OF" on a value put back on a bus found empty or behind, OF (> 0)
+    // the version it puts back.
+    bool of_ok = true;
+    if (const auto r = head.find(" refill "); r != std::string_view::npos) {
+        std::string_view of = head.substr(r + 8);
         out.refill = true;
-        head.remove_suffix(kRefill.size());
+        of_ok = !of.empty() && of.size() <= 19;
+        for (char c : of) {
+            of_ok = of_ok && c >= '0' && c <= '9';
+            out.of = out.of * 10 + uint64_t(c - '0');
+        }
+        of_ok = of_ok && out.of > 0;
+        head = head.substr(0, r);
     }
     out.json = std::string(value.substr(eol + 1));
     const std::string want =
-        ok ? mac(admin_token, out.base, out.deadline_ms, out.refill, out.json) : "";
-    if (!ok || head.size() != want.size() ||
+        ok && of_ok ? mac(admin_token, out.base, out.deadline_ms, out.of, out.json) : "";
+    if (!ok || !of_ok || want.empty() || head.size() != want.size() ||
         CRYPTO_memcmp(head.data(), want.data(), want.size()) != 0)
         return make_error(ErrorCode::kInvalidArgument,
                           "a value not signed with the admin credential");
     return out;
 }
+
+namespace {
+
+// Whether the key's value `e` is another node's refill of a version older than `held`
+// (SceneBus::stale_refill), signed with the admin credential.
+bool stale_refill_entry(kvEntry* e, const std::string& admin_token, uint64_t held) {
+    if (held == 0 || kvEntry_Operation(e) != kvOp_Put)
+        return false;
+    auto v = SceneBus::verify(
+        admin_token,
+        std::string_view(static_cast<const char*>(kvEntry_Value(e)), size_t(kvEntry_ValueLen(e))));
+    return v && v->refill && v->of < held;
+}
+
+}  // namespace
 
 std::string SceneBus::redacted(const std::string& url) {
     const auto scheme = url.find("://");
@@ -162,14 +185,16 @@ std::string SceneBus::metrics_text() const {
         "# HELP hysar_scene_bus_ignored_values_total Values on the scene bus this node did not "
         "apply, by why: unsigned (not signed with the admin credential), replayed (signed, but "
         "an older write put again), superseded (a newer one came in the same burst), invalid "
-        "(refused as a SceneUpdate would be), late (stored after its write's deadline).\n"
+        "(refused as a SceneUpdate would be), late (stored after its write's deadline), "
+        "stale_refill (a node's refill of a version older than this node's).\n"
         "# TYPE hysar_scene_bus_ignored_values_total counter\n";
     const std::pair<const char*, uint64_t> rows[] = {
         {"unsigned", counters_.unsigned_values.load()},
         {"replayed", counters_.replayed_values.load()},
         {"superseded", counters_.superseded_values.load()},
         {"invalid", counters_.invalid_values.load()},
-        {"late", counters_.late_values.load()}};
+        {"late", counters_.late_values.load()},
+        {"stale_refill", counters_.stale_refills.load()}};
     for (const auto& [why, n] : rows)
         t += fmt::format("hysar_scene_bus_ignored_values_total{{why=\"{}\"}} {}\n", why, n);
     t += fmt::format(
@@ -351,7 +376,7 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     for (uint64_t t = signed_tail_.load();
          revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
     }
-    return Value{revision, v->base, v->deadline_ms, std::move(v->json), v->refill};
+    return Value{revision, v->base, v->deadline_ms, std::move(v->json), v->refill, v->of};
 }
 
 Result<std::vector<SceneBus::Value>> SceneBus::signed_values() {
@@ -625,8 +650,9 @@ bool SceneBus::check_bus(int& behind) {
     const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
     if (s == NATS_OK) {
         const uint64_t rev = kvEntry_Revision(e);
+        const bool stale = stale_refill_entry(e, s_->options.admin_token, held);
         kvEntry_Destroy(e);
-        if (rev < held)
+        if (rev < held || stale)
             return refill();
         // Values stored since the last one seen are read one by one and the newest delivered
         // now: a watch whose consumer lived on a server that died is only made again once the
@@ -711,13 +737,18 @@ bool SceneBus::refill() {
     // What the bus holds now: its current revision (0: none) and its newest signed write.
     uint64_t bus_revision = 0;
     kvEntry* e = nullptr;
+    bool stale = false;
     if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
         bus_revision = kvEntry_Revision(e);
+        stale = stale_refill_entry(e, s_->options.admin_token, held.revision);
         kvEntry_Destroy(e);
     }
     // The key has a value and the stream (its leader) is at or past the held version: the read
-    // that looked behind came from a follower of a replicated bucket that lags. Not behind.
-    if (bus_revision != 0 && last >= held.revision)
+    // that looked behind came from a follower of a replicated bucket that lags. Not behind,
+    // unless that value is another node's refill of an older version: then it is gone over.
+    if (stale)
+        bus_revision = 0;
+    else if (bus_revision != 0 && last >= held.revision)
         return made;
     std::optional<Value> newest;
     if (auto listed = read_signed(false); listed && !listed->empty())
@@ -738,8 +769,9 @@ bool SceneBus::refill() {
         return made;
     }
     const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
-    const std::string value =
-        sign(s_->options.admin_token, plan->revision - 1, deadline, from.json, true);
+    // A held value puts back its own version; a newer write goes back as the version it gets.
+    const std::string value = sign(s_->options.admin_token, plan->revision - 1, deadline, from.json,
+                                   plan->ours ? held.revision : plan->revision);
     uint64_t rev = 0;
     s = kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()));
     if (s != NATS_OK)
@@ -755,7 +787,10 @@ bool SceneBus::refill() {
     log::warn(
         "scene bus: the bus came back {} (revision {}, this node holds version {}): put "
         "{} back as version {}",
-        bus_revision == 0 ? "empty" : "behind", bus_revision, held.revision,
+        stale               ? "with an older version put back by another node"
+        : bus_revision == 0 ? "empty"
+                            : "behind",
+        bus_revision, held.revision,
         plan->ours ? "the held scene" : fmt::format("the newer write of version {}", from.revision),
         rev);
     return true;

@@ -4,14 +4,14 @@
 // Every value is signed: "hysar-scene 1 BASE DEADLINE HMAC\n" then the JSON, where BASE is the
 // version the write follows, DEADLINE the time (UNIX ms) by which the bus must store it, and
 // HMAC is HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON", keyed by a key derived from
-// the admin token (a refill ends the line with " refill", and "refill\n" follows DEADLINE in
-// the HMAC's input), so only a holder of the admin credential changes the scene even
-// on a bus anyone can write; a value not so signed is ignored and counted. Writes are
-// compare-and-set on the revision the writing node has applied (or on the unsigned values put
-// after it); no node applies its own write: every node applies what its watch delivers, if and
-// only if it is newer than what it has applied and follows it (BASE >= applied: an old signed
-// value put again is refused). A value the bus stored after its deadline is taken by no node,
-// and a write not confirmed in time is reported applied only if the bus stored it in time: a
+// the admin token (a refill ends the line with " refill OF", OF the version it puts back, and
+// "refill OF\n" follows DEADLINE in the HMAC's input), so only a holder of the admin credential
+// changes the scene even on a bus anyone can write; a value not so signed is ignored and counted.
+// Writes are compare-and-set on the revision the writing node has applied (or on the unsigned
+// values put after it); no node applies its own write: every node applies what its watch delivers,
+// if and only if it is newer than what it has applied and follows it (BASE >= applied: an old
+// signed value put again is refused). A value the bus stored after its deadline is taken by no
+// node, and a write not confirmed in time is reported applied only if the bus stored it in time: a
 // refused write never lands later. A burst of values is coalesced to its newest signed one.
 // Thread: any; the watch callback runs on the bus's own thread.
 #pragma once
@@ -67,6 +67,7 @@ public:
         uint64_t deadline_ms = 0;  // when the bus had to store it by (signed): its write time
         std::string json;
         bool refill = false;  // a node put it back on a bus found empty or behind (signed)
+        uint64_t of = 0;      // a refill: the version it puts back (signed; see stale_refill)
     };
     // What the bus ignored, for /metrics.
     struct Counters {
@@ -75,6 +76,7 @@ public:
         std::atomic<uint64_t> superseded_values{0};  // coalesced: a newer one came in the burst
         std::atomic<uint64_t> invalid_values{0};     // signed, refused as a SceneUpdate would be
         std::atomic<uint64_t> late_values{0};        // stored after its write's deadline
+        std::atomic<uint64_t> stale_refills{0};      // a refill of an older version (stale_refill)
         std::atomic<uint64_t> refills{0};     // the bus came back empty or behind and was refilled
         std::atomic<uint64_t> caught_up{0};   // a scene read directly: the watch was behind
         std::atomic<uint64_t> relabelled{0};  // a refill of the applied scene: not rebuilt
@@ -90,6 +92,7 @@ public:
         uint64_t deadline_ms = 0;  // the bus must have stored it by then (UNIX ms)
         std::string json;
         bool refill = false;
+        uint64_t of = 0;  // a refill's: the version it puts back
     };
     // Connects and opens (or creates) the bucket. An error naming the URL when the bus cannot be
     // reached at start: a node that cannot learn the current scene must not serve another.
@@ -142,11 +145,17 @@ public:
     static bool follows(const Value& v, uint64_t applied) {
         return newer(v.revision, applied) && v.base >= applied;
     }
+    // A refill of a version older than `held`: a lagging node put its older scene back on a bus
+    // found empty while another node held a newer one (both refilling at once, the older one's
+    // value can land at the newer's revision). No node that holds a newer version applies it,
+    // and such a node puts its own back over it, so the cluster converges on the newest.
+    static bool stale_refill(const Value& v, uint64_t held) { return v.refill && v.of < held; }
     // The signed form of `json` following version `base`, to be stored by `deadline_ms`
     // (unit-tested), and its check: the signed parts, or an error saying why it is refused.
-    // `refill`: a value put back on a bus found empty or behind ("... HMAC refill").
+    // `refill_of` > 0: a value put back on a bus found empty or behind, as version refill_of
+    // ("... HMAC refill OF").
     static std::string sign(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
-                            const std::string& json, bool refill = false);
+                            const std::string& json, uint64_t refill_of = 0);
     static Result<Signed> verify(const std::string& admin_token, std::string_view value);
 
 private:

@@ -131,18 +131,34 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
     for (const char* junk : {"{{{", "", "{\"name\":\"x\"}", "hysar-scene 1 7 9 00\n{}"})
         EXPECT_FALSE(SceneBus::verify(kAdmin, junk).ok()) << junk;
     EXPECT_FALSE(ok->refill);
-    // A refill is signed as one: the flag cannot be added to a write, nor taken off a refill.
-    const std::string r = SceneBus::sign(kAdmin, 7, 1700000000000, "{\"name\":\"x\"}", true);
+    // A refill is signed as one, with the version it puts back: the flag cannot be added to a
+    // write, nor taken off a refill, nor its version changed.
+    const std::string r = SceneBus::sign(kAdmin, 7, 1700000000000, "{\"name\":\"x\"}", 6);
     auto refill = SceneBus::verify(kAdmin, r);
     ASSERT_TRUE(refill.ok()) << refill.error().message;
     EXPECT_TRUE(refill->refill);
+    EXPECT_EQ(refill->of, 6u);
     EXPECT_EQ(refill->json, "{\"name\":\"x\"}");
+    EXPECT_EQ(ok->of, 0u);
     std::string flagged = v;
-    flagged.insert(flagged.find('\n'), " refill");
+    flagged.insert(flagged.find('\n'), " refill 6");
     EXPECT_FALSE(SceneBus::verify(kAdmin, flagged).ok());
     std::string unflagged = r;
-    unflagged.erase(unflagged.find(" refill"), 7);
+    unflagged.erase(unflagged.find(" refill"), 9);
     EXPECT_FALSE(SceneBus::verify(kAdmin, unflagged).ok());
+    std::string newer_of = r;
+    newer_of.replace(newer_of.find(" refill 6"), 9, " refill 9");
+    EXPECT_FALSE(SceneBus::verify(kAdmin, newer_of).ok());
+    for (const char* of : {" refill", " refill ", " refill x", " refill 0"}) {
+        std::string bad = r;
+        bad.replace(bad.find(" refill 6"), 9, of);
+        EXPECT_FALSE(SceneBus::verify(kAdmin, bad).ok()) << of;
+    }
+    // A refill of an older version than the node holds is stale; of its own or a newer, not.
+    EXPECT_TRUE(SceneBus::stale_refill({9, 7, 0, "", true, 8}, 9));
+    EXPECT_FALSE(SceneBus::stale_refill({9, 8, 0, "", true, 9}, 9));
+    EXPECT_FALSE(SceneBus::stale_refill({11, 10, 0, "", true, 10}, 9));
+    EXPECT_FALSE(SceneBus::stale_refill({9, 7, 0, "", false, 0}, 9));
     // The rule: newer, and following the applied version (an old value put again is not).
     EXPECT_TRUE(SceneBus::follows({9, 5, 0, ""}, 5));
     EXPECT_FALSE(SceneBus::follows({9, 3, 0, ""}, 5));
@@ -330,6 +346,56 @@ TEST(SceneBus, AnUnreachableBusIsNamed) {
     EXPECT_NE(b.error().message.find("nats://127.0.0.1:1"), std::string::npos) << b.error().message;
 }
 
+// Two nodes refilled an emptied bus at once, and the one that held the older version landed at
+// the newer's revision: the node that holds the newer version finds that refill on the key,
+// puts its own back over it (as the version it holds), and never applies the older scene.
+TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
+    auto a = bus("stale");
+    ASSERT_TRUE(a);
+    const BusWrite one = a->write(0, "one");
+    ASSERT_EQ(one.error, BusError::kNone) << one.message;
+    const BusWrite two = a->write(one.revision, "two");
+    ASSERT_EQ(two.error, BusError::kNone) << two.message;
+    a->hold({two.revision, one.revision, two.deadline_ms, "two"});
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    a->watch([&](const SceneBus::Value& v) {
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    // The lagging node's refill of version one, signed as it signs one, stored past "two".
+    const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count());
+    ASSERT_TRUE(
+        raw_put("stale", SceneBus::sign(kAdmin, two.revision, now_ms + 5000, "one", one.revision)));
+    std::unique_lock lock(m);
+    ASSERT_TRUE(cv.wait_for(
+        lock, std::chrono::seconds(15),
+        [&] { return !seen.empty() && seen.back().json == "two" && seen.back().refill; }))
+        << "node a did not put version " << two.revision << " back over the stale refill";
+    EXPECT_EQ(seen.back().of, two.revision);
+    EXPECT_GT(seen.back().revision, two.revision + 1);
+    EXPECT_EQ(a->counters().refills.load(), 1u);
+    // What the watch delivered before: the stale refill, which stale_refill() names for the
+    // node (serve's watch ignores it), and never as anything but a refill of version one.
+    for (const auto& v : seen) {
+        if (v.json == "one" && v.revision > two.revision) {
+            EXPECT_TRUE(SceneBus::stale_refill(v, two.revision));
+        }
+    }
+    lock.unlock();
+    // The bus now holds "two" on top: a node starting now serves it.
+    auto c = bus("stale", "c");
+    ASSERT_TRUE(c);
+    auto values = c->signed_values();
+    ASSERT_TRUE(values.ok()) << values.error().message;
+    ASSERT_FALSE(values->empty());
+    EXPECT_EQ(values->front().json, "two");
+}
+
 // A bus found empty or behind the held version gets the newest scene back, at a revision no
 // node has applied yet: the held one, unless an admin wrote a later one on the emptied bus.
 TEST(SceneBus, RefillPlan) {
@@ -361,7 +427,7 @@ TEST(SceneBus, RefillPlan) {
     EXPECT_TRUE(old->ours);
     // A lagging node refilled version 6 first (a refill: its deadline is the refill's time, not
     // the write's): it never outranks the held, acknowledged version 7, which goes back at 7.
-    SceneBus::Value lagging{6, 5, 9000, "six", true};
+    SceneBus::Value lagging{6, 5, 9000, "six", true, 6};
     auto over = SceneBus::plan_refill(held, 6, 6, lagging);
     ASSERT_TRUE(over);
     EXPECT_TRUE(over->ours);
