@@ -452,6 +452,7 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         fill_clusters_.clear();
         fill_groups_.clear();
         fill_bounds_.clear();
+        fill_charge_.reset();
         return {};
     }
     HS_ASSIGN_OR_RETURN(FillAtlas atlas, fill_atlas(blend));
@@ -470,6 +471,13 @@ Result<void> Renderer::set_fill(const Blend& blend) {
     fill_cluster_count_ = count;
     fill_projectors_ = uint32_t(blend.views.size());
     fill_ = true;
+    if (info_.ledger) {
+        size_t bytes = fill_params_.capacity() * sizeof(gpu::GpuFillProjector);
+        for (size_t l = 0; l < fill_clusters_.size(); ++l)
+            bytes += fill_clusters_[l].capacity() + fill_groups_[l].capacity() +
+                     fill_bounds_[l].capacity() * sizeof(Cluster);
+        fill_charge_ = MemoryCharge(&info_.ledger->cpu, int64_t(bytes));
+    }
     return {};
 }
 

@@ -176,6 +176,36 @@ TEST_F(Fill, FullCoverageTurnsItOffAndNoCoverageFillsEverything) {
     EXPECT_EQ(a.plan.clusters_filled, a.plan.clusters_lit);
 }
 
+// What the fill-in keeps per level (its clusters, groups and their uncovered bounds) and its
+// projectors are scene memory: on the renderer's ledger while it holds them, once however often
+// the fill-in is set up, and off it when the renderer goes.
+TEST_F(Fill, WhatTheFillInKeepsIsOnTheLedger) {
+    SceneLedger ledger;
+    render::RendererCreateInfo ri;
+    ri.ledger = &ledger;
+    scene::Scene away = scene_;
+    away.projector.pose.position += glm::dvec3(50.0, 0.0, 0.0);  // nothing covered
+    auto made = render::Renderer::create(test::device(), away, ri);
+    ASSERT_TRUE(made.ok()) << made.error().message;
+    auto r = std::move(made).value();
+    const int64_t before = ledger.cpu.bytes(), holders = ledger.cpu.holders();
+    ASSERT_TRUE(r->set_fill(render::compute_blend(r->mesh(), away.projectors())).ok());
+    ASSERT_TRUE(r->fill());
+    // At least a flag and a bounding cluster per cluster of every level.
+    int64_t least = 0;
+    for (const auto& level : r->levels())
+        least += int64_t(level.clusters.size() * (1 + sizeof(render::Cluster)));
+    EXPECT_GE(ledger.cpu.bytes() - before, least);
+    EXPECT_EQ(ledger.cpu.holders(), holders + 1);
+    // Set up again over the same: counted once.
+    const int64_t once = ledger.cpu.bytes();
+    ASSERT_TRUE(r->set_fill(render::compute_blend(r->mesh(), away.projectors())).ok());
+    EXPECT_EQ(ledger.cpu.bytes(), once);
+    r.reset();
+    EXPECT_EQ(ledger.cpu.bytes(), 0);
+    EXPECT_EQ(ledger.cpu.holders(), 0);
+}
+
 // The fill pipelines are prepared with the others when the fill-in is set up before the
 // warm-up: a headset's first filled layer compiles nothing.
 TEST_F(Fill, WarmUpPreparesTheFillPipelines) {
