@@ -458,6 +458,18 @@ void FrameLoop::publish_reblend(const render::Blend& blend, const std::set<std::
         out.frames.push_back({all[j].name, img.width, img.height, codec::srgb8_pixels(img)});
     }
     excluded_ = excluded;
+    // What none of the included projectors reaches goes to the headsets' fill-in (the surface
+    // only a missing projector lit, too), and back to the version's own when all are there.
+    // The fill's texture is bound to every pipeline: nothing of it may be in flight.
+    if (current_.effects.headset_fill && !current_.captured_material) {
+        const auto t0 = Clock::now();
+        (void)ring_->wait_idle();
+        if (auto f = renderer_->set_fill(blend); !f)
+            log::warn("the headsets' fill-in stays as it was: {}", f.error().message);
+        out.fill = std::pair{renderer_->fill(), renderer_->fill_clusters()};
+        log::info("the headsets' fill-in covers {} clusters ({:.0f} ms)", out.fill->second,
+                  ms_since(t0));
+    }
     host_.projectors_reblended(std::move(out));
 }
 

@@ -134,6 +134,9 @@ public:
         std::vector<std::string> excluded;
         std::vector<SceneVersion::ProjectorFrame> frames;
         double blend_ms = 0;
+        // The headsets' fill-in, handed what the included projectors do not reach (the stats'
+        // headset_fill): whether it is on, over how many clusters; nullopt: the scene has none.
+        std::optional<std::pair<bool, uint32_t>> fill;
     };
     virtual void projectors_reblended(Reblend reblend) = 0;
     // A queued scene could not be built; the running one stays.

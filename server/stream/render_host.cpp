@@ -209,6 +209,11 @@ void Server::Impl::on_projectors_reblended(loop::FrameLoopHost::Reblend r) {
         std::lock_guard lock(figures_mutex);
         figures.projectors_excluded = {r.excluded.begin(), r.excluded.end()};
         ++figures.projector_reblends;
+        if (r.fill && figures.last_projector_report.contains("headset_fill")) {
+            auto& fill = figures.last_projector_report["headset_fill"];
+            fill["active"] = r.fill->first;
+            fill["uncovered_clusters"] = r.fill->second;
+        }
         if (!projector_names.empty() && projector_frame_for(projector_names.front())) {
             figures.current_projector_frame = projector_frame_for(projector_names.front());
             ++figures.projector_frames_published;

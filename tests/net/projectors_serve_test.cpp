@@ -214,8 +214,14 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     if (!full1)
         full1 = f1;
     const uint64_t reblends_before = reblends();
+    // The surface the headsets' fill-in covers (what no included projector reaches).
+    const auto uncovered = [&] {
+        return server_->stats()["passes"]["projector"]["headset_fill"]["uncovered_clusters"]
+            .get<uint64_t>();
+    };
+    const uint64_t uncovered_all = uncovered();
     // The third leaves: the first two are blended without it and get more light where it
-    // contributed, nowhere less.
+    // contributed, nowhere less; what only it reached goes to the headsets' fill-in.
     c2.reset();
     ASSERT_TRUE(blended_as({false, false, true}));
     auto less0 = last_frame(*c0, 1500), less1 = last_frame(*c1, 1500);
@@ -226,6 +232,14 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     EXPECT_TRUE(brighter_everywhere(full1->data, less1->data, &brighter1));
     EXPECT_GT(brighter0 + brighter1, 100u);
     EXPECT_GT(reblends(), reblends_before);
+    EXPECT_GT(uncovered(), uncovered_all);
+    {  // a headset is served with the fill-in as it now is
+        auto hmd = headset(small_display(), "hmd");
+        ASSERT_TRUE(hmd);
+        ASSERT_TRUE(hmd->send(pose_at(150, 1)));
+        ASSERT_TRUE(hmd->send(proto::FrameRequest{}));
+        EXPECT_EQ(frame_for(*hmd, 1).size(), 2u);
+    }
     // The blend is computed again, the frames are not rendered again.
     auto st = server_->stats();
     EXPECT_EQ(st["projector_renders"].get<uint64_t>(), 1u);
@@ -240,6 +254,7 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     ASSERT_TRUE(again0 && again1);
     EXPECT_EQ(again0->data, full0->data);
     EXPECT_EQ(again1->data, full1->data);
+    EXPECT_EQ(uncovered(), uncovered_all);
 }
 
 // What the projectors' blend keeps is on the scene-memory ledger: with --reblend-missing the
