@@ -10,7 +10,7 @@ of degree 1, 2 or 3 over a window of past samples (the window chosen, per degree
 error over the whole trace), for the bob's axis (pitch and the vertical position) and for the
 orbit's (yaw and the horizontal position, at constant rate), and reports the p95 of the
 highlight's displacement in the HoloLens profile's pixels (1268 px over 30 deg: 41.3 px/deg at
-the centre) when both axes take their best fits. Standard library only; about a minute.
+the centre) when both axes take their best fits. Standard library only; about ten seconds.
 
     scripts/walk_noise_bound.py [--noise-deg 0.05] [--noise-mm 0.5] [--trials 400]
 """
