@@ -656,12 +656,14 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
         const uint64_t applied = watched->bus_version();
         if (v.revision > 0xffffffffu || !cluster::SceneBus::newer(v.revision, applied))
             return;
-        if (cluster::SceneBus::stale_refill(v, applied)) {
+        // The version of the scene this node holds: a relabel (its own refill, say) keeps it.
+        const uint64_t held = cluster::SceneBus::content_version(b->held());
+        if (cluster::SceneBus::stale_refill(v, held)) {
             ++b->counters().stale_refills;
             log::warn(
-                "scene bus: version {} ignored: a refill of version {}, older than the applied "
+                "scene bus: version {} ignored: a refill of version {}, older than the held "
                 "{} (two nodes refilled an emptied bus at once); this node puts its own back",
-                v.revision, v.of, applied);
+                v.revision, v.of, held);
             return;
         }
         if (!cluster::SceneBus::follows(v, applied)) {

@@ -641,16 +641,17 @@ std::optional<SceneBus::Refill> SceneBus::plan_refill(const Value& held, uint64_
 }
 
 bool SceneBus::check_bus(int& behind) {
-    uint64_t held;
+    uint64_t held, content;
     {
         std::lock_guard lock(held_mutex_);
         held = held_.revision;
+        content = content_version(held_);
     }
     kvEntry* e = nullptr;
     const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
     if (s == NATS_OK) {
         const uint64_t rev = kvEntry_Revision(e);
-        const bool stale = stale_refill_entry(e, s_->options.admin_token, held);
+        const bool stale = stale_refill_entry(e, s_->options.admin_token, content);
         kvEntry_Destroy(e);
         if (rev < held || stale)
             return refill();
@@ -740,7 +741,7 @@ bool SceneBus::refill() {
     bool stale = false;
     if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
         bus_revision = kvEntry_Revision(e);
-        stale = stale_refill_entry(e, s_->options.admin_token, held.revision);
+        stale = stale_refill_entry(e, s_->options.admin_token, content_version(held));
         kvEntry_Destroy(e);
     }
     // The key has a value and the stream (its leader) is at or past the held version: the read
@@ -769,9 +770,10 @@ bool SceneBus::refill() {
         return made;
     }
     const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
-    // A held value puts back its own version; a newer write goes back as the version it gets.
+    // A held value puts back the version of its scene (a relabel keeps it); a newer write goes
+    // back as the version it gets.
     const std::string value = sign(s_->options.admin_token, plan->revision - 1, deadline, from.json,
-                                   plan->ours ? held.revision : plan->revision);
+                                   plan->ours ? content_version(held) : plan->revision);
     uint64_t rev = 0;
     s = kvStore_Create(&rev, s_->kv, kKey, value.data(), int(value.size()));
     if (s != NATS_OK)

@@ -149,7 +149,12 @@ public:
     // found empty while another node held a newer one (both refilling at once, the older one's
     // value can land at the newer's revision). No node that holds a newer version applies it,
     // and such a node puts its own back over it, so the cluster converges on the newest.
+    // `held` is the version of the scene a node holds (content_version: a relabel keeps it).
     static bool stale_refill(const Value& v, uint64_t held) { return v.refill && v.of < held; }
+    // The version whose scene `v` carries: a write's own revision, a refill's OF (the same
+    // scene relabelled under a newer revision is still that version's scene, so a node's own
+    // refill never makes its older scene outrank a newer one).
+    static uint64_t content_version(const Value& v) { return v.refill ? v.of : v.revision; }
     // The signed form of `json` following version `base`, to be stored by `deadline_ms`
     // (unit-tested), and its check: the signed parts, or an error saying why it is refused.
     // `refill_of` > 0: a value put back on a bus found empty or behind, as version refill_of

@@ -159,6 +159,14 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
     EXPECT_FALSE(SceneBus::stale_refill({9, 8, 0, "", true, 9}, 9));
     EXPECT_FALSE(SceneBus::stale_refill({11, 10, 0, "", true, 10}, 9));
     EXPECT_FALSE(SceneBus::stale_refill({9, 7, 0, "", false, 0}, 9));
+    // A scene's version survives its relabels: a node that relabelled its own refill of version
+    // 8 as revision 9 still holds version 8's scene, so a refill of version 9 is not stale to
+    // it, and its next refill puts version 8 back, never 9.
+    const SceneBus::Value relabelled{9, 8, 0, "eight", true, 8};
+    EXPECT_EQ(SceneBus::content_version(relabelled), 8u);
+    EXPECT_FALSE(
+        SceneBus::stale_refill({10, 9, 0, "nine", true, 9}, SceneBus::content_version(relabelled)));
+    EXPECT_EQ(SceneBus::content_version({9, 8, 0, "nine"}), 9u);
     // The rule: newer, and following the applied version (an old value put again is not).
     EXPECT_TRUE(SceneBus::follows({9, 5, 0, ""}, 5));
     EXPECT_FALSE(SceneBus::follows({9, 3, 0, ""}, 5));
