@@ -30,5 +30,8 @@ if ((${#missing[@]})); then
 fi
 
 jobs=$(nproc 2>/dev/null || echo 2)
-cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@" >/dev/null
+# A unity build: each target's sources compiled a few at a time, so the headers they share are
+# parsed and their templates compiled once per batch (about half the time of one file at a time;
+# pass -DCMAKE_UNITY_BUILD=OFF for quicker rebuilds of a single changed file).
+cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_UNITY_BUILD=ON "$@" >/dev/null
 cmake --build build -j "$jobs"

@@ -75,9 +75,9 @@ struct Failure {
     std::string message;
 };
 
-volatile std::sig_atomic_t g_stop = 0;
+volatile std::sig_atomic_t g_admin_stop = 0;
 extern "C" void on_stop(int) {
-    g_stop = 1;
+    g_admin_stop = 1;
 }
 
 // Options and the command words, in any order.
@@ -86,7 +86,7 @@ struct Parsed {
     std::vector<std::string> words;
 };
 
-Parsed parse(const std::vector<std::string>& args) {
+Parsed parse_admin_args(const std::vector<std::string>& args) {
     auto parsed =
         options::parse(args, {{"--connect", "--token-file", "--token", "--timeout-ms", "--watch",
                                "--count", "--reason", "--tls-ca", "--tls-fingerprint"},
@@ -366,9 +366,9 @@ int watch_stats(AdminSession& session, bool as_json, double watch_s, int64_t cou
             return 0;
         const auto until =
             std::chrono::steady_clock::now() + std::chrono::milliseconds(int64_t(watch_s * 1000));
-        while (!g_stop && std::chrono::steady_clock::now() < until)
+        while (!g_admin_stop && std::chrono::steady_clock::now() < until)
             std::this_thread::sleep_for(std::chrono::milliseconds(50));
-        if (g_stop)
+        if (g_admin_stop)
             return 0;
         if (!tty)
             std::fputs("\n", stdout);
@@ -388,8 +388,8 @@ std::string checked_scene_text(const std::filesystem::path& file) {
     return text.str();
 }
 
-int run(const std::vector<std::string>& args) {
-    const Parsed p = parse(args);
+int admin_main(const std::vector<std::string>& args) {
+    const Parsed p = parse_admin_args(args);
     const hs::client::Args a = as_client_args(p);
     const std::string address = a.get("--connect", "127.0.0.1:7700");
     const int timeout_ms = int(a.integer("--timeout-ms", 30000, 100, 600000));
@@ -459,7 +459,7 @@ int run_admin(const std::vector<std::string>& args) {
         return 0;
     }
     try {
-        return run(args);
+        return admin_main(args);
     } catch (const Failure& f) {
         std::fprintf(stderr, "hysar admin: %s\n", f.message.c_str());
         return f.status;

@@ -86,7 +86,7 @@ const char* kBenchHelp =
     "          hysar bench serve --headsets 1,8 --seconds 5 --lean-baseline ./lean.sh\n"
     "          hysar bench encoding --repeats 5 --json out/encoding.json\n";
 
-const char* kServeHelp =
+const char* kBenchServeHelp =
     "usage: hysar bench serve [--headsets 1,8,32] [--seconds S] [--profile NAME]\n"
     "                         [--format srgb8|rgba16f] [--encoding tiles|lossy|raw]\n"
     "                         [--scene FILE]\n"
@@ -487,7 +487,7 @@ int bench_accuracy(const std::string& scene_path, const std::string& out_dir, bo
 
 int bench_serve(const std::vector<std::string>& args) {
     if (options::asks_for_help(args)) {
-        std::fputs(kServeHelp, stdout);
+        std::fputs(kBenchServeHelp, stdout);
         return 0;
     }
     auto o = parse_serve_args(args);

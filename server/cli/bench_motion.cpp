@@ -73,7 +73,7 @@ Result<std::vector<std::string>> words(const Flags& f, const char* flag,
     return out;
 }
 
-Result<bench::MotionBenchOptions> parse(const std::vector<std::string>& args) {
+Result<bench::MotionBenchOptions> parse_motion(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
         Flags f, parse_flags(args,
                              {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz",
@@ -112,7 +112,7 @@ int bench_motion(const std::vector<std::string>& args) {
         std::fputs(kMotionHelp, stdout);
         return 0;
     }
-    auto o = parse(args);
+    auto o = parse_motion(args);
     if (!o) {
         std::fprintf(stderr, "hysar bench motion: %s\n", o.error().message.c_str());
         return 2;

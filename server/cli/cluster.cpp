@@ -40,7 +40,7 @@ const char* kClusterHelp =
     "example: hysar cluster config --node a=10.0.0.11:7700 --node b=10.0.0.12:7700 \\\n"
     "             --out /etc/haproxy/haproxy.cfg && haproxy -c -f /etc/haproxy/haproxy.cfg\n";
 
-int usage_error(const std::string& message) {
+int cluster_usage_error(const std::string& message) {
     std::fprintf(stderr, "hysar cluster: %s\n", message.c_str());
     return 2;
 }
@@ -56,10 +56,11 @@ int run_cluster(const std::vector<std::string>& args) {
         args,
         {{"--node", "--listen", "--agent-port", "--admin-socket", "--tls-pem", "--out"}, {}, true});
     if (auto* e = std::get_if<std::string>(&parsed))
-        return usage_error(*e + " (see hysar cluster --help)");
+        return cluster_usage_error(*e + " (see hysar cluster --help)");
     const auto& p = std::get<options::Parsed>(parsed);
     if (p.positionals != std::vector<std::string>{"config"})
-        return usage_error("expected the command 'config' (hysar cluster config --node ...)");
+        return cluster_usage_error(
+            "expected the command 'config' (hysar cluster config --node ...)");
     auto value = [&](const std::string& k) {
         auto it = p.values.find(k);
         return it == p.values.end() ? std::string() : it->second.back();
@@ -69,7 +70,7 @@ int run_cluster(const std::vector<std::string>& args) {
     if (!value("--agent-port").empty()) {
         auto v = parse_integer("--agent-port", value("--agent-port"), 1, 65535);
         if (!v)
-            return usage_error(v.error().message);
+            return cluster_usage_error(v.error().message);
         agent_port = uint16_t(*v);
     }
     if (!value("--listen").empty()) {
@@ -79,7 +80,7 @@ int run_cluster(const std::vector<std::string>& args) {
                         ? Result<int64_t>(make_error(ErrorCode::kInvalidArgument, ""))
                         : parse_integer("--listen", l.substr(colon + 1), 1, 65535);
         if (!port || colon == 0)
-            return usage_error(
+            return cluster_usage_error(
                 fmt::format("--listen: '{}' is not HOST:PORT with a port in [1, 65535]", l));
         o.listen_host = l.substr(0, colon);
         if (o.listen_host.size() >= 2 && o.listen_host.front() == '[')
@@ -89,17 +90,17 @@ int run_cluster(const std::vector<std::string>& args) {
     o.admin_socket = value("--admin-socket");
     o.tls_pem = value("--tls-pem");
     if (!o.tls_pem.empty() && !std::ifstream(o.tls_pem))
-        return usage_error("--tls-pem " + o.tls_pem + ": cannot read the file");
+        return cluster_usage_error("--tls-pem " + o.tls_pem + ": cannot read the file");
     if (auto it = p.values.find("--node"); it != p.values.end())
         for (const auto& text : it->second) {
             auto n = cluster::parse_node(text, agent_port);
             if (!n)
-                return usage_error(n.error().message);
+                return cluster_usage_error(n.error().message);
             o.nodes.push_back(*n);
         }
     auto config = cluster::haproxy_config(o);
     if (!config)
-        return usage_error(config.error().message);
+        return cluster_usage_error(config.error().message);
     const std::string out = value("--out");
     if (out.empty()) {
         std::fputs(config->c_str(), stdout);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <random>
 
 #include <fmt/format.h>
@@ -12,7 +13,6 @@
 namespace hs::optics {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
 
 std::string size_str(const ImageRgba32f& i) {
     return fmt::format("{}x{}", i.width, i.height);
@@ -148,7 +148,7 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
                             d.projector_min + (d.projector_max - d.projector_min) * pd[c];
                         // Lambert: rho / pi E; Phong sheen: k_s lobe E; so sheen / diffuse =
                         // pi k_s lobe / rho relative to the white on which P^M was measured.
-                        s[c] += f * level * (rho[c] + kPi * o.prop_sheen * lobe);
+                        s[c] += f * level * (rho[c] + std::numbers::pi * o.prop_sheen * lobe);
                     }
                 }
                 for (double& c : s) c += d.environment;

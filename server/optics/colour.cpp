@@ -2,11 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace hs::optics {
 
 namespace {
-constexpr double kPi = 3.14159265358979323846;
 // D65 white of the sRGB matrix below (its rows sum to these), so RGB (1, 1, 1) is L* = 100, a* =
 // b* = 0 to rounding.
 constexpr double kXn = 0.9505, kYn = 1.0, kZn = 1.0890;
@@ -18,10 +18,10 @@ double lab_f(double t) {
     return t / (3.0 * kDelta * kDelta) + 4.0 / 29.0;
 }
 double deg(double rad) {
-    return rad * 180.0 / kPi;
+    return rad * 180.0 / std::numbers::pi;
 }
 double rad(double deg) {
-    return deg * kPi / 180.0;
+    return deg * std::numbers::pi / 180.0;
 }
 }  // namespace
 

@@ -15,7 +15,7 @@ namespace proto = hs::protocol;
 
 namespace {
 
-class Loopback : public GpuTest {};
+class InProcessLoopback : public GpuTest {};
 
 std::unique_ptr<client::Connection> connect(const std::string& address) {
     auto c = client::Connection::open(address);
@@ -26,7 +26,7 @@ std::unique_ptr<client::Connection> connect(const std::string& address) {
     return std::move(std::get<std::unique_ptr<client::Connection>>(c));
 }
 
-TEST_F(Loopback, AHeadsetWithItsTokenGetsLayersAndStopIsIdempotent) {
+TEST_F(InProcessLoopback, AHeadsetWithItsTokenGetsLayersAndStopIsIdempotent) {
     const scene::Scene s = scene::default_scene();
     auto server = stream::LoopbackServer::start(device(), s, {});
     ASSERT_TRUE(server.ok()) << server.error().message;
