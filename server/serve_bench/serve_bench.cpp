@@ -204,12 +204,12 @@ std::optional<T> json_at(const json& j, std::initializer_list<const char*> path)
     return p->get<T>();
 }
 
-// After a row: every session gone and the render thread idle, so that the next row starts
-// from a quiet server.
-void settle(const stream::LoopbackServer& server) {
+// After a row: every headset's session gone (`staying`: the projector clients' sessions, still
+// connected) and the render thread idle, so that the next row starts from a quiet server.
+void settle(const stream::LoopbackServer& server, uint64_t staying) {
     const auto deadline = Clock::now() + std::chrono::seconds(10);
     while (Clock::now() < deadline &&
-           json_at<uint64_t>(server.stats(), {"sessions"}).value_or(0) > 0)
+           json_at<uint64_t>(server.stats(), {"sessions"}).value_or(0) > staying)
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
     auto last = json_at<uint64_t>(server.stats(), {"timing_ms", "vd_layers"});
     for (int quiet = 0; quiet < 6 && Clock::now() < deadline;) {
@@ -449,7 +449,7 @@ ServedRow serve_row(const stream::LoopbackServer& server, const scene::Scene& sc
     for (auto& t : threads) t.join();
     ServedRow r = row_from(tallies, m, o, headsets);
     add_bit_rate_limits(r, at_end);
-    settle(server);
+    settle(server, uint64_t(projectors.connected.load()));
     return r;
 }
 
