@@ -352,10 +352,18 @@ bool SceneBus::connected() const {
 
 std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored_ns,
                                                std::string_view raw, bool count) {
-    for (uint64_t t = tail_.load(); revision > t && !tail_.compare_exchange_weak(t, revision);) {
-    }
+    // The newest revision seen (tail_) and the newest signed one (signed_tail_). A writer reads
+    // tail_ before signed_tail_ and writes over what lies between as unsigned, so a signed
+    // value raises signed_tail_ before tail_: a writer never sees it in the tail and not in the
+    // signed tail (it would write over a value every node takes, with an older base that every
+    // node then refuses: an acknowledged update lost).
+    const auto raise = [revision](std::atomic<uint64_t>& to) {
+        for (uint64_t t = to.load(); revision > t && !to.compare_exchange_weak(t, revision);) {
+        }
+    };
     auto v = verify(s_->options.admin_token, raw);
     if (!v) {
+        raise(tail_);
         if (count) {
             ++counters_.unsigned_values;
             burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
@@ -364,6 +372,7 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     }
     // Stored after its deadline: its writer was told the write failed, so no node takes it.
     if (stored_ns > 0 && uint64_t(stored_ns / 1000000) > v->deadline_ms) {
+        raise(tail_);
         if (!count)
             return std::nullopt;
         ++counters_.late_values;
@@ -373,9 +382,8 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
                         revision, uint64_t(stored_ns / 1000000) - v->deadline_ms));
         return std::nullopt;
     }
-    for (uint64_t t = signed_tail_.load();
-         revision > t && !signed_tail_.compare_exchange_weak(t, revision);) {
-    }
+    raise(signed_tail_);
+    raise(tail_);
     return Value{revision, v->base, v->deadline_ms, std::move(v->json), v->refill, v->of};
 }
 
@@ -783,8 +791,8 @@ bool SceneBus::refill() {
             "scene bus: the refill landed at revision {}, not {} (another node purged or "
             "wrote meanwhile)",
             rev, plan->revision);
+    signed_tail_ = rev;  // before tail_ (see check())
     tail_ = rev;
-    signed_tail_ = rev;
     ++counters_.refills;
     log::warn(
         "scene bus: the bus came back {} (revision {}, this node holds version {}): put "
