@@ -13,7 +13,14 @@ cleanup() {
   rm -rf "$dir"
 }
 trap cleanup EXIT
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 12 "$f"; done; exit 1; }
+# A log's last lines, or, where a sanitizer reported, its report from the first line on (the
+# last lines of an ASan report are its legend, not the stack).
+show_log() {  # LOG
+  local at
+  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1)
+  if [[ -n "$at" ]]; then sed -n "${at},$((at + 60))p" "$1"; else tail -n 12 "$1"; fi
+}
+fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; exit 1; }
 command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 # Waits for a nats-server's log to say it is ready.
