@@ -21,7 +21,8 @@ CC=clang CXX=clang++ cmake -S . -B build-san -G Ninja -DCMAKE_BUILD_TYPE=RelWith
 cmake --build build-san -j "$jobs" --target hs_protocol_tests hs_fuzz_decoder hs_fuzz_seeds hs_net_tests hysar \
   hysar-loadgen hysar-hmd hysar-projector hs_client_lib_tests hs_scene_bus_tests
 (cd build-san && ctest --output-on-failure -j "$jobs" --timeout 600 -R '^(Protocol|Tiles|protocol)\.' &&
-  ASAN_OPTIONS=detect_leaks=0 ctest --output-on-failure -j "$jobs" --timeout 600 -R "$server_tests")
+  ASAN_OPTIONS=detect_leaks=0:handle_abort=1 UBSAN_OPTIONS=print_stacktrace=1 \
+    ctest --output-on-failure -j "$jobs" --timeout 600 -R "$server_tests")
 
 # The server's loopback and reliability tests, and the render thread's worker pool, once more
 # under ThreadSanitizer; tests/tsan.supp lists the suppressions (the Vulkan driver only) and why.

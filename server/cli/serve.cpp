@@ -818,8 +818,9 @@ int serve_until_stopped(stream::Server& srv, std::unique_ptr<cluster::SceneBus> 
     srv.run();
     g_stop.store(true);
     watcher.join();
-    bus.reset();
+    // The admin endpoint first: its /metrics reads the bus's counters.
     admin_endpoint.reset();
+    bus.reset();
     report_stats(srv.stats(), f);
     return 0;
 }

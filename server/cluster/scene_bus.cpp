@@ -747,7 +747,13 @@ bool SceneBus::refill() {
     uint64_t bus_revision = 0;
     kvEntry* e = nullptr;
     bool stale = false;
-    if (kvStore_Get(&e, s_->kv, kKey) == NATS_OK) {
+    // A read that fails says nothing about the key: only NOT_FOUND is an empty one. Taking a
+    // timed-out read (a slow or frozen leader, an election) for an empty key would purge the
+    // stream and put an older held version back over a newer acknowledged write.
+    const natsStatus got = kvStore_Get(&e, s_->kv, kKey);
+    if (got != NATS_OK && got != NATS_NOT_FOUND)
+        return made;
+    if (got == NATS_OK) {
         bus_revision = kvEntry_Revision(e);
         stale = stale_refill_entry(e, s_->options.admin_token, content_version(held));
         kvEntry_Destroy(e);
@@ -759,8 +765,12 @@ bool SceneBus::refill() {
         bus_revision = 0;
     else if (bus_revision != 0 && last >= held.revision)
         return made;
+    // Likewise the history: one that cannot be read is not one without a newer write.
+    auto listed = read_signed(false);
+    if (!listed)
+        return made;
     std::optional<Value> newest;
-    if (auto listed = read_signed(false); listed && !listed->empty())
+    if (!listed->empty())
         newest = listed->front();
     const auto plan = plan_refill(held, bus_revision, last, newest);
     if (!plan)
