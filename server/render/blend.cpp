@@ -462,7 +462,11 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
             u += shift_px.x, v += shift_px.y;
         // Bilinear over the pixels around p that light the same surface (their point within
         // the shadow test's tolerance of p's depth): across a silhouette in j's frame, the
-        // pixels beside p light another part of the prop.
+        // pixels beside p light another part of the prop. A pixel off the prop counts with the
+        // weight dilate() gave it, the weight its frame carries there (apply_weights): at the
+        // prop's outline in j's frame (the dome's rim) the share then changes continuously,
+        // where dropping those pixels and renormalising made it jump by up to a pixel's change
+        // of weight.
         const auto& k = view.intrinsics;
         const auto& wt = blend.projectors[j].weight;
         const glm::dvec3 to = view.pose.position - p;
@@ -479,7 +483,7 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
                 if (x < 0 || y < 0 || x >= int(k.width) || y >= int(k.height))
                     continue;
                 const size_t i = size_t(y) * k.width + x;
-                if (view.covered(i) && std::abs(double(view.depth[i]) - uvz->z) <= bias)
+                if (!view.covered(i) || std::abs(double(view.depth[i]) - uvz->z) <= bias)
                     acc += f * wt[i], norm += f;
             }
         if (norm > 0.0)
