@@ -288,7 +288,9 @@ std::string peer_address(int fd) {
     return host;
 }
 
-// The same over TLS, then its close_notify; best effort, without waiting.
+// The same over TLS, then its close_notify; best effort, without waiting. What the client sent
+// is read off (still encrypted) as above, so that the close is a FIN, not a reset that could
+// eat the answer.
 void answer_and_close(stream::TlsSocket& tls, int fd, int status, std::string_view reason,
                       const std::string& body) {
     const std::string text = fmt::format(
@@ -299,6 +301,9 @@ void answer_and_close(stream::TlsSocket& tls, int fd, int status, std::string_vi
     (void)tls.write(text.data(), text.size(), written);
     tls.close_notify();
     ::shutdown(fd, SHUT_WR);
+    char sink[4096];
+    for (int i = 0; i < 16 && ::recv(fd, sink, sizeof sink, MSG_DONTWAIT) > 0; ++i) {
+    }
     ::close(fd);
 }
 
@@ -446,10 +451,11 @@ struct HttpGate::Impl {
                 refuse(c, 400, "Bad Request", kHttpsBody);
                 return false;
             case S::kFailed:
-                if (!tls.handshaken()) {
+                if (!tls.handshaken())
                     ++counters.tls_failed;
-                    c.tls.reset();  // no close_notify on a failed handshake
-                }
+                // No close_notify after a fatal error (a failed handshake, a bad record): the
+                // session is broken, and OpenSSL forbids a shutdown on it.
+                c.tls.reset();
                 break;
         }
         release(c);

@@ -118,6 +118,11 @@ std::unique_ptr<TlsSocket> TlsSocket::server(const TlsContext& ctx, int fd) {
         ERR_clear_error();
         return nullptr;
     }
+    // A client that closes its socket without close_notify after a complete request (common
+    // for scripts and probes) reads as the peer's close (kClosed), not as a failure: HTTP's own
+    // framing (a complete head, Content-Length) tells a whole request from a cut one, and the
+    // gate serves only whole ones.
+    SSL_set_options(impl->ssl, SSL_OP_IGNORE_UNEXPECTED_EOF);
     SSL_set_accept_state(impl->ssl);
     return std::unique_ptr<TlsSocket>(new TlsSocket(std::move(impl)));
 }

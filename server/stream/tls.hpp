@@ -34,7 +34,7 @@ public:
         kOk,         // done (a handshake), or bytes moved
         kWantRead,   // poll the socket for input, then call again
         kWantWrite,  // poll it for output, then call again
-        kClosed,     // the peer's close_notify
+        kClosed,     // the peer's close_notify, or its end of stream without one
         kPlainHttp,  // the handshake's first bytes were a plain HTTP request
         kFailed      // anything else: close the socket
     };

@@ -14,7 +14,13 @@ dir=$(mktemp -d)
 server=""
 cleanup() { [[ -n "$server" ]] && kill -KILL "$server" 2>/dev/null; rm -rf "$dir"; }
 trap cleanup EXIT
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; tail -n 20 "$f"; done; exit 1; }
+# A log's sanitizer report from its first line (its last lines are only the legend), else its end.
+show_log() {  # LOG
+  local at
+  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1)
+  if [[ -n "$at" ]]; then sed -n "${at},$((at + 60))p" "$1"; else tail -n 20 "$1"; fi
+}
+fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; exit 1; }
 (umask 077 && echo "tls-test-token" > "$dir/token" && echo "tls-test-admin" > "$dir/admin")
 
 # The README's one-line self-signed set-up; this certificate names localhost only (no IP).
@@ -110,6 +116,49 @@ for junk in (b"\x16\x03\x01\x00\x05hello", b"\x16\x03\x01"):
     except (ConnectionResetError, socket.timeout):
         pass
     s.close()
+# A whole request, then the client's end of stream without a close_notify (scripts and probes
+# often close so): still answered, over the half-closed socket.
+raw = socket.create_connection(("127.0.0.1", port), timeout=10)
+incoming, outgoing = ssl.MemoryBIO(), ssl.MemoryBIO()
+tls = ctx.wrap_bio(incoming, outgoing, server_hostname="localhost")
+def pump():
+    data = outgoing.read()
+    if data:
+        raw.sendall(data)
+def fill():
+    c = raw.recv(65536)
+    if c:
+        incoming.write(c)
+    else:
+        incoming.write_eof()
+    return bool(c)
+while True:
+    try:
+        tls.do_handshake()
+        break
+    except ssl.SSLWantReadError:
+        pump()
+        fill()
+pump()
+tls.write(f"GET /metrics HTTP/1.1\r\nHost: localhost\r\nAuthorization: Bearer {token}\r\n"
+          "Connection: close\r\n\r\n".encode())
+pump()
+raw.shutdown(socket.SHUT_WR)  # a FIN, no close_notify
+answer = b""
+while True:
+    try:
+        chunk = tls.read(65536)
+        if not chunk:
+            break
+        answer += chunk
+    except ssl.SSLWantReadError:
+        if not fill():
+            break
+    except (ssl.SSLEOFError, ssl.SSLZeroReturnError):
+        break
+raw.close()
+assert answer.startswith(b"HTTP/1.1 200 "), answer[:200]
+assert b"hysar_admin_bad_requests_total" in answer, answer[:200]
 # A client that does not trust the certificate is refused by its own check.
 try:
     urllib.request.urlopen(f"https://localhost:{port}/metrics", timeout=10,
