@@ -578,8 +578,8 @@ BlendCaseRow run_case(const std::string& name, const scene::Mesh& mesh,
         for (size_t i = 0; i < size_t(k.width) * k.height; ++i)
             for (int c = 0; c < 3; ++c)
                 target.pixels[i * 4 + c] = float(0.5 * optics.levels.projector_max);
-        const ImageRgba32f drive = render::blended_projector_drive(
-            optics, projectors[j], blend.projectors[j], target, 0.0);
+        const ImageRgba32f drive =
+            render::blended_projector_drive(optics, projectors, j, blend, target, 0.0);
         for (size_t i = 0; i < size_t(k.width) * k.height; ++i)
             for (int c = 0; c < 3; ++c) {
                 const double d = drive.pixels[i * 4 + c];

@@ -87,6 +87,25 @@ Result<void> check_capture_inputs(const scene::Optics& o, double alpha, const Ca
     if (!(alpha >= 0.0 && alpha <= 1.0))
         return make_error(ErrorCode::kInvalidArgument,
                           fmt::format("alpha must lie in [0, 1], got {}", alpha));
+    for (size_t j = 0; j < dev.projectors.size(); ++j) {
+        const ProjectorLight& p = dev.projectors[j];
+        if (!p.drive || !p.camera || p.drive->empty())
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("projector {}: no drive or no capture geometry", j));
+        if (p.camera->width != geo.width || p.camera->height != geo.height)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("projector {}: its capture geometry is {} but the "
+                                          "camera is {}",
+                                          j, size_str(*p.camera), size_str(geo)));
+        if (p.reaches && p.reaches->size() != size_t(geo.width) * geo.height)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("projector {}: its reach mask has {} pixels, the camera "
+                                          "{}",
+                                          j, p.reaches->size(), size_t(geo.width) * geo.height));
+        if (!(p.g_ref > 0.0) && dev.projector_present && o.effects.projector_falloff)
+            return make_error(ErrorCode::kInvalidArgument,
+                              fmt::format("projector {}: reference falloff g_ref must be > 0", j));
+    }
     return {};
 }
 
@@ -131,7 +150,26 @@ Result<Capture> simulate_capture(const scene::Optics& o, double alpha, const Cap
             const float* gp = &geo.pixels[i * 4];
             const bool covered = gp[3] > 0.5f;
             double s[3] = {0, 0, 0};
-            if (covered) {
+            if (covered && !dev.projectors.empty()) {
+                // Several projectors: each one's light through its own geometry and levels.
+                for (const ProjectorLight& pl : dev.projectors) {
+                    const float* gj = &pl.camera->pixels[i * 4];
+                    double pd[4] = {0, 0, 0, 0};
+                    const bool lit = dev.projector_present && gj[2] > 0.0f &&
+                                     (!pl.reaches || (*pl.reaches)[i]) &&
+                                     sample_bilinear(*pl.drive, gj[0], gj[1], pd);
+                    if (!lit)
+                        continue;
+                    if (pd[3] > 0.0)
+                        clipped[i] = 1;
+                    const double f = o.effects.projector_falloff ? gj[2] / pl.g_ref : 1.0;
+                    const double lobe = sheen ? (gj[3] - 1.0) : 0.0;
+                    for (int c = 0; c < 3; ++c)
+                        s[c] += f * (pl.black + (pl.white - pl.black) * pd[c]) *
+                                (rho[c] + std::numbers::pi * o.prop_sheen * lobe);
+                }
+                for (double& c : s) c += d.environment;
+            } else if (covered) {
                 // Light reaching the prop: projector (drive or black level) and the room.
                 double pd[4] = {0, 0, 0, 0};
                 const bool in_frame = !dev.projector.empty()

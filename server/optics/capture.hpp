@@ -34,10 +34,28 @@ Result<double> reference_falloff(const ImageRgba32f& projector_geometry,
 // What the devices show. An empty image is a device showing black (its black level remains);
 // a projector that is not present adds nothing. Alpha of a drive image is 1 where the wanted
 // drive fell outside [0, 1] and was clipped.
+// One projector of several (render/blend.hpp), its light as the camera sees it: its drive (its
+// own pixels, linear in [0, 1], alpha 1 where clipped), its capture geometry from the camera
+// (as CaptureGeometry::camera, of this projector: u, v, g and 1 + its sheen lobe), g at its
+// own reference point, its effective levels (DN/s) and, per camera pixel, whether it reaches
+// the surface there (its shadow test; empty: wherever g > 0). The pointers must outlive the
+// capture.
+struct ProjectorLight {
+    const ImageRgba32f* drive = nullptr;
+    const ImageRgba32f* camera = nullptr;
+    double g_ref = 0;
+    double white = 0, black = 0;
+    const std::vector<uint8_t>* reaches = nullptr;
+};
+
 struct DeviceImages {
     ImageRgba32f projector;  // projector pixels
     ImageRgba32f hmd;        // camera pixels (the headset's eye is the camera)
     bool projector_present = true;
+    // Several projectors: when not empty, their light replaces `projector`'s, each through its
+    // own geometry, levels and falloff (the camera geometry then gives only the prop's
+    // coverage).
+    std::vector<ProjectorLight> projectors;
 };
 
 struct Capture {

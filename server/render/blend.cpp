@@ -327,6 +327,12 @@ std::vector<double> blend_weights(const Blend& blend, const glm::dvec3& p, const
     return w;
 }
 
+bool reaches(const Blend& blend, size_t j, const glm::dvec3& p, const glm::dvec3& n) {
+    HS_CHECK(j < blend.views.size(), "reaches: no such projector");
+    double soft = 0.0;
+    return raw_factor(blend.views[j], blend.options, p, n, &soft) > 0.0;
+}
+
 uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n) {
     uint32_t count = 0;
     double cos_t = 0.0;
@@ -341,7 +347,7 @@ uint64_t blend_bytes(const Blend& blend) {
     for (const SurfaceView& v : blend.views)
         n += bytes(v.depth) + bytes(v.position) + bytes(v.normal) + bytes(v.edge_distance);
     for (const ProjectorBlend& p : blend.projectors)
-        n += bytes(p.weight) + bytes(p.geometry.pixels);
+        n += bytes(p.weight) + bytes(p.geometry.pixels) + bytes(p.reach_g);
     return n;
 }
 
@@ -372,6 +378,7 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
         ProjectorBlend pb;
         pb.name = projectors[j].name;
         pb.weight.assign(size_t(k.width) * k.height, 0.0f);
+        pb.reach_g.assign(size_t(k.width) * k.height * count, 0.0f);
         pb.geometry = ImageRgba32f::zeros(k.width, k.height);
         // Row by row over the cores; each row's counts apart, summed after in row order.
         std::vector<uint64_t> prop(k.height, 0), shared(k.height, 0);
@@ -403,6 +410,12 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                 g[2] = cos_t > 0.0 ? float(cos_t / d2) : 0.0f;
                 g[3] = 1.0f;
                 pb.weight[i] = float(wj);
+                for (size_t m = 0; m < count; ++m)
+                    if (raw[m] > 0.0) {
+                        const glm::dvec3 tm = blend.views[m].pose.position - p;
+                        const double dm2 = glm::dot(tm, tm);
+                        pb.reach_g[i * count + m] = float(glm::dot(n, tm / std::sqrt(dm2)) / dm2);
+                    }
                 ++prop[y];
                 shared[y] += wj > 0.0 && wj < 1.0;
             }
@@ -422,28 +435,68 @@ void apply_weights(ImageRgba32f& frame, const std::vector<float>& weight) {
         for (int c = 0; c < 3; ++c) frame.pixels[i * 4 + c] *= weight[i];
 }
 
-ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
-                                     const ProjectorBlend& blend, const ImageRgba32f& target,
+ImageRgba32f blended_projector_drive(const scene::Optics& optics,
+                                     std::span<const scene::Projector> projectors, size_t j,
+                                     const Blend& blend, const ImageRgba32f& target,
                                      double hmd_min_through) {
-    HS_CHECK(target.width == blend.geometry.width && target.height == blend.geometry.height,
+    HS_CHECK(j < projectors.size() && projectors.size() == blend.projectors.size(),
+             "blended_projector_drive: a projector of the blend");
+    const scene::Projector& projector = projectors[j];
+    const ProjectorBlend& pb = blend.projectors[j];
+    HS_CHECK(target.width == pb.geometry.width && target.height == pb.geometry.height,
              "blended_projector_drive: the target and the projector differ in size");
-    scene::Optics o = optics;
-    o.levels.projector_max = projector.white_level.value_or(optics.levels.projector_max);
-    o.levels.projector_min = projector.black_level.value_or(optics.levels.projector_min);
+    // Each projector's optics: its own white and black levels where it has them.
+    const auto levels_of = [&](const scene::Projector& pr) {
+        scene::Optics o = optics;
+        o.levels.projector_max = pr.white_level.value_or(optics.levels.projector_max);
+        o.levels.projector_min = pr.black_level.value_or(optics.levels.projector_min);
+        return o;
+    };
+    const scene::Optics o = levels_of(projector);
     const scene::DeviceLevels d = optics::effective_levels(o);
-    auto g_ref = optics::reference_falloff(blend.geometry, projector.intrinsics);
+    const auto g_ref_of = [&](size_t m) {
+        auto g = optics::reference_falloff(blend.projectors[m].geometry, projectors[m].intrinsics);
+        return g.ok() ? g.value() : 1.0;
+    };
+    const double g_ref = g_ref_of(j);
+    const size_t count = projectors.size();
+    // Per projector k: its black level over its reference falloff, as the compensation models
+    // it (f_k = g_k / g_ref_k where the falloff is compensated, else 1).
+    const auto& comp = o.compensation;
+    const bool falloff = comp.falloff && o.effects.projector_falloff;
+    std::vector<double> black(count), g_ref_k(count);
+    for (size_t m = 0; m < count; ++m) {
+        black[m] = optics::effective_levels(levels_of(projectors[m])).projector_min;
+        g_ref_k[m] = m == j ? g_ref : g_ref_of(m);
+    }
+    const glm::dvec3 rho = comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
     const double base = d.environment + hmd_min_through;
-    const bool black = o.compensation.black_levels;
+    const bool compensate_black = comp.black_levels;
+    const bool floor_known = pb.reach_g.size() == pb.weight.size() * count;
     ImageRgba32f share = target;
     for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
-        const double w = blend.weight[i];
+        const double w = pb.weight[i];
+        const float* gp = &pb.geometry.pixels[i * 4];
+        const bool lights = gp[3] > 0.5f && gp[2] > 0.0f;
+        // The black floor there, and j's own part of it (both in DN/s before the albedo).
+        double floor = 0.0, own = 0.0;
+        if (compensate_black && lights && floor_known) {
+            for (size_t m = 0; m < count; ++m) {
+                const double g = pb.reach_g[i * count + m];
+                if (g > 0.0)
+                    floor += (falloff ? g / g_ref_k[m] : 1.0) * black[m];
+            }
+            own = (falloff ? gp[2] / g_ref : 1.0) * black[j];
+        }
         for (int c = 0; c < 3; ++c) {
             const double t = target.pixels[i * 4 + c];
-            share.pixels[i * 4 + c] = float(black && w > 0.0 ? w * t + (1.0 - w) * base : w * t);
+            double v = w * t;
+            if (compensate_black && (w > 0.0 || (lights && floor_known)))
+                v += (1.0 - w) * base + rho[c] * (own - w * floor);
+            share.pixels[i * 4 + c] = float(v);
         }
     }
-    return optics::projector_drive(o, share, blend.geometry, g_ref.ok() ? g_ref.value() : 1.0,
-                                   hmd_min_through);
+    return optics::projector_drive(o, share, pb.geometry, g_ref, hmd_min_through);
 }
 
 double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n, int shifted,

@@ -97,6 +97,10 @@ struct ProjectorBlend {
     // The projector's capture geometry as render_capture_geometry gives it seen from the
     // projector itself: u, v (the pixel), g = cos theta / d^2 (m^-2), alpha 1 on the prop.
     ImageRgba32f geometry;
+    // Per pixel and projector k (index pixel * projectors + k): g_k = cos theta_k / d_k^2 of
+    // the surface point the pixel lights, where k reaches it (0 elsewhere, and off the prop):
+    // the black floor the projectors put there (blended_projector_drive).
+    std::vector<float> reach_g;
     uint64_t prop_pixels = 0;    // pixels that light the prop
     uint64_t shared_pixels = 0;  // of which another projector shares (0 < w < 1)
 };
@@ -143,9 +147,14 @@ double delivered_share(const Blend& blend, const glm::dvec3& p, const glm::dvec3
 // pixels), weighted here by j's blend; the compensation is optics::projector_drive's with the
 // projector's own white and black levels, its own falloff (its blend geometry) and its own
 // reference point g_ref (g at its principal point; 1 where that ray misses the prop), and it
-// takes off only j's share of the environment and the headset black. Drives lie in [0, 1].
-ImageRgba32f blended_projector_drive(const scene::Optics& optics, const scene::Projector& projector,
-                                     const ProjectorBlend& blend, const ImageRgba32f& target,
+// takes off only j's share of the environment and the headset black. With the black levels
+// compensated, the black floor every projector that reaches a point puts there (sum_k f_k
+// P^m_k) is shared by weight too: j takes off w_j of it rather than its own black, so that a
+// projector with a small share shows black instead of clipping above its share. `projectors`
+// are the blend's, in its order. Drives lie in [0, 1].
+ImageRgba32f blended_projector_drive(const scene::Optics& optics,
+                                     std::span<const scene::Projector> projectors, size_t j,
+                                     const Blend& blend, const ImageRgba32f& target,
                                      double hmd_min_through);
 
 // The interior of a camera's view of the prop, as the shading comparisons take it: at least
@@ -173,6 +182,10 @@ struct ViewBlend {
 };
 ViewBlend view_blend(const Blend& blend, const SurfaceView& camera, int shifted = -1,
                      glm::dvec2 shift_px = {0, 0});
+
+// Whether projector j reaches p (V_j and cos theta_j > 0: inside its frame, facing it and not
+// hidden from it).
+bool reaches(const Blend& blend, size_t j, const glm::dvec3& p, const glm::dvec3& n);
 
 // How many of the projectors reach p (V_j and cos theta_j > 0).
 uint32_t projectors_reaching(const Blend& blend, const glm::dvec3& p, const glm::dvec3& n);

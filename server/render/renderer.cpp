@@ -305,8 +305,14 @@ gpu::GpuScene Renderer::scene_block(const scene::Specular& sp) const {
     return block;
 }
 
-Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> sheen_exponent) {
-    const std::string key = fmt::format("geometry|{}", sheen_exponent ? *sheen_exponent : -1.0);
+Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> sheen_exponent,
+                                                      size_t projector) {
+    HS_CHECK(projector < scene_.projector_count(), "geometry_variant: no such projector");
+    // The first projector's key as it was (one projector: one variant, as before).
+    const std::string key =
+        projector == 0
+            ? fmt::format("geometry|{}", sheen_exponent ? *sheen_exponent : -1.0)
+            : fmt::format("geometry|{}|{}", sheen_exponent ? *sheen_exponent : -1.0, projector);
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
     Variant v;
@@ -325,6 +331,13 @@ Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> shee
         .set_bool(HS_SC_ANALYTIC_SPHERE, convex_);
     gpu::GpuScene block = scene_block(scene::Specular{});
     block.sheen_params = glm::vec4(float(sheen_exponent.value_or(1.0)), 0, 0, 0);
+    if (projector > 0) {
+        const scene::Projector& pr = scene_.more_projectors[projector - 1];
+        const auto& pk = pr.intrinsics;
+        block.projector_frame_from_world = glm::mat4(scene::frame_from_world(pr.pose));
+        block.projector_k = glm::vec4(float(pk.fx), float(pk.fy), float(pk.cx), float(pk.cy));
+        block.projector_position = glm::vec4(glm::vec3(pr.pose.position), 1.0f);
+    }
     return build_variant(key, std::move(v), pi, block);
 }
 
@@ -605,8 +618,12 @@ Result<RenderResult> Renderer::render_eye_diffuse(const scene::Intrinsics& k,
 }
 
 Result<RenderResult> Renderer::render_projector_vd(const scene::Specular& spec,
-                                                   const glm::dvec3& eye_position) {
-    const auto& k = scene_.projector.intrinsics;
+                                                   const glm::dvec3& eye_position,
+                                                   size_t projector) {
+    HS_CHECK(projector < scene_.projector_count(), "render_projector_vd: no such projector");
+    const scene::Projector& pr =
+        projector == 0 ? scene_.projector : scene_.more_projectors[projector - 1];
+    const auto& k = pr.intrinsics;
     RenderResult r;
     r.report.pass = "projector-vd-baked";
     if (!has_vd_term(spec)) {
@@ -615,16 +632,20 @@ Result<RenderResult> Renderer::render_projector_vd(const scene::Specular& spec,
         return r;
     }
     HS_ASSIGN_OR_RETURN(Variant * v, variant(true, spec));
-    HS_ASSIGN_OR_RETURN(
-        r, draw(*v, k, scene_.projector.pose, "pass.projector-vd-baked", &eye_position));
+    HS_ASSIGN_OR_RETURN(r, draw(*v, k, pr.pose, "pass.projector-vd-baked", &eye_position));
     r.report.pass = "projector-vd-baked";
     return r;
 }
 
 Result<RenderResult> Renderer::render_capture_geometry(const scene::Intrinsics& k,
                                                        const scene::Pose& camera,
-                                                       std::optional<double> sheen_exponent) {
-    HS_ASSIGN_OR_RETURN(Variant * v, geometry_variant(sheen_exponent));
+                                                       std::optional<double> sheen_exponent,
+                                                       size_t projector) {
+    if (projector >= scene_.projector_count())
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("capture geometry: projector {} of a scene with {}",
+                                      projector, scene_.projector_count()));
+    HS_ASSIGN_OR_RETURN(Variant * v, geometry_variant(sheen_exponent, projector));
     HS_ASSIGN_OR_RETURN(RenderResult r, draw(*v, k, camera, "pass.capture-geometry", nullptr,
                                              gpu::ColorFormat::kRgba32Float));
     r.report.pass = "capture-geometry";

@@ -170,19 +170,21 @@ public:
     Result<RenderResult> render_eye_diffuse(const scene::Intrinsics& k, const scene::Pose& eye);
 
     // SAR's projector frame (paper Sec. 5.2): the VD layer for a viewer at `eye_position`,
-    // drawn from the projector, so that VI + this bakes one viewpoint's highlights into the
-    // projector image.
+    // drawn from the projector (the scene's `projector`-th, scene::Scene::projectors()), so
+    // that VI + this bakes one viewpoint's highlights into the projector image.
     Result<RenderResult> render_projector_vd(const scene::Specular& spec,
-                                             const glm::dvec3& eye_position);
+                                             const glm::dvec3& eye_position, size_t projector = 0);
 
     // The capture geometry seen from a camera (docs/OPTICS.md), always in a 32-bit float
     // target: per pixel (u_p, v_p) the projector pixel that lights it, cos(theta_p) / d_p^2
     // (m^-2; 0 where the projector cannot reach), and alpha = 1 + the prop's sheen lobe towards
     // the camera (0 where the prop does not cover the pixel). The sheen term is compiled in only
-    // when `sheen_exponent` is set.
+    // when `sheen_exponent` is set. `projector`: which of the scene's projectors
+    // (scene::Scene::projectors()) the geometry is of; each has its own pipeline variant.
     Result<RenderResult> render_capture_geometry(const scene::Intrinsics& k,
                                                  const scene::Pose& camera,
-                                                 std::optional<double> sheen_exponent);
+                                                 std::optional<double> sheen_exponent,
+                                                 size_t projector = 0);
 
     // The headsets' fill-in (render/fill.hpp): from now on, served VD layers (record_layers)
     // carry the VI term wherever no projector of `blend` reaches the surface they show. The
@@ -255,7 +257,7 @@ private:
     Result<Variant*> variant(bool vd, const scene::Specular& spec) {
         return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
     }
-    Result<Variant*> geometry_variant(std::optional<double> sheen_exponent);
+    Result<Variant*> geometry_variant(std::optional<double> sheen_exponent, size_t projector);
     // Builds the pipeline and its scene block, and keeps the variant under `key`.
     Result<Variant*> build_variant(const std::string& key, Variant v, gpu::GraphicsPipelineInfo pi,
                                    const gpu::GpuScene& block);

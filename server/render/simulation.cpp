@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <fmt/format.h>
 
@@ -36,8 +37,44 @@ Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
     sim.projector_geometry_ = std::move(geo.image);
     HS_ASSIGN_OR_RETURN(sim.g_ref_,
                         optics::reference_falloff(sim.projector_geometry_, s.projector.intrinsics));
+    if (s.projector_count() > 1) {
+        const std::vector<scene::Projector> all = s.projectors();
+        sim.blend_ = std::make_shared<const Blend>(compute_blend(r.mesh(), all));
+        for (size_t j = 0; j < all.size(); ++j) {
+            Blended b;
+            b.projector = all[j];
+            HS_ASSIGN_OR_RETURN(RenderResult f, r.render_projector(j));
+            b.vi = std::move(f.image);
+            // As blended_projector_drive takes it: 1 where j's principal ray misses the prop.
+            auto g =
+                optics::reference_falloff(sim.blend_->projectors[j].geometry, all[j].intrinsics);
+            b.g_ref = g.ok() ? g.value() : 1.0;
+            sim.blended_.push_back(std::move(b));
+        }
+    }
     if (s.optics.scene_to_signal > 0) {
         sim.k_ = s.optics.scene_to_signal;
+    } else if (!sim.blended_.empty()) {
+        // The largest k every projector can show its share of (VI, or SAR's frame baked for
+        // `fit_sar`) at, with its own white level and falloff.
+        double k = std::numeric_limits<double>::infinity();
+        for (size_t j = 0; j < sim.blended_.size(); ++j) {
+            const Blended& b = sim.blended_[j];
+            ImageRgba32f share = b.vi;
+            if (fit_sar) {
+                HS_ASSIGN_OR_RETURN(
+                    RenderResult vd,
+                    r.render_projector_vd(s.material.specular, fit_sar->camera.position, j));
+                share = added(share, vd.image);
+            }
+            apply_weights(share, sim.blend_->projectors[j].weight);
+            scene::Optics oj = s.optics;
+            oj.levels.projector_max = b.projector.white_level.value_or(oj.levels.projector_max);
+            if (auto kj = optics::largest_scene_to_signal(
+                    oj, share, sim.blend_->projectors[j].geometry, b.g_ref))
+                k = std::min(k, *kj);
+        }
+        sim.k_ = std::isfinite(k) ? k : 1.0;
     } else {
         ImageRgba32f fit = sim.vi_projector_;
         if (fit_sar) {
@@ -87,6 +124,14 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
         return vi_drive_;
     };
     const double alpha_c = o.compensation.hmd_alpha ? alpha_ : 1.0;
+    if (!blended_.empty() && mode != DisplayMode::kHmdOnly) {
+        HS_ASSIGN_OR_RETURN(
+            out.capture,
+            capture_blended(
+                mode, view, baked, o, override_optics.has_value(), out.geometry,
+                mode == DisplayMode::kHySAR ? scaled(ls.image, alpha_c * k_) : ImageRgba32f{}));
+        return out;
+    }
     optics::DeviceImages dev;
     switch (mode) {
         case DisplayMode::kHySAR:
@@ -111,6 +156,74 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
         out.capture,
         optics::simulate_capture(o, alpha_, optics::CaptureGeometry{out.geometry, g_ref_}, dev));
     return out;
+}
+
+Result<optics::Capture> Simulator::capture_blended(DisplayMode mode, const Viewpoint& view,
+                                                   const std::optional<Viewpoint>& baked,
+                                                   const scene::Optics& o, bool overridden,
+                                                   const ImageRgba32f& geometry,
+                                                   const ImageRgba32f& eye_vd) {
+    const size_t count = blended_.size();
+    const bool sheen = o.effects.prop_sheen && o.prop_sheen > 0;
+    const scene::DeviceLevels lv = optics::effective_levels(o);
+    const double hmd_min_through = alpha_ > 0 ? lv.hmd_min / alpha_ : 0.0;
+    // Which projectors reach the surface each camera pixel sees: the blend's own shadow test,
+    // at the surface point the CPU's view of the prop puts there (a pixel the GPU covers and
+    // the CPU does not keeps 1: lit wherever its g > 0).
+    const SurfaceView cam = rasterise(renderer_->mesh(), view.intrinsics, view.camera);
+    const size_t n = size_t(view.intrinsics.width) * view.intrinsics.height;
+    if (geometry.width != view.intrinsics.width || geometry.height != view.intrinsics.height)
+        return make_error(ErrorCode::kInvalidArgument,
+                          "capture: the capture geometry and the viewpoint differ in size");
+    std::vector<std::vector<uint8_t>> reach(count, std::vector<uint8_t>(n, 1));
+    for (size_t i = 0; i < n; ++i) {
+        if (!cam.covered(i))
+            continue;
+        const glm::dvec3 p(cam.position[i]), nn(cam.normal[i]);
+        for (size_t j = 0; j < count; ++j) reach[j][i] = reaches(*blend_, j, p, nn);
+    }
+    const std::vector<scene::Projector> all = scene_.projectors();
+    std::vector<ImageRgba32f> cams(count), sar_drives(count);
+    optics::DeviceImages dev;
+    for (size_t j = 0; j < count; ++j) {
+        Blended& b = blended_[j];
+        HS_ASSIGN_OR_RETURN(
+            RenderResult g,
+            renderer_->render_capture_geometry(
+                view.intrinsics, view.camera,
+                sheen ? std::optional<double>(o.prop_sheen_exponent) : std::nullopt, j));
+        cams[j] = std::move(g.image);
+        const ImageRgba32f* drive = nullptr;
+        if (mode == DisplayMode::kSAR) {
+            const glm::dvec3 eye = (baked ? *baked : view).camera.position;
+            HS_ASSIGN_OR_RETURN(RenderResult vd,
+                                renderer_->render_projector_vd(scene_.material.specular, eye, j));
+            sar_drives[j] = blended_projector_drive(
+                o, all, j, *blend_, scaled(added(b.vi, vd.image), k_), hmd_min_through);
+            drive = &sar_drives[j];
+        } else if (overridden || b.vi_drive.empty()) {
+            ImageRgba32f d =
+                blended_projector_drive(o, all, j, *blend_, scaled(b.vi, k_), hmd_min_through);
+            if (overridden) {
+                sar_drives[j] = std::move(d);
+                drive = &sar_drives[j];
+            } else {
+                b.vi_drive = std::move(d);
+                drive = &b.vi_drive;
+            }
+        } else {
+            drive = &b.vi_drive;
+        }
+        scene::Optics oj = o;
+        oj.levels.projector_max = b.projector.white_level.value_or(o.levels.projector_max);
+        oj.levels.projector_min = b.projector.black_level.value_or(o.levels.projector_min);
+        const scene::DeviceLevels dj = optics::effective_levels(oj);
+        dev.projectors.push_back(
+            {drive, &cams[j], b.g_ref, dj.projector_max, dj.projector_min, &reach[j]});
+    }
+    if (mode == DisplayMode::kHySAR)
+        dev.hmd = optics::hmd_drive(o, eye_vd);
+    return optics::simulate_capture(o, alpha_, optics::CaptureGeometry{geometry, g_ref_}, dev);
 }
 
 std::vector<uint8_t> usable_pixels(const SimulatedView& v) {

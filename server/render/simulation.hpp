@@ -10,11 +10,13 @@
 // alpha k (L_d + L_s), k the scene-to-signal scale (scene::Optics::scene_to_signal).
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "optics/capture.hpp"
+#include "render/blend.hpp"
 #include "render/renderer.hpp"
 
 namespace hs::render {
@@ -36,12 +38,17 @@ struct SimulatedView {
     ImageRgba32f geometry;  // the capture geometry of this viewpoint
 };
 
+// A scene with several projectors is simulated with all of them (docs/OPTICS.md, "Several
+// projectors"): each shows its blended share of the frame (render::blended_projector_drive),
+// and the capture sums their light, each through its own geometry, falloff, levels and shadow
+// test (render::reaches). With one projector the capture is the single-projector path's.
 class Simulator {
 public:
     // `viewer` gives alpha; the scene's optics section everything else. The renderer must
     // belong to the same scene. Unless the scene fixes k, it is the largest the projector can
     // show: of the VI frame, or, with `fit_sar`, of SAR's frame baked for that viewpoint (so
-    // that SAR is at its best where it was made for, and every mode shares one target).
+    // that SAR is at its best where it was made for, and every mode shares one target); with
+    // several projectors, the largest that every projector can show of its share.
     static Result<Simulator> create(Renderer& renderer, const scene::Scene& scene,
                                     const scene::ViewerProfile& viewer,
                                     const std::optional<Viewpoint>& fit_sar = std::nullopt);
@@ -53,6 +60,8 @@ public:
                                   const std::optional<scene::Optics>& optics = std::nullopt);
 
     double scene_to_signal() const { return k_; }
+    // How many projectors the captures simulate (the scene's).
+    size_t projectors() const { return blended_.empty() ? 1 : blended_.size(); }
     double g_ref() const { return g_ref_; }
     double alpha() const { return alpha_; }
     const scene::Optics& optics() const { return optics_; }
@@ -67,6 +76,21 @@ private:
     ImageRgba32f vi_drive_;        // the VI frame's drive under the scene's optics, once made
     ImageRgba32f override_drive_;  // the same under the last overriding optics
     double g_ref_ = 0, k_ = 0;
+    // Several projectors: their blend, and per projector its unweighted VI frame, g at its
+    // reference point and its VI drive under the scene's optics (once made). Empty with one.
+    struct Blended {
+        scene::Projector projector;
+        ImageRgba32f vi;
+        double g_ref = 1.0;
+        ImageRgba32f vi_drive;
+    };
+    std::shared_ptr<const Blend> blend_;
+    std::vector<Blended> blended_;
+    Result<optics::Capture> capture_blended(DisplayMode mode, const Viewpoint& view,
+                                            const std::optional<Viewpoint>& baked,
+                                            const scene::Optics& o, bool overridden,
+                                            const ImageRgba32f& geometry,
+                                            const ImageRgba32f& eye_vd);
 };
 
 // The capture against its target (docs/OPTICS.md): over prop pixels that `usable` keeps, in

@@ -1,13 +1,17 @@
 // The simulation pass: the capture geometry against exact ray casting, the HySAR composite
 // against its target with and without each compensation, and the display modes.
 #include <cmath>
+#include <cstdio>
+#include <string>
 
 #include <glm/geometric.hpp>
 
+#include "../shrink.hpp"
 #include "gpu_fixture.hpp"
 #include "optics/metrics.hpp"
 #include "render/simulation.hpp"
 #include "scene/camera.hpp"
+#include "scene/config.hpp"
 #include "shading/reference.hpp"
 
 using namespace hs;
@@ -147,3 +151,66 @@ TEST_F(Simulation, WithoutHighlightsNothingViewDependentIsRendered) {
 }
 
 }  // namespace
+
+// Several projectors (docs/OPTICS.md, "Several projectors"): the capture sums each projector's
+// blended share through its own geometry, levels and shadow test.
+TEST_F(Simulation, ThreeProjectorsReproduceTheTargetWhereOneLeavesTheSideUnlit) {
+    auto loaded =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+    scene::Scene three = loaded.value();
+    shrink(three.projector, 4);
+    for (auto& p : three.more_projectors) shrink(p, 4);
+    scene::Scene one = three;
+    one.more_projectors.clear();
+    const scene::ViewerProfile& viewer = three.viewers.front();
+    // The side of the dome that the first projector (in front) reaches only in part.
+    auto vp = render::viewing_viewpoint(three, viewer, 90, three.viewing.default_height);
+    ASSERT_TRUE(vp.ok());
+    vp->intrinsics = small_eye(4);
+    struct Result {
+        render::CompositeError e;
+        double k = 0;
+    };
+    auto run = [&](const scene::Scene& s, size_t projectors) {
+        auto r = make_renderer(s);
+        auto sim = render::Simulator::create(*r, s, viewer);
+        EXPECT_TRUE(sim.ok()) << sim.error().message;
+        EXPECT_EQ(sim->projectors(), projectors);
+        auto sv = sim->capture(render::DisplayMode::kHySAR, *vp);
+        EXPECT_TRUE(sv.ok()) << sv.error().message;
+        // Each projector's capture geometry is its own; one past the last is refused.
+        auto g0 = r->render_capture_geometry(vp->intrinsics, vp->camera, std::nullopt, 0);
+        auto past = r->render_capture_geometry(vp->intrinsics, vp->camera, std::nullopt,
+                                               s.projector_count());
+        EXPECT_TRUE(g0.ok());
+        EXPECT_FALSE(past.ok());
+        if (projectors > 1) {
+            auto g1 = r->render_capture_geometry(vp->intrinsics, vp->camera, std::nullopt, 1);
+            EXPECT_TRUE(g1.ok());
+            size_t differ = 0;
+            for (size_t i = 0; i < g0->image.pixels.size(); i += 4)
+                differ +=
+                    g0->image.pixels[i + 3] > 0.5f && g0->image.pixels[i] != g1->image.pixels[i];
+            EXPECT_GT(differ, 1000u);  // another projector's pixels
+        }
+        return Result{render::composite_error(*sv, render::usable_pixels(*sv)),
+                      sim->scene_to_signal()};
+    };
+    const Result three_r = run(three, 3), one_r = run(one, 1);
+    std::printf("three: rmse %.3f max %.2f peak %.1f pixels %llu excluded %llu k %.1f\n",
+                three_r.e.rmse_dn, three_r.e.max_dn, three_r.e.peak_dn,
+                (unsigned long long)three_r.e.pixels, (unsigned long long)three_r.e.excluded,
+                three_r.k);
+    std::printf("one:   rmse %.3f max %.2f peak %.1f pixels %llu excluded %llu k %.1f\n",
+                one_r.e.rmse_dn, one_r.e.max_dn, one_r.e.peak_dn,
+                (unsigned long long)one_r.e.pixels, (unsigned long long)one_r.e.excluded, one_r.k);
+    // Three: the stated tolerance of the single-projector path where it reaches (RMSE <= 0.5 %
+    // of the peak, max <= 5 %), over the whole side.
+    EXPECT_GT(three_r.e.pixels, 2000u);
+    EXPECT_GT(three_r.e.peak_dn, 30.0);
+    EXPECT_LE(three_r.e.rmse_dn, 0.005 * three_r.e.peak_dn);
+    EXPECT_LE(three_r.e.max_dn, 0.05 * three_r.e.peak_dn);
+    // One: the part of the side it does not reach stays dark, far from the target.
+    EXPECT_GT(one_r.e.rmse_dn, 10.0 * three_r.e.rmse_dn);
+}
