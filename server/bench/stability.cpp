@@ -546,7 +546,9 @@ BlendCaseRow run_case(const std::string& name, const scene::Mesh& mesh,
     BlendCaseRow row;
     row.name = name;
     row.projectors = projectors.size();
-    const render::Blend blend = render::compute_blend(mesh, projectors);
+    render::BlendOptions options;
+    options.keep_reach = true;  // the drives below share the black floor
+    const render::Blend blend = render::compute_blend(mesh, projectors, options);
     row.min_drive = 1.0, row.max_drive = 0.0;
     // Every prop point some projector's pixel lands on, through every projector's eyes.
     for (size_t j = 0; j < blend.views.size(); ++j) {

@@ -378,7 +378,8 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
         ProjectorBlend pb;
         pb.name = projectors[j].name;
         pb.weight.assign(size_t(k.width) * k.height, 0.0f);
-        pb.reach_g.assign(size_t(k.width) * k.height * count, 0.0f);
+        if (options.keep_reach)
+            pb.reach_g.assign(size_t(k.width) * k.height * count, 0.0f);
         pb.geometry = ImageRgba32f::zeros(k.width, k.height);
         // Row by row over the cores; each row's counts apart, summed after in row order.
         std::vector<uint64_t> prop(k.height, 0), shared(k.height, 0);
@@ -410,7 +411,7 @@ Blend compute_blend(const scene::Mesh& mesh, std::span<const scene::Projector> p
                 g[2] = cos_t > 0.0 ? float(cos_t / d2) : 0.0f;
                 g[3] = 1.0f;
                 pb.weight[i] = float(wj);
-                for (size_t m = 0; m < count; ++m)
+                for (size_t m = 0; m < count && options.keep_reach; ++m)
                     if (raw[m] > 0.0) {
                         const glm::dvec3 tm = blend.views[m].pose.position - p;
                         const double dm2 = glm::dot(tm, tm);

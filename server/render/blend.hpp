@@ -60,6 +60,10 @@ struct BlendOptions {
     // roll-offs do. 0.05 lowered the largest interior seam step at full resolution from 6.3 %
     // to 2.0 % (docs/OPTICS.md, "Several projectors"); at 0.001 the roll-offs alone decided.
     double rolloff_floor = 0.05;
+    // Keep each projector's g_k per pixel (ProjectorBlend::reach_g), which
+    // blended_projector_drive needs to share the black floor: 4 bytes per projector and pixel,
+    // off where only the weights are sent (the server's uncalibrated frames).
+    bool keep_reach = false;
 };
 
 // A camera's view of the prop, rasterised on the CPU: per pixel (pixel centres at integers,
@@ -99,7 +103,8 @@ struct ProjectorBlend {
     ImageRgba32f geometry;
     // Per pixel and projector k (index pixel * projectors + k): g_k = cos theta_k / d_k^2 of
     // the surface point the pixel lights, where k reaches it (0 elsewhere, and off the prop):
-    // the black floor the projectors put there (blended_projector_drive).
+    // the black floor the projectors put there (blended_projector_drive). Empty unless
+    // BlendOptions::keep_reach.
     std::vector<float> reach_g;
     uint64_t prop_pixels = 0;    // pixels that light the prop
     uint64_t shared_pixels = 0;  // of which another projector shares (0 < w < 1)

@@ -39,7 +39,9 @@ Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
                         optics::reference_falloff(sim.projector_geometry_, s.projector.intrinsics));
     if (s.projector_count() > 1) {
         const std::vector<scene::Projector> all = s.projectors();
-        sim.blend_ = std::make_shared<const Blend>(compute_blend(r.mesh(), all));
+        BlendOptions bo;
+        bo.keep_reach = true;  // the drives share the black floor
+        sim.blend_ = std::make_shared<const Blend>(compute_blend(r.mesh(), all, bo));
         for (size_t j = 0; j < all.size(); ++j) {
             Blended b;
             b.projector = all[j];
