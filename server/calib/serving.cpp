@@ -272,7 +272,8 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s, cons
 }
 
 Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
-                                                     std::span<const ProjectorShare> shares) const {
+                                                     std::span<const ProjectorShare> shares,
+                                                     double fixed_k) const {
     HS_TRY(check_scene(s));
     const auto all = s.projectors();
     if (shares.size() != all.size())
@@ -311,7 +312,7 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
         o[j] = drive_optics(all[j].name);
     }
     // One k for the room: the largest that every projector can show its share at.
-    out.scene_to_signal = optics.scene_to_signal;
+    out.scene_to_signal = fixed_k > 0.0 ? fixed_k : optics.scene_to_signal;
     if (!(out.scene_to_signal > 0)) {
         // A projector whose share wants no light on its well-lit prop sets no limit.
         double k = std::numeric_limits<double>::infinity();

@@ -145,8 +145,11 @@ struct ServingCalibration {
     // share per projector of the scene in its order. k is one for the whole room: optics.json's,
     // or the largest every projector can show. With the black-level compensation each projector
     // takes off its own black and its share of the room light (render::blended_projector_drive).
+    // `fixed_k` > 0 takes that k instead (a re-blend of a running version keeps the version's,
+    // which its headsets' layers are drawn at).
     Result<SceneDrives> scene_drives(const scene::Scene& scene,
-                                     std::span<const ProjectorShare> shares) const;
+                                     std::span<const ProjectorShare> shares,
+                                     double fixed_k = 0.0) const;
     // A room of one: its projector's frame and geometry.
     Result<SceneDrives> scene_drives(const scene::Scene& scene, const ImageRgba32f& projector_vi,
                                      const ImageRgba32f& projector_geometry) const;

@@ -101,11 +101,6 @@ void FrameLoop::run(scene::Scene initial, uint32_t version) {
         throw std::runtime_error(ring.error().message);
     ring_ = std::move(ring).value();
     sink_ = host_.make_sink(*ring_);
-    if (info_.reblend_missing && info_.calibration)
-        log::warn(
-            "--reblend-missing: not with a calibration (the drives are made once per scene "
-            "version, for the blend of every projector); the projectors stay blended over all "
-            "of them");
     // The initial version is built before anything is served: it is waited for.
     start_build({initial, 0, 0, version}, version);
     auto first = take_blend(true);
@@ -161,10 +156,11 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
                 host_.scene_failed(request);
             }
         } else if (done->blend) {
-            publish_reblend(*done->blend, done->excluded, done->ms);
+            publish_reblend(*done);
         } else {
             log::error("render: re-blending the projectors failed ({}); the frames stay",
                        done->error);
+            reblend_failed_ = done->excluded;  // not tried again until the set changes
         }
     }
     if (!blend_) {
@@ -327,7 +323,7 @@ bool FrameLoop::build_scene(BlendTask& task) {
     std::optional<render::ProjectorFrames> frames;
     if (!sc.captured_material) {
         if (task.blend) {
-            if (info_.reblend_missing && !info_.calibration)
+            if (info_.reblend_missing)
                 for (const auto& f : b.frames.frames) b.unweighted.push_back(f.image);
             render::blend_projector_frames(b.frames, task.blend, task.ms);
         }
@@ -339,6 +335,8 @@ bool FrameLoop::build_scene(BlendTask& task) {
         return false;
     }
     b.layer_drive = std::move(layer_drive).value();
+    if (const auto it = b.built.report.find("calibration"); it != b.built.report.end())
+        b.scene_to_signal = it->value("scene_to_signal", 0.0);
     // The fill-in's state, with the projector pass in the stats.
     b.built.report["headset_fill"] = {{"enabled", fill},
                                       {"active", b.renderer->fill()},
@@ -355,16 +353,28 @@ void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projecto
     blend_ = std::make_unique<BlendTask>();
     blend_->excluded = std::move(excluded);
     BlendTask* task = blend_.get();
-    task->thread = std::thread([this, task, &mesh, projectors = std::move(projectors)] {
+    // All of them back: the version's own blend, its frames made again (drives through the
+    // calibration are not kept between re-blends).
+    std::shared_ptr<const render::Blend> full =
+        blend_->excluded.empty() ? full_blend_ : std::shared_ptr<const render::Blend>();
+    task->thread = std::thread([this, task, &mesh, full, projectors = std::move(projectors)] {
         const auto t0 = Clock::now();
         // A failure here (memory at full resolution) fails this version or re-blend on the
         // render thread, as it did when the blend ran there; it never ends the process.
         try {
-            task->blend = charged_blend(render::compute_blend(mesh, projectors));
+            task->blend = full ? full : charged_blend(render::compute_blend(mesh, projectors));
+            task->ms = full ? 0.0 : ms_since(t0);
+            auto frames = reblend_frames(*task->blend, task->excluded);
+            if (frames) {
+                task->frames = std::move(frames).value();
+            } else {
+                task->error = frames.error().message;
+                task->blend.reset();
+            }
         } catch (const std::exception& e) {
             task->error = e.what();
+            task->blend.reset();
         }
-        task->ms = ms_since(t0);
         task->done.store(true, std::memory_order_release);
         scheduler_.wake();  // the render thread takes it on its next turn
     });
@@ -404,7 +414,9 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     unweighted_charge_ = MemoryCharge(cpu_ledger(), unweighted_bytes);
     // Kept only to re-blend without a missing projector (--reblend-missing): three 1920 x 1200
     // projectors' blend holds about 330 MB.
-    full_blend_ = info_.reblend_missing && !info_.calibration ? task->blend : nullptr;
+    full_blend_ = info_.reblend_missing ? task->blend : nullptr;
+    version_k_ = b.scene_to_signal;
+    reblend_failed_.reset();
     task->blend.reset();  // not kept: off the ledger before the version is announced
     excluded_.clear();
     version_ = task->version;
@@ -420,7 +432,7 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
 }
 
 void FrameLoop::reblend_if_needed() {
-    if (!info_.reblend_missing || info_.calibration || !full_blend_ || unweighted_.empty())
+    if (!info_.reblend_missing || !full_blend_ || unweighted_.empty())
         return;
     const auto all = current_.projectors();
     const std::set<std::string> missing = inbox_.missing_projectors();
@@ -434,30 +446,74 @@ void FrameLoop::reblend_if_needed() {
     // With none of them connected there is nobody to cover for: the full blend stays.
     if (included.empty())
         excluded.clear();
-    if (excluded == excluded_)
+    if (excluded == excluded_ || (reblend_failed_ && *reblend_failed_ == excluded))
         return;
     if (excluded.empty())
-        return publish_reblend(*full_blend_, excluded, 0.0);
-    log::info("re-blending {} of the {} projectors without {}", included.size(), all.size(),
-              fmt::join(excluded, ", "));
+        log::info("all {} projectors are back: blended over all of them", all.size());
+    else
+        log::info("re-blending {} of the {} projectors without {}", included.size(), all.size(),
+                  fmt::join(excluded, ", "));
     start_blend(renderer_->mesh(), std::move(included), std::move(excluded));
 }
 
-void FrameLoop::publish_reblend(const render::Blend& blend, const std::set<std::string>& excluded,
-                                double ms) {
+Result<std::vector<SceneVersion::ProjectorFrame>> FrameLoop::reblend_frames(
+    const render::Blend& blend, const std::set<std::string>& excluded) const {
     const auto all = current_.projectors();
+    std::vector<size_t> included;
+    for (size_t j = 0; j < all.size(); ++j)
+        if (!excluded.count(all[j].name))
+            included.push_back(j);
+    HS_CHECK(included.size() == blend.projectors.size() && unweighted_.size() == all.size(),
+             "reblend_frames: a blend of the included projectors");
+    std::vector<ImageRgba32f> weighted;
+    weighted.reserve(included.size());
+    for (size_t b = 0; b < included.size(); ++b) {
+        weighted.push_back(unweighted_[included[b]]);
+        render::apply_weights(weighted.back(), blend.projectors[b].weight);
+    }
+    std::vector<SceneVersion::ProjectorFrame> out;
+    if (!info_.calibration) {
+        for (size_t b = 0; b < included.size(); ++b)
+            out.push_back({all[included[b]].name, weighted[b].width, weighted[b].height,
+                           codec::srgb8_pixels(weighted[b])});
+        return out;
+    }
+    // Through the calibration: the included projectors as a room of their own, each with the
+    // calibrated device it has in the whole room, at the version's k.
+    const calib::ServingCalibration& cal = *info_.calibration;
+    const std::string& first = all[included[0]].name;
+    if (cal.device_for(first, 0) != cal.device_for(first, included[0]))
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("without {} the first projector is '{}', and the "
+                        "calibration has no device of its own for it (projectors/{}/)",
+                        fmt::join(excluded, ", "), first, first));
+    scene::Scene room = current_;
+    room.projector = all[included[0]];
+    room.more_projectors.clear();
+    for (size_t b = 1; b < included.size(); ++b) room.more_projectors.push_back(all[included[b]]);
+    std::vector<calib::ProjectorShare> shares;
+    for (size_t b = 0; b < included.size(); ++b)
+        shares.push_back(
+            {&weighted[b], &blend.projectors[b].geometry, &blend.projectors[b].weight});
+    HS_ASSIGN_OR_RETURN(calib::SceneDrives d, cal.scene_drives(room, shares, version_k_));
+    for (size_t b = 0; b < included.size(); ++b) {
+        const ImageRgba32f img = codec::drive_as_layer(d.projectors[b].drive);
+        out.push_back({all[included[b]].name, img.width, img.height, codec::srgb8_pixels(img)});
+    }
+    return out;
+}
+
+void FrameLoop::publish_reblend(BlendTask& task) {
+    const render::Blend& blend = *task.blend;
+    const std::set<std::string>& excluded = task.excluded;
     FrameLoopHost::Reblend out;
     out.version = version_;
     out.excluded.assign(excluded.begin(), excluded.end());
-    out.blend_ms = ms;
-    for (size_t j = 0, b = 0; j < all.size(); ++j) {
-        if (excluded.count(all[j].name))
-            continue;
-        ImageRgba32f img = unweighted_[j];
-        render::apply_weights(img, blend.projectors[b++].weight);
-        out.frames.push_back({all[j].name, img.width, img.height, codec::srgb8_pixels(img)});
-    }
+    out.blend_ms = task.ms;
+    out.frames = std::move(task.frames);
     excluded_ = excluded;
+    reblend_failed_.reset();
     // What none of the included projectors reaches goes to the headsets' fill-in (the surface
     // only a missing projector lit, too), and back to the version's own when all are there.
     // The fill's texture is bound to every pipeline: nothing of it may be in flight.

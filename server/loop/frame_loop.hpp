@@ -162,7 +162,8 @@ struct FrameLoopInfo {
     std::filesystem::path pipeline_cache_file;
     // With several projectors, blend them again without those that have no projector client
     // (LoopInbox::set_missing_projectors) so that the others cover what they can, and over all
-    // of them when they are back (`hysar serve --reblend-missing`). Not with a calibration.
+    // of them when they are back (`hysar serve --reblend-missing`). With a calibration the
+    // others' frames are made again through it, at the version's k.
     bool reblend_missing = false;
 };
 
@@ -196,6 +197,7 @@ private:
         SceneVersion built;              // the projector frames sent with the version
         std::shared_ptr<const calib::LayerDrive> layer_drive;  // calibrated output's
         std::vector<ImageRgba32f> unweighted;  // the frames before weighting (re-blends)
+        double scene_to_signal = 0;            // calibrated output's k (re-blends keep it)
     };
     // A build (`builds`) or a re-blend of the running version being computed on its thread;
     // `excluded` names the scene's projectors a re-blend leaves out.
@@ -210,6 +212,7 @@ private:
         std::string error;                           // why it failed (out of memory, ...)
         double ms = 0;
         std::set<std::string> excluded;
+        std::vector<SceneVersion::ProjectorFrame> frames;  // a re-blend's, for the included
         ~BlendTask();
     };
     // The ledger's CPU counter (null: none), and `blend` shared, counted on it.
@@ -227,8 +230,12 @@ private:
     std::unique_ptr<BlendTask> take_blend(bool wait);
     // reblend_missing: starts (or applies at once) the blend the missing projectors call for.
     void reblend_if_needed();
-    void publish_reblend(const render::Blend& blend, const std::set<std::string>& excluded,
-                         double ms);
+    void publish_reblend(BlendTask& task);
+    // A re-blend's frames, on its thread: each included projector's share under `blend` (the
+    // scene's projectors less `excluded`, in order), through the calibration at the version's
+    // k when there is one, else as rendered radiance.
+    Result<std::vector<SceneVersion::ProjectorFrame>> reblend_frames(
+        const render::Blend& blend, const std::set<std::string>& excluded) const;
     // The projector frame of `scene` (drives when calibrated) into `out`, from its projector
     // frames (weighted); its layer drive. Thread: the build's (reads info_ only).
     Result<std::shared_ptr<const calib::LayerDrive>> projector_frame(
@@ -277,7 +284,9 @@ private:
     std::vector<ImageRgba32f> unweighted_;
     MemoryCharge unweighted_charge_;
     std::shared_ptr<const render::Blend> full_blend_;
+    double version_k_ = 0;  // calibrated output's k of the running version
     std::set<std::string> excluded_;
+    std::optional<std::set<std::string>> reblend_failed_;  // the set a re-blend failed for
     uint32_t version_ = 0;
 };
 

@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 
+#include "calib/serving.hpp"
 #include "net_fixture.hpp"
 
 using namespace hs;
@@ -108,6 +109,36 @@ protected:
                 return true;
         }
         return false;
+    }
+};
+
+// --reblend-missing with a calibration: each projector a linear device of 1000 DN/s of its own
+// (DIR/projectors/NAME/), so that a re-blend that leaves out the first has a device for the
+// next.
+class CalibratedReblendingServer : public ReblendingServer {
+protected:
+    void configure(stream::ServerCreateInfo& info) override {
+        info.reblend_missing = true;
+        auto c = std::make_shared<calib::ServingCalibration>();
+        c->dir = "synthetic";
+        const auto linear = [](calib::ServedDevice& d) {
+            d.colour.model = calib::ColourModel::kLinear;
+            d.colour.matrix = glm::dmat3(1000.0);
+            d.colour.offset = glm::dvec3(20.0);
+        };
+        for (const auto& p : make_scene().projectors()) {
+            calib::ServedDevice d;
+            d.dir = "synthetic/projectors/" + p.name;
+            d.width = p.intrinsics.width;
+            d.height = p.intrinsics.height;
+            linear(d);
+            c->named_projectors[p.name] = d;
+        }
+        c->hmd.dir = "synthetic/hmd";
+        c->hmd.width = c->hmd.height = 64;
+        linear(c->hmd);
+        c->optics.alpha = 0.4;
+        info.calibration = std::move(c);
     }
 };
 
@@ -255,6 +286,46 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     EXPECT_EQ(again0->data, full0->data);
     EXPECT_EQ(again1->data, full1->data);
     EXPECT_EQ(uncovered(), uncovered_all);
+}
+
+// With a calibration the others' frames are drives made again through it, at the version's k:
+// brighter where the missing one contributed, and back to the version's own drives after.
+TEST_F(CalibratedReblendingServer, TheOthersCoverThroughTheCalibrationAndRevert) {
+    const auto all = make_scene().projectors();
+    proto::ProjectorFrame f0, f1, f2;
+    auto c0 = projector(all[0].name, &f0);
+    auto c1 = projector(all[1].name, &f1);
+    auto c2 = projector(all[2].name, &f2);
+    ASSERT_TRUE(c0 && c1 && c2);
+    ASSERT_TRUE(blended_as({false, false, false}));
+    const nlohmann::json pass = server_->stats()["passes"]["projector"];
+    ASSERT_TRUE(pass["calibration"].is_object()) << pass.dump();
+    const double k = pass["calibration"]["scene_to_signal"].get<double>();
+    EXPECT_GT(k, 0.0);
+    auto full0 = last_frame(*c0, 1500), full1 = last_frame(*c1, 1500);
+    if (!full0)
+        full0 = f0;
+    if (!full1)
+        full1 = f1;
+    // The first leaves: the second and third are driven for the whole of it.
+    c0.reset();
+    ASSERT_TRUE(blended_as({true, false, false}));
+    auto less1 = last_frame(*c1, 1500), less2 = last_frame(*c2, 1500);
+    ASSERT_TRUE(less1 && less2);
+    uint64_t brighter1 = 0, brighter2 = 0;
+    EXPECT_TRUE(brighter_everywhere(full1->data, less1->data, &brighter1));
+    EXPECT_TRUE(brighter_everywhere(f2.data, less2->data, &brighter2));
+    EXPECT_GT(brighter1 + brighter2, 100u);
+    // The version and its k are the same: the headsets' layers are still drawn at it.
+    EXPECT_EQ(server_->stats()["passes"]["projector"]["calibration"]["scene_to_signal"], k);
+    // It comes back: every frame the version's own drives again, bit for bit.
+    c0 = projector(all[0].name, nullptr);
+    ASSERT_TRUE(c0);
+    ASSERT_TRUE(blended_as({false, false, false}));
+    auto again1 = last_frame(*c1, 1500), again2 = last_frame(*c2, 1500);
+    ASSERT_TRUE(again1 && again2);
+    EXPECT_EQ(again1->data, full1->data);
+    EXPECT_EQ(again2->data, f2.data);
 }
 
 // What the projectors' blend keeps is on the scene-memory ledger: with --reblend-missing the
