@@ -439,6 +439,12 @@ struct HttpGate::Impl {
             case S::kWantWrite:
                 return true;
             case S::kClosed:
+                if (!tls.handshaken()) {
+                    // The end of the stream half way through a handshake: a failed one.
+                    ++counters.tls_failed;
+                    c.tls.reset();
+                    break;
+                }
                 if (!c.buffer.empty()) {
                     c.eof = true;  // a request, then the client's close_notify: serve it
                     return true;

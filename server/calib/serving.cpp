@@ -333,16 +333,26 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
         ProjectorDrives& pd = out.projectors[j];
         // The light the projector must emit relative to its white (docs/OPTICS.md), then the
         // projector's colour model: r^-1(M^-1 (W o p)). In a blend, with the black levels
-        // compensated, each projector takes off only its weight's share of the room light
-        // (render::blended_projector_drive): the others take off the rest where they reach.
+        // compensated, each projector takes off only its weight's share of the room light and
+        // of the projectors' black floor (optics::add_blend_black_share, as
+        // render::blended_projector_drive): the others take off the rest where they reach.
         ImageRgba32f target = scaled(*shares[j].vi, out.scene_to_signal);
         if (shares[j].weight && compensation.black_levels) {
-            const double base = optics::effective_levels(o[j]).environment;
-            const auto& w = *shares[j].weight;
-            for (size_t i = 0; i < w.size(); ++i)
-                if (w[i] > 0.0f)
-                    for (int c = 0; c < 3; ++c)
-                        target.pixels[i * 4 + c] += float((1.0 - w[i]) * base);
+            std::vector<double> black(all.size()), g_ref(all.size());
+            for (size_t m = 0; m < all.size(); ++m) {
+                black[m] = optics::effective_levels(o[m]).projector_min;
+                g_ref[m] = out.projectors[m].g_ref;
+            }
+            const bool falloff = compensation.falloff && o[j].effects.projector_falloff;
+            const glm::dvec3 rho = compensation.albedo && o[j].effects.prop_albedo
+                                       ? o[j].prop_albedo
+                                       : glm::dvec3(1.0);
+            const std::vector<float> none;
+            optics::add_blend_black_share(
+                target, *shares[j].weight, geometry,
+                shares[j].reach_g ? std::span<const float>(*shares[j].reach_g)
+                                  : std::span<const float>(none),
+                j, black, g_ref, falloff, rho, optics::effective_levels(o[j]).environment);
         }
         const ImageRgba32f p = optics::projector_drive(o[j], target, geometry, pd.g_ref, 0.0);
         const ServedDevice& dev = *device_for(all[j].name, j);

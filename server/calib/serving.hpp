@@ -95,6 +95,10 @@ struct ProjectorShare {
     const ImageRgba32f* geometry = nullptr;  // its capture geometry (g per pixel)
     // Its blend weight per pixel (render/blend.hpp); null: 1 everywhere (a room of one).
     const std::vector<float>* weight = nullptr;
+    // Per pixel and projector k, g_k where k reaches the point the pixel lights
+    // (render::ProjectorBlend::reach_g, BlendOptions::keep_reach); null or empty: the black
+    // floor unknown, and the projector takes off its own black.
+    const std::vector<float>* reach_g = nullptr;
 };
 
 // One projector's drives (ServingCalibration::scene_drives).
@@ -144,7 +148,9 @@ struct ServingCalibration {
     // projector pixels) and its capture geometry (render_capture_geometry: g per pixel), one
     // share per projector of the scene in its order. k is one for the whole room: optics.json's,
     // or the largest every projector can show. With the black-level compensation each projector
-    // takes off its own black and its share of the room light (render::blended_projector_drive).
+    // takes off its weight's share of the room light and of the projectors' whole black floor
+    // where its share says where the others reach (optics::add_blend_black_share, as
+    // render::blended_projector_drive), else its own black.
     // `fixed_k` > 0 takes that k instead (a re-blend of a running version keeps the version's,
     // which its headsets' layers are drawn at).
     Result<SceneDrives> scene_drives(const scene::Scene& scene,

@@ -290,8 +290,9 @@ bool FrameLoop::build_scene(BlendTask& task) {
         try {
             // One projector: its shadow map alone (what the fill-in reads).
             blend = charged_blend(
-                several ? render::compute_blend(b.renderer->mesh(), sc.projectors())
-                        : render::compute_visibility(b.renderer->mesh(), sc.projectors()));
+                several
+                    ? render::compute_blend(b.renderer->mesh(), sc.projectors(), blend_options())
+                    : render::compute_visibility(b.renderer->mesh(), sc.projectors()));
         } catch (const std::exception& e) {
             task.error = fmt::format("the projectors' blend of version {} failed: {}", task.version,
                                      e.what());
@@ -362,7 +363,9 @@ void FrameLoop::start_blend(const scene::Mesh& mesh, std::vector<scene::Projecto
         // A failure here (memory at full resolution) fails this version or re-blend on the
         // render thread, as it did when the blend ran there; it never ends the process.
         try {
-            task->blend = full ? full : charged_blend(render::compute_blend(mesh, projectors));
+            task->blend =
+                full ? full
+                     : charged_blend(render::compute_blend(mesh, projectors, blend_options()));
             task->ms = full ? 0.0 : ms_since(t0);
             auto frames = reblend_frames(*task->blend, task->excluded);
             if (frames) {
@@ -494,8 +497,8 @@ Result<std::vector<SceneVersion::ProjectorFrame>> FrameLoop::reblend_frames(
     for (size_t b = 1; b < included.size(); ++b) room.more_projectors.push_back(all[included[b]]);
     std::vector<calib::ProjectorShare> shares;
     for (size_t b = 0; b < included.size(); ++b)
-        shares.push_back(
-            {&weighted[b], &blend.projectors[b].geometry, &blend.projectors[b].weight});
+        shares.push_back({&weighted[b], &blend.projectors[b].geometry, &blend.projectors[b].weight,
+                          &blend.projectors[b].reach_g});
     HS_ASSIGN_OR_RETURN(calib::SceneDrives d, cal.scene_drives(room, shares, version_k_));
     for (size_t b = 0; b < included.size(); ++b) {
         const ImageRgba32f img = codec::drive_as_layer(d.projectors[b].drive);
@@ -610,8 +613,8 @@ Result<std::shared_ptr<const calib::LayerDrive>> FrameLoop::projector_frame(
 Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene::Scene& next,
                                                 const render::ProjectorFrames& frames) {
     // Each projector's per-pixel falloff (docs/OPTICS.md), once per scene version: a blend
-    // holds every projector's (the capture geometry pass lights the prop from the scene's
-    // first projector only); a room of one renders it.
+    // holds every projector's (and, calibrated, the black floor's reach: blend_options()); a
+    // room of one renders it.
     const auto all = next.projectors();
     HS_CHECK(frames.frames.size() == all.size(), "calibrate: a frame per projector");
     std::vector<calib::ProjectorShare> shares;
@@ -624,7 +627,8 @@ Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene
     } else {
         for (size_t j = 0; j < all.size(); ++j)
             shares.push_back({&frames.frames[j].image, &frames.blend->projectors[j].geometry,
-                              &frames.blend->projectors[j].weight});
+                              &frames.blend->projectors[j].weight,
+                              &frames.blend->projectors[j].reach_g});
     }
     HS_ASSIGN_OR_RETURN(calib::SceneDrives d, info_.calibration->scene_drives(next, shares));
     log::info(

@@ -215,6 +215,13 @@ private:
         std::vector<SceneVersion::ProjectorFrame> frames;  // a re-blend's, for the included
         ~BlendTask();
     };
+    // The blends' options: calibrated, each projector's g per pixel is kept (keep_reach), so
+    // that the drives share the black floor (optics::add_blend_black_share).
+    render::BlendOptions blend_options() const {
+        render::BlendOptions o;
+        o.keep_reach = info_.calibration != nullptr;
+        return o;
+    }
     // The ledger's CPU counter (null: none), and `blend` shared, counted on it.
     MemoryCounter* cpu_ledger() const;
     std::shared_ptr<const render::Blend> charged_blend(render::Blend blend) const;

@@ -244,6 +244,37 @@ std::optional<double> largest_scene_to_signal(const scene::Optics& o, const Imag
     return 0.95 * k;
 }
 
+void add_blend_black_share(ImageRgba32f& target, std::span<const float> weight,
+                           const ImageRgba32f& geometry, std::span<const float> reach_g, size_t j,
+                           std::span<const double> black, std::span<const double> g_ref,
+                           bool falloff, const glm::dvec3& rho, double base) {
+    const size_t count = black.size();
+    const size_t n = size_t(target.width) * target.height;
+    HS_CHECK(weight.size() == n && geometry.width == target.width &&
+                 geometry.height == target.height && g_ref.size() == count && j < count,
+             "add_blend_black_share: the sizes differ");
+    const bool floor_known = count > 0 && reach_g.size() == n * count;
+    for (size_t i = 0; i < n; ++i) {
+        const double w = weight[i];
+        const float* gp = &geometry.pixels[i * 4];
+        const bool lights = gp[3] > 0.5f && gp[2] > 0.0f;
+        // The black floor there, and j's own part of it (DN/s before the albedo).
+        double floor = 0.0, own = 0.0;
+        if (lights && floor_known) {
+            for (size_t m = 0; m < count; ++m) {
+                const double g = reach_g[i * count + m];
+                if (g > 0.0)
+                    floor += (falloff ? g / g_ref[m] : 1.0) * black[m];
+            }
+            own = (falloff ? gp[2] / g_ref[j] : 1.0) * black[j];
+        }
+        if (!(w > 0.0 || (lights && floor_known)))
+            continue;
+        for (int c = 0; c < 3; ++c)
+            target.pixels[i * 4 + c] += float((1.0 - w) * base + rho[c] * (own - w * floor));
+    }
+}
+
 ImageRgba32f projector_drive(const scene::Optics& o, const ImageRgba32f& target,
                              const ImageRgba32f& geo, double g_ref, double hmd_min_through) {
     HS_CHECK(geo.width == target.width && geo.height == target.height,

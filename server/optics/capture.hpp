@@ -9,8 +9,11 @@
 #pragma once
 
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
+
+#include <glm/vec3.hpp>
 
 #include "core/image.hpp"
 #include "core/result.hpp"
@@ -31,9 +34,6 @@ struct CaptureGeometry {
 Result<double> reference_falloff(const ImageRgba32f& projector_geometry,
                                  const scene::Intrinsics& projector);
 
-// What the devices show. An empty image is a device showing black (its black level remains);
-// a projector that is not present adds nothing. Alpha of a drive image is 1 where the wanted
-// drive fell outside [0, 1] and was clipped.
 // One projector of several (render/blend.hpp), its light as the camera sees it: its drive (its
 // own pixels, linear in [0, 1], alpha 1 where clipped), its capture geometry from the camera
 // (as CaptureGeometry::camera, of this projector: u, v, g and 1 + its sheen lobe), g at its
@@ -48,6 +48,9 @@ struct ProjectorLight {
     const std::vector<uint8_t>* reaches = nullptr;
 };
 
+// What the devices show. An empty image is a device showing black (its black level remains);
+// a projector that is not present adds nothing. Alpha of a drive image is 1 where the wanted
+// drive fell outside [0, 1] and was clipped.
 struct DeviceImages {
     ImageRgba32f projector;  // projector pixels
     ImageRgba32f hmd;        // camera pixels (the headset's eye is the camera)
@@ -99,6 +102,21 @@ std::optional<double> largest_scene_to_signal(const scene::Optics& optics,
 ImageRgba32f projector_drive(const scene::Optics& optics, const ImageRgba32f& target,
                              const ImageRgba32f& projector_geometry, double g_ref,
                              double hmd_min_through);
+
+// Several projectors, the black levels compensated (docs/OPTICS.md, "Several projectors"):
+// adds to projector j's wanted signal `target` (its pixels, DN/s) what makes it take off its
+// weight's share of the whole black floor rather than its own black level, rho (f_j P^m_j -
+// w_j B) with B = sum_k f_k P^m_k over the projectors k that reach the point a pixel lights, and
+// its share of the room light and headset black, (1 - w_j) `base`. `weight`: j's blend weight
+// per pixel; `geometry`: j's own capture geometry (g per pixel, alpha 1 on the prop);
+// `reach_g`: per pixel and projector k (index pixel * projectors + k) g_k where k reaches the
+// point, else 0 (empty: the floor unknown, j takes off its own black as before); `black` and
+// `g_ref`: each projector's effective black level and reference falloff; `falloff`: whether
+// the compensation models the falloff (else f = 1); `rho`: the albedo it compensates.
+void add_blend_black_share(ImageRgba32f& target, std::span<const float> weight,
+                           const ImageRgba32f& geometry, std::span<const float> reach_g, size_t j,
+                           std::span<const double> black, std::span<const double> g_ref,
+                           bool falloff, const glm::dvec3& rho, double base);
 
 // Headset drive for a wanted headset signal `target` (DN/s; camera pixels).
 ImageRgba32f hmd_drive(const scene::Optics& optics, const ImageRgba32f& target);

@@ -471,32 +471,14 @@ ImageRgba32f blended_projector_drive(const scene::Optics& optics,
         g_ref_k[m] = m == j ? g_ref : g_ref_of(m);
     }
     const glm::dvec3 rho = comp.albedo && o.effects.prop_albedo ? o.prop_albedo : glm::dvec3(1.0);
-    const double base = d.environment + hmd_min_through;
-    const bool compensate_black = comp.black_levels;
-    const bool floor_known = pb.reach_g.size() == pb.weight.size() * count;
+    // w_j of the target, and with the black levels compensated w_j's share of the room light,
+    // the headset black and the projectors' whole black floor.
     ImageRgba32f share = target;
-    for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i) {
-        const double w = pb.weight[i];
-        const float* gp = &pb.geometry.pixels[i * 4];
-        const bool lights = gp[3] > 0.5f && gp[2] > 0.0f;
-        // The black floor there, and j's own part of it (both in DN/s before the albedo).
-        double floor = 0.0, own = 0.0;
-        if (compensate_black && lights && floor_known) {
-            for (size_t m = 0; m < count; ++m) {
-                const double g = pb.reach_g[i * count + m];
-                if (g > 0.0)
-                    floor += (falloff ? g / g_ref_k[m] : 1.0) * black[m];
-            }
-            own = (falloff ? gp[2] / g_ref : 1.0) * black[j];
-        }
-        for (int c = 0; c < 3; ++c) {
-            const double t = target.pixels[i * 4 + c];
-            double v = w * t;
-            if (compensate_black && (w > 0.0 || (lights && floor_known)))
-                v += (1.0 - w) * base + rho[c] * (own - w * floor);
-            share.pixels[i * 4 + c] = float(v);
-        }
-    }
+    for (size_t i = 0, n = size_t(target.width) * target.height; i < n; ++i)
+        for (int c = 0; c < 3; ++c) share.pixels[i * 4 + c] *= pb.weight[i];
+    if (comp.black_levels)
+        optics::add_blend_black_share(share, pb.weight, pb.geometry, pb.reach_g, j, black, g_ref_k,
+                                      falloff, rho, d.environment + hmd_min_through);
     return optics::projector_drive(o, share, pb.geometry, g_ref, hmd_min_through);
 }
 

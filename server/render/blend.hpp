@@ -45,8 +45,8 @@ struct BlendOptions {
     // The shadow test's tolerance, in pixel footprints of the projector at the point (divided
     // by the incidence cosine, clamped at 0.05), plus a fixed 0.5 mm.
     double shadow_bias_px = 2.0;
-    // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) to 0 at
-    // incidence_cutoff (c0).
+    // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) down to
+    // incidence_cutoff (c0), where it reaches the floor (rolloff_floor) rather than 0.
     double incidence_rolloff = 0.4;  // c1
     double incidence_cutoff = 0.1;   // c0
     // The roll-off toward the prop's outline in the projector's frame (where the prop's edge

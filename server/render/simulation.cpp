@@ -35,8 +35,12 @@ Result<Simulator> Simulator::create(Renderer& r, const scene::Scene& s,
         RenderResult geo,
         r.render_capture_geometry(s.projector.intrinsics, s.projector.pose, std::nullopt));
     sim.projector_geometry_ = std::move(geo.image);
-    HS_ASSIGN_OR_RETURN(sim.g_ref_,
-                        optics::reference_falloff(sim.projector_geometry_, s.projector.intrinsics));
+    // One projector: its principal ray must meet the prop (the levels' reference point). With
+    // several, each takes 1 where it misses, as blended_projector_drive does.
+    auto g_ref = optics::reference_falloff(sim.projector_geometry_, s.projector.intrinsics);
+    if (!g_ref && s.projector_count() == 1)
+        return g_ref.error();
+    sim.g_ref_ = g_ref ? g_ref.value() : 1.0;
     if (s.projector_count() > 1) {
         const std::vector<scene::Projector> all = s.projectors();
         BlendOptions bo;

@@ -104,7 +104,8 @@ while True:
         break
     answer += c
 assert answer.startswith(b"HTTP/1.1 400 ") and b"speaks HTTPS" in answer, answer[:200]
-# A handshake that is not TLS at all, and one that stops half way: closed, counted.
+# A handshake that is not TLS at all, and one that stops half way: closed, each counted.
+before = value(metrics(), "hysar_admin_tls_handshakes_failed_total")
 for junk in (b"\x16\x03\x01\x00\x05hello", b"\x16\x03\x01"):
     s = socket.create_connection(("127.0.0.1", port), timeout=10)
     s.sendall(junk)
@@ -116,6 +117,8 @@ for junk in (b"\x16\x03\x01\x00\x05hello", b"\x16\x03\x01"):
     except (ConnectionResetError, socket.timeout):
         pass
     s.close()
+counted = value(metrics(), "hysar_admin_tls_handshakes_failed_total") - before
+assert counted == 2, f"{counted} of 2 broken handshakes counted"
 # A whole request, then the client's end of stream without a close_notify (scripts and probes
 # often close so): still answered, over the half-closed socket.
 raw = socket.create_connection(("127.0.0.1", port), timeout=10)
