@@ -193,12 +193,16 @@ Result<optics::Capture> Simulator::capture_blended(DisplayMode mode, const Viewp
     optics::DeviceImages dev;
     for (size_t j = 0; j < count; ++j) {
         Blended& b = blended_[j];
-        HS_ASSIGN_OR_RETURN(
-            RenderResult g,
-            renderer_->render_capture_geometry(
-                view.intrinsics, view.camera,
-                sheen ? std::optional<double>(o.prop_sheen_exponent) : std::nullopt, j));
-        cams[j] = std::move(g.image);
+        // The first projector's is the capture's own geometry (same view, same sheen).
+        if (j > 0) {
+            HS_ASSIGN_OR_RETURN(
+                RenderResult g,
+                renderer_->render_capture_geometry(
+                    view.intrinsics, view.camera,
+                    sheen ? std::optional<double>(o.prop_sheen_exponent) : std::nullopt, j));
+            cams[j] = std::move(g.image);
+        }
+        const ImageRgba32f* camera_geometry = j == 0 ? &geometry : &cams[j];
         const ImageRgba32f* drive = nullptr;
         if (mode == DisplayMode::kSAR) {
             const glm::dvec3 eye = (baked ? *baked : view).camera.position;
@@ -225,7 +229,7 @@ Result<optics::Capture> Simulator::capture_blended(DisplayMode mode, const Viewp
         oj.levels.projector_min = b.projector.black_level.value_or(o.levels.projector_min);
         const scene::DeviceLevels dj = optics::effective_levels(oj);
         dev.projectors.push_back(
-            {drive, &cams[j], b.g_ref, dj.projector_max, dj.projector_min, &reach[j]});
+            {drive, camera_geometry, b.g_ref, dj.projector_max, dj.projector_min, &reach[j]});
     }
     if (mode == DisplayMode::kHySAR)
         dev.hmd = optics::hmd_drive(o, eye_vd);

@@ -89,6 +89,15 @@ class ReblendingServer : public ProjectorsServer {
 protected:
     void configure(stream::ServerCreateInfo& info) override { info.reblend_missing = true; }
     uint64_t reblends() { return server_->stats()["projector_reblends"].get<uint64_t>(); }
+    // A client per scene projector, the scene's order, each one's first frame into `first`.
+    std::vector<std::unique_ptr<Connection>> connect_all(
+        std::vector<proto::ProjectorFrame>& first) {
+        const auto all = make_scene().projectors();
+        std::vector<std::unique_ptr<Connection>> out;
+        first.assign(all.size(), {});
+        for (size_t j = 0; j < all.size(); ++j) out.push_back(projector(all[j].name, &first[j]));
+        return out;
+    }
     // Waits until the published frames leave out exactly the projectors marked true, and no
     // re-blend has been published for a second (one started before may still be on its way).
     bool blended_as(const std::vector<bool>& left_out) {
@@ -234,10 +243,11 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     const scene::Scene s = make_scene();
     const auto all = s.projectors();
     // All three connected: the version's own blend over all of them.
-    proto::ProjectorFrame f0, f1, f2;
-    auto c0 = projector(all[0].name, &f0);
-    auto c1 = projector(all[1].name, &f1);
-    auto c2 = projector(all[2].name, &f2);
+    std::vector<proto::ProjectorFrame> f;
+    auto c = connect_all(f);
+    ASSERT_EQ(c.size(), 3u);
+    auto &c0 = c[0], &c1 = c[1], &c2 = c[2];
+    const auto &f0 = f[0], &f1 = f[1], &f2 = f[2];
     ASSERT_TRUE(c0 && c1 && c2);
     ASSERT_TRUE(blended_as({false, false, false}));
     auto full0 = last_frame(*c0, 1500), full1 = last_frame(*c1, 1500);
@@ -293,10 +303,11 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
 // brighter where the missing one contributed, and back to the version's own drives after.
 TEST_F(CalibratedReblendingServer, TheOthersCoverThroughTheCalibrationAndRevert) {
     const auto all = make_scene().projectors();
-    proto::ProjectorFrame f0, f1, f2;
-    auto c0 = projector(all[0].name, &f0);
-    auto c1 = projector(all[1].name, &f1);
-    auto c2 = projector(all[2].name, &f2);
+    std::vector<proto::ProjectorFrame> f;
+    auto c = connect_all(f);
+    ASSERT_EQ(c.size(), 3u);
+    auto &c0 = c[0], &c1 = c[1], &c2 = c[2];
+    const auto &f0 = f[0], &f1 = f[1], &f2 = f[2];
     ASSERT_TRUE(c0 && c1 && c2);
     ASSERT_TRUE(blended_as({false, false, false}));
     const nlohmann::json pass = server_->stats()["passes"]["projector"];
