@@ -1,12 +1,19 @@
 // Checks the figures of `hysar eval report` (DIR/report.json), not just that files exist.
-// usage: check_report DIR; exit 0 when every figure is as the paper's claims require.
+// usage: check_report DIR [--around-only]; exit 0 when every figure is as the paper's claims
+// require (--around-only: a report of `--around-only`, its around section alone).
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
+#include <variant>
+#include <vector>
 
 #include <nlohmann/json.hpp>
+
+#include "options/options.hpp"
 
 namespace {
 int failures = 0;
@@ -22,12 +29,86 @@ void near(double v, double want, double tol, const std::string& what) {
 }
 }  // namespace
 
+// The paper's metrics around the prop (`--around`): one projector leaves the far side unlit,
+// the headsets' fill-in brings what it leaves toward the target, HySAR's VD areas match at every
+// viewpoint, and several projectors (where the scene has them) reach every visible point.
+void check_around(const nlohmann::json& a) {
+    const int n = a["viewpoints"];
+    const auto& views = a["views"];
+    expect(n >= 4, "around: at least 4 viewpoints (" + std::to_string(n) + ")");
+    std::map<std::string, std::map<double, nlohmann::json>> by;  // config -> angle -> view
+    for (const auto& v : views) by[v["config"].get<std::string>()][double(v["angle_deg"])] = v;
+    expect(by.count("1 projector") && by.count("1 projector + headsets"),
+           "around: one projector, without and with the headsets");
+    expect(views.size() == size_t(n) * by.size(), "around: every configuration at every angle");
+    for (const auto& [name, at] : by) {
+        expect(at.size() == size_t(n), "around: " + name + " at every angle");
+        for (const auto& [angle, v] : at) {
+            const std::string where = name + " at " + std::to_string(int(angle)) + " deg";
+            const double mr1 = v["mr1"];
+            expect(mr1 >= 0.9,
+                   "around: HySAR's VD area matched (MR1 " + std::to_string(mr1) + ") " + where);
+            if (name.find(" + headsets") == std::string::npos)
+                continue;
+            const auto& without = by[name.substr(0, name.size() - 11)][angle];
+            expect(v["coverage"] == without["coverage"],
+                   "around: the fill-in reaches no more surface than the projectors " + where);
+            if (uint64_t(v["uncovered_pixels"]) < 100)
+                continue;
+            const double served = v["de00_uncovered_mean"], none = without["de00_uncovered_mean"],
+                         floor_off = v["de00_uncovered_floor_off_mean"];
+            expect(served < none, "around: the fill-in lowers dE00 where no projector reaches (" +
+                                      std::to_string(served) + " < " + std::to_string(none) + ") " +
+                                      where);
+            expect(floor_off >= 0 && floor_off < served,
+                   "around: taking the floor off lowers it further (" + std::to_string(floor_off) +
+                       ") " + where);
+        }
+    }
+    const auto& one = by["1 projector"];
+    expect(!one.empty() && one.begin()->second["coverage"] >= 0.99,
+           "around: one projector covers its own side");
+    double worst = 1;
+    for (const auto& [angle, v] : one) worst = std::min(worst, double(v["coverage"]));
+    expect(worst < 0.9, "around: one projector leaves the far side unlit (coverage " +
+                            std::to_string(worst) + ")");
+    for (const auto& [name, at] : by) {
+        if (name.rfind("1 projector", 0) == 0 || name.find(" + headsets") != std::string::npos)
+            continue;
+        for (const auto& [angle, v] : at) {
+            const std::string where = name + " at " + std::to_string(int(angle)) + " deg";
+            expect(double(v["coverage"]) >= 0.99,
+                   "around: coverage " + std::to_string(double(v["coverage"])) + " " + where);
+            const double rmse = v["composite_rmse_dn"];
+            const double rmse1 = one.count(angle) ? double(one.at(angle)["composite_rmse_dn"]) : 0;
+            expect(rmse <= rmse1 + 0.01, "around: composite RMSE " + std::to_string(rmse) +
+                                             " DN <= one projector's " + std::to_string(rmse1) +
+                                             " " + where);
+        }
+    }
+}
+
 int main(int argc, char** argv) {
-    if (argc != 2) {
-        std::fprintf(stderr, "usage: check_report DIR\n");
+    const auto parsed = hs::options::parse(std::vector<std::string>(argv + 1, argv + argc),
+                                           {{}, {"--around-only"}, true});
+    const auto* args = std::get_if<hs::options::Parsed>(&parsed);
+    if (!args || args->positionals.size() != 1) {
+        std::fprintf(stderr, "usage: check_report DIR [--around-only]\n");
         return 2;
     }
-    const std::filesystem::path dir = argv[1];
+    const bool around_only = args->values.count("--around-only") > 0;
+    const std::filesystem::path dir = args->positionals.front();
+    if (around_only) {
+        std::ifstream in(dir / "report.json");
+        const auto j = nlohmann::json::parse(in);
+        for (const char* f : {"index.html", "around.png", "around_sheet.png", "around.csv"})
+            expect(std::filesystem::file_size(dir / f) > 100, std::string("non-empty ") + f);
+        expect(j.contains("around"), "the report has the around section");
+        if (j.contains("around"))
+            check_around(j["around"]);
+        std::printf("%d failure(s)\n", failures);
+        return failures ? 1 : 0;
+    }
     for (const char* f : {"index.html", "sheet.png", "fig9.png", "fig11.png", "fig12.png",
                           "table2.csv", "resolution.csv", "fig9.csv", "fig11.csv", "composite.csv"})
         expect(std::filesystem::file_size(dir / f) > 100, std::string("non-empty ") + f);
@@ -80,6 +161,10 @@ int main(int argc, char** argv) {
         }
         expect(higher, std::string(ms) + " ms: HySAR reaches higher in some channel");
     }
+    // Around the prop, at the default --around.
+    expect(j.contains("around"), "the report has the around section");
+    if (j.contains("around"))
+        check_around(j["around"]);
     std::printf("%d failure(s)\n", failures);
     return failures ? 1 : 0;
 }

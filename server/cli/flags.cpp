@@ -97,8 +97,9 @@ int run_subcommand(const std::vector<std::string>& args, const std::vector<std::
 
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
                    const std::vector<NumericFlag>& numbers,
-                   const std::function<Result<void>(const Flags&)>& body) {
-    return run_checked(args, with_value, {}, numbers, body);
+                   const std::function<Result<void>(const Flags&)>& body,
+                   const std::vector<std::string>& switches) {
+    return run_checked(args, with_value, switches, numbers, body);
 }
 
 Result<double> parse_double(const std::string& flag, const std::string& s, double lo, double hi) {

@@ -56,6 +56,7 @@ int run_subcommand(const std::vector<std::string>& args, const std::vector<std::
                    const std::vector<std::string>& switches = {});
 int run_subcommand(const std::vector<std::string>& args, const std::vector<std::string>& with_value,
                    const std::vector<NumericFlag>& numbers,
-                   const std::function<Result<void>(const Flags&)>& body);
+                   const std::function<Result<void>(const Flags&)>& body,
+                   const std::vector<std::string>& switches = {});
 
 }  // namespace hs::cli

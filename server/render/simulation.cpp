@@ -130,12 +130,38 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
         return vi_drive_;
     };
     const double alpha_c = o.compensation.hmd_alpha ? alpha_ : 1.0;
+    // Which projectors reach what the camera sees, where a blend is held.
+    const Blend* blend = blend_ ? blend_.get() : (fill_ ? visibility_.get() : nullptr);
+    Reach r;
+    if (blend) {
+        r = reach_of(*blend, view);
+        out.prop_pixels = r.prop;
+        out.uncovered_pixels = r.uncovered_count;
+        out.uncovered = r.uncovered;
+    }
+    // The headset's layer: VD, and with the fill-in the VI part where no projector reaches.
+    auto eye_layer = [&]() {
+        ImageRgba32f layer = scaled(ls.image, alpha_c * k_);
+        if (!fill_ || !blend)
+            return layer;
+        // The light the camera sees there with no projector: the room's through the headset,
+        // and the headset's black (optics::simulate_capture).
+        const double floor =
+            fill_floor_ && o.compensation.black_levels ? alpha_ * lv.environment + lv.hmd_min : 0.0;
+        for (size_t i = 0; i < r.uncovered.size(); ++i)
+            if (r.uncovered[i])
+                for (int c = 0; c < 3; ++c) {
+                    float& v = layer.pixels[i * 4 + c];
+                    v = float(std::max(
+                        0.0, double(v) + alpha_c * k_ * ld.image.pixels[i * 4 + c] - floor));
+                }
+        return layer;
+    };
     if (!blended_.empty() && mode != DisplayMode::kHmdOnly) {
         HS_ASSIGN_OR_RETURN(
             out.capture,
-            capture_blended(
-                mode, view, baked, o, override_optics.has_value(), out.geometry,
-                mode == DisplayMode::kHySAR ? scaled(ls.image, alpha_c * k_) : ImageRgba32f{}));
+            capture_blended(mode, view, baked, o, override_optics.has_value(), out.geometry,
+                            mode == DisplayMode::kHySAR ? eye_layer() : ImageRgba32f{}, r));
         return out;
     }
     optics::DeviceImages dev;
@@ -144,7 +170,7 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
         case DisplayMode::kDiffuseOnly:
             dev.projector = vi_drive();
             if (mode == DisplayMode::kHySAR)
-                dev.hmd = optics::hmd_drive(o, scaled(ls.image, alpha_c * k_));
+                dev.hmd = optics::hmd_drive(o, eye_layer());
             break;
         case DisplayMode::kSAR: {
             const glm::dvec3 eye = (baked ? *baked : view).camera.position;
@@ -168,26 +194,15 @@ Result<optics::Capture> Simulator::capture_blended(DisplayMode mode, const Viewp
                                                    const std::optional<Viewpoint>& baked,
                                                    const scene::Optics& o, bool overridden,
                                                    const ImageRgba32f& geometry,
-                                                   const ImageRgba32f& eye_vd) {
+                                                   const ImageRgba32f& eye_vd, const Reach& r) {
     const size_t count = blended_.size();
     const bool sheen = o.effects.prop_sheen && o.prop_sheen > 0;
     const scene::DeviceLevels lv = optics::effective_levels(o);
     const double hmd_min_through = alpha_ > 0 ? lv.hmd_min / alpha_ : 0.0;
-    // Which projectors reach the surface each camera pixel sees: the blend's own shadow test,
-    // at the surface point the CPU's view of the prop puts there (a pixel the GPU covers and
-    // the CPU does not keeps 1: lit wherever its g > 0).
-    const SurfaceView cam = rasterise(renderer_->mesh(), view.intrinsics, view.camera);
-    const size_t n = size_t(view.intrinsics.width) * view.intrinsics.height;
     if (geometry.width != view.intrinsics.width || geometry.height != view.intrinsics.height)
         return make_error(ErrorCode::kInvalidArgument,
                           "capture: the capture geometry and the viewpoint differ in size");
-    std::vector<std::vector<uint8_t>> reach(count, std::vector<uint8_t>(n, 1));
-    for (size_t i = 0; i < n; ++i) {
-        if (!cam.covered(i))
-            continue;
-        const glm::dvec3 p(cam.position[i]), nn(cam.normal[i]);
-        for (size_t j = 0; j < count; ++j) reach[j][i] = reaches(*blend_, j, p, nn);
-    }
+    const std::vector<std::vector<uint8_t>>& reach = r.by_projector;
     const std::vector<scene::Projector> all = scene_.projectors();
     std::vector<ImageRgba32f> cams(count), sar_drives(count);
     optics::DeviceImages dev;
@@ -234,6 +249,47 @@ Result<optics::Capture> Simulator::capture_blended(DisplayMode mode, const Viewp
     if (mode == DisplayMode::kHySAR)
         dev.hmd = optics::hmd_drive(o, eye_vd);
     return optics::simulate_capture(o, alpha_, optics::CaptureGeometry{geometry, g_ref_}, dev);
+}
+
+Simulator::Reach Simulator::reach_of(const Blend& blend, const Viewpoint& view) const {
+    // The blend's own shadow test at the surface point the CPU's view of the prop puts at each
+    // pixel (a pixel the GPU covers and the CPU does not keeps 1: lit wherever its g > 0).
+    const SurfaceView cam = rasterise(renderer_->mesh(), view.intrinsics, view.camera);
+    const size_t n = size_t(view.intrinsics.width) * view.intrinsics.height;
+    const size_t count = blend.views.size();
+    Reach r;
+    r.by_projector.assign(count, std::vector<uint8_t>(n, 1));
+    r.uncovered.assign(n, 0);
+    for (size_t i = 0; i < n; ++i) {
+        if (!cam.covered(i))
+            continue;
+        ++r.prop;
+        const glm::dvec3 p(cam.position[i]), nn(cam.normal[i]);
+        bool any = false;
+        for (size_t j = 0; j < count; ++j) {
+            r.by_projector[j][i] = reaches(blend, j, p, nn);
+            any = any || r.by_projector[j][i];
+        }
+        r.uncovered[i] = !any;
+        r.uncovered_count += !any;
+    }
+    return r;
+}
+
+void Simulator::set_scene_to_signal(double k) {
+    HS_CHECK(k > 0 && std::isfinite(k), "set_scene_to_signal: k must be finite and > 0");
+    k_ = k;
+    vi_drive_ = {};
+    for (Blended& b : blended_) b.vi_drive = {};
+}
+
+void Simulator::set_headset_fill(bool on, bool take_off_floor) {
+    fill_ = on;
+    fill_floor_ = on && take_off_floor;
+    if (on && !blend_ && !visibility_) {
+        const std::vector<scene::Projector> first{scene_.projector};
+        visibility_ = std::make_shared<const Blend>(compute_visibility(renderer_->mesh(), first));
+    }
 }
 
 std::vector<uint8_t> usable_pixels(const SimulatedView& v) {

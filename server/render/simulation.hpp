@@ -36,6 +36,11 @@ struct SimulatedView {
     ImageRgba32f target_vi_dn;  // its VI part alone (the "VI only" reference)
     std::vector<uint8_t> target_saturated;
     ImageRgba32f geometry;  // the capture geometry of this viewpoint
+    // Where the simulator holds a blend (several projectors, or the headsets' fill-in on): per
+    // pixel, 1 on the prop's surface (as the CPU's view of it covers it) where no projector
+    // reaches (the blend's test, render::reaches), and the counts of both. Otherwise empty.
+    std::vector<uint8_t> uncovered;
+    std::optional<uint64_t> prop_pixels, uncovered_pixels;
 };
 
 // A scene with several projectors is simulated with all of them (docs/OPTICS.md, "Several
@@ -60,6 +65,17 @@ public:
                                   const std::optional<scene::Optics>& optics = std::nullopt);
 
     double scene_to_signal() const { return k_; }
+    // Fixes k (> 0) for the captures from now on, so that two simulators compare at one scale.
+    void set_scene_to_signal(double k);
+    // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): from now on, a HySAR capture's
+    // headset also shows the VI part where no projector reaches (the served layers' rule, with
+    // the blend's own test per camera pixel). With one projector the first call rasterises its
+    // shadow map (render::compute_visibility). `take_off_floor`: where it fills, the headset
+    // also takes off the light that reaches the camera there without any projector (the room's
+    // light on the prop and its own black level, as the projector's drive does where it
+    // reaches, with the black levels compensated); the served layers do not (yet).
+    void set_headset_fill(bool on, bool take_off_floor = false);
+    bool headset_fill() const { return fill_; }
     // How many projectors the captures simulate (the scene's).
     size_t projectors() const { return blended_.empty() ? 1 : blended_.size(); }
     double g_ref() const { return g_ref_; }
@@ -86,11 +102,21 @@ private:
     };
     std::shared_ptr<const Blend> blend_;
     std::vector<Blended> blended_;
+    bool fill_ = false, fill_floor_ = false;
+    std::shared_ptr<const Blend> visibility_;  // one projector with the fill-in: its shadow map
+    // Per camera pixel of `view`, which projectors of `blend` reach the surface it sees (1 off
+    // the CPU's view of the prop), and the counts of SimulatedView.
+    struct Reach {
+        std::vector<std::vector<uint8_t>> by_projector;
+        std::vector<uint8_t> uncovered;  // on the prop, reached by none
+        uint64_t prop = 0, uncovered_count = 0;
+    };
+    Reach reach_of(const Blend& blend, const Viewpoint& view) const;
     Result<optics::Capture> capture_blended(DisplayMode mode, const Viewpoint& view,
                                             const std::optional<Viewpoint>& baked,
                                             const scene::Optics& o, bool overridden,
                                             const ImageRgba32f& geometry,
-                                            const ImageRgba32f& eye_vd);
+                                            const ImageRgba32f& eye_vd, const Reach& reach);
 };
 
 // The capture against its target (docs/OPTICS.md): over prop pixels that `usable` keeps, in

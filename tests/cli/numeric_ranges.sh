@@ -91,6 +91,10 @@ refused --repeats 7x "[1, 1000]" "$hysar" bench encoding --repeats 7x
 for v in nan inf 1e300 20x 256 -1; do
   refused --threshold "$v" "[0, 255]" "$hysar" eval compare --threshold "$v"
 done
+for v in nan 361 -1 2.5; do
+  refused --around "$v" "[0, 360]" "$hysar" eval report --around "$v" --out "$work/rep"
+done
+[ ! -e "$work/rep" ] || { failures=$((failures + 1)); echo "FAIL eval report wrote $work/rep"; }
 
 # hysar calibrate
 refused --size 1x10 "[2, 16384]" "$hysar" calibrate patterns --size 1x10 --out "$work/pat"

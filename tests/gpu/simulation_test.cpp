@@ -214,3 +214,81 @@ TEST_F(Simulation, ThreeProjectorsReproduceTheTargetWhereOneLeavesTheSideUnlit) 
     // One: the part of the side it does not reach stays dark, far from the target.
     EXPECT_GT(one_r.e.rmse_dn, 10.0 * three_r.e.rmse_dn);
 }
+
+// The headsets' fill-in in the simulation (docs/OPTICS.md, "Fill-in"): one projector leaves
+// part of the dome's side unlit; the headset's VI there brings the capture toward the target,
+// the more so when it also takes off the light that is there without any projector; a view
+// whose every point a projector reaches is captured bit for bit as without it.
+TEST_F(Simulation, HeadsetFillInLightsWhatNoProjectorReaches) {
+    auto loaded =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
+    scene::Scene three = loaded.value();
+    shrink(three.projector, 4);
+    for (auto& p : three.more_projectors) shrink(p, 4);
+    scene::Scene one = three;
+    one.more_projectors.clear();
+    const scene::ViewerProfile& viewer = three.viewers.front();
+    auto side = render::viewing_viewpoint(three, viewer, 90, three.viewing.default_height);
+    auto front = render::viewing_viewpoint(three, viewer, 0, three.viewing.default_height);
+    ASSERT_TRUE(side.ok() && front.ok());
+    side->intrinsics = front->intrinsics = small_eye(4);
+
+    auto r = make_renderer(one);
+    auto sim = render::Simulator::create(*r, one, viewer);
+    ASSERT_TRUE(sim.ok()) << sim.error().message;
+    auto none = sim->capture(render::DisplayMode::kHySAR, *side);
+    ASSERT_TRUE(none.ok()) << none.error().message;
+    EXPECT_TRUE(none->uncovered.empty());  // one projector, no fill-in: no blend held
+    sim->set_headset_fill(true);
+    auto served = sim->capture(render::DisplayMode::kHySAR, *side);
+    sim->set_headset_fill(true, true);
+    auto floor_off = sim->capture(render::DisplayMode::kHySAR, *side);
+    ASSERT_TRUE(served.ok() && floor_off.ok());
+    ASSERT_EQ(served->uncovered.size(), size_t(side->intrinsics.width) * side->intrinsics.height);
+    ASSERT_TRUE(served->uncovered_pixels && served->prop_pixels);
+    EXPECT_GT(*served->uncovered_pixels, 200u);
+    EXPECT_LT(*served->uncovered_pixels, *served->prop_pixels);
+    // Over the uncovered prop pixels: light added, and the error to the target.
+    auto over_uncovered = [&](const render::SimulatedView& v, double* added) {
+        double ss = 0, add = 0;
+        uint64_t n = 0;
+        for (size_t i = 0; i < served->uncovered.size(); ++i) {
+            if (!served->uncovered[i] || !(v.geometry.pixels[i * 4 + 3] > 0.5f))
+                continue;
+            for (int c = 0; c < 3; ++c) {
+                const double d =
+                    double(v.capture.dn.pixels[i * 4 + c]) - v.target_dn.pixels[i * 4 + c];
+                ss += d * d;
+                add += double(v.capture.dn.pixels[i * 4 + c]) - none->capture.dn.pixels[i * 4 + c];
+            }
+            ++n;
+        }
+        EXPECT_GT(n, 100u);
+        *added = add / double(3 * n);
+        return std::sqrt(ss / double(3 * n));
+    };
+    double add_none = 0, add_served = 0, add_floor = 0;
+    const double e_none = over_uncovered(*none, &add_none),
+                 e_served = over_uncovered(*served, &add_served),
+                 e_floor = over_uncovered(*floor_off, &add_floor);
+    std::printf(
+        "uncovered %llu of %llu: rmse none %.3f served %.3f floor off %.3f DN; added %.3f "
+        "and %.3f DN\n",
+        (unsigned long long)*served->uncovered_pixels, (unsigned long long)*served->prop_pixels,
+        e_none, e_served, e_floor, add_served, add_floor);
+    EXPECT_EQ(add_none, 0.0);
+    EXPECT_GT(add_served, 0.5);
+    EXPECT_LT(add_floor, add_served);
+    EXPECT_LT(e_served, e_none);
+    EXPECT_LT(e_floor, 0.7 * e_served);
+
+    // Where every point is covered, the fill-in changes nothing.
+    sim->set_headset_fill(false);
+    auto plain = sim->capture(render::DisplayMode::kHySAR, *front);
+    sim->set_headset_fill(true, true);
+    auto filled = sim->capture(render::DisplayMode::kHySAR, *front);
+    ASSERT_TRUE(plain.ok() && filled.ok());
+    EXPECT_EQ(filled->uncovered_pixels.value_or(1), 0u);
+    EXPECT_EQ(filled->capture.dn.pixels, plain->capture.dn.pixels);
+}

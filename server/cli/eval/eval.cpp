@@ -216,13 +216,18 @@ const char* kEvalHelp =
     "              [--threshold 20] [--out DIR]\n"
     "              Sec. 5.2: VD areas, MR1, MR2, the matching map, Lab differences (Delta E\n"
     "              1976 and CIEDE2000) over the reference's VD area\n"
-    "  report      [--scene FILE] [--params FILE] [--viewer NAME] [--out DIR]\n"
-    "              all of the above on the simulated installation: out/report/index.html\n"
+    "  report      [--scene FILE] [--params FILE] [--viewer NAME] [--around N]\n"
+    "              [--around-only] [--out DIR]\n"
+    "              all of the above on the simulated installation: out/report/index.html;\n"
+    "              --around N: the paper's metrics at N viewpoints from 0 to 360 degrees, the\n"
+    "              first projector alone against every projector, without and with the\n"
+    "              headsets' fill-in (default 8; 0: none); --around-only: that section alone\n"
     "\n"
     "--threshold: 8-bit code values in [0, 255]; every numeric flag's range: docs/LIMITS.md\n"
     "\n"
     "examples: hysar eval optics --out out/optics\n"
-    "          hysar eval report --out out/report\n";
+    "          hysar eval report --out out/report\n"
+    "          hysar eval report --scene configs/exp1-room-3proj.json --around-only\n";
 
 Result<void> eval_optics(const Flags& flags) {
     HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
@@ -317,7 +322,8 @@ int run_eval(const std::vector<std::string>& args) {
                                "--threshold", "--out"},
                               {kThresholdFlag}, eval_compare);
     if (args[0] == "report")
-        return run_subcommand(rest, {"--scene", "--params", "--viewer", "--out"}, eval_report);
+        return run_subcommand(rest, {"--scene", "--params", "--viewer", "--around", "--out"},
+                              {kAroundFlag}, eval_report, {"--around-only"});
     std::fprintf(stderr, "hysar eval: unknown subcommand '%s'\n\n%s", args[0].c_str(), kEvalHelp);
     return 2;
 }

@@ -52,7 +52,8 @@ std::string compare_csv(const std::vector<CompareRow>& rows, const std::string& 
 // Fig. 12: mean +- sd of dL, da, db per method, and Delta E 2000 histograms.
 Figure fig12_plot(const std::vector<CompareRow>& rows);
 
-// `hysar eval report` (server/cli/eval/report.cpp).
+// `hysar eval report` (server/cli/eval/report.cpp); --around: its viewpoints around the prop.
+inline constexpr NumericFlag kAroundFlag{"--around", 0, 360, NumericFlag::kWhole};
 Result<void> eval_report(const Flags& flags);
 
 }  // namespace hs::cli

@@ -1,8 +1,11 @@
 // `hysar eval report`: the paper's whole evaluation on the simulated installation, as an HTML
 // page with its figures and the CSV behind each (docs/OPTICS.md).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -10,6 +13,7 @@
 #include "cli/eval/eval_common.hpp"
 #include "core/log.hpp"
 #include "gpu/device.hpp"
+#include "optics/colour.hpp"
 #include "plot/draw.hpp"
 #include "plot/figure.hpp"
 #include "plot/plot.hpp"
@@ -332,6 +336,268 @@ Result<void> fig11_fig12_section(Report& rep, const Installation& in) {
     return {};
 }
 
+// The paper's metrics at viewpoints all around the prop (0 to 360 degrees at the default
+// height), with the first projector alone and with every projector, each without and with the
+// headsets' fill-in: how much of the prop a projector reaches, the composite against the
+// target, CIEDE2000 over the prop and over its uncovered part (from the camera's values, not
+// their 8-bit codes: a dark pixel's rounding is not a colour difference), and the VD areas'
+// MR1, MR2 and CIEDE2000 as Figs. 11 and 12 take them. Both simulators at one k (the smaller of
+// theirs), so that the captures share one scale.
+struct AroundRow {
+    double coverage = 1;  // of the prop's visible pixels, those a projector reaches
+    uint64_t uncovered = 0;
+    render::CompositeError composite;
+    double de00_prop = 0, de00_all = 0, de00_uncovered = 0, de00_vd = 0, de76_vd = 0;
+    // With the fill-in, over the uncovered pixels: the headset taking off the floor too.
+    std::optional<double> de00_uncovered_floor_off;
+    std::optional<double> mr1, mr2;
+    double ms = 0;
+};
+
+// CIEDE2000 of the capture against the target over `mask`, from camera values over full scale.
+double mean_de00(const render::SimulatedView& sv, const std::vector<uint8_t>& mask, double full) {
+    double sum = 0;
+    uint64_t n = 0;
+    for (size_t i = 0; i < mask.size(); ++i) {
+        if (!mask[i])
+            continue;
+        glm::dvec3 got, want;
+        for (int c = 0; c < 3; ++c) {
+            got[c] = std::max(0.0, double(sv.capture.dn.pixels[i * 4 + c])) / full;
+            want[c] = std::max(0.0, double(sv.target_dn.pixels[i * 4 + c])) / full;
+        }
+        sum += optics::delta_e_2000(optics::lab_from_linear_srgb(got),
+                                    optics::lab_from_linear_srgb(want));
+        ++n;
+    }
+    return n ? sum / double(n) : 0.0;
+}
+
+Result<AroundRow> around_row(const render::SimulatedView& sv, const std::vector<uint8_t>& uncovered,
+                             double full, double ms) {
+    AroundRow row;
+    row.ms = ms;
+    std::vector<uint8_t> prop(size_t(sv.geometry.width) * sv.geometry.height), open(prop.size());
+    uint64_t on_prop = 0;
+    for (size_t i = 0; i < prop.size(); ++i) {
+        prop[i] = sv.geometry.pixels[i * 4 + 3] > 0.5f;
+        open[i] = prop[i] && !uncovered.empty() && uncovered[i];
+        on_prop += prop[i];
+        row.uncovered += open[i];
+    }
+    row.coverage = on_prop ? 1.0 - double(row.uncovered) / double(on_prop) : 1.0;
+    const std::vector<uint8_t> usable = render::usable_pixels(sv);
+    row.composite = render::composite_error(sv, usable);
+    row.de00_prop = mean_de00(sv, usable, full);
+    row.de00_all = mean_de00(sv, prop, full);
+    row.de00_uncovered = mean_de00(sv, open, full);
+    const ImageRgba8 ref = optics::to_rgba8(sv.target_dn);
+    const ImageRgba8 cap = optics::to_rgba8(sv.capture.dn);
+    HS_ASSIGN_OR_RETURN(auto areas, optics::vd_areas(ref, optics::to_rgba8(sv.target_vi_dn), cap));
+    HS_ASSIGN_OR_RETURN(auto lab, optics::lab_differences(ref, cap, areas.reference,
+                                                          optics::PixelEncoding::kLinear));
+    row.de00_vd = lab.s00.mean, row.de76_vd = lab.s76.mean;
+    row.mr1 = areas.mr1, row.mr2 = areas.mr2;
+    return row;
+}
+
+Result<void> around_section(Report& rep, const Installation& in, render::Simulator* one,
+                            uint32_t n) {
+    std::vector<render::Simulator*> sims{&in.sim};
+    if (one)
+        sims.insert(sims.begin(), one);
+    double k = std::numeric_limits<double>::infinity();
+    for (auto* sim : sims) k = std::min(k, sim->scene_to_signal());
+    for (auto* sim : sims) sim->set_scene_to_signal(k);
+    const double full = std::ldexp(1.0, int(in.s.optics.bits)) - 1.0;
+    // Per simulator two configurations: without, then with the headsets' fill-in.
+    std::vector<std::string> names;
+    for (auto* sim : sims) {
+        const std::string name = sim->projectors() == 1
+                                     ? std::string("1 projector")
+                                     : fmt::format("{} projectors", sim->projectors());
+        names.push_back(name);
+        names.push_back(name + " + headsets");
+    }
+    static const Rgb kColours[] = {{220, 40, 40}, {240, 150, 40}, {40, 90, 220}, {60, 170, 60}};
+    std::vector<Series> cov(names.size()), de_prop(names.size()), mr1(names.size());
+    for (size_t c = 0; c < names.size(); ++c)
+        for (auto* series : {&cov[c], &de_prop[c], &mr1[c]}) {
+            series->name = names[c];
+            series->colour = kColours[c % 4];
+            series->markers = true;
+        }
+    std::vector<std::vector<Figure>> sheet(names.size());
+    std::string csv =
+        "angle_deg,config,uncovered_pixels,coverage,composite_rmse_dn,composite_excluded,"
+        "de00_prop_mean,de00_all_mean,de00_uncovered_mean,de00_uncovered_floor_off_mean,"
+        "de00_vd_mean,"
+        "de76_vd_mean,mr1,mr2,capture_ms\n";
+    json views = json::array();
+    std::vector<double> capture_ms;
+    std::string text =
+        fmt::format("{:>6}  {:<26}{:>10}{:>10}{:>11}{:>11}{:>10}{:>12}{:>11}{:>9}{:>9}{:>9}\n",
+                    "angle", "config", "coverage", "excluded", "RMSE [DN]", "dE00 prop", "dE00 all",
+                    "dE00 uncov", "floor off", "dE00 VD", "MR1", "MR2");
+    const auto opt_pct = [](const std::optional<double>& v) {
+        return v ? fmt::format("{:.1f} %", 100 * *v) : std::string("n/a");
+    };
+    for (uint32_t a = 0; a < n; ++a) {
+        const double angle = 360.0 * a / n;
+        HS_ASSIGN_OR_RETURN(auto vp, render::viewing_viewpoint(in.s, in.viewer, angle, in.height));
+        for (size_t si = 0; si < sims.size(); ++si) {
+            render::Simulator& sim = *sims[si];
+            // With the fill-in first: its capture says which pixels no projector reaches.
+            std::vector<uint8_t> uncovered;
+            AroundRow rows[2];
+            std::optional<render::SimulatedView> captured[2];
+            for (const bool fill : {true, false}) {
+                sim.set_headset_fill(fill);
+                const auto t0 = std::chrono::steady_clock::now();
+                auto sv = sim.capture(render::DisplayMode::kHySAR, vp);
+                sim.set_headset_fill(false);
+                if (!sv.ok())
+                    return sv.error();
+                const double ms =
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                        .count();
+                capture_ms.push_back(ms);
+                if (fill)
+                    uncovered = sv->uncovered;
+                HS_ASSIGN_OR_RETURN(rows[fill], around_row(*sv, uncovered, full, ms));
+                captured[fill] = std::move(*sv);
+            }
+            if (rows[1].uncovered > 0) {
+                sim.set_headset_fill(true, true);
+                auto sv = sim.capture(render::DisplayMode::kHySAR, vp);
+                sim.set_headset_fill(false);
+                if (!sv.ok())
+                    return sv.error();
+                std::vector<uint8_t> open(uncovered.size());
+                for (size_t i = 0; i < open.size(); ++i)
+                    open[i] = uncovered[i] && sv->geometry.pixels[i * 4 + 3] > 0.5f;
+                rows[1].de00_uncovered_floor_off = mean_de00(*sv, open, full);
+            }
+            for (const bool fill : {false, true}) {
+                const size_t c = 2 * si + (fill ? 1 : 0);
+                const AroundRow& r = rows[fill];
+                const std::string floor_off =
+                    r.de00_uncovered_floor_off ? fmt::format("{:.3f}", *r.de00_uncovered_floor_off)
+                                               : std::string("-");
+                const uint64_t on_prop = r.composite.pixels + r.composite.excluded;
+                text += fmt::format(
+                    "{:>5.0f}°  "
+                    "{:<26}{:>10}{:>10}{:>11.2f}{:>11.3f}{:>10.3f}{:>12.3f}{:>11}{:>9.3f}"
+                    "{:>9}{:>9}\n",
+                    angle, names[c], fmt::format("{:.2f} %", 100 * r.coverage),
+                    fmt::format(
+                        "{:.1f} %",
+                        on_prop ? 100.0 * double(r.composite.excluded) / double(on_prop) : 0.0),
+                    r.composite.rmse_dn, r.de00_prop, r.de00_all, r.de00_uncovered, floor_off,
+                    r.de00_vd, opt_pct(r.mr1), opt_pct(r.mr2));
+                csv += fmt::format(
+                    "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{:.1f}\n", angle, names[c],
+                    r.uncovered, r.coverage, r.composite.rmse_dn, r.composite.excluded, r.de00_prop,
+                    r.de00_all, r.de00_uncovered,
+                    r.de00_uncovered_floor_off ? fmt::format("{}", *r.de00_uncovered_floor_off)
+                                               : std::string(),
+                    r.de00_vd, r.de76_vd, r.mr1 ? fmt::format("{}", *r.mr1) : std::string(),
+                    r.mr2 ? fmt::format("{}", *r.mr2) : std::string(), r.ms);
+                views.push_back(
+                    {{"angle_deg", angle},
+                     {"config", names[c]},
+                     {"projectors", sim.projectors()},
+                     {"headset_fill", fill},
+                     {"coverage", r.coverage},
+                     {"uncovered_pixels", r.uncovered},
+                     {"composite_rmse_dn", r.composite.rmse_dn},
+                     {"composite_excluded", r.composite.excluded},
+                     {"de00_prop_mean", r.de00_prop},
+                     {"de00_all_mean", r.de00_all},
+                     {"de00_uncovered_mean", r.de00_uncovered},
+                     {"de00_uncovered_floor_off_mean", r.de00_uncovered_floor_off.value_or(-1)},
+                     {"de00_vd_mean", r.de00_vd},
+                     {"de76_vd_mean", r.de76_vd},
+                     {"mr1", r.mr1.value_or(-1)},
+                     {"mr2", r.mr2.value_or(-1)}});
+                cov[c].x.push_back(angle), cov[c].y.push_back(100 * r.coverage);
+                de_prop[c].x.push_back(angle), de_prop[c].y.push_back(r.de00_prop);
+                if (r.mr1)
+                    mr1[c].x.push_back(angle), mr1[c].y.push_back(100 * *r.mr1);
+                sheet[c].push_back(labelled(optics::to_rgba8(captured[fill]->capture.dn),
+                                            fmt::format("{} {:.0f} deg", names[c], angle), 4));
+            }
+        }
+        log::info("around the prop: {} of {} viewpoints", a + 1, n);
+    }
+    // Per configuration, its worst viewpoint.
+    json summary = json::object();
+    for (const std::string& name : names) {
+        double worst_cov = 1, worst_de = 0, worst_open = 0, worst_rmse = 0, worst_mr1 = 1;
+        for (const auto& v : views) {
+            if (v["config"] != name)
+                continue;
+            worst_cov = std::min(worst_cov, double(v["coverage"]));
+            worst_de = std::max(worst_de, double(v["de00_prop_mean"]));
+            worst_open = std::max(worst_open, double(v["de00_uncovered_mean"]));
+            worst_rmse = std::max(worst_rmse, double(v["composite_rmse_dn"]));
+            if (double(v["mr1"]) >= 0)
+                worst_mr1 = std::min(worst_mr1, double(v["mr1"]));
+        }
+        summary[name] = {{"min_coverage", worst_cov},
+                         {"max_de00_prop_mean", worst_de},
+                         {"max_de00_uncovered_mean", worst_open},
+                         {"max_composite_rmse_dn", worst_rmse},
+                         {"min_mr1", worst_mr1}};
+    }
+    std::sort(capture_ms.begin(), capture_ms.end());
+    const double median_ms = capture_ms.empty() ? 0.0 : capture_ms[capture_ms.size() / 2];
+    rep.data["around"] = {{"views", views},       {"summary", summary},
+                          {"scene_to_signal", k}, {"viewpoints", n},
+                          {"height", in.height},  {"capture_ms_median", median_ms}};
+    HS_TRY(write_text(rep.out / "around.csv", csv));
+    rep.section(
+        "The paper's metrics all around the prop",
+        fmt::format(
+            "{} viewpoints from 0 to 360 degrees at height {}; HySAR captures with the first "
+            "projector alone and with every projector, each without and with the headsets' "
+            "fill-in (the VI part drawn by the headset where no projector reaches). Coverage: "
+            "the share of the prop's visible pixels a projector reaches. Excluded: prop pixels "
+            "where a device clips or the camera saturates (mostly surface darker than the "
+            "light the room and the headset's black put on it, which no device takes off); RMSE "
+            "and dE00 prop (mean CIEDE2000 against the reference, from the camera's values) are "
+            "over the rest; dE00 all over every prop pixel. dE00 uncov: over the prop pixels no "
+            "projector reaches; floor off: "
+            "the same with a headset that also takes off that floor where it fills. dE00 VD, "
+            "MR1 and MR2 as Figs. 11 and 12. Every capture at k = {:.1f} DN/s per unit radiance; "
+            "median {:.0f} ms per "
+            "capture. Data: <a href=\"around.csv\">around.csv</a>.",
+            n, in.height, k, median_ms));
+    rep.pre(text);
+    log::info("around the prop:\n{}", text);
+    PlotOptions po;
+    po.x_label = "viewpoint [deg]";
+    po.width = 420, po.height = 260;
+    po.x_lo = 0, po.x_hi = 360;
+    PlotOptions pc = po, pd = po, pm = po;
+    pc.title = "coverage of the visible prop";
+    pc.y_label = "%";
+    pd.title = "CIEDE2000 over the prop (mean)";
+    pd.y_label = "Delta E 2000";
+    pm.title = "MR1 (VD area matched)";
+    pm.y_label = "%";
+    std::vector<Series> cov_proj;  // the fill-in does not change what the projectors reach
+    for (size_t c = 0; c < names.size(); c += 2) cov_proj.push_back(cov[c]);
+    HS_TRY(rep.figure("around.png",
+                      hstack({line_plot(cov_proj, pc), line_plot(de_prop, pd), line_plot(mr1, pm)}),
+                      "Per viewpoint around the prop.", "around.csv"));
+    std::vector<Figure> rows;
+    for (auto& r : sheet) rows.push_back(hstack(r));
+    HS_TRY(rep.figure("around_sheet.png", vstack(rows),
+                      "HySAR captures around the prop; rows as the legend above."));
+    return {};
+}
+
 }  // namespace
 
 Result<void> eval_report(const Flags& flags) {
@@ -350,8 +616,14 @@ Result<void> eval_report(const Flags& flags) {
         "<h1>HySAR evaluation: {}</h1>\n<p>Viewer {} (alpha {}); simulated "
         "user-perspective camera: {}-bit, linear. See docs/OPTICS.md.</p>\n",
         html_escape(s.name), html_escape(viewer->name), viewer->alpha, s.optics.bits);
-    log::info("[1/6] Table 2 and resolution");
-    HS_TRY(table2_and_resolution(rep, paper, s, viewer));
+    HS_ASSIGN_OR_RETURN(double around, parse_number(flags, kAroundFlag, 8));
+    const bool around_only = flags.has("--around-only");
+    if (around_only && around < 1)
+        return make_error(ErrorCode::kInvalidArgument, "--around-only needs --around of 1 or more");
+    if (!around_only) {
+        log::info("[1/7] Table 2 and resolution");
+        HS_TRY(table2_and_resolution(rep, paper, s, viewer));
+    }
 
     // The simulated installation.
     HS_ASSIGN_OR_RETURN(auto device, gpu::Device::create(gpu::device_info_from_environment()));
@@ -363,27 +635,45 @@ Result<void> eval_report(const Flags& flags) {
     // Fig. 9). Figs. 11-12 compare where VD appears, so there k also lets SAR's frame for the
     // first viewpoint fit the projector: SAR at its best where it was made for.
     HS_ASSIGN_OR_RETURN(auto sim, render::Simulator::create(*renderer, s, *viewer));
-    HS_ASSIGN_OR_RETURN(auto sim_sar, render::Simulator::create(*renderer, s, *viewer, v1));
-    log::info(
-        "device: {}; scene-to-signal k = {:.1f} DN/s per unit radiance ({:.1f} with SAR's "
-        "frame fitted)",
-        device->name(), sim.scene_to_signal(), sim_sar.scene_to_signal());
-    rep.data["scene_to_signal"] = sim.scene_to_signal();
-    rep.data["scene_to_signal_sar_fit"] = sim_sar.scene_to_signal();
-    const Installation in{s, *viewer, height, sim, sim_sar, v1, v2};
-    log::info("[2/6] viewpoint sheet");
-    HS_TRY(viewpoint_sheet(rep, in));
-    log::info("[3/6] composite and compensations");
-    HS_TRY(composite_section(rep, in));
-    log::info("[4/6] Fig. 9: residual histograms at 250, 125, 33 ms");
-    HS_TRY(fig9_section(rep, in));
-    log::info("[5/6] Figs. 11 and 12: two viewpoints, HySAR, SAR (baked at the first), HMD-only");
-    HS_TRY(fig11_fig12_section(rep, in));
+    std::optional<render::Simulator> sim_sar;
+    if (!around_only) {
+        HS_ASSIGN_OR_RETURN(sim_sar, render::Simulator::create(*renderer, s, *viewer, v1));
+        log::info(
+            "device: {}; scene-to-signal k = {:.1f} DN/s per unit radiance ({:.1f} with SAR's "
+            "frame fitted)",
+            device->name(), sim.scene_to_signal(), sim_sar->scene_to_signal());
+        rep.data["scene_to_signal"] = sim.scene_to_signal();
+        rep.data["scene_to_signal_sar_fit"] = sim_sar->scene_to_signal();
+    }
+    const Installation in{s, *viewer, height, sim, sim_sar ? *sim_sar : sim, v1, v2};
+    if (!around_only) {
+        log::info("[2/7] viewpoint sheet");
+        HS_TRY(viewpoint_sheet(rep, in));
+        log::info("[3/7] composite and compensations");
+        HS_TRY(composite_section(rep, in));
+        log::info("[4/7] Fig. 9: residual histograms at 250, 125, 33 ms");
+        HS_TRY(fig9_section(rep, in));
+        log::info(
+            "[5/7] Figs. 11 and 12: two viewpoints, HySAR, SAR (baked at the first), HMD-only");
+        HS_TRY(fig11_fig12_section(rep, in));
+    }
+    if (around >= 1) {
+        log::info("[6/7] the paper's metrics at {} viewpoints around the prop", around);
+        // With several projectors, the first alone as well (same renderer: it draws projector
+        // 0's frames as they are, unweighted).
+        std::optional<render::Simulator> one;
+        if (s.projector_count() > 1) {
+            scene::Scene s1 = s;
+            s1.more_projectors.clear();
+            HS_ASSIGN_OR_RETURN(one, render::Simulator::create(*renderer, s1, *viewer));
+        }
+        HS_TRY(around_section(rep, in, one ? &*one : nullptr, uint32_t(around)));
+    }
 
     if (device->validation_enabled() && device->validation_message_count() > 0)
         return make_error(ErrorCode::kDevice, fmt::format("{} Vulkan validation message(s)",
                                                           device->validation_message_count()));
-    log::info("[6/6] writing the report");
+    log::info("[7/7] writing the report");
     const double secs =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     rep.html += fmt::format("<p>Device: {}. Generated in {:.1f} s.</p></body></html>\n",
