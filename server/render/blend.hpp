@@ -48,17 +48,18 @@ struct BlendOptions {
     // The roll-off toward grazing: from cos theta = incidence_rolloff (c1) down to
     // incidence_cutoff (c0), where it reaches the floor (rolloff_floor) rather than 0.
     double incidence_rolloff = 0.4;  // c1
-    double incidence_cutoff = 0.1;   // c0
+    double incidence_cutoff = 0.08;  // c0 (0.1 until the seam sweep of docs/OPTICS.md)
     // The roll-off toward the prop's outline in the projector's frame (where the prop's edge
     // or a part of it in front of another is), over this fraction of the frame's smaller side:
     // a ramp that is smooth in the projector's own pixels, where the light is placed. 0: off
     // (the default: on the dome it made the seams larger, docs/OPTICS.md).
     double silhouette_rolloff = 0.0;
     // The roll-offs' product s never falls below this: where every projector is in one (near
-    // the dome's rim, all three meet it at cos theta 0.1-0.4) they share the point partly by
+    // the dome's rim, all three meet it at cos theta 0.08-0.4) they share the point partly by
     // their other factors, which change more slowly across a projector's pixels there than the
-    // roll-offs do. 0.05 lowered the largest interior seam step at full resolution from 6.3 %
-    // to 2.0 % (docs/OPTICS.md, "Several projectors"); at 0.001 the roll-offs alone decided.
+    // roll-offs do. 0.05 (with c0 0.08) lowered the largest interior seam step at full
+    // resolution from 6.3 % to 1.93 % (docs/OPTICS.md, "Several projectors"); at 0.001 the
+    // roll-offs alone decided.
     double rolloff_floor = 0.05;
     // Keep each projector's g_k per pixel (ProjectorBlend::reach_g), which
     // blended_projector_drive needs to share the black floor: 4 bytes per projector and pixel,
