@@ -2,6 +2,7 @@
 // against its target with and without each compensation, and the display modes.
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include <glm/geometric.hpp>
@@ -150,19 +151,33 @@ TEST_F(Simulation, WithoutHighlightsNothingViewDependentIsRendered) {
     EXPECT_EQ(sv->capture.dn.pixels, dif->capture.dn.pixels);
 }
 
+// The three-projector room with its projectors at a quarter of their resolution, and the same
+// room with its first projector alone.
+struct Rooms {
+    scene::Scene three, one;
+};
+std::optional<Rooms> three_and_one() {
+    auto loaded =
+        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
+    EXPECT_TRUE(loaded.ok()) << loaded.error().message;
+    if (!loaded.ok())
+        return std::nullopt;
+    Rooms r{loaded.value(), {}};
+    shrink(r.three.projector, 4);
+    for (auto& p : r.three.more_projectors) shrink(p, 4);
+    r.one = r.three;
+    r.one.more_projectors.clear();
+    return r;
+}
+
 }  // namespace
 
 // Several projectors (docs/OPTICS.md, "Several projectors"): the capture sums each projector's
 // blended share through its own geometry, levels and shadow test.
 TEST_F(Simulation, ThreeProjectorsReproduceTheTargetWhereOneLeavesTheSideUnlit) {
-    auto loaded =
-        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
-    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-    scene::Scene three = loaded.value();
-    shrink(three.projector, 4);
-    for (auto& p : three.more_projectors) shrink(p, 4);
-    scene::Scene one = three;
-    one.more_projectors.clear();
+    const auto rooms = three_and_one();
+    ASSERT_TRUE(rooms);
+    const scene::Scene &three = rooms->three, &one = rooms->one;
     const scene::ViewerProfile& viewer = three.viewers.front();
     // The side of the dome that the first projector (in front) reaches only in part.
     auto vp = render::viewing_viewpoint(three, viewer, 90, three.viewing.default_height);
@@ -220,14 +235,9 @@ TEST_F(Simulation, ThreeProjectorsReproduceTheTargetWhereOneLeavesTheSideUnlit) 
 // the more so when it also takes off the light that is there without any projector; a view
 // whose every point a projector reaches is captured bit for bit as without it.
 TEST_F(Simulation, HeadsetFillInLightsWhatNoProjectorReaches) {
-    auto loaded =
-        scene::load_scene_file(std::string(HYSAR_SOURCE_DIR) + "/configs/exp1-room-3proj.json");
-    ASSERT_TRUE(loaded.ok()) << loaded.error().message;
-    scene::Scene three = loaded.value();
-    shrink(three.projector, 4);
-    for (auto& p : three.more_projectors) shrink(p, 4);
-    scene::Scene one = three;
-    one.more_projectors.clear();
+    const auto rooms = three_and_one();
+    ASSERT_TRUE(rooms);
+    const scene::Scene &three = rooms->three, &one = rooms->one;
     const scene::ViewerProfile& viewer = three.viewers.front();
     auto side = render::viewing_viewpoint(three, viewer, 90, three.viewing.default_height);
     auto front = render::viewing_viewpoint(three, viewer, 0, three.viewing.default_height);
