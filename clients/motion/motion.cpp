@@ -484,41 +484,44 @@ constexpr uint32_t kSpan = 64;
                                                    uint32_t height, int64_t fu, int64_t fv) {
     const int64_t iu = fu >> 8, iv = fv >> 8;  // floor
     const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
-    uint32_t p[4];
+    // The two rows' pairs, each one 64-bit word (the left neighbour in its low half).
+    uint64_t top, bot;
     if (uint64_t(iu) < uint64_t(width) - 1 && uint64_t(iv) < uint64_t(height) - 1) {
         const uint32_t* r0 = src + size_t(iv) * width + size_t(iu);
-        p[0] = r0[0], p[1] = r0[1], p[2] = r0[width], p[3] = r0[width + 1];
+        std::memcpy(&top, r0, 8);
+        std::memcpy(&bot, r0 + width, 8);
     } else {
+        uint32_t p[4];
         for (int t = 0; t < 4; ++t) {
             const int64_t x = iu + (t & 1), y = iv + (t >> 1);
             p[t] = uint64_t(x) < width && uint64_t(y) < height ? src[size_t(y) * width + size_t(x)]
                                                                : 0u;
         }
+        top = p[0] | (uint64_t(p[1]) << 32), bot = p[2] | (uint64_t(p[3]) << 32);
     }
-    if ((p[0] | p[1] | p[2] | p[3]) == 0)
+    if ((top | bot) == 0)
         return 0;
 #if defined(__SSE2__)
-    // The same sums, separably: each row's pair weighted by (256 - au, au) in 16-bit lanes (at
-    // most 255 x 256), then the two rows by (256 - av, av) in 32 bits. Integer arithmetic
-    // throughout, so the result is the scalar form's bit for bit.
+    // Each row's pair weighted by (256 - au, au) in 16-bit lanes (at most 255 x 256 in all),
+    // halved, then the two rows by (256 - av, av) in one multiply-add to 32 bits. The halving
+    // drops a bit the plain sums keep: the result is within one code of them.
     const __m128i z = _mm_setzero_si128();
-    const auto ru = short(256 - au), u = short(au), rv = short(256 - av), v = short(av);
+    const auto ru = short(256 - au), u = short(au);
     const __m128i wh = _mm_set_epi16(u, u, u, u, ru, ru, ru, ru);
-    const __m128i top =
-        _mm_mullo_epi16(_mm_unpacklo_epi8(_mm_set_epi32(0, 0, int(p[1]), int(p[0])), z), wh);
-    const __m128i bot =
-        _mm_mullo_epi16(_mm_unpacklo_epi8(_mm_set_epi32(0, 0, int(p[3]), int(p[2])), z), wh);
-    const __m128i t = _mm_add_epi16(top, _mm_srli_si128(top, 8));
-    const __m128i b = _mm_add_epi16(bot, _mm_srli_si128(bot, 8));
-    const __m128i wt = _mm_set1_epi16(rv), wb = _mm_set1_epi16(v);
-    const __m128i t32 = _mm_unpacklo_epi16(_mm_mullo_epi16(t, wt), _mm_mulhi_epu16(t, wt));
-    const __m128i b32 = _mm_unpacklo_epi16(_mm_mullo_epi16(b, wb), _mm_mulhi_epu16(b, wb));
-    const __m128i sum =
-        _mm_srli_epi32(_mm_add_epi32(_mm_add_epi32(t32, b32), _mm_set1_epi32(32768)), 16);
+    const __m128i rows =
+        _mm_unpacklo_epi64(_mm_cvtsi64_si128(int64_t(top)), _mm_cvtsi64_si128(int64_t(bot)));
+    const __m128i hi = _mm_mullo_epi16(_mm_unpacklo_epi8(rows, z), wh);
+    const __m128i lo = _mm_mullo_epi16(_mm_unpackhi_epi8(rows, z), wh);
+    const __m128i t = _mm_srli_epi16(_mm_add_epi16(hi, _mm_srli_si128(hi, 8)), 1);
+    const __m128i b = _mm_srli_epi16(_mm_add_epi16(lo, _mm_srli_si128(lo, 8)), 1);
+    const __m128i wv = _mm_set1_epi32(int((av << 16) | (256 - av)));
+    const __m128i sum = _mm_srli_epi32(
+        _mm_add_epi32(_mm_madd_epi16(_mm_unpacklo_epi16(t, b), wv), _mm_set1_epi32(16384)), 15);
     const __m128i packed = _mm_packus_epi16(_mm_packs_epi32(sum, z), z);
     const uint32_t rgb = uint32_t(_mm_cvtsi128_si32(packed)) & 0xFFFFFFu;
     return rgb ? rgb | 0xFF000000u : 0u;
 #else
+    const uint32_t p[4] = {uint32_t(top), uint32_t(top >> 32), uint32_t(bot), uint32_t(bot >> 32)};
     const uint64_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av, au * av};
     uint64_t rb = 0, g = 0;
     for (int t = 0; t < 4; ++t) {
