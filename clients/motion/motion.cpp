@@ -477,39 +477,42 @@ namespace {
 constexpr uint32_t kSpan = 64;
 
 // The bilinear sample of an RGBA8 layer at (u, v) in 24.8 fixed point (pixel centres at
-// integers): the 4 neighbours with 8-bit weights, neighbours outside the layer black. Red and
-// blue go through one 64-bit multiply per neighbour (a 32-bit lane each: 255 x 65536 fits),
-// green through another. Alpha: 0 exactly where the colour is 0, full elsewhere (PROTOCOL.md).
+// integers): the 4 neighbours with 8-bit weights, neighbours outside the layer black. With SSE2
+// (every x86-64) in 16-bit lanes, below; otherwise red and blue go through one 64-bit multiply
+// per neighbour (a 32-bit lane each: 255 x 65536 fits), green through another. Alpha: 0 exactly
+// where the colour is 0, full elsewhere (PROTOCOL.md).
 [[gnu::always_inline]] inline uint32_t bilinear_at(const uint32_t* src, uint32_t width,
                                                    uint32_t height, int64_t fu, int64_t fv) {
     const int64_t iu = fu >> 8, iv = fv >> 8;  // floor
     const auto au = uint32_t(fu & 255), av = uint32_t(fv & 255);
-    // The two rows' pairs, each one 64-bit word (the left neighbour in its low half).
-    uint64_t top, bot;
-    if (uint64_t(iu) < uint64_t(width) - 1 && uint64_t(iv) < uint64_t(height) - 1) {
-        const uint32_t* r0 = src + size_t(iv) * width + size_t(iu);
-        std::memcpy(&top, r0, 8);
-        std::memcpy(&bot, r0 + width, 8);
-    } else {
-        uint32_t p[4];
+    uint32_t p[4];
+    const bool inside = uint64_t(iu) < uint64_t(width) - 1 && uint64_t(iv) < uint64_t(height) - 1;
+    if (!inside)
         for (int t = 0; t < 4; ++t) {
             const int64_t x = iu + (t & 1), y = iv + (t >> 1);
             p[t] = uint64_t(x) < width && uint64_t(y) < height ? src[size_t(y) * width + size_t(x)]
                                                                : 0u;
         }
-        top = p[0] | (uint64_t(p[1]) << 32), bot = p[2] | (uint64_t(p[3]) << 32);
-    }
-    if ((top | bot) == 0)
-        return 0;
 #if defined(__SSE2__)
-    // Each row's pair weighted by (256 - au, au) in 16-bit lanes (at most 255 x 256 in all),
-    // halved, then the two rows by (256 - av, av) in one multiply-add to 32 bits. The halving
-    // drops a bit the plain sums keep: the result is within one code of them.
+    // Each row's pair straight into a vector (the left neighbour in the low half), weighted by
+    // (256 - au, au) in 16-bit lanes (at most 255 x 256 in all), halved, then the two rows by
+    // (256 - av, av) in one multiply-add to 32 bits. The halving drops a bit the plain sums
+    // keep: the result is never above them and at most one code below.
     const __m128i z = _mm_setzero_si128();
+    __m128i top, bot;
+    if (inside) {
+        const uint32_t* r0 = src + size_t(iv) * width + size_t(iu);
+        top = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(r0));
+        bot = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(r0 + width));
+    } else {
+        top = _mm_set_epi32(0, 0, int(p[1]), int(p[0]));
+        bot = _mm_set_epi32(0, 0, int(p[3]), int(p[2]));
+    }
+    const __m128i rows = _mm_unpacklo_epi64(top, bot);
+    if (_mm_movemask_epi8(_mm_cmpeq_epi8(rows, z)) == 0xFFFF)
+        return 0;
     const auto ru = short(256 - au), u = short(au);
     const __m128i wh = _mm_set_epi16(u, u, u, u, ru, ru, ru, ru);
-    const __m128i rows =
-        _mm_unpacklo_epi64(_mm_cvtsi64_si128(int64_t(top)), _mm_cvtsi64_si128(int64_t(bot)));
     const __m128i hi = _mm_mullo_epi16(_mm_unpacklo_epi8(rows, z), wh);
     const __m128i lo = _mm_mullo_epi16(_mm_unpackhi_epi8(rows, z), wh);
     const __m128i t = _mm_srli_epi16(_mm_add_epi16(hi, _mm_srli_si128(hi, 8)), 1);
@@ -521,7 +524,12 @@ constexpr uint32_t kSpan = 64;
     const uint32_t rgb = uint32_t(_mm_cvtsi128_si32(packed)) & 0xFFFFFFu;
     return rgb ? rgb | 0xFF000000u : 0u;
 #else
-    const uint32_t p[4] = {uint32_t(top), uint32_t(top >> 32), uint32_t(bot), uint32_t(bot >> 32)};
+    if (inside) {
+        const uint32_t* r0 = src + size_t(iv) * width + size_t(iu);
+        p[0] = r0[0], p[1] = r0[1], p[2] = r0[width], p[3] = r0[width + 1];
+    }
+    if ((p[0] | p[1] | p[2] | p[3]) == 0)
+        return 0;
     const uint64_t wt[4] = {(256 - au) * (256 - av), au * (256 - av), (256 - au) * av, au * av};
     uint64_t rb = 0, g = 0;
     for (int t = 0; t < 4; ++t) {

@@ -130,8 +130,12 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
         return vi_drive_;
     };
     const double alpha_c = o.compensation.hmd_alpha ? alpha_ : 1.0;
-    // Which projectors reach what the camera sees, where a blend is held.
-    const Blend* blend = blend_ ? blend_.get() : (fill_ ? visibility_.get() : nullptr);
+    // Which projectors reach what the camera sees, where a blend is held and something uses
+    // it: the blended projectors' light, or the fill-in of a HySAR capture.
+    const bool fill = fill_ && mode == DisplayMode::kHySAR;
+    const Blend* blend = blend_ && mode != DisplayMode::kHmdOnly ? blend_.get()
+                         : fill ? (blend_ ? blend_.get() : visibility_.get())
+                                : nullptr;
     Reach r;
     if (blend) {
         r = reach_of(*blend, view);
@@ -142,7 +146,7 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
     // The headset's layer: VD, and with the fill-in the VI part where no projector reaches.
     auto eye_layer = [&]() {
         ImageRgba32f layer = scaled(ls.image, alpha_c * k_);
-        if (!fill_ || !blend)
+        if (!fill || !blend)
             return layer;
         // The light the camera sees there with no projector: the room's through the headset,
         // and the headset's black (optics::simulate_capture).
@@ -168,7 +172,14 @@ Result<SimulatedView> Simulator::capture(DisplayMode mode, const Viewpoint& view
     switch (mode) {
         case DisplayMode::kHySAR:
         case DisplayMode::kDiffuseOnly:
-            dev.projector = vi_drive();
+            if (fill && blend) {
+                // The projector's light only where its shadow test says it reaches, as the
+                // fill-in's complement (the camera geometry knows no shadows).
+                dev.projectors.push_back({&vi_drive(), &out.geometry, g_ref_, lv.projector_max,
+                                          lv.projector_min, &r.by_projector[0]});
+            } else {
+                dev.projector = vi_drive();
+            }
             if (mode == DisplayMode::kHySAR)
                 dev.hmd = optics::hmd_drive(o, eye_layer());
             break;

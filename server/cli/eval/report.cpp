@@ -339,9 +339,10 @@ Result<void> fig11_fig12_section(Report& rep, const Installation& in) {
 // The paper's metrics at viewpoints all around the prop (0 to 360 degrees at the default
 // height), with the first projector alone and with every projector, each without and with the
 // headsets' fill-in: how much of the prop a projector reaches, the composite against the
-// target, CIEDE2000 over the prop and over its uncovered part (from the camera's values, not
-// their 8-bit codes: a dark pixel's rounding is not a colour difference), and the VD areas'
-// MR1, MR2 and CIEDE2000 as Figs. 11 and 12 take them. Both simulators at one k (the smaller of
+// target, CIEDE2000 over the prop and over its uncovered part (from the camera's values, its
+// 8-bit codes with the scene's quantisation: where the target is under a code, as at the back
+// of the dome, a code's rounding alone is several units), and the VD areas' MR1, MR2 and
+// CIEDE2000 as Figs. 11 and 12 take them. Both simulators at one k (the smaller of
 // theirs), so that the captures share one scale.
 struct AroundRow {
     double coverage = 1;  // of the prop's visible pixels, those a projector reaches
@@ -487,18 +488,19 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
                 const uint64_t on_prop = r.composite.pixels + r.composite.excluded;
                 text += fmt::format(
                     "{:>5.0f}°  "
-                    "{:<26}{:>10}{:>10}{:>11.2f}{:>11.3f}{:>10.3f}{:>12.3f}{:>11}{:>9.3f}"
+                    "{:<26}{:>10}{:>10}{:>11.2f}{:>11.3f}{:>10.3f}{:>12}{:>11}{:>9.3f}"
                     "{:>9}{:>9}\n",
                     angle, names[c], fmt::format("{:.2f} %", 100 * r.coverage),
                     fmt::format(
                         "{:.1f} %",
                         on_prop ? 100.0 * double(r.composite.excluded) / double(on_prop) : 0.0),
-                    r.composite.rmse_dn, r.de00_prop, r.de00_all, r.de00_uncovered, floor_off,
-                    r.de00_vd, opt_pct(r.mr1), opt_pct(r.mr2));
+                    r.composite.rmse_dn, r.de00_prop, r.de00_all,
+                    r.uncovered ? fmt::format("{:.3f}", r.de00_uncovered) : std::string("-"),
+                    floor_off, r.de00_vd, opt_pct(r.mr1), opt_pct(r.mr2));
                 csv += fmt::format(
                     "{},\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{:.1f}\n", angle, names[c],
                     r.uncovered, r.coverage, r.composite.rmse_dn, r.composite.excluded, r.de00_prop,
-                    r.de00_all, r.de00_uncovered,
+                    r.de00_all, r.uncovered ? fmt::format("{}", r.de00_uncovered) : std::string(),
                     r.de00_uncovered_floor_off ? fmt::format("{}", *r.de00_uncovered_floor_off)
                                                : std::string(),
                     r.de00_vd, r.de76_vd, r.mr1 ? fmt::format("{}", *r.mr1) : std::string(),
@@ -514,14 +516,14 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
                      {"composite_excluded", r.composite.excluded},
                      {"de00_prop_mean", r.de00_prop},
                      {"de00_all_mean", r.de00_all},
-                     {"de00_uncovered_mean", r.de00_uncovered},
+                     {"de00_uncovered_mean", r.uncovered ? json(r.de00_uncovered) : json(nullptr)},
                      {"de00_uncovered_floor_off_mean", r.de00_uncovered_floor_off.value_or(-1)},
                      {"de00_vd_mean", r.de00_vd},
                      {"de76_vd_mean", r.de76_vd},
                      {"mr1", r.mr1.value_or(-1)},
                      {"mr2", r.mr2.value_or(-1)}});
                 cov[c].x.push_back(angle), cov[c].y.push_back(100 * r.coverage);
-                de_prop[c].x.push_back(angle), de_prop[c].y.push_back(r.de00_prop);
+                de_prop[c].x.push_back(angle), de_prop[c].y.push_back(r.de00_all);
                 if (r.mr1)
                     mr1[c].x.push_back(angle), mr1[c].y.push_back(100 * *r.mr1);
                 sheet[c].push_back(labelled(optics::to_rgba8(captured[fill]->capture.dn),
@@ -533,22 +535,28 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
     // Per configuration, its worst viewpoint.
     json summary = json::object();
     for (const std::string& name : names) {
-        double worst_cov = 1, worst_de = 0, worst_open = 0, worst_rmse = 0, worst_mr1 = 1;
+        double worst_cov = 1, worst_de = 0, worst_all = 0, worst_rmse = 0;
+        std::optional<double> worst_open, worst_mr1;
         for (const auto& v : views) {
             if (v["config"] != name)
                 continue;
             worst_cov = std::min(worst_cov, double(v["coverage"]));
             worst_de = std::max(worst_de, double(v["de00_prop_mean"]));
-            worst_open = std::max(worst_open, double(v["de00_uncovered_mean"]));
+            worst_all = std::max(worst_all, double(v["de00_all_mean"]));
             worst_rmse = std::max(worst_rmse, double(v["composite_rmse_dn"]));
+            if (!v["de00_uncovered_mean"].is_null())
+                worst_open = std::max(worst_open.value_or(0.0), double(v["de00_uncovered_mean"]));
             if (double(v["mr1"]) >= 0)
-                worst_mr1 = std::min(worst_mr1, double(v["mr1"]));
+                worst_mr1 = std::min(worst_mr1.value_or(1.0), double(v["mr1"]));
         }
-        summary[name] = {{"min_coverage", worst_cov},
-                         {"max_de00_prop_mean", worst_de},
-                         {"max_de00_uncovered_mean", worst_open},
-                         {"max_composite_rmse_dn", worst_rmse},
-                         {"min_mr1", worst_mr1}};
+        // null where no viewpoint had anything to measure (nothing uncovered, no VD area).
+        const auto or_null = [](const std::optional<double>& v) {
+            return v ? json(*v) : json(nullptr);
+        };
+        summary[name] = {
+            {"min_coverage", worst_cov},           {"max_de00_prop_mean", worst_de},
+            {"max_de00_all_mean", worst_all},      {"max_de00_uncovered_mean", or_null(worst_open)},
+            {"max_composite_rmse_dn", worst_rmse}, {"min_mr1", or_null(worst_mr1)}};
     }
     std::sort(capture_ms.begin(), capture_ms.end());
     const double median_ms = capture_ms.empty() ? 0.0 : capture_ms[capture_ms.size() / 2];
@@ -565,8 +573,9 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
             "the share of the prop's visible pixels a projector reaches. Excluded: prop pixels "
             "where a device clips or the camera saturates (mostly surface darker than the "
             "light the room and the headset's black put on it, which no device takes off); RMSE "
-            "and dE00 prop (mean CIEDE2000 against the reference, from the camera's values) are "
-            "over the rest; dE00 all over every prop pixel. dE00 uncov: over the prop pixels no "
+            "and dE00 prop (mean CIEDE2000 against the reference, from the camera's 8-bit "
+            "values) are over the rest; dE00 all over every prop pixel. dE00 uncov: over the prop "
+            "pixels no "
             "projector reaches; floor off: "
             "the same with a headset that also takes off that floor where it fills. dE00 VD, "
             "MR1 and MR2 as Figs. 11 and 12. Every capture at k = {:.1f} DN/s per unit radiance; "
@@ -582,7 +591,7 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
     PlotOptions pc = po, pd = po, pm = po;
     pc.title = "coverage of the visible prop";
     pc.y_label = "%";
-    pd.title = "CIEDE2000 over the prop (mean)";
+    pd.title = "CIEDE2000 over every prop pixel (mean)";
     pd.y_label = "Delta E 2000";
     pm.title = "MR1 (VD area matched)";
     pm.y_label = "%";
@@ -605,6 +614,10 @@ Result<void> eval_report(const Flags& flags) {
     HS_ASSIGN_OR_RETURN(auto paper, load_params(flags));
     HS_ASSIGN_OR_RETURN(auto s, load_scene(flags));
     HS_ASSIGN_OR_RETURN(const scene::ViewerProfile* viewer, pick_viewer(s, flags));
+    HS_ASSIGN_OR_RETURN(double around, parse_number(flags, kAroundFlag, 8));
+    const bool around_only = flags.has("--around-only");
+    if (around_only && around < 1)
+        return make_error(ErrorCode::kInvalidArgument, "--around-only needs --around of 1 or more");
     Report rep;
     rep.out = flags.get("--out", "out/report");
     HS_TRY(make_dirs(rep.out));
@@ -616,10 +629,6 @@ Result<void> eval_report(const Flags& flags) {
         "<h1>HySAR evaluation: {}</h1>\n<p>Viewer {} (alpha {}); simulated "
         "user-perspective camera: {}-bit, linear. See docs/OPTICS.md.</p>\n",
         html_escape(s.name), html_escape(viewer->name), viewer->alpha, s.optics.bits);
-    HS_ASSIGN_OR_RETURN(double around, parse_number(flags, kAroundFlag, 8));
-    const bool around_only = flags.has("--around-only");
-    if (around_only && around < 1)
-        return make_error(ErrorCode::kInvalidArgument, "--around-only needs --around of 1 or more");
     if (!around_only) {
         log::info("[1/7] Table 2 and resolution");
         HS_TRY(table2_and_resolution(rep, paper, s, viewer));
