@@ -674,7 +674,15 @@ Result<void> eval_report(const Flags& flags) {
         if (s.projector_count() > 1) {
             scene::Scene s1 = s;
             s1.more_projectors.clear();
-            HS_ASSIGN_OR_RETURN(one, render::Simulator::create(*renderer, s1, *viewer));
+            // A first projector whose principal ray misses the prop cannot be simulated alone
+            // (its levels' reference point); the room is still measured.
+            if (auto sim1 = render::Simulator::create(*renderer, s1, *viewer))
+                one = std::move(*sim1);
+            else
+                log::warn(
+                    "around the prop: the first projector alone is not simulated ({}); "
+                    "only every projector is",
+                    sim1.error().message);
         }
         HS_TRY(around_section(rep, in, one ? &*one : nullptr, uint32_t(around)));
     }
