@@ -158,9 +158,13 @@ void FrameLoop::turn(std::vector<ViewerJob>& batch, uint32_t& version) {
         } else if (done->blend) {
             publish_reblend(*done);
         } else {
-            log::error("render: re-blending the projectors failed ({}); the frames stay",
-                       done->error);
-            reblend_failed_ = done->excluded;  // not tried again until the set changes
+            // Tried again later (it may have been passing), or at once for another set.
+            const auto again = reblend_retry_.failed(done->excluded, Clock::now());
+            scheduler_.wake_at(again);
+            log::error(
+                "render: re-blending the projectors failed ({}); the frames stay, tried again in "
+                "{:.0f} s",
+                done->error, std::chrono::duration<double>(again - Clock::now()).count());
         }
     }
     if (!blend_) {
@@ -419,7 +423,7 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     // projectors' blend holds about 330 MB.
     full_blend_ = info_.reblend_missing ? task->blend : nullptr;
     version_k_ = b.scene_to_signal;
-    reblend_failed_.reset();
+    reblend_retry_.succeeded();
     task->blend.reset();  // not kept: off the ledger before the version is announced
     excluded_.clear();
     version_ = task->version;
@@ -449,7 +453,7 @@ void FrameLoop::reblend_if_needed() {
     // With none of them connected there is nobody to cover for: the full blend stays.
     if (included.empty())
         excluded.clear();
-    if (excluded == excluded_ || (reblend_failed_ && *reblend_failed_ == excluded))
+    if (excluded == excluded_ || !reblend_retry_.may_try(excluded, Clock::now()))
         return;
     if (excluded.empty())
         log::info("all {} projectors are back: blended over all of them", all.size());
@@ -516,7 +520,7 @@ void FrameLoop::publish_reblend(BlendTask& task) {
     out.blend_ms = task.ms;
     out.frames = std::move(task.frames);
     excluded_ = excluded;
-    reblend_failed_.reset();
+    reblend_retry_.succeeded();
     // What none of the included projectors reaches goes to the headsets' fill-in (the surface
     // only a missing projector lit, too), and back to the version's own when all are there.
     // The fill's texture is bound to every pipeline: nothing of it may be in flight.

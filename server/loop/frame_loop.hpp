@@ -33,6 +33,7 @@
 #include "gpu/device.hpp"
 #include "gpu/submit_ring.hpp"
 #include "loop/frame_source.hpp"
+#include "loop/reblend_retry.hpp"
 #include "loop/scheduler.hpp"
 #include "loop/viewer_frame.hpp"
 #include "render/projectors.hpp"
@@ -293,7 +294,7 @@ private:
     std::shared_ptr<const render::Blend> full_blend_;
     double version_k_ = 0;  // calibrated output's k of the running version
     std::set<std::string> excluded_;
-    std::optional<std::set<std::string>> reblend_failed_;  // the set a re-blend failed for
+    ReblendRetry reblend_retry_;  // when a set whose re-blend failed is tried again
     uint32_t version_ = 0;
 };
 

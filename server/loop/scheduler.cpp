@@ -121,7 +121,7 @@ std::vector<ViewerJob> Scheduler::wait_for_batch() {
     for (;;) {
         if (stopped_ || woken_)
             break;
-        const auto next = next_eligible_locked();
+        const auto next = std::min(next_eligible_locked(), wake_at_);
         if (next <= SteadyClock::now())
             break;
         // A viewer held back by its display's rate wakes us at its time.
@@ -131,6 +131,8 @@ std::vector<ViewerJob> Scheduler::wait_for_batch() {
             cv_.wait_until(lock, next);
     }
     woken_ = false;
+    if (wake_at_ <= SteadyClock::now())
+        wake_at_ = SteadyClock::time_point::max();  // honoured
     return take_locked();
 }
 
@@ -230,6 +232,14 @@ void Scheduler::wake() {
     {
         std::lock_guard lock(mutex_);
         woken_ = true;
+    }
+    cv_.notify_all();
+}
+
+void Scheduler::wake_at(Clock::time_point when) {
+    {
+        std::lock_guard lock(mutex_);
+        wake_at_ = std::min(wake_at_, when);
     }
     cv_.notify_all();
 }

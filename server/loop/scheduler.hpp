@@ -85,6 +85,8 @@ public:
 
     // Any thread: makes a waiting wait_for_batch() return, so its caller can look at other work.
     void wake();
+    // Any thread: as wake(), at `when` (the earliest of those asked for, each honoured once).
+    void wake_at(Clock::time_point when);
     bool stopped() const;
     void stop();
     std::map<uint32_t, ViewerCounters> counters() const;
@@ -120,6 +122,7 @@ private:
     ServedDisplays served_;
     bool stopped_ = false;
     bool woken_ = false;
+    Clock::time_point wake_at_ = Clock::time_point::max();
 };
 
 }  // namespace hs::loop

@@ -2,8 +2,14 @@
 // bookkeeping, so these drive it by hand: poses, batches taken, frames rendered and sent.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <map>
+#include <set>
+#include <string>
+#include <thread>
 
+#include "loop/reblend_retry.hpp"
 #include "loop/scheduler.hpp"
 
 namespace {
@@ -139,3 +145,47 @@ TEST(Scheduler, AViewersBitRateLimitPacesItAndSetsItsQuality) {
 }
 
 }  // namespace
+
+// wake_at: a render thread with no viewer to serve still turns at the time asked for (a
+// re-blend to try again), once.
+TEST(Scheduler, WakeAtReturnsAnEmptyBatchAtThatTimeOnce) {
+    Scheduler s({.max_batch = 2});
+    const auto asked = hs::loop::Clock::now() + std::chrono::milliseconds(30);
+    s.wake_at(asked + std::chrono::hours(1));  // the earliest of those asked for counts
+    s.wake_at(asked);
+    const auto batch = s.wait_for_batch();
+    EXPECT_TRUE(batch.empty());
+    EXPECT_GE(hs::loop::Clock::now(), asked);
+    // Honoured: the next wait blocks until something else wakes it.
+    std::atomic<bool> returned{false};
+    std::thread waiter([&] {
+        (void)s.wait_for_batch();
+        returned = true;
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    EXPECT_FALSE(returned.load());
+    s.wake();
+    waiter.join();
+    EXPECT_TRUE(returned.load());
+}
+
+// A failed re-blend is tried again after a wait that doubles while the same set keeps failing;
+// another set is tried at once; a success forgets.
+TEST(ReblendRetry, TheSameSetWaitsLongerEachTimeAnotherAtOnce) {
+    using namespace std::chrono_literals;
+    hs::loop::ReblendRetry r(5s, 18s);
+    const std::set<std::string> a{"back-left"}, b{"front"};
+    const auto t0 = hs::loop::ReblendRetry::Clock::now();
+    EXPECT_TRUE(r.may_try(a, t0));
+    EXPECT_EQ(r.failed(a, t0), t0 + 5s);
+    EXPECT_FALSE(r.may_try(a, t0 + 4s));
+    EXPECT_TRUE(r.may_try(b, t0 + 1s));  // another set: at once
+    EXPECT_TRUE(r.may_try(a, t0 + 5s));
+    EXPECT_EQ(r.failed(a, t0 + 5s), t0 + 15s);   // 10 s
+    EXPECT_EQ(r.failed(a, t0 + 15s), t0 + 33s);  // 20 s, capped at 18
+    EXPECT_FALSE(r.may_try(a, t0 + 32s));
+    EXPECT_EQ(r.failed(b, t0 + 40s), t0 + 45s);  // another set starts again at 5 s
+    r.succeeded();
+    EXPECT_TRUE(r.may_try(b, t0 + 41s));
+    EXPECT_EQ(r.failed(b, t0 + 41s), t0 + 46s);
+}
