@@ -327,6 +327,12 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
                           fmt::format("calibrated output: the scene-to-signal scale k = {} is "
                                       "not a positive number",
                                       out.scene_to_signal));
+    // Every projector's black level and reference falloff: the black floor a blend shares.
+    std::vector<double> black(all.size()), g_ref(all.size());
+    for (size_t m = 0; m < all.size(); ++m) {
+        black[m] = optics::effective_levels(o[m]).projector_min;
+        g_ref[m] = out.projectors[m].g_ref;
+    }
     for (size_t j = 0; j < all.size(); ++j) {
         const auto& k = all[j].intrinsics;
         const ImageRgba32f& geometry = *shares[j].geometry;
@@ -338,20 +344,14 @@ Result<SceneDrives> ServingCalibration::scene_drives(const scene::Scene& s,
         // render::blended_projector_drive): the others take off the rest where they reach.
         ImageRgba32f target = scaled(*shares[j].vi, out.scene_to_signal);
         if (shares[j].weight && compensation.black_levels) {
-            std::vector<double> black(all.size()), g_ref(all.size());
-            for (size_t m = 0; m < all.size(); ++m) {
-                black[m] = optics::effective_levels(o[m]).projector_min;
-                g_ref[m] = out.projectors[m].g_ref;
-            }
             const bool falloff = compensation.falloff && o[j].effects.projector_falloff;
             const glm::dvec3 rho = compensation.albedo && o[j].effects.prop_albedo
                                        ? o[j].prop_albedo
                                        : glm::dvec3(1.0);
-            const std::vector<float> none;
             optics::add_blend_black_share(
                 target, *shares[j].weight, geometry,
                 shares[j].reach_g ? std::span<const float>(*shares[j].reach_g)
-                                  : std::span<const float>(none),
+                                  : std::span<const float>(),
                 j, black, g_ref, falloff, rho, optics::effective_levels(o[j]).environment);
         }
         const ImageRgba32f p = optics::projector_drive(o[j], target, geometry, pd.g_ref, 0.0);

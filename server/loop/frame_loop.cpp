@@ -486,15 +486,9 @@ Result<std::vector<SceneVersion::ProjectorFrame>> FrameLoop::reblend_frames(
         return out;
     }
     // Through the calibration: the included projectors as a room of their own, each with the
-    // calibrated device it has in the whole room, at the version's k.
+    // calibrated device it has in the whole room (every projector after the scene's first has
+    // one of its own, projectors/NAME/, which the version's check required), at the version's k.
     const calib::ServingCalibration& cal = *info_.calibration;
-    const std::string& first = all[included[0]].name;
-    if (cal.device_for(first, 0) != cal.device_for(first, included[0]))
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            fmt::format("without {} the first projector is '{}', and the "
-                        "calibration has no device of its own for it (projectors/{}/)",
-                        fmt::join(excluded, ", "), first, first));
     scene::Scene room = current_;
     room.projector = all[included[0]];
     room.more_projectors.clear();

@@ -98,6 +98,23 @@ protected:
         for (size_t j = 0; j < all.size(); ++j) out.push_back(projector(all[j].name, &first[j]));
         return out;
     }
+    // A client per scene projector, settled on the version's blend over all of them: the
+    // connections, each one's first frame and its latest (the first when none came since).
+    struct Room {
+        std::vector<std::unique_ptr<Connection>> c;
+        std::vector<proto::ProjectorFrame> first, latest;
+        bool settled = false;
+    };
+    Room connect_settled() {
+        Room r;
+        r.c = connect_all(r.first);
+        r.settled = blended_as(std::vector<bool>(r.c.size(), false));
+        for (size_t j = 0; j < r.c.size(); ++j) {
+            auto f = r.c[j] ? last_frame(*r.c[j], 1500) : std::nullopt;
+            r.latest.push_back(f ? std::move(*f) : r.first[j]);
+        }
+        return r;
+    }
     // Waits until the published frames leave out exactly the projectors marked true, and no
     // re-blend has been published for a second (one started before may still be on its way).
     bool blended_as(const std::vector<bool>& left_out) {
@@ -243,18 +260,13 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     const scene::Scene s = make_scene();
     const auto all = s.projectors();
     // All three connected: the version's own blend over all of them.
-    std::vector<proto::ProjectorFrame> f;
-    auto c = connect_all(f);
-    ASSERT_EQ(c.size(), 3u);
-    auto &c0 = c[0], &c1 = c[1], &c2 = c[2];
-    const auto &f0 = f[0], &f1 = f[1], &f2 = f[2];
+    auto room = connect_settled();
+    ASSERT_EQ(room.c.size(), 3u);
+    auto &c0 = room.c[0], &c1 = room.c[1], &c2 = room.c[2];
     ASSERT_TRUE(c0 && c1 && c2);
-    ASSERT_TRUE(blended_as({false, false, false}));
-    auto full0 = last_frame(*c0, 1500), full1 = last_frame(*c1, 1500);
-    if (!full0)
-        full0 = f0;
-    if (!full1)
-        full1 = f1;
+    ASSERT_TRUE(room.settled);
+    const auto &full0 = room.latest[0], &full1 = room.latest[1];
+    const auto& f2 = room.first[2];
     const uint64_t reblends_before = reblends();
     // The surface the headsets' fill-in covers (what no included projector reaches).
     const auto uncovered = [&] {
@@ -268,10 +280,10 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     ASSERT_TRUE(blended_as({false, false, true}));
     auto less0 = last_frame(*c0, 1500), less1 = last_frame(*c1, 1500);
     ASSERT_TRUE(less0 && less1);
-    EXPECT_EQ(less0->scene_version, full0->scene_version);
+    EXPECT_EQ(less0->scene_version, full0.scene_version);
     uint64_t brighter0 = 0, brighter1 = 0;
-    EXPECT_TRUE(brighter_everywhere(full0->data, less0->data, &brighter0));
-    EXPECT_TRUE(brighter_everywhere(full1->data, less1->data, &brighter1));
+    EXPECT_TRUE(brighter_everywhere(full0.data, less0->data, &brighter0));
+    EXPECT_TRUE(brighter_everywhere(full1.data, less1->data, &brighter1));
     EXPECT_GT(brighter0 + brighter1, 100u);
     EXPECT_GT(reblends(), reblends_before);
     EXPECT_GT(uncovered(), uncovered_all);
@@ -294,8 +306,8 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
     ASSERT_TRUE(blended_as({false, false, false}));
     auto again0 = last_frame(*c0, 1500), again1 = last_frame(*c1, 1500);
     ASSERT_TRUE(again0 && again1);
-    EXPECT_EQ(again0->data, full0->data);
-    EXPECT_EQ(again1->data, full1->data);
+    EXPECT_EQ(again0->data, full0.data);
+    EXPECT_EQ(again1->data, full1.data);
     EXPECT_EQ(uncovered(), uncovered_all);
 }
 
@@ -303,40 +315,34 @@ TEST_F(ReblendingServer, TheOthersCoverForAMissingProjectorAndRevert) {
 // brighter where the missing one contributed, and back to the version's own drives after.
 TEST_F(CalibratedReblendingServer, TheOthersCoverThroughTheCalibrationAndRevert) {
     const auto all = make_scene().projectors();
-    std::vector<proto::ProjectorFrame> f;
-    auto c = connect_all(f);
-    ASSERT_EQ(c.size(), 3u);
-    auto &c0 = c[0], &c1 = c[1], &c2 = c[2];
-    const auto &f0 = f[0], &f1 = f[1], &f2 = f[2];
+    auto room = connect_settled();
+    ASSERT_EQ(room.c.size(), 3u);
+    auto &c0 = room.c[0], &c1 = room.c[1], &c2 = room.c[2];
     ASSERT_TRUE(c0 && c1 && c2);
-    ASSERT_TRUE(blended_as({false, false, false}));
+    ASSERT_TRUE(room.settled);
+    const auto &full1 = room.latest[1], &full2 = room.latest[2];
     const nlohmann::json pass = server_->stats()["passes"]["projector"];
     ASSERT_TRUE(pass["calibration"].is_object()) << pass.dump();
     const double k = pass["calibration"]["scene_to_signal"].get<double>();
     EXPECT_GT(k, 0.0);
-    auto full0 = last_frame(*c0, 1500), full1 = last_frame(*c1, 1500);
-    if (!full0)
-        full0 = f0;
-    if (!full1)
-        full1 = f1;
     // The first leaves: the second and third are driven for the whole of it.
     c0.reset();
     ASSERT_TRUE(blended_as({true, false, false}));
     auto less1 = last_frame(*c1, 1500), less2 = last_frame(*c2, 1500);
     ASSERT_TRUE(less1 && less2);
     uint64_t brighter1 = 0, brighter2 = 0;
-    EXPECT_TRUE(brighter_everywhere(full1->data, less1->data, &brighter1));
-    EXPECT_TRUE(brighter_everywhere(f2.data, less2->data, &brighter2));
+    EXPECT_TRUE(brighter_everywhere(full1.data, less1->data, &brighter1));
+    EXPECT_TRUE(brighter_everywhere(full2.data, less2->data, &brighter2));
     EXPECT_GT(brighter1 + brighter2, 100u);
     // At the version's k (the headsets' layers are drawn at it): where the first projector
     // had no share, the second's drives are the same codes as before, not all rescaled.
     uint64_t lit = 0, same = 0;
-    for (size_t i = 0; i < full1->data.size(); i += 4) {
-        const bool on = full1->data[i] | full1->data[i + 1] | full1->data[i + 2];
+    for (size_t i = 0; i < full1.data.size(); i += 4) {
+        const bool on = full1.data[i] | full1.data[i + 1] | full1.data[i + 2];
         lit += on;
-        same += on && std::equal(full1->data.begin() + ptrdiff_t(i),
-                                 full1->data.begin() + ptrdiff_t(i + 3),
-                                 less1->data.begin() + ptrdiff_t(i));
+        same += on &&
+                std::equal(full1.data.begin() + ptrdiff_t(i), full1.data.begin() + ptrdiff_t(i + 3),
+                           less1->data.begin() + ptrdiff_t(i));
     }
     std::printf("[reblend] second projector: %llu lit pixels, %llu unchanged, %llu brighter\n",
                 (unsigned long long)lit, (unsigned long long)same, (unsigned long long)brighter1);
@@ -348,8 +354,8 @@ TEST_F(CalibratedReblendingServer, TheOthersCoverThroughTheCalibrationAndRevert)
     ASSERT_TRUE(blended_as({false, false, false}));
     auto again1 = last_frame(*c1, 1500), again2 = last_frame(*c2, 1500);
     ASSERT_TRUE(again1 && again2);
-    EXPECT_EQ(again1->data, full1->data);
-    EXPECT_EQ(again2->data, f2.data);
+    EXPECT_EQ(again1->data, full1.data);
+    EXPECT_EQ(again2->data, full2.data);
 }
 
 // What the projectors' blend keeps is on the scene-memory ledger: with --reblend-missing the

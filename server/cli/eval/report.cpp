@@ -13,7 +13,6 @@
 #include "cli/eval/eval_common.hpp"
 #include "core/log.hpp"
 #include "gpu/device.hpp"
-#include "optics/colour.hpp"
 #include "plot/draw.hpp"
 #include "plot/figure.hpp"
 #include "plot/plot.hpp"
@@ -339,10 +338,10 @@ Result<void> fig11_fig12_section(Report& rep, const Installation& in) {
 // The paper's metrics at viewpoints all around the prop (0 to 360 degrees at the default
 // height), with the first projector alone and with every projector, each without and with the
 // headsets' fill-in: how much of the prop a projector reaches, the composite against the
-// target, CIEDE2000 over the prop and over its uncovered part (from the camera's values, its
-// 8-bit codes with the scene's quantisation: where the target is under a code, as at the back
-// of the dome, a code's rounding alone is several units), and the VD areas' MR1, MR2 and
-// CIEDE2000 as Figs. 11 and 12 take them. Both simulators at one k (the smaller of
+// target, and CIEDE2000 over the prop, over its uncovered part and over the VD areas with their
+// MR1 and MR2, all from the captures' 8-bit codes as Figs. 11 and 12 take them (where the
+// target is under a code, as at the back of the dome, a code's rounding alone is several
+// units). Both simulators at one k (the smaller of
 // theirs), so that the captures share one scale.
 struct AroundRow {
     double coverage = 1;  // of the prop's visible pixels, those a projector reaches
@@ -353,29 +352,20 @@ struct AroundRow {
     std::optional<double> de00_uncovered_floor_off;
     std::optional<double> mr1, mr2;
     double ms = 0;
+    ImageRgba8 capture;  // the capture's 8-bit codes (the contact sheet's)
 };
 
-// CIEDE2000 of the capture against the target over `mask`, from camera values over full scale.
-double mean_de00(const render::SimulatedView& sv, const std::vector<uint8_t>& mask, double full) {
-    double sum = 0;
-    uint64_t n = 0;
-    for (size_t i = 0; i < mask.size(); ++i) {
-        if (!mask[i])
-            continue;
-        glm::dvec3 got, want;
-        for (int c = 0; c < 3; ++c) {
-            got[c] = std::max(0.0, double(sv.capture.dn.pixels[i * 4 + c])) / full;
-            want[c] = std::max(0.0, double(sv.target_dn.pixels[i * 4 + c])) / full;
-        }
-        sum += optics::delta_e_2000(optics::lab_from_linear_srgb(got),
-                                    optics::lab_from_linear_srgb(want));
-        ++n;
-    }
-    return n ? sum / double(n) : 0.0;
+// Mean CIEDE2000 of a capture against its target over `mask`, from their 8-bit codes as Figs.
+// 11 and 12 take them.
+Result<double> mean_de00(const ImageRgba8& target, const ImageRgba8& capture,
+                         const std::vector<uint8_t>& mask) {
+    HS_ASSIGN_OR_RETURN(
+        auto lab, optics::lab_differences(target, capture, mask, optics::PixelEncoding::kLinear));
+    return lab.s00.mean;
 }
 
 Result<AroundRow> around_row(const render::SimulatedView& sv, const std::vector<uint8_t>& uncovered,
-                             double full, double ms) {
+                             double ms) {
     AroundRow row;
     row.ms = ms;
     std::vector<uint8_t> prop(size_t(sv.geometry.width) * sv.geometry.height), open(prop.size());
@@ -389,11 +379,12 @@ Result<AroundRow> around_row(const render::SimulatedView& sv, const std::vector<
     row.coverage = on_prop ? 1.0 - double(row.uncovered) / double(on_prop) : 1.0;
     const std::vector<uint8_t> usable = render::usable_pixels(sv);
     row.composite = render::composite_error(sv, usable);
-    row.de00_prop = mean_de00(sv, usable, full);
-    row.de00_all = mean_de00(sv, prop, full);
-    row.de00_uncovered = mean_de00(sv, open, full);
     const ImageRgba8 ref = optics::to_rgba8(sv.target_dn);
-    const ImageRgba8 cap = optics::to_rgba8(sv.capture.dn);
+    row.capture = optics::to_rgba8(sv.capture.dn);
+    const ImageRgba8& cap = row.capture;
+    HS_ASSIGN_OR_RETURN(row.de00_prop, mean_de00(ref, cap, usable));
+    HS_ASSIGN_OR_RETURN(row.de00_all, mean_de00(ref, cap, prop));
+    HS_ASSIGN_OR_RETURN(row.de00_uncovered, mean_de00(ref, cap, open));
     HS_ASSIGN_OR_RETURN(auto areas, optics::vd_areas(ref, optics::to_rgba8(sv.target_vi_dn), cap));
     HS_ASSIGN_OR_RETURN(auto lab, optics::lab_differences(ref, cap, areas.reference,
                                                           optics::PixelEncoding::kLinear));
@@ -410,7 +401,6 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
     double k = std::numeric_limits<double>::infinity();
     for (auto* sim : sims) k = std::min(k, sim->scene_to_signal());
     for (auto* sim : sims) sim->set_scene_to_signal(k);
-    const double full = std::ldexp(1.0, int(in.s.optics.bits)) - 1.0;
     // Per simulator two configurations: without, then with the headsets' fill-in.
     std::vector<std::string> names;
     for (auto* sim : sims) {
@@ -451,7 +441,6 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
             // With the fill-in first: its capture says which pixels no projector reaches.
             std::vector<uint8_t> uncovered;
             AroundRow rows[2];
-            std::optional<render::SimulatedView> captured[2];
             for (const bool fill : {true, false}) {
                 sim.set_headset_fill(fill);
                 const auto t0 = std::chrono::steady_clock::now();
@@ -465,8 +454,7 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
                 capture_ms.push_back(ms);
                 if (fill)
                     uncovered = sv->uncovered;
-                HS_ASSIGN_OR_RETURN(rows[fill], around_row(*sv, uncovered, full, ms));
-                captured[fill] = std::move(*sv);
+                HS_ASSIGN_OR_RETURN(rows[fill], around_row(*sv, uncovered, ms));
             }
             if (rows[1].uncovered > 0) {
                 sim.set_headset_fill(true, true);
@@ -477,7 +465,9 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
                 std::vector<uint8_t> open(uncovered.size());
                 for (size_t i = 0; i < open.size(); ++i)
                     open[i] = uncovered[i] && sv->geometry.pixels[i * 4 + 3] > 0.5f;
-                rows[1].de00_uncovered_floor_off = mean_de00(*sv, open, full);
+                HS_ASSIGN_OR_RETURN(rows[1].de00_uncovered_floor_off,
+                                    mean_de00(optics::to_rgba8(sv->target_dn),
+                                              optics::to_rgba8(sv->capture.dn), open));
             }
             for (const bool fill : {false, true}) {
                 const size_t c = 2 * si + (fill ? 1 : 0);
@@ -526,8 +516,8 @@ Result<void> around_section(Report& rep, const Installation& in, render::Simulat
                 de_prop[c].x.push_back(angle), de_prop[c].y.push_back(r.de00_all);
                 if (r.mr1)
                     mr1[c].x.push_back(angle), mr1[c].y.push_back(100 * *r.mr1);
-                sheet[c].push_back(labelled(optics::to_rgba8(captured[fill]->capture.dn),
-                                            fmt::format("{} {:.0f} deg", names[c], angle), 4));
+                sheet[c].push_back(
+                    labelled(r.capture, fmt::format("{} {:.0f} deg", names[c], angle), 4));
             }
         }
         log::info("around the prop: {} of {} viewpoints", a + 1, n);
