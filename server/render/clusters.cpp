@@ -241,29 +241,49 @@ ViewBound view_bound(const Cluster& cl, const glm::dvec3& eye) {
 
 constexpr double kUnbounded = std::numeric_limits<double>::infinity();
 
+// A light as the points of a cluster see it: the directions to it lie within alpha_l of
+// l_axis, its irradiance (largest channel, normal incidence) is at most E; unbounded where the
+// light is among the cluster's points.
+struct LightCone {
+    bool unbounded = false;
+    glm::dvec3 l_axis{0.0};
+    double alpha_l = 0, E = 0;
+};
+
+LightCone light_cone(const Cluster& cl, const scene::Light& light, const VdBound& b) {
+    LightCone lc;
+    lc.E = max_channel(light.colour * light.intensity);
+    if (light.type == scene::LightType::kDirectional) {
+        lc.l_axis = glm::normalize(-light.direction);
+        return lc;
+    }
+    const double panel = light.type == scene::LightType::kRect
+                             ? 0.5 * (glm::length(light.edge_u) + glm::length(light.edge_v))
+                             : 0.0;
+    const glm::dvec3 d = light.position - cl.centre;
+    const double dist = glm::length(d);
+    lc.alpha_l = spread_towards(cl.centre, cl.radius, light.position, panel);
+    if (lc.alpha_l >= kHalfPi) {
+        lc.unbounded = true;
+        return lc;
+    }
+    lc.l_axis = d / dist;
+    const bool falloff = b.point_falloff || light.type == scene::LightType::kRect;
+    if (falloff) {
+        const double dmin = std::max(dist - cl.radius - panel, b.min_light_distance);
+        lc.E /= dmin * dmin;
+    }
+    return lc;
+}
+
 double light_bound(const Cluster& cl, const ViewBound& vb, const scene::Light& light,
                    const VdBound& b) {
     const double ks = max_channel(b.spec.colour);
-    glm::dvec3 l_axis;
-    double alpha_l = 0, E = max_channel(light.colour * light.intensity);
-    if (light.type == scene::LightType::kDirectional) {
-        l_axis = glm::normalize(-light.direction);
-    } else {
-        const double panel = light.type == scene::LightType::kRect
-                                 ? 0.5 * (glm::length(light.edge_u) + glm::length(light.edge_v))
-                                 : 0.0;
-        const glm::dvec3 d = light.position - cl.centre;
-        const double dist = glm::length(d);
-        alpha_l = spread_towards(cl.centre, cl.radius, light.position, panel);
-        if (alpha_l >= kHalfPi)
-            return kUnbounded;  // the light is among the cluster's points: no direction bound
-        l_axis = d / dist;
-        const bool falloff = b.point_falloff || light.type == scene::LightType::kRect;
-        if (falloff) {
-            const double dmin = std::max(dist - cl.radius - panel, b.min_light_distance);
-            E /= dmin * dmin;
-        }
-    }
+    const LightCone lc = light_cone(cl, light, b);
+    if (lc.unbounded)
+        return kUnbounded;  // the light is among the cluster's points: no direction bound
+    const glm::dvec3& l_axis = lc.l_axis;
+    const double alpha_l = lc.alpha_l, E = lc.E;
     const double nl_angle = angle_between(cl.cone_axis, l_axis);
     if (nl_angle - vb.theta_n - alpha_l >= kHalfPi + kSlack)
         return 0;         // gate n.l > 0 fails everywhere: this light adds nothing
@@ -372,6 +392,27 @@ uint64_t cluster_light_mask(const Cluster& rasterised, const Shell& shell, const
 
 bool cluster_may_face(const Cluster& cl, const Shell& shell, const glm::dvec3& eye) {
     return !view_bound(shaded_bounds(cl, shell, eye), eye).dark;
+}
+
+bool cluster_may_diffuse(const Cluster& rasterised, const Shell& shell, const glm::dvec3& eye,
+                         const VdBound& b, double albedo) {
+    if (!(albedo > 0) || b.lights.empty())
+        return false;
+    const Cluster cl = shaded_bounds(rasterised, shell, eye);
+    if (cl.cone_angle >= kHalfPi)
+        return true;
+    double total = 0;
+    for (const scene::Light& light : b.lights) {
+        const LightCone lc = light_cone(cl, light, b);
+        if (lc.unbounded)
+            return true;
+        // n.l is at most the cosine of the least angle between a normal and a light direction.
+        const double least =
+            angle_between(cl.cone_axis, lc.l_axis) - cl.cone_angle - lc.alpha_l - kSlack;
+        if (least < kHalfPi)
+            total += lc.E * std::cos(std::max(least, 0.0));
+    }
+    return albedo / kPi * total >= b.threshold;
 }
 
 bool cluster_may_light(const Cluster& cl, const Shell& shell, const glm::dvec3& eye,

@@ -115,6 +115,13 @@ Cluster shaded_bounds(const Cluster& cluster, const Shell& shell, const glm::dve
 // Whether any point a VD pass shades on `cluster` may face `eye` (n.v > 0; conservative).
 bool cluster_may_face(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye);
 
+// Whether the VI term (albedo / pi) sum_i E_i max(n.l_i, 0) can reach `bound.threshold`
+// anywhere a pass shades on `cluster` seen from `eye` (the headsets' fill-in draws it): a
+// conservative test from the gate n.l > 0 and the light's irradiance bound, as for the VD term.
+// `albedo`: the largest albedo channel (times the texture's largest, 1 when unknown).
+bool cluster_may_diffuse(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye,
+                         const VdBound& bound, double albedo);
+
 // `shell`: the cluster's level's (ClusteredMesh::shell).
 bool cluster_may_light(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye,
                        const VdBound& bound);

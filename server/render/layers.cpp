@@ -86,6 +86,8 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     // The fill-in: clusters with uncovered surface that may face the eye are drawn too.
     const size_t level_index = size_t(&level - levels_.data());
     const std::vector<uint8_t>* fill_clusters = fill_ ? &fill_clusters_[level_index] : nullptr;
+    const double fill_albedo =
+        std::max({scene_.material.albedo.x, scene_.material.albedo.y, scene_.material.albedo.z});
     const uint64_t all_lights = lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
     // A group first: out of view or dark, its clusters are too (its bounds hold theirs);
     // otherwise each cluster on its own, needing at most the group's lights.
@@ -111,8 +113,12 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
             rects[c] = project_sphere(cl.centre, cl.radius, k, view, info_.near_m);
             if (rects[c].empty())
                 continue;
-            fills[c] = group_fill && (*fill_clusters)[c] &&
-                       cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position);
+            // Drawn only where the VI term can show: facing the eye and lit by some light.
+            fills[c] =
+                group_fill && (*fill_clusters)[c] &&
+                cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position) &&
+                cluster_may_diffuse(fill_bounds_[level_index][c], level.shell, r.eye.position,
+                                    bound, fill_albedo);
             if (group_mask != 0)
                 masks[c] = r.sparse ? cluster_light_mask(cl, level.shell, r.eye.position, bound) &
                                           group_mask

@@ -1,5 +1,6 @@
 // Google Benchmark suite of the hot paths (built by default, run on request; not part of the
-// test pass): the VD pass for 1 and N viewers, the projector pass, layer encoding and decoding
+// test pass): the VD pass for 1 and N viewers, the layers with and without the headsets'
+// fill-in, the projector pass, layer encoding and decoding
 // (lossless, and lossy tiles at two qualities), the served layer with and without the headset
 // drive of a calibration, the calibration's kernel regression and CIEDE2000 over an image.
 //   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
@@ -15,6 +16,7 @@
 #include "codec/layer_codec.hpp"
 #include "gpu/device.hpp"
 #include "optics/colour.hpp"
+#include "render/blend.hpp"
 #include "render/renderer.hpp"
 #include "scene/camera.hpp"
 #include "scene/config.hpp"
@@ -113,6 +115,61 @@ void BM_VdLayers(benchmark::State& state) {
 BENCHMARK(BM_VdLayers)
     ->ArgsProduct({{1, 0}, {1, 0}})
     ->ArgNames({"sparse", "lod"})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// One viewer's stereo layers as the server renders them (sRGB8, sparse, level of detail) at
+// 8 viewpoints all around the prop of the default scene, whose one projector leaves the back
+// unlit: range(0) 1 with the headsets' fill-in, 0 without. The views cycle, so the time is
+// the mean over the orbit; fill_clusters is the clusters drawn with the fill-in per layer.
+void BM_FillLayers(benchmark::State& state) {
+    auto& g = Gpu::get();
+    auto r = render::Renderer::create(*g.device, g.scene, {});
+    if (!r) {
+        state.SkipWithError(r.error().message.c_str());
+        return;
+    }
+    if (state.range(0) != 0) {
+        const render::Blend blend =
+            render::compute_visibility(r.value()->mesh(), g.scene.projectors());
+        if (auto f = r.value()->set_fill(blend); !f || !r.value()->fill()) {
+            state.SkipWithError(f ? "the fill-in is off" : f.error().message.c_str());
+            return;
+        }
+    }
+    std::array<gpu::RenderTarget, 2> targets;
+    for (auto& t : targets)
+        t = gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
+                                      gpu::ColorFormat::kRgba8Unorm, "bench.eye")
+                .value();
+    std::vector<scene::Pose> heads;
+    for (int i = 0; i < 8; ++i)
+        heads.push_back(scene::viewing_pose(g.scene.viewing, 45.0 * i, 1.1).value());
+    size_t frame = 0;
+    uint64_t filled = 0;
+    for (auto _ : state) {
+        const auto eyes = scene::eye_poses(heads[frame++ % heads.size()], 0.063);
+        std::vector<render::Renderer::LayerRequest> reqs;
+        for (size_t e = 0; e < 2; ++e)
+            reqs.push_back({g.scene.material.specular, g.eye_k, eyes[e],
+                            render::LayerEncoding::kSrgb8, &targets[e], true});
+        auto plans = r.value()->render_layers(reqs);
+        if (!plans) {
+            state.SkipWithError(plans.error().message.c_str());
+            break;
+        }
+        for (const auto& p : *plans) filled += p.clusters_filled;
+    }
+    state.counters["stereo/s"] =
+        benchmark::Counter(1.0, benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["fill_clusters"] =
+        benchmark::Counter(double(filled) / 2.0, benchmark::Counter::kAvgIterations);
+}
+BENCHMARK(BM_FillLayers)
+    ->Arg(0)
+    ->Arg(1)
+    ->ArgName("fill")
+    ->Iterations(48)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 #include <glm/geometric.hpp>
+#include <glm/gtc/constants.hpp>
 
 #include "render/clusters.hpp"
 #include "scene/config.hpp"
@@ -112,6 +113,79 @@ TEST(Clusters, BoundNeverMissesLight) {
     }
     // The bound must also cull: a test of a bound that says "lit" everywhere proves nothing.
     EXPECT_GT(culled, checked / 4) << lit << " lit of " << checked;
+}
+
+// The fill-in's gate (cluster_may_diffuse) is conservative the same way: wherever the reference
+// puts VI light above the quantisation step on a facing triangle of a cluster, the gate passes
+// it. And it culls: the scene's lights leave part of the dome dark.
+TEST(Clusters, DiffuseGateNeverMissesLight) {
+    const scene::Scene s = scene::default_scene();
+    const auto& h = s.prop.hemisphere;
+    auto finest = scene::build_prop_mesh(s.prop);
+    ASSERT_TRUE(finest.ok());
+    const auto levels = render::prop_levels(s.prop, finest.value());
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const double albedo = std::max({s.material.albedo.x, s.material.albedo.y, s.material.albedo.z});
+    size_t checked = 0, culled = 0, lit_found = 0;
+    for (int trial = 0; trial < 8; ++trial) {
+        const glm::dvec3 eye =
+            h.centre + glm::dvec3(0.8 * u(rng), 0.3 + 0.4 * std::abs(u(rng)), 0.8 * u(rng));
+        std::vector<scene::Light> lights = s.lights;
+        if (trial % 2 == 1) {  // and a point light from 30 cm down to 2 mm off the surface
+            scene::Light near;
+            near.type = scene::LightType::kPoint;
+            near.intensity = 0.3;
+            const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)), u(rng)));
+            near.position = h.centre + dir * (h.radius + 0.3 * std::pow(0.01, trial / 7.0));
+            lights.push_back(near);
+        }
+        render::VdBound bound;
+        bound.lights = lights;
+        bound.threshold = render::layer_threshold(true);
+        const auto& level = levels[size_t(trial) % levels.size()];
+        const auto& m = level.mesh;
+        for (const auto& cl : level.clusters) {
+            const bool may = render::cluster_may_diffuse(cl, level.shell, eye, bound, albedo);
+            double peak = 0;
+            for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
+                const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
+                                 c = m.positions[m.indices[i + 2]];
+                if (glm::dot(glm::cross(b - a, c - a), eye - a) <= 0)
+                    continue;
+                for (const glm::dvec3 w :
+                     {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1),
+                      glm::dvec3(.5, .5, 0), glm::dvec3(0, .5, .5), glm::dvec3(.5, 0, .5),
+                      glm::dvec3(1, 1, 1) / 3.0}) {
+                    const auto q = dome_hit(h, eye, w.x * a + w.y * b + w.z * c);
+                    if (!q)
+                        continue;
+                    const glm::dvec3 n = glm::normalize(*q - h.centre);
+                    double sum = 0;
+                    for (const auto& light : lights) {
+                        const auto at = shading::light_at(light, *q, n, true);
+                        sum +=
+                            std::max({at.E.x, at.E.y, at.E.z}) * std::max(glm::dot(n, at.l), 0.0);
+                    }
+                    peak = std::max(peak, albedo / glm::pi<double>() * sum);
+                }
+            }
+            ++checked;
+            culled += !may;
+            lit_found += peak >= bound.threshold;
+            if (peak >= bound.threshold) {
+                EXPECT_TRUE(may) << "trial " << trial << ": a culled cluster's VI reaches " << peak
+                                 << " (threshold " << bound.threshold << ")";
+            }
+        }
+    }
+    EXPECT_GT(lit_found, checked / 4);
+    // The scene's lights all come from above and in front: the lower back is dark.
+    EXPECT_GT(culled, checked / 50) << "the gate culls " << culled << " of " << checked;
+    // No light, no albedo: nothing to draw.
+    render::VdBound dark;
+    EXPECT_FALSE(render::cluster_may_diffuse(levels[0].clusters[0], levels[0].shell,
+                                             h.centre + glm::dvec3(0, 0.5, 0.8), dark, albedo));
 }
 
 // What shaded_bounds promises, point by point: every sphere point a pixel of a cluster's
