@@ -16,7 +16,7 @@ constexpr const char* kMotionHelp =
     "usage: hysar bench motion [--traces walk,turn,nod] [--modes none,predict,reproject,both]\n"
     "                          [--seconds S] [--delay-ms MS] [--refresh-hz HZ] [--scale F]\n"
     "                          [--noise-deg D] [--noise-mm MM] [--overscan-deg D]\n"
-    "                          [--reference-frames N]\n"
+    "                          [--plane-nearer-m M] [--reference-frames N]\n"
     "                          [--profile NAME] [--json FILE] [--plot FILE.png] [--quick]\n"
     "\n"
     "  Registration while heads move: a headset through `hysar serve` in-process on loopback\n"
@@ -41,6 +41,9 @@ constexpr const char* kMotionHelp =
     "  --overscan-deg D     reproject and both: the layer is rendered D degrees wider on every\n"
     "                       side than the display and warped back onto it, so that a turn has\n"
     "                       what it brings into view (default 5; 0: none; at most 30)\n"
+    "  --plane-nearer-m M   reproject and both: the warp puts a plane facing the eye in place,\n"
+    "                       by default through the viewing plan's target (the prop's centre);\n"
+    "                       this moves it M metres nearer (negative: farther; -1..1)\n"
     "  --reference-frames N shown frames compared per row (default 60; 20 with --quick)\n"
     "  --profile NAME       a viewer profile of the default scene (default its first)\n"
     "  --json FILE          {\"traces\": {NAME: {MODE: {\"p50_px\", \"p95_px\", \"max_px\",\n"
@@ -75,11 +78,12 @@ Result<std::vector<std::string>> words(const Flags& f, const char* flag,
 
 Result<bench::MotionBenchOptions> parse_motion(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
-        Flags f, parse_flags(args,
-                             {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz",
-                              "--scale", "--noise-deg", "--noise-mm", "--overscan-deg",
-                              "--reference-frames", "--profile", "--json", "--plot"},
-                             {"--quick"}));
+        Flags f,
+        parse_flags(args,
+                    {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz", "--scale",
+                     "--noise-deg", "--noise-mm", "--overscan-deg", "--plane-nearer-m",
+                     "--reference-frames", "--profile", "--json", "--plot"},
+                    {"--quick"}));
     bench::MotionBenchOptions o;
     const std::vector<std::string> traces(std::begin(bench::kMotionTraces),
                                           std::end(bench::kMotionTraces));
@@ -94,6 +98,8 @@ Result<bench::MotionBenchOptions> parse_motion(const std::vector<std::string>& a
     HS_ASSIGN_OR_RETURN(o.noise_deg, parse_number(f, {"--noise-deg", 0, 5}, o.noise_deg));
     HS_ASSIGN_OR_RETURN(o.noise_mm, parse_number(f, {"--noise-mm", 0, 50}, o.noise_mm));
     HS_ASSIGN_OR_RETURN(o.overscan_deg, parse_number(f, {"--overscan-deg", 0, 30}, o.overscan_deg));
+    HS_ASSIGN_OR_RETURN(o.plane_nearer_m,
+                        parse_number(f, {"--plane-nearer-m", -1, 1}, o.plane_nearer_m));
     HS_ASSIGN_OR_RETURN(
         double refs,
         parse_number(f, {"--reference-frames", 1, 10000, NumericFlag::kWhole}, o.reference_frames));

@@ -271,11 +271,13 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                     const auto to = motion::eye_pose(target.position_m, target.orientation_wxyz,
                                                      display.ipd_m, e);
                     // The plane through the prop's centre (the viewing plan's target), as the
-                    // installation tells its clients.
+                    // installation tells its clients (moved by --plane-nearer-m).
                     const motion::Vec3 fwd = motion::rotate(rendered, {0, 0, -1});
-                    const double depth = (sc.viewing.target.x - from.position_m[0]) * fwd[0] +
-                                         (sc.viewing.target.y - from.position_m[1]) * fwd[1] +
-                                         (sc.viewing.target.z - from.position_m[2]) * fwd[2];
+                    const double depth =
+                        std::max(0.05, (sc.viewing.target.x - from.position_m[0]) * fwd[0] +
+                                           (sc.viewing.target.y - from.position_m[1]) * fwd[1] +
+                                           (sc.viewing.target.z - from.position_m[2]) * fwd[2] -
+                                           o.plane_nearer_m);
                     motion::LitRows lit;
                     if (shown->lit_first[e].size() == sh && shown->lit_last[e].size() == sh)
                         lit = {shown->lit_first[e].data(), shown->lit_last[e].data()};
@@ -453,12 +455,13 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     stream::LoopbackCreateInfo info;
     info.clients = 4;
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, sc, info));
-    say(fmt::format(
-        "bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
-        "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row, "
-        "overscan {} deg with reprojection",
-        profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width, full.height,
-        o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds, o.overscan_deg));
+    say(
+        fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
+                    "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row, "
+                    "overscan {} deg with reprojection, its plane {} m nearer than the target",
+                    profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
+                    full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds,
+                    o.overscan_deg, o.plane_nearer_m));
     MotionReport rep;
     rep.profile = profile->name;
     rep.eye_width = d.eye_width, rep.eye_height = d.eye_height;
@@ -515,6 +518,7 @@ int run_motion_bench(const MotionBenchOptions& o) {
         j["refresh_hz"] = o.refresh_hz;
         j["delay_ms"] = o.delay_ms;
         j["overscan_deg"] = o.overscan_deg;
+        j["plane_nearer_m"] = o.plane_nearer_m;
         j["seconds"] = measured->seconds;
         j["device"] = measured->device;
         std::ofstream f(o.json_path);
