@@ -37,7 +37,7 @@ grep -q '^turn' "$out/table.txt" || { cat "$out/table.txt"; exit 1; }
 [[ -s "$out/motion.png" && -s "$out/motion.svg" ]] || { echo "no plot written"; exit 1; }
 
 for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" \
-        "--overscan-deg 31" "--frobnicate"; do
+        "--overscan-deg 31" "--plane-nearer-m 2" "--plane-nearer-m nan" "--frobnicate"; do
     set +e
     # shellcheck disable=SC2086
     "$hysar" bench motion $bad > "$out/o.txt" 2> "$out/e.txt"
