@@ -85,6 +85,10 @@ Cluster bound_triangles(const scene::Mesh& mesh, size_t first, size_t last) {
 
 }  // namespace
 
+Cluster triangle_bounds(const scene::Mesh& mesh, uint32_t first_index) {
+    return bound_triangles(mesh, first_index / 3, first_index / 3 + 1);
+}
+
 ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster, uint32_t per_group) {
     ClusteredMesh out;
     const size_t tris = mesh.indices.size() / 3;

@@ -64,6 +64,10 @@ struct ClusteredMesh {
     double surface_error_m = 0;
     uint32_t segments = 0, rings = 0;  // a hemisphere level's tessellation; 0 for a glTF mesh
 };
+// The bounds of one triangle of `mesh` (the one whose indices start at `first_index`), as a
+// cluster's: its bounding sphere and the cone of its vertex normals.
+Cluster triangle_bounds(const scene::Mesh& mesh, uint32_t first_index);
+
 ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t triangles_per_cluster = kTrianglesPerCluster,
                            uint32_t clusters_per_group = kClustersPerGroup);
 

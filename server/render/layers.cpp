@@ -113,16 +113,20 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
             rects[c] = project_sphere(cl.centre, cl.radius, k, view, info_.near_m);
             if (rects[c].empty())
                 continue;
-            // Drawn only where the VI term can show: facing the eye and lit by some light.
-            fills[c] =
-                group_fill && (*fill_clusters)[c] &&
-                cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position) &&
-                cluster_may_diffuse(fill_bounds_[level_index][c], level.shell, r.eye.position,
-                                    bound, fill_albedo);
             if (group_mask != 0)
                 masks[c] = r.sparse ? cluster_light_mask(cl, level.shell, r.eye.position, bound) &
                                           group_mask
                                     : group_mask;
+            // Drawn only where the VI term can show: facing the eye and lit by some light.
+            if (group_fill && (*fill_clusters)[c] &&
+                cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position) &&
+                cluster_may_diffuse(fill_bounds_[level_index][c], level.shell, r.eye.position,
+                                    bound, fill_albedo))
+                // A cluster drawn for the fill-in alone draws only its triangles some light
+                // can reach (on a convex prop: elsewhere a dark triangle may hide another).
+                fills[c] = masks[c] == 0 && convex_ && r.sparse
+                               ? fill_triangles(r, level_index, c, bound, fill_albedo)
+                               : kAllTriangles;
             if (masks[c] != 0 || fills[c])
                 rect = unite(rect, rects[c]);
         }
@@ -130,6 +134,21 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     if (!r.sparse)
         rect = {0, 0, k.width, k.height};
     return rect;
+}
+
+uint8_t Renderer::fill_triangles(const LayerRequest& r, size_t level, size_t c,
+                                 const VdBound& bound, double albedo) const {
+    const uint32_t first = fill_triangle_first_[level][c];
+    if (first == kNoTriangles)
+        return kAllTriangles;
+    const ClusteredMesh& lv = levels_[level];
+    const uint32_t count = lv.clusters[c].index_count / 3;
+    uint8_t bits = 0;
+    for (uint32_t t = 0; t < count; ++t)
+        if (cluster_may_diffuse(fill_triangles_[level][first + t], lv.shell, r.eye.position, bound,
+                                albedo))
+            bits |= uint8_t(1u << t);
+    return bits == (1u << count) - 1 ? kAllTriangles : bits;
 }
 
 void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
@@ -164,28 +183,39 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     for (size_t c = 0; c < level.clusters.size(); ++c)
         if (drawn(c))
             order.push_back(uint32_t(c));
-    const auto key = [&](uint32_t c) { return std::make_pair(fills[c], masks[c]); };
+    const auto key = [&](uint32_t c) { return std::make_pair(fills[c] != 0, masks[c]); };
     std::stable_sort(order.begin(), order.end(),
                      [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
     size_t distinct = 0;
     uint64_t union_mask[2] = {0, 0};
     for (size_t i = 0; i < order.size(); ++i) {
-        union_mask[fills[order[i]]] |= masks[order[i]];
+        union_mask[fills[order[i]] != 0] |= masks[order[i]];
         distinct += i == 0 || key(order[i]) != key(order[i - 1]);
     }
     if (distinct > kMaxLightGroups)
-        for (uint32_t c : order) masks[c] = union_mask[fills[c]];
+        for (uint32_t c : order) masks[c] = union_mask[fills[c] != 0];
     const uint32_t lit_first = written;
     uint32_t filled = 0;
     for (uint32_t c : order) {
         const Cluster& cc = level.clusters[c];
-        filled += fills[c];
+        filled += fills[c] != 0;
         if (w.groups.empty() || w.groups.back().mask != masks[c] ||
             w.groups.back().fill != bool(fills[c]))
             w.groups.push_back({masks[c], written, 0, bool(fills[c])});
-        std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
-        written += cc.index_count;
-        w.groups.back().count += cc.index_count;
+        uint32_t n = cc.index_count;
+        if (fills[c] == 0 || fills[c] == kAllTriangles) {
+            std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
+        } else {  // the triangles the fill-in needs
+            n = 0;
+            for (uint32_t t = 0; t < cc.index_count / 3; ++t)
+                if (fills[c] >> t & 1u) {
+                    std::memcpy(gathered + written + n, source + cc.first_index + 3 * t, 12);
+                    n += 3;
+                }
+            plan.fill_triangles_unlit += (cc.index_count - n) / 3;
+        }
+        written += n;
+        w.groups.back().count += n;
     }
     const uint32_t lit_count = written - lit_first;
     plan.clusters_occluding = occ_clusters;

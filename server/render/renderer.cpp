@@ -444,16 +444,24 @@ Result<void> Renderer::set_fill(const Blend& blend) {
                           fmt::format("the fill-in takes at most {} projectors, got {}",
                                       HS_MAX_FILL_PROJECTORS, blend.views.size()));
     std::vector<std::vector<uint8_t>> clusters(levels_.size()), groups(levels_.size());
-    std::vector<std::vector<Cluster>> bounds(levels_.size());
+    std::vector<std::vector<Cluster>> bounds(levels_.size()), triangles(levels_.size());
+    std::vector<std::vector<uint32_t>> triangle_first(levels_.size());
     for (size_t l = 0; l < levels_.size(); ++l) {
         const ClusteredMesh& level = levels_[l];
         UncoveredClusters u = uncovered_clusters(level, blend, scene_.prop);
         clusters[l] = std::move(u.any);
         bounds[l] = std::move(u.bounds);
         groups[l].assign(level.groups.size(), 0);
-        for (size_t c = 0; c < clusters[l].size(); ++c)
-            if (clusters[l][c])
-                groups[l][c / level.clusters_per_group] = 1;
+        triangle_first[l].assign(level.clusters.size(), kNoTriangles);
+        for (size_t c = 0; c < clusters[l].size(); ++c) {
+            if (!clusters[l][c])
+                continue;
+            groups[l][c / level.clusters_per_group] = 1;
+            const Cluster& cl = level.clusters[c];
+            triangle_first[l][c] = uint32_t(triangles[l].size());
+            for (uint32_t t = 0; t < cl.index_count; t += 3)
+                triangles[l].push_back(triangle_bounds(level.mesh, cl.first_index + t));
+        }
     }
     const auto count = uint32_t(std::count(clusters[0].begin(), clusters[0].end(), uint8_t(1)));
     const bool any = std::any_of(clusters.begin(), clusters.end(), [](const auto& c) {
@@ -465,6 +473,8 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         fill_clusters_.clear();
         fill_groups_.clear();
         fill_bounds_.clear();
+        fill_triangles_.clear();
+        fill_triangle_first_.clear();
         fill_charge_.reset();
         return {};
     }
@@ -481,14 +491,18 @@ Result<void> Renderer::set_fill(const Blend& blend) {
     fill_clusters_ = std::move(clusters);
     fill_groups_ = std::move(groups);
     fill_bounds_ = std::move(bounds);
+    fill_triangles_ = std::move(triangles);
+    fill_triangle_first_ = std::move(triangle_first);
     fill_cluster_count_ = count;
     fill_projectors_ = uint32_t(blend.views.size());
     fill_ = true;
     if (info_.ledger) {
         size_t bytes = fill_params_.capacity() * sizeof(gpu::GpuFillProjector);
         for (size_t l = 0; l < fill_clusters_.size(); ++l)
-            bytes += fill_clusters_[l].capacity() + fill_groups_[l].capacity() +
-                     fill_bounds_[l].capacity() * sizeof(Cluster);
+            bytes +=
+                fill_clusters_[l].capacity() + fill_groups_[l].capacity() +
+                (fill_bounds_[l].capacity() + fill_triangles_[l].capacity()) * sizeof(Cluster) +
+                fill_triangle_first_[l].capacity() * sizeof(uint32_t);
         fill_charge_ = MemoryCharge(&info_.ledger->cpu, int64_t(bytes));
     }
     return {};

@@ -145,6 +145,9 @@ public:
         // Of the drawn clusters, those drawn with the headsets' fill-in (set_fill): uncovered
         // surface that may face the eye. 0: the layer is what it is without the fill-in.
         uint32_t clusters_filled = 0;
+        // Triangles of clusters drawn for the fill-in alone that it left out: no light reaches
+        // them (Renderer::fill_triangles).
+        uint32_t fill_triangles_unlit = 0;
         uint64_t triangles = 0;  // drawn, lit and occluding
         uint32_t lights_skipped = 0;
     };
@@ -294,7 +297,9 @@ private:
     struct LayerWork {
         std::vector<PixelRect> rects;
         std::vector<uint64_t> masks;
-        std::vector<uint8_t> fills;  // per cluster: drawn with the fill-in
+        // Per cluster: drawn with the fill-in (0: not), which of its triangles (bit i: the
+        // cluster's i-th; kAllTriangles: the whole cluster).
+        std::vector<uint8_t> fills;
         std::vector<uint32_t> order;
         LayerPlan plan;
         std::string error;  // the request is invalid: record_layers returns this
@@ -331,6 +336,17 @@ private:
     uint32_t fill_projectors_ = 0;  // compiled into the fill pipelines (HS_SC_FILL)
     std::vector<std::vector<uint8_t>> fill_clusters_, fill_groups_;
     std::vector<std::vector<Cluster>> fill_bounds_;  // per cluster: its uncovered part's bounds
+    // Per level, the bounds of each triangle of the clusters with uncovered surface, and per
+    // cluster where its triangles' start in it (kNoTriangles: not such a cluster): a cluster
+    // drawn for the fill-in alone draws only the triangles some light can reach.
+    std::vector<std::vector<Cluster>> fill_triangles_;
+    std::vector<std::vector<uint32_t>> fill_triangle_first_;
+    static constexpr uint32_t kNoTriangles = ~uint32_t(0);
+    static constexpr uint8_t kAllTriangles = 0xFF;
+    static_assert(kTrianglesPerCluster <= 8, "a cluster's triangles are bits of a byte");
+    // The triangles of cluster `c` of level `level` that the fill-in must draw for `r`.
+    uint8_t fill_triangles(const LayerRequest& r, size_t level, size_t c, const VdBound& bound,
+                           double albedo) const;
     std::map<std::string, Variant> variants_;
     std::map<std::tuple<uint32_t, uint32_t, uint32_t, int>, gpu::RenderTarget> targets_;
     // Device memory is charged here (info_.ledger's, or null).
