@@ -52,6 +52,17 @@ private:
             heads.push_back(
                 scene::viewing_pose(scene.viewing, -40.0 + 80.0 * i / 31.0, 1.1).value());
     }
+
+public:
+    // A stereo pair of eye targets in the wire's sRGB8, as the server renders layers into.
+    std::array<gpu::RenderTarget, 2> eye_targets() const {
+        std::array<gpu::RenderTarget, 2> targets;
+        for (auto& t : targets)
+            t = gpu::RenderTarget::create(*device, eye_k.width, eye_k.height,
+                                          gpu::ColorFormat::kRgba8Unorm, "bench.eye")
+                    .value();
+        return targets;
+    }
 };
 
 // Both eyes of `state.range(0)` viewers in one submission, as the server batches them.
@@ -85,11 +96,7 @@ void BM_VdLayers(benchmark::State& state) {
         state.SkipWithError(r.error().message.c_str());
         return;
     }
-    std::array<gpu::RenderTarget, 2> targets;
-    for (auto& t : targets)
-        t = gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
-                                      gpu::ColorFormat::kRgba8Unorm, "bench.eye")
-                .value();
+    auto targets = g.eye_targets();
     size_t frame = 0;
     uint64_t pixels = 0, triangles = 0;
     for (auto _ : state) {
@@ -137,11 +144,7 @@ void BM_FillLayers(benchmark::State& state) {
             return;
         }
     }
-    std::array<gpu::RenderTarget, 2> targets;
-    for (auto& t : targets)
-        t = gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
-                                      gpu::ColorFormat::kRgba8Unorm, "bench.eye")
-                .value();
+    auto targets = g.eye_targets();
     std::vector<scene::Pose> heads;
     for (int i = 0; i < 8; ++i)
         heads.push_back(scene::viewing_pose(g.scene.viewing, 45.0 * i, 1.1).value());

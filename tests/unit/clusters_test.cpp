@@ -32,13 +32,11 @@ std::optional<glm::dvec3> dome_hit(const scene::Hemisphere& h, glm::dvec3 eye, g
     return q;
 }
 
-// The largest VD radiance (any channel) the reference finds on `cl` from `eye`, sampling each
-// triangle that faces the eye (the others are culled) at its corners, edge midpoints and
-// centroid.
-double brute_force_peak(const render::ClusteredMesh& level, const render::Cluster& cl,
-                        const scene::Hemisphere& h, const scene::Specular& spec,
-                        std::span<const scene::Light> lights, glm::dvec3 eye) {
-    double peak = 0;
+// The sphere points (and normals) a pass shades on `cl` from `eye`, sampled: each triangle that
+// faces the eye (the others are culled) at its corners, edge midpoints and centroid.
+template <typename Fn>
+void for_each_shaded_point(const render::ClusteredMesh& level, const render::Cluster& cl,
+                           const scene::Hemisphere& h, glm::dvec3 eye, Fn&& fn) {
     const auto& m = level.mesh;
     for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
         const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
@@ -49,19 +47,28 @@ double brute_force_peak(const render::ClusteredMesh& level, const render::Cluste
              {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1), glm::dvec3(.5, .5, 0),
               glm::dvec3(0, .5, .5), glm::dvec3(.5, 0, .5), glm::dvec3(1, 1, 1) / 3.0}) {
             const auto q = dome_hit(h, eye, w.x * a + w.y * b + w.z * c);
-            if (!q)
-                continue;
-            const glm::dvec3 n = glm::normalize(*q - h.centre), v = glm::normalize(eye - *q);
-            double sum = 0;
-            for (const auto& light : lights) {
-                const auto at = shading::light_at(light, *q, n, true);
-                const double f =
-                    shading::specular_factor(spec, n, at.l, v, scene::hemisphere_tangent(n));
-                sum += std::max({at.E.x, at.E.y, at.E.z}) * f;
-            }
-            peak = std::max(peak, sum * std::max({spec.colour.x, spec.colour.y, spec.colour.z}));
+            if (q)
+                fn(*q, glm::normalize(*q - h.centre));
         }
     }
+}
+
+// The largest VD radiance (any channel) the reference finds on `cl` from `eye`.
+double brute_force_peak(const render::ClusteredMesh& level, const render::Cluster& cl,
+                        const scene::Hemisphere& h, const scene::Specular& spec,
+                        std::span<const scene::Light> lights, glm::dvec3 eye) {
+    double peak = 0;
+    for_each_shaded_point(level, cl, h, eye, [&](const glm::dvec3& q, const glm::dvec3& n) {
+        const glm::dvec3 v = glm::normalize(eye - q);
+        double sum = 0;
+        for (const auto& light : lights) {
+            const auto at = shading::light_at(light, q, n, true);
+            const double f =
+                shading::specular_factor(spec, n, at.l, v, scene::hemisphere_tangent(n));
+            sum += std::max({at.E.x, at.E.y, at.E.z}) * f;
+        }
+        peak = std::max(peak, sum * std::max({spec.colour.x, spec.colour.y, spec.colour.z}));
+    });
     return peak;
 }
 
@@ -144,32 +151,17 @@ TEST(Clusters, DiffuseGateNeverMissesLight) {
         bound.lights = lights;
         bound.threshold = render::layer_threshold(true);
         const auto& level = levels[size_t(trial) % levels.size()];
-        const auto& m = level.mesh;
         for (const auto& cl : level.clusters) {
             const bool may = render::cluster_may_diffuse(cl, level.shell, eye, bound, albedo);
             double peak = 0;
-            for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
-                const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
-                                 c = m.positions[m.indices[i + 2]];
-                if (glm::dot(glm::cross(b - a, c - a), eye - a) <= 0)
-                    continue;
-                for (const glm::dvec3 w :
-                     {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1),
-                      glm::dvec3(.5, .5, 0), glm::dvec3(0, .5, .5), glm::dvec3(.5, 0, .5),
-                      glm::dvec3(1, 1, 1) / 3.0}) {
-                    const auto q = dome_hit(h, eye, w.x * a + w.y * b + w.z * c);
-                    if (!q)
-                        continue;
-                    const glm::dvec3 n = glm::normalize(*q - h.centre);
-                    double sum = 0;
-                    for (const auto& light : lights) {
-                        const auto at = shading::light_at(light, *q, n, true);
-                        sum +=
-                            std::max({at.E.x, at.E.y, at.E.z}) * std::max(glm::dot(n, at.l), 0.0);
-                    }
-                    peak = std::max(peak, albedo / glm::pi<double>() * sum);
+            for_each_shaded_point(level, cl, h, eye, [&](const glm::dvec3& q, const glm::dvec3& n) {
+                double sum = 0;
+                for (const auto& light : lights) {
+                    const auto at = shading::light_at(light, q, n, true);
+                    sum += std::max({at.E.x, at.E.y, at.E.z}) * std::max(glm::dot(n, at.l), 0.0);
                 }
-            }
+                peak = std::max(peak, albedo / glm::pi<double>() * sum);
+            });
             ++checked;
             culled += !may;
             lit_found += peak >= bound.threshold;
