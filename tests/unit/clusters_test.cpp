@@ -32,6 +32,14 @@ std::optional<glm::dvec3> dome_hit(const scene::Hemisphere& h, glm::dvec3 eye, g
     return q;
 }
 
+// The levels of detail of `s`'s hemisphere (empty when its mesh cannot be built).
+std::vector<render::ClusteredMesh> dome_levels(const scene::Scene& s) {
+    auto finest = scene::build_prop_mesh(s.prop);
+    if (!finest.ok())
+        return {};
+    return render::prop_levels(s.prop, finest.value());
+}
+
 // The sphere points (and normals) a pass shades on `cl` from `eye`, sampled: each triangle that
 // faces the eye (the others are culled) at its corners, edge midpoints and centroid.
 template <typename Fn>
@@ -75,9 +83,8 @@ double brute_force_peak(const render::ClusteredMesh& level, const render::Cluste
 TEST(Clusters, BoundNeverMissesLight) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
-    auto finest = scene::build_prop_mesh(s.prop);
-    ASSERT_TRUE(finest.ok());
-    const auto levels = render::prop_levels(s.prop, finest.value());
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
     ASSERT_GE(levels.size(), 3u);
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -128,9 +135,8 @@ TEST(Clusters, BoundNeverMissesLight) {
 TEST(Clusters, DiffuseGateNeverMissesLight) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
-    auto finest = scene::build_prop_mesh(s.prop);
-    ASSERT_TRUE(finest.ok());
-    const auto levels = render::prop_levels(s.prop, finest.value());
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     const double albedo = std::max({s.material.albedo.x, s.material.albedo.y, s.material.albedo.z});
@@ -188,9 +194,8 @@ TEST(Clusters, DiffuseGateNeverMissesLight) {
 TEST(Clusters, ShadedPointsLieWithinTheShadedBounds) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
-    auto finest = scene::build_prop_mesh(s.prop);
-    ASSERT_TRUE(finest.ok());
-    const auto levels = render::prop_levels(s.prop, finest.value());
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     size_t points = 0, tighter = 0, bounded = 0;
@@ -246,9 +251,8 @@ TEST(Clusters, ShadedPointsLieWithinTheShadedBounds) {
 TEST(Clusters, LevelsEncloseTheDomeWithinTheirError) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
-    auto finest = scene::build_prop_mesh(s.prop);
-    ASSERT_TRUE(finest.ok());
-    const auto levels = render::prop_levels(s.prop, finest.value());
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
     EXPECT_EQ(levels.front().segments, h.segments);
     for (size_t i = 0; i < levels.size(); ++i) {
         const auto& m = levels[i].mesh;
