@@ -416,7 +416,7 @@ bool cluster_may_diffuse(const Cluster& rasterised, const Shell& shell, const gl
         if (least < kHalfPi)
             total += lc.E * std::cos(std::max(least, 0.0));
     }
-    return albedo / kPi * total >= b.threshold;
+    return total > 0 && albedo / kPi * total >= b.threshold;
 }
 
 bool cluster_may_light(const Cluster& cl, const Shell& shell, const glm::dvec3& eye,

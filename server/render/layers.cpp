@@ -117,16 +117,23 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
                 masks[c] = r.sparse ? cluster_light_mask(cl, level.shell, r.eye.position, bound) &
                                           group_mask
                                     : group_mask;
-            // Drawn only where the VI term can show: facing the eye and lit by some light.
+            // Drawn where the VI term can show: facing the eye and, for a cluster drawn for the
+            // fill-in alone, lit by some light (VI below the step alone stores 0; added to a VD
+            // term it could still move a code, so a cluster with VD light is filled as before).
             if (group_fill && (*fill_clusters)[c] &&
-                cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position) &&
-                cluster_may_diffuse(fill_bounds_[level_index][c], level.shell, r.eye.position,
-                                    bound, fill_albedo))
-                // A cluster drawn for the fill-in alone draws only its triangles some light
-                // can reach (on a convex prop: elsewhere a dark triangle may hide another).
-                fills[c] = masks[c] == 0 && convex_ && r.sparse
-                               ? fill_triangles(r, level_index, c, bound, fill_albedo)
-                               : kAllTriangles;
+                cluster_may_face(fill_bounds_[level_index][c], level.shell, r.eye.position)) {
+                const Cluster& fb = fill_bounds_[level_index][c];
+                if (masks[c] != 0)
+                    fills[c] = kAllTriangles;
+                else if (cluster_may_diffuse(fb, level.shell, r.eye.position, bound, fill_albedo))
+                    // Only its triangles some light can reach, on a convex prop (elsewhere a
+                    // dark triangle may hide another) in a sparse layer.
+                    fills[c] = convex_ && r.sparse
+                                   ? fill_triangles(r, level_index, c, bound, fill_albedo)
+                                   : kAllTriangles;
+                if (masks[c] == 0 && fills[c] == 0)  // counted as left out, whole
+                    w.plan.fill_triangles_unlit += cl.index_count / 3;
+            }
             if (masks[c] != 0 || fills[c])
                 rect = unite(rect, rects[c]);
         }

@@ -453,10 +453,19 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         bounds[l] = std::move(u.bounds);
         groups[l].assign(level.groups.size(), 0);
         triangle_first[l].assign(level.clusters.size(), kNoTriangles);
+        for (size_t c = 0; c < clusters[l].size(); ++c)
+            if (clusters[l][c])
+                groups[l][c / level.clusters_per_group] = 1;
+        // Per triangle only where layers use them (Renderer::fill_triangles: a convex prop).
+        if (!convex_)
+            continue;
+        size_t count = 0;
+        for (size_t c = 0; c < clusters[l].size(); ++c)
+            count += clusters[l][c] ? level.clusters[c].index_count / 3 : 0;
+        triangles[l].reserve(count);
         for (size_t c = 0; c < clusters[l].size(); ++c) {
             if (!clusters[l][c])
                 continue;
-            groups[l][c / level.clusters_per_group] = 1;
             const Cluster& cl = level.clusters[c];
             triangle_first[l][c] = uint32_t(triangles[l].size());
             for (uint32_t t = 0; t < cl.index_count; t += 3)

@@ -130,8 +130,11 @@ TEST(Clusters, BoundNeverMissesLight) {
 }
 
 // The fill-in's gate (cluster_may_diffuse) is conservative the same way: wherever the reference
-// puts VI light above the quantisation step on a facing triangle of a cluster, the gate passes
-// it. And it culls: the scene's lights leave part of the dome dark.
+// puts VI light above the quantisation step on a facing triangle, the gate passes the cluster
+// and the triangle's own bounds (render::triangle_bounds, what a cluster drawn for the fill-in
+// alone is cut into). Lights: the scene's, with and without the point lights' falloff, plus a
+// point light from 30 cm down to 2 mm off the surface or a rect light panel near the dome. And
+// it culls: the scene's lights leave part of the dome dark.
 TEST(Clusters, DiffuseGateNeverMissesLight) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
@@ -140,34 +143,51 @@ TEST(Clusters, DiffuseGateNeverMissesLight) {
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     const double albedo = std::max({s.material.albedo.x, s.material.albedo.y, s.material.albedo.z});
-    size_t checked = 0, culled = 0, lit_found = 0;
-    for (int trial = 0; trial < 8; ++trial) {
+    size_t checked = 0, culled = 0, lit_found = 0, triangles_culled = 0;
+    for (int trial = 0; trial < 9; ++trial) {
         const glm::dvec3 eye =
             h.centre + glm::dvec3(0.8 * u(rng), 0.3 + 0.4 * std::abs(u(rng)), 0.8 * u(rng));
         std::vector<scene::Light> lights = s.lights;
-        if (trial % 2 == 1) {  // and a point light from 30 cm down to 2 mm off the surface
+        const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)), u(rng)));
+        if (trial % 3 == 1) {
             scene::Light near;
             near.type = scene::LightType::kPoint;
             near.intensity = 0.3;
-            const glm::dvec3 dir = glm::normalize(glm::dvec3(u(rng), std::abs(u(rng)), u(rng)));
-            near.position = h.centre + dir * (h.radius + 0.3 * std::pow(0.01, trial / 7.0));
+            near.position = h.centre + dir * (h.radius + 0.3 * std::pow(0.01, trial / 8.0));
             lights.push_back(near);
+        } else if (trial % 3 == 2) {
+            scene::Light panel;
+            panel.type = scene::LightType::kRect;
+            panel.intensity = 2.0;
+            panel.position = h.centre + dir * (h.radius + 0.05);
+            // Facing the dome: edge_u x edge_v points back along -dir.
+            const glm::dvec3 a = glm::normalize(glm::cross(dir, glm::dvec3(0.3, 0.1, 1.0)));
+            panel.edge_u = 0.1 * a;
+            panel.edge_v = 0.1 * glm::cross(a, dir);
+            lights.push_back(panel);
         }
         render::VdBound bound;
         bound.lights = lights;
+        bound.point_falloff = trial % 2 == 0;
         bound.threshold = render::layer_threshold(true);
         const auto& level = levels[size_t(trial) % levels.size()];
-        for (const auto& cl : level.clusters) {
-            const bool may = render::cluster_may_diffuse(cl, level.shell, eye, bound, albedo);
+        const auto peak_on = [&](const render::Cluster& cl) {
             double peak = 0;
             for_each_shaded_point(level, cl, h, eye, [&](const glm::dvec3& q, const glm::dvec3& n) {
                 double sum = 0;
-                for (const auto& light : lights) {
-                    const auto at = shading::light_at(light, q, n, true);
-                    sum += std::max({at.E.x, at.E.y, at.E.z}) * std::max(glm::dot(n, at.l), 0.0);
-                }
+                for (const auto& light : lights)
+                    shading::for_each_light_sample(light, q, n, bound.point_falloff, 8,
+                                                   [&](const shading::LightAtPoint& at) {
+                                                       sum += std::max({at.E.x, at.E.y, at.E.z}) *
+                                                              std::max(glm::dot(n, at.l), 0.0);
+                                                   });
                 peak = std::max(peak, albedo / glm::pi<double>() * sum);
             });
+            return peak;
+        };
+        for (const auto& cl : level.clusters) {
+            const bool may = render::cluster_may_diffuse(cl, level.shell, eye, bound, albedo);
+            const double peak = peak_on(cl);
             ++checked;
             culled += !may;
             lit_found += peak >= bound.threshold;
@@ -175,15 +195,42 @@ TEST(Clusters, DiffuseGateNeverMissesLight) {
                 EXPECT_TRUE(may) << "trial " << trial << ": a culled cluster's VI reaches " << peak
                                  << " (threshold " << bound.threshold << ")";
             }
+            if (!may)
+                continue;
+            for (uint32_t t = 0; t < cl.index_count; t += 3) {
+                const render::Cluster tri = render::triangle_bounds(level.mesh, cl.first_index + t);
+                ASSERT_EQ(tri.first_index, cl.first_index + t);
+                ASSERT_EQ(tri.index_count, 3u);
+                const bool tri_may =
+                    render::cluster_may_diffuse(tri, level.shell, eye, bound, albedo);
+                triangles_culled += !tri_may;
+                const double tri_peak = peak_on(tri);
+                if (tri_peak >= bound.threshold) {
+                    EXPECT_TRUE(tri_may) << "trial " << trial << ": a culled triangle's VI reaches "
+                                         << tri_peak << " (threshold " << bound.threshold << ")";
+                }
+            }
         }
     }
     EXPECT_GT(lit_found, checked / 4);
-    // The scene's lights all come from above and in front: the lower back is dark.
+    // The scene's lights all come from above and in front: the lower back is dark, and a
+    // triangle's bounds are tighter than its cluster's.
     EXPECT_GT(culled, checked / 50) << "the gate culls " << culled << " of " << checked;
-    // No light, no albedo: nothing to draw.
+    EXPECT_GT(triangles_culled, 0u);
+    // Nothing to draw without a light, or with a black albedo.
+    const render::Cluster& any = levels[0].clusters[0];
+    const glm::dvec3 above = h.centre + glm::dvec3(0, 0.5, 0.8);
     render::VdBound dark;
-    EXPECT_FALSE(render::cluster_may_diffuse(levels[0].clusters[0], levels[0].shell,
-                                             h.centre + glm::dvec3(0, 0.5, 0.8), dark, albedo));
+    EXPECT_FALSE(render::cluster_may_diffuse(any, levels[0].shell, above, dark, albedo));
+    render::VdBound lit;
+    lit.lights = s.lights;
+    lit.threshold = render::layer_threshold(true);
+    bool some = false;
+    for (const auto& cl : levels[0].clusters) {
+        some = some || render::cluster_may_diffuse(cl, levels[0].shell, above, lit, albedo);
+        EXPECT_FALSE(render::cluster_may_diffuse(cl, levels[0].shell, above, lit, 0.0));
+    }
+    EXPECT_TRUE(some);
 }
 
 // What shaded_bounds promises, point by point: every sphere point a pixel of a cluster's
