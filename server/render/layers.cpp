@@ -150,6 +150,8 @@ uint8_t Renderer::fill_triangles(const LayerRequest& r, size_t level, size_t c,
         return kAllTriangles;
     const ClusteredMesh& lv = levels_[level];
     const uint32_t count = lv.clusters[c].index_count / 3;
+    if (count > 8)  // more than a byte's bits: the whole cluster
+        return kAllTriangles;
     uint8_t bits = 0;
     for (uint32_t t = 0; t < count; ++t)
         if (cluster_may_diffuse(fill_triangles_[level][first + t], lv.shell, r.eye.position, bound,

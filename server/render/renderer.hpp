@@ -337,13 +337,12 @@ private:
     std::vector<std::vector<uint8_t>> fill_clusters_, fill_groups_;
     std::vector<std::vector<Cluster>> fill_bounds_;  // per cluster: its uncovered part's bounds
     // Per level, the bounds of each triangle of the clusters with uncovered surface, and per
-    // cluster where its triangles' start in it (kNoTriangles: not such a cluster): a cluster
+    // cluster where its triangles start in it (kNoTriangles: not such a cluster): a cluster
     // drawn for the fill-in alone draws only the triangles some light can reach.
     std::vector<std::vector<Cluster>> fill_triangles_;
     std::vector<std::vector<uint32_t>> fill_triangle_first_;
     static constexpr uint32_t kNoTriangles = ~uint32_t(0);
     static constexpr uint8_t kAllTriangles = 0xFF;
-    static_assert(kTrianglesPerCluster <= 8, "a cluster's triangles are bits of a byte");
     // The triangles of cluster `c` of level `level` that the fill-in must draw for `r`.
     uint8_t fill_triangles(const LayerRequest& r, size_t level, size_t c, const VdBound& bound,
                            double albedo) const;
