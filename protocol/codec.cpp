@@ -211,10 +211,41 @@ template <typename M, typename F>
 size_t wire_bytes(const M&, const F& f) {
     return schema::min_bytes(f);
 }
-template <typename M, typename V>
-size_t wire_bytes(const M& m, const Uint<M, V>& f) {
-    return f.tail && m.*f.member == 0 ? 0 : sizeof(V);
+// Optional tails (messages.def, HS_U64_TAIL) go on the wire up to the last one that is not 0,
+// those before it included even when 0, so that each message has exactly one encoding: `written`
+// is how many of M's tails m writes, `next` the tail a walk over the fields has reached.
+struct Tails {
+    size_t written = 0, next = 0;
+    bool take() { return next++ < written; }
+};
+template <typename F>
+bool is_tail(const F&) {
+    return false;
 }
+template <typename M, typename V>
+bool is_tail(const Uint<M, V>& f) {
+    return f.tail;
+}
+template <typename M, typename F>
+uint64_t tail_value(const M&, const F&) {
+    return 0;
+}
+template <typename M, typename V>
+uint64_t tail_value(const M& m, const Uint<M, V>& f) {
+    return f.tail ? uint64_t(m.*f.member) : 0;
+}
+template <typename M>
+Tails tails_of(const M& m) {
+    Tails t;
+    size_t i = 0;
+    std::apply(
+        [&](const auto&... f) {
+            ((is_tail(f) ? (++i, t.written = tail_value(m, f) != 0 ? i : t.written) : 0), ...);
+        },
+        Info<M>::fields);
+    return t;
+}
+
 template <typename M, typename Len>
 size_t wire_bytes(const M& m, const Str<M, Len>& f) {
     return sizeof(Len) + (m.*f.member).size();
@@ -223,9 +254,18 @@ template <typename M>
 size_t wire_bytes(const M& m, const Bytes<M>& f) {
     return 4 + (m.*f.member).size();
 }
+template <typename M, typename V>
+size_t wire_bytes(const M&, const Uint<M, V>& f, Tails& tails) {
+    return f.tail && !tails.take() ? 0 : sizeof(V);
+}
+template <typename M, typename F>
+size_t wire_bytes(const M& m, const F& f, Tails&) {
+    return wire_bytes(m, f);
+}
 template <typename M>
 size_t payload_bytes(const M& m) {
-    return std::apply([&](const auto&... f) { return (size_t(0) + ... + wire_bytes(m, f)); },
+    Tails tails = tails_of(m);
+    return std::apply([&](const auto&... f) { return (size_t(0) + ... + wire_bytes(m, f, tails)); },
                       Info<M>::fields);
 }
 
@@ -248,20 +288,6 @@ public:
     std::vector<uint8_t> out;
 };
 
-template <typename M, typename V>
-void write(Writer& w, const M& m, const Uint<M, V>& f) {
-    if (!f.tail || m.*f.member != 0)
-        w.put<V>(m.*f.member);
-}
-// Whether a field is an optional tail (written after a VdLayer's data).
-template <typename F>
-bool is_tail(const F&) {
-    return false;
-}
-template <typename M, typename V>
-bool is_tail(const Uint<M, V>& f) {
-    return f.tail;
-}
 template <typename M>
 void write(Writer& w, const M& m, const F64<M>& f) {
     w.put<double>(m.*f.member);
@@ -288,6 +314,15 @@ void write(Writer& w, const M& m, const Bytes<M>& f) {
 }
 template <typename M>
 void write(Writer&, const M&, const ImageRule&) {}
+template <typename M, typename V>
+void write(Writer& w, const M& m, const Uint<M, V>& f, Tails& tails) {
+    if (!f.tail || tails.take())
+        w.put<V>(m.*f.member);
+}
+template <typename M, typename F>
+void write(Writer& w, const M& m, const F& f, Tails&) {
+    write(w, m, f);
+}
 
 // Reads a payload's structure: every field present, lengths within the payload, nothing left.
 // Values are checked afterwards by check(), the same check encode() makes. Field names are
@@ -354,11 +389,12 @@ bool read(Reader& r, M& m, const Uint<M, V>& f) {
                       where<M>(f).str() + ", optional, takes " + std::to_string(sizeof(V)) + ")");
     if (!r.get(m.*f.member, where<M>(f)))
         return false;
-    // A sender omits an optional field that is 0, so that each message has one encoding.
-    if (f.tail && m.*f.member == 0)
+    // A sender omits an optional field that is 0 unless a later one follows, so that each
+    // message has one encoding.
+    if (f.tail && m.*f.member == 0 && r.left() == 0)
         return r.fail(where<M>(f).str() +
                       " is present but 0 (an optional field that is 0 is "
-                      "left out)");
+                      "left out when none follows)");
     return true;
 }
 template <typename M>
@@ -485,7 +521,8 @@ std::variant<std::vector<uint8_t>, EncodeError> encode_message(const M& m, Side 
     w.put<uint16_t>(uint16_t(I::type));
     w.put<uint32_t>(uint32_t(n));
     w.put(sequence);
-    std::apply([&](const auto&... f) { (write(w, m, f), ...); }, I::fields);
+    Tails tails = tails_of(m);
+    std::apply([&](const auto&... f) { (write(w, m, f, tails), ...); }, I::fields);
     return std::move(w.out);
 }
 
@@ -521,9 +558,10 @@ std::optional<EncodeError> encode_vd_layer_into(
     w.put<uint16_t>(uint16_t(I::type));
     w.put<uint32_t>(0);  // payload length, patched below
     w.put(sequence);
-    const auto write_if = [&](bool tails) {
+    Tails tails = tails_of(m);
+    const auto write_if = [&](bool tail) {
         std::apply(
-            [&](const auto&... f) { ((is_tail(f) == tails ? write(w, m, f) : void()), ...); },
+            [&](const auto&... f) { ((is_tail(f) == tail ? write(w, m, f, tails) : void()), ...); },
             I::fields);
     };
     write_if(false);

@@ -23,6 +23,9 @@ inline constexpr size_t kMaxNameBytes = 64;
 inline constexpr size_t kMaxErrorMessageBytes = 1000;     // Error.message; make_error() fits text
 inline constexpr uint32_t kMaxEyePixels = 8192;           // per side
 inline constexpr double kUnitQuaternionTolerance = 1e-3;  // | |q| - 1 | above this is rejected
+// RegisterDisplay.options, bits: what the session's layers carry besides their pixels
+// (PROTOCOL.md, "Time"). A bit the server does not know is ignored.
+inline constexpr uint64_t kOptionWarpDepth = 1;  // VdLayer.warp_depth_um
 
 enum class MessageType : uint16_t {
 #define HS_MESSAGE(name, id, max, dir, ...) k##name = id,

@@ -241,7 +241,16 @@ void hysar_client_close(hysar_client* client) {
 }
 
 hysar_status hysar_client_register_display(hysar_client* client, const hysar_display* d) {
+    return hysar_client_register_display_opts(client, d, 0);
+}
+
+hysar_status hysar_client_register_display_opts(hysar_client* client, const hysar_display* d,
+                                                uint32_t options) {
     return guarded([&] {
+        if (options & ~uint32_t(HYSAR_OPTION_WARP_DEPTH))
+            return fail(HYSAR_E_INVALID_ARGUMENT, "options " + std::to_string(options) +
+                                                      " has bits other than "
+                                                      "HYSAR_OPTION_WARP_DEPTH (1)");
         if (!client || !d)
             return fail(HYSAR_E_INVALID_ARGUMENT, "client and display must not be NULL");
         proto::RegisterDisplay r;
@@ -260,6 +269,8 @@ hysar_status hysar_client_register_display(hysar_client* client, const hysar_dis
             return fail(HYSAR_E_INVALID_ARGUMENT,
                         "display.mode " + std::to_string(d->mode) + " is not 0 or 1");
         r.format = *format, r.encoding = *encoding, r.mode = *mode;
+        if (options & HYSAR_OPTION_WARP_DEPTH)
+            r.options |= proto::kOptionWarpDepth;
         return from_session(client->session->register_display(r));
     });
 }
@@ -375,6 +386,15 @@ hysar_status hysar_client_send_pose_at(hysar_client* client, const hysar_pose* p
             *sent_time_ns = p.client_time_ns;
         return s;
     });
+}
+
+double hysar_event_warp_depth_m(const hysar_event* event) {
+    if (!event || event->kind != HYSAR_EVENT_LAYER || !event->internal_)
+        return 0;
+    std::lock_guard live_lock(live_events_mutex());
+    if (!live_events().count(event->internal_))
+        return 0;
+    return static_cast<const SessionEvent*>(event->internal_)->warp_depth_m;
 }
 
 uint64_t hysar_event_display_time_ns(const hysar_event* event) {
@@ -506,9 +526,11 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
         if (!(d->fx > 0 && d->fy > 0 && std::isfinite(d->fx) && std::isfinite(d->fy) &&
               std::isfinite(d->cx) && std::isfinite(d->cy)))
             return fail(HYSAR_E_INVALID_ARGUMENT, "display intrinsics must be finite, fx, fy > 0");
-    if (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m))
+    if (plane_depth_m != HYSAR_PLANE_DEPTH_FROM_LAYER &&
+        (!(plane_depth_m >= 0) || !std::isfinite(plane_depth_m)))
         return fail(HYSAR_E_INVALID_ARGUMENT, "plane_depth_m " + std::to_string(plane_depth_m) +
-                                                  " must be finite and >= 0 (0: rotation only)");
+                                                  " must be finite and >= 0 (0: rotation only), or "
+                                                  "HYSAR_PLANE_DEPTH_FROM_LAYER");
     hs::motion::Quat render, now;
     hs::motion::Vec3 render_at, now_at;
     for (size_t i = 0; i < 4; ++i) {
@@ -549,6 +571,8 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
         std::lock_guard live_lock(live_events_mutex());
         if (live_events().count(layer->internal_)) {
             const auto* held = static_cast<const SessionEvent*>(layer->internal_);
+            if (plane_depth_m == HYSAR_PLANE_DEPTH_FROM_LAYER)
+                plane_depth_m = held->warp_depth_m;
             if (held->pixels.data() == im.pixels && held->width == im.width &&
                 held->height == im.height && held->lit_first.size() == im.height &&
                 held->lit_last.size() == im.height) {
@@ -557,6 +581,8 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
             }
         }
     }
+    if (plane_depth_m == HYSAR_PLANE_DEPTH_FROM_LAYER)
+        plane_depth_m = 0;  // not a layer the library holds: rotation only
     const hs::motion::Pinhole kr{rendered->fx, rendered->fy, rendered->cx, rendered->cy};
     const hs::motion::Pinhole kd{shown->fx, shown->fy, shown->cx, shown->cy};
     const int eye = layer->eye == 1 ? 1 : 0;

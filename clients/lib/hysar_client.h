@@ -33,7 +33,7 @@ extern "C" {
 #endif
 
 /* The version of this API; hysar_client_api_version() returns the library's. */
-#define HYSAR_CLIENT_API_VERSION 3
+#define HYSAR_CLIENT_API_VERSION 4
 
 typedef enum hysar_status {
     HYSAR_OK = 0,
@@ -262,7 +262,9 @@ enum { HYSAR_FILTER_NEAREST = 0, HYSAR_FILTER_BILINEAR = 1 };
  * image.size_bytes, not the event's pixels). plane_depth_m > 0: the points of a plane facing
  * the eye at that distance (metres; the prop's, e.g. from the installation's viewing plan) are
  * put exactly where they belong, the head's translation included; 0: rotation only (a
- * homography per eye from the display's intrinsics, exact for far points).
+ * homography per eye from the display's intrinsics, exact for far points);
+ * HYSAR_PLANE_DEPTH_FROM_LAYER (since 1.4): the layer's own warp depth, as the server sent it
+ * (hysar_event_warp_depth_m; rotation only when it has none).
  * A layer whose pose is older than stale_limit_ns at now_ns (0: no limit) is cleared to 0
  * (see-through: better nothing than a highlight in the wrong place) and *cleared is 1.
  * BILINEAR needs RGBA8; RGBA16F is warped NEAREST. Cost: README ("Registration"). */
@@ -295,6 +297,27 @@ HYSAR_API hysar_status hysar_reproject_layer_to(
     const hysar_event* layer, const hysar_display* rendered, const hysar_display* shown,
     const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
     uint32_t filter, uint8_t* dst, size_t dst_bytes, uint32_t* cleared);
+
+/* ---- The server's warp depth (library 1.4, API version 4, added functions only) ----
+ *
+ * A late warp that knows how far away the prop is moves the layer with the head's translation
+ * too, not only its rotation: a visitor walking around the prop sees the highlight stay on it.
+ * The server knows the prop; a display registered with HYSAR_OPTION_WARP_DEPTH gets, in every
+ * layer, the depth of the plane through the prop's centre along that eye's view axis
+ * (protocol/PROTOCOL.md, "Time"). A server that predates the option is asked again without it
+ * (its layers then carry none). */
+enum { HYSAR_OPTION_WARP_DEPTH = 1 };
+/* plane_depth_m of hysar_reproject_layer and hysar_reproject_layer_to: the layer's own. */
+#define HYSAR_PLANE_DEPTH_FROM_LAYER (-1.0)
+/* As hysar_client_register_display, with options (HYSAR_OPTION_* bits; 0: as that call).
+ * HYSAR_E_INVALID_ARGUMENT for a bit this library does not know. */
+HYSAR_API hysar_status hysar_client_register_display_opts(hysar_client* client,
+                                                          const hysar_display* display,
+                                                          uint32_t options);
+/* A LAYER event's warp depth: metres along its eye's view axis (> 0), or 0 when it has none
+ * (the display did not ask, the prop lies behind the eye, or the event is not a LAYER the
+ * library delivered). */
+HYSAR_API double hysar_event_warp_depth_m(const hysar_event* event);
 
 #ifdef __cplusplus
 }

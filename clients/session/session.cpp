@@ -371,6 +371,7 @@ void Session::handle(Message m, uint64_t received_ns) {
         e.frame_id = layer->frame_id;
         e.pose.client_time_ns = layer->pose_time_ns;
         e.pose.display_time_ns = layer->display_time_ns;
+        e.warp_depth_m = double(layer->warp_depth_um) * 1e-6;
         decode(layer->width, layer->height, layer->format, layer->encoding, layer->data);
     } else if (frame) {
         e.kind = SessionEvent::Kind::kProjectorFrame;
@@ -383,12 +384,17 @@ void Session::handle(Message m, uint64_t received_ns) {
             send_display_time_ = false;
         // A server that predates lossy tiles refuses encoding 3 in RegisterDisplay as
         // malformed and closes: the display goes again, after the reconnect, with sparse tiles
-        // (PROTOCOL.md, "Lossy tiles").
+        // (PROTOCOL.md, "Lossy tiles"). One that predates RegisterDisplay.options refuses it
+        // the same way: the display goes again without it (its layers carry no warp depth).
         {
             std::lock_guard lock(mutex_);
             if (err->code == proto::ErrorCode::kMalformed && display_ && display_sent_ &&
-                !layer_since_display_ && display_->encoding == proto::Encoding::kLossyTiles)
-                display_->encoding = proto::Encoding::kSparseTiles;
+                !layer_since_display_) {
+                if (display_->options != 0)
+                    display_->options = 0;
+                else if (display_->encoding == proto::Encoding::kLossyTiles)
+                    display_->encoding = proto::Encoding::kSparseTiles;
+            }
         }
         e.kind = SessionEvent::Kind::kServerError;
         e.error_code = uint32_t(err->code);

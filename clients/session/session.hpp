@@ -62,6 +62,9 @@ struct SessionEvent {
     uint32_t eye = 0, frame_id = 0, scene_version = 0, session_id = 0, error_code = 0,
              reconnects = 0;
     protocol::Pose pose;  // kLayer: as sent (client_time_ns is the stamp)
+    // kLayer: the depth of the plane a late warp moves it by (metres, along the eye's view
+    // axis), when the display asked for it (RegisterDisplay.options); 0: none.
+    double warp_depth_m = 0;
     uint64_t received_ns = 0, decoded_ns = 0;
     uint32_t width = 0, height = 0;
     protocol::PixelFormat format = protocol::PixelFormat::kRgba8;

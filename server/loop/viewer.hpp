@@ -38,6 +38,8 @@ struct Display {
     render::LayerEncoding encoding = render::LayerEncoding::kSrgb8;
     LayerPacking packing = LayerPacking::kRaw;
     FrameMode mode = FrameMode::kOnRequest;
+    // The client asked for each layer's warp depth (RegisterDisplay.options, PROTOCOL.md "Time").
+    bool warp_depth = false;
 
     uint64_t eye_pixels() const { return uint64_t(eye.width) * eye.height; }
 };

@@ -3,6 +3,7 @@
 // the lights' bound, gather the drawn clusters' indices into the request's index buffer, group
 // them by the lights they need), then all are recorded in request order into one command list.
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 #include <fmt/format.h>
@@ -45,6 +46,10 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.lights_skipped = lights_skipped_;
     if (!check_layer_request(r, w))
         return;
+    // The eye looks along its -z (PROTOCOL.md, §Conventions.Pose).
+    const glm::dvec3 forward = r.eye.orientation * glm::dvec3(0, 0, -1);
+    const double depth = glm::dot(prop_centre_ - r.eye.position, forward);
+    plan.warp_depth_m = std::isfinite(depth) && depth > 0 ? depth : 0;
     if (!has_vd_term(r.spec) && !fill_) {
         plan.skipped_because = vd_skip_reason(r.spec);
         return;

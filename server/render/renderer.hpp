@@ -150,6 +150,10 @@ public:
         uint32_t fill_triangles_unlit = 0;
         uint64_t triangles = 0;  // drawn, lit and occluding
         uint32_t lights_skipped = 0;
+        // The depth along the eye's view axis (metres) of the plane a client's late warp moves
+        // the layer by: through the prop's centre (prop_centre()). 0 when that lies behind the
+        // eye (rotation only). PROTOCOL.md, "Time".
+        double warp_depth_m = 0;
     };
     // A rendered layer's readback as the wire's pixel bytes over the whole image: the plan's
     // rectangle from the target, 0 elsewhere (nothing was drawn or read back there).
@@ -226,6 +230,9 @@ public:
     // fragment shades the point its own ray hits, so which triangle covers a pixel (at a
     // level's seams, or where clusters' triangles meet) does not change it.
     bool uses_depth() const { return !convex_; }
+    // The centre of the prop's bounding box (metres, world): the plane a late warp moves a
+    // layer by goes through it (docs/OPTICS.md, "Registration").
+    const glm::dvec3& prop_centre() const { return prop_centre_; }
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
@@ -291,6 +298,7 @@ private:
     std::vector<scene::Light> lit_;      // the lights that add light, in the scene's order
     uint32_t lights_skipped_ = 0;
     bool convex_ = false;  // no part of the prop can hide another (back faces are culled)
+    glm::dvec3 prop_centre_{0.0};
     // One VD layer's plan (record_layers), kept per request slot and reused: per cluster the
     // pixels it may cover (empty: out of view) and the lights it must evaluate (0: dark), the
     // lit clusters grouped by light mask, and the draws that record it.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "codec/layer_codec.hpp"
 #include "protocol/tiles.hpp"
@@ -16,6 +17,14 @@ double ms_between(std::chrono::steady_clock::time_point a,
 
 static_assert(loop::kLayerTile == protocol::kDefaultTileSize,
               "the frame loop grows rendered rectangles to the wire's tile grid");
+
+// The wire's warp depth: whole micrometres, at least 1 (0 says none); a depth past 10 km is
+// sent as 10 km (a plane that far is a rotation).
+uint64_t warp_depth_um(double depth_m) {
+    if (!(depth_m > 0))
+        return 0;
+    return uint64_t(std::clamp(std::llround(std::min(depth_m, 1e4) * 1e6), 1LL, 10'000'000'000LL));
+}
 
 codec::LayerPixels wire_pixels(const loop::EyePixels& p) {
     return {p.data, p.stride, p.width, p.height, wire_format(p.encoding), p.x0, p.y0, p.x1, p.y1};
@@ -215,6 +224,8 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         fields.frame_id = f.job.frame_id;
         fields.pose_time_ns = f.job.pose.client_time_ns;
         fields.display_time_ns = f.job.pose.display_time_ns;
+        if (f.job.display.warp_depth)
+            fields.warp_depth_um = warp_depth_um(f.plans[e].warp_depth_m);
         fields.eye = e;
         fields.format = format;
         fields.encoding = encoding;

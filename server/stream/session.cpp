@@ -28,6 +28,7 @@ loop::Display display_of(const proto::RegisterDisplay& d) {
                                                                : loop::LayerPacking::kSparseTiles;
     out.mode = d.mode == proto::FrameMode::kContinuous ? loop::FrameMode::kContinuous
                                                        : loop::FrameMode::kOnRequest;
+    out.warp_depth = (d.options & proto::kOptionWarpDepth) != 0;  // other bits: ignored
     return out;
 }
 

@@ -28,7 +28,7 @@ _Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
 _Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
 _Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
 #endif
-_Static_assert(HYSAR_CLIENT_API_VERSION == 3, "API version");
+_Static_assert(HYSAR_CLIENT_API_VERSION == 4, "API version");
 
 static int failures = 0;
 #define CHECK(cond)                                                                           \
@@ -107,6 +107,18 @@ int main(int argc, char** argv) {
         CHECK(hysar_display_overscan(NULL, 5, &wide) == HYSAR_E_INVALID_ARGUMENT);
         CHECK(hysar_reproject_layer_to(NULL, &display, &wide, &pose0, 0, 0, 0, 0, NULL, 0, NULL) ==
               HYSAR_E_INVALID_ARGUMENT);
+    }
+    {
+        /* The server's warp depth (API 4). */
+        hysar_event none;
+        memset(&none, 0, sizeof none);
+        CHECK(hysar_event_warp_depth_m(NULL) == 0 && hysar_event_warp_depth_m(&none) == 0);
+        CHECK(hysar_client_register_display_opts(NULL, &display, HYSAR_OPTION_WARP_DEPTH) ==
+              HYSAR_E_INVALID_ARGUMENT);
+        CHECK(hysar_client_register_display_opts(NULL, &display, 2) == HYSAR_E_INVALID_ARGUMENT);
+        CHECK(strstr(hysar_last_error(), "HYSAR_OPTION_WARP_DEPTH") != NULL);
+        CHECK(hysar_reproject_layer(NULL, &display, &pose0, 0, 0, HYSAR_PLANE_DEPTH_FROM_LAYER, 0,
+                                    NULL, 0, NULL) == HYSAR_E_INVALID_ARGUMENT);
     }
     CHECK(hysar_display_from_profile("/nonexistent/profile.json", 1, &display) ==
           HYSAR_E_INVALID_ARGUMENT);

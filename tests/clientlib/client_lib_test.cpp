@@ -428,6 +428,69 @@ TEST_F(ClientLib, LayersEchoTheDisplayTimeAndOldPosesAreServedAsBefore) {
     EXPECT_GT(clock.pose_to_layer_ns, 0u);
 }
 
+// A display registered with HYSAR_OPTION_WARP_DEPTH gets, in each eye's layer, the depth of the
+// plane through the prop's centre (its bounding box's) along that eye's view axis; a display
+// registered without it gets none; and a warp told HYSAR_PLANE_DEPTH_FROM_LAYER is the warp at
+// that depth, byte for byte.
+TEST_F(ClientLib, LayersCarryTheWarpDepthWhenAsked) {
+    auto c = connect(config());
+    ASSERT_TRUE(c);
+    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+    hysar_event_release(&e);
+    const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
+    const scene::Scene sc = test_scene();
+    const auto& dome = sc.prop.hemisphere;
+    const glm::dvec3 centre = dome.centre + glm::dvec3(0, dome.radius / 2, 0);
+    for (uint32_t options : {uint32_t(HYSAR_OPTION_WARP_DEPTH), uint32_t(0)}) {
+        ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, options), HYSAR_OK)
+            << hysar_last_error();
+        const hysar_pose p = pose(options ? 20 : -20);
+        uint64_t stamp = 0;
+        ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK);
+        ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+        const scene::Pose head{{p.position_m[0], p.position_m[1], p.position_m[2]},
+                               glm::dquat(p.orientation_wxyz[0], p.orientation_wxyz[1],
+                                          p.orientation_wxyz[2], p.orientation_wxyz[3])};
+        const auto eyes = scene::eye_poses(head, d.ipd_m);
+        for (int k = 0; k < 2; ++k) {
+            e = wait_for(c.get(), HYSAR_EVENT_LAYER);
+            ASSERT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+            ASSERT_EQ(e.pose.time_ns, stamp);
+            const scene::Pose& eye = eyes[e.eye];
+            const double want =
+                glm::dot(centre - eye.position, eye.orientation * glm::dvec3(0, 0, -1));
+            ASSERT_GT(want, 0.5);
+            const double got = hysar_event_warp_depth_m(&e);
+            if (options) {
+                // The tessellation encloses the dome by a fraction of a millimetre.
+                EXPECT_NEAR(got, want, 2e-3) << "eye " << e.eye;
+                // The warp to a pose 5 cm to the side: the layer's depth is the one used.
+                hysar_pose moved = p;
+                moved.position_m[0] += 0.05;
+                std::vector<uint8_t> from_layer(e.image.size_bytes), told(e.image.size_bytes);
+                ASSERT_EQ(hysar_reproject_layer(&e, &d, &moved, 0, 0, HYSAR_PLANE_DEPTH_FROM_LAYER,
+                                                HYSAR_FILTER_NEAREST, from_layer.data(),
+                                                from_layer.size(), nullptr),
+                          HYSAR_OK)
+                    << hysar_last_error();
+                ASSERT_EQ(hysar_reproject_layer(&e, &d, &moved, 0, 0, got, HYSAR_FILTER_NEAREST,
+                                                told.data(), told.size(), nullptr),
+                          HYSAR_OK);
+                EXPECT_EQ(from_layer, told);
+                ASSERT_EQ(hysar_reproject_layer(&e, &d, &moved, 0, 0, 0, HYSAR_FILTER_NEAREST,
+                                                told.data(), told.size(), nullptr),
+                          HYSAR_OK);
+                EXPECT_NE(from_layer, told) << "5 cm moves the plane's points, not a rotation's";
+            } else {
+                EXPECT_EQ(got, 0.0) << "not asked for";
+            }
+            hysar_event_release(&e);
+        }
+    }
+    EXPECT_EQ(hysar_client_register_display_opts(c.get(), &d, 6), HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("options 6"), std::string::npos);
+}
+
 // Late reprojection against the server's own renderer: a layer rendered at pose A and warped to
 // pose B (B is A turned by 2 degrees about the vertical, the eye fixed: IPD 0) lands within
 // half a pixel (highlight centroid) of the layer the server renders at B.
@@ -517,12 +580,14 @@ public:
     struct Options {
         bool refuses_display_time = true;  // Pose payloads over 64 bytes: error 4, close
         bool refuses_lossy = true;         // RegisterDisplay encoding 3: error 5, close
+        bool refuses_options = true;       // RegisterDisplay.options (its 8 bytes): error 5
     };
     struct Log {
         int connections = 0;
         int refused_poses = 0, refused_displays = 0;
-        std::vector<uint32_t> pose_bytes;    // every Pose's payload length, refused ones too
-        std::vector<int> display_encodings;  // every RegisterDisplay's encoding, refused too
+        std::vector<uint32_t> pose_bytes;     // every Pose's payload length, refused ones too
+        std::vector<int> display_encodings;   // every RegisterDisplay's encoding, refused too
+        std::vector<uint32_t> display_bytes;  // every RegisterDisplay's payload length
         int layers_sent = 0;
     };
 
@@ -642,6 +707,15 @@ private:
             if (type == uint16_t(proto::MessageType::kPose)) {
                 std::lock_guard lock(mutex_);
                 log_.pose_bytes.push_back(payload_bytes);
+            }
+            if (type == uint16_t(proto::MessageType::kRegisterDisplay)) {
+                std::lock_guard lock(mutex_);
+                log_.display_bytes.push_back(payload_bytes);
+                if (o_.refuses_options && payload_bytes > 51) {
+                    ++log_.refused_displays;
+                    return refuse(fd, proto::ErrorCode::kMalformed,
+                                  "RegisterDisplay: 8 trailing byte(s) after the last field");
+                }
             }
             if (o_.refuses_display_time && type == uint16_t(proto::MessageType::kPose) &&
                 payload_bytes > 64) {
@@ -844,6 +918,36 @@ TEST(ClientLibOldServer, LossyTilesFallBackToSparseTilesAfterMalformed) {
     EXPECT_EQ(log.display_encodings[0], 3);
     EXPECT_EQ(log.display_encodings[1], 2);
     EXPECT_EQ(seen[HYSAR_EVENT_SERVER_ERROR], 1);
+}
+
+// An older server answers a RegisterDisplay with options (8 bytes it does not know) with error 5
+// and closes: the library registers again without them and receives layers, with no warp depth.
+TEST(ClientLibOldServer, DisplayOptionsFallBackToNoneAfterMalformed) {
+    OldServer server({false, false, true});
+    const std::string address = server.address();
+    const hysar_client_config cfg = old_server_config(address);
+    hysar_client* raw = nullptr;
+    ASSERT_EQ(hysar_client_connect(&cfg, &raw), HYSAR_OK) << hysar_last_error();
+    Client c(raw);
+    const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
+    ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK)
+        << hysar_last_error();
+    const hysar_pose p = old_server_pose();
+    uint64_t stamp = 0;
+    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK) << hysar_last_error();
+    std::map<uint32_t, int> seen;
+    hysar_event e{};
+    ASSERT_TRUE(layer_from(c.get(), seen, &e)) << "no layer after the refusal";
+    EXPECT_EQ(hysar_event_warp_depth_m(&e), 0.0);
+    EXPECT_EQ(e.image.pixels[(size_t(24) * d.eye_width + 32) * 4], 200) << "the lit square";
+    hysar_event_release(&e);
+    EXPECT_EQ(seen[1000 + 5], 1) << "error 5, malformed";
+    const OldServer::Log log = server.log();
+    EXPECT_EQ(log.refused_displays, 1);
+    EXPECT_EQ(log.connections, 2);
+    EXPECT_EQ(log.display_bytes, (std::vector<uint32_t>{59, 51}));
+    ASSERT_EQ(log.display_encodings.size(), 1u) << "the refused one was not decoded";
+    EXPECT_EQ(log.display_encodings[0], 2) << "sparse tiles kept";
 }
 
 }  // namespace

@@ -743,5 +743,58 @@ TEST(WireTime, VdLayerCarriesTheDisplayTimeAfterItsData) {
     }
 }
 
+// Two optional tails: each is written up to the last one that is not 0, a 0 before it
+// included, so that every pair of values has exactly one encoding; the last tail present is
+// never 0.
+TEST(WireTime, VdLayerWarpDepthFollowsTheDisplayTime) {
+    namespace proto = hs::protocol;
+    struct Case {
+        uint64_t display, depth;
+        size_t tail_bytes;
+    };
+    for (const Case& c :
+         {Case{0, 0, 0}, Case{77, 0, 8}, Case{0, 812345, 16}, Case{77, 812345, 16}}) {
+        proto::VdLayer l;
+        l.width = 2, l.height = 1, l.display_time_ns = c.display, l.warp_depth_um = c.depth;
+        l.data = {1, 2, 3, 4, 5, 6, 7, 8};
+        auto bytes = std::get<std::vector<uint8_t>>(proto::encode(l, proto::Side::kServer, 5));
+        proto::VdLayer none = l;
+        none.display_time_ns = none.warp_depth_um = 0;
+        const auto old =
+            std::get<std::vector<uint8_t>>(proto::encode(none, proto::Side::kServer, 5));
+        ASSERT_EQ(bytes.size(), old.size() + c.tail_bytes) << c.display << " " << c.depth;
+        auto back = proto::decode_frame(bytes, proto::Side::kServer);
+        ASSERT_TRUE(std::holds_alternative<proto::Message>(back))
+            << std::get<proto::DecodeError>(back).message;
+        const auto& m = std::get<proto::VdLayer>(std::get<proto::Message>(back));
+        EXPECT_EQ(m.display_time_ns, c.display);
+        EXPECT_EQ(m.warp_depth_um, c.depth);
+        if (c.depth != 0) {
+            // The depth present but 0 is malformed: without it the layer has its shorter form.
+            std::fill(bytes.end() - 8, bytes.end(), uint8_t(0));
+            auto zero = proto::decode_frame(bytes, proto::Side::kServer);
+            ASSERT_TRUE(std::holds_alternative<proto::DecodeError>(zero));
+            EXPECT_NE(
+                std::get<proto::DecodeError>(zero).message.find("warp_depth_um is present but 0"),
+                std::string::npos)
+                << std::get<proto::DecodeError>(zero).message;
+        }
+    }
+}
+
+TEST(WireTime, RegisterDisplayOptionsAreAnOptionalTail) {
+    namespace proto = hs::protocol;
+    proto::RegisterDisplay d{64, 48, 60, 60, 31.5, 23.5, 0.063};
+    auto old_bytes = std::get<std::vector<uint8_t>>(proto::encode(d, proto::Side::kClient, 1));
+    EXPECT_EQ(old_bytes.size(), proto::kHeaderBytes + 51) << "a RegisterDisplay as before";
+    d.options = proto::kOptionWarpDepth;
+    auto new_bytes = std::get<std::vector<uint8_t>>(proto::encode(d, proto::Side::kClient, 1));
+    ASSERT_EQ(new_bytes.size(), proto::kHeaderBytes + 59);
+    auto back = proto::decode_frame(new_bytes, proto::Side::kClient);
+    ASSERT_TRUE(std::holds_alternative<proto::Message>(back));
+    EXPECT_EQ(std::get<proto::RegisterDisplay>(std::get<proto::Message>(back)).options,
+              proto::kOptionWarpDepth);
+}
+
 }  // namespace
 }  // namespace hs::motion
