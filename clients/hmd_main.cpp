@@ -68,7 +68,8 @@ static const std::string kUsage =
         "                   nothing than a highlight in the wrong place\n"
         "  --reproject      with --window: warp each layer from the pose it was rendered for to\n"
         "                   the newest pose sent before showing it (libhysar-client's late\n"
-        "                   reprojection, rotation only)\n"
+        "                   reprojection: rotation, and the head's translation for the plane\n"
+        "                   through the prop that the server sends with each layer)\n"
         "  --overscan-deg D with --reproject: the server renders each layer D degrees wider on\n"
         "                   every side than the display (0..30, default 5; 0: none), so that a\n"
         "                   head turn shows what it brings into view instead of a cut edge\n"
@@ -251,8 +252,8 @@ private:
                 // clears stale ones, so no stale limit here), overscan cut off.
                 warped_.resize(row * h);
                 if (hysar_reproject_layer_to(&e, &rendered_, &shown_c_, &newest_, hysar_now_ns(), 0,
-                                             0, HYSAR_FILTER_NEAREST, warped_.data(),
-                                             warped_.size(), nullptr) == HYSAR_OK) {
+                                             HYSAR_PLANE_DEPTH_FROM_LAYER, HYSAR_FILTER_NEAREST,
+                                             warped_.data(), warped_.size(), nullptr) == HYSAR_OK) {
                     pixels = warped_.data(), shown = true;
                     ++reprojected_;
                 } else {
@@ -644,7 +645,9 @@ int hmd_main(int argc, char** argv) {
         }
         d = wide;
     }
-    if (hysar_client_register_display(client, &d) != HYSAR_OK) {
+    // A reprojecting headset asks for each layer's warp depth (the plane through the prop).
+    const uint32_t options = args.has("--reproject") ? HYSAR_OPTION_WARP_DEPTH : 0;
+    if (hysar_client_register_display_opts(client, &d, options) != HYSAR_OK) {
         std::fprintf(stderr, "hysar-hmd: %s\n", hysar_last_error());
         return 1;
     }

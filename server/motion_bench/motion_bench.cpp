@@ -129,6 +129,7 @@ struct Pair {
     proto::Pose pose;
     std::vector<uint8_t> eye[2];
     std::vector<uint32_t> lit_first[2], lit_last[2];  // where each eye may be lit (its tiles)
+    double warp_depth_m[2] = {0, 0};  // the server's, each eye's (RegisterDisplay.options)
     bool have[2] = {false, false};
 };
 
@@ -173,6 +174,8 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
         served.cx = wide->k.cx, served.cy = wide->k.cy;
         served_k = wide->k;
     }
+    if (reproject)
+        served.options = proto::kOptionWarpDepth;  // the plane the warp moves, from the server
     HS_ASSIGN_OR_RETURN(auto session, open(server, served, "motion-" + trace + "-" + mode));
     const uint32_t sw = served.eye_width, sh = served.eye_height;
     motion::Predictor predictor;
@@ -246,6 +249,7 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
             p.eye[ev.eye & 1] = std::move(ev.pixels);
             p.lit_first[ev.eye & 1] = std::move(ev.lit_first);
             p.lit_last[ev.eye & 1] = std::move(ev.lit_last);
+            p.warp_depth_m[ev.eye & 1] = ev.warp_depth_m;
             p.have[ev.eye & 1] = true;
             if (p.have[0] && p.have[1]) {
                 if (!shown || p.frame_id > shown->frame_id)
@@ -270,14 +274,10 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
                     const auto from = motion::eye_pose(rendered_at, rendered, display.ipd_m, e);
                     const auto to = motion::eye_pose(target.position_m, target.orientation_wxyz,
                                                      display.ipd_m, e);
-                    // The plane through the prop's centre (the viewing plan's target), as the
-                    // installation tells its clients (moved by --plane-nearer-m).
-                    const motion::Vec3 fwd = motion::rotate(rendered, {0, 0, -1});
-                    const double depth =
-                        std::max(0.05, (sc.viewing.target.x - from.position_m[0]) * fwd[0] +
-                                           (sc.viewing.target.y - from.position_m[1]) * fwd[1] +
-                                           (sc.viewing.target.z - from.position_m[2]) * fwd[2] -
-                                           o.plane_nearer_m);
+                    // The plane through the prop's centre that the server sent with the
+                    // layer (moved by --plane-nearer-m); none: rotation only.
+                    const double sent = shown->warp_depth_m[e];
+                    const double depth = sent > 0 ? std::max(0.05, sent - o.plane_nearer_m) : 0;
                     motion::LitRows lit;
                     if (shown->lit_first[e].size() == sh && shown->lit_last[e].size() == sh)
                         lit = {shown->lit_first[e].data(), shown->lit_last[e].data()};
@@ -458,7 +458,7 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     say(
         fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
                     "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row, "
-                    "overscan {} deg with reprojection, its plane {} m nearer than the target",
+                    "overscan {} deg with reprojection, its plane {} m nearer than the server's",
                     profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
                     full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds,
                     o.overscan_deg, o.plane_nearer_m));

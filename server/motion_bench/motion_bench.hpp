@@ -33,7 +33,8 @@ struct MotionBenchOptions {
     double overscan_deg = 5;    // reproject and both: the layer rendered this much wider on
                                 // every side (degrees) than the display it is warped onto; 0: none
     double plane_nearer_m = 0;  // reproject and both: the warp's plane this much nearer the
-                                // eye than the viewing plan's target (metres; < 0: farther)
+                                // eye than the one the server sends (the prop's centre;
+                                // metres; < 0: farther)
     int reference_frames = 60;  // displayed frames compared with a fresh render, per row
     std::string profile;        // the scene's viewer profile; empty: the scene's first
     std::string json_path;      // --json FILE; empty: none

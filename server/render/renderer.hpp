@@ -231,7 +231,7 @@ public:
     // level's seams, or where clusters' triangles meet) does not change it.
     bool uses_depth() const { return !convex_; }
     // The centre of the prop's bounding box (metres, world): the plane a late warp moves a
-    // layer by goes through it (docs/OPTICS.md, "Registration").
+    // layer by goes through it (PROTOCOL.md, "Time").
     const glm::dvec3& prop_centre() const { return prop_centre_; }
 
     uint64_t projector_render_count() const { return projector_renders_; }
