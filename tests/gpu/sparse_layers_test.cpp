@@ -187,6 +187,44 @@ TEST_F(SparseLayers, SparseEqualsFullOnTheHardCases) {
     EXPECT_GT(culled_somewhere, cases.size()) << "no case culled a cluster";
 }
 
+// Each plan says the depth of the plane a client's late warp moves the layer by: the prop's
+// bounding-box centre along the eye's view axis (PROTOCOL.md, "Time"), for the dome and for a
+// mesh prop alike, and 0 when the centre lies behind the eye.
+TEST_F(SparseLayers, PlanCarriesTheWarpDepthOfThePropsCentre) {
+    const auto k = small_eye(2);
+    for (const scene::Scene& s : {scene::default_scene(), two_domes()}) {
+        auto r = make_renderer(s);
+        ASSERT_TRUE(r);
+        scene::Mesh m = s.prop.kind == scene::Prop::Kind::kGltf
+                            ? *s.prop.gltf_mesh
+                            : scene::tessellate_hemisphere(s.prop.hemisphere);
+        glm::dvec3 lo(1e9), hi(-1e9);
+        for (const glm::vec3& p : m.positions) {
+            lo = glm::min(lo, glm::dvec3(p));
+            hi = glm::max(hi, glm::dvec3(p));
+        }
+        const glm::dvec3 centre = 0.5 * (lo + hi);
+        EXPECT_LT(glm::length(r->prop_centre() - centre), 1e-6);
+        for (double angle : {-60.0, 0.0, 90.0}) {
+            const auto head = scene::viewing_pose(s.viewing, angle, 1.10).value();
+            scene::Pose eye = scene::eye_poses(head, 0.063)[0];
+            const double want =
+                glm::dot(centre - eye.position, eye.orientation * glm::dvec3(0, 0, -1));
+            const Pair p =
+                render_both(*r, s.material.specular, eye, render::LayerEncoding::kSrgb8, k);
+            EXPECT_GT(want, 0.5);
+            EXPECT_NEAR(p.sparse_plan.warp_depth_m, want, 1e-9) << angle;
+            EXPECT_EQ(p.full_plan.warp_depth_m, p.sparse_plan.warp_depth_m);
+            // Turned round, the prop behind: no plane (the client warps by rotation only).
+            eye.orientation =
+                eye.orientation * glm::angleAxis(glm::pi<double>(), glm::dvec3(0, 1, 0));
+            const Pair back =
+                render_both(*r, s.material.specular, eye, render::LayerEncoding::kSrgb8, k);
+            EXPECT_EQ(back.sparse_plan.warp_depth_m, 0.0) << angle;
+        }
+    }
+}
+
 // The dome's passes have no depth test (it is convex and each fragment shades its own ray's
 // hit), so the server makes its layer targets without a depth buffer: the layer is the same in
 // either target. A prop that is not convex needs the depth test, and a target without a depth
