@@ -168,9 +168,17 @@ public:
             case HYSAR_EVENT_NONE:
                 return Saw::kNothing;
             case HYSAR_EVENT_LAYER:
+                layer_since_connected_ = true;
                 layer(e);
                 return Saw::kLayer;
             case HYSAR_EVENT_SERVER_ERROR:
+                // A server older than the display asked for (lossy tiles, the warp depth)
+                // refuses it as malformed before any layer: libhysar-client registers again
+                // without it after the reconnect, so the run goes on.
+                if (e.error_code == 5 && !layer_since_connected_) {
+                    std::fprintf(stderr, "hysar-hmd: %s (registering again without it)\n", e.text);
+                    return Saw::kOther;
+                }
                 ++errors_;
                 std::fprintf(stderr, "hysar-hmd: server error: %s\n", e.text);
                 return Saw::kServerError;
@@ -182,6 +190,7 @@ public:
                 break;
             case HYSAR_EVENT_CONNECTED:
                 reconnects_ = e.reconnects;
+                layer_since_connected_ = false;
                 break;
         }
         report_connection("hysar-hmd", e);
@@ -321,8 +330,9 @@ private:
     bool last_answered_ = true;
     uint32_t last_eye_ = 0, reconnects_ = 0;
     uint64_t layers_ = 0, errors_ = 0, clears_ = 0;
-    bool warp_failed_ = false;  // a reprojection failed (said once)
-    uint64_t reprojected_ = 0;  // layers shown warped
+    bool warp_failed_ = false;            // a reprojection failed (said once)
+    uint64_t reprojected_ = 0;            // layers shown warped
+    bool layer_since_connected_ = false;  // a layer came in this session
     std::vector<double> latency_ms_;
 };
 

@@ -26,7 +26,8 @@ struct Uint {  // V on the wire; a value above `max` is malformed
     V M::*member;
     const char* name;
     V max;
-    // Only a message's last field: omitted when 0, and 0 when the payload ends before it.
+    // An optional tail, only among a message's last fields (tails_last): written up to the last
+    // tail that is not 0, and 0 when the payload ends before it.
     bool tail = false;
 };
 template <typename M>
@@ -184,8 +185,38 @@ constexpr bool consistent() {
     return strings && min_payload<M>() <= Info<M>::max_payload &&
            (!max || *max <= Info<M>::max_payload);
 }
-#define HS_MESSAGE(Name, ...) \
-    static_assert(consistent<Name>(), #Name "'s fields do not fit its payload limit");
+// Nothing with bytes on the wire follows a message's first tail: the decoder takes a payload
+// that ends early as the tails left out.
+template <typename F>
+constexpr bool is_tail_field(const F&) {
+    return false;
+}
+template <typename M, typename V>
+constexpr bool is_tail_field(const Uint<M, V>& f) {
+    return f.tail;
+}
+template <typename F>
+constexpr bool on_the_wire(const F&) {
+    return true;
+}
+constexpr bool on_the_wire(const ImageRule&) {
+    return false;
+}
+template <typename M>
+constexpr bool tails_last() {
+    return std::apply(
+        [](const auto&... f) {
+            bool seen = false, ok = true;
+            ((ok = ok && (!seen || is_tail_field(f) || !on_the_wire(f)),
+              seen = seen || is_tail_field(f)),
+             ...);
+            return ok;
+        },
+        Info<M>::fields);
+}
+#define HS_MESSAGE(Name, ...)                                                          \
+    static_assert(consistent<Name>(), #Name "'s fields do not fit its payload limit"); \
+    static_assert(tails_last<Name>(), #Name ": a field follows an optional tail");
 #include "protocol/messages.def"
 #undef HS_MESSAGE
 

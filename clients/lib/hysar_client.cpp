@@ -571,7 +571,8 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
         std::lock_guard live_lock(live_events_mutex());
         if (live_events().count(layer->internal_)) {
             const auto* held = static_cast<const SessionEvent*>(layer->internal_);
-            if (plane_depth_m == HYSAR_PLANE_DEPTH_FROM_LAYER)
+            if (plane_depth_m == HYSAR_PLANE_DEPTH_FROM_LAYER && held->eye == layer->eye &&
+                held->frame_id == layer->frame_id)
                 plane_depth_m = held->warp_depth_m;
             if (held->pixels.data() == im.pixels && held->width == im.width &&
                 held->height == im.height && held->lit_first.size() == im.height &&

@@ -49,7 +49,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     // The eye looks along its -z (PROTOCOL.md, §Conventions.Pose).
     const glm::dvec3 forward = r.eye.orientation * glm::dvec3(0, 0, -1);
     const double depth = glm::dot(prop_centre_ - r.eye.position, forward);
-    plan.warp_depth_m = std::isfinite(depth) && depth > 0 ? depth : 0;
+    plan.warp_depth_m = std::isfinite(depth) && depth >= kMinWarpDepthM ? depth : 0;
     if (!has_vd_term(r.spec) && !fill_) {
         plan.skipped_because = vd_skip_reason(r.spec);
         return;

@@ -137,6 +137,9 @@ public:
     };
     // What was recorded for one layer. Outside `rect` the layer is black (nothing was drawn or
     // read back there); an empty rect: no GPU work at all, the layer is black.
+    // The nearest warp plane a plan gives (metres): a prop centre nearer the eye than this (the
+    // eye inside the prop) would blow a translation up.
+    static constexpr double kMinWarpDepthM = 0.05;
     struct LayerPlan {
         PixelRect rect;
         std::string skipped_because;  // when rect is empty
@@ -152,7 +155,7 @@ public:
         uint32_t lights_skipped = 0;
         // The depth along the eye's view axis (metres) of the plane a client's late warp moves
         // the layer by: through the prop's centre (prop_centre()). 0 when that lies behind the
-        // eye (rotation only). PROTOCOL.md, "Time".
+        // eye or nearer than kMinWarpDepthM (rotation only). PROTOCOL.md, "Time".
         double warp_depth_m = 0;
     };
     // A rendered layer's readback as the wire's pixel bytes over the whole image: the plan's

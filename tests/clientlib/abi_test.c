@@ -117,8 +117,26 @@ int main(int argc, char** argv) {
               HYSAR_E_INVALID_ARGUMENT);
         CHECK(hysar_client_register_display_opts(NULL, &display, 2) == HYSAR_E_INVALID_ARGUMENT);
         CHECK(strstr(hysar_last_error(), "HYSAR_OPTION_WARP_DEPTH") != NULL);
-        CHECK(hysar_reproject_layer(NULL, &display, &pose0, 0, 0, HYSAR_PLANE_DEPTH_FROM_LAYER, 0,
-                                    NULL, 0, NULL) == HYSAR_E_INVALID_ARGUMENT);
+        /* A layer the library did not deliver has no depth of its own: rotation only. */
+        uint8_t px[4 * 4 * 4], out[4 * 4 * 4];
+        memset(px, 0, sizeof px);
+        hysar_event own;
+        memset(&own, 0, sizeof own);
+        own.kind = HYSAR_EVENT_LAYER;
+        own.pose = pose0;
+        own.image.width = own.image.height = 4;
+        own.image.format = HYSAR_FORMAT_RGBA8;
+        own.image.bytes_per_pixel = 4;
+        own.image.size_bytes = sizeof px;
+        own.image.pixels = px;
+        CHECK(hysar_event_warp_depth_m(&own) == 0);
+        hysar_display small = display;
+        small.eye_width = small.eye_height = 4;
+        CHECK(hysar_reproject_layer(&own, &small, &pose0, 0, 0, HYSAR_PLANE_DEPTH_FROM_LAYER, 0,
+                                    out, sizeof out, NULL) == HYSAR_OK);
+        CHECK(hysar_reproject_layer(&own, &small, &pose0, 0, 0, -2.0, 0, out, sizeof out, NULL) ==
+              HYSAR_E_INVALID_ARGUMENT);
+        CHECK(strstr(hysar_last_error(), "plane_depth_m") != NULL);
     }
     CHECK(hysar_display_from_profile("/nonexistent/profile.json", 1, &display) ==
           HYSAR_E_INVALID_ARGUMENT);

@@ -487,6 +487,22 @@ TEST_F(ClientLib, LayersCarryTheWarpDepthWhenAsked) {
             hysar_event_release(&e);
         }
     }
+    // Asked for, with the prop behind the eyes: no plane (the client warps by rotation only).
+    ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK);
+    hysar_pose away = pose(0);
+    const double* q = away.orientation_wxyz;  // turned 180 degrees about the vertical
+    const double turned[4] = {-q[2], -q[3], q[0], q[1]};
+    std::copy(turned, turned + 4, away.orientation_wxyz);
+    uint64_t stamp = 0;
+    ASSERT_EQ(hysar_client_send_pose(c.get(), &away, &stamp), HYSAR_OK) << hysar_last_error();
+    ASSERT_EQ(hysar_client_request_frame(c.get()), HYSAR_OK);
+    for (int k = 0; k < 2; ++k) {
+        e = wait_for(c.get(), HYSAR_EVENT_LAYER);
+        ASSERT_EQ(e.kind, uint32_t(HYSAR_EVENT_LAYER));
+        EXPECT_EQ(e.pose.time_ns, stamp);
+        EXPECT_EQ(hysar_event_warp_depth_m(&e), 0.0) << "the prop is behind the eye";
+        hysar_event_release(&e);
+    }
     EXPECT_EQ(hysar_client_register_display_opts(c.get(), &d, 6), HYSAR_E_INVALID_ARGUMENT);
     EXPECT_NE(std::string(hysar_last_error()).find("options 6"), std::string::npos);
 }

@@ -696,6 +696,14 @@ TEST(Predictor, CApi) {
 
 // ---- The wire: the optional display time -------------------------------------------------
 
+// A frame with its last `bytes` payload bytes taken off, its header saying so.
+std::vector<uint8_t> cut_payload(std::vector<uint8_t> frame, size_t bytes) {
+    frame.resize(frame.size() - bytes);
+    const auto payload = uint32_t(frame.size() - hs::protocol::kHeaderBytes);
+    std::memcpy(frame.data() + 8, &payload, 4);
+    return frame;
+}
+
 TEST(WireTime, PoseWithoutDisplayTimeIsTheOldPose) {
     namespace proto = hs::protocol;
     proto::Pose p{42, {0.1, 1.6, 0.3}, {1, 0, 0, 0}};
@@ -794,6 +802,34 @@ TEST(WireTime, RegisterDisplayOptionsAreAnOptionalTail) {
     ASSERT_TRUE(std::holds_alternative<proto::Message>(back));
     EXPECT_EQ(std::get<proto::RegisterDisplay>(std::get<proto::Message>(back)).options,
               proto::kOptionWarpDepth);
+    // Present but 0, and cut inside: malformed.
+    auto zero = new_bytes;
+    std::fill(zero.end() - 8, zero.end(), uint8_t(0));
+    EXPECT_TRUE(std::holds_alternative<proto::DecodeError>(
+        proto::decode_frame(zero, proto::Side::kClient)));
+    EXPECT_TRUE(std::holds_alternative<proto::DecodeError>(
+        proto::decode_frame(cut_payload(new_bytes, 4), proto::Side::kClient)));
+}
+
+// A layer with both tails, cut: inside a tail it is malformed; at the boundary between them it
+// is the layer with the display time alone.
+TEST(WireTime, VdLayerCutInsideATailIsMalformed) {
+    namespace proto = hs::protocol;
+    proto::VdLayer l;
+    l.width = 2, l.height = 1, l.display_time_ns = 77, l.warp_depth_um = 812345;
+    l.data = {1, 2, 3, 4, 5, 6, 7, 8};
+    const auto bytes = std::get<std::vector<uint8_t>>(proto::encode(l, proto::Side::kServer, 5));
+    for (size_t cut : {size_t(4), size_t(12)}) {
+        auto r = proto::decode_frame(cut_payload(bytes, cut), proto::Side::kServer);
+        ASSERT_TRUE(std::holds_alternative<proto::DecodeError>(r)) << cut;
+        EXPECT_NE(std::get<proto::DecodeError>(r).message.find("trailing byte"), std::string::npos)
+            << std::get<proto::DecodeError>(r).message;
+    }
+    auto r = proto::decode_frame(cut_payload(bytes, 8), proto::Side::kServer);
+    ASSERT_TRUE(std::holds_alternative<proto::Message>(r));
+    const auto& m = std::get<proto::VdLayer>(std::get<proto::Message>(r));
+    EXPECT_EQ(m.display_time_ns, 77u);
+    EXPECT_EQ(m.warp_depth_um, 0u);
 }
 
 }  // namespace
