@@ -87,6 +87,15 @@ protected:
         EXPECT_EQ(hysar_client_connect(&c, &raw), HYSAR_OK) << hysar_last_error();
         return Client(raw);
     }
+    // A client whose first session is up (its CONNECTED event taken).
+    Client connected() {
+        Client c = connect(config());
+        if (c) {
+            hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
+            hysar_event_release(&e);
+        }
+        return c;
+    }
     // Sparse tiles, so that the layers go through the library's decoder.
     static hysar_display display(uint32_t mode) {
         auto d = small_display(proto::PixelFormat::kRgba8, proto::FrameMode(mode));
@@ -166,10 +175,9 @@ TEST_F(ClientLib, LayersCarryThePoseTheyAnswer) {
 }
 
 TEST_F(ClientLib, ReconnectsAndSendsDisplayPoseAndRequestAgain) {
-    auto c = connect(config());
+    auto c = connected();
     ASSERT_TRUE(c);
-    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
-    hysar_event_release(&e);
+    hysar_event e{};
     const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
     ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
     const hysar_pose p = pose(-20);
@@ -380,10 +388,8 @@ TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
 // share one steady clock in this process, so the true offset is 0: within 1 ms on loopback) and
 // the pose-to-layer time.
 TEST_F(ClientLib, ClockOffsetWithinAMillisecondOnLoopback) {
-    auto c = connect(config());
+    auto c = connected();
     ASSERT_TRUE(c);
-    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
-    hysar_event_release(&e);
     hysar_clock clock{};
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (std::chrono::steady_clock::now() < until) {
@@ -402,10 +408,9 @@ TEST_F(ClientLib, ClockOffsetWithinAMillisecondOnLoopback) {
 // A pose sent with a display time gets layers that echo it; one sent without (as every older
 // client does) gets layers without it, as before.
 TEST_F(ClientLib, LayersEchoTheDisplayTimeAndOldPosesAreServedAsBefore) {
-    auto c = connect(config());
+    auto c = connected();
     ASSERT_TRUE(c);
-    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
-    hysar_event_release(&e);
+    hysar_event e{};
     const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
     ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK);
     const uint64_t display_at = hysar_now_ns() + 40000000;
@@ -433,10 +438,9 @@ TEST_F(ClientLib, LayersEchoTheDisplayTimeAndOldPosesAreServedAsBefore) {
 // registered without it gets none; and a warp told HYSAR_PLANE_DEPTH_FROM_LAYER is the warp at
 // that depth, byte for byte.
 TEST_F(ClientLib, LayersCarryTheWarpDepthWhenAsked) {
-    auto c = connect(config());
+    auto c = connected();
     ASSERT_TRUE(c);
-    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
-    hysar_event_release(&e);
+    hysar_event e{};
     const hysar_display d = display(HYSAR_MODE_ON_REQUEST);
     const scene::Scene sc = test_scene();
     const auto& dome = sc.prop.hemisphere;
@@ -511,10 +515,8 @@ TEST_F(ClientLib, LayersCarryTheWarpDepthWhenAsked) {
 // pose B (B is A turned by 2 degrees about the vertical, the eye fixed: IPD 0) lands within
 // half a pixel (highlight centroid) of the layer the server renders at B.
 TEST_F(ClientLib, ReprojectionOfAPureRotationMatchesAFreshRender) {
-    auto c = connect(config());
+    auto c = connected();
     ASSERT_TRUE(c);
-    hysar_event e = wait_for(c.get(), HYSAR_EVENT_CONNECTED);
-    hysar_event_release(&e);
     const scene::Scene sc = scene::default_scene();
     const auto& v = sc.viewers.front();
     const auto k =
