@@ -56,11 +56,15 @@ struct FieldSpan {
     bool is_string = false;
     size_t max_bytes = 0;                  // a string's limit
     std::vector<uint64_t> refused_values;  // values the field refuses, written in `size` bytes
+    bool tail = false;                     // an optional tail (messages.def), and its value
+    uint64_t value = 0;
 };
 
 template <typename M, typename V>
-void describe(const M&, const schema::Uint<M, V>& f, FieldSpan& s) {
+void describe(const M& m, const schema::Uint<M, V>& f, FieldSpan& s) {
     s.size = sizeof(V);
+    s.tail = f.tail;
+    s.value = uint64_t(m.*f.member);
     if (f.max < std::numeric_limits<V>::max())
         s.refused_values = {uint64_t(f.max) + 1, std::numeric_limits<V>::max()};
 }
@@ -114,6 +118,16 @@ std::vector<FieldSpan> layout(const M& m) {
         }
     };
     std::apply([&](const auto&... f) { (add(f), ...); }, schema::Info<M>::fields);
+    return out;
+}
+
+// The payload lengths at which a cut leaves a valid message: at an optional tail whose field
+// before it is not a tail, or a tail that is not 0 (the tails left out read as 0).
+inline std::set<size_t> valid_cuts(const std::vector<FieldSpan>& fields) {
+    std::set<size_t> out;
+    for (size_t i = 0; i < fields.size(); ++i)
+        if (fields[i].tail && (i == 0 || !fields[i - 1].tail || fields[i - 1].value != 0))
+            out.insert(fields[i].offset);
     return out;
 }
 
@@ -197,6 +211,7 @@ inline std::vector<Message> samples() {
     layer.width = 2;
     layer.height = 1;
     layer.data = {1, 2, 3, 255, 5, 6, 7, 255};
+    layer.warp_depth_um = 812345;  // both optional tails on the wire, the display time as 0
     ProjectorFrame pf;
     pf.scene_version = 4;
     pf.width = 1;
@@ -206,8 +221,8 @@ inline std::vector<Message> samples() {
     return {Hello{Role::kHmd, "secret-token", "corpus-client"},
             Welcome{5, 123456789, 3},
             RegisterDisplay{1268, 720, 2366.0, 2409.6, 633.5, 359.5, 0.063, PixelFormat::kRgba8,
-                            Encoding::kSparseTiles, FrameMode::kContinuous},
-            Pose{42, {0.1, 1.6, 0.3}, {1, 0, 0, 0}},
+                            Encoding::kSparseTiles, FrameMode::kContinuous, kOptionWarpDepth},
+            Pose{42, {0.1, 1.6, 0.3}, {1, 0, 0, 0}, 99},
             FrameRequest{},
             layer,
             pf,
@@ -259,8 +274,9 @@ inline std::vector<CorpusFrame> malformed_frames(Side sender = Side::kClient) {
                 cuts.insert(f.offset + f.prefix);
             cuts.insert(f.offset + f.size - 1);
         }
+        const std::set<size_t> valid_cuts = detail::valid_cuts(fields);
         for (size_t cut : cuts) {
-            if (cut >= n)
+            if (cut >= n || valid_cuts.count(cut))
                 continue;
             std::string where;
             for (const auto& f : fields)
