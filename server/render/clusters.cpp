@@ -92,12 +92,8 @@ Cluster triangle_bounds(const scene::Mesh& mesh, uint32_t first_index) {
 ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster, uint32_t per_group) {
     ClusteredMesh out;
     const size_t tris = mesh.indices.size() / 3;
-    glm::dvec3 lo(1e300), hi(-1e300);
-    for (const auto& p : mesh.positions) {
-        lo = glm::min(lo, glm::dvec3(p));
-        hi = glm::max(hi, glm::dvec3(p));
-    }
-    const glm::dvec3 extent = glm::max(hi - lo, glm::dvec3(1e-12));
+    const scene::Box box = scene::bounds(mesh.positions);
+    const glm::dvec3 lo = box.lo, extent = glm::max(box.hi - box.lo, glm::dvec3(1e-12));
     std::vector<uint32_t> code(tris);
     for (size_t t = 0; t < tris; ++t) {
         glm::dvec3 c(0.0);

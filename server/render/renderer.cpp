@@ -117,14 +117,8 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         ++info.ledger->versions_built;
     }
     r->convex_ = scene.prop.kind == scene::Prop::Kind::kHemisphere;
-    if (!finest.positions.empty()) {
-        glm::dvec3 lo(finest.positions.front()), hi = lo;
-        for (const glm::vec3& p : finest.positions) {
-            lo = glm::min(lo, glm::dvec3(p));
-            hi = glm::max(hi, glm::dvec3(p));
-        }
-        r->prop_centre_ = 0.5 * (lo + hi);
-    }
+    if (const scene::Box box = scene::bounds(finest.positions); !box.empty())
+        r->prop_centre_ = box.centre();
     r->lit_ = lit_lights(scene, &r->lights_skipped_);
     for (size_t i = 0; i < r->levels_.size(); ++i) {
         const auto& m = r->levels_[i].mesh;

@@ -205,16 +205,21 @@ PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p) {
     return out;
 }
 
+Box bounds(std::span<const glm::vec3> positions) {
+    Box b;
+    for (const glm::vec3& q : positions) {
+        b.lo = glm::min(b.lo, glm::dvec3(q));
+        b.hi = glm::max(b.hi, glm::dvec3(q));
+    }
+    return b;
+}
+
 Result<void> check_point_lights(const Scene& scene) {
     // A glTF prop's bounding box, once: a light farther than d_min from it needs no search of
     // the triangles (a large mesh would otherwise cost a pass per light at every scene load).
-    glm::dvec3 lo(std::numeric_limits<double>::infinity()), hi = -lo;
     const bool mesh = scene.prop.kind == Prop::Kind::kGltf && scene.prop.gltf_mesh;
-    if (mesh)
-        for (const glm::vec3& q : scene.prop.gltf_mesh->positions) {
-            lo = glm::min(lo, glm::dvec3(q));
-            hi = glm::max(hi, glm::dvec3(q));
-        }
+    const Box box = mesh ? bounds(scene.prop.gltf_mesh->positions) : Box{};
+    const glm::dvec3 &lo = box.lo, &hi = box.hi;
     for (size_t i = 0; i < scene.lights.size(); ++i) {
         const Light& l = scene.lights[i];
         if (l.type != LightType::kPoint)

@@ -3,6 +3,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <limits>
+#include <span>
 
 #include "core/result.hpp"
 #include "scene/scene.hpp"
@@ -55,6 +57,14 @@ PropDistance distance_to_prop(const Prop& prop, glm::dvec3 p);
 // the 1/d^2 falloff is clamped and a light on the surface lights a spot the exact model leaves
 // black (docs/SHADING.md, "Lights"). An error naming the light, its distance and the rule.
 Result<void> check_point_lights(const Scene& scene);
+
+// The axis-aligned box around `positions` (metres); lo > hi (infinite) when there are none.
+struct Box {
+    glm::dvec3 lo{std::numeric_limits<double>::infinity()}, hi{-lo};
+    bool empty() const { return !(lo.x <= hi.x); }
+    glm::dvec3 centre() const { return 0.5 * (lo + hi); }
+};
+Box bounds(std::span<const glm::vec3> positions);
 
 // Drops triangles whose area is below `min_area_m2` (and ones with out-of-range indices),
 // then computes area-weighted vertex normals where `normals` is empty or has a bad entry.

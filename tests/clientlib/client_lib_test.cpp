@@ -806,7 +806,9 @@ private:
     Log log_;
 };
 
-hysar_client_config old_server_config(const std::string& address) {
+// A headset client of `server`, reconnecting quickly (null when the first session fails).
+Client old_server_client(const OldServer& server) {
+    const std::string address = server.address();
     hysar_client_config c;
     hysar_client_config_init(&c);
     c.address = address.c_str();
@@ -815,7 +817,9 @@ hysar_client_config old_server_config(const std::string& address) {
     c.role = HYSAR_ROLE_HMD;
     c.reconnect_initial_ms = 50;
     c.reconnect_max_ms = 400;
-    return c;
+    hysar_client* raw = nullptr;
+    EXPECT_EQ(hysar_client_connect(&c, &raw), HYSAR_OK) << hysar_last_error();
+    return Client(raw);
 }
 
 hysar_display old_server_display(uint32_t encoding) {
@@ -854,11 +858,8 @@ bool layer_from(hysar_client* c, std::map<uint32_t, int>& seen, hysar_event* lay
 // library reconnects, sends its poses without display time from then on, and is served.
 TEST(ClientLibOldServer, PosesGoWithoutDisplayTimeAfterTooLarge) {
     OldServer server({true, false});
-    const std::string address = server.address();
-    const hysar_client_config cfg = old_server_config(address);
-    hysar_client* raw = nullptr;
-    ASSERT_EQ(hysar_client_connect(&cfg, &raw), HYSAR_OK) << hysar_last_error();
-    Client c(raw);
+    Client c = old_server_client(server);
+    ASSERT_TRUE(c);
     const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
     ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK) << hysar_last_error();
     const hysar_pose p = old_server_pose();
@@ -901,11 +902,8 @@ TEST(ClientLibOldServer, PosesGoWithoutDisplayTimeAfterTooLarge) {
 // the library registers again, after reconnecting, with sparse tiles and receives layers.
 TEST(ClientLibOldServer, LossyTilesFallBackToSparseTilesAfterMalformed) {
     OldServer server({false, true});
-    const std::string address = server.address();
-    const hysar_client_config cfg = old_server_config(address);
-    hysar_client* raw = nullptr;
-    ASSERT_EQ(hysar_client_connect(&cfg, &raw), HYSAR_OK) << hysar_last_error();
-    Client c(raw);
+    Client c = old_server_client(server);
+    ASSERT_TRUE(c);
     const hysar_display d = old_server_display(HYSAR_ENCODING_LOSSY);
     ASSERT_EQ(hysar_client_register_display(c.get(), &d), HYSAR_OK) << hysar_last_error();
     const hysar_pose p = old_server_pose();
@@ -942,11 +940,8 @@ TEST(ClientLibOldServer, LossyTilesFallBackToSparseTilesAfterMalformed) {
 // and closes: the library registers again without them and receives layers, with no warp depth.
 TEST(ClientLibOldServer, DisplayOptionsFallBackToNoneAfterMalformed) {
     OldServer server({false, false, true});
-    const std::string address = server.address();
-    const hysar_client_config cfg = old_server_config(address);
-    hysar_client* raw = nullptr;
-    ASSERT_EQ(hysar_client_connect(&cfg, &raw), HYSAR_OK) << hysar_last_error();
-    Client c(raw);
+    Client c = old_server_client(server);
+    ASSERT_TRUE(c);
     const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
     ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK)
         << hysar_last_error();
