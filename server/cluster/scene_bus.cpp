@@ -10,6 +10,8 @@
 #include <chrono>
 #include <cstring>
 #include <mutex>
+#include <thread>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -333,10 +335,27 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
     jsOptions_Init(&jo);
     jo.Wait = o.timeout_ms;
     s = natsConnection_JetStream(&st->js, st->nc, &jo);
-    if (s == NATS_OK) {
+    // A NATS cluster that is still forming (its servers started together with this node)
+    // answers a replicated bucket with "no suitable peers" until enough of them joined, or
+    // with a timeout while it elects a leader: waited for, up to start_wait_ms, shown once.
+    const auto forming = [](natsStatus e) {
+        const std::string why = status_text(e);
+        return e == NATS_TIMEOUT || why.find("no suitable peers") != std::string::npos ||
+               why.find("temporarily unavailable") != std::string::npos;
+    };
+    const auto until =
+        std::chrono::steady_clock::now() + std::chrono::milliseconds(o.start_wait_ms);
+    for (bool shown_wait = false; s == NATS_OK;) {
         s = js_KeyValue(&st->kv, st->js, o.bucket.c_str());
         if (s == NATS_NOT_FOUND)
             s = create_bucket(&st->kv, st->js, o);
+        if (s == NATS_OK || !forming(s) || std::chrono::steady_clock::now() >= until)
+            break;
+        if (!std::exchange(shown_wait, true))
+            log::info("scene bus: waiting up to {} s for the bus's JetStream cluster ({})",
+                      (o.start_wait_ms + 999) / 1000, status_text(s));
+        std::this_thread::sleep_for(std::chrono::milliseconds(250));
+        s = NATS_OK;
     }
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo,

@@ -52,6 +52,9 @@ public:
         // 3-server cluster: a write is confirmed once a majority stored it).
         int replicas = 1;
         int timeout_ms = 2000;  // per request to the bus
+        // At start, how long to wait for a NATS cluster that is still forming (too few servers
+        // joined yet to place the bucket's replicas, no leader yet) before giving up.
+        int start_wait_ms = 30000;
         // Authentication to NATS, at most one kind: user and password, a token, or a .creds
         // file (a user JWT and its nkey seed).
         std::string user, password, token, creds_file;

@@ -17,7 +17,7 @@ trap cleanup EXIT
 # last lines of an ASan report are its legend, not the stack).
 show_log() {  # LOG
   local at
-  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1)
+  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1 || true)
   if [[ -n "$at" ]]; then sed -n "${at},$((at + 60))p" "$1"; else tail -n 12 "$1"; fi
 }
 fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; exit 1; }
@@ -28,8 +28,8 @@ nats_ready() {  # LOG
   for _ in $(seq 100); do grep -q "Server is ready" "$1" && return 0; sleep 0.1; done
   fail "nats-server did not start ($1)"
 }
-# A render node on a free port (port_NAME, pid_NAME), started once it prints "serving".
-start_node() {  # NAME [more flags]
+# A render node on a free port (port_NAME, pid_NAME), started in the background.
+launch_node() {  # NAME [more flags]
   local name=$1 port; shift; port=$(free_port)
   eval "port_$name=$port"
   LP_NUM_THREADS=1 "$bin/hysar" serve --listen "127.0.0.1:$port" --token-file "$dir/token" \
@@ -37,9 +37,18 @@ start_node() {  # NAME [more flags]
     > "$dir/node-$name.log" 2>&1 &
   pids+=($!)
   eval "pid_$name=$!"
-  for _ in $(seq 600); do grep -q "^serving" "$dir/node-$name.log" && return 0; sleep 0.1; done
-  fail "node $name did not start"
 }
+# Waits until a launched node prints "serving"; fails at once if it exits first.
+wait_node() {  # NAME
+  local name=$1 pid; pid=$(eval echo "\$pid_$1")
+  for _ in $(seq 600); do
+    grep -q "^serving" "$dir/node-$name.log" && return 0
+    kill -0 "$pid" 2>/dev/null || fail "node $name exited before serving"
+    sleep 0.1
+  done
+  fail "node $name did not start within 60 s"
+}
+start_node() { launch_node "$@"; wait_node "$1"; }  # NAME [more flags]
 # The room file renamed "room NAME", pushed through a node as an admin.
 push() {  # NODE NAME
   sed "s/\"name\": \"HySAR experiment 1 room[^\"]*\"/\"name\": \"room $2\"/" "$src/configs/exp1-room.json" > "$dir/room-$2.json"

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # The scene bus on a three-server NATS cluster with the bucket in three replicas
 # (docs/CLUSTER.md, "Three replicas"), on loopback:
+#   0. a node started while only two of the three servers are up waits for the third (the
+#      bucket's three replicas cannot be placed before) instead of exiting;
 #   1. two render nodes given every server's URL put and share version 1, then 2;
 #   2. one nats-server killed (-9): no node stops, a SceneUpdate is still confirmed (a majority
 #      of two stores it) and reaches both nodes;
@@ -16,7 +18,8 @@ for i in 1 2 3; do
 done
 routes=$(for p in "${route_ports[@]}"; do printf 'nats-route://127.0.0.1:%s,' "$p"; done)
 routes="[${routes%,}]"
-for i in 0 1 2; do
+start_server() {  # INDEX
+  local i=$1
   cat > "$dir/n$i.conf" <<EOF
 server_name: n$i
 listen: 127.0.0.1:${client_ports[$i]}
@@ -26,16 +29,25 @@ cluster { name: hysar-bus, listen: 127.0.0.1:${route_ports[$i]}, routes: $routes
 EOF
   nats-server -c "$dir/n$i.conf" > "$dir/nats-n$i.log" 2>&1 &
   servers+=($!)
-done
+}
+start_server 0
+start_server 1
 leader() { grep -qh "JetStream cluster new metadata leader" "$dir"/nats-n*.log; }
-for _ in $(seq 300); do leader && break; sleep 0.1; done
-leader || fail "the three nats-servers elected no JetStream leader within 30 s"
+within 30 leader || fail "two nats-servers elected no JetStream leader within 30 s"
 url=$(for p in "${client_ports[@]}"; do printf 'nats://127.0.0.1:%s,' "$p"; done)
 url=${url%,}
 node_flags=(--cluster-replicas 3)
 
+# 0. Node a starts on a bus of two servers: three replicas have no place yet, so it waits.
+launch_node a
+within 60 'grep -q "waiting up to" "$dir/node-a.log"' ||
+  fail "node a did not say it waits for the bus's third server"
+kill -0 "$pid_a" || fail "node a exited on a bus still forming"
+start_server 2
+wait_node a
+echo "0. node a waited for the third nats-server and then started"
+
 # 1. Two nodes on the three servers; the bucket is made with three replicas.
-start_node a
 start_node b
 push a one > "$dir/push.log" 2>&1 || fail "push through a: $(cat "$dir/push.log")"
 within 10 'same_everywhere 2 a b' || fail "version 2 not on both nodes: a: $(applied a); b: $(applied b)"
@@ -64,7 +76,7 @@ PY
 }
 victim=$(watch_host a || true)
 [[ "$victim" =~ ^[0-2]$ ]] || fail "the servers' monitoring shows no watch consumer of node a"
-kill -KILL "${servers[$victim]}"
+{ kill -KILL "${servers[$victim]}"; wait "${servers[$victim]}"; } 2>/dev/null || true
 killed=$(date +%s%N)
 within 60 'push b two > "$dir/push.log" 2>&1' || fail "no push confirmed after a server was killed: $(cat "$dir/push.log")"
 after_ms=$(( ($(date +%s%N) - killed) / 1000000 ))

@@ -17,7 +17,7 @@ trap cleanup EXIT
 # A log's sanitizer report from its first line (its last lines are only the legend), else its end.
 show_log() {  # LOG
   local at
-  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1)
+  at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1 || true)
   if [[ -n "$at" ]]; then sed -n "${at},$((at + 60))p" "$1"; else tail -n 20 "$1"; fi
 }
 fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; exit 1; }
