@@ -355,6 +355,7 @@ std::variant<std::monostate, protocol::Message, std::string> Connection::receive
     if (auto* e = std::get_if<protocol::DecodeError>(&m))
         return "bad " + std::string(protocol::to_string(protocol::MessageType(header.type))) +
                " from the server: " + describe(protocol::Error{e->code, e->message});
+    last_sequence_ = header.sequence;
     return std::get<protocol::Message>(m);
 }
 

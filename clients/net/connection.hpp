@@ -52,6 +52,9 @@ public:
     // received is kept for the next call); an error sentence when the connection closed or the
     // bytes do not decode.
     std::variant<std::monostate, protocol::Message, std::string> receive(int timeout_ms);
+    // The header's sequence of the message receive() last returned (a reply echoes its
+    // request's; an Error the offending frame's, 0 where the server could not read it).
+    uint32_t last_sequence() const { return last_sequence_; }
 
     // Hello with the token, then Welcome. Returns an error sentence on failure: no answer, the
     // connection closed, or the server's Error (wrong token, ...).
@@ -81,6 +84,7 @@ private:
     std::vector<uint8_t> inbox_;       // the frame being read: header, then payload
     size_t inbox_len_ = 0;             // bytes of it received
     uint64_t bytes_read_ = 0;
+    uint32_t last_sequence_ = 0;
     std::string last_error_;
 };
 

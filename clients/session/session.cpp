@@ -326,8 +326,10 @@ bool Session::send_pending() {
     }
     // In the order a session needs them: the display before the pose before the request.
     bool ok = true;
-    if (display)
+    if (display) {
+        display_sequence_ = sequence_;
         ok = ok && conn_->send(*display, sequence_++);
+    }
     if (pose)
         ok = ok && conn_->send(*pose, sequence_++);
     if (frame)
@@ -386,10 +388,13 @@ void Session::handle(Message m, uint64_t received_ns) {
         // malformed and closes: the display goes again, after the reconnect, with sparse tiles
         // (PROTOCOL.md, "Lossy tiles"). One that predates RegisterDisplay.options refuses it
         // the same way: the display goes again without it (its layers carry no warp depth).
+        // Only an Error that answers the display (its sequence echoed; 0 where the server could
+        // not tell) costs the display a feature: one about another message leaves it as asked.
+        const uint32_t about = conn_->last_sequence();
         {
             std::lock_guard lock(mutex_);
             if (err->code == proto::ErrorCode::kMalformed && display_ && display_sent_ &&
-                !layer_since_display_) {
+                !layer_since_display_ && (about == 0 || about == display_sequence_)) {
                 if (display_->options != 0)
                     display_->options = 0;
                 else if (display_->encoding == proto::Encoding::kLossyTiles)

@@ -172,6 +172,7 @@ private:
     uint64_t last_sent_ns_ = 0, last_received_ns_ = 0;
     uint64_t bytes_before_ = 0;  // read by the connections before this one
     uint32_t sequence_ = 1;
+    uint32_t display_sequence_ = 0;  // the sequence the display last went with; network thread
     // The clock (PROTOCOL.md, "Time"). Pings, once wanted: 8 back to back, then 1/s; again 8
     // after a reconnect.
     bool clock_wanted_ = false;  // mutex_

@@ -592,13 +592,17 @@ TEST_F(ClientLib, ReprojectionOfAPureRotationMatchesAFreshRender) {
 // Pose both eyes' layers (RGBA8, sparse tiles + LZ4, a lit square; no display time). What such a
 // server refused it refuses as it did: a Pose longer than its 64 bytes with error 4 (too large)
 // from the header alone, a RegisterDisplay of encoding 3 with error 5 (malformed); after either
-// it writes the Error and closes the connection. One connection at a time, on 127.0.0.1.
+// it writes the Error (echoing the offending frame's sequence) and closes the connection. One
+// connection at a time, on 127.0.0.1.
 class OldServer {
 public:
     struct Options {
         bool refuses_display_time = true;  // Pose payloads over 64 bytes: error 4, close
         bool refuses_lossy = true;         // RegisterDisplay encoding 3: error 5, close
         bool refuses_options = true;       // RegisterDisplay.options (its 8 bytes): error 5
+        // The first connection's first Pose: error 5 (a server that found some other fault in
+        // it), then close; not about the display.
+        bool refuses_first_pose = false;
     };
     struct Log {
         int connections = 0;
@@ -665,8 +669,8 @@ private:
         }
         return true;
     }
-    bool send(int fd, const proto::Message& m) {
-        auto b = proto::encode(m, proto::Side::kServer, sequence_++);
+    bool send(int fd, const proto::Message& m, uint32_t sequence) {
+        auto b = proto::encode(m, proto::Side::kServer, sequence);
         if (auto* e = std::get_if<proto::EncodeError>(&b)) {
             ADD_FAILURE() << "the fake server cannot encode: " << e->message;
             return false;
@@ -682,8 +686,8 @@ private:
     }
     // The Error, then the end of the connection: no more writes, whatever the client still
     // sends is read and dropped until it closes its end (or 3 s pass).
-    void refuse(int fd, proto::ErrorCode code, const std::string& text) {
-        send(fd, proto::make_error(code, text));
+    void refuse(int fd, proto::ErrorCode code, const std::string& text, uint32_t sequence) {
+        send(fd, proto::make_error(code, text), sequence);
         ::shutdown(fd, SHUT_WR);
         uint8_t sink[4096];
         const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
@@ -706,7 +710,7 @@ private:
             l.encoding = proto::Encoding::kSparseTiles;
             l.width = d.eye_width, l.height = d.eye_height;
             l.data = proto::encode_tiles(px, d.eye_width, d.eye_height, 4, proto::TileCodec::kLz4);
-            if (!send(fd, l))
+            if (!send(fd, l, 0))
                 return;
             std::lock_guard lock(mutex_);
             ++log_.layers_sent;
@@ -719,9 +723,10 @@ private:
             if (!read_exact(fd, header.data(), header.size()))
                 return;
             uint16_t type = 0;
-            uint32_t payload_bytes = 0;
+            uint32_t payload_bytes = 0, sequence = 0;
             std::memcpy(&type, header.data() + 6, 2);
             std::memcpy(&payload_bytes, header.data() + 8, 4);
+            std::memcpy(&sequence, header.data() + 12, 4);
             if (type == uint16_t(proto::MessageType::kPose)) {
                 std::lock_guard lock(mutex_);
                 log_.pose_bytes.push_back(payload_bytes);
@@ -732,7 +737,8 @@ private:
                 if (o_.refuses_options && payload_bytes > 51) {
                     ++log_.refused_displays;
                     return refuse(fd, proto::ErrorCode::kMalformed,
-                                  "RegisterDisplay: 8 trailing byte(s) after the last field");
+                                  "RegisterDisplay: 8 trailing byte(s) after the last field",
+                                  sequence);
                 }
             }
             if (o_.refuses_display_time && type == uint16_t(proto::MessageType::kPose) &&
@@ -743,7 +749,8 @@ private:
                 }
                 return refuse(
                     fd, proto::ErrorCode::kTooLarge,
-                    "Pose: payload of " + std::to_string(payload_bytes) + " bytes, at most 64");
+                    "Pose: payload of " + std::to_string(payload_bytes) + " bytes, at most 64",
+                    sequence);
             }
             std::vector<uint8_t> frame(header.begin(), header.end());
             frame.resize(proto::kHeaderBytes + payload_bytes);
@@ -751,7 +758,7 @@ private:
                 return;
             auto m = proto::decode_frame(frame, proto::Side::kClient);
             if (auto* e = std::get_if<proto::DecodeError>(&m))
-                return refuse(fd, e->code, e->message);
+                return refuse(fd, e->code, e->message, sequence);
             const auto& msg = std::get<proto::Message>(m);
             if (std::holds_alternative<proto::Hello>(msg)) {
                 int id = 0;
@@ -759,10 +766,10 @@ private:
                     std::lock_guard lock(mutex_);
                     id = ++log_.connections;
                 }
-                if (!send(fd, proto::Welcome{uint32_t(id), now(), 1}))
+                if (!send(fd, proto::Welcome{uint32_t(id), now(), 1}, sequence))
                     return;
             } else if (auto* ping = std::get_if<proto::Ping>(&msg)) {
-                if (!send(fd, proto::Pong{ping->client_time_ns, now()}))
+                if (!send(fd, proto::Pong{ping->client_time_ns, now()}, sequence))
                     return;
             } else if (auto* d = std::get_if<proto::RegisterDisplay>(&msg)) {
                 {
@@ -775,10 +782,14 @@ private:
                         ++log_.refused_displays;
                     }
                     return refuse(fd, proto::ErrorCode::kMalformed,
-                                  "RegisterDisplay: encoding 3 is not 1 (raw) or 2 (sparse tiles)");
+                                  "RegisterDisplay: encoding 3 is not 1 (raw) or 2 (sparse tiles)",
+                                  sequence);
                 }
                 display = *d;
             } else if (auto* p = std::get_if<proto::Pose>(&msg)) {
+                if (o_.refuses_first_pose && std::exchange(first_pose_, false))
+                    return refuse(fd, proto::ErrorCode::kMalformed, "Pose: a fault of its own",
+                                  sequence);
                 if (display)
                     layers(fd, *display, *p);
             } else if (std::holds_alternative<proto::Bye>(msg)) {
@@ -801,7 +812,8 @@ private:
     uint16_t port_ = 0;
     std::atomic<bool> stop_{false};
     std::thread thread_;
-    uint32_t sequence_ = 0, frame_id_ = 0;
+    uint32_t frame_id_ = 0;
+    bool first_pose_ = true;  // the server thread's
     mutable std::mutex mutex_;
     Log log_;
 };
@@ -961,6 +973,30 @@ TEST(ClientLibOldServer, DisplayOptionsFallBackToNoneAfterMalformed) {
     EXPECT_EQ(log.display_bytes, (std::vector<uint32_t>{59, 51}));
     ASSERT_EQ(log.display_encodings.size(), 1u) << "the refused one was not decoded";
     EXPECT_EQ(log.display_encodings[0], 2) << "sparse tiles kept";
+}
+
+TEST(ClientLibOldServer, AnErrorAboutAnotherMessageKeepsTheDisplaysOptions) {
+    // Error 5 before the first layer, but answering a Pose (its sequence echoed): the display
+    // is not what was refused, so it goes again as asked, with its options.
+    OldServer::Options o{false, false, false};
+    o.refuses_first_pose = true;
+    OldServer server(o);
+    Client c = old_server_client(server);
+    ASSERT_TRUE(c);
+    const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
+    ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK)
+        << hysar_last_error();
+    const hysar_pose p = old_server_pose();
+    uint64_t stamp = 0;
+    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK) << hysar_last_error();
+    std::map<uint32_t, int> seen;
+    hysar_event e{};
+    ASSERT_TRUE(layer_from(c.get(), seen, &e)) << "no layer after the refusal";
+    hysar_event_release(&e);
+    EXPECT_EQ(seen[1000 + 5], 1) << "error 5, malformed";
+    const OldServer::Log log = server.log();
+    EXPECT_EQ(log.connections, 2);
+    EXPECT_EQ(log.display_bytes, (std::vector<uint32_t>{59, 59})) << "the options kept";
 }
 
 }  // namespace
