@@ -118,6 +118,52 @@ void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t 
     host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT, VK_ACCESS_2_SHADER_WRITE_BIT);
 }
 
+void CommandList::execute(const SecondaryBuffers& s, std::span<const uint32_t> which) {
+    std::vector<VkCommandBuffer> buffers;
+    buffers.reserve(which.size());
+    for (uint32_t i : which) buffers.push_back(s.vk(i));
+    if (!buffers.empty())
+        vkCmdExecuteCommands(cmd_, uint32_t(buffers.size()), buffers.data());
+}
+
+Result<void> SecondaryBuffers::reserve(size_t n) {
+    while (buffers_.size() < n) {
+        VkCommandPoolCreateInfo pci{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};
+        pci.flags = VK_COMMAND_POOL_CREATE_TRANSIENT_BIT;
+        pci.queueFamilyIndex = device_.queue_family();
+        VkCommandPool pool;
+        HS_VK_TRY(vkCreateCommandPool(device_.vk(), &pci, nullptr, &pool));
+        CommandPoolHandle owned(device_.vk(), pool);
+        const std::string name = name_ + "." + std::to_string(buffers_.size());
+        device_.set_name(VK_OBJECT_TYPE_COMMAND_POOL, uint64_t(pool), name + ".pool");
+        VkCommandBufferAllocateInfo ai{VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO};
+        ai.commandPool = pool;
+        ai.level = VK_COMMAND_BUFFER_LEVEL_SECONDARY;
+        ai.commandBufferCount = 1;
+        VkCommandBuffer cmd;
+        HS_VK_TRY(vkAllocateCommandBuffers(device_.vk(), &ai, &cmd));
+        pools_.push_back(std::move(owned));
+        buffers_.push_back(cmd);
+    }
+    return {};
+}
+
+Result<void> SecondaryBuffers::begin(size_t i) {
+    HS_VK_TRY(vkResetCommandPool(device_.vk(), pools_[i].get(), 0));
+    // Not inside a render pass: the buffer begins and ends its own rendering.
+    VkCommandBufferInheritanceInfo inherit{VK_STRUCTURE_TYPE_COMMAND_BUFFER_INHERITANCE_INFO};
+    VkCommandBufferBeginInfo bi{VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO};
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    bi.pInheritanceInfo = &inherit;
+    HS_VK_TRY(vkBeginCommandBuffer(buffers_[i], &bi));
+    return {};
+}
+
+Result<void> SecondaryBuffers::end(size_t i) {
+    HS_VK_TRY(vkEndCommandBuffer(buffers_[i]));
+    return {};
+}
+
 Result<void> execute(Device& device, const char* label,
                      const std::function<void(CommandList&)>& record) {
     return device.submit_and_wait(label, [&](VkCommandBuffer cmd) {

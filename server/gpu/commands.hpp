@@ -1,13 +1,21 @@
 // The recording API that passes use: render/ records through this and makes no Vulkan call.
 #pragma once
 
+#include <cstdint>
 #include <functional>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
 
 #include <glm/vec4.hpp>
 
+#include "gpu/handle.hpp"
 #include "gpu/pipeline.hpp"
 
 namespace hs::gpu {
+
+class SecondaryBuffers;
 
 // A pixel rectangle of a target: x, y, width, height; width 0 means the whole target.
 struct Area {
@@ -16,7 +24,16 @@ struct Area {
 
 class CommandList {
 public:
-    CommandList(Device& device, VkCommandBuffer cmd) : device_(device), cmd_(cmd) {}
+    CommandList(Device& device, VkCommandBuffer cmd, std::optional<uint32_t> slot = std::nullopt)
+        : device_(device), cmd_(cmd), slot_(slot) {}
+
+    // The SubmitRing slot this list records (nullopt: a list that is submitted and waited for,
+    // gpu::execute). A slot is recorded again only once its previous submission completed, so
+    // a caller that records SecondaryBuffers for the list keeps one set per slot.
+    std::optional<uint32_t> slot() const { return slot_; }
+    // Runs buffers `which` of `s`, in that order; each was recorded and ended since the last
+    // submission that ran it completed. Outside begin_render/end_render_and_read_back.
+    void execute(const SecondaryBuffers& s, std::span<const uint32_t> which);
 
     // Starts rendering into `area` of `target` (cleared to `clear` and, with `depth`, depth 1
     // there; the rest of the target is undefined), under a debug label. Without `depth` the
@@ -49,6 +66,34 @@ public:
 private:
     Device& device_;
     VkCommandBuffer cmd_;
+    std::optional<uint32_t> slot_;
+};
+
+// Command buffers that other threads record, each a whole sequence of passes (barriers,
+// rendering, read-back copies), and a CommandList runs in order (CommandList::execute). Each has
+// a command pool of its own, so that any thread may record any one of them (one thread per
+// buffer at a time). Made once and grown when more are needed, never allocated per frame.
+class SecondaryBuffers {
+public:
+    SecondaryBuffers(Device& device, std::string name) : device_(device), name_(std::move(name)) {}
+    SecondaryBuffers(const SecondaryBuffers&) = delete;
+    SecondaryBuffers& operator=(const SecondaryBuffers&) = delete;
+
+    // At least `n` buffers. Thread: one, while none is being recorded.
+    Result<void> reserve(size_t n);
+    size_t size() const { return buffers_.size(); }
+    // Resets buffer `i` and begins recording it; list(i) records into it until end(i). Thread:
+    // any, one per buffer.
+    Result<void> begin(size_t i);
+    CommandList list(size_t i) { return CommandList(device_, buffers_[i]); }
+    Result<void> end(size_t i);
+    VkCommandBuffer vk(size_t i) const { return buffers_[i]; }
+
+private:
+    Device& device_;
+    std::string name_;
+    std::vector<CommandPoolHandle> pools_;  // one per buffer
+    std::vector<VkCommandBuffer> buffers_;  // freed with their pools
 };
 
 // Records with `record`, submits and waits (Device::submit_and_wait).

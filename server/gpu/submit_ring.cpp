@@ -79,7 +79,7 @@ Result<uint64_t> SubmitRing::submit(const char* label,
         vkCmdWriteTimestamp2(cmd, VK_PIPELINE_STAGE_2_TOP_OF_PIPE_BIT, qp, uint32_t(2 * slot));
     }
     device_.begin_label(cmd, label);
-    CommandList list(device_, cmd);
+    CommandList list(device_, cmd, uint32_t(slot));
     record(list);
     device_.end_label(cmd);
     if (qp)

@@ -249,6 +249,49 @@ std::vector<uint8_t> Renderer::layer_bytes(const gpu::RenderTarget& t, const Lay
     return out;
 }
 
+Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
+    w.occluder = nullptr;
+    w.lit.clear();
+    if (!w.draw)
+        return {};
+    if (w.occ_count > 0) {
+        HS_ASSIGN_OR_RETURN(w.occluder, variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
+    }
+    for (const auto& g : w.groups) {
+        // The fill-in's draws share one pipeline per format (the lights chosen by the push
+        // constants): a pipeline per set of lights would double the compiles, each of which
+        // holds tens of MB of JIT memory on lavapipe, for a few clusters per layer.
+        HS_ASSIGN_OR_RETURN(
+            Variant * lit,
+            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true)
+                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask));
+        w.lit.push_back(lit);
+    }
+    return {};
+}
+
+void Renderer::record_layer(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {
+    const PixelRect& pr = w.plan.rect;
+    const gpu::Area area{pr.x0, pr.y0, pr.x1 - pr.x0, pr.y1 - pr.y0};
+    const gpu::GpuPush push = push_for(r.intrinsics, r.eye);
+    cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area, uses_depth());
+    cl.bind_mesh(streams(w.plan.level), *r.indices);
+    if (w.occ_count > 0) {
+        cl.bind(w.occluder->pipeline);
+        cl.push_constants(w.occluder->pipeline, &push, sizeof(push));
+        cl.draw_range(0, w.occ_count);
+    }
+    for (size_t i = 0; i < w.groups.size(); ++i) {
+        const auto& g = w.groups[i];
+        gpu::GpuPush gp = push;
+        gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
+        cl.bind(w.lit[i]->pipeline);
+        cl.push_constants(w.lit[i]->pipeline, &gp, sizeof(gp));
+        cl.draw_range(g.first, g.count);
+    }
+    cl.end_render_and_read_back(*r.target, area);
+}
+
 Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
     gpu::CommandList& cl, std::span<const LayerRequest> reqs) {
     if (layer_work_.size() < reqs.size())
@@ -263,40 +306,45 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         if (!layer_work_[i].error.empty())
             return make_error(ErrorCode::kInvalidArgument, layer_work_[i].error);
     std::vector<LayerPlan> plans(reqs.size());
+    std::vector<uint32_t> drawn;
     for (size_t i = 0; i < reqs.size(); ++i) {
-        const LayerRequest& r = reqs[i];
-        const LayerWork& w = layer_work_[i];
-        plans[i] = w.plan;
-        if (!w.draw)
-            continue;
-        const PixelRect& pr = w.plan.rect;
-        const gpu::Area area{pr.x0, pr.y0, pr.x1 - pr.x0, pr.y1 - pr.y0};
-        const gpu::GpuPush push = push_for(r.intrinsics, r.eye);
-        cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area, uses_depth());
-        cl.bind_mesh(streams(w.plan.level), *r.indices);
-        if (w.occ_count > 0) {
-            HS_ASSIGN_OR_RETURN(Variant * occ,
-                                variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
-            cl.bind(occ->pipeline);
-            cl.push_constants(occ->pipeline, &push, sizeof(push));
-            cl.draw_range(0, w.occ_count);
-        }
-        for (const auto& g : w.groups) {
-            // The fill-in's draws share one pipeline per format (the lights chosen by the push
-            // constants): a pipeline per set of lights would double the compiles, each of
-            // which holds tens of MB of JIT memory on lavapipe, for a few clusters per layer.
-            HS_ASSIGN_OR_RETURN(
-                Variant * lit,
-                g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true)
-                       : vd_variant(r.spec, 1 + int(r.encoding), g.mask));
-            gpu::GpuPush gp = push;
-            gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
-            cl.bind(lit->pipeline);
-            cl.push_constants(lit->pipeline, &gp, sizeof(gp));
-            cl.draw_range(g.first, g.count);
-        }
-        cl.end_render_and_read_back(*r.target, area);
+        plans[i] = layer_work_[i].plan;
+        HS_TRY(resolve_variants(reqs[i], layer_work_[i]));
+        if (layer_work_[i].draw)
+            drawn.push_back(uint32_t(i));
     }
+    if (!planners_ || drawn.size() < 2) {  // one layer: recording it here costs the same
+        for (uint32_t i : drawn) record_layer(cl, reqs[i], layer_work_[i]);
+        return plans;
+    }
+    // Each layer recorded by a planner into its own secondary buffer (the render thread only
+    // orders them), run in request order.
+    const size_t set = cl.slot() ? size_t(*cl.slot()) + 1 : 0;
+    while (layer_buffers_.size() <= set)
+        layer_buffers_.push_back(std::make_unique<gpu::SecondaryBuffers>(
+            device_, fmt::format("viewer-vd.layers.{}", layer_buffers_.size())));
+    gpu::SecondaryBuffers& buffers = *layer_buffers_[set];
+    HS_TRY(buffers.reserve(drawn.size()));
+    planners_->run(drawn.size(), [&](size_t k) {
+        LayerWork& w = layer_work_[drawn[k]];
+        w.record_error.clear();
+        if (auto b = buffers.begin(k); !b) {
+            w.record_error = b.error().message;
+            return;
+        }
+        gpu::CommandList list = buffers.list(k);
+        record_layer(list, reqs[drawn[k]], w);
+        if (auto e = buffers.end(k); !e)
+            w.record_error = e.error().message;
+    });
+    for (uint32_t i : drawn)
+        if (!layer_work_[i].record_error.empty())
+            return make_error(ErrorCode::kDevice,
+                              "recording a VD layer: " + layer_work_[i].record_error);
+    std::vector<uint32_t> order(drawn.size());
+    for (size_t k = 0; k < order.size(); ++k) order[k] = uint32_t(k);
+    cl.execute(buffers, order);
+    layers_recorded_by_planners_ += order.size();
     return plans;
 }
 

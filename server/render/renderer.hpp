@@ -167,6 +167,9 @@ public:
                                                  std::span<const LayerRequest> requests);
     // record_layers, submitted and waited for.
     Result<std::vector<LayerPlan>> render_layers(std::span<const LayerRequest> requests);
+    // Layers recorded by the planning threads into secondary buffers (a batch of two or more
+    // drawn layers, with planners) since the renderer was made.
+    uint64_t layers_recorded_by_planners() const { return layers_recorded_by_planners_; }
     // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
     uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }
     // Whether a layer of `spec` can ever be non-zero in this scene (a specular term with a
@@ -322,6 +325,11 @@ private:
             bool fill;
         };
         std::vector<Group> groups;
+        // The pipelines the draws bind (resolve_variants, on the caller: looking one up may
+        // compile it): the occluders', and one per group.
+        Variant* occluder = nullptr;
+        std::vector<Variant*> lit;
+        std::string record_error;  // recording into a secondary buffer failed
     };
     // Fills `w` for request `r`: everything but the recording. Thread: any, one per `w`.
     void plan_layer(const LayerRequest& r, LayerWork& w) const;
@@ -334,8 +342,18 @@ private:
     // The drawn clusters' indices into r.indices: the occluders first, then the lit clusters
     // grouped by light mask (w.groups); the plan's counts.
     void gather_indices(const LayerRequest& r, const ClusteredMesh& level, LayerWork& w) const;
+    // The pipelines of w's draws (w.occluder, w.lit). Thread: the caller of record_layers.
+    Result<void> resolve_variants(const LayerRequest& r, LayerWork& w);
+    // Records one planned, resolved layer: its pass, draws and read-back. Thread: any, one per
+    // `w` and list.
+    void record_layer(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const;
     std::vector<LayerWork> layer_work_;
-    std::unique_ptr<WorkerPool> planners_;    // null: plan on the caller
+    std::unique_ptr<WorkerPool> planners_;  // null: plan on the caller
+    // With planners: each layer is recorded by a planner into a secondary buffer of its own,
+    // one set per SubmitRing slot (index slot + 1) and one for lists that are waited for
+    // (index 0), so that a set is recorded again only after the submission that ran it.
+    std::vector<std::unique_ptr<gpu::SecondaryBuffers>> layer_buffers_;
+    uint64_t layers_recorded_by_planners_ = 0;
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level

@@ -5,6 +5,7 @@
 
 #include <glm/gtc/packing.hpp>
 
+#include "gpu/submit_ring.hpp"
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
@@ -479,7 +480,82 @@ TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
         ASSERT_FALSE(e1.ok());
         ASSERT_FALSE(e4.ok());
         EXPECT_EQ(e1.error().message, e4.error().message);
+        EXPECT_GT((*r4)->layers_recorded_by_planners(), 0u) << "the planners recorded layers";
+        EXPECT_EQ((*r1)->layers_recorded_by_planners(), 0u);
     }
+}
+
+// The served path: batches recorded through a submit ring, each batch's layers recorded by the
+// planners into the secondary buffers of the ring slot it goes in, while the previous batch may
+// still be on the device. Four batches over two slots give the bytes of the same layers
+// recorded on the caller, batch by batch.
+TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
+    const scene::Scene s = scene::default_scene();
+    render::RendererCreateInfo one, many;
+    one.planning_threads = 0;
+    many.planning_threads = 2;
+    auto r1 = render::Renderer::create(device(), s, one);
+    auto r3 = render::Renderer::create(device(), s, many);
+    ASSERT_TRUE(r1.ok() && r3.ok());
+    auto ring = gpu::SubmitRing::create(device(), 2, "test.layers");
+    ASSERT_TRUE(ring.ok()) << ring.error().message;
+    const auto k = small_eye(4);
+    constexpr int kBatches = 4, kEyes = 6;
+    const auto enc = render::LayerEncoding::kSrgb8;
+    const auto fmt = render::layer_target_format(enc);
+    struct Batch {
+        std::vector<gpu::RenderTarget> t1, t3;
+        std::vector<gpu::Buffer> indices;
+        std::vector<Request> reqs;
+        std::vector<Plan> p1, p3;
+    };
+    std::vector<Batch> batches(kBatches);
+    for (int b = 0; b < kBatches; ++b) {
+        Batch& batch = batches[size_t(b)];
+        for (int i = 0; i < kEyes; ++i) {
+            batch.t1.push_back(
+                gpu::RenderTarget::create(device(), k.width, k.height, fmt, "a").value());
+            batch.t3.push_back(
+                gpu::RenderTarget::create(device(), k.width, k.height, fmt, "b").value());
+            batch.indices.push_back(gpu::Buffer::create(device(), (*r3)->layer_index_bytes(),
+                                                        gpu::BufferUsage::kIndex, "i")
+                                        .value());
+            const auto head = scene::viewing_pose(s.viewing, -40.0 + 16.0 * i + 3.0 * b,
+                                                  s.viewing.heights_m.at("M"))
+                                  .value();
+            batch.reqs.push_back(
+                {s.material.specular, k, scene::eye_poses(head, 0.063)[i % 2], enc, nullptr, true});
+        }
+        std::vector<Request> own = batch.reqs;
+        for (int i = 0; i < kEyes; ++i) own[size_t(i)].target = &batch.t1[size_t(i)];
+        auto p1 = (*r1)->render_layers(own);
+        ASSERT_TRUE(p1.ok()) << p1.error().message;
+        batch.p1 = *p1;
+        for (int i = 0; i < kEyes; ++i) {
+            own[size_t(i)].target = &batch.t3[size_t(i)];
+            own[size_t(i)].indices = &batch.indices[size_t(i)];
+        }
+        Result<std::vector<Plan>> p3 = std::vector<Plan>{};
+        auto submitted = (*ring)->submit(
+            "test.layers.batch", [&](gpu::CommandList& cl) { p3 = (*r3)->record_layers(cl, own); });
+        ASSERT_TRUE(submitted.ok()) << submitted.error().message;
+        ASSERT_TRUE(p3.ok()) << p3.error().message;
+        batch.p3 = *p3;
+    }
+    ASSERT_TRUE((*ring)->wait_idle().ok());
+    size_t lit = 0;
+    for (int b = 0; b < kBatches; ++b)
+        for (int i = 0; i < kEyes; ++i) {
+            SCOPED_TRACE("batch " + std::to_string(b) + ", eye " + std::to_string(i));
+            const Batch& batch = batches[size_t(b)];
+            const auto va = layer_values(batch.t1[size_t(i)], batch.p1[size_t(i)]);
+            const auto vb = layer_values(batch.t3[size_t(i)], batch.p3[size_t(i)]);
+            EXPECT_EQ(va, vb);
+            lit += lit_values(va) > 100;
+        }
+    EXPECT_GE(lit, size_t(kBatches * kEyes / 2)) << "most eyes must show a highlight";
+    EXPECT_GE((*r3)->layers_recorded_by_planners(), uint64_t(kBatches * 2))
+        << "the planners recorded the batches' layers";
 }
 
 }  // namespace
