@@ -93,6 +93,7 @@ const char* kBenchServeHelp =
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
+    "                         [--record-on-render-thread]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
     "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
     "                         [--overscan-deg D]\n"
@@ -126,7 +127,9 @@ const char* kBenchServeHelp =
     "  --submissions-in-flight N  the server's VD submissions on the device at once\n"
     "                       (default 3)\n"
     "  --planning-threads N threads planning a batch's layers (default as hysar serve: 0 on\n"
-    "                       lavapipe, cores - 1 up to 7 on a GPU)\n"
+    "                       lavapipe, cores - 1 up to 7 on a GPU); they record them too\n"
+    "  --record-on-render-thread  the planning threads plan only and the render thread\n"
+    "                       records every layer (to measure what recording on them buys)\n"
     "  --headset-mbps X, --room-mbps Y  the server's bit-rate limits, Mbit/s (as hysar\n"
     "                       serve; default 0: none); each row then reports the Mbit/s per\n"
     "                       headset, the layer quality and the frame rate they were kept at\n"
@@ -259,7 +262,8 @@ Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
 
 // The arguments after `hysar bench serve`; on a bad one, a sentence that names the flag.
 Result<bench::ServeBenchOptions> parse_serve_args(const std::vector<std::string>& args) {
-    HS_ASSIGN_OR_RETURN(Flags f, parse_flags(args, kServeValued, {"--quick"}));
+    HS_ASSIGN_OR_RETURN(Flags f,
+                        parse_flags(args, kServeValued, {"--quick", "--record-on-render-thread"}));
     bench::ServeBenchOptions o;
     // The arguments of an --lp-threads child: these options again, each as "--key value",
     // less those that only the parent acts on.
@@ -274,6 +278,7 @@ Result<bench::ServeBenchOptions> parse_serve_args(const std::vector<std::string>
     }
     HS_TRY(read_serve_numbers(f, o));
     HS_TRY(read_serve_words(f, o));
+    o.record_on_render_thread = f.has("--record-on-render-thread");
     if (f.has("--quick")) {
         o.quick = true;
         if (!f.has("--headsets"))

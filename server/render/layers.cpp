@@ -313,7 +313,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         if (layer_work_[i].draw)
             drawn.push_back(uint32_t(i));
     }
-    if (!planners_ || drawn.size() < 2) {  // one layer: recording it here costs the same
+    if (!planners_ || !info_.record_on_planners ||
+        drawn.size() < 2) {  // one layer: recording it here costs the same
         for (uint32_t i : drawn) record_layer(cl, reqs[i], layer_work_[i]);
         return plans;
     }

@@ -54,6 +54,11 @@ struct RendererCreateInfo {
     // cores rasterise), min(cores, 8) - 1 on a GPU (where planning bounds the served path,
     // README "On a GPU"); 0 or more: this many.
     int planning_threads = -1;
+    // With planning threads: each records the layers it planned into a secondary command
+    // buffer, and the caller only runs them in order (false: the caller records every layer, as
+    // without planners; for measuring what the former buys, `hysar bench serve
+    // --record-on-render-thread`).
+    bool record_on_planners = true;
     // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
     // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
     // outlive the renderer.

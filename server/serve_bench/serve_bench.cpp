@@ -482,6 +482,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.max_target_mib = o.max_target_mib;
     info.submissions_in_flight = o.submissions_in_flight;
     info.planning_threads = o.planning_threads;
+    info.record_on_planners = !o.record_on_render_thread;
     info.encoder_threads = o.encoder_threads;
     info.headset_mbps = o.headset_mbps;
     info.room_mbps = o.room_mbps;
@@ -804,6 +805,7 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"max_target_mib", o.max_target_mib},
             {"submissions_in_flight", o.submissions_in_flight},
             {"planning_threads", o.planning_threads},
+            {"record_on_render_thread", o.record_on_render_thread},
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
             {"layer_quality", o.layer_quality},

@@ -51,16 +51,17 @@ struct ServeBenchOptions {
     protocol::Encoding encoding = protocol::Encoding::kSparseTiles;
     std::string scene_path;  // empty: scene::default_scene()
     std::string out_dir = "out/bench-serve";
-    std::string lean_baseline_command;   // run through the shell when non-empty
-    std::vector<int> lp_threads;         // LP_NUM_THREADS values for the repeated served rows
-    uint32_t encoder_threads = 0;        // the server's, as `hysar serve --encoder-threads`
-    uint32_t max_batch_viewers = 8;      // as `hysar serve --max-batch-viewers`
-    uint32_t max_target_mib = 0;         // as `hysar serve --max-target-mib`; 0: its default
-    uint32_t submissions_in_flight = 0;  // the server's VD submissions in flight; 0: default
-    int planning_threads = -1;           // as `hysar serve --planning-threads`; -1: its default
-    double headset_mbps = 0;             // as `hysar serve --headset-mbps`; 0: no limit
-    double room_mbps = 0;                // as `hysar serve --room-mbps`; 0: no limit
-    int layer_quality = 0;               // as `hysar serve --layer-quality`; 0: its default
+    std::string lean_baseline_command;     // run through the shell when non-empty
+    std::vector<int> lp_threads;           // LP_NUM_THREADS values for the repeated served rows
+    uint32_t encoder_threads = 0;          // the server's, as `hysar serve --encoder-threads`
+    uint32_t max_batch_viewers = 8;        // as `hysar serve --max-batch-viewers`
+    uint32_t max_target_mib = 0;           // as `hysar serve --max-target-mib`; 0: its default
+    uint32_t submissions_in_flight = 0;    // the server's VD submissions in flight; 0: default
+    int planning_threads = -1;             // as `hysar serve --planning-threads`; -1: its default
+    bool record_on_render_thread = false;  // planners plan only; the render thread records
+    double headset_mbps = 0;               // as `hysar serve --headset-mbps`; 0: no limit
+    double room_mbps = 0;                  // as `hysar serve --room-mbps`; 0: no limit
+    int layer_quality = 0;                 // as `hysar serve --layer-quality`; 0: its default
     double overscan_deg = 0;  // each headset registers its display widened by this on every side
                               // (degrees), as `hysar-hmd --reproject` does; 0: not widened
     bool quick = false;

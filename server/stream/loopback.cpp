@@ -51,6 +51,7 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     if (o.layer_quality > 0)
         info.layer_quality = o.layer_quality;
     info.renderer.planning_threads = o.planning_threads;
+    info.renderer.record_on_planners = o.record_on_planners;
     info.calibration = o.calibration;
     return info;
 }
