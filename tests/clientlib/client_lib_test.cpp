@@ -950,19 +950,31 @@ TEST(ClientLibOldServer, LossyTilesFallBackToSparseTilesAfterMalformed) {
 
 // An older server answers a RegisterDisplay with options (8 bytes it does not know) with error 5
 // and closes: the library registers again without them and receives layers, with no warp depth.
+// A sparse display asking for the warp depth, then one pose: the first layer that comes back
+// (false: none within 10 s), the events before it counted in `seen`.
+bool layer_after_options(hysar_client* c, const hysar_display& d, std::map<uint32_t, int>& seen,
+                         hysar_event* layer) {
+    if (hysar_client_register_display_opts(c, &d, HYSAR_OPTION_WARP_DEPTH) != HYSAR_OK) {
+        ADD_FAILURE() << hysar_last_error();
+        return false;
+    }
+    const hysar_pose p = old_server_pose();
+    uint64_t stamp = 0;
+    if (hysar_client_send_pose(c, &p, &stamp) != HYSAR_OK) {
+        ADD_FAILURE() << hysar_last_error();
+        return false;
+    }
+    return layer_from(c, seen, layer);
+}
+
 TEST(ClientLibOldServer, DisplayOptionsFallBackToNoneAfterMalformed) {
     OldServer server({false, false, true});
     Client c = old_server_client(server);
     ASSERT_TRUE(c);
     const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
-    ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK)
-        << hysar_last_error();
-    const hysar_pose p = old_server_pose();
-    uint64_t stamp = 0;
-    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK) << hysar_last_error();
     std::map<uint32_t, int> seen;
     hysar_event e{};
-    ASSERT_TRUE(layer_from(c.get(), seen, &e)) << "no layer after the refusal";
+    ASSERT_TRUE(layer_after_options(c.get(), d, seen, &e)) << "no layer after the refusal";
     EXPECT_EQ(hysar_event_warp_depth_m(&e), 0.0);
     EXPECT_EQ(e.image.pixels[(size_t(24) * d.eye_width + 32) * 4], 200) << "the lit square";
     hysar_event_release(&e);
@@ -983,15 +995,10 @@ TEST(ClientLibOldServer, AnErrorAboutAnotherMessageKeepsTheDisplaysOptions) {
     OldServer server(o);
     Client c = old_server_client(server);
     ASSERT_TRUE(c);
-    const hysar_display d = old_server_display(HYSAR_ENCODING_SPARSE);
-    ASSERT_EQ(hysar_client_register_display_opts(c.get(), &d, HYSAR_OPTION_WARP_DEPTH), HYSAR_OK)
-        << hysar_last_error();
-    const hysar_pose p = old_server_pose();
-    uint64_t stamp = 0;
-    ASSERT_EQ(hysar_client_send_pose(c.get(), &p, &stamp), HYSAR_OK) << hysar_last_error();
     std::map<uint32_t, int> seen;
     hysar_event e{};
-    ASSERT_TRUE(layer_from(c.get(), seen, &e)) << "no layer after the refusal";
+    ASSERT_TRUE(layer_after_options(c.get(), old_server_display(HYSAR_ENCODING_SPARSE), seen, &e))
+        << "no layer after the refusal";
     hysar_event_release(&e);
     EXPECT_EQ(seen[1000 + 5], 1) << "error 5, malformed";
     const OldServer::Log log = server.log();

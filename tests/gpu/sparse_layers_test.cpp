@@ -421,6 +421,19 @@ TEST_F(SparseLayers, WhatCanOnlyBeBlackRecordsNoPass) {
 
 namespace {
 
+// A renderer that plans and records every layer on the caller, and one with `threads` planning
+// threads (null where one cannot be made).
+std::pair<std::unique_ptr<render::Renderer>, std::unique_ptr<render::Renderer>> caller_and_planners(
+    gpu::Device& device, const scene::Scene& s, int threads) {
+    render::RendererCreateInfo caller, planners;
+    caller.planning_threads = 0;
+    planners.planning_threads = threads;
+    auto a = render::Renderer::create(device, s, caller);
+    auto b = render::Renderer::create(device, s, planners);
+    EXPECT_TRUE(a.ok() && b.ok());
+    return {a.ok() ? std::move(*a) : nullptr, b.ok() ? std::move(*b) : nullptr};
+}
+
 // Planning a batch's layers on threads (the default on a GPU) changes nothing: the same plans
 // and the same bytes as planning on the caller, for a batch of eyes at different poses, models
 // and encodings, on the convex dome and on two domes (occluders), including a request that is
@@ -428,12 +441,8 @@ namespace {
 TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
     for (const bool domes : {false, true}) {
         const scene::Scene s = domes ? two_domes() : scene::default_scene();
-        render::RendererCreateInfo one, many;
-        one.planning_threads = 0;
-        many.planning_threads = 3;
-        auto r1 = render::Renderer::create(device(), s, one);
-        auto r4 = render::Renderer::create(device(), s, many);
-        ASSERT_TRUE(r1.ok() && r4.ok());
+        auto [r1, r4] = caller_and_planners(device(), s, 3);
+        ASSERT_TRUE(r1 && r4);
         const auto k = small_eye(4);
         const char* presets[] = {"phong", "ward-aniso", "kajiya-kay", "blinn-phong"};
         std::vector<Request> reqs;
@@ -455,8 +464,8 @@ TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
             for (size_t i = 0; i < own.size(); ++i) own[i].target = &t[i];
             return own;
         };
-        auto p1 = (*r1)->render_layers(with(t1));
-        auto p4 = (*r4)->render_layers(with(t4));
+        auto p1 = r1->render_layers(with(t1));
+        auto p4 = r4->render_layers(with(t4));
         ASSERT_TRUE(p1.ok() && p4.ok());
         size_t lit = 0;
         for (int i = 0; i < kEyes; ++i) {
@@ -476,12 +485,12 @@ TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
         auto bad = with(t4);
         auto small = gpu::RenderTarget::create(device(), 8, 8, gpu::ColorFormat::kRgba8Unorm, "s");
         bad[5].target = &small.value();
-        auto e1 = (*r1)->render_layers(bad), e4 = (*r4)->render_layers(bad);
+        auto e1 = r1->render_layers(bad), e4 = r4->render_layers(bad);
         ASSERT_FALSE(e1.ok());
         ASSERT_FALSE(e4.ok());
         EXPECT_EQ(e1.error().message, e4.error().message);
-        EXPECT_GT((*r4)->layers_recorded_by_planners(), 0u) << "the planners recorded layers";
-        EXPECT_EQ((*r1)->layers_recorded_by_planners(), 0u);
+        EXPECT_GT(r4->layers_recorded_by_planners(), 0u) << "the planners recorded layers";
+        EXPECT_EQ(r1->layers_recorded_by_planners(), 0u);
     }
 }
 
@@ -491,12 +500,8 @@ TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
 // recorded on the caller, batch by batch.
 TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
     const scene::Scene s = scene::default_scene();
-    render::RendererCreateInfo one, many;
-    one.planning_threads = 0;
-    many.planning_threads = 2;
-    auto r1 = render::Renderer::create(device(), s, one);
-    auto r3 = render::Renderer::create(device(), s, many);
-    ASSERT_TRUE(r1.ok() && r3.ok());
+    auto [r1, r3] = caller_and_planners(device(), s, 2);
+    ASSERT_TRUE(r1 && r3);
     auto ring = gpu::SubmitRing::create(device(), 2, "test.layers");
     ASSERT_TRUE(ring.ok()) << ring.error().message;
     const auto k = small_eye(4);
@@ -517,7 +522,7 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
                 gpu::RenderTarget::create(device(), k.width, k.height, fmt, "a").value());
             batch.t3.push_back(
                 gpu::RenderTarget::create(device(), k.width, k.height, fmt, "b").value());
-            batch.indices.push_back(gpu::Buffer::create(device(), (*r3)->layer_index_bytes(),
+            batch.indices.push_back(gpu::Buffer::create(device(), r3->layer_index_bytes(),
                                                         gpu::BufferUsage::kIndex, "i")
                                         .value());
             const auto head = scene::viewing_pose(s.viewing, -40.0 + 16.0 * i + 3.0 * b,
@@ -528,7 +533,7 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
         }
         std::vector<Request> own = batch.reqs;
         for (int i = 0; i < kEyes; ++i) own[size_t(i)].target = &batch.t1[size_t(i)];
-        auto p1 = (*r1)->render_layers(own);
+        auto p1 = r1->render_layers(own);
         ASSERT_TRUE(p1.ok()) << p1.error().message;
         batch.p1 = *p1;
         for (int i = 0; i < kEyes; ++i) {
@@ -537,7 +542,7 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
         }
         Result<std::vector<Plan>> p3 = std::vector<Plan>{};
         auto submitted = (*ring)->submit(
-            "test.layers.batch", [&](gpu::CommandList& cl) { p3 = (*r3)->record_layers(cl, own); });
+            "test.layers.batch", [&](gpu::CommandList& cl) { p3 = r3->record_layers(cl, own); });
         ASSERT_TRUE(submitted.ok()) << submitted.error().message;
         ASSERT_TRUE(p3.ok()) << p3.error().message;
         batch.p3 = *p3;
@@ -554,7 +559,7 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
             lit += lit_values(va) > 100;
         }
     EXPECT_GE(lit, size_t(kBatches * kEyes / 2)) << "most eyes must show a highlight";
-    EXPECT_GE((*r3)->layers_recorded_by_planners(), uint64_t(kBatches * 2))
+    EXPECT_GE(r3->layers_recorded_by_planners(), uint64_t(kBatches * 2))
         << "the planners recorded the batches' layers";
 }
 
