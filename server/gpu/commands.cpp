@@ -118,12 +118,10 @@ void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t 
     host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT, VK_ACCESS_2_SHADER_WRITE_BIT);
 }
 
-void CommandList::execute(const SecondaryBuffers& s, std::span<const uint32_t> which) {
-    std::vector<VkCommandBuffer> buffers;
-    buffers.reserve(which.size());
-    for (uint32_t i : which) buffers.push_back(s.vk(i));
-    if (!buffers.empty())
-        vkCmdExecuteCommands(cmd_, uint32_t(buffers.size()), buffers.data());
+void CommandList::execute(const SecondaryBuffers& s, size_t count) {
+    HS_CHECK(count <= s.size(), "execute: more secondary buffers than were made");
+    if (count > 0)
+        vkCmdExecuteCommands(cmd_, uint32_t(count), s.data());
 }
 
 Result<void> SecondaryBuffers::reserve(size_t n) {

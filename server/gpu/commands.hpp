@@ -4,7 +4,6 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
-#include <span>
 #include <string>
 #include <vector>
 
@@ -31,9 +30,9 @@ public:
     // gpu::execute). A slot is recorded again only once its previous submission completed, so
     // a caller that records SecondaryBuffers for the list keeps one set per slot.
     std::optional<uint32_t> slot() const { return slot_; }
-    // Runs buffers `which` of `s`, in that order; each was recorded and ended since the last
-    // submission that ran it completed. Outside begin_render/end_render_and_read_back.
-    void execute(const SecondaryBuffers& s, std::span<const uint32_t> which);
+    // Runs the first `count` buffers of `s`, in order; each was recorded and ended since the
+    // last submission that ran it completed. Outside begin_render/end_render_and_read_back.
+    void execute(const SecondaryBuffers& s, size_t count);
 
     // Starts rendering into `area` of `target` (cleared to `clear` and, with `depth`, depth 1
     // there; the rest of the target is undefined), under a debug label. Without `depth` the
@@ -87,7 +86,7 @@ public:
     Result<void> begin(size_t i);
     CommandList list(size_t i) { return CommandList(device_, buffers_[i]); }
     Result<void> end(size_t i);
-    VkCommandBuffer vk(size_t i) const { return buffers_[i]; }
+    const VkCommandBuffer* data() const { return buffers_.data(); }
 
 private:
     Device& device_;

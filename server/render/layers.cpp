@@ -306,7 +306,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         if (!layer_work_[i].error.empty())
             return make_error(ErrorCode::kInvalidArgument, layer_work_[i].error);
     std::vector<LayerPlan> plans(reqs.size());
-    std::vector<uint32_t> drawn;
+    std::vector<uint32_t>& drawn = layer_drawn_;
+    drawn.clear();
     for (size_t i = 0; i < reqs.size(); ++i) {
         plans[i] = layer_work_[i].plan;
         HS_TRY(resolve_variants(reqs[i], layer_work_[i]));
@@ -342,10 +343,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         if (!layer_work_[i].record_error.empty())
             return make_error(ErrorCode::kDevice,
                               "recording a VD layer: " + layer_work_[i].record_error);
-    std::vector<uint32_t> order(drawn.size());
-    for (size_t k = 0; k < order.size(); ++k) order[k] = uint32_t(k);
-    cl.execute(buffers, order);
-    layers_recorded_by_planners_ += order.size();
+    cl.execute(buffers, drawn.size());
+    layers_recorded_by_planners_ += drawn.size();
     return plans;
 }
 

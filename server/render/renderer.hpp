@@ -167,7 +167,9 @@ public:
     // rectangle from the target, 0 elsewhere (nothing was drawn or read back there).
     static std::vector<uint8_t> layer_bytes(const gpu::RenderTarget& target, const LayerPlan& plan);
     // Records the layers' passes into `cl` (the caller submits). Plans are in request order.
-    // An invalid request is an error for the whole batch, and then nothing is recorded.
+    // An invalid request is an error for the whole batch, and then nothing is recorded. With
+    // planners the layers go into secondary buffers kept per ring slot (cl.slot()): call it once
+    // per CommandList, and from one SubmitRing.
     Result<std::vector<LayerPlan>> record_layers(gpu::CommandList& cl,
                                                  std::span<const LayerRequest> requests);
     // record_layers, submitted and waited for.
@@ -359,6 +361,7 @@ private:
     // (index 0), so that a set is recorded again only after the submission that ran it.
     std::vector<std::unique_ptr<gpu::SecondaryBuffers>> layer_buffers_;
     uint64_t layers_recorded_by_planners_ = 0;
+    std::vector<uint32_t> layer_drawn_;       // record_layers: the drawn requests, kept for reuse
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level

@@ -502,8 +502,6 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
     const scene::Scene s = scene::default_scene();
     auto [r1, r3] = caller_and_planners(device(), s, 2);
     ASSERT_TRUE(r1 && r3);
-    auto ring = gpu::SubmitRing::create(device(), 2, "test.layers");
-    ASSERT_TRUE(ring.ok()) << ring.error().message;
     const auto k = small_eye(4);
     constexpr int kBatches = 4, kEyes = 6;
     const auto enc = render::LayerEncoding::kSrgb8;
@@ -514,7 +512,11 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
         std::vector<Request> reqs;
         std::vector<Plan> p1, p3;
     };
+    // Before the ring, so that the ring (which waits for its submissions) goes first on a
+    // failed assertion.
     std::vector<Batch> batches(kBatches);
+    auto ring = gpu::SubmitRing::create(device(), 2, "test.layers");
+    ASSERT_TRUE(ring.ok()) << ring.error().message;
     for (int b = 0; b < kBatches; ++b) {
         Batch& batch = batches[size_t(b)];
         for (int i = 0; i < kEyes; ++i) {
