@@ -1,7 +1,9 @@
 // The served path's VD layers (Renderer::record_layers): each layer is planned on its own,
 // in parallel where the renderer has planning threads (cull the clusters against the view and
 // the lights' bound, gather the drawn clusters' indices into the request's index buffer, group
-// them by the lights they need), then all are recorded in request order into one command list.
+// them by the lights they need); their pipelines are looked up on the caller; then each is
+// recorded, by the planning threads into secondary command buffers that the caller runs in
+// request order, or without planners (or for a single layer) on the caller, in request order.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
