@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "clientlib/client_handle_ptr.hpp"
 #include "clients/lib/hysar_client.h"
 #include "net/net_fixture.hpp"
 #include "protocol/protocol.hpp"
@@ -24,11 +25,6 @@
 
 namespace hs::net_test {
 namespace {
-
-struct Closer {
-    void operator()(hysar_client* c) const { hysar_client_close(c); }
-};
-using Client = std::unique_ptr<hysar_client, Closer>;
 
 // A server that predates Pose.display_time_ns and lossy tiles, speaking just enough of the
 // protocol for a headset: Hello -> Welcome, Ping -> Pong, RegisterDisplay kept, and for every

@@ -10,6 +10,7 @@
 #include <random>
 #include <thread>
 
+#include "clientlib/client_handle_ptr.hpp"
 #include "clients/client_handle.hpp"
 #include "clients/net/connection.hpp"
 #include "clients/session/session.hpp"
@@ -18,11 +19,6 @@
 
 namespace hs::net_test {
 namespace {
-
-struct Closer {
-    void operator()(hysar_client* c) const { hysar_client_close(c); }
-};
-using Client = std::unique_ptr<hysar_client, Closer>;
 
 // A server on a Unix socket that a test can stop and start again at the same address (the
 // fixture's TCP server is not started).
