@@ -38,7 +38,7 @@ inline bool tile_lit(const uint8_t* raw, size_t stride, uint32_t x0, uint32_t y0
 }
 
 // `packed` through `codec` into `out` from `at` on (resized to fit); the bytes written.
-size_t compress_into(std::vector<uint8_t>& out, size_t at, const std::vector<uint8_t>& packed,
+size_t compress_into(std::vector<uint8_t>& out, size_t at, std::span<const uint8_t> packed,
                      TileCodec codec) {
     switch (codec) {
         case TileCodec::kNone:
@@ -128,6 +128,76 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
         return;
     }
     const size_t n = compress_into(out, len_at + 4, packed, codec);
+    out.resize(len_at + 4 + n);
+    const uint32_t n32 = uint32_t(n);
+    std::memcpy(out.data() + len_at, &n32, 4);
+}
+
+void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, uint32_t count,
+                              const uint8_t* tiles, uint32_t w, uint32_t h, uint32_t bpp,
+                              TileCodec codec, std::vector<uint8_t>& packed, uint16_t ts,
+                              int quality, lossy::Huffman huffman) {
+    const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    const size_t tile_bytes = size_t(ts) * ts * bpp;
+    const size_t tile_stride = size_t(ts) * bpp;  // a packed tile's row
+    const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
+    const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0 && ts <= 256;
+    if (codec == TileCodec::kJpeg && !lossy)
+        codec = TileCodec::kLz4;
+    const size_t header_at = out.size();
+    out.resize(header_at + kFixedHeader + mask_bytes);
+    uint8_t* head = out.data() + header_at;
+    head[0] = uint8_t(ts & 0xff);
+    head[1] = uint8_t(ts >> 8);
+    head[2] = uint8_t(codec);
+    head[3] = 0;
+    std::memcpy(head + kFixedHeader, mask, mask_bytes);
+    // The marked tiles in order; any left all zero (a drive applied after packing can make
+    // one so) is unmarked and skipped.
+    thread_local std::vector<lossy::TilePlace> places;
+    places.clear();
+    packed.clear();
+    uint32_t present = 0, seen = 0;
+    bool dropped = false;
+    for (size_t tile = 0; tile < size_t(tx) * ty && seen < count; ++tile) {
+        if (!(mask[tile / 8] >> (tile % 8) & 1u))
+            continue;
+        const uint32_t bx = uint32_t(tile % tx), by = uint32_t(tile / tx);
+        const uint32_t cw = std::min<uint32_t>(ts, w - bx * ts),
+                       ch = std::min<uint32_t>(ts, h - by * ts);
+        const uint8_t* t = tiles + size_t(seen) * tile_bytes;
+        ++seen;
+        if (!tile_lit(t, tile_stride, 0, 0, cw, ch, bpp)) {
+            out[header_at + kFixedHeader + tile / 8] &= uint8_t(~(1u << (tile % 8)));
+            if (!dropped && !lossy)  // the tiles kept so far lie together at the start
+                packed.assign(tiles, tiles + size_t(present) * tile_bytes);
+            dropped = true;
+            continue;
+        }
+        if (lossy)
+            places.push_back({0, uint32_t((seen - 1) * ts), cw, ch});
+        else if (dropped)  // after a dropped tile, the kept ones are copied together
+            packed.insert(packed.end(), t, t + tile_bytes);
+        ++present;
+    }
+    std::memcpy(out.data() + header_at + 4, &present, 4);
+    const size_t len_at = out.size();
+    out.resize(len_at + 4);
+    if (lossy) {
+        if (lossy::encode_payload(out, tiles, tile_stride, places, ts, quality, packed, huffman) &&
+            out.size() - len_at - 4 <= size_t(present) * tile_bytes) {
+            const uint32_t n32 = uint32_t(out.size() - len_at - 4);
+            std::memcpy(out.data() + len_at, &n32, 4);
+            return;
+        }
+        out.resize(header_at);
+        encode_packed_tiles_into(out, mask, count, tiles, w, h, bpp, TileCodec::kLz4, packed, ts);
+        return;
+    }
+    std::span<const uint8_t> payload(tiles, size_t(present) * tile_bytes);
+    if (dropped)
+        payload = packed;
+    const size_t n = compress_into(out, len_at + 4, payload, codec);
     out.resize(len_at + 4 + n);
     const uint32_t n32 = uint32_t(n);
     std::memcpy(out.data() + len_at, &n32, 4);

@@ -44,6 +44,19 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
                        uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality,
                        lossy::Huffman huffman = lossy::Huffman::kReused);
 
+// The same encoding from tiles already packed (by the device: render/, "Only lit tiles leave
+// the device"): `mask` is the presence mask over the whole w x h layer (one bit per tile,
+// row-major, LSB first), `count` its set bits, and `tiles` the tiles it marks in that order,
+// each tile_size x tile_size pixels (rows tile_size * bytes_per_pixel bytes apart, zero past the
+// layer's edge). A marked tile whose pixels are all zero is left out, as the host's scan would;
+// so the bytes are encode_tiles_into's for the same layer. `scratch` as there.
+void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, uint32_t count,
+                              const uint8_t* tiles, uint32_t width, uint32_t height,
+                              uint32_t bytes_per_pixel, TileCodec codec,
+                              std::vector<uint8_t>& scratch, uint16_t tile_size = kDefaultTileSize,
+                              int quality = kDefaultLayerQuality,
+                              lossy::Huffman huffman = lossy::Huffman::kReused);
+
 // Decodes to raw pixel bytes, or an error sentence; never reads or writes out of bounds,
 // whatever the input. Codec 3 (lossy) is accepted for 4 bytes per pixel.
 std::variant<std::vector<uint8_t>, std::string> decode_tiles(std::span<const uint8_t> data,

@@ -93,7 +93,7 @@ const char* kBenchServeHelp =
     "                         [--out DIR] [--frames N] [--lean-baseline CMD]\n"
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
-    "                         [--record-on-render-thread]\n"
+    "                         [--record-on-render-thread] [--pack-tiles auto|on|off]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
     "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
     "                         [--overscan-deg D]\n"
@@ -130,6 +130,8 @@ const char* kBenchServeHelp =
     "                       lavapipe, cores - 1 up to 7 on a GPU); they record them too\n"
     "  --record-on-render-thread  the planning threads plan only and the render thread\n"
     "                       records every layer (to measure what recording on them buys)\n"
+    "  --pack-tiles auto|on|off  the server's --pack-tiles (default auto: on a GPU): a\n"
+    "                       compute pass packs the lit tiles, only they are read back\n"
     "  --headset-mbps X, --room-mbps Y  the server's bit-rate limits, Mbit/s (as hysar\n"
     "                       serve; default 0: none); each row then reports the Mbit/s per\n"
     "                       headset, the layer quality and the frame rate they were kept at\n"
@@ -176,7 +178,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--headset-mbps",
                                             "--room-mbps",
                                             "--layer-quality",
-                                            "--overscan-deg"};
+                                            "--overscan-deg",
+                                            "--pack-tiles"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -235,6 +238,12 @@ Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
         if (v != "srgb8" && v != "rgba16f")
             return invalid("--format wants srgb8 or rgba16f, got '" + v + "'");
         o.format = v == "srgb8" ? protocol::PixelFormat::kRgba8 : protocol::PixelFormat::kRgba16f;
+    }
+    if (f.has("--pack-tiles")) {
+        const std::string v = f.get("--pack-tiles", "");
+        if (v != "auto" && v != "on" && v != "off")
+            return invalid("--pack-tiles wants auto, on or off, got '" + v + "'");
+        o.pack_tiles = v == "auto" ? -1 : v == "on" ? 1 : 0;
     }
     if (f.has("--encoding")) {
         const std::string v = f.get("--encoding", "");

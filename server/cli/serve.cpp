@@ -105,6 +105,8 @@ const char* kServeHelp =
     "  --max-viewer-hz N (60, 0: none)   --max-batch-viewers N (8)\n"
     "  --encoder-threads N (0: 1 on lavapipe, half the cores up to 8 on a GPU)\n"
     "  --tile-codec lz4|zstd|none (lz4)\n"
+    "  --pack-tiles auto|on|off (auto: on a GPU): a compute pass packs each sparse layer's lit\n"
+    "                      tiles, so only they are read back and encoded (docs/ARCHITECTURE.md)\n"
     "  --layer-quality Q (92): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"
@@ -278,6 +280,7 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--encoder-threads",
                                            "--planning-threads",
                                            "--tile-codec",
+                                           "--pack-tiles",
                                            "--layer-quality",
                                            "--calibration",
                                            "--compensation",
@@ -363,6 +366,12 @@ std::optional<int> read_network(const Flags& f, ServeSetup& s) {
 std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
     stream::ServerCreateInfo& info = s.info;
     info.reblend_missing = f.has("--reblend-missing");
+    if (f.has("--pack-tiles")) {
+        const std::string v = f.get("--pack-tiles", "");
+        if (v != "auto" && v != "on" && v != "off")
+            return usage_error("--pack-tiles: expected auto, on or off, got '" + v + "'");
+        info.renderer.pack_tiles = v == "auto" ? -1 : v == "on" ? 1 : 0;
+    }
     if (f.has("--tile-codec")) {
         const std::string c = f.get("--tile-codec", "");
         if (c == "lz4")

@@ -1,11 +1,13 @@
 #include "codec/layer_codec.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
 #include <glm/gtc/packing.hpp>
 
+#include "core/check.hpp"
 #include "protocol/schema.hpp"
 
 namespace hs::codec {
@@ -66,6 +68,17 @@ void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
                        std::vector<uint8_t>& scratch, int quality) {
     const size_t bpp = px.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
     const uint32_t x1 = std::min(px.x1, px.width), y1 = std::min(px.y1, px.height);
+    if (px.tile_info) {
+        HS_CHECK(encoding != protocol::Encoding::kRaw,
+                 "append_layer_data: tiles packed on the device make sparse layers only");
+        static_assert(std::endian::native == std::endian::little,
+                      "the mask's u32 words are read as the wire's bytes");
+        protocol::encode_packed_tiles_into(out, reinterpret_cast<const uint8_t*>(px.tile_info + 4),
+                                           px.tile_info[0], px.tiles, px.width, px.height,
+                                           uint32_t(bpp), codec, scratch,
+                                           protocol::kDefaultTileSize, quality);
+        return;
+    }
     if (encoding == protocol::Encoding::kRaw) {
         const size_t at = out.size(), row = size_t(px.width) * bpp;
         out.resize(at + row * px.height);  // zeros: black outside the rectangle

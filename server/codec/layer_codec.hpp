@@ -38,13 +38,17 @@ constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat) {
 
 // A layer's pixels in the wire's pixel format where they lie (a persistently mapped readback
 // buffer): rows `stride` bytes apart; only the rectangle [x0, x1) x [y0, y1) is read, the rest
-// of the layer is black.
+// of the layer is black. Or, with `tile_info`, the layer's lit tiles packed by the device
+// (gpu::RenderTarget::tile_info and packed_tiles, tiles of protocol::kDefaultTileSize): `data`
+// is then unused, and only sparse encodings can be made of them.
 struct LayerPixels {
     const uint8_t* data = nullptr;
     size_t stride = 0;
     uint32_t width = 0, height = 0;
     protocol::PixelFormat format = protocol::PixelFormat::kRgba8;
     uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    const uint32_t* tile_info = nullptr;  // count, 3 unused words, the presence mask's words
+    const uint8_t* tiles = nullptr;
 };
 // Appends the layer's data bytes in `encoding` to `out`: raw pixels (black outside the
 // rectangle), or sparse tiles (tiles outside it absent, never read; the rectangle should lie

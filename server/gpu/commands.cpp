@@ -1,5 +1,7 @@
 #include "gpu/commands.hpp"
 
+#include <algorithm>
+
 #include "gpu/barriers.hpp"
 
 namespace hs::gpu {
@@ -85,8 +87,76 @@ void CommandList::draw_range(uint32_t first, uint32_t count) {
     vkCmdDrawIndexed(cmd_, count, 1, first, 0, 0);
 }
 
+namespace {
+// shaders/tiles.comp's push constants.
+struct TilesPush {
+    uint32_t phase, width, height, words, tile, tiles_x, tiles_y, tx0, ty0, tx1, ty1;
+};
+}  // namespace
+
+void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& packer, Area area) {
+    HS_CHECK(t.packs_tiles(), "end_render_and_pack: the target was made without packing");
+    auto push_fn = device_.push_descriptor_fn();
+    HS_CHECK(push_fn != nullptr, "end_render_and_pack: no VK_KHR_push_descriptor");
+    area = whole(t, area);
+    copy_out(t, area);
+    const uint32_t ts = t.pack_tile();
+    TilesPush pc{};
+    pc.width = t.width();
+    pc.height = t.height();
+    pc.words = uint32_t(bytes_per_pixel(t.format()) / 4);
+    pc.tile = ts;
+    pc.tiles_x = (t.width() + ts - 1) / ts;
+    pc.tiles_y = (t.height() + ts - 1) / ts;
+    pc.tx0 = area.x / ts;
+    pc.ty0 = area.y / ts;
+    pc.tx1 = std::min(pc.tiles_x, (area.x + area.width + ts - 1) / ts);
+    pc.ty1 = std::min(pc.tiles_y, (area.y + area.height + ts - 1) / ts);
+    memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT,
+                   VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT, VK_ACCESS_2_SHADER_STORAGE_READ_BIT);
+    vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.vk());
+    const Buffer* buffers[4] = {&t.readback_buffer(), &t.tile_slots_buffer(), &t.tile_info_buffer(),
+                                &t.packed_tiles_buffer()};
+    VkDescriptorBufferInfo infos[4];
+    VkWriteDescriptorSet writes[4];
+    for (uint32_t i = 0; i < 4; ++i) {
+        infos[i] = {buffers[i]->vk(), 0, VK_WHOLE_SIZE};
+        writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+        writes[i].dstBinding = i;
+        writes[i].descriptorCount = 1;
+        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        writes[i].pBufferInfo = &infos[i];
+    }
+    push_fn(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.layout(), 0, 4, writes);
+    const uint32_t rw = pc.tx1 - pc.tx0, rh = pc.ty1 - pc.ty0;
+    const auto shader_to_shader = [&] {
+        memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
+                       VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
+                       VK_ACCESS_2_SHADER_STORAGE_READ_BIT | VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
+    };
+    for (uint32_t phase = 0; phase < 3; ++phase) {
+        pc.phase = phase;
+        vkCmdPushConstants(cmd_, packer.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), &pc);
+        if (phase == 1)
+            vkCmdDispatch(cmd_, 1, 1, 1);  // places and the mask over the whole target
+        else if (rw > 0 && rh > 0)
+            vkCmdDispatch(cmd_, rw, rh, 1);
+        if (phase < 2)
+            shader_to_shader();
+    }
+    host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
+                      VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
+    device_.end_label(cmd_);
+}
+
 void CommandList::end_render_and_read_back(RenderTarget& t, Area area) {
     area = whole(t, area);
+    copy_out(t, area);
+    host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);
+    device_.end_label(cmd_);
+}
+
+void CommandList::copy_out(RenderTarget& t, Area area) {
     vkCmdEndRendering(cmd_);
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT,
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
@@ -102,8 +172,6 @@ void CommandList::end_render_and_read_back(RenderTarget& t, Area area) {
     region.imageExtent = {area.width, area.height, 1};
     vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(), 1,
                            &region);
-    host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);
-    device_.end_label(cmd_);
 }
 
 void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t push_size,

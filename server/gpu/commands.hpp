@@ -58,11 +58,20 @@ public:
     // Ends rendering and copies `area` of the colour attachment into the same pixels of the
     // target's readback buffer (laid out as the whole image); the rest of it is left as it was.
     void end_render_and_read_back(RenderTarget& target, Area area = {});
+    // For a target that packs its tiles (RenderTarget::create with pack_tile): ends rendering,
+    // copies `area` (on the tile grid, or the whole target) into the device-side pixels, and
+    // packs the lit tiles of that area with `packer` (shaders/tiles.comp, push descriptors),
+    // so that the host reads only the target's tile_info() and its lit tiles.
+    void end_render_and_pack(RenderTarget& target, const ComputePipeline& packer, Area area = {});
 
     void dispatch(const ComputePipeline& pipeline, const void* push, uint32_t push_size,
                   uint32_t groups_x);
 
 private:
+    // Ends rendering and copies `area` of the colour attachment into the target's read-back
+    // buffer.
+    void copy_out(RenderTarget& target, Area area);
+
     Device& device_;
     VkCommandBuffer cmd_;
     std::optional<uint32_t> slot_;

@@ -239,11 +239,26 @@ Result<void> Device::create_logical_device(bool want_float64) {
     VkPhysicalDeviceFeatures2 f2{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
     f2.features.shaderFloat64 = float64_ ? VK_TRUE : VK_FALSE;
     f2.pNext = &f12;
+    // VK_KHR_push_descriptor where the device has it: the tile packer binds each target's
+    // buffers with it (render/tile_pack; without it the host scans the tiles).
+    uint32_t ext_count = 0;
+    HS_VK_TRY(vkEnumerateDeviceExtensionProperties(physical_, nullptr, &ext_count, nullptr));
+    std::vector<VkExtensionProperties> exts(ext_count);
+    HS_VK_TRY(vkEnumerateDeviceExtensionProperties(physical_, nullptr, &ext_count, exts.data()));
+    std::vector<const char*> device_exts;
+    for (const auto& e : exts)
+        if (!std::strcmp(e.extensionName, VK_KHR_PUSH_DESCRIPTOR_EXTENSION_NAME))
+            device_exts.push_back(VK_KHR_PUSH_DESCRIPTOR_EXTENSION_NAME);
     VkDeviceCreateInfo dci{VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO};
     dci.pNext = &f2;
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
+    dci.enabledExtensionCount = uint32_t(device_exts.size());
+    dci.ppEnabledExtensionNames = device_exts.data();
     HS_VK_TRY(vkCreateDevice(physical_, &dci, nullptr, &device_));
+    if (!device_exts.empty())
+        push_descriptor_fn_ = reinterpret_cast<PFN_vkCmdPushDescriptorSetKHR>(
+            vkGetDeviceProcAddr(device_, "vkCmdPushDescriptorSetKHR"));
     vkGetDeviceQueue(device_, queue_family_, 0, &queue_);
 
     VkCommandPoolCreateInfo pci{VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO};

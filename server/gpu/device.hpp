@@ -52,6 +52,8 @@ public:
     bool validation_enabled() const { return validation_; }
     // shaderFloat64 is enabled: the shaders with double-precision parts may be used.
     bool float64() const { return float64_; }
+    // VK_KHR_push_descriptor is enabled (null: the device has no such extension).
+    PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn() const { return push_descriptor_fn_; }
 
     // Validation messages (warnings and errors) seen so far, and their texts.
     uint32_t validation_message_count() const { return validation_count_.load(); }
@@ -112,6 +114,7 @@ private:
     mutable std::mutex messages_mutex_;
     std::vector<std::string> messages_;
     PFN_vkSetDebugUtilsObjectNameEXT set_name_fn_ = nullptr;
+    PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn_ = nullptr;
     PFN_vkCmdBeginDebugUtilsLabelEXT begin_label_fn_ = nullptr;
     PFN_vkCmdEndDebugUtilsLabelEXT end_label_fn_ = nullptr;
 };

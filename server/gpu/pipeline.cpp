@@ -45,8 +45,9 @@ struct SetParts {
 };
 
 // One set whose binding i has type types[i].
+// With `push`, a layout for vkCmdPushDescriptorSetKHR and no pool or set.
 Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& types,
-                          VkShaderStageFlags stages, const std::string& name) {
+                          VkShaderStageFlags stages, const std::string& name, bool push = false) {
     const uint32_t count = uint32_t(types.size());
     std::vector<VkDescriptorSetLayoutBinding> bindings(count);
     std::vector<VkDescriptorPoolSize> sizes;
@@ -57,11 +58,15 @@ Result<SetParts> make_set(Device& dev, const std::vector<VkDescriptorType>& type
     VkDescriptorSetLayoutCreateInfo lci{VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO};
     lci.bindingCount = count;
     lci.pBindings = bindings.data();
+    if (push)
+        lci.flags = VK_DESCRIPTOR_SET_LAYOUT_CREATE_PUSH_DESCRIPTOR_BIT_KHR;
     VkDescriptorSetLayout layout;
     HS_VK_TRY(vkCreateDescriptorSetLayout(dev.vk(), &lci, nullptr, &layout));
     SetParts p;
     p.layout = DescriptorSetLayoutHandle(dev.vk(), layout);
     dev.set_name(VK_OBJECT_TYPE_DESCRIPTOR_SET_LAYOUT, uint64_t(layout), name + ".set_layout");
+    if (push)
+        return p;
     VkDescriptorPoolCreateInfo pci{VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO};
     pci.maxSets = 1;
     pci.poolSizeCount = uint32_t(sizes.size());
@@ -248,12 +253,15 @@ void GraphicsPipeline::bind_second_texture(Device& dev, const Texture& texture) 
 
 Result<ComputePipeline> ComputePipeline::create(Device& dev, const ComputePipelineInfo& info) {
     ComputePipeline p;
+    if (info.push_descriptors && !dev.push_descriptor_fn())
+        return make_error(ErrorCode::kUnsupported,
+                          fmt::format("{}: the device has no VK_KHR_push_descriptor", info.name));
     HS_ASSIGN_OR_RETURN(auto cs, make_module(dev, info.spv, info.name + ".comp"));
     HS_ASSIGN_OR_RETURN(auto set,
                         make_set(dev,
                                  std::vector<VkDescriptorType>(info.storage_buffers,
                                                                VK_DESCRIPTOR_TYPE_STORAGE_BUFFER),
-                                 VK_SHADER_STAGE_COMPUTE_BIT, info.name));
+                                 VK_SHADER_STAGE_COMPUTE_BIT, info.name, info.push_descriptors));
     p.set_layout_ = std::move(set.layout);
     p.pool_ = std::move(set.pool);
     p.set_ = set.set;

@@ -129,6 +129,12 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage,
         case BufferUsage::kStaging:
             bci.usage = VK_BUFFER_USAGE_TRANSFER_SRC_BIT;
             break;
+        case BufferUsage::kDeviceStorage:
+            bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT;
+            break;
+        case BufferUsage::kStorageReadback:
+            bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT;
+            break;
     }
     VkBuffer buf;
     HS_VK_TRY(vkCreateBuffer(dev.vk(), &bci, nullptr, &buf));
@@ -138,9 +144,15 @@ Result<Buffer> Buffer::create(Device& dev, uint64_t size, BufferUsage usage,
     dev.set_name(VK_OBJECT_TYPE_BUFFER, uint64_t(buf), name);
     VkMemoryRequirements req;
     vkGetBufferMemoryRequirements(dev.vk(), buf, &req);
+    if (usage == BufferUsage::kDeviceStorage) {  // the device's own memory, not mapped
+        HS_ASSIGN_OR_RETURN(b.memory_,
+                            allocate(dev, req, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, counter));
+        HS_VK_TRY(vkBindBufferMemory(dev.vk(), buf, b.memory_.get(), 0));
+        return b;
+    }
     VkMemoryPropertyFlags props =
         VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-    if (usage == BufferUsage::kReadback) {
+    if (usage == BufferUsage::kReadback || usage == BufferUsage::kStorageReadback) {
         // Prefer cached memory for CPU reads where the device offers it.
         auto cached =
             dev.find_memory_type(req.memoryTypeBits, props | VK_MEMORY_PROPERTY_HOST_CACHED_BIT);
@@ -220,9 +232,27 @@ Result<Texture> Texture::upload(Device& dev, uint32_t width, uint32_t height, Vk
     return t;
 }
 
+namespace {
+struct PackSizes {
+    uint64_t slots, info, tiles;
+};
+PackSizes pack_sizes(uint32_t w, uint32_t h, ColorFormat format, uint32_t tile) {
+    const uint64_t tx = (w + tile - 1) / tile, ty = (h + tile - 1) / tile;
+    return {tx * ty * 4, 16 + (tx * ty + 31) / 32 * 4,
+            tx * ty * tile * tile * bytes_per_pixel(format)};
+}
+}  // namespace
+
+uint64_t RenderTarget::pack_bytes(uint32_t w, uint32_t h, ColorFormat format, uint32_t tile) {
+    if (tile == 0)
+        return 0;
+    const PackSizes p = pack_sizes(w, h, format, tile);
+    return p.slots + p.info + p.tiles;
+}
+
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
                                           const std::string& name, bool with_depth,
-                                          MemoryCounter* counter) {
+                                          MemoryCounter* counter, uint32_t pack_tile) {
     if (w == 0 || h == 0 || w > 16384 || h > 16384)
         return make_error(
             ErrorCode::kInvalidArgument,
@@ -248,13 +278,31 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
         t.depth_ = std::move(depth.image);
         t.depth_view_ = std::move(depth.view);
     }
-    HS_ASSIGN_OR_RETURN(t.readback_,
-                        Buffer::create(dev, uint64_t(w) * h * bytes_per_pixel(format),
-                                       BufferUsage::kReadback, name + ".readback", counter));
+    const uint64_t image_bytes = uint64_t(w) * h * bytes_per_pixel(format);
+    if (pack_tile == 0) {
+        HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, image_bytes, BufferUsage::kReadback,
+                                                        name + ".readback", counter));
+        return t;
+    }
+    if (pack_tile > 256)
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("render target '{}': pack tile {} outside 1..256", name, pack_tile));
+    t.pack_tile_ = pack_tile;
+    const PackSizes p = pack_sizes(w, h, format, pack_tile);
+    HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, image_bytes, BufferUsage::kDeviceStorage,
+                                                    name + ".pixels", counter));
+    HS_ASSIGN_OR_RETURN(t.tile_slots_, Buffer::create(dev, p.slots, BufferUsage::kDeviceStorage,
+                                                      name + ".tile_slots", counter));
+    HS_ASSIGN_OR_RETURN(t.tile_info_, Buffer::create(dev, p.info, BufferUsage::kStorageReadback,
+                                                     name + ".tile_info", counter));
+    HS_ASSIGN_OR_RETURN(t.tiles_, Buffer::create(dev, p.tiles, BufferUsage::kStorageReadback,
+                                                 name + ".tiles", counter));
     return t;
 }
 
 ImageRgba32f RenderTarget::read() const {
+    HS_CHECK(readback_data() != nullptr, "RenderTarget::read: the target packs its tiles");
     ImageRgba32f img = ImageRgba32f::zeros(width_, height_);
     const size_t n = size_t(width_) * height_ * 4;
     switch (format_) {

@@ -35,7 +35,19 @@ private:
     MemoryCharge charge_;  // released before the memory is freed
 };
 
-enum class BufferUsage { kVertex, kIndex, kUniform, kStorage, kReadback, kStaging };
+// kDeviceStorage: storage and copy destination in the device's own memory, not mapped
+// (mapped() is null); kStorageReadback: written by shaders, read by the host (mapped, cached
+// where offered).
+enum class BufferUsage {
+    kVertex,
+    kIndex,
+    kUniform,
+    kStorage,
+    kReadback,
+    kStaging,
+    kDeviceStorage,
+    kStorageReadback
+};
 
 class Buffer {
 public:
@@ -92,9 +104,16 @@ private:
 // one size and format.
 class RenderTarget {
 public:
+    // `pack_tile` > 0: the target's lit tiles of that size are packed on the device
+    // (CommandList::end_render_and_pack): the read-back buffer then lies in the device's memory
+    // (readback_data() is null) and the host reads tile_info() and packed_tiles() instead.
     static Result<RenderTarget> create(Device& device, uint32_t width, uint32_t height,
                                        ColorFormat format, const std::string& name,
-                                       bool with_depth = true, MemoryCounter* counter = nullptr);
+                                       bool with_depth = true, MemoryCounter* counter = nullptr,
+                                       uint32_t pack_tile = 0);
+    // What the packing adds to a target: the tile slots, the presence mask and room for every
+    // tile, padded.
+    static uint64_t pack_bytes(uint32_t width, uint32_t height, ColorFormat format, uint32_t tile);
     RenderTarget() = default;
     RenderTarget(RenderTarget&&) noexcept = default;
     RenderTarget& operator=(RenderTarget&&) noexcept = default;
@@ -111,6 +130,20 @@ public:
     // The readback buffer, persistently mapped: the pixels in the target's format, row-major.
     const uint8_t* readback_data() const { return static_cast<const uint8_t*>(readback_.mapped()); }
 
+    // Packing on the device (pack_tile > 0 at creation).
+    bool packs_tiles() const { return pack_tile_ > 0; }
+    uint32_t pack_tile() const { return pack_tile_; }
+    // Once the pack has completed: u32 count of lit tiles, 3 u32 unused, then the presence
+    // mask (one bit per tile of the whole target, row-major, LSB first; PROTOCOL.md "Sparse
+    // tiles"), in u32 words.
+    const uint32_t* tile_info() const { return static_cast<const uint32_t*>(tile_info_.mapped()); }
+    // The lit tiles in mask order, each pack_tile() x pack_tile() pixels, zero past the edge.
+    const uint8_t* packed_tiles() const { return static_cast<const uint8_t*>(tiles_.mapped()); }
+    const Buffer& tile_slots_buffer() const { return tile_slots_; }
+    const Buffer& tile_info_buffer() const { return tile_info_; }
+    const Buffer& packed_tiles_buffer() const { return tiles_; }
+    const Buffer& readback_buffer() const { return readback_; }
+
     // Converts the readback buffer (filled by CommandList::end_render) to linear float RGBA.
     ImageRgba32f read() const;
 
@@ -121,6 +154,8 @@ private:
     ImageHandle color_, depth_;
     ImageViewHandle color_view_, depth_view_;
     Buffer readback_;
+    uint32_t pack_tile_ = 0;
+    Buffer tile_slots_, tile_info_, tiles_;
 };
 
 }  // namespace hs::gpu

@@ -665,9 +665,13 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     auto& slot = frames_[job.session_id];
     const uint64_t index_bytes = renderer_->layer_index_bytes();
     const bool depth = renderer_->uses_depth();
+    // Sparse layers' lit tiles packed on the device, where the renderer does (raw layers need
+    // every pixel).
+    const uint32_t pack_tile =
+        renderer_->packs_tiles() && d.packing != LayerPacking::kRaw ? kLayerTile : 0;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
-        slot->targets[0].has_depth() == depth)
+        slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile)
         return slot.get();
     // A new display, or a scene that needs a depth buffer where the last did not (or the
     // other way round): new targets (the old frame, if the encoder still holds it, lives on
@@ -679,16 +683,17 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->encoding = d.encoding;
     const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     for (size_t e = 0; e < 2; ++e) {
-        HS_ASSIGN_OR_RETURN(
-            f->targets[e],
-            gpu::RenderTarget::create(device_, d.eye.width, d.eye.height, cf,
-                                      fmt::format("viewer{}.eye{}", job.session_id, e), depth));
+        HS_ASSIGN_OR_RETURN(f->targets[e], gpu::RenderTarget::create(
+                                               device_, d.eye.width, d.eye.height, cf,
+                                               fmt::format("viewer{}.eye{}", job.session_id, e),
+                                               depth, nullptr, pack_tile));
         HS_ASSIGN_OR_RETURN(
             f->indices[e],
             gpu::Buffer::create(device_, index_bytes, gpu::BufferUsage::kIndex,
                                 fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
     }
-    f->target_bytes = 2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth);
+    f->target_bytes =
+        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth, pack_tile);
     f->index_bytes = 2 * index_bytes;
     slot = std::move(f);
     update_held_bytes();

@@ -41,6 +41,10 @@ public:
                     f.encoding,        plan.rect.x0,
                     plan.rect.y0,      plan.rect.x1,
                     plan.rect.y1};
+                if (t.packs_tiles() && !plan.rect.empty()) {
+                    f.pixels[e].tile_info = t.tile_info();
+                    f.pixels[e].tiles = t.packed_tiles();
+                }
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;
             }

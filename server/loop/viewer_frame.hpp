@@ -23,13 +23,16 @@ namespace hs::loop {
 
 // One eye's layer where its pixels lie (a persistently mapped readback buffer, or a captured
 // image): rows `stride` bytes apart, in `encoding`; only the rectangle [x0, x1) x [y0, y1) is
-// read, the rest of the layer is black.
+// read, the rest of the layer is black. Or, from a target that packs its tiles, the lit tiles
+// the device packed (codec::LayerPixels::tile_info; `data` null).
 struct EyePixels {
     const uint8_t* data = nullptr;
     size_t stride = 0;  // bytes
     uint32_t width = 0, height = 0;
     render::LayerEncoding encoding = render::LayerEncoding::kSrgb8;
     uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    const uint32_t* tile_info = nullptr;
+    const uint8_t* tiles = nullptr;
 };
 
 // One submission's figures (stats "frames"): its viewers' eyes, the time from taking the

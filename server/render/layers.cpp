@@ -30,6 +30,15 @@ bool Renderer::check_layer_request(const LayerRequest& r, LayerWork& w) const {
                               gpu::to_string(layer_target_format(r.encoding)));
         return false;
     }
+    if (r.target->packs_tiles() && (!packer_ || r.target->pack_tile() != r.tile || !r.sparse)) {
+        w.error = packer_ ? fmt::format(
+                                "a layer target that packs tiles of {} needs a sparse "
+                                "request on tiles of that size (got {}{})",
+                                r.target->pack_tile(), r.tile, r.sparse ? "" : ", dense")
+                          : "this renderer does not pack tiles (packs_tiles()): make layer "
+                            "targets without pack_tile";
+        return false;
+    }
     if (uses_depth() && !r.target->has_depth()) {
         w.error =
             "this scene's prop is drawn with a depth test: its layer targets need a depth buffer";
@@ -291,7 +300,10 @@ void Renderer::record_layer(gpu::CommandList& cl, const LayerRequest& r, const L
         cl.push_constants(w.lit[i]->pipeline, &gp, sizeof(gp));
         cl.draw_range(g.first, g.count);
     }
-    cl.end_render_and_read_back(*r.target, area);
+    if (r.target->packs_tiles())
+        cl.end_render_and_pack(*r.target, *packer_, area);
+    else
+        cl.end_render_and_read_back(*r.target, area);
 }
 
 Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(

@@ -11,6 +11,7 @@
 #include <glm/gtc/constants.hpp>
 
 #include "core/check.hpp"
+#include "core/log.hpp"
 #include "gpu/shared_layout.hpp"
 #include "render/fill.hpp"
 #include "scene/camera.hpp"
@@ -19,6 +20,7 @@
 #include "shaders/prop_frag.h"
 #include "shaders/prop_frag_f32.h"
 #include "shaders/prop_vert.h"
+#include "shaders/tiles_comp.h"
 
 namespace hs::render {
 
@@ -159,7 +161,28 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
                                                     : cores - 1;
     if (planners > 0)
         r->planners_ = std::make_unique<WorkerPool>(unsigned(planners));
+    const bool pack = info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
+    if (packs_tiles(device, info)) {
+        gpu::ComputePipelineInfo pi;
+        pi.spv = kTilesCompSpv;
+        pi.storage_buffers = 4;
+        pi.push_constant_bytes = 11 * 4;
+        pi.push_descriptors = true;
+        pi.name = "pipeline.tile-pack";
+        HS_ASSIGN_OR_RETURN(auto packer, gpu::ComputePipeline::create(device, pi));
+        r->packer_ = std::make_unique<gpu::ComputePipeline>(std::move(packer));
+    } else if (pack) {
+        log::warn(
+            "packing tiles on the device needs VK_KHR_push_descriptor, which {} lacks: "
+            "the host scans the layers' tiles",
+            device.name());
+    }
     return r;
+}
+
+bool Renderer::packs_tiles(const gpu::Device& device, const RendererCreateInfo& info) {
+    const bool pack = info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
+    return pack && device.push_descriptor_fn() != nullptr;
 }
 
 Renderer::~Renderer() {
@@ -424,9 +447,10 @@ Result<RenderResult> Renderer::draw(Variant& v, const scene::Intrinsics& k, cons
 }
 
 uint64_t Renderer::target_bytes_for(uint32_t w, uint32_t h, gpu::ColorFormat format,
-                                    bool with_depth) {
+                                    bool with_depth, uint32_t pack_tile) {
     const uint64_t px = uint64_t(w) * h;
-    return px * (2 * gpu::bytes_per_pixel(format) + (with_depth ? 4 : 0));  // + D32 depth
+    return px * (2 * gpu::bytes_per_pixel(format) + (with_depth ? 4 : 0)) +  // + D32 depth
+           gpu::RenderTarget::pack_bytes(w, h, format, pack_tile);
 }
 
 uint64_t Renderer::target_bytes() const {

@@ -59,6 +59,13 @@ struct RendererCreateInfo {
     // without planners; for measuring what the former buys, `hysar bench serve
     // --record-on-render-thread`).
     bool record_on_planners = true;
+    // Only lit tiles leave the device: a layer target made with packing
+    // (gpu::RenderTarget::create's pack_tile) has its lit tiles classified and packed by a
+    // compute pass (shaders/tiles.comp), so the host reads those alone rather than the layer's
+    // whole rectangle. -1: on a GPU, off on a CPU device (lavapipe, where device memory is the
+    // host's and the pass costs the same cores as the host's scan); 0: off; 1: on. Needs
+    // VK_KHR_push_descriptor (without it, off). See packs_tiles().
+    int pack_tiles = -1;
     // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
     // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
     // outlive the renderer.
@@ -177,6 +184,11 @@ public:
     // Layers recorded by the planning threads into secondary buffers (a batch of two or more
     // drawn layers, with planners) since the renderer was made.
     uint64_t layers_recorded_by_planners() const { return layers_recorded_by_planners_; }
+    // Whether layer targets are packed on the device (RendererCreateInfo::pack_tiles on, and
+    // the device can): then make a sparse layer's targets with pack_tile = the request's tile.
+    bool packs_tiles() const { return packer_ != nullptr; }
+    // Whether a renderer made with `info` on `device` packs tiles (packs_tiles()).
+    static bool packs_tiles(const gpu::Device& device, const RendererCreateInfo& info);
     // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
     uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }
     // Whether a layer of `spec` can ever be non-zero in this scene (a specular term with a
@@ -237,7 +249,7 @@ public:
     // What one render target of this size holds: colour, depth (if it has one) and readback
     // buffer, bytes.
     static uint64_t target_bytes_for(uint32_t width, uint32_t height, gpu::ColorFormat format,
-                                     bool with_depth = true);
+                                     bool with_depth = true, uint32_t pack_tile = 0);
     // Whether this scene's passes test depth; targets for them need a depth buffer only then.
     // The analytic dome's do not: being convex, no front face hides another, and every
     // fragment shades the point its own ray hits, so which triangle covers a pixel (at a
@@ -361,6 +373,7 @@ private:
     // (index 0), so that a set is recorded again only after the submission that ran it.
     std::vector<std::unique_ptr<gpu::SecondaryBuffers>> layer_buffers_;
     uint64_t layers_recorded_by_planners_ = 0;
+    std::unique_ptr<gpu::ComputePipeline> packer_;  // shaders/tiles.comp; null: host scans
     std::vector<uint32_t> layer_drawn_;       // record_layers: the drawn requests, kept for reuse
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one

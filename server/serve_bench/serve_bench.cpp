@@ -483,6 +483,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.submissions_in_flight = o.submissions_in_flight;
     info.planning_threads = o.planning_threads;
     info.record_on_planners = !o.record_on_render_thread;
+    info.pack_tiles = o.pack_tiles;
     info.encoder_threads = o.encoder_threads;
     info.headset_mbps = o.headset_mbps;
     info.room_mbps = o.room_mbps;
@@ -806,6 +807,9 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"submissions_in_flight", o.submissions_in_flight},
             {"planning_threads", o.planning_threads},
             {"record_on_render_thread", o.record_on_render_thread},
+            {"pack_tiles", o.pack_tiles < 0 ? "auto"
+                           : o.pack_tiles   ? "on"
+                                            : "off"},
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
             {"layer_quality", o.layer_quality},

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 
 #include "codec/layer_codec.hpp"
 #include "protocol/tiles.hpp"
@@ -27,7 +28,33 @@ uint64_t warp_depth_um(double depth_m) {
 }
 
 codec::LayerPixels wire_pixels(const loop::EyePixels& p) {
-    return {p.data, p.stride, p.width, p.height, wire_format(p.encoding), p.x0, p.y0, p.x1, p.y1};
+    return {p.data, p.stride, p.width,     p.height, wire_format(p.encoding), p.x0, p.y0,
+            p.x1,   p.y1,     p.tile_info, p.tiles};
+}
+
+// The headset drive over tiles the device packed: each tile's pixels inside the layer through
+// the drive, its padding past the layer's edge left zero, into `dst` (the same packing).
+void drive_packed(const calib::LayerDrive& drive, const codec::LayerPixels& px, uint8_t* dst) {
+    const uint32_t ts = protocol::kDefaultTileSize;
+    const bool rgba8 = px.format == protocol::PixelFormat::kRgba8;
+    const size_t stride = size_t(ts) * (rgba8 ? 4 : 8), tile_bytes = stride * ts;
+    const uint32_t tx = (px.width + ts - 1) / ts, ty = (px.height + ts - 1) / ts;
+    const uint32_t count = px.tile_info[0];
+    const uint32_t* mask = px.tile_info + 4;
+    uint32_t k = 0;
+    for (uint32_t t = 0; t < tx * ty && k < count; ++t) {
+        if (!(mask[t / 32] >> (t % 32) & 1u))
+            continue;
+        const uint32_t cw = std::min(ts, px.width - t % tx * ts),
+                       ch = std::min(ts, px.height - t / tx * ts);
+        if (cw < ts || ch < ts)
+            std::memset(dst + size_t(k) * tile_bytes, 0, tile_bytes);
+        if (rgba8)
+            drive.apply_rgba8(px.tiles, stride, dst, stride, 0, k * ts, cw, k * ts + ch);
+        else
+            drive.apply_rgba16f(px.tiles, stride, dst, stride, 0, k * ts, cw, k * ts + ch);
+        ++k;
+    }
 }
 }  // namespace
 
@@ -155,6 +182,20 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     const uint32_t x1 = std::min(pixels.x1, pixels.width), y1 = std::min(pixels.y1, pixels.height);
     if (!drive || pixels.x0 >= x1 || pixels.y0 >= y1) {
         codec::append_layer_data(out, pixels, encoding, codec, scratch.tiles, quality);
+        return;
+    }
+    if (pixels.tile_info) {  // only the packed tiles through the drive
+        const uint32_t ts = protocol::kDefaultTileSize;
+        const size_t bytes = size_t(pixels.tile_info[0]) * ts * ts *
+                             (pixels.format == protocol::PixelFormat::kRgba8 ? 4 : 8);
+        if (scratch.driven_bytes < bytes) {
+            scratch.driven.reset(new uint8_t[bytes]);
+            scratch.driven_bytes = bytes;
+        }
+        drive_packed(*drive, pixels, scratch.driven.get());
+        codec::LayerPixels driven = pixels;
+        driven.tiles = scratch.driven.get();
+        codec::append_layer_data(out, driven, encoding, codec, scratch.tiles, quality);
         return;
     }
     // The rectangle through the headset drive, at the same place in a layer-sized buffer, so

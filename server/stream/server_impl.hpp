@@ -149,6 +149,9 @@ struct Server::Impl final : loop::FrameLoopHost {
     ServerCreateInfo info;
     const ServerLimits& limits;
     std::string driver_info;  // the device's driver, name and version
+    // Sparse layers' tiles are packed on the device (render::Renderer::packs_tiles): their
+    // targets hold the packed tiles too.
+    bool packs_tiles = false;
     uint16_t bound_port = 0;
     uint32_t encoder_threads = 1;
     scene::Scene initial_scene;  // handed to the render thread when it starts (then empty)
@@ -244,7 +247,11 @@ struct Server::Impl final : loop::FrameLoopHost {
     mutable std::mutex bus_mutex;
     uint32_t bus_version = 1;
 
-    Impl(gpu::Device& d, const ServerCreateInfo& i) : device(d), info(i), limits(info.limits) {}
+    Impl(gpu::Device& d, const ServerCreateInfo& i)
+        : device(d),
+          info(i),
+          limits(info.limits),
+          packs_tiles(render::Renderer::packs_tiles(d, info.renderer)) {}
     void accept_tcp();
     void accept_unix();
     void accept_agent();

@@ -18,6 +18,7 @@
 #include "scene/camera.hpp"
 #include "served_installation/served.hpp"
 #include "stream/loopback.hpp"
+#include "synthetic_calibration.hpp"
 
 using namespace hs;
 using namespace hs::test;
@@ -91,25 +92,6 @@ TEST_F(ServedCalibration, CalibratedServerReproducesTheTargetAndTheUncalibratedD
         differ = std::max<double>(
             differ, std::fabs(with->projector.pixels[i] - without->projector.pixels[i]));
     EXPECT_GT(differ, 0.1);
-}
-
-// A calibration of the test scene's own sizes, made in memory: a linear device of 1000 DN/s.
-calib::ServingCalibration synthetic(const scene::Scene& s, uint32_t hmd_w, uint32_t hmd_h) {
-    calib::ServingCalibration c;
-    c.dir = "synthetic";
-    c.projector.dir = "synthetic/projector";
-    c.projector.width = s.projector.intrinsics.width;
-    c.projector.height = s.projector.intrinsics.height;
-    c.hmd.dir = "synthetic/hmd";
-    c.hmd.width = hmd_w;
-    c.hmd.height = hmd_h;
-    for (auto* d : {&c.projector, &c.hmd}) {
-        d->colour.model = calib::ColourModel::kLinear;
-        d->colour.matrix = glm::dmat3(1000.0);
-        d->colour.offset = glm::dvec3(20.0);
-    }
-    c.optics.alpha = 0.4;
-    return c;
 }
 
 std::unique_ptr<client::Connection> open(uint16_t port) {
