@@ -23,7 +23,7 @@ using uvec4 = glm::uvec4;
 #define HS_BINDING_PROBE_IN 0
 #define HS_BINDING_PROBE_OUT 1
 #define HS_PROBE_LOCAL_SIZE 64
-#define HS_TILES_LOCAL_SIZE 256  // tiles.comp: invocations per workgroup
+#define HS_TILES_LOCAL_SIZE 64  // tiles.comp: invocations per workgroup
 
 // Specialization constant ids (gpu/shared_layout.hpp mirrors them as an enum).
 #define HS_SC_PASS_KIND \

@@ -4,14 +4,17 @@
 
 // Packs a VD layer's lit tiles on the device, so that only they are read back (docs/
 // ARCHITECTURE.md, "Only lit tiles leave the device"). The layer's pixels lie in `src` (the
-// rectangle copied there, laid out as the whole image, HS_TILES_WORDS 32-bit words per pixel);
-// three dispatches, one phase each:
-//   0. one workgroup per tile of the region: whether any word of the tile is non-zero;
+// rectangle copied there, laid out as the whole image, `words` 32-bit words per pixel); three
+// dispatches, one phase each:
+//   0. one invocation per pixel row of each tile of the region: a row with a non-zero word
+//      marks its tile lit (the tiles' marks were cleared to 0 before);
 //   1. one workgroup: each lit tile's place in the packed list (row-major order over the whole
 //      layer, as the wire's presence mask counts them), the mask and the count;
-//   2. one workgroup per tile of the region: a lit tile's rows into its place, tile x tile
-//      pixels, zero past the layer's edge.
-// The packed tiles are byte for byte what protocol::encode_tiles_into packs on the host.
+//   2. one invocation per pixel row of each tile of the region: a lit tile's row into its
+//      place, tile pixels wide, zero past the layer's edge (rows past it too).
+// The packed tiles are byte for byte what protocol::encode_tiles_into packs on the host. Only
+// phase 1 synchronises a workgroup: on a CPU device (lavapipe) a barrier() in a shader costs
+// a switch per invocation, so the per-tile phases have none.
 layout(local_size_x = HS_TILES_LOCAL_SIZE) in;
 
 layout(std430, set = 0, binding = 0) readonly buffer Src { uint src[]; };
@@ -28,29 +31,33 @@ layout(push_constant) uniform Push {
 } pc;
 
 const uint kNone = 0xffffffffu;
-shared uint lit_any;
 shared uint partial[HS_TILES_LOCAL_SIZE];
 
 uint tile_width(uint bx) { return min(pc.tile, pc.width - bx * pc.tile); }
 uint tile_height(uint by) { return min(pc.tile, pc.height - by * pc.tile); }
 
-void classify(uint bx, uint by) {
-    const uint row_words = tile_width(bx) * pc.words;
-    const uint n = row_words * tile_height(by);
-    const uint base = (by * pc.tile * pc.width + bx * pc.tile) * pc.words;
+// The tile and the row within it of this invocation: x runs over the region's tile columns'
+// rows (tile column i / tile, row i % tile), y over the region's tile rows. False past the
+// region.
+bool tile_row(out uint bx, out uint by, out uint y) {
+    const uint i = gl_GlobalInvocationID.x;
+    bx = pc.tx0 + i / pc.tile;
+    by = pc.ty0 + gl_GlobalInvocationID.y;
+    y = i % pc.tile;
+    return bx < pc.tx1 && by < pc.ty1;
+}
+
+void classify() {
+    uint bx, by, y;
+    if (!tile_row(bx, by, y) || y >= tile_height(by))
+        return;
+    const uint n = tile_width(bx) * pc.words;
+    const uint base = ((by * pc.tile + y) * pc.width + bx * pc.tile) * pc.words;
     uint acc = 0u;
-    for (uint i = gl_LocalInvocationID.x; i < n; i += HS_TILES_LOCAL_SIZE) {
-        const uint y = i / row_words, c = i - y * row_words;
-        acc |= src[base + y * pc.width * pc.words + c];
-    }
-    if (gl_LocalInvocationID.x == 0u)
-        lit_any = 0u;
-    barrier();
+    for (uint c = 0u; c < n; ++c)
+        acc |= src[base + c];
     if (acc != 0u)
-        atomicOr(lit_any, 1u);
-    barrier();
-    if (gl_LocalInvocationID.x == 0u)
-        slots[by * pc.tiles_x + bx] = lit_any;
+        atomicOr(slots[by * pc.tiles_x + bx], 1u);
 }
 
 bool in_region(uint t) {
@@ -100,26 +107,28 @@ void place() {
     }
 }
 
-void pack(uint bx, uint by) {
+void pack() {
+    uint bx, by, y;
+    if (!tile_row(bx, by, y))
+        return;
     const uint slot = slots[by * pc.tiles_x + bx];
     if (slot == kNone)
         return;
-    const uint cw = tile_width(bx) * pc.words, ch = tile_height(by);
     const uint row_words = pc.tile * pc.words;
-    const uint n = row_words * pc.tile;
-    const uint base = (by * pc.tile * pc.width + bx * pc.tile) * pc.words;
-    for (uint i = gl_LocalInvocationID.x; i < n; i += HS_TILES_LOCAL_SIZE) {
-        const uint y = i / row_words, c = i - y * row_words;
-        packed[slot * n + i] = (y < ch && c < cw) ? src[base + y * pc.width * pc.words + c] : 0u;
-    }
+    const uint to = (slot * pc.tile + y) * row_words;
+    const uint n = y < tile_height(by) ? tile_width(bx) * pc.words : 0u;
+    const uint base = ((by * pc.tile + y) * pc.width + bx * pc.tile) * pc.words;
+    for (uint c = 0u; c < n; ++c)
+        packed[to + c] = src[base + c];
+    for (uint c = n; c < row_words; ++c)
+        packed[to + c] = 0u;
 }
 
 void main() {
-    const uint bx = pc.tx0 + gl_WorkGroupID.x, by = pc.ty0 + gl_WorkGroupID.y;
     if (pc.phase == 0u)
-        classify(bx, by);
+        classify();
     else if (pc.phase == 1u)
         place();
     else
-        pack(bx, by);
+        pack();
 }

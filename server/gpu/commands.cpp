@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "gpu/barriers.hpp"
+#include "gpu/shared_layout.hpp"
 
 namespace hs::gpu {
 
@@ -112,8 +113,11 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
     pc.ty0 = area.y / ts;
     pc.tx1 = std::min(pc.tiles_x, (area.x + area.width + ts - 1) / ts);
     pc.ty1 = std::min(pc.tiles_y, (area.y + area.height + ts - 1) / ts);
-    memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT,
-                   VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT, VK_ACCESS_2_SHADER_STORAGE_READ_BIT);
+    // Phase 0 only sets the marks of lit tiles: all start at 0.
+    vkCmdFillBuffer(cmd_, t.tile_slots_buffer().vk(), 0, VK_WHOLE_SIZE, 0);
+    memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT | VK_PIPELINE_STAGE_2_CLEAR_BIT,
+                   VK_ACCESS_2_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
+                   VK_ACCESS_2_SHADER_STORAGE_READ_BIT | VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
     vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.vk());
     const Buffer* buffers[4] = {&t.readback_buffer(), &t.tile_slots_buffer(), &t.tile_info_buffer(),
                                 &t.packed_tiles_buffer()};
@@ -128,7 +132,10 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
         writes[i].pBufferInfo = &infos[i];
     }
     push_fn(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.layout(), 0, 4, writes);
+    // Phases 0 and 2: an invocation per pixel row of each tile of the region, along x the
+    // region's tile columns' rows.
     const uint32_t rw = pc.tx1 - pc.tx0, rh = pc.ty1 - pc.ty0;
+    const uint32_t groups_x = (rw * ts + HS_TILES_LOCAL_SIZE - 1) / HS_TILES_LOCAL_SIZE;
     const auto shader_to_shader = [&] {
         memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
                        VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
@@ -140,7 +147,7 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
         if (phase == 1)
             vkCmdDispatch(cmd_, 1, 1, 1);  // places and the mask over the whole target
         else if (rw > 0 && rh > 0)
-            vkCmdDispatch(cmd_, rw, rh, 1);
+            vkCmdDispatch(cmd_, groups_x, rh, 1);
         if (phase < 2)
             shader_to_shader();
     }

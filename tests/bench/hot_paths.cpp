@@ -270,12 +270,44 @@ void BM_DecodeLossy(benchmark::State& state) {
 }
 BENCHMARK(BM_DecodeLossy)->Arg(92)->Unit(benchmark::kMillisecond);
 
+// What the device's tile pass (shaders/tiles.comp) leaves for the host: the count, three unused
+// words and the presence mask's words, then the lit tiles of the rectangle, each padded.
+struct DevicePacked {
+    std::vector<uint32_t> info;
+    std::vector<uint8_t> tiles;
+};
+DevicePacked pack_like_the_device(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h,
+                                  size_t bpp, uint32_t x0, uint32_t y0, uint32_t x1, uint32_t y1) {
+    const uint32_t ts = protocol::kDefaultTileSize, tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    DevicePacked p;
+    p.info.assign(4 + (size_t(tx) * ty + 31) / 32, 0);
+    for (uint32_t by = y0 / ts; by * ts < y1; ++by)
+        for (uint32_t bx = x0 / ts; bx * ts < x1; ++bx) {
+            std::vector<uint8_t> tile(size_t(ts) * ts * bpp, 0);
+            bool lit = false;
+            for (uint32_t y = 0; y < ts && by * ts + y < h; ++y) {
+                const uint32_t cw = std::min(ts, w - bx * ts);
+                const uint8_t* row = raw.data() + ((size_t(by) * ts + y) * w + bx * ts) * bpp;
+                std::memcpy(&tile[size_t(y) * ts * bpp], row, cw * bpp);
+                for (size_t i = 0; i < cw * bpp; ++i) lit = lit || row[i] != 0;
+            }
+            if (!lit)
+                continue;
+            const size_t t = size_t(by) * tx + bx;
+            p.info[4 + t / 32] |= 1u << (t % 32);
+            ++p.info[0];
+            p.tiles.insert(p.tiles.end(), tile.begin(), tile.end());
+        }
+    return p;
+}
+
 // One eye's layer data as the encoder thread appends it, from the layer's pixels in the wire
 // format (sRGB8 or halves, as in the mapped readback) over the tile-aligned rectangle of its
 // lit pixels, sparse tiles + LZ4 (the server's default). range(0): 0 the encoder's call before
 // calibrated output existed (codec::append_layer_data), 1 the encoder's path without a
 // calibration (stream::append_served_layer, no drive), 2 with the headset drive of a
-// calibration. range(1): 1 sRGB8, 0 f16.
+// calibration; 3 and 4 the same two from the lit tiles the device packed (`--pack-tiles`),
+// where the host no longer scans the rectangle. range(1): 1 sRGB8, 0 f16.
 void BM_ServedLayer(benchmark::State& state) {
     const auto& img = vd_layer();
     const auto f = format_of(state.range(1));
@@ -293,8 +325,13 @@ void BM_ServedLayer(benchmark::State& state) {
     x1 = std::min((x1 + ts - 1) / ts * ts, img.width);
     y1 = std::min((y1 + ts - 1) / ts * ts, img.height);
     const size_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
-    const codec::LayerPixels px{raw.data(), img.width * bpp, img.width, img.height, f, x0, y0, x1,
-                                y1};
+    codec::LayerPixels px{raw.data(), img.width * bpp, img.width, img.height, f, x0, y0, x1, y1};
+    const DevicePacked packed = pack_like_the_device(raw, img.width, img.height, bpp, x0, y0, x1, y1);
+    if (state.range(0) >= 3) {
+        px.data = nullptr;
+        px.tile_info = packed.info.data();
+        px.tiles = packed.tiles.data();
+    }
     // A headset like the virtual installation's: gamma 1.9 / 2.0 / 2.1 with cross-talk.
     std::vector<calib::ColourSample> samples;
     const glm::dmat3 m(3200, 250, 70, 140, 3300, 210, 70, 110, 3250);
@@ -307,24 +344,44 @@ void BM_ServedLayer(benchmark::State& state) {
     const auto codec = codec::default_tile_codec(f);
     stream::LayerScratch scratch;
     std::vector<uint8_t> out;
+    if (state.range(0) >= 3) {  // the same bytes as from the read-back rectangle
+        codec::LayerPixels host = px;
+        host.data = raw.data(), host.tile_info = nullptr, host.tiles = nullptr;
+        std::vector<uint8_t> a, b;
+        const calib::LayerDrive* d = state.range(0) == 4 ? &drive : nullptr;
+        stream::append_served_layer(a, host, d, protocol::Encoding::kSparseTiles, codec, scratch);
+        stream::append_served_layer(b, px, d, protocol::Encoding::kSparseTiles, codec, scratch);
+        if (a != b)
+            state.SkipWithError("the device-packed tiles encode to other bytes");
+    }
     for (auto _ : state) {
         out.clear();
         if (state.range(0) == 0)
             codec::append_layer_data(out, px, protocol::Encoding::kSparseTiles, codec,
                                      scratch.tiles);
         else
-            stream::append_served_layer(out, px, state.range(0) == 2 ? &drive : nullptr,
+            stream::append_served_layer(out, px,
+                                        state.range(0) == 2 || state.range(0) == 4 ? &drive
+                                                                                   : nullptr,
                                         protocol::Encoding::kSparseTiles, codec, scratch);
         benchmark::DoNotOptimize(out.data());
     }
     state.counters["rect_px"] = double(x1 - x0) * double(y1 - y0);
     state.counters["bytes"] = double(out.size());
-    static const char* kPath[] = {"before calibrated output", "calibration off", "calibration on"};
+    state.counters["lit_tiles"] = double(packed.info[0]);
+    // What crosses from the device to the host: the rectangle, or the lit tiles and the mask.
+    state.counters["readback_kib"] =
+        (state.range(0) >= 3 ? double(packed.tiles.size() + packed.info.size() * 4)
+                             : double(x1 - x0) * double(y1 - y0) * double(bpp)) /
+        1024.0;
+    static const char* kPath[] = {"before calibrated output", "calibration off", "calibration on",
+                                  "device-packed, calibration off",
+                                  "device-packed, calibration on"};
     state.SetLabel(std::string(kPath[state.range(0)]) +
                    (f == protocol::PixelFormat::kRgba8 ? ", srgb8" : ", f16"));
 }
 BENCHMARK(BM_ServedLayer)
-    ->ArgsProduct({{0, 1, 2}, {1, 0}})
+    ->ArgsProduct({{0, 1, 2, 3, 4}, {1, 0}})
     ->ArgNames({"path", "srgb8"})
     ->Unit(benchmark::kMillisecond);
 

@@ -126,6 +126,7 @@ bad --seconds --seconds -1
 bad --seconds --seconds
 bad --format --format png
 bad --encoding --encoding zip
+bad --pack-tiles --pack-tiles maybe
 bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 1025
