@@ -326,7 +326,8 @@ void BM_ServedLayer(benchmark::State& state) {
     y1 = std::min((y1 + ts - 1) / ts * ts, img.height);
     const size_t bpp = f == protocol::PixelFormat::kRgba8 ? 4 : 8;
     codec::LayerPixels px{raw.data(), img.width * bpp, img.width, img.height, f, x0, y0, x1, y1};
-    const DevicePacked packed = pack_like_the_device(raw, img.width, img.height, bpp, x0, y0, x1, y1);
+    const DevicePacked packed =
+        pack_like_the_device(raw, img.width, img.height, bpp, x0, y0, x1, y1);
     if (state.range(0) >= 3) {
         px.data = nullptr;
         px.tile_info = packed.info.data();
@@ -360,10 +361,9 @@ void BM_ServedLayer(benchmark::State& state) {
             codec::append_layer_data(out, px, protocol::Encoding::kSparseTiles, codec,
                                      scratch.tiles);
         else
-            stream::append_served_layer(out, px,
-                                        state.range(0) == 2 || state.range(0) == 4 ? &drive
-                                                                                   : nullptr,
-                                        protocol::Encoding::kSparseTiles, codec, scratch);
+            stream::append_served_layer(
+                out, px, state.range(0) == 2 || state.range(0) == 4 ? &drive : nullptr,
+                protocol::Encoding::kSparseTiles, codec, scratch);
         benchmark::DoNotOptimize(out.data());
     }
     state.counters["rect_px"] = double(x1 - x0) * double(y1 - y0);
