@@ -204,6 +204,7 @@ Result<void> Device::pick_physical_device(DevicePreference preference) {
             physical_ = pd;
             queue_family_ = uint32_t(family);
             name_ = props.deviceName;
+            max_storage_buffer_range_ = props.limits.maxStorageBufferRange;
             is_cpu_ = cpu;
         }
     }

@@ -54,6 +54,8 @@ public:
     bool float64() const { return float64_; }
     // VK_KHR_push_descriptor is enabled (null: the device has no such extension).
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn() const { return push_descriptor_fn_; }
+    // The largest storage buffer a shader may be given (bytes; at least 2^27).
+    uint64_t max_storage_buffer_range() const { return max_storage_buffer_range_; }
 
     // Validation messages (warnings and errors) seen so far, and their texts.
     uint32_t validation_message_count() const { return validation_count_.load(); }
@@ -115,6 +117,7 @@ private:
     std::vector<std::string> messages_;
     PFN_vkSetDebugUtilsObjectNameEXT set_name_fn_ = nullptr;
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn_ = nullptr;
+    uint64_t max_storage_buffer_range_ = 0;
     PFN_vkCmdBeginDebugUtilsLabelEXT begin_label_fn_ = nullptr;
     PFN_vkCmdEndDebugUtilsLabelEXT end_label_fn_ = nullptr;
 };

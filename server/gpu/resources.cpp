@@ -250,6 +250,15 @@ uint64_t RenderTarget::pack_bytes(uint32_t w, uint32_t h, ColorFormat format, ui
     return p.slots + p.info + p.tiles;
 }
 
+bool RenderTarget::can_pack(const Device& dev, uint32_t w, uint32_t h, ColorFormat format,
+                            uint32_t tile) {
+    if (tile == 0 || tile > 256)
+        return false;
+    const uint64_t most = dev.max_storage_buffer_range();
+    return uint64_t(w) * h * bytes_per_pixel(format) <= most &&
+           pack_sizes(w, h, format, tile).tiles <= most;
+}
+
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
                                           const std::string& name, bool with_depth,
                                           MemoryCounter* counter, uint32_t pack_tile) {
@@ -284,10 +293,12 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
                                                         name + ".readback", counter));
         return t;
     }
-    if (pack_tile > 256)
-        return make_error(
-            ErrorCode::kInvalidArgument,
-            fmt::format("render target '{}': pack tile {} outside 1..256", name, pack_tile));
+    if (!can_pack(dev, w, h, format, pack_tile))
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("render target '{}': {}x{} cannot pack tiles of {} (a tile "
+                                      "of 1..256 and buffers within the device's storage buffer "
+                                      "range of {} bytes)",
+                                      name, w, h, pack_tile, dev.max_storage_buffer_range()));
     t.pack_tile_ = pack_tile;
     const PackSizes p = pack_sizes(w, h, format, pack_tile);
     HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, image_bytes, BufferUsage::kDeviceStorage,

@@ -114,6 +114,10 @@ public:
     // What the packing adds to a target: the tile slots, the presence mask and room for every
     // tile, padded.
     static uint64_t pack_bytes(uint32_t width, uint32_t height, ColorFormat format, uint32_t tile);
+    // Whether a target of this size can pack tiles of `tile` on `device`: its pixels and its
+    // packed tiles each fit one storage buffer (maxStorageBufferRange, as little as 128 MiB).
+    static bool can_pack(const Device& device, uint32_t width, uint32_t height, ColorFormat format,
+                         uint32_t tile);
     RenderTarget() = default;
     RenderTarget(RenderTarget&&) noexcept = default;
     RenderTarget& operator=(RenderTarget&&) noexcept = default;

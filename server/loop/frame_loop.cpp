@@ -667,8 +667,12 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const bool depth = renderer_->uses_depth();
     // Sparse layers' lit tiles packed on the device, where the renderer does (raw layers need
     // every pixel).
+    const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     const uint32_t pack_tile =
-        renderer_->packs_tiles() && d.packing != LayerPacking::kRaw ? kLayerTile : 0;
+        renderer_->packs_tiles() && d.packing != LayerPacking::kRaw &&
+                gpu::RenderTarget::can_pack(device_, d.eye.width, d.eye.height, cf, kLayerTile)
+            ? kLayerTile
+            : 0;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
         slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile)
@@ -681,7 +685,6 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->width = d.eye.width;
     f->height = d.eye.height;
     f->encoding = d.encoding;
-    const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     for (size_t e = 0; e < 2; ++e) {
         HS_ASSIGN_OR_RETURN(f->targets[e], gpu::RenderTarget::create(
                                                device_, d.eye.width, d.eye.height, cf,

@@ -241,6 +241,15 @@ TEST_F(TilePacking, ARequestThePackingCannotServeIsRefusedWithAReason) {
     e = packing->render_layers(other_tile);
     ASSERT_FALSE(e.ok());
     EXPECT_NE(e.error().message.find("tiles of 32"), std::string::npos) << e.error().message;
+    // A target that cannot pack: its tile outside 1..256 (or buffers past the device's
+    // storage buffer range, which the frame loop and admission check the same way).
+    EXPECT_TRUE(gpu::RenderTarget::can_pack(device(), 333, 211, gpu::ColorFormat::kRgba8Unorm, 32));
+    EXPECT_FALSE(gpu::RenderTarget::can_pack(device(), 64, 64, gpu::ColorFormat::kRgba8Unorm, 300));
+    auto no = gpu::RenderTarget::create(device(), 64, 64, gpu::ColorFormat::kRgba8Unorm, "t", true,
+                                        nullptr, 300);
+    ASSERT_FALSE(no.ok());
+    EXPECT_NE(no.error().message.find("cannot pack tiles of 300"), std::string::npos)
+        << no.error().message;
     // A renderer that does not pack, given a packed target.
     e = host->render_layers(with(eyes, eyes.packed));
     ASSERT_FALSE(e.ok());
