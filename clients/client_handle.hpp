@@ -22,6 +22,10 @@ struct ClientCloser {
     void operator()(hysar_client* c) const { hysar_client_close(c); }
 };
 using ClientPtr = std::unique_ptr<hysar_client, ClientCloser>;
+struct WarpTargetCloser {
+    void operator()(hysar_warp_target* t) const { hysar_warp_target_destroy(t); }
+};
+using WarpTargetPtr = std::unique_ptr<hysar_warp_target, WarpTargetCloser>;
 
 // One event, released when it goes out of scope.
 struct Event : hysar_event {

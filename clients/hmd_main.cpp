@@ -259,11 +259,19 @@ private:
             if (reproject_ && newest_.time_ns != 0) {
                 // Late reprojection: the layer as the newest pose sees it (--clear-after-ms
                 // clears stale ones, so no stale limit here), overscan cut off.
-                warped_.resize(row * h);
-                if (hysar_reproject_layer_to(&e, &rendered_, &shown_c_, &newest_, hysar_now_ns(), 0,
-                                             HYSAR_PLANE_DEPTH_FROM_LAYER, HYSAR_FILTER_NEAREST,
-                                             warped_.data(), warped_.size(), nullptr) == HYSAR_OK) {
-                    pixels = warped_.data(), shown = true;
+                // Into a target per eye the library keeps: it clears only where the last
+                // warp lit it.
+                auto& target = warped_[e.eye];
+                if (!target) {
+                    hysar_warp_target* made = nullptr;
+                    if (hysar_warp_target_create(w, h, 4, &made) == HYSAR_OK)
+                        target.reset(made);
+                }
+                if (target && hysar_reproject_layer_into(
+                                  &e, &rendered_, &shown_c_, &newest_, hysar_now_ns(), 0,
+                                  HYSAR_PLANE_DEPTH_FROM_LAYER, HYSAR_FILTER_NEAREST, target.get(),
+                                  nullptr) == HYSAR_OK) {
+                    pixels = hysar_warp_target_pixels(target.get()), shown = true;
                     ++reprojected_;
                 } else {
                     // Not shown, counted as an error (the exit status says so), said once.
@@ -320,8 +328,8 @@ private:
     ImageWindow* window_;
     const std::chrono::steady_clock::duration clear_after_;
     const bool reproject_;
-    hysar_pose newest_{};          // the newest pose sent (time_ns 0: none yet)
-    std::vector<uint8_t> warped_;  // --reproject: the warped eye
+    hysar_pose newest_{};                  // the newest pose sent (time_ns 0: none yet)
+    hs::client::WarpTargetPtr warped_[2];  // --reproject: each eye's warp, kept by the library
     std::chrono::steady_clock::time_point shown_ = std::chrono::steady_clock::now();
     bool cleared_ = true;  // nothing shown yet
     std::vector<uint8_t> side_by_side_;

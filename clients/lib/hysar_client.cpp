@@ -20,6 +20,14 @@ using hs::client::Session;
 using hs::client::SessionConfig;
 using hs::client::SessionEvent;
 
+// A destination the library keeps: its pixels and where they may be lit
+// (hysar_reproject_layer_into).
+struct hysar_warp_target {
+    uint32_t width = 0, height = 0, bytes_per_pixel = 4;
+    std::vector<uint8_t> pixels;
+    hs::motion::KeptRows kept;
+};
+
 struct hysar_client {
     std::unique_ptr<Session> session;
 };
@@ -496,7 +504,7 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
                        const hysar_display* shown, uint32_t dst_width, uint32_t dst_height,
                        const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns,
                        double plane_depth_m, uint32_t filter, uint8_t* dst, size_t dst_bytes,
-                       uint32_t* cleared) {
+                       uint32_t* cleared, hs::motion::KeptRows* kept = nullptr) {
     const hysar_image& im = layer->image;
     // The image's own fields must agree: the warp reads width x height x bpp (sizes bounded
     // first, so that the product cannot wrap).
@@ -557,7 +565,10 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
     if (cleared)
         *cleared = stale ? 1 : 0;
     if (stale) {
-        std::memset(dst, 0, size_t(dst_needed));
+        if (kept)
+            hs::motion::clear_kept(dst, dst_width, dst_height, im.bytes_per_pixel, *kept);
+        else
+            std::memset(dst, 0, size_t(dst_needed));
         return HYSAR_OK;
     }
     // A layer the library decoded knows where it may be lit (its tiles): the warp need not
@@ -594,7 +605,30 @@ hysar_status reproject(const hysar_event* layer, const hysar_display* rendered,
                                      hs::motion::eye_pose(now_at, now, ipd, eye), plane_depth_m),
         filter == HYSAR_FILTER_BILINEAR ? hs::motion::Filter::kBilinear
                                         : hs::motion::Filter::kNearest,
-        lit);
+        lit, kept);
+    return HYSAR_OK;
+}
+
+// The checks hysar_reproject_layer_to and hysar_reproject_layer_into share; HYSAR_OK when the
+// arguments can be warped.
+hysar_status check_reproject_to(const hysar_event* layer, const hysar_display* rendered,
+                                const hysar_display* shown, const hysar_pose* latest) {
+    if (!layer || !rendered || !shown || !latest)
+        return fail(HYSAR_E_INVALID_ARGUMENT,
+                    "layer, rendered, shown, latest and the destination must not be NULL");
+    if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
+        return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
+    if (layer->image.width != rendered->eye_width || layer->image.height != rendered->eye_height)
+        return fail(HYSAR_E_INVALID_ARGUMENT, "the layer is " + std::to_string(layer->image.width) +
+                                                  "x" + std::to_string(layer->image.height) +
+                                                  ", not the rendered display's " +
+                                                  std::to_string(rendered->eye_width) + "x" +
+                                                  std::to_string(rendered->eye_height));
+    if (shown->eye_width == 0 || shown->eye_height == 0 || shown->eye_width > 8192 ||
+        shown->eye_height > 8192)
+        return fail(HYSAR_E_INVALID_ARGUMENT,
+                    "the shown display is " + std::to_string(shown->eye_width) + "x" +
+                        std::to_string(shown->eye_height) + ", not within 1..8192");
     return HYSAR_OK;
 }
 
@@ -623,25 +657,72 @@ hysar_status hysar_reproject_layer_to(const hysar_event* layer, const hysar_disp
                                       double plane_depth_m, uint32_t filter, uint8_t* dst,
                                       size_t dst_bytes, uint32_t* cleared) {
     return guarded([&] {
-        if (!layer || !rendered || !shown || !latest || !dst)
+        if (!dst)
             return fail(HYSAR_E_INVALID_ARGUMENT,
                         "layer, rendered, shown, latest and dst must not be NULL");
-        if (layer->kind != HYSAR_EVENT_LAYER || !layer->image.pixels)
-            return fail(HYSAR_E_INVALID_ARGUMENT, "the event is not a LAYER with an image");
-        if (layer->image.width != rendered->eye_width ||
-            layer->image.height != rendered->eye_height)
-            return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "the layer is " + std::to_string(layer->image.width) + "x" +
-                            std::to_string(layer->image.height) + ", not the rendered display's " +
-                            std::to_string(rendered->eye_width) + "x" +
-                            std::to_string(rendered->eye_height));
-        if (shown->eye_width == 0 || shown->eye_height == 0 || shown->eye_width > 8192 ||
-            shown->eye_height > 8192)
-            return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "the shown display is " + std::to_string(shown->eye_width) + "x" +
-                            std::to_string(shown->eye_height) + ", not within 1..8192");
+        if (const hysar_status s = check_reproject_to(layer, rendered, shown, latest); s)
+            return s;
         return reproject(layer, rendered, shown, shown->eye_width, shown->eye_height, latest,
                          now_ns, stale_limit_ns, plane_depth_m, filter, dst, dst_bytes, cleared);
+    });
+}
+
+hysar_status hysar_warp_target_create(uint32_t width, uint32_t height, uint32_t bytes_per_pixel,
+                                      hysar_warp_target** out) {
+    return guarded([&] {
+        if (!out)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "out must not be NULL");
+        *out = nullptr;
+        if (width == 0 || height == 0 || width > 8192 || height > 8192)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "a warp target of " + std::to_string(width) +
+                                                      "x" + std::to_string(height) +
+                                                      " is not within 1..8192 on each side");
+        if (bytes_per_pixel != 4 && bytes_per_pixel != 8)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "bytes_per_pixel " +
+                                                      std::to_string(bytes_per_pixel) +
+                                                      " is not 4 (rgba8) or 8 (rgba16f)");
+        auto t = std::make_unique<hysar_warp_target>();
+        t->width = width, t->height = height, t->bytes_per_pixel = bytes_per_pixel;
+        t->pixels.assign(size_t(width) * height * bytes_per_pixel, 0);
+        t->kept.first.assign(height, 0);  // all 0, and known to be
+        t->kept.last.assign(height, 0);
+        *out = t.release();
+        return HYSAR_OK;
+    });
+}
+
+void hysar_warp_target_destroy(hysar_warp_target* target) {
+    delete target;
+}
+
+const uint8_t* hysar_warp_target_pixels(const hysar_warp_target* target) {
+    return target ? target->pixels.data() : nullptr;
+}
+
+hysar_status hysar_reproject_layer_into(const hysar_event* layer, const hysar_display* rendered,
+                                        const hysar_display* shown, const hysar_pose* latest,
+                                        uint64_t now_ns, uint64_t stale_limit_ns,
+                                        double plane_depth_m, uint32_t filter,
+                                        hysar_warp_target* target, uint32_t* cleared) {
+    return guarded([&] {
+        if (!target)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "layer, rendered, shown, latest and target must not be NULL");
+        if (const hysar_status s = check_reproject_to(layer, rendered, shown, latest); s)
+            return s;
+        if (target->width != shown->eye_width || target->height != shown->eye_height ||
+            target->bytes_per_pixel != layer->image.bytes_per_pixel)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        "the target is " + std::to_string(target->width) + "x" +
+                            std::to_string(target->height) + " at " +
+                            std::to_string(target->bytes_per_pixel) +
+                            " bytes a pixel, not the shown display's " +
+                            std::to_string(shown->eye_width) + "x" +
+                            std::to_string(shown->eye_height) + " at the layer's " +
+                            std::to_string(layer->image.bytes_per_pixel));
+        return reproject(layer, rendered, shown, shown->eye_width, shown->eye_height, latest,
+                         now_ns, stale_limit_ns, plane_depth_m, filter, target->pixels.data(),
+                         target->pixels.size(), cleared, &target->kept);
     });
 }
 

@@ -33,7 +33,7 @@ extern "C" {
 #endif
 
 /* The version of this API; hysar_client_api_version() returns the library's. */
-#define HYSAR_CLIENT_API_VERSION 4
+#define HYSAR_CLIENT_API_VERSION 5
 
 typedef enum hysar_status {
     HYSAR_OK = 0,
@@ -297,6 +297,31 @@ HYSAR_API hysar_status hysar_reproject_layer_to(
     const hysar_event* layer, const hysar_display* rendered, const hysar_display* shown,
     const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
     uint32_t filter, uint8_t* dst, size_t dst_bytes, uint32_t* cleared);
+
+/* ---- A destination the library keeps (library 1.5, API version 5, added functions only) ----
+ *
+ * A layer is black (see-through) but for the highlight, and so is its warp: most of a shown
+ * image stays 0 from one refresh to the next. A warp target owns its pixels and remembers where
+ * they may be lit, so that each warp into it clears only those places rather than the whole
+ * image (at HoloLens resolution, about half of a nearest warp's time). The pixels are the
+ * library's: read them, never write them. One thread at a time per target. */
+typedef struct hysar_warp_target hysar_warp_target;
+/* A width x height target of bytes_per_pixel (4: rgba8, 8: rgba16f), all 0.
+ * HYSAR_E_INVALID_ARGUMENT (with a sentence) when out is NULL, a side is outside 1..8192 or
+ * bytes_per_pixel is not 4 or 8. */
+HYSAR_API hysar_status hysar_warp_target_create(uint32_t width, uint32_t height,
+                                                uint32_t bytes_per_pixel, hysar_warp_target** out);
+/* NULL is ignored. */
+HYSAR_API void hysar_warp_target_destroy(hysar_warp_target* target);
+/* The target's pixels, rows top to bottom, width x bytes_per_pixel bytes each (NULL for NULL);
+ * valid until the target is destroyed, and what the last warp into it made. */
+HYSAR_API const uint8_t* hysar_warp_target_pixels(const hysar_warp_target* target);
+/* As hysar_reproject_layer_to, into `target` (shown->eye_width x eye_height at the layer's
+ * bytes_per_pixel): the same pixels, bit for bit, for less time. */
+HYSAR_API hysar_status hysar_reproject_layer_into(
+    const hysar_event* layer, const hysar_display* rendered, const hysar_display* shown,
+    const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
+    uint32_t filter, hysar_warp_target* target, uint32_t* cleared);
 
 /* ---- The server's warp depth (library 1.4, API version 4, added functions only) ----
  *

@@ -551,7 +551,7 @@ inline int64_t fixed8(double v) {
 
 template <typename T, bool kBilinear>
 void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_bytes, uint32_t dw,
-               uint32_t dh, const std::array<double, 9>& h, const LitRows& known) {
+               uint32_t dh, const std::array<double, 9>& h, const LitRows& known, KeptRows* kept) {
     static_assert(!kBilinear || sizeof(T) == 4, "bilinear: RGBA8 only");
     const auto* src = reinterpret_cast<const T*>(src_bytes);
     auto* dst = reinterpret_cast<T*>(dst_bytes);
@@ -618,8 +618,29 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
     lit_rows.assign(size_t(sh) + 1, 0);
     for (uint32_t y = 0; y < sh; ++y) lit_rows[y + 1] = lit_rows[y] + (first[y] < last[y]);
     const double last_x = double(dw) - 1;  // the destination row's last pixel
+    // With a kept destination, a clear touches only the columns it may hold lit ([kf, kl)),
+    // and the row's columns written [nf, nl) become what it may hold next.
+    if (kept && (kept->first.size() != dh || kept->last.size() != dh)) {
+        kept->first.assign(dh, 0);
+        kept->last.assign(dh, dw);
+    }
+    uint32_t kf = 0, kl = dw, nf = dw, nl = 0;
+    const auto zero = [&](T* out, uint32_t a, uint32_t b) {
+        a = std::max(a, kf), b = std::min(b, kl);
+        if (a < b)
+            std::fill(out + a, out + b, T(0));
+    };
+    const auto row_done = [&](uint32_t y) {
+        if (kept) {
+            kept->first[y] = nf < nl ? nf : 0;
+            kept->last[y] = nf < nl ? nl : 0;
+        }
+    };
     for (uint32_t y = 0; y < dh; ++y) {
         T* out = dst + size_t(y) * dw;
+        if (kept)
+            kf = std::min(kept->first[y], dw), kl = std::min(kept->last[y], dw);
+        nf = dw, nl = 0;
         const double bx = h[1] * y + h[2], by = h[4] * y + h[5], bw = h[7] * y + h[8];
         {
             const double wa = bw, wb = bw + h[6] * last_x;
@@ -628,7 +649,8 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
                 const double lo = std::max(0.0, std::min(va, vb) - kSlack);
                 const double hi = std::min(fh - 1, std::max(va, vb) + kSlack);
                 if (hi < lo || lit_rows[size_t(hi) + 1] == lit_rows[size_t(lo)]) {
-                    std::fill(out, out + dw, T(0));
+                    zero(out, 0, dw);
+                    row_done(y);
                     continue;
                 }
             }
@@ -639,6 +661,7 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
             if (!(w0 > 1e-9 && w1 > 1e-9)) {  // behind the eye somewhere: pixel by pixel
                 for (uint32_t x = x0; x < x1; ++x)
                     out[x] = exact(bx + h[0] * x, by + h[3] * x, bw + h[6] * x);
+                nf = std::min(nf, x0), nl = std::max(nl, x1);
                 continue;
             }
             const double u0 = (bx + h[0] * x0) / w0 + kOff, v0 = (by + h[3] * x0) / w0 + kOff;
@@ -648,7 +671,7 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
             const double lo_v = std::min(v0, v1), hi_v = std::max(v0, v1);
             if (hi_u <= kLow || hi_v <= kLow || lo_u >= fw || lo_v >= fh || !(std::abs(u0) < 1e6) ||
                 !(std::abs(v0) < 1e6) || !(std::abs(u1) < 1e6) || !(std::abs(v1) < 1e6)) {
-                std::fill(out + x0, out + x1, T(0));
+                zero(out, x0, x1);
                 continue;
             }
             {
@@ -660,10 +683,11 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
                 for (uint32_t r = vlo; r <= vhi && !lit; ++r)
                     lit = first[r] < last[r] && first[r] <= uhi + 1 && last[r] + 1 >= ulo;
                 if (!lit) {
-                    std::fill(out + x0, out + x1, T(0));
+                    zero(out, x0, x1);
                     continue;
                 }
             }
+            nf = std::min(nf, x0), nl = std::max(nl, x1);  // gathered below
             // A large turn bends the position along the span (its error from the line is
             // largest mid-span and falls with the square of the length): shorter pieces, each
             // exact at its ends, until it is within kTol.
@@ -702,26 +726,48 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
                 }
             }
         }
+        row_done(y);
     }
 }
 
 }  // namespace
 
+void clear_kept(uint8_t* dst, uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
+                KeptRows& kept) {
+    const size_t row = size_t(dst_width) * bytes_per_pixel;
+    const bool known = kept.first.size() == dst_height && kept.last.size() == dst_height;
+    for (uint32_t y = 0; y < dst_height; ++y) {
+        const uint32_t a = known ? std::min(kept.first[y], dst_width) : 0,
+                       b = known ? std::min(kept.last[y], dst_width) : dst_width;
+        if (a < b)
+            std::memset(dst + y * row + size_t(a) * bytes_per_pixel, 0,
+                        size_t(b - a) * bytes_per_pixel);
+    }
+    kept.first.assign(dst_height, 0);
+    kept.last.assign(dst_height, 0);
+}
+
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
           uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
-          const std::array<double, 9>& h, Filter filter, const LitRows& lit) {
+          const std::array<double, 9>& h, Filter filter, const LitRows& lit, KeptRows* kept) {
     if (dst_width == 0 || dst_height == 0)
         return;
     if (src_width == 0 || src_height == 0) {  // nothing to show: see-through
-        std::memset(dst, 0, size_t(dst_width) * dst_height * bytes_per_pixel);
+        if (kept)
+            clear_kept(dst, dst_width, dst_height, bytes_per_pixel, *kept);
+        else
+            std::memset(dst, 0, size_t(dst_width) * dst_height * bytes_per_pixel);
         return;
     }
     if (filter == Filter::kBilinear && bytes_per_pixel == 4)
-        warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
+        warp_rows<uint32_t, true>(src, src_width, src_height, dst, dst_width, dst_height, h, lit,
+                                  kept);
     else if (bytes_per_pixel == 8)
-        warp_rows<uint64_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
+        warp_rows<uint64_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit,
+                                   kept);
     else
-        warp_rows<uint32_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit);
+        warp_rows<uint32_t, false>(src, src_width, src_height, dst, dst_width, dst_height, h, lit,
+                                   kept);
 }
 
 void warp(const uint8_t* src, uint8_t* dst, uint32_t width, uint32_t height,

@@ -168,11 +168,26 @@ struct LitRows {
     const uint32_t* first = nullptr;  // src_height entries each
     const uint32_t* last = nullptr;
 };
+// Where a destination the warp keeps from call to call may hold non-zero pixels, per row:
+// columns [first[y], last[y]) (first == last: none). Given, the warp clears only those of them
+// it does not write (the rest of the destination is 0 already) and leaves in it where it may
+// have written non-zero pixels now. A layer is black but for the highlight: most of a
+// destination stays 0 from one frame to the next, and clearing it is about half of a nearest
+// warp's time. Rows of another count than the destination's mean "anywhere" (a new
+// destination of unknown content).
+struct KeptRows {
+    std::vector<uint32_t> first, last;
+};
 // As above, from a source of one size to a destination of another (an overscanned layer to its
 // display); h takes a destination pixel to a source pixel.
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,
           uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
-          const std::array<double, 9>& h, Filter filter, const LitRows& lit = {});
+          const std::array<double, 9>& h, Filter filter, const LitRows& lit = {},
+          KeptRows* kept = nullptr);
+// Clears a kept destination (dst_width x dst_height, `bytes_per_pixel`) to 0 where `kept`
+// says it may be lit, and says so in `kept`.
+void clear_kept(uint8_t* dst, uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
+                KeptRows& kept);
 
 // Quaternion helpers (Hamilton, w first).
 Quat multiply(const Quat& a, const Quat& b);

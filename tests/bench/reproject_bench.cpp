@@ -64,7 +64,8 @@ BENCHMARK(BM_ReprojectStereo)
     ->UseRealTime();
 
 // As above, from a layer overscanned by 5 degrees on every side (hysar_display_overscan) onto
-// the display: the source is larger, the destination the same.
+// the display: the source is larger, the destination the same. range(2): into destinations the
+// warp keeps (KeptRows, hysar_reproject_layer_into), which it clears only where they were lit.
 void BM_ReprojectStereoOverscanned(benchmark::State& state) {
     const auto filter = state.range(0) ? Filter::kBilinear : Filter::kNearest;
     const Pinhole k{kW / 2.0 / std::tan(15 * kPi / 180), kH / 2.0 / std::tan(8.5 * kPi / 180),
@@ -89,24 +90,29 @@ void BM_ReprojectStereoOverscanned(benchmark::State& state) {
         first[y] = (o->left + kW / 3) / 32 * 32,
         last[y] = std::min(o->width, (o->left + kW / 3 + kW / 10 * 3 + 31) / 32 * 32);
     const LitRows lit = told ? LitRows{first.data(), last.data()} : LitRows{};
+    const bool keep = state.range(2) != 0;
+    KeptRows kept[2];
     for (auto _ : state) {
         const auto h = rotation_homography(o->k, k, Quat{1, 0, 0, 0}, display);
-        for (auto& d : dst) {
-            warp(src.data(), o->width, o->height, d.data(), kW, kH, 4, h, filter, lit);
-            benchmark::DoNotOptimize(d.data());
+        for (int e = 0; e < 2; ++e) {
+            warp(src.data(), o->width, o->height, dst[e].data(), kW, kH, 4, h, filter, lit,
+                 keep ? &kept[e] : nullptr);
+            benchmark::DoNotOptimize(dst[e].data());
         }
         benchmark::ClobberMemory();
     }
     state.SetLabel(std::string(filter == Filter::kBilinear ? "bilinear" : "nearest") +
                    " RGBA8, 2 x " + std::to_string(o->width) + " x " + std::to_string(o->height) +
                    " (5 deg overscan) onto 2 x 1268 x 720" +
-                   (told ? ", lit rows told" : ", scanned"));
+                   (told ? ", lit rows told" : ", scanned") + (keep ? ", kept destination" : ""));
 }
 BENCHMARK(BM_ReprojectStereoOverscanned)
-    ->Args({0, 0})
-    ->Args({0, 1})
-    ->Args({1, 0})
-    ->Args({1, 1})
+    ->Args({0, 0, 0})
+    ->Args({0, 1, 0})
+    ->Args({0, 1, 1})
+    ->Args({1, 0, 0})
+    ->Args({1, 1, 0})
+    ->Args({1, 1, 1})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -28,7 +28,7 @@ _Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
 _Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
 _Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
 #endif
-_Static_assert(HYSAR_CLIENT_API_VERSION == 4, "API version");
+_Static_assert(HYSAR_CLIENT_API_VERSION == 5, "API version");
 
 static int failures = 0;
 #define CHECK(cond)                                                                           \
@@ -137,6 +137,21 @@ int main(int argc, char** argv) {
         CHECK(hysar_reproject_layer(&own, &small, &pose0, 0, 0, -2.0, 0, out, sizeof out, NULL) ==
               HYSAR_E_INVALID_ARGUMENT);
         CHECK(strstr(hysar_last_error(), "plane_depth_m") != NULL);
+        /* 1.5: a warp target the library keeps gives the same pixels. */
+        hysar_warp_target* target = NULL;
+        CHECK(hysar_warp_target_create(4, 4, 4, &target) == HYSAR_OK && target != NULL);
+        CHECK(hysar_reproject_layer_into(&own, &small, &small, &pose0, 0, 0, 0, 0, target, NULL) ==
+              HYSAR_OK);
+        CHECK(hysar_reproject_layer(&own, &small, &pose0, 0, 0, 0, 0, out, sizeof out, NULL) ==
+              HYSAR_OK);
+        CHECK(target && memcmp(hysar_warp_target_pixels(target), out, sizeof out) == 0);
+        CHECK(hysar_reproject_layer_into(&own, &small, &small, &pose0, 0, 0, 0, 0, NULL, NULL) ==
+              HYSAR_E_INVALID_ARGUMENT);
+        hysar_warp_target_destroy(target);
+        CHECK(hysar_warp_target_create(4, 4, 3, &target) == HYSAR_E_INVALID_ARGUMENT);
+        CHECK(strstr(hysar_last_error(), "bytes_per_pixel") != NULL && target == NULL);
+        hysar_warp_target_destroy(NULL);
+        CHECK(hysar_warp_target_pixels(NULL) == NULL);
     }
     CHECK(hysar_display_from_profile("/nonexistent/profile.json", 1, &display) ==
           HYSAR_E_INVALID_ARGUMENT);

@@ -578,6 +578,98 @@ TEST(Reproject, CApiWarpsAndClearsStaleLayers) {
               HYSAR_E_INVALID_ARGUMENT);
 }
 
+// A destination the warp keeps (KeptRows; hysar_reproject_layer_into): over a sequence of
+// turns that move the highlight across the image, off it and back, every frame is bit for bit
+// the warp into a destination cleared first, for both filters and both pixel sizes, through a
+// source with nothing lit and through the C API's stale clear; and the kept rows bound the
+// destination's lit pixels.
+TEST(Reproject, AKeptDestinationGivesTheSamePixels) {
+    const auto src8 = render(kHead, kLook);
+    // The same layer as RGBA16F (nearest only): each 8-bit code widened to a half's bytes.
+    std::vector<uint8_t> src16(src8.size() * 2, 0);
+    for (size_t i = 0; i < src8.size(); ++i) src16[2 * i] = src8[i];
+    const std::vector<uint8_t> black(src8.size(), 0);
+    const double turns_deg[] = {0, 3, 6, 12, 40, 40, -2, 0.5, 9, 0};
+    for (const uint32_t bpp : {4u, 8u})
+        for (const Filter f : {Filter::kNearest, Filter::kBilinear}) {
+            if (bpp == 8 && f == Filter::kBilinear)
+                continue;
+            SCOPED_TRACE(testing::Message() << bpp << " bytes, filter " << int(f));
+            const auto& src = bpp == 4 ? src8 : src16;
+            KeptRows kept;  // unknown at first: the destination holds garbage
+            std::vector<uint8_t> kept_dst(src.size(), 0x5A), fresh(src.size());
+            size_t lit_frames = 0;
+            for (size_t k = 0; k < std::size(turns_deg); ++k) {
+                SCOPED_TRACE("frame " + std::to_string(k));
+                const Quat turn = from_rotation_vector({0, turns_deg[k] * kPi / 180, 0});
+                const auto h =
+                    plane_homography(kK, kK, eye_pose(kHead, kLook, 0.064, 0),
+                                     eye_pose(kHead, multiply(kLook, turn), 0.064, 0), 0.8);
+                const bool empty = k == 5;  // a layer with nothing lit
+                const auto& in =
+                    empty ? (bpp == 4 ? black : std::vector<uint8_t>(src16.size())) : src;
+                std::fill(fresh.begin(), fresh.end(), uint8_t(0x33));
+                warp(in.data(), kW, kH, fresh.data(), kW, kH, bpp, h, f);
+                warp(in.data(), kW, kH, kept_dst.data(), kW, kH, bpp, h, f, {}, &kept);
+                ASSERT_EQ(kept_dst, fresh);
+                ASSERT_EQ(kept.first.size(), size_t(kH));
+                size_t lit = 0;
+                for (uint32_t y = 0; y < kH; ++y)
+                    for (uint32_t x = 0; x < kW; ++x) {
+                        bool any = false;
+                        for (uint32_t c = 0; c < bpp; ++c)
+                            any = any || kept_dst[(size_t(y) * kW + x) * bpp + c] != 0;
+                        lit += any;
+                        if (any) {
+                            ASSERT_TRUE(x >= kept.first[y] && x < kept.last[y])
+                                << "a lit pixel outside its kept row at " << x << ", " << y;
+                        }
+                    }
+                lit_frames += lit > 100;
+            }
+            EXPECT_GE(lit_frames, 5u) << "the highlight must show in most frames";
+            EXPECT_LT(lit_frames, std::size(turns_deg)) << "and leave the image in some";
+        }
+    // Through the C API: the target against hysar_reproject_layer_to, with a stale clear.
+    hysar_event e{};
+    e.kind = HYSAR_EVENT_LAYER;
+    e.pose.time_ns = 100 * kMs;
+    for (size_t i = 0; i < 4; ++i) e.pose.orientation_wxyz[i] = kLook[i];
+    for (size_t i = 0; i < 3; ++i) e.pose.position_m[i] = kHead[i];
+    auto src = src8;
+    e.image = hysar_image{kW, kH, HYSAR_FORMAT_RGBA8, 4, src.size(), src.data()};
+    hysar_display d{};
+    d.eye_width = kW, d.eye_height = kH, d.fx = kK.fx, d.fy = kK.fy, d.cx = kK.cx, d.cy = kK.cy;
+    hysar_warp_target* target = nullptr;
+    ASSERT_EQ(hysar_warp_target_create(kW, kH, 4, &target), HYSAR_OK) << hysar_last_error();
+    std::vector<uint8_t> to(src.size());
+    for (const uint64_t now : {110 * kMs, 200 * kMs, 120 * kMs}) {  // the second is stale
+        hysar_pose latest = e.pose;
+        const Quat turn = from_rotation_vector({0.02, 0.05, 0});
+        const Quat q = multiply(kLook, turn);
+        for (size_t i = 0; i < 4; ++i) latest.orientation_wxyz[i] = q[i];
+        uint32_t c1 = 9, c2 = 9;
+        ASSERT_EQ(hysar_reproject_layer_to(&e, &d, &d, &latest, now, 50 * kMs, 0.8,
+                                           HYSAR_FILTER_BILINEAR, to.data(), to.size(), &c1),
+                  HYSAR_OK);
+        ASSERT_EQ(hysar_reproject_layer_into(&e, &d, &d, &latest, now, 50 * kMs, 0.8,
+                                             HYSAR_FILTER_BILINEAR, target, &c2),
+                  HYSAR_OK)
+            << hysar_last_error();
+        EXPECT_EQ(c1, c2);
+        EXPECT_EQ(std::vector<uint8_t>(hysar_warp_target_pixels(target),
+                                       hysar_warp_target_pixels(target) + to.size()),
+                  to);
+    }
+    // A target of another size than the shown display is refused, naming both.
+    hysar_display other = d;
+    other.eye_width = kW - 2;
+    EXPECT_EQ(hysar_reproject_layer_into(&e, &d, &other, &e.pose, 0, 0, 0, 0, target, nullptr),
+              HYSAR_E_INVALID_ARGUMENT);
+    EXPECT_NE(std::string(hysar_last_error()).find("the target is"), std::string::npos);
+    hysar_warp_target_destroy(target);
+}
+
 // The overscanned path through the C API: a display widened, a layer of the widened size
 // shown on the real one (the identity crop without motion), and what does not fit refused.
 TEST(Reproject, CApiShowsAnOverscannedLayerOnItsDisplay) {

@@ -48,7 +48,7 @@ Packed pack(const std::vector<uint8_t>& raw, uint32_t w, uint32_t h, uint32_t bp
     return p;
 }
 
-TEST(PackedTiles, EncodeAsTheHostsScanOfTheSameLayer) {
+TEST(Tiles, PackedElsewhereEncodeAsTheHostsScanOfTheSameLayer) {
     std::mt19937 rng(7);
     for (const uint32_t bpp : {4u, 8u})
         for (const auto codec :
@@ -91,7 +91,7 @@ TEST(PackedTiles, EncodeAsTheHostsScanOfTheSameLayer) {
             }
 }
 
-TEST(PackedTiles, NoTileMakesTheEncodingOfABlackLayer) {
+TEST(Tiles, NoPackedTileMakesTheEncodingOfABlackLayer) {
     const uint32_t w = 64, h = 40, bpp = 4;
     const std::vector<uint8_t> raw(size_t(w) * h * bpp, 0);
     for (const auto codec : {TileCodec::kNone, TileCodec::kLz4, TileCodec::kJpeg}) {
