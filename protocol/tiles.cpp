@@ -65,17 +65,16 @@ size_t compress_into(std::vector<uint8_t>& out, size_t at, std::span<const uint8
     return 0;
 }
 
-}  // namespace
-
-void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
-                       uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
-                       std::vector<uint8_t>& packed, uint16_t ts, int quality,
-                       lossy::Huffman huffman) {
-    const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
-    region.x1 = std::min(region.x1, tx);
-    region.y1 = std::min(region.y1, ty);
-    const size_t tile_bytes = size_t(ts) * ts * bpp;
-    const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
+// The start of an encoding appended to `out`: the header with a zero count and `mask` (or a
+// zero mask), and the codec it will carry (lossy tiles only for RGBA8 with a tile size a
+// multiple of 16 up to 256; LZ4 instead).
+struct Begun {
+    size_t header_at;
+    TileCodec codec;
+    bool lossy;
+};
+Begun begin_tiles(std::vector<uint8_t>& out, uint16_t ts, TileCodec codec, uint32_t bpp,
+                  size_t mask_bytes, const uint8_t* mask) {
     const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0 && ts <= 256;
     if (codec == TileCodec::kJpeg && !lossy)
         codec = TileCodec::kLz4;
@@ -86,7 +85,55 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
     head[1] = uint8_t(ts >> 8);
     head[2] = uint8_t(codec);
     head[3] = 0;
-    std::memset(head + kFixedHeader, 0, mask_bytes);
+    std::memset(head + 4, 0, 4);
+    if (mask)
+        std::memcpy(head + kFixedHeader, mask, mask_bytes);
+    else
+        std::memset(head + kFixedHeader, 0, mask_bytes);
+    return {header_at, codec, lossy};
+}
+
+// The end of it: the count of present tiles, then the payload's length and the payload: the
+// lossy tiles at `places` of `raw` (false, and `out` cut back to the header's start, when the
+// JPEG failed or would be larger than the tiles: the caller encodes with LZ4 instead), or
+// `packed` through `codec`.
+bool end_tiles(std::vector<uint8_t>& out, const Begun& b, uint32_t present, size_t tile_bytes,
+               std::span<const uint8_t> packed, const uint8_t* raw, size_t stride,
+               const std::vector<lossy::TilePlace>& places, uint16_t ts, int quality,
+               std::vector<uint8_t>& scratch, lossy::Huffman huffman) {
+    std::memcpy(out.data() + b.header_at + 4, &present, 4);
+    const size_t len_at = out.size();
+    out.resize(len_at + 4);
+    size_t n = 0;
+    if (b.lossy) {
+        // Never more than the tiles themselves: the bound that registration checks
+        // (codec::max_layer_payload_bytes) holds for every codec.
+        if (!lossy::encode_payload(out, raw, stride, places, ts, quality, scratch, huffman) ||
+            out.size() - len_at - 4 > size_t(present) * tile_bytes) {
+            out.resize(b.header_at);
+            return false;
+        }
+        n = out.size() - len_at - 4;
+    } else {
+        n = compress_into(out, len_at + 4, packed, b.codec);
+        out.resize(len_at + 4 + n);
+    }
+    const uint32_t n32 = uint32_t(n);
+    std::memcpy(out.data() + len_at, &n32, 4);
+    return true;
+}
+
+}  // namespace
+
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
+                       uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
+                       std::vector<uint8_t>& packed, uint16_t ts, int quality,
+                       lossy::Huffman huffman) {
+    const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
+    region.x1 = std::min(region.x1, tx);
+    region.y1 = std::min(region.y1, ty);
+    const size_t tile_bytes = size_t(ts) * ts * bpp;
+    const Begun b = begin_tiles(out, ts, codec, bpp, (size_t(tx) * ty + 7) / 8, nullptr);
     packed.clear();
     // The stored tiles' places (lossy); kept by the thread, so a steady stream allocates nothing.
     thread_local std::vector<lossy::TilePlace> places;
@@ -99,9 +146,9 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
             if (!tile_lit(raw, stride, x0, y0, cw, ch, bpp))
                 continue;
             const size_t tile = size_t(by) * tx + bx;
-            out[header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
+            out[b.header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
             ++present;
-            if (lossy) {
+            if (b.lossy) {
                 places.push_back({x0, y0, cw, ch});
                 continue;
             }
@@ -111,26 +158,9 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
                 std::memcpy(&packed[base + size_t(y) * ts * bpp],
                             raw + size_t(y0 + y) * stride + size_t(x0) * bpp, size_t(cw) * bpp);
         }
-    std::memcpy(out.data() + header_at + 4, &present, 4);
-    const size_t len_at = out.size();
-    out.resize(len_at + 4);
-    if (lossy) {
-        // Never more than the tiles themselves: the bound that registration checks
-        // (codec::max_layer_payload_bytes) holds for every codec.
-        if (lossy::encode_payload(out, raw, stride, places, ts, quality, packed, huffman) &&
-            out.size() - len_at - 4 <= size_t(present) * tile_bytes) {
-            const uint32_t n32 = uint32_t(out.size() - len_at - 4);
-            std::memcpy(out.data() + len_at, &n32, 4);
-            return;
-        }
-        out.resize(header_at);
+    if (!end_tiles(out, b, present, tile_bytes, packed, raw, stride, places, ts, quality, packed,
+                   huffman))
         encode_tiles_into(out, raw, stride, w, h, bpp, TileCodec::kLz4, region, packed, ts);
-        return;
-    }
-    const size_t n = compress_into(out, len_at + 4, packed, codec);
-    out.resize(len_at + 4 + n);
-    const uint32_t n32 = uint32_t(n);
-    std::memcpy(out.data() + len_at, &n32, 4);
 }
 
 void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, uint32_t count,
@@ -140,18 +170,7 @@ void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, ui
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
     const size_t tile_bytes = size_t(ts) * ts * bpp;
     const size_t tile_stride = size_t(ts) * bpp;  // a packed tile's row
-    const size_t mask_bytes = (size_t(tx) * ty + 7) / 8;
-    const bool lossy = codec == TileCodec::kJpeg && bpp == 4 && ts % 16 == 0 && ts <= 256;
-    if (codec == TileCodec::kJpeg && !lossy)
-        codec = TileCodec::kLz4;
-    const size_t header_at = out.size();
-    out.resize(header_at + kFixedHeader + mask_bytes);
-    uint8_t* head = out.data() + header_at;
-    head[0] = uint8_t(ts & 0xff);
-    head[1] = uint8_t(ts >> 8);
-    head[2] = uint8_t(codec);
-    head[3] = 0;
-    std::memcpy(head + kFixedHeader, mask, mask_bytes);
+    const Begun b = begin_tiles(out, ts, codec, bpp, (size_t(tx) * ty + 7) / 8, mask);
     // The marked tiles in order; any left all zero (a drive applied after packing can make
     // one so) is unmarked and skipped.
     thread_local std::vector<lossy::TilePlace> places;
@@ -168,39 +187,24 @@ void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, ui
         const uint8_t* t = tiles + size_t(seen) * tile_bytes;
         ++seen;
         if (!tile_lit(t, tile_stride, 0, 0, cw, ch, bpp)) {
-            out[header_at + kFixedHeader + tile / 8] &= uint8_t(~(1u << (tile % 8)));
-            if (!dropped && !lossy)  // the tiles kept so far lie together at the start
+            out[b.header_at + kFixedHeader + tile / 8] &= uint8_t(~(1u << (tile % 8)));
+            if (!dropped && !b.lossy)  // the tiles kept so far lie together at the start
                 packed.assign(tiles, tiles + size_t(present) * tile_bytes);
             dropped = true;
             continue;
         }
-        if (lossy)
+        if (b.lossy)  // each at its place in the packed column
             places.push_back({0, uint32_t((seen - 1) * ts), cw, ch});
         else if (dropped)  // after a dropped tile, the kept ones are copied together
             packed.insert(packed.end(), t, t + tile_bytes);
         ++present;
     }
-    std::memcpy(out.data() + header_at + 4, &present, 4);
-    const size_t len_at = out.size();
-    out.resize(len_at + 4);
-    if (lossy) {
-        if (lossy::encode_payload(out, tiles, tile_stride, places, ts, quality, packed, huffman) &&
-            out.size() - len_at - 4 <= size_t(present) * tile_bytes) {
-            const uint32_t n32 = uint32_t(out.size() - len_at - 4);
-            std::memcpy(out.data() + len_at, &n32, 4);
-            return;
-        }
-        out.resize(header_at);
+    const std::span<const uint8_t> payload =
+        dropped ? std::span<const uint8_t>(packed)
+                : std::span<const uint8_t>(tiles, size_t(present) * tile_bytes);
+    if (!end_tiles(out, b, present, tile_bytes, payload, tiles, tile_stride, places, ts, quality,
+                   packed, huffman))
         encode_packed_tiles_into(out, mask, count, tiles, w, h, bpp, TileCodec::kLz4, packed, ts);
-        return;
-    }
-    std::span<const uint8_t> payload(tiles, size_t(present) * tile_bytes);
-    if (dropped)
-        payload = packed;
-    const size_t n = compress_into(out, len_at + 4, payload, codec);
-    out.resize(len_at + 4 + n);
-    const uint32_t n32 = uint32_t(n);
-    std::memcpy(out.data() + len_at, &n32, 4);
 }
 
 std::vector<uint8_t> encode_tiles(std::span<const uint8_t> raw, uint32_t w, uint32_t h,
