@@ -137,6 +137,19 @@ Result<scene::Scene> lean_scene(const scene::Scene& scene) {
 namespace {
 
 // The server's cost of the VD path: per stage, its mean so far times the frame count beside it.
+template <typename T>
+std::optional<T> json_at(const json& j, std::initializer_list<const char*> path) {
+    const json* p = &j;
+    for (const char* k : path) {
+        if (!p->is_object() || !p->contains(k))
+            return std::nullopt;
+        p = &(*p)[k];
+    }
+    if (!p->is_number())
+        return std::nullopt;
+    return p->get<T>();
+}
+
 // A stage may be counted in its own unit (per layer, per stereo frame, per batch); as long as
 // that count grows in step with `frames`, the difference of two snapshots over the difference of
 // their frames is the stage's mean, in its unit, between them. Read defensively: a field that is
@@ -147,7 +160,8 @@ struct CostSnapshot {
     std::optional<double> render_busy_ns;
     std::map<std::string, double> busy_ms;  // stats "busy_ms": render_thread, device, encoders
     double encoder_threads = 0;
-    double layers_replaced = 0;  // over the connected viewers
+    double layers_replaced = 0;              // over the connected viewers
+    double layers = 0, bytes_read_back = 0;  // stats "frames"
     uint64_t at_ns = 0;
 };
 CostSnapshot cost_snapshot(const json& stats) {
@@ -168,6 +182,10 @@ CostSnapshot cost_snapshot(const json& stats) {
         for (const auto& v : stats["viewers"])
             if (v.is_object() && v.contains("layers_replaced") && v["layers_replaced"].is_number())
                 s.layers_replaced += v["layers_replaced"].get<double>();
+    if (const auto n = json_at<double>(stats, {"frames", "layers"}))
+        s.layers = *n;
+    if (const auto b = json_at<double>(stats, {"frames", "sparse", "bytes_read_back"}))
+        s.bytes_read_back = *b;
     if (!stats.is_object() || !stats.contains("cost_ms") || !stats["cost_ms"].is_object())
         return s;
     const json& cost = stats["cost_ms"];
@@ -189,19 +207,6 @@ double cpu_seconds() {
     getrusage(RUSAGE_SELF, &u);
     return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) +
            double(u.ru_utime.tv_usec + u.ru_stime.tv_usec) * 1e-6;
-}
-
-template <typename T>
-std::optional<T> json_at(const json& j, std::initializer_list<const char*> path) {
-    const json* p = &j;
-    for (const char* k : path) {
-        if (!p->is_object() || !p->contains(k))
-            return std::nullopt;
-        p = &(*p)[k];
-    }
-    if (!p->is_number())
-        return std::nullopt;
-    return p->get<T>();
 }
 
 // After a row: every headset's session gone (`staying`: the projector clients' sessions, still
@@ -373,6 +378,9 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
         }
     if (r.eye_layers > 0)
         r.bytes_per_layer = double(bytes) / double(r.eye_layers);
+    if (m.c1.layers > m.c0.layers)
+        r.read_back_bytes_per_layer =
+            (m.c1.bytes_read_back - m.c0.bytes_read_back) / (m.c1.layers - m.c0.layers);
     if (o.seconds > 0 && headsets > 0)
         r.mbps_per_headset = double(bytes) * 8e-6 / o.seconds / double(headsets);
     if (r.stereo_layers > 0)
@@ -831,6 +839,10 @@ const json& report_notes() {
         "latency (usually before the window opens), the median and the largest over the row's "
         "headsets; against latency_ms_p50 it shows what a new headset's first layer pays",
         "bytes_per_layer: wire bytes per eye layer, header included",
+        "read_back_bytes_per_layer: what the server's encoders read of each eye layer's pixels "
+        "from the device: the rendered rectangle, or with pack_tiles on only the lit tiles, "
+        "their count and mask (the server's stats frames.sparse.bytes_read_back over the "
+        "window's layers)",
         "mbps_per_headset: wire Mbit/s per headset over the window; layer_quality_mean, "
         "rate_limit_hz_mean: what the bit-rate limits (headset_mbps, room_mbps) did at the "
         "window's end, the mean over the headsets (0 Hz: no frame rate was lowered)",

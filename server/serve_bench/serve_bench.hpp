@@ -98,6 +98,9 @@ struct ServedRow {
     std::map<std::string, double> stage_ms;
     std::optional<double> bytes_per_layer;   // wire bytes per eye layer (header included)
     std::optional<double> mbps_per_headset;  // wire Mbit/s per headset over the window
+    // What the encoders read of each eye layer's pixels from the device's read-back, bytes:
+    // the rectangle, or the lit tiles where the device packs them (--pack-tiles).
+    std::optional<double> read_back_bytes_per_layer;
     // What the bit-rate limits did at the window's end, the mean over the headsets (the
     // server's stats): the JPEG quality of their lossy layers (0: lossless) and the frame rate
     // they were lowered to (0: none was).

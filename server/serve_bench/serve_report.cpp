@@ -138,6 +138,7 @@ json row_json(const ServedRow& r) {
             {"first_layer_ms_max", opt(r.first_layer_max_ms)},
             {"stage_ms_mean", stages},
             {"bytes_per_layer", opt(r.bytes_per_layer)},
+            {"read_back_bytes_per_layer", opt(r.read_back_bytes_per_layer)},
             {"mbps_per_headset", opt(r.mbps_per_headset)},
             {"layer_quality_mean", opt(r.layer_quality_mean)},
             {"rate_limit_hz_mean", opt(r.rate_limit_hz_mean)},
@@ -176,6 +177,7 @@ ServedRow row_of(const json& j) {
             if (v.is_number())
                 r.stage_ms[k] = v.get<double>();
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
+    r.read_back_bytes_per_layer = opt_of(j, "read_back_bytes_per_layer");
     r.mbps_per_headset = opt_of(j, "mbps_per_headset");
     r.layer_quality_mean = opt_of(j, "layer_quality_mean");
     r.rate_limit_hz_mean = opt_of(j, "rate_limit_hz_mean");

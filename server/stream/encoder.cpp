@@ -32,6 +32,19 @@ codec::LayerPixels wire_pixels(const loop::EyePixels& p) {
             p.x1,   p.y1,     p.tile_info, p.tiles};
 }
 
+// The bytes of a layer's pixels the host reads: its rectangle, or the lit tiles the device
+// packed with their count and mask.
+uint64_t read_back_bytes(const codec::LayerPixels& p) {
+    const uint64_t bpp = p.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
+    if (p.tile_info) {
+        const uint64_t ts = protocol::kDefaultTileSize;
+        const uint64_t tiles = ((p.width + ts - 1) / ts) * ((p.height + ts - 1) / ts);
+        return p.tile_info[0] * ts * ts * bpp + 16 + (tiles + 31) / 32 * 4;
+    }
+    const uint32_t x1 = std::min(p.x1, p.width), y1 = std::min(p.y1, p.height);
+    return p.x0 < x1 && p.y0 < y1 ? uint64_t(x1 - p.x0) * (y1 - p.y0) * bpp : 0;
+}
+
 // The headset drive over tiles the device packed: each tile's pixels inside the layer through
 // the drive, its padding past the layer's edge left zero, into `dst` (the same packing).
 void drive_packed(const calib::LayerDrive& drive, const codec::LayerPixels& px, uint8_t* dst) {
@@ -273,6 +286,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         fields.width = f.width;
         fields.height = f.height;
         const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
+        out.read_back_bytes += read_back_bytes(pixels);
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
             append_served_layer(o, pixels, drive, encoding, codec, scratch, quality);

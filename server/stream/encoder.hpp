@@ -82,6 +82,9 @@ struct EncodedFrame {
     // The device's own time on the frame's submission (timestamps); unset where not known.
     std::optional<double> device_ms;
     double encode_ms = 0;  // both layers, CPU
+    // What the encoder read of the two layers' pixels, as the device left them for the host:
+    // the rectangles, or (packed on the device) the lit tiles with the count and the mask.
+    uint64_t read_back_bytes = 0;
 };
 
 // Owns its queue (under its lock: the render thread pushes, its threads take) and its threads.

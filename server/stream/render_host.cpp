@@ -281,6 +281,7 @@ void Server::Impl::on_encoded(EncodedFrame done) {
                 st.device_busy_ms += *done.device_ms;
         }
         for (const auto& p : done.plans) add_plan(st, p);
+        st.bytes_read_back += done.read_back_bytes;
         if (ok) {
             st.frames += 1;
             st.layers += 2;

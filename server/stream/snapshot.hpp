@@ -65,6 +65,9 @@ struct FrameStats {
     uint64_t layers_black = 0;  // nothing view-dependent in view: no pass, no readback
     uint64_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0, triangles = 0;
     uint64_t pixels_rendered = 0;
+    // Bytes of the layers' pixels the encoders read from the device's read-back: the
+    // rectangles, or only the lit tiles where the device packs them (`--pack-tiles`).
+    uint64_t bytes_read_back = 0;
     // Stages: queue = taken from the scheduler to submitted (culling and recording, per
     // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
     // frame); device = the device's own time on the frame's submission, from its timestamps

@@ -268,7 +268,8 @@ struct Served {
 
 std::vector<std::vector<uint8_t>> served_layers(gpu::Device& device, const scene::Scene& s,
                                                 int pack, const Served& how,
-                                                const scene::Intrinsics& k) {
+                                                const scene::Intrinsics& k,
+                                                double* read_back = nullptr) {
     stream::LoopbackCreateInfo info;
     info.pack_tiles = pack;
     if (how.calibrated)
@@ -315,6 +316,10 @@ std::vector<std::vector<uint8_t>> served_layers(gpu::Device& device, const scene
         }
         EXPECT_EQ(got, 2u) << "both eyes' layers";
     }
+    if (read_back) {  // what the encoders read of the layers' pixels (stats)
+        const auto stats = (*server)->stats();
+        *read_back = stats["frames"]["sparse"]["bytes_read_back"].get<double>();
+    }
     (*server)->stop();
     return layers;
 }
@@ -331,8 +336,11 @@ TEST_F(TilePacking, AHeadsetGetsTheSameBytesEitherWay) {
         SCOPED_TRACE(testing::Message()
                      << "encoding " << int(how.encoding) << ", format " << int(how.format)
                      << (how.calibrated ? ", calibrated" : ""));
-        const auto host = served_layers(device(), s, 0, how, k);
-        const auto packed = served_layers(device(), s, 1, how, k);
+        double host_read = 0, packed_read = 0;
+        const auto host = served_layers(device(), s, 0, how, k, &host_read);
+        const auto packed = served_layers(device(), s, 1, how, k, &packed_read);
+        EXPECT_GT(packed_read, 0);
+        EXPECT_LT(packed_read, host_read) << "only the lit tiles are read back";
         ASSERT_EQ(host.size(), 4u);
         EXPECT_EQ(host, packed);
         size_t lit = 0;
