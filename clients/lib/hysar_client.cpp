@@ -686,6 +686,7 @@ hysar_status hysar_warp_target_create(uint32_t width, uint32_t height, uint32_t 
         t->pixels.assign(size_t(width) * height * bytes_per_pixel, 0);
         t->kept.first.assign(height, 0);  // all 0, and known to be
         t->kept.last.assign(height, 0);
+        t->kept.width = width, t->kept.bytes_per_pixel = bytes_per_pixel;
         *out = t.release();
         return HYSAR_OK;
     });
@@ -710,6 +711,10 @@ hysar_status hysar_reproject_layer_into(const hysar_event* layer, const hysar_di
                         "layer, rendered, shown, latest and target must not be NULL");
         if (const hysar_status s = check_reproject_to(layer, rendered, shown, latest); s)
             return s;
+        if (layer->image.bytes_per_pixel != 4 && layer->image.bytes_per_pixel != 8)
+            return fail(HYSAR_E_INVALID_ARGUMENT, "the image's bytes_per_pixel is " +
+                                                      std::to_string(layer->image.bytes_per_pixel) +
+                                                      ", not 4 (rgba8) or 8 (rgba16f)");
         if (target->width != shown->eye_width || target->height != shown->eye_height ||
             target->bytes_per_pixel != layer->image.bytes_per_pixel)
             return fail(HYSAR_E_INVALID_ARGUMENT,

@@ -6,9 +6,10 @@
  * registered display, the last pose and an unanswered frame request again; the application sees
  * DISCONNECTED and CONNECTED events and carries on.
  *
- * Threads: every function may be called from any thread; one thread inside the library does
- * the network. Nothing here throws or aborts: every function returns a hysar_status, and
- * hysar_last_error() gives the sentence of the last failure on the calling thread.
+ * Threads: every function may be called from any thread (a warp target, one thread at a time);
+ * one thread inside the library does the network. Nothing here throws or aborts: every function
+ * returns a hysar_status, and hysar_last_error() gives the sentence of the last failure on the
+ * calling thread.
  *
  * Ownership: the library copies every string and struct it is given. An event's pixels and
  * text belong to the event until hysar_event_release().
@@ -298,6 +299,27 @@ HYSAR_API hysar_status hysar_reproject_layer_to(
     const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
     uint32_t filter, uint8_t* dst, size_t dst_bytes, uint32_t* cleared);
 
+/* ---- The server's warp depth (library 1.4, API version 4, added functions only) ----
+ *
+ * A late warp that knows how far away the prop is moves the layer with the head's translation
+ * too, not only its rotation: a visitor walking around the prop sees the highlight stay on it.
+ * The server knows the prop; a display registered with HYSAR_OPTION_WARP_DEPTH gets, in every
+ * layer, the depth of the plane through the prop's centre along that eye's view axis
+ * (protocol/PROTOCOL.md, "Time"). A server that predates the option is asked again without it
+ * (its layers then carry none). */
+enum { HYSAR_OPTION_WARP_DEPTH = 1 };
+/* plane_depth_m of hysar_reproject_layer and hysar_reproject_layer_to: the layer's own. */
+#define HYSAR_PLANE_DEPTH_FROM_LAYER (-1.0)
+/* As hysar_client_register_display, with options (HYSAR_OPTION_* bits; 0: as that call).
+ * HYSAR_E_INVALID_ARGUMENT for a bit this library does not know. */
+HYSAR_API hysar_status hysar_client_register_display_opts(hysar_client* client,
+                                                          const hysar_display* display,
+                                                          uint32_t options);
+/* A LAYER event's warp depth: metres along its eye's view axis (> 0), or 0 when it has none
+ * (the display did not ask, the prop lies behind the eye, or the event is not a LAYER the
+ * library delivered). */
+HYSAR_API double hysar_event_warp_depth_m(const hysar_event* event);
+
 /* ---- A destination the library keeps (library 1.5, API version 5, added functions only) ----
  *
  * A layer is black (see-through) but for the highlight, and so is its warp: most of a shown
@@ -322,27 +344,6 @@ HYSAR_API hysar_status hysar_reproject_layer_into(
     const hysar_event* layer, const hysar_display* rendered, const hysar_display* shown,
     const hysar_pose* latest, uint64_t now_ns, uint64_t stale_limit_ns, double plane_depth_m,
     uint32_t filter, hysar_warp_target* target, uint32_t* cleared);
-
-/* ---- The server's warp depth (library 1.4, API version 4, added functions only) ----
- *
- * A late warp that knows how far away the prop is moves the layer with the head's translation
- * too, not only its rotation: a visitor walking around the prop sees the highlight stay on it.
- * The server knows the prop; a display registered with HYSAR_OPTION_WARP_DEPTH gets, in every
- * layer, the depth of the plane through the prop's centre along that eye's view axis
- * (protocol/PROTOCOL.md, "Time"). A server that predates the option is asked again without it
- * (its layers then carry none). */
-enum { HYSAR_OPTION_WARP_DEPTH = 1 };
-/* plane_depth_m of hysar_reproject_layer and hysar_reproject_layer_to: the layer's own. */
-#define HYSAR_PLANE_DEPTH_FROM_LAYER (-1.0)
-/* As hysar_client_register_display, with options (HYSAR_OPTION_* bits; 0: as that call).
- * HYSAR_E_INVALID_ARGUMENT for a bit this library does not know. */
-HYSAR_API hysar_status hysar_client_register_display_opts(hysar_client* client,
-                                                          const hysar_display* display,
-                                                          uint32_t options);
-/* A LAYER event's warp depth: metres along its eye's view axis (> 0), or 0 when it has none
- * (the display did not ask, the prop lies behind the eye, or the event is not a LAYER the
- * library delivered). */
-HYSAR_API double hysar_event_warp_depth_m(const hysar_event* event);
 
 #ifdef __cplusplus
 }

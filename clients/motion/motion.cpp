@@ -620,9 +620,11 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
     const double last_x = double(dw) - 1;  // the destination row's last pixel
     // With a kept destination, a clear touches only the columns it may hold lit ([kf, kl)),
     // and the row's columns written [nf, nl) become what it may hold next.
-    if (kept && (kept->first.size() != dh || kept->last.size() != dh)) {
+    if (kept && (kept->first.size() != dh || kept->last.size() != dh || kept->width != dw ||
+                 kept->bytes_per_pixel != sizeof(T))) {
         kept->first.assign(dh, 0);
         kept->last.assign(dh, dw);
+        kept->width = dw, kept->bytes_per_pixel = uint32_t(sizeof(T));
     }
     uint32_t kf = 0, kl = dw, nf = dw, nl = 0;
     const auto zero = [&](T* out, uint32_t a, uint32_t b) {
@@ -735,7 +737,8 @@ void warp_rows(const uint8_t* src_bytes, uint32_t sw, uint32_t sh, uint8_t* dst_
 void clear_kept(uint8_t* dst, uint32_t dst_width, uint32_t dst_height, uint32_t bytes_per_pixel,
                 KeptRows& kept) {
     const size_t row = size_t(dst_width) * bytes_per_pixel;
-    const bool known = kept.first.size() == dst_height && kept.last.size() == dst_height;
+    const bool known = kept.first.size() == dst_height && kept.last.size() == dst_height &&
+                       kept.width == dst_width && kept.bytes_per_pixel == bytes_per_pixel;
     for (uint32_t y = 0; y < dst_height; ++y) {
         const uint32_t a = known ? std::min(kept.first[y], dst_width) : 0,
                        b = known ? std::min(kept.last[y], dst_width) : dst_width;
@@ -745,6 +748,7 @@ void clear_kept(uint8_t* dst, uint32_t dst_width, uint32_t dst_height, uint32_t 
     }
     kept.first.assign(dst_height, 0);
     kept.last.assign(dst_height, 0);
+    kept.width = dst_width, kept.bytes_per_pixel = bytes_per_pixel;
 }
 
 void warp(const uint8_t* src, uint32_t src_width, uint32_t src_height, uint8_t* dst,

@@ -174,9 +174,12 @@ struct LitRows {
 // have written non-zero pixels now. A layer is black but for the highlight: most of a
 // destination stays 0 from one frame to the next, and clearing it is about half of a nearest
 // warp's time. Rows of another count than the destination's mean "anywhere" (a new
-// destination of unknown content).
+// destination of unknown content). One KeptRows belongs to one destination buffer, written by
+// nothing else between warps.
 struct KeptRows {
     std::vector<uint32_t> first, last;
+    // The destination they describe: another width or pixel size also means "anywhere".
+    uint32_t width = 0, bytes_per_pixel = 0;
 };
 // As above, from a source of one size to a destination of another (an overscanned layer to its
 // display); h takes a destination pixel to a source pixel.

@@ -241,7 +241,7 @@ Result<void> Device::create_logical_device(bool want_float64) {
     f2.features.shaderFloat64 = float64_ ? VK_TRUE : VK_FALSE;
     f2.pNext = &f12;
     // VK_KHR_push_descriptor where the device has it: the tile packer binds each target's
-    // buffers with it (render/tile_pack; without it the host scans the tiles).
+    // buffers with it (CommandList::end_render_and_pack; without it the host scans the tiles).
     uint32_t ext_count = 0;
     HS_VK_TRY(vkEnumerateDeviceExtensionProperties(physical_, nullptr, &ext_count, nullptr));
     std::vector<VkExtensionProperties> exts(ext_count);

@@ -76,8 +76,8 @@ struct ComputePipelineInfo {
     SpecConstants spec;
     uint32_t storage_buffers = 2;  // bindings 0..n-1 of set 0
     uint32_t push_constant_bytes = 0;
-    // The buffers are pushed with each dispatch (CommandList::dispatch with buffers;
-    // VK_KHR_push_descriptor) rather than bound once (bind_storage).
+    // The buffers are pushed with each use (vkCmdPushDescriptorSetKHR, as
+    // CommandList::end_render_and_pack does) rather than bound once (bind_storage).
     bool push_descriptors = false;
     std::string name;
 };

@@ -136,7 +136,7 @@ Result<scene::Scene> lean_scene(const scene::Scene& scene) {
 
 namespace {
 
-// The server's cost of the VD path: per stage, its mean so far times the frame count beside it.
+// The number at `path` in `j`, if there is one.
 template <typename T>
 std::optional<T> json_at(const json& j, std::initializer_list<const char*> path) {
     const json* p = &j;
@@ -150,6 +150,7 @@ std::optional<T> json_at(const json& j, std::initializer_list<const char*> path)
     return p->get<T>();
 }
 
+// The server's cost of the VD path: per stage, its mean so far times the frame count beside it.
 // A stage may be counted in its own unit (per layer, per stereo frame, per batch); as long as
 // that count grows in step with `frames`, the difference of two snapshots over the difference of
 // their frames is the stage's mean, in its unit, between them. Read defensively: a field that is

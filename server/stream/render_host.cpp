@@ -281,8 +281,8 @@ void Server::Impl::on_encoded(EncodedFrame done) {
                 st.device_busy_ms += *done.device_ms;
         }
         for (const auto& p : done.plans) add_plan(st, p);
-        st.bytes_read_back += done.read_back_bytes;
         if (ok) {
+            st.bytes_read_back += done.read_back_bytes;  // per layer sent, as `layers`
             st.frames += 1;
             st.layers += 2;
             st.bytes += done.layers[0]->size() + done.layers[1]->size();

@@ -629,6 +629,15 @@ TEST(Reproject, AKeptDestinationGivesTheSamePixels) {
             }
             EXPECT_GE(lit_frames, 5u) << "the highlight must show in most frames";
             EXPECT_LT(lit_frames, std::size(turns_deg)) << "and leave the image in some";
+            // The same rows given with a destination of another width (same height): they
+            // describe another buffer, so it is cleared whole.
+            const uint32_t nw = kW - 8;
+            std::vector<uint8_t> narrow(size_t(nw) * kH * bpp, 0x5A), narrow_fresh(narrow.size());
+            const auto h0 = plane_homography(kK, kK, eye_pose(kHead, kLook, 0.064, 0),
+                                             eye_pose(kHead, kLook, 0.064, 0), 0.8);
+            warp(src.data(), kW, kH, narrow_fresh.data(), nw, kH, bpp, h0, f);
+            warp(src.data(), kW, kH, narrow.data(), nw, kH, bpp, h0, f, {}, &kept);
+            EXPECT_EQ(narrow, narrow_fresh);
         }
     // Through the C API: the target against hysar_reproject_layer_to, with a stale clear.
     hysar_event e{};
