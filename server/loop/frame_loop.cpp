@@ -660,19 +660,21 @@ std::set<uint32_t> FrameLoop::free_released() {
     return {gone.begin(), gone.end()};
 }
 
+uint32_t layer_pack_tile(const gpu::Device& device, bool packs, const Display& d) {
+    return packs && d.packing != LayerPacking::kRaw &&
+                   gpu::RenderTarget::can_pack(device, d.eye.width, d.eye.height,
+                                               render::layer_target_format(d.encoding), kLayerTile)
+               ? kLayerTile
+               : 0;
+}
+
 Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const Display& d = job.display;
     auto& slot = frames_[job.session_id];
     const uint64_t index_bytes = renderer_->layer_index_bytes();
     const bool depth = renderer_->uses_depth();
-    // Sparse layers' lit tiles packed on the device, where the renderer does (raw layers need
-    // every pixel).
     const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
-    const uint32_t pack_tile =
-        renderer_->packs_tiles() && d.packing != LayerPacking::kRaw &&
-                gpu::RenderTarget::can_pack(device_, d.eye.width, d.eye.height, cf, kLayerTile)
-            ? kLayerTile
-            : 0;
+    const uint32_t pack_tile = layer_pack_tile(device_, renderer_->packs_tiles(), d);
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
         slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile)

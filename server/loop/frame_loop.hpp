@@ -118,6 +118,12 @@ public:
 // What the render thread tells the rest of the server. Every call is made on the render
 // thread, hands its values over (a post to the network thread, an atomic store) and returns at
 // once; none calls back into the frame loop.
+// The tile a display's layer targets pack on the device (gpu::RenderTarget::create's
+// pack_tile), or 0: where the renderer packs (`packs`), for sparse and lossy layers (raw ones
+// need every pixel) whose buffers fit the device. The frame loop makes targets by it and
+// admission reserves their bytes by it.
+uint32_t layer_pack_tile(const gpu::Device& device, bool packs, const Display& d);
+
 class FrameLoopHost {
 public:
     virtual ~FrameLoopHost() = default;

@@ -95,6 +95,13 @@ std::vector<std::string> effects_of(const scene::Scene& s, bool vd, const scene:
     return e;
 }
 
+namespace {
+// --pack-tiles on, or auto on a GPU (RendererCreateInfo::pack_tiles).
+bool wants_packed_tiles(const gpu::Device& device, const RendererCreateInfo& info) {
+    return info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
+}
+}  // namespace
+
 Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const scene::Scene& scene,
                                                    const RendererCreateInfo& info) {
     if (scene.lights.size() > HS_MAX_LIGHTS)
@@ -161,7 +168,6 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
                                                     : cores - 1;
     if (planners > 0)
         r->planners_ = std::make_unique<WorkerPool>(unsigned(planners));
-    const bool pack = info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
     if (packs_tiles(device, info)) {
         gpu::ComputePipelineInfo pi;
         pi.spv = kTilesCompSpv;
@@ -171,7 +177,7 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         pi.name = "pipeline.tile-pack";
         HS_ASSIGN_OR_RETURN(auto packer, gpu::ComputePipeline::create(device, pi));
         r->packer_ = std::make_unique<gpu::ComputePipeline>(std::move(packer));
-    } else if (pack) {
+    } else if (wants_packed_tiles(device, info)) {
         log::warn(
             "packing tiles on the device needs VK_KHR_push_descriptor, which {} lacks: "
             "the host scans the layers' tiles",
@@ -181,8 +187,7 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
 }
 
 bool Renderer::packs_tiles(const gpu::Device& device, const RendererCreateInfo& info) {
-    const bool pack = info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
-    return pack && device.push_descriptor_fn() != nullptr;
+    return wants_packed_tiles(device, info) && device.push_descriptor_fn() != nullptr;
 }
 
 Renderer::~Renderer() {

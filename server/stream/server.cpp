@@ -351,13 +351,10 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id, const loop:
         return proto::Error{proto::ErrorCode::kInvalidDisplay, std::move(*why)};
     // Reserved with a depth buffer whatever the running scene: a new scene may need one (the
     // dome's targets have none, so they hold less than this).
-    const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
-    const bool packed =
-        packs_tiles && d.packing != loop::LayerPacking::kRaw &&
-        gpu::RenderTarget::can_pack(device, d.eye.width, d.eye.height, cf, loop::kLayerTile);
     const uint64_t need =
-        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, true,
-                                               packed ? loop::kLayerTile : 0);
+        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height,
+                                               render::layer_target_format(d.encoding), true,
+                                               loop::layer_pack_tile(device, packs_tiles, d));
     const uint64_t had = target_bytes_of.count(id) ? target_bytes_of[id] : 0;
     const uint64_t others = reserved_target_bytes - had;
     if (others + need > limits.max_target_bytes)

@@ -260,14 +260,8 @@ private:
 // A headset client of `server`, reconnecting quickly (null when the first session fails).
 Client old_server_client(const OldServer& server) {
     const std::string address = server.address();
-    hysar_client_config c;
-    hysar_client_config_init(&c);
-    c.address = address.c_str();
-    c.token = kToken;
-    c.name = "lib-test-old-server";
-    c.role = HYSAR_ROLE_HMD;
-    c.reconnect_initial_ms = 50;
-    c.reconnect_max_ms = 400;
+    const hysar_client_config c =
+        test_client_config(address.c_str(), kToken, "lib-test-old-server");
     hysar_client* raw = nullptr;
     EXPECT_EQ(hysar_client_connect(&c, &raw), HYSAR_OK) << hysar_last_error();
     return Client(raw);

@@ -59,15 +59,7 @@ protected:
     }
 
     hysar_client_config config(uint32_t role = HYSAR_ROLE_HMD) {
-        hysar_client_config c;
-        hysar_client_config_init(&c);
-        c.address = address_.c_str();
-        c.token = kToken;
-        c.name = "lib-test";
-        c.role = role;
-        c.reconnect_initial_ms = 50;
-        c.reconnect_max_ms = 400;
-        return c;
+        return test_client_config(address_.c_str(), kToken, "lib-test", role);
     }
     Client connect(const hysar_client_config& c) {
         hysar_client* raw = nullptr;
