@@ -248,8 +248,8 @@ natsStatus create_bucket(kvStore** kv, jsCtx* js, const SceneBus::Options& o) {
 
 struct SceneBus::State {
     Options options;
-    // Set by the client's thread on a reconnect: the watch is made again at once (its consumer
-    // may have lived on a server that is gone).
+    // Set by the client's thread on a reconnect: the watch is made again a second later (its
+    // consumer may have lived on a server that is gone).
     std::atomic<bool> reconnected{false};
     natsConnection* nc = nullptr;
     jsCtx* js = nullptr;
@@ -343,8 +343,10 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         return e == NATS_TIMEOUT || why.find("no suitable peers") != std::string::npos ||
                why.find("temporarily unavailable") != std::string::npos;
     };
-    const auto until =
-        std::chrono::steady_clock::now() + std::chrono::milliseconds(o.start_wait_ms);
+    // Each try may itself wait up to two request timeouts (open, then create): the last try
+    // starts early enough to end by the deadline.
+    const auto until = std::chrono::steady_clock::now() +
+                       std::chrono::milliseconds(o.start_wait_ms - 2 * int64_t(o.timeout_ms));
     for (bool shown_wait = false; s == NATS_OK;) {
         s = js_KeyValue(&st->kv, st->js, o.bucket.c_str());
         if (s == NATS_NOT_FOUND)
@@ -357,6 +359,15 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         std::this_thread::sleep_for(std::chrono::milliseconds(250));
         s = NATS_OK;
     }
+    if (s != NATS_OK && o.replicas > 1 &&
+        status_text(s).find("no suitable peers") != std::string::npos)
+        return make_error(
+            ErrorCode::kIo,
+            fmt::format("--cluster {}: the bus cannot place the bucket '{}' on {} servers "
+                        "(--cluster-replicas {}) after {} s: does its JetStream cluster have "
+                        "that many servers, all up? ({})",
+                        shown, o.bucket, o.replicas, o.replicas, (o.start_wait_ms + 999) / 1000,
+                        status_text(s)));
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo,
                           fmt::format("--cluster {}: cannot open the key-value bucket '{}' "
@@ -588,6 +599,8 @@ void SceneBus::watch_loop(void* first) {
     // frozen), and a bus found empty or behind the held version is refilled.
     auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
     int behind = 0;
+    // After a reconnect: when the watch is made again (max(): not pending).
+    auto remake_at = std::chrono::steady_clock::time_point::max();
     auto stalled = [&] {
         if (std::chrono::steady_clock::now() < next_check)
             return false;
@@ -629,9 +642,16 @@ void SceneBus::watch_loop(void* first) {
             }
             if (newest)
                 on_scene_(*newest);
-            if ((s != NATS_OK && s != NATS_TIMEOUT) || s_->reconnected.exchange(false) ||
-                stalled()) {
+            // After a reconnect the watch is made again, but only once the client has had a
+            // second to reset its own consumers: destroying a watcher while the library
+            // resets it is a race inside libnats. The old watch is read meanwhile.
+            if (s_->reconnected.exchange(false) &&
+                remake_at == std::chrono::steady_clock::time_point::max())
+                remake_at = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+            if ((s != NATS_OK && s != NATS_TIMEOUT) ||
+                std::chrono::steady_clock::now() >= remake_at || stalled()) {
                 behind = 0;
+                remake_at = std::chrono::steady_clock::time_point::max();
                 break;  // made again
             }
         }

@@ -177,6 +177,8 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         pi.name = "pipeline.tile-pack";
         HS_ASSIGN_OR_RETURN(auto packer, gpu::ComputePipeline::create(device, pi));
         r->packer_ = std::make_unique<gpu::ComputePipeline>(std::move(packer));
+        r->packer_charge_ =
+            MemoryCharge(info.ledger ? &info.ledger->pipelines : nullptr, 0);  // a holder
     } else if (wants_packed_tiles(device, info)) {
         log::warn(
             "packing tiles on the device needs VK_KHR_push_descriptor, which {} lacks: "

@@ -403,6 +403,7 @@ private:
     MemoryCharge version_charge_;  // one scene version alive
     MemoryCharge cpu_charge_;      // levels_' meshes and clusters
     MemoryCharge fill_charge_;     // the fill-in's clusters, groups, bounds and projectors
+    MemoryCharge packer_charge_;   // packer_ on the ledger's pipelines
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
     uint32_t light_variants_ = 0;  // VD pipelines compiled for a set of lights

@@ -100,6 +100,10 @@ void classify_bound(ServedRow& r, double pose_rate_hz) {
                 "; the render thread spent {:.0f} % of the time planning and recording, {:.0f} % "
                 "submitting (waiting for a free command buffer included)",
                 100 * rec->second, 100 * sub->second);
+        // The GPU's busy time holds the copies of the layers into host memory.
+        if (top == "gpu" && r.read_back_bytes_per_layer)
+            r.bound_why += fmt::format("; its passes include reading back {:.0f} KB per eye layer",
+                                       *r.read_back_bytes_per_layer / 1000);
     } else {
         // Nothing saturated: each headset has at most two frames in flight, so its rate is
         // capped near 2 / latency.

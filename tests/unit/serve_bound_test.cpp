@@ -47,6 +47,19 @@ TEST(ServeBound, TheBusiestSaturatedStageBounds) {
     EXPECT_EQ(r.bound_why.find("cores"), std::string::npos) << r.bound_why;
 }
 
+TEST(ServeBound, ABusyGpuSaysWhatItReadsBack) {
+    auto r = row(30, {{"render_thread", 0.5}, {"gpu", 0.97}});
+    r.read_back_bytes_per_layer = 3'242'000;
+    hs::bench::classify_bound(r, 60);
+    EXPECT_EQ(r.bound, "gpu");
+    EXPECT_NE(r.bound_why.find("reading back 3242 KB per eye layer"), std::string::npos)
+        << r.bound_why;
+    r = row(30, {{"render_thread", 0.99}, {"gpu", 0.5}});
+    r.read_back_bytes_per_layer = 3'242'000;
+    hs::bench::classify_bound(r, 60);
+    EXPECT_EQ(r.bound_why.find("reading back"), std::string::npos) << r.bound_why;
+}
+
 TEST(ServeBound, ReplacedLayersMeanTheSockets) {
     auto r = row(30, {{"render_thread", 0.99}});
     r.layers_replaced = r.eye_layers / 5;  // a sixth of all layers made were replaced
