@@ -103,7 +103,8 @@ struct GpuPush {
     mat4 clip_from_world;  // Vulkan clip space from world (scene/camera.hpp)
     vec4 eye_position;     // xyz: viewer eye (VD pass) in metres, world
     vec4 camera_position;  // xyz: the camera this pass renders from (rays start here), world
-    uvec4 light_mask;      // VD pass: bit i of (x, y) set: light i may add light to this draw
+    uvec4 light_mask;      // VD pass: bit i of (x, y) set: light i may add light to this draw;
+                           // z: in a multiview pass, the view this draw is for
 };
 
 // One shading probe: evaluates shaders/shading.glsl at given vectors (tests of hard cases).

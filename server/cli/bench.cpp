@@ -94,6 +94,7 @@ const char* kBenchServeHelp =
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
     "                         [--record-on-render-thread] [--pack-tiles auto|on|off]\n"
+    "                         [--multiview auto|on|off]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
     "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
     "                         [--overscan-deg D]\n"
@@ -132,6 +133,8 @@ const char* kBenchServeHelp =
     "                       records every layer (to measure what recording on them buys)\n"
     "  --pack-tiles auto|on|off  the server's --pack-tiles (default auto: on a GPU): a\n"
     "                       compute pass packs the lit tiles, only they are read back\n"
+    "  --multiview auto|on|off  the server's --multiview (default auto: on a GPU): both\n"
+    "                       eyes of a headset in one pass\n"
     "  --headset-mbps X, --room-mbps Y  the server's bit-rate limits, Mbit/s (as hysar\n"
     "                       serve; default 0: none); each row then reports the Mbit/s per\n"
     "                       headset, the layer quality and the frame rate they were kept at\n"
@@ -179,7 +182,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--room-mbps",
                                             "--layer-quality",
                                             "--overscan-deg",
-                                            "--pack-tiles"};
+                                            "--pack-tiles",
+                                            "--multiview"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -244,6 +248,12 @@ Result<void> read_serve_words(const Flags& f, bench::ServeBenchOptions& o) {
         if (v != "auto" && v != "on" && v != "off")
             return invalid("--pack-tiles wants auto, on or off, got '" + v + "'");
         o.pack_tiles = v == "auto" ? -1 : v == "on" ? 1 : 0;
+    }
+    if (f.has("--multiview")) {
+        const std::string v = f.get("--multiview", "");
+        if (v != "auto" && v != "on" && v != "off")
+            return invalid("--multiview wants auto, on or off, got '" + v + "'");
+        o.multiview = v == "auto" ? -1 : v == "on" ? 1 : 0;
     }
     if (f.has("--encoding")) {
         const std::string v = f.get("--encoding", "");

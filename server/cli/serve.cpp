@@ -107,6 +107,8 @@ const char* kServeHelp =
     "  --tile-codec lz4|zstd|none (lz4)\n"
     "  --pack-tiles auto|on|off (auto: on a GPU): a compute pass packs each sparse layer's lit\n"
     "                      tiles, so only they are read back and encoded (docs/ARCHITECTURE.md)\n"
+    "  --multiview auto|on|off (auto: on a GPU): both eyes of a headset in one pass\n"
+    "                      (VK_KHR_multiview), for layers whose tiles are not packed\n"
     "  --layer-quality Q (92): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"
@@ -281,6 +283,7 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--planning-threads",
                                            "--tile-codec",
                                            "--pack-tiles",
+                                           "--multiview",
                                            "--layer-quality",
                                            "--calibration",
                                            "--compensation",
@@ -371,6 +374,12 @@ std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
         if (v != "auto" && v != "on" && v != "off")
             return usage_error("--pack-tiles: expected auto, on or off, got '" + v + "'");
         info.renderer.pack_tiles = v == "auto" ? -1 : v == "on" ? 1 : 0;
+    }
+    if (f.has("--multiview")) {
+        const std::string v = f.get("--multiview", "");
+        if (v != "auto" && v != "on" && v != "off")
+            return usage_error("--multiview: expected auto, on or off, got '" + v + "'");
+        info.renderer.multiview = v == "auto" ? -1 : v == "on" ? 1 : 0;
     }
     if (f.has("--tile-codec")) {
         const std::string c = f.get("--tile-codec", "");

@@ -1,6 +1,7 @@
 #include "gpu/commands.hpp"
 
 #include <algorithm>
+#include <array>
 
 #include "gpu/barriers.hpp"
 #include "gpu/shared_layout.hpp"
@@ -48,6 +49,7 @@ void CommandList::begin_render(RenderTarget& t, glm::vec4 clear, const char* lab
     VkRenderingInfo ri{VK_STRUCTURE_TYPE_RENDERING_INFO};
     ri.renderArea = {{int32_t(area.x), int32_t(area.y)}, {area.width, area.height}};
     ri.layerCount = 1;
+    ri.viewMask = t.views() > 1 ? (1u << t.views()) - 1 : 0;
     ri.colorAttachmentCount = 1;
     ri.pColorAttachments = &color;
     ri.pDepthAttachment = with_depth ? &depth : nullptr;
@@ -100,7 +102,7 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
     auto push_fn = device_.push_descriptor_fn();
     HS_CHECK(push_fn != nullptr, "end_render_and_pack: no VK_KHR_push_descriptor");
     area = whole(t, area);
-    copy_out(t, area);
+    copy_out(t, {&area, 1});
     const uint32_t ts = t.pack_tile();
     TilesPush pc{};
     pc.width = t.width();
@@ -158,27 +160,45 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
 
 void CommandList::end_render_and_read_back(RenderTarget& t, Area area) {
     area = whole(t, area);
-    copy_out(t, area);
+    std::array<Area, kMaxTargetViews> areas;
+    areas.fill(area);
+    end_render_and_read_back(t, std::span<const Area>(areas.data(), t.views()));
+}
+
+void CommandList::end_render_and_read_back(RenderTarget& t, std::span<const Area> areas) {
+    HS_CHECK(areas.size() == t.views(), "end_render_and_read_back: one area per view");
+    copy_out(t, areas);
     host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);
     device_.end_label(cmd_);
 }
 
-void CommandList::copy_out(RenderTarget& t, Area area) {
+void CommandList::copy_out(RenderTarget& t, std::span<const Area> areas) {
     vkCmdEndRendering(cmd_);
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT,
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
                   VK_PIPELINE_STAGE_2_COLOR_ATTACHMENT_OUTPUT_BIT,
                   VK_ACCESS_2_COLOR_ATTACHMENT_WRITE_BIT, VK_PIPELINE_STAGE_2_COPY_BIT,
                   VK_ACCESS_2_TRANSFER_READ_BIT);
-    VkBufferImageCopy region{};
-    region.bufferOffset = (uint64_t(area.y) * t.width() + area.x) * bytes_per_pixel(t.format());
-    region.bufferRowLength = t.width();
-    region.bufferImageHeight = t.height();
-    region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
-    region.imageOffset = {int32_t(area.x), int32_t(area.y), 0};
-    region.imageExtent = {area.width, area.height, 1};
-    vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(), 1,
-                           &region);
+    const uint64_t px = bytes_per_pixel(t.format());
+    const uint64_t view_bytes = uint64_t(t.width()) * t.height() * px;
+    VkBufferImageCopy regions[kMaxTargetViews];
+    uint32_t n = 0;
+    for (uint32_t v = 0; v < areas.size() && v < kMaxTargetViews; ++v) {
+        const Area& a = areas[v];
+        if (a.width == 0 || a.height == 0)
+            continue;
+        VkBufferImageCopy& region = regions[n++];
+        region = {};
+        region.bufferOffset = v * view_bytes + (uint64_t(a.y) * t.width() + a.x) * px;
+        region.bufferRowLength = t.width();
+        region.bufferImageHeight = t.height();
+        region.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, v, 1};
+        region.imageOffset = {int32_t(a.x), int32_t(a.y), 0};
+        region.imageExtent = {a.width, a.height, 1};
+    }
+    if (n > 0)
+        vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(),
+                               n, regions);
 }
 
 void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t push_size,

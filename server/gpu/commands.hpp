@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -37,7 +38,8 @@ public:
     // Starts rendering into `area` of `target` (cleared to `clear` and, with `depth`, depth 1
     // there; the rest of the target is undefined), under a debug label. Without `depth` the
     // target's depth attachment is not used: the pipelines bound must be made without one
-    // (GraphicsPipelineInfo::depth).
+    // (GraphicsPipelineInfo::depth). A target of several views renders them all in this one
+    // pass (multiview; the pipelines bound are made with GraphicsPipelineInfo::views).
     void begin_render(RenderTarget& target, glm::vec4 clear, const char* label, Area area = {},
                       bool depth = true);
     void bind(const GraphicsPipeline& pipeline);
@@ -57,7 +59,11 @@ public:
     void draw_range(uint32_t first, uint32_t count);
     // Ends rendering and copies `area` of the colour attachment into the same pixels of the
     // target's readback buffer (laid out as the whole image); the rest of it is left as it was.
+    // A target of several views: `area` of each.
     void end_render_and_read_back(RenderTarget& target, Area area = {});
+    // The same for a target of several views: view v's `areas[v]` into view v's part of the
+    // read-back buffer (an empty area: nothing of that view).
+    void end_render_and_read_back(RenderTarget& target, std::span<const Area> areas);
     // For a target that packs its tiles (RenderTarget::create with pack_tile): ends rendering,
     // copies `area` (on the tile grid, or the whole target) into the device-side pixels, and
     // packs the lit tiles of that area with `packer` (shaders/tiles.comp, push descriptors),
@@ -70,7 +76,7 @@ public:
 private:
     // Ends rendering and copies `area` of the colour attachment into the target's read-back
     // buffer.
-    void copy_out(RenderTarget& target, Area area);
+    void copy_out(RenderTarget& target, std::span<const Area> areas);
 
     Device& device_;
     VkCommandBuffer cmd_;

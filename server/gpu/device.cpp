@@ -234,6 +234,20 @@ Result<void> Device::create_logical_device(bool want_float64) {
     VkPhysicalDeviceVulkan12Features f12{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_2_FEATURES};
     f12.timelineSemaphore = VK_TRUE;
     f12.pNext = &f13;
+    // Multiview where the device has it: both eyes of a headset in one pass
+    // (render::Renderer's multiview).
+    VkPhysicalDeviceVulkan11Features has11{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_1_FEATURES};
+    VkPhysicalDeviceFeatures2 has{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_FEATURES_2};
+    has.pNext = &has11;
+    vkGetPhysicalDeviceFeatures2(physical_, &has);
+    VkPhysicalDeviceVulkan11Properties p11{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_1_PROPERTIES};
+    VkPhysicalDeviceProperties2 props{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2};
+    props.pNext = &p11;
+    vkGetPhysicalDeviceProperties2(physical_, &props);
+    max_multiview_views_ = has11.multiview == VK_TRUE ? p11.maxMultiviewViewCount : 0;
+    VkPhysicalDeviceVulkan11Features f11{VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_VULKAN_1_1_FEATURES};
+    f11.multiview = max_multiview_views_ >= 2 ? VK_TRUE : VK_FALSE;
+    f13.pNext = &f11;
     VkPhysicalDeviceFeatures supported{};
     vkGetPhysicalDeviceFeatures(physical_, &supported);
     float64_ = want_float64 && supported.shaderFloat64 == VK_TRUE;

@@ -56,6 +56,10 @@ public:
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn() const { return push_descriptor_fn_; }
     // The largest storage buffer a shader may be given (bytes; at least 2^27).
     uint64_t max_storage_buffer_range() const { return max_storage_buffer_range_; }
+    // Views a multiview pass may render (the feature is enabled when >= 2); 0: no multiview.
+    uint32_t max_multiview_views() const {
+        return max_multiview_views_ >= 2 ? max_multiview_views_ : 0;
+    }
 
     // Validation messages (warnings and errors) seen so far, and their texts.
     uint32_t validation_message_count() const { return validation_count_.load(); }
@@ -118,6 +122,7 @@ private:
     PFN_vkSetDebugUtilsObjectNameEXT set_name_fn_ = nullptr;
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn_ = nullptr;
     uint64_t max_storage_buffer_range_ = 0;
+    uint32_t max_multiview_views_ = 0;
     PFN_vkCmdBeginDebugUtilsLabelEXT begin_label_fn_ = nullptr;
     PFN_vkCmdEndDebugUtilsLabelEXT end_label_fn_ = nullptr;
 };

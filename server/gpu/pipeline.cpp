@@ -203,6 +203,7 @@ Result<GraphicsPipeline> GraphicsPipeline::create(Device& dev, const GraphicsPip
     rci.colorAttachmentCount = 1;
     rci.pColorAttachmentFormats = &color_format;
     rci.depthAttachmentFormat = info.depth ? VK_FORMAT_D32_SFLOAT : VK_FORMAT_UNDEFINED;
+    rci.viewMask = info.views > 1 ? (1u << info.views) - 1 : 0;
 
     VkGraphicsPipelineCreateInfo gci{VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO};
     gci.pNext = &rci;

@@ -36,6 +36,8 @@ struct GraphicsPipelineInfo {
     // order: for geometry no part of which can hide another as drawn (a convex prop, back
     // faces culled), which then saves the depth buffer's clear, tests and writes.
     bool depth = true;
+    // Views of a multiview pass (RenderTarget views; vertex_spv reads gl_ViewIndex); 1: none.
+    uint32_t views = 1;
     std::string name;  // debug name
 };
 

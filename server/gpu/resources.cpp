@@ -70,13 +70,14 @@ struct ImageParts {
 
 Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat format,
                               VkImageUsageFlags usage, VkImageAspectFlags aspect,
-                              const std::string& name, MemoryCounter* counter) {
+                              const std::string& name, MemoryCounter* counter,
+                              uint32_t layers = 1) {
     VkImageCreateInfo ici{VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO};
     ici.imageType = VK_IMAGE_TYPE_2D;
     ici.format = format;
     ici.extent = {w, h, 1};
     ici.mipLevels = 1;
-    ici.arrayLayers = 1;
+    ici.arrayLayers = layers;
     ici.samples = VK_SAMPLE_COUNT_1_BIT;
     ici.tiling = VK_IMAGE_TILING_OPTIMAL;
     ici.usage = usage;
@@ -93,9 +94,9 @@ Result<ImageParts> make_image(Device& dev, uint32_t w, uint32_t h, VkFormat form
     HS_VK_TRY(vkBindImageMemory(dev.vk(), image, parts.mem.get(), 0));
     VkImageViewCreateInfo vci{VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO};
     vci.image = image;
-    vci.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    vci.viewType = layers > 1 ? VK_IMAGE_VIEW_TYPE_2D_ARRAY : VK_IMAGE_VIEW_TYPE_2D;
     vci.format = format;
-    vci.subresourceRange = {aspect, 0, 1, 0, 1};
+    vci.subresourceRange = {aspect, 0, 1, 0, layers};
     VkImageView view;
     HS_VK_TRY(vkCreateImageView(dev.vk(), &vci, nullptr, &view));
     parts.view = ImageViewHandle(dev.vk(), view);
@@ -261,20 +262,33 @@ bool RenderTarget::can_pack(const Device& dev, uint32_t w, uint32_t h, ColorForm
 
 Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, ColorFormat format,
                                           const std::string& name, bool with_depth,
-                                          MemoryCounter* counter, uint32_t pack_tile) {
+                                          MemoryCounter* counter, uint32_t pack_tile,
+                                          uint32_t views) {
     if (w == 0 || h == 0 || w > 16384 || h > 16384)
         return make_error(
             ErrorCode::kInvalidArgument,
             fmt::format("render target '{}': size {}x{} outside 1..16384", name, w, h));
+    if (views < 1 || views > kMaxTargetViews || (views > 1 && views > dev.max_multiview_views()))
+        return make_error(
+            ErrorCode::kInvalidArgument,
+            fmt::format("render target '{}': {} views, but {} renders at most {} "
+                        "in one pass (multiview)",
+                        name, views, dev.name(), std::max(1u, dev.max_multiview_views())));
+    if (views > 1 && pack_tile > 0)
+        return make_error(ErrorCode::kInvalidArgument,
+                          fmt::format("render target '{}': a target of {} views does not pack "
+                                      "its tiles on the device",
+                                      name, views));
     RenderTarget t;
     t.width_ = w;
     t.height_ = h;
     t.format_ = format;
+    t.views_ = views;
     HS_ASSIGN_OR_RETURN(
         auto color,
         make_image(dev, w, h, to_vk(format),
                    VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT,
-                   VK_IMAGE_ASPECT_COLOR_BIT, name + ".color", counter));
+                   VK_IMAGE_ASPECT_COLOR_BIT, name + ".color", counter, views));
     t.color_mem_ = std::move(color.mem);
     t.color_ = std::move(color.image);
     t.color_view_ = std::move(color.view);
@@ -282,15 +296,16 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
         HS_ASSIGN_OR_RETURN(
             auto depth,
             make_image(dev, w, h, VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
-                       VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth", counter));
+                       VK_IMAGE_ASPECT_DEPTH_BIT, name + ".depth", counter, views));
         t.depth_mem_ = std::move(depth.mem);
         t.depth_ = std::move(depth.image);
         t.depth_view_ = std::move(depth.view);
     }
     const uint64_t image_bytes = uint64_t(w) * h * bytes_per_pixel(format);
     if (pack_tile == 0) {
-        HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, image_bytes, BufferUsage::kReadback,
-                                                        name + ".readback", counter));
+        HS_ASSIGN_OR_RETURN(t.readback_,
+                            Buffer::create(dev, image_bytes * views, BufferUsage::kReadback,
+                                           name + ".readback", counter));
         return t;
     }
     if (!can_pack(dev, w, h, format, pack_tile))
@@ -312,23 +327,25 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     return t;
 }
 
-ImageRgba32f RenderTarget::read() const {
+ImageRgba32f RenderTarget::read(uint32_t view) const {
     HS_CHECK(readback_data() != nullptr, "RenderTarget::read: the target packs its tiles");
+    HS_CHECK(view < views_, "RenderTarget::read: no such view");
+    const void* mapped = readback_data(view);
     ImageRgba32f img = ImageRgba32f::zeros(width_, height_);
     const size_t n = size_t(width_) * height_ * 4;
     switch (format_) {
         case ColorFormat::kRgba8Unorm: {
-            auto* p = static_cast<const uint8_t*>(readback_.mapped());
+            auto* p = static_cast<const uint8_t*>(mapped);
             for (size_t i = 0; i < n; ++i) img.pixels[i] = p[i] / 255.0f;
             break;
         }
         case ColorFormat::kRgba16Float: {
-            auto* p = static_cast<const uint16_t*>(readback_.mapped());
+            auto* p = static_cast<const uint16_t*>(mapped);
             for (size_t i = 0; i < n; ++i) img.pixels[i] = glm::unpackHalf1x16(p[i]);
             break;
         }
         case ColorFormat::kRgba32Float:
-            std::memcpy(img.pixels.data(), readback_.mapped(), n * sizeof(float));
+            std::memcpy(img.pixels.data(), mapped, n * sizeof(float));
             break;
     }
     return img;

@@ -100,8 +100,12 @@ private:
     SamplerHandle sampler_;
 };
 
+// The most views a render target holds (RenderTarget::create's `views`).
+inline constexpr uint32_t kMaxTargetViews = 8;
+
 // A colour attachment, a depth attachment (unless made without one) and a readback buffer of
-// one size and format.
+// one size and format; with `views` > 1, that many layers of each, rendered in one multiview
+// pass (Device::max_multiview_views).
 class RenderTarget {
 public:
     // `pack_tile` > 0: the target's lit tiles of that size are packed on the device
@@ -110,7 +114,7 @@ public:
     static Result<RenderTarget> create(Device& device, uint32_t width, uint32_t height,
                                        ColorFormat format, const std::string& name,
                                        bool with_depth = true, MemoryCounter* counter = nullptr,
-                                       uint32_t pack_tile = 0);
+                                       uint32_t pack_tile = 0, uint32_t views = 1);
     // What the packing adds to a target: the tile slots, the presence mask and room for every
     // tile, padded.
     static uint64_t pack_bytes(uint32_t width, uint32_t height, ColorFormat format, uint32_t tile);
@@ -131,8 +135,15 @@ public:
     VkImage depth() const { return depth_.get(); }
     VkImageView depth_view() const { return depth_view_.get(); }
     VkBuffer readback() const { return readback_.vk(); }
-    // The readback buffer, persistently mapped: the pixels in the target's format, row-major.
+    // The readback buffer, persistently mapped: the pixels in the target's format, row-major;
+    // a target of several views holds them one view after the other.
     const uint8_t* readback_data() const { return static_cast<const uint8_t*>(readback_.mapped()); }
+    const uint8_t* readback_data(uint32_t view) const {
+        return readback_data() + size_t(view) * width_ * height_ * bytes_per_pixel(format_);
+    }
+    // Views rendered in one pass (multiview: a 2D array image of that many layers); 1: a plain
+    // target.
+    uint32_t views() const { return views_; }
 
     // Packing on the device (pack_tile > 0 at creation).
     bool packs_tiles() const { return pack_tile_ > 0; }
@@ -149,7 +160,7 @@ public:
     const Buffer& readback_buffer() const { return readback_; }
 
     // Converts the readback buffer (filled by CommandList::end_render) to linear float RGBA.
-    ImageRgba32f read() const;
+    ImageRgba32f read(uint32_t view = 0) const;
 
 private:
     uint32_t width_ = 0, height_ = 0;
@@ -159,6 +170,7 @@ private:
     ImageViewHandle color_view_, depth_view_;
     Buffer readback_;
     uint32_t pack_tile_ = 0;
+    uint32_t views_ = 1;
     Buffer tile_slots_, tile_info_, tiles_;
 };
 

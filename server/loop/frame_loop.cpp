@@ -675,9 +675,13 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const bool depth = renderer_->uses_depth();
     const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     const uint32_t pack_tile = layer_pack_tile(device_, renderer_->packs_tiles(), d);
+    // Both eyes in one target of two views, rendered in one pass, where the renderer does so
+    // and the layers are not packed on the device.
+    const uint32_t views = renderer_->multiview() && pack_tile == 0 ? 2 : 1;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
-        slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile)
+        slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile &&
+        slot->targets[0].views() == views)
         return slot.get();
     // A new display, or a scene that needs a depth buffer where the last did not (or the
     // other way round): new targets (the old frame, if the encoder still holds it, lives on
@@ -688,10 +692,14 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->height = d.eye.height;
     f->encoding = d.encoding;
     for (size_t e = 0; e < 2; ++e) {
-        HS_ASSIGN_OR_RETURN(f->targets[e], gpu::RenderTarget::create(
-                                               device_, d.eye.width, d.eye.height, cf,
-                                               fmt::format("viewer{}.eye{}", job.session_id, e),
-                                               depth, nullptr, pack_tile));
+        if (e < 2 / views) {
+            HS_ASSIGN_OR_RETURN(f->targets[e],
+                                gpu::RenderTarget::create(
+                                    device_, d.eye.width, d.eye.height, cf,
+                                    views > 1 ? fmt::format("viewer{}.eyes", job.session_id)
+                                              : fmt::format("viewer{}.eye{}", job.session_id, e),
+                                    depth, nullptr, pack_tile, views));
+        }
         HS_ASSIGN_OR_RETURN(
             f->indices[e],
             gpu::Buffer::create(device_, index_bytes, gpu::BufferUsage::kIndex,

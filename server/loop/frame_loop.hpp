@@ -115,15 +115,15 @@ public:
     virtual void set_layer_drive(std::shared_ptr<const calib::LayerDrive> drive) = 0;
 };
 
-// What the render thread tells the rest of the server. Every call is made on the render
-// thread, hands its values over (a post to the network thread, an atomic store) and returns at
-// once; none calls back into the frame loop.
 // The tile a display's layer targets pack on the device (gpu::RenderTarget::create's
 // pack_tile), or 0: where the renderer packs (`packs`), for sparse and lossy layers (raw ones
 // need every pixel) whose buffers fit the device. The frame loop makes targets by it and
 // admission reserves their bytes by it.
 uint32_t layer_pack_tile(const gpu::Device& device, bool packs, const Display& d);
 
+// What the render thread tells the rest of the server. Every call is made on the render
+// thread, hands its values over (a post to the network thread, an atomic store) and returns at
+// once; none calls back into the frame loop.
 class FrameLoopHost {
 public:
     virtual ~FrameLoopHost() = default;

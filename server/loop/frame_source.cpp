@@ -23,9 +23,10 @@ public:
             ViewerFrame& f = *s.frame;
             const Display& d = f.job.display;
             const auto eyes = scene::eye_poses(s.head, d.ipd_m);
+            const bool views = f.targets[0].views() > 1;  // both eyes in targets[0]
             for (size_t e = 0; e < 2; ++e)
-                requests_.push_back({spec_, d.eye, eyes[e], f.encoding, &f.targets[e], true,
-                                     kLayerTile, &f.indices[e]});
+                requests_.push_back({spec_, d.eye, eyes[e], f.encoding, &f.targets[views ? 0 : e],
+                                     true, kLayerTile, &f.indices[e], views ? uint32_t(e) : 0});
         }
         HS_ASSIGN_OR_RETURN(auto plans, renderer_.record_layers(*cl, requests_));
         bool recorded = false;
@@ -34,13 +35,17 @@ public:
             for (size_t e = 0; e < 2; ++e) {
                 const auto& plan = plans[2 * i + e];
                 f.plans[e] = plan;
-                const gpu::RenderTarget& t = f.targets[e];
-                f.pixels[e] = {
-                    t.readback_data(), size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
-                    t.width(),         t.height(),
-                    f.encoding,        plan.rect.x0,
-                    plan.rect.y0,      plan.rect.x1,
-                    plan.rect.y1};
+                const auto& req = requests_[2 * i + e];
+                const gpu::RenderTarget& t = *req.target;
+                f.pixels[e] = {t.readback_data(req.view),
+                               size_t(t.width()) * gpu::bytes_per_pixel(t.format()),
+                               t.width(),
+                               t.height(),
+                               f.encoding,
+                               plan.rect.x0,
+                               plan.rect.y0,
+                               plan.rect.x1,
+                               plan.rect.y1};
                 if (t.packs_tiles() && !plan.rect.empty()) {
                     f.pixels[e].tile_info = t.tile_info();
                     f.pixels[e].tiles = t.packed_tiles();

@@ -52,10 +52,12 @@ struct ViewerFrame {
     uint32_t viewer = 0;
     uint32_t width = 0, height = 0;
     render::LayerEncoding encoding = render::LayerEncoding::kSrgb8;
-    std::array<gpu::RenderTarget, 2> targets;  // per eye, in the layer's pixel format
-    std::array<gpu::Buffer, 2> indices;        // per eye, the drawn clusters' indices
-    uint64_t target_bytes = 0;                 // what the two targets hold
-    uint64_t index_bytes = 0;                  // what the two index buffers hold
+    // Per eye, in the layer's pixel format; or both eyes in targets[0], a target of two views
+    // (render::Renderer::multiview), and targets[1] empty.
+    std::array<gpu::RenderTarget, 2> targets;
+    std::array<gpu::Buffer, 2> indices;  // per eye, the drawn clusters' indices
+    uint64_t target_bytes = 0;           // what the two targets hold
+    uint64_t index_bytes = 0;            // what the two index buffers hold
 
     // Per frame, written by the render thread before the frame goes to the encoder.
     ViewerJob job;

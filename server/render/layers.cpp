@@ -5,6 +5,7 @@
 // recorded, by the planning threads into secondary command buffers that the caller runs in
 // request order, or without planners (or for a single layer) on the caller, in request order.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -37,6 +38,11 @@ bool Renderer::check_layer_request(const LayerRequest& r, LayerWork& w) const {
                                 r.target->pack_tile(), r.tile, r.sparse ? "" : ", dense")
                           : "this renderer does not pack tiles (packs_tiles()): make layer "
                             "targets without pack_tile";
+        return false;
+    }
+    if (r.view >= r.target->views()) {
+        w.error = fmt::format("a layer request for view {} of a target of {} view{}", r.view,
+                              r.target->views(), r.target->views() == 1 ? "" : "s");
         return false;
     }
     if (uses_depth() && !r.target->has_depth()) {
@@ -265,8 +271,10 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
     w.lit.clear();
     if (!w.draw)
         return {};
+    const uint32_t views = r.target->views();
     if (w.occ_count > 0) {
-        HS_ASSIGN_OR_RETURN(w.occluder, variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding)));
+        HS_ASSIGN_OR_RETURN(w.occluder, variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding),
+                                                ~uint64_t(0), false, views));
     }
     for (const auto& g : w.groups) {
         // The fill-in's draws share one pipeline per format (the lights chosen by the push
@@ -274,18 +282,54 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
         // holds tens of MB of JIT memory on lavapipe, for a few clusters per layer.
         HS_ASSIGN_OR_RETURN(
             Variant * lit,
-            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true)
-                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask));
+            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true, views)
+                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask, false, views));
         w.lit.push_back(lit);
     }
     return {};
 }
 
+namespace {
+gpu::Area area_of(const PixelRect& r) {
+    return {r.x0, r.y0, r.x1 - r.x0, r.y1 - r.y0};
+}
+}  // namespace
+
 void Renderer::record_layer(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {
-    const PixelRect& pr = w.plan.rect;
-    const gpu::Area area{pr.x0, pr.y0, pr.x1 - pr.x0, pr.y1 - pr.y0};
-    const gpu::GpuPush push = push_for(r.intrinsics, r.eye);
+    const gpu::Area area = area_of(w.plan.rect);
     cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area, uses_depth());
+    record_draws(cl, r, w);
+    if (r.target->packs_tiles())
+        cl.end_render_and_pack(*r.target, *packer_, area);
+    else
+        cl.end_render_and_read_back(*r.target, area);
+}
+
+void Renderer::record_views(gpu::CommandList& cl, std::span<const LayerRequest> reqs,
+                            size_t first) const {
+    gpu::RenderTarget& t = *reqs[first].target;
+    const uint32_t views = t.views();
+    // The pass covers every drawn view's rectangle; each view's draws stay within its own, and
+    // only that is read back (a view with nothing to draw: none of it).
+    PixelRect all;
+    std::array<gpu::Area, gpu::kMaxTargetViews> areas{};
+    for (uint32_t v = 0; v < views; ++v) {
+        const LayerWork& w = layer_work_[first + v];
+        if (!w.draw)
+            continue;
+        all = unite(all, w.plan.rect);
+        areas[v] = area_of(w.plan.rect);
+    }
+    cl.begin_render(t, glm::vec4(0.0f), "pass.viewer-vd.views", area_of(all), uses_depth());
+    for (uint32_t v = 0; v < views; ++v)
+        if (layer_work_[first + v].draw)
+            record_draws(cl, reqs[first + v], layer_work_[first + v]);
+    cl.end_render_and_read_back(t, std::span<const gpu::Area>(areas.data(), views));
+}
+
+void Renderer::record_draws(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {
+    gpu::GpuPush push = push_for(r.intrinsics, r.eye);
+    push.light_mask.z = r.view;  // in a multiview pass, the view the draws are for
     cl.bind_mesh(streams(w.plan.level), *r.indices);
     if (w.occ_count > 0) {
         cl.bind(w.occluder->pipeline);
@@ -295,15 +339,40 @@ void Renderer::record_layer(gpu::CommandList& cl, const LayerRequest& r, const L
     for (size_t i = 0; i < w.groups.size(); ++i) {
         const auto& g = w.groups[i];
         gpu::GpuPush gp = push;
-        gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), 0, 0);
+        gp.light_mask = glm::uvec4(uint32_t(g.mask), uint32_t(g.mask >> 32), r.view, 0);
         cl.bind(w.lit[i]->pipeline);
         cl.push_constants(w.lit[i]->pipeline, &gp, sizeof(gp));
         cl.draw_range(g.first, g.count);
     }
-    if (r.target->packs_tiles())
-        cl.end_render_and_pack(*r.target, *packer_, area);
-    else
-        cl.end_render_and_read_back(*r.target, area);
+}
+
+Result<void> Renderer::group_passes(std::span<const LayerRequest> reqs) {
+    std::vector<uint32_t>& passes = layer_drawn_;
+    passes.clear();
+    for (size_t i = 0; i < reqs.size();) {
+        const uint32_t views = reqs[i].target->views();
+        if (views == 1) {
+            if (layer_work_[i].draw)
+                passes.push_back(uint32_t(i));
+            ++i;
+            continue;
+        }
+        // A target of several views: its requests in a row, views 0, 1, ...
+        bool drawn = false;
+        for (uint32_t v = 0; v < views; ++v) {
+            if (i + v >= reqs.size() || reqs[i + v].target != reqs[i].target ||
+                reqs[i + v].view != v)
+                return make_error(ErrorCode::kInvalidArgument,
+                                  fmt::format("layer request {}: a target of {} views takes its "
+                                              "requests in a row, views 0 to {}",
+                                              i + v, views, views - 1));
+            drawn = drawn || layer_work_[i + v].draw;
+        }
+        if (drawn)
+            passes.push_back(uint32_t(i));
+        i += views;
+    }
+    return {};
 }
 
 Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
@@ -320,17 +389,22 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
         if (!layer_work_[i].error.empty())
             return make_error(ErrorCode::kInvalidArgument, layer_work_[i].error);
     std::vector<LayerPlan> plans(reqs.size());
-    std::vector<uint32_t>& drawn = layer_drawn_;
-    drawn.clear();
     for (size_t i = 0; i < reqs.size(); ++i) {
         plans[i] = layer_work_[i].plan;
         HS_TRY(resolve_variants(reqs[i], layer_work_[i]));
-        if (layer_work_[i].draw)
-            drawn.push_back(uint32_t(i));
     }
+    // One pass per drawn layer, or per target of several views with a view drawn.
+    HS_TRY(group_passes(reqs));
+    const std::vector<uint32_t>& drawn = layer_drawn_;
+    const auto record_pass = [&](gpu::CommandList& list, uint32_t i) {
+        if (reqs[i].target->views() > 1)
+            record_views(list, reqs, i);
+        else
+            record_layer(list, reqs[i], layer_work_[i]);
+    };
     if (!planners_ || !info_.record_on_planners ||
-        drawn.size() < 2) {  // one layer: recording it here costs the same
-        for (uint32_t i : drawn) record_layer(cl, reqs[i], layer_work_[i]);
+        drawn.size() < 2) {  // one pass: recording it here costs the same
+        for (uint32_t i : drawn) record_pass(cl, i);
         return plans;
     }
     // Each layer recorded by a planner into its own secondary buffer (the render thread only
@@ -349,7 +423,7 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             return;
         }
         gpu::CommandList list = buffers.list(k);
-        record_layer(list, reqs[drawn[k]], w);
+        record_pass(list, drawn[k]);
         if (auto e = buffers.end(k); !e)
             w.record_error = e.error().message;
     });
@@ -358,7 +432,9 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
             return make_error(ErrorCode::kDevice,
                               "recording a VD layer: " + layer_work_[i].record_error);
     cl.execute(buffers, drawn.size());
-    layers_recorded_by_planners_ += drawn.size();
+    for (uint32_t i : drawn)
+        for (uint32_t v = 0; v < reqs[i].target->views(); ++v)
+            layers_recorded_by_planners_ += layer_work_[i + v].draw ? 1 : 0;
     return plans;
 }
 

@@ -17,6 +17,7 @@
 #include "scene/camera.hpp"
 #include "scene/memory.hpp"
 #include "scene/mesh.hpp"
+#include "shaders/multiview_vert.h"
 #include "shaders/prop_frag.h"
 #include "shaders/prop_frag_f32.h"
 #include "shaders/prop_vert.h"
@@ -185,6 +186,11 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
             "the host scans the layers' tiles",
             device.name());
     }
+    const bool multiview = info.multiview > 0 || (info.multiview < 0 && !device.is_cpu());
+    r->multiview_ = multiview && device.max_multiview_views() >= 2;
+    if (multiview && !r->multiview_ && info.multiview > 0)
+        log::warn("{} has no multiview: each eye of a headset is rendered in a pass of its own",
+                  device.name());
     return r;
 }
 
@@ -216,7 +222,8 @@ int whole_exponent(const scene::Specular& sp) {
 }
 
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
-                                             int encoding, uint64_t lights, bool fill) {
+                                             int encoding, uint64_t lights, bool fill,
+                                             uint32_t views) {
     const bool vd = kind == PassKind::kVd;
     fill = fill && vd;
     const scene::Specular none{};
@@ -226,7 +233,7 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
                     sp.colour.r, sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
                     sp.tangent_axis.x, sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source),
                     encoding, lights) +
-        (fill ? "|fill" : "");
+        (fill ? "|fill" : "") + (views > 1 ? fmt::format("|views{}", views) : std::string());
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
 
@@ -242,7 +249,9 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
     const gpu::ColorFormat format =
         encoding == 0 ? info_.format : layer_target_format(LayerEncoding(encoding - 1));
     gpu::GraphicsPipelineInfo pi;
-    pi.vertex_spv = kPropVertSpv;
+    pi.vertex_spv = views > 1 ? std::span<const uint32_t>(kMultiviewVertSpv)
+                              : std::span<const uint32_t>(kPropVertSpv);
+    pi.views = views;
     pi.fragment_spv = prop_fragment_spv(device_);
     pi.color_format = format;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);
@@ -272,11 +281,11 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
 }
 
 Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int encoding,
-                                                uint64_t lights, bool fill) {
+                                                uint64_t lights, bool fill, uint32_t views) {
     if (light_variants_ >= info_.max_light_variants)
-        return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill);
+        return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill, views);
     const uint64_t before = pipelines_built_;
-    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights, fill));
+    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights, fill, views));
     light_variants_ += uint32_t(pipelines_built_ - before);
     return v;
 }

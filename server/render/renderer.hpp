@@ -66,6 +66,14 @@ struct RendererCreateInfo {
     // host's and the pass costs the same cores as the host's scan); 0: off; 1: on. Needs
     // VK_KHR_push_descriptor (without it, off). See packs_tiles().
     int pack_tiles = -1;
+    // Both eyes of a headset in one pass (VK_KHR_multiview, core in Vulkan 1.1): a layer target
+    // of two views (gpu::RenderTarget::create's views) is cleared, drawn and read back by one
+    // pass, each eye's draws reaching its own view alone, so that its layers are bit for bit
+    // the per-eye path's. -1: on a GPU that has multiview, off on a CPU device (lavapipe, where
+    // every view still runs every draw's vertices: measured slower, README); 0: off; 1: on
+    // where the device has it. Targets that pack their tiles stay one view each. See
+    // multiview().
+    int multiview = -1;
     // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
     // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
     // outlive the renderer.
@@ -146,6 +154,9 @@ public:
         // index buffer of at least layer_index_bytes(), not in use by the device, its caller's
         // until the submission completes. Null: the renderer's own (render_layers only).
         gpu::Buffer* indices = nullptr;
+        // The target's view this layer is rendered into. A target of several views (multiview)
+        // takes one request per view, in a row, views 0, 1, ...: they are recorded as one pass.
+        uint32_t view = 0;
     };
     // What was recorded for one layer. Outside `rect` the layer is black (nothing was drawn or
     // read back there); an empty rect: no GPU work at all, the layer is black.
@@ -189,6 +200,10 @@ public:
     bool packs_tiles() const { return packer_ != nullptr; }
     // Whether a renderer made with `info` on `device` packs tiles (packs_tiles()).
     static bool packs_tiles(const gpu::Device& device, const RendererCreateInfo& info);
+    // Whether layer targets of two views are recorded in one multiview pass
+    // (RendererCreateInfo::multiview on, and the device has multiview): then make a headset's
+    // targets that do not pack their tiles with views = 2.
+    bool multiview() const { return multiview_; }
     // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
     uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }
     // Whether a layer of `spec` can ever be non-zero in this scene (a specular term with a
@@ -283,12 +298,13 @@ private:
     // lights compiled in (bit i: lit_[i]); all ones: every light, chosen per draw by the push
     // constants' light_mask.
     // fill: a VD pass with the headsets' fill-in (HS_SC_FILL).
+    // views: of the multiview pass it draws in (1: none).
     Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0,
-                             uint64_t lights = ~uint64_t(0), bool fill = false);
+                             uint64_t lights = ~uint64_t(0), bool fill = false, uint32_t views = 1);
     // The VD pipeline for a draw that needs `lights`: one compiled for exactly those lights, or
     // past info_.max_light_variants of them the generic one.
     Result<Variant*> vd_variant(const scene::Specular& spec, int encoding, uint64_t lights,
-                                bool fill = false);
+                                bool fill = false, uint32_t views = 1);
     Result<Variant*> variant(bool vd, const scene::Specular& spec) {
         return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
     }
@@ -366,6 +382,14 @@ private:
     // Records one planned, resolved layer: its pass, draws and read-back. Thread: any, one per
     // `w` and list.
     void record_layer(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const;
+    // The draws of one layer inside an open pass (its view's, in a multiview pass).
+    void record_draws(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const;
+    // Records the layers of one target of several views, reqs[first, first + views), in one
+    // multiview pass. Thread: any, one per target and list.
+    void record_views(gpu::CommandList& cl, std::span<const LayerRequest> reqs, size_t first) const;
+    // The requests recorded as one pass each (first request; a target of several views: its
+    // first view's), of those with something to draw; w.error set on a misplaced view.
+    Result<void> group_passes(std::span<const LayerRequest> reqs);
     std::vector<LayerWork> layer_work_;
     std::unique_ptr<WorkerPool> planners_;  // null: plan on the caller
     // With planners: each layer is recorded by a planner into a secondary buffer of its own,
@@ -374,7 +398,8 @@ private:
     std::vector<std::unique_ptr<gpu::SecondaryBuffers>> layer_buffers_;
     uint64_t layers_recorded_by_planners_ = 0;
     std::unique_ptr<gpu::ComputePipeline> packer_;  // shaders/tiles.comp; null: host scans
-    std::vector<uint32_t> layer_drawn_;       // record_layers: the drawn requests, kept for reuse
+    std::vector<uint32_t> layer_drawn_;  // record_layers: the passes' first requests (reused)
+    bool multiview_ = false;
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level

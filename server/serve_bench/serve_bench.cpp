@@ -493,6 +493,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.planning_threads = o.planning_threads;
     info.record_on_planners = !o.record_on_render_thread;
     info.pack_tiles = o.pack_tiles;
+    info.multiview = o.multiview;
     info.encoder_threads = o.encoder_threads;
     info.headset_mbps = o.headset_mbps;
     info.room_mbps = o.room_mbps;
@@ -819,6 +820,9 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"pack_tiles", o.pack_tiles < 0 ? "auto"
                            : o.pack_tiles   ? "on"
                                             : "off"},
+            {"multiview", o.multiview < 0 ? "auto"
+                          : o.multiview   ? "on"
+                                          : "off"},
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
             {"layer_quality", o.layer_quality},

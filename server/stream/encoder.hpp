@@ -85,6 +85,7 @@ struct EncodedFrame {
     // What the encoder read of the two layers' pixels, as the device left them for the host:
     // the rectangles, or (packed on the device) the lit tiles with the count and the mask.
     uint64_t read_back_bytes = 0;
+    bool one_pass = false;  // both eyes were rendered in one multiview pass
 };
 
 // Owns its queue (under its lock: the render thread pushes, its threads take) and its threads.

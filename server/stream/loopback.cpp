@@ -53,6 +53,7 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     info.renderer.planning_threads = o.planning_threads;
     info.renderer.record_on_planners = o.record_on_planners;
     info.renderer.pack_tiles = o.pack_tiles;
+    info.renderer.multiview = o.multiview;
     info.calibration = o.calibration;
     return info;
 }

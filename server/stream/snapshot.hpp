@@ -68,6 +68,8 @@ struct FrameStats {
     // Bytes of the layers' pixels the encoders read from the device's read-back: the
     // rectangles, or only the lit tiles where the device packs them (`--pack-tiles`).
     uint64_t bytes_read_back = 0;
+    // Frames whose two eyes were rendered in one multiview pass (`--multiview`).
+    uint64_t frames_one_pass = 0;
     // Stages: queue = taken from the scheduler to submitted (culling and recording, per
     // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
     // frame); device = the device's own time on the frame's submission, from its timestamps

@@ -10,6 +10,7 @@
 #include "codec/layer_codec.hpp"
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
+#include "served_layers.hpp"
 #include "stream/loopback.hpp"
 #include "synthetic_calibration.hpp"
 
@@ -260,68 +261,13 @@ TEST_F(TilePacking, ARequestThePackingCannotServeIsRefusedWithAReason) {
 // Served: a headset gets the same layer bytes from a server that packs on the device as from
 // one that scans on the host, in sparse and lossy tiles, RGBA8 and RGBA16F, and through a
 // headset calibration (the drive applied to the packed tiles, where a tile may turn black).
-struct Served {
-    proto::Encoding encoding;
-    proto::PixelFormat format;
-    bool calibrated;
-};
-
 std::vector<std::vector<uint8_t>> served_layers(gpu::Device& device, const scene::Scene& s,
                                                 int pack, const Served& how,
                                                 const scene::Intrinsics& k,
                                                 double* read_back = nullptr) {
     stream::LoopbackCreateInfo info;
     info.pack_tiles = pack;
-    if (how.calibrated)
-        info.calibration =
-            std::make_shared<const calib::ServingCalibration>(synthetic(s, k.width, k.height));
-    auto server = stream::LoopbackServer::start(device, s, info);
-    EXPECT_TRUE(server.ok()) << server.error().message;
-    if (!server.ok())
-        return {};
-    auto opened = client::Connection::open((*server)->address());
-    if (auto* e = std::get_if<std::string>(&opened)) {
-        ADD_FAILURE() << *e;
-        return {};
-    }
-    auto c = std::move(std::get<std::unique_ptr<client::Connection>>(opened));
-    EXPECT_FALSE(c->hello(proto::Role::kHmd, (*server)->token(), "pack-test"));
-    proto::RegisterDisplay d{k.width, k.height, k.fx, k.fy, k.cx, k.cy, 0.063};
-    d.format = how.format;
-    d.encoding = how.encoding;
-    EXPECT_TRUE(c->send(d));
-    std::vector<std::vector<uint8_t>> layers;
-    for (const double azimuth : {-20.0, 15.0}) {
-        const auto head = scene::viewing_pose(s.viewing, azimuth, 1.10).value();
-        EXPECT_TRUE(c->send(proto::Pose{
-            1,
-            {head.position.x, head.position.y, head.position.z},
-            {head.orientation.w, head.orientation.x, head.orientation.y, head.orientation.z}}));
-        EXPECT_TRUE(c->send(proto::FrameRequest{}));
-        size_t got = 0;
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-        while (got < 2 && std::chrono::steady_clock::now() < deadline) {
-            auto m = c->receive(500);
-            if (auto* e = std::get_if<std::string>(&m)) {
-                ADD_FAILURE() << *e;
-                return layers;
-            }
-            if (auto* msg = std::get_if<proto::Message>(&m)) {
-                EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
-                if (auto* l = std::get_if<proto::VdLayer>(msg)) {
-                    layers.push_back(l->data);
-                    ++got;
-                }
-            }
-        }
-        EXPECT_EQ(got, 2u) << "both eyes' layers";
-    }
-    if (read_back) {  // what the encoders read of the layers' pixels (stats)
-        const auto stats = (*server)->stats();
-        *read_back = stats["frames"]["sparse"]["bytes_read_back"].get<double>();
-    }
-    (*server)->stop();
-    return layers;
+    return hs::test::served_layers(device, s, info, how, k, read_back);
 }
 
 TEST_F(TilePacking, AHeadsetGetsTheSameBytesEitherWay) {

@@ -1,0 +1,213 @@
+// Both eyes in one pass (RendererCreateInfo::multiview, VK_KHR_multiview): a target of two views
+// rendered by one pass gives each eye bit for bit the layer of the per-eye path, on the convex
+// dome and on a prop drawn with a depth test (occluders), in both formats, recorded on the
+// caller and by the planners, and served; requests that do not fit a target of two views are
+// refused with a reason.
+#include <cstring>
+#include <string>
+
+#include "gpu_fixture.hpp"
+#include "scene/camera.hpp"
+#include "served_layers.hpp"
+#include "two_domes.hpp"
+
+using namespace hs;
+using namespace hs::test;
+namespace proto = hs::protocol;
+
+namespace {
+
+using Request = render::Renderer::LayerRequest;
+using Plan = render::Renderer::LayerPlan;
+
+class Multiview : public GpuTest {
+protected:
+    void SetUp() override {
+        GpuTest::SetUp();
+        // lavapipe, where CI runs, has it (six views): a device without it fails here rather
+        // than passing on nothing.
+        ASSERT_GE(device().max_multiview_views(), 2u) << device().name() << " has no multiview";
+    }
+    std::unique_ptr<render::Renderer> renderer(const scene::Scene& s, int multiview, int planners) {
+        render::RendererCreateInfo info;
+        info.multiview = multiview;
+        info.planning_threads = planners;
+        auto r = render::Renderer::create(device(), s, info);
+        EXPECT_TRUE(r.ok()) << r.error().message;
+        return r.ok() ? std::move(*r) : nullptr;
+    }
+};
+
+// A layer's bytes as the wire carries them: the rendered rectangle of `view`, 0 elsewhere.
+std::vector<uint8_t> view_bytes(const gpu::RenderTarget& t, uint32_t view, const Plan& plan) {
+    const size_t px = gpu::bytes_per_pixel(t.format()), w = t.width();
+    std::vector<uint8_t> out(w * t.height() * px, 0);
+    const uint8_t* in = t.readback_data(view);
+    for (uint32_t y = plan.rect.y0; y < plan.rect.y1; ++y)
+        std::memcpy(out.data() + (y * w + plan.rect.x0) * px, in + (y * w + plan.rect.x0) * px,
+                    (plan.rect.x1 - plan.rect.x0) * px);
+    return out;
+}
+
+size_t lit_pixels(const std::vector<uint8_t>& bytes, size_t px) {
+    size_t n = 0;
+    for (size_t i = 0; i < bytes.size(); i += px)
+        for (size_t b = 0; b < px; ++b)
+            if (bytes[i + b] != 0) {
+                ++n;
+                break;
+            }
+    return n;
+}
+
+TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
+    const char* presets[] = {"phong", "ward-aniso", "kajiya-kay", "blinn-phong"};
+    for (const bool domes : {false, true})
+        for (const int planners : {0, 2}) {
+            SCOPED_TRACE(std::string(domes ? "two domes" : "dome") +
+                         (planners ? ", recorded by planners" : ", recorded on the caller"));
+            const scene::Scene s = domes ? two_domes() : scene::default_scene();
+            auto per_eye = renderer(s, 0, planners);
+            auto both = renderer(s, 1, planners);
+            ASSERT_TRUE(per_eye && both);
+            EXPECT_FALSE(per_eye->multiview());
+            EXPECT_TRUE(both->multiview());
+            const auto k = small_eye(4);
+            // Heads around the prop, and one turned away from it (nothing to draw in either
+            // eye: no pass at all).
+            constexpr int kHeads = 6;
+            std::vector<gpu::RenderTarget> singles, pairs;
+            std::vector<gpu::Buffer> indices;
+            std::vector<Request> a, b;
+            singles.reserve(2 * kHeads);
+            pairs.reserve(kHeads);
+            for (int h = 0; h < kHeads; ++h) {
+                const auto enc =
+                    h % 2 ? render::LayerEncoding::kHalf : render::LayerEncoding::kSrgb8;
+                const auto fmt = render::layer_target_format(enc);
+                auto head =
+                    scene::viewing_pose(s.viewing, -50.0 + 20.0 * h, s.viewing.heights_m.at("M"))
+                        .value();
+                if (h == kHeads - 1)  // looking away
+                    head.orientation =
+                        head.orientation * glm::angleAxis(glm::pi<double>(), glm::dvec3(0, 1, 0));
+                const auto eyes = scene::eye_poses(head, 0.063);
+                pairs.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt, "pair",
+                                                          both->uses_depth(), nullptr, 0, 2)
+                                    .value());
+                for (uint32_t e = 0; e < 2; ++e) {
+                    singles.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt,
+                                                                "single", per_eye->uses_depth())
+                                          .value());
+                    const auto& spec = s.specular_presets.at(presets[(h + e) % 4]);
+                    a.push_back({spec, k, eyes[e], enc, &singles.back(), true});
+                    b.push_back({spec, k, eyes[e], enc, &pairs.back(), true, 32, nullptr, e});
+                }
+            }
+            auto pa = per_eye->render_layers(a);
+            auto pb = both->render_layers(b);
+            ASSERT_TRUE(pa.ok()) << pa.error().message;
+            ASSERT_TRUE(pb.ok()) << pb.error().message;
+            size_t lit = 0;
+            for (int h = 0; h < kHeads; ++h)
+                for (uint32_t e = 0; e < 2; ++e) {
+                    SCOPED_TRACE("head " + std::to_string(h) + ", eye " + std::to_string(e));
+                    const size_t i = 2 * size_t(h) + e;
+                    const Plan &x = (*pa)[i], &y = (*pb)[i];
+                    EXPECT_EQ(x.rect.x0, y.rect.x0);
+                    EXPECT_EQ(x.rect.y0, y.rect.y0);
+                    EXPECT_EQ(x.rect.x1, y.rect.x1);
+                    EXPECT_EQ(x.rect.y1, y.rect.y1);
+                    EXPECT_EQ(x.triangles, y.triangles);
+                    const auto va = view_bytes(singles[i], 0, x);
+                    const auto vb = view_bytes(pairs[size_t(h)], e, y);
+                    EXPECT_TRUE(va == vb) << "the layers differ";
+                    const size_t n = lit_pixels(va, gpu::bytes_per_pixel(singles[i].format()));
+                    lit += n > 100;
+                    if (h == kHeads - 1) {
+                        EXPECT_TRUE(x.rect.empty()) << "the head turned away sees nothing";
+                        EXPECT_EQ(n, 0u);
+                    }
+                }
+            EXPECT_GE(lit, size_t(kHeads)) << "most eyes must show a highlight";
+            if (planners) {
+                EXPECT_GT(both->layers_recorded_by_planners(), 0u);
+            }
+        }
+}
+
+// A target of two views takes its two requests in a row, views 0 then 1; anything else is
+// refused with a reason, and nothing is recorded.
+TEST_F(Multiview, RequestsThatDoNotFitTheViewsAreRefused) {
+    const scene::Scene s = scene::default_scene();
+    auto r = renderer(s, 1, 0);
+    ASSERT_TRUE(r);
+    const auto k = small_eye(4);
+    const auto enc = render::LayerEncoding::kSrgb8;
+    auto t =
+        gpu::RenderTarget::create(device(), k.width, k.height, render::layer_target_format(enc),
+                                  "pair", false, nullptr, 0, 2);
+    ASSERT_TRUE(t.ok()) << t.error().message;
+    const auto head = scene::viewing_pose(s.viewing, 0.0, s.viewing.heights_m.at("M")).value();
+    const auto eyes = scene::eye_poses(head, 0.063);
+    const auto spec = s.material.specular;
+    const auto refused = [&](std::vector<Request> reqs, const char* why) {
+        auto p = r->render_layers(reqs);
+        ASSERT_FALSE(p.ok()) << why;
+        EXPECT_NE(p.error().message.find(why), std::string::npos) << p.error().message;
+    };
+    refused({{spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0}}, "in a row");
+    refused({{spec, k, eyes[1], enc, &*t, true, 32, nullptr, 1},
+             {spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0}},
+            "in a row");
+    refused({{spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0},
+             {spec, k, eyes[1], enc, &*t, true, 32, nullptr, 2}},
+            "view 2 of a target of 2 views");
+    // Too many views for the device, or views on a target that packs its tiles.
+    auto many = gpu::RenderTarget::create(device(), 8, 8, gpu::ColorFormat::kRgba8Unorm, "many",
+                                          false, nullptr, 0, device().max_multiview_views() + 1);
+    ASSERT_FALSE(many.ok());
+    EXPECT_NE(many.error().message.find("views"), std::string::npos) << many.error().message;
+    auto packed = gpu::RenderTarget::create(device(), 64, 64, gpu::ColorFormat::kRgba8Unorm,
+                                            "packed", false, nullptr, 32, 2);
+    ASSERT_FALSE(packed.ok());
+    EXPECT_NE(packed.error().message.find("does not pack"), std::string::npos)
+        << packed.error().message;
+    // The right order still renders.
+    auto ok =
+        r->render_layers(std::vector<Request>{{spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0},
+                                              {spec, k, eyes[1], enc, &*t, true, 32, nullptr, 1}});
+    ASSERT_TRUE(ok.ok()) << ok.error().message;
+}
+
+// Served: a headset gets the same bytes from a server that renders both eyes in one pass as
+// from one that renders them apart: sparse RGBA8 and RGBA16F, raw, and calibrated.
+TEST_F(Multiview, AHeadsetGetsTheSameBytesEitherWay) {
+    const scene::Scene s = scene::default_scene();
+    const scene::Intrinsics k = small_eye(4);
+    const Served cases[] = {{proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, false},
+                            {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba16f, false},
+                            {proto::Encoding::kRaw, proto::PixelFormat::kRgba8, false},
+                            {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, true}};
+    for (const Served& how : cases) {
+        SCOPED_TRACE(testing::Message()
+                     << "encoding " << int(how.encoding) << ", format " << int(how.format)
+                     << (how.calibrated ? ", calibrated" : ""));
+        stream::LoopbackCreateInfo apart, together;
+        apart.multiview = 0;
+        together.multiview = 1;
+        apart.pack_tiles = together.pack_tiles = 0;
+        uint64_t one_pass_apart = 0, one_pass_together = 0;
+        const auto a = served_layers(device(), s, apart, how, k, nullptr, &one_pass_apart);
+        const auto b = served_layers(device(), s, together, how, k, nullptr, &one_pass_together);
+        EXPECT_EQ(one_pass_apart, 0u);
+        EXPECT_EQ(one_pass_together, 2u) << "both frames rendered their eyes in one pass";
+        ASSERT_EQ(a.size(), 4u);
+        EXPECT_TRUE(a == b) << "the served layers differ";
+        size_t lit = 0;
+        for (const auto& l : a) lit += l.size() > 200;
+        EXPECT_GE(lit, 2u) << "the layers show highlights";
+    }
+}
+
+}  // namespace
