@@ -1,7 +1,9 @@
 // The prop's vertex stage (prop.vert; multiview.vert with HS_MULTIVIEW: every view of a
 // multiview pass runs each draw, and a draw meant for one view (push constants'
 // light_mask.z) puts its triangles outside the clip volume in the others, so each view gets
-// exactly the draws of its own pass).
+// exactly the draws of its own pass). A device with multiview runs multiview.vert in every
+// pipeline, passes of one view included (gl_ViewIndex 0, light_mask.z 0), so that a layer's
+// positions come from one shader whichever way its eyes are drawn.
 #extension GL_GOOGLE_include_directive : require
 #include "shared.h"
 

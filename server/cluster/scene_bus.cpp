@@ -344,9 +344,11 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
                why.find("temporarily unavailable") != std::string::npos;
     };
     // Each try may itself wait up to two request timeouts (open, then create): the last try
-    // starts early enough to end by the deadline.
-    const auto until = std::chrono::steady_clock::now() +
-                       std::chrono::milliseconds(o.start_wait_ms - 2 * int64_t(o.timeout_ms));
+    // starts early enough to end by the deadline (or, for a wait of no more than that, halfway).
+    const auto start = std::chrono::steady_clock::now();
+    const auto until =
+        start + std::chrono::milliseconds(std::max<int64_t>(
+                    o.start_wait_ms - 2 * int64_t(o.timeout_ms), o.start_wait_ms / 2));
     for (bool shown_wait = false; s == NATS_OK;) {
         s = js_KeyValue(&st->kv, st->js, o.bucket.c_str());
         if (s == NATS_NOT_FOUND)
@@ -363,11 +365,13 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
         status_text(s).find("no suitable peers") != std::string::npos)
         return make_error(
             ErrorCode::kIo,
-            fmt::format("--cluster {}: the bus cannot place the bucket '{}' on {} servers "
-                        "(--cluster-replicas {}) after {} s: does its JetStream cluster have "
-                        "that many servers, all up? ({})",
-                        shown, o.bucket, o.replicas, o.replicas, (o.start_wait_ms + 999) / 1000,
-                        status_text(s)));
+            fmt::format(
+                "--cluster {}: the bus cannot place the bucket '{}' on {} servers "
+                "(--cluster-replicas {}) after {:.0f} s: does its JetStream cluster "
+                "have that many servers, all up? ({})",
+                shown, o.bucket, o.replicas, o.replicas,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
+                status_text(s)));
     if (s != NATS_OK)
         return make_error(ErrorCode::kIo,
                           fmt::format("--cluster {}: cannot open the key-value bucket '{}' "
@@ -599,8 +603,10 @@ void SceneBus::watch_loop(void* first) {
     // frozen), and a bus found empty or behind the held version is refilled.
     auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
     int behind = 0;
-    // After a reconnect: when the watch is made again (max(): not pending).
-    auto remake_at = std::chrono::steady_clock::time_point::max();
+    // After a reconnect: when the watch is made again (never: not pending), and the latest
+    // that may be.
+    constexpr auto never = std::chrono::steady_clock::time_point::max();
+    auto remake_at = never, remake_by = never;
     auto stalled = [&] {
         if (std::chrono::steady_clock::now() < next_check)
             return false;
@@ -643,15 +649,25 @@ void SceneBus::watch_loop(void* first) {
             if (newest)
                 on_scene_(*newest);
             // After a reconnect the watch is made again, but only once the client has had a
-            // second to reset its own consumers: destroying a watcher while the library
-            // resets it is a race inside libnats. The old watch is read meanwhile.
-            if (s_->reconnected.exchange(false) &&
-                remake_at == std::chrono::steady_clock::time_point::max())
-                remake_at = std::chrono::steady_clock::now() + std::chrono::seconds(1);
-            if ((s != NATS_OK && s != NATS_TIMEOUT) ||
-                std::chrono::steady_clock::now() >= remake_at || stalled()) {
+            // second to reset its own consumers (destroying a watcher while the library resets
+            // it is a race inside libnats): a second after the latest reconnect, and at most
+            // three after the first. Until then nothing destroys the watcher, not an error
+            // from it nor a stall; the old watch is read meanwhile.
+            const auto now = std::chrono::steady_clock::now();
+            if (s_->reconnected.exchange(false)) {
+                if (remake_at == never)
+                    remake_by = now + std::chrono::seconds(3);
+                remake_at = std::min(now + std::chrono::seconds(1), remake_by);
+            }
+            const bool failed = s != NATS_OK && s != NATS_TIMEOUT;
+            if (remake_at != never && now < remake_at) {
+                if (failed)  // it answers at once: not a busy loop
+                    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+                continue;
+            }
+            if (remake_at != never || failed || stalled()) {
                 behind = 0;
-                remake_at = std::chrono::steady_clock::time_point::max();
+                remake_at = never;
                 break;  // made again
             }
         }

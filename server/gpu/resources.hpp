@@ -139,6 +139,7 @@ public:
     // a target of several views holds them one view after the other.
     const uint8_t* readback_data() const { return static_cast<const uint8_t*>(readback_.mapped()); }
     const uint8_t* readback_data(uint32_t view) const {
+        HS_CHECK(view < views_, "RenderTarget::readback_data: no such view");
         return readback_data() + size_t(view) * width_ * height_ * bytes_per_pixel(format_);
     }
     // Views rendered in one pass (multiview: a 2D array image of that many layers); 1: a plain

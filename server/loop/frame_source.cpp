@@ -53,6 +53,8 @@ public:
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;
             }
+            f.one_pass =
+                f.targets[0].views() > 1 && !(f.plans[0].rect.empty() && f.plans[1].rect.empty());
         }
         return recorded;
     }
@@ -102,6 +104,7 @@ public:
             const bool srgb8 = f.encoding == render::LayerEncoding::kSrgb8;
             const auto& bytes = srgb8 ? srgb8_ : half_;
             f.keep_alive = bytes;
+            f.one_pass = false;
             for (size_t e = 0; e < 2; ++e) {
                 f.plans[e] = {};
                 f.pixels[e] = {bytes->data(),

@@ -63,6 +63,7 @@ struct ViewerFrame {
     ViewerJob job;
     std::array<EyePixels, 2> pixels;  // what each eye's layer is made of
     std::array<render::Renderer::LayerPlan, 2> plans;
+    bool one_pass = false;  // both eyes were drawn by one multiview pass
     uint64_t timeline = 0;  // the submission whose completion makes `pixels` valid; 0: none
     std::chrono::steady_clock::time_point taken, submitted;
     // Keeps the pixels a captured material's frame points at alive while it is encoded.

@@ -255,13 +255,15 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     plan.triangles = (w.occ_count + lit_count) / 3;
 }
 
-std::vector<uint8_t> Renderer::layer_bytes(const gpu::RenderTarget& t, const LayerPlan& plan) {
+std::vector<uint8_t> Renderer::layer_bytes(const gpu::RenderTarget& t, const LayerPlan& plan,
+                                           uint32_t view) {
     const size_t px = t.format() == gpu::ColorFormat::kRgba8Unorm ? 4 : 8;
     const size_t w = t.width();
     std::vector<uint8_t> out(w * t.height() * px, 0);
     const PixelRect& r = plan.rect;
+    const uint8_t* in = t.readback_data(view);
     for (uint32_t y = r.y0; y < r.y1; ++y)
-        std::memcpy(out.data() + (y * w + r.x0) * px, t.readback_data() + (y * w + r.x0) * px,
+        std::memcpy(out.data() + (y * w + r.x0) * px, in + (y * w + r.x0) * px,
                     size_t(r.x1 - r.x0) * px);
     return out;
 }

@@ -204,6 +204,14 @@ Renderer::~Renderer() {
 }
 
 namespace {
+// The vertex shader: multiview.vert wherever the device has multiview, in every pipeline (its
+// positions are then those of one shader, whichever way a headset's eyes are drawn).
+std::span<const uint32_t> prop_vertex_spv(const gpu::Device& device) {
+    if (device.max_multiview_views() >= 2)
+        return kMultiviewVertSpv;
+    return kPropVertSpv;
+}
+
 // The fragment shader with double-precision parts where the device has shaderFloat64.
 std::span<const uint32_t> prop_fragment_spv(const gpu::Device& device) {
     if (device.float64())
@@ -221,6 +229,18 @@ int whole_exponent(const scene::Specular& sp) {
     return lobe && e >= 1.0 && e <= 4095.0 && e == std::floor(e) ? int(e) : 0;
 }
 
+std::string Renderer::variant_key(PassKind kind, const scene::Specular& spec, int encoding,
+                                  uint64_t lights, bool fill) {
+    const bool vd = kind == PassKind::kVd;
+    const scene::Specular none{};
+    const scene::Specular& sp = vd ? spec : none;
+    return fmt::format("{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model),
+                       sp.colour.r, sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
+                       sp.tangent_axis.x, sp.tangent_axis.y, sp.tangent_axis.z,
+                       int(sp.tangent_source), encoding, lights) +
+           (fill && vd ? "|fill" : "");
+}
+
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
                                              int encoding, uint64_t lights, bool fill,
                                              uint32_t views) {
@@ -228,12 +248,9 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
     fill = fill && vd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
-    const std::string key =
-        fmt::format("{}|{}|{},{},{}|{}|{},{}|{},{},{}|{}|{}|{:x}", int(kind), int(sp.model),
-                    sp.colour.r, sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
-                    sp.tangent_axis.x, sp.tangent_axis.y, sp.tangent_axis.z, int(sp.tangent_source),
-                    encoding, lights) +
-        (fill ? "|fill" : "") + (views > 1 ? fmt::format("|views{}", views) : std::string());
+    // The views before the fill-in's mark: set_fill finds the fill-in's pipelines by it.
+    const std::string key = (views > 1 ? fmt::format("views{}|", views) : std::string()) +
+                            variant_key(kind, spec, encoding, lights, fill);
     if (auto it = variants_.find(key); it != variants_.end())
         return &it->second;
 
@@ -249,8 +266,7 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
     const gpu::ColorFormat format =
         encoding == 0 ? info_.format : layer_target_format(LayerEncoding(encoding - 1));
     gpu::GraphicsPipelineInfo pi;
-    pi.vertex_spv = views > 1 ? std::span<const uint32_t>(kMultiviewVertSpv)
-                              : std::span<const uint32_t>(kPropVertSpv);
+    pi.vertex_spv = prop_vertex_spv(device_);
     pi.views = views;
     pi.fragment_spv = prop_fragment_spv(device_);
     pi.color_format = format;
@@ -282,12 +298,16 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
 
 Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int encoding,
                                                 uint64_t lights, bool fill, uint32_t views) {
-    if (light_variants_ >= info_.max_light_variants)
-        return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill, views);
-    const uint64_t before = pipelines_built_;
-    HS_ASSIGN_OR_RETURN(Variant * v, variant(PassKind::kVd, spec, encoding, lights, fill, views));
-    light_variants_ += uint32_t(pipelines_built_ - before);
-    return v;
+    // The budget counts sets of lights, whatever the views: a set compiled for one view count
+    // is compiled for the other too, so that a headset's layers do not depend on whether its
+    // eyes share a pass.
+    std::string set = variant_key(PassKind::kVd, spec, encoding, lights, fill);
+    if (!light_sets_.count(set)) {
+        if (light_sets_.size() >= info_.max_light_variants)
+            return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill, views);
+        light_sets_.insert(std::move(set));
+    }
+    return variant(PassKind::kVd, spec, encoding, lights, fill, views);
 }
 
 Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Variant v,
@@ -361,7 +381,7 @@ Result<Renderer::Variant*> Renderer::geometry_variant(std::optional<double> shee
     if (sheen_exponent)
         v.effects.push_back("prop-sheen");
     gpu::GraphicsPipelineInfo pi;
-    pi.vertex_spv = kPropVertSpv;
+    pi.vertex_spv = prop_vertex_spv(device_);
     pi.fragment_spv = prop_fragment_spv(device_);
     pi.color_format = gpu::ColorFormat::kRgba32Float;
     pi.push_constant_bytes = sizeof(gpu::GpuPush);

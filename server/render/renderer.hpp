@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <span>
 #include <string>
 #include <tuple>
@@ -183,7 +184,9 @@ public:
     };
     // A rendered layer's readback as the wire's pixel bytes over the whole image: the plan's
     // rectangle from the target, 0 elsewhere (nothing was drawn or read back there).
-    static std::vector<uint8_t> layer_bytes(const gpu::RenderTarget& target, const LayerPlan& plan);
+    // `view`: of a target of several views.
+    static std::vector<uint8_t> layer_bytes(const gpu::RenderTarget& target, const LayerPlan& plan,
+                                            uint32_t view = 0);
     // Records the layers' passes into `cl` (the caller submits). Plans are in request order.
     // An invalid request is an error for the whole batch, and then nothing is recorded. With
     // planners the layers go into secondary buffers kept per ring slot (cl.slot()): call it once
@@ -298,6 +301,9 @@ private:
     // lights compiled in (bit i: lit_[i]); all ones: every light, chosen per draw by the push
     // constants' light_mask.
     // fill: a VD pass with the headsets' fill-in (HS_SC_FILL).
+    // A variant's key, less the views it draws (variant adds them).
+    static std::string variant_key(PassKind kind, const scene::Specular& spec, int encoding,
+                                   uint64_t lights, bool fill);
     // views: of the multiview pass it draws in (1: none).
     Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0,
                              uint64_t lights = ~uint64_t(0), bool fill = false, uint32_t views = 1);
@@ -388,7 +394,8 @@ private:
     // multiview pass. Thread: any, one per target and list.
     void record_views(gpu::CommandList& cl, std::span<const LayerRequest> reqs, size_t first) const;
     // The requests recorded as one pass each (first request; a target of several views: its
-    // first view's), of those with something to draw; w.error set on a misplaced view.
+    // first view's), of those with something to draw into layer_drawn_; an error names a
+    // target of several views whose requests are not in a row, views 0, 1, ...
     Result<void> group_passes(std::span<const LayerRequest> reqs);
     std::vector<LayerWork> layer_work_;
     std::unique_ptr<WorkerPool> planners_;  // null: plan on the caller
@@ -431,7 +438,9 @@ private:
     MemoryCharge packer_charge_;   // packer_ on the ledger's pipelines
     uint64_t projector_renders_ = 0;
     uint64_t pipelines_built_ = 0;
-    uint32_t light_variants_ = 0;  // VD pipelines compiled for a set of lights
+    // vd_variant's sets of lights compiled (variant_key without the views), at most
+    // info_.max_light_variants.
+    std::set<std::string> light_sets_;
 };
 
 // Effects and specialisation key of a pass, as the renderer decides them from the scene.

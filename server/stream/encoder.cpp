@@ -287,7 +287,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         fields.height = f.height;
         const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
         out.read_back_bytes += read_back_bytes(pixels);
-        out.one_pass = f.targets[0].views() > 1;
+        out.one_pass = f.one_pass;
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
             append_served_layer(o, pixels, drive, encoding, codec, scratch, quality);

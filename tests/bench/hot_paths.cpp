@@ -5,6 +5,7 @@
 // drive of a calibration, the calibration's kernel regression and CIEDE2000 over an image.
 //   build/tests/hs_benchmarks [--benchmark_filter=Vd] [--benchmark_repetitions=5]
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <random>
 
@@ -14,6 +15,7 @@
 #include "calib/inverse_map.hpp"
 #include "calib/serving.hpp"
 #include "codec/layer_codec.hpp"
+#include "gpu/commands.hpp"
 #include "gpu/device.hpp"
 #include "optics/colour.hpp"
 #include "render/blend.hpp"
@@ -124,6 +126,79 @@ BENCHMARK(BM_VdLayers)
     ->ArgNames({"sparse", "lod"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
+
+// What the render thread (or a planner) spends recording a batch of 8 headsets' sparse layers
+// into a command buffer: the planning and the Vulkan calls, not the device's work (which runs
+// after, untimed). range(0): 1 both eyes of a headset in one multiview pass, 0 a pass per
+// eye (RendererCreateInfo::multiview). On a GPU the recording is what bounds the served path
+// (README, "On a GPU").
+void BM_RecordBatch(benchmark::State& state) {
+    auto& g = Gpu::get();
+    const bool multiview = state.range(0) != 0;
+    if (multiview && g.device->max_multiview_views() < 2) {
+        state.SkipWithError("the device has no multiview");
+        return;
+    }
+    render::RendererCreateInfo info;
+    info.multiview = multiview ? 1 : 0;
+    info.planning_threads = 0;
+    auto r = render::Renderer::create(*g.device, g.scene, info);
+    if (!r) {
+        state.SkipWithError(r.error().message.c_str());
+        return;
+    }
+    constexpr size_t kHeadsets = 8;
+    std::vector<gpu::RenderTarget> targets;
+    std::vector<gpu::Buffer> indices;
+    for (size_t i = 0; i < kHeadsets * 2; ++i) {
+        if (!multiview || i % 2 == 0)
+            targets.push_back(gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
+                                                        gpu::ColorFormat::kRgba8Unorm, "bench.eye",
+                                                        false, nullptr, 0, multiview ? 2 : 1)
+                                  .value());
+        indices.push_back(gpu::Buffer::create(*g.device, r.value()->layer_index_bytes(),
+                                              gpu::BufferUsage::kIndex, "bench.indices")
+                              .value());
+    }
+    const auto batch = [&](size_t frame) {
+        std::vector<render::Renderer::LayerRequest> reqs;
+        for (size_t h = 0; h < kHeadsets; ++h) {
+            const auto eyes = scene::eye_poses(g.heads[(frame + 3 * h) % g.heads.size()], 0.063);
+            for (uint32_t e = 0; e < 2; ++e)
+                reqs.push_back({g.scene.material.specular, g.eye_k, eyes[e],
+                                render::LayerEncoding::kSrgb8, &targets[multiview ? h : 2 * h + e],
+                                true, 32, &indices[2 * h + e], multiview ? e : 0});
+        }
+        return reqs;
+    };
+    // Two batches before timing: the pipelines the poses need are compiled on first use.
+    for (size_t frame = 0; frame < 2; ++frame) (void)r.value()->render_layers(batch(frame));
+    size_t frame = 0;
+    for (auto _ : state) {
+        const auto reqs = batch(frame++);
+        double ms = 0;
+        auto done = gpu::execute(*g.device, "bench.record", [&](gpu::CommandList& cl) {
+            const auto t0 = std::chrono::steady_clock::now();
+            auto plans = r.value()->record_layers(cl, reqs);
+            ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                     .count();
+            if (!plans)
+                state.SkipWithError(plans.error().message.c_str());
+        });
+        if (!done) {
+            state.SkipWithError(done.error().message.c_str());
+            break;
+        }
+        state.SetIterationTime(ms / 1000.0);
+    }
+}
+BENCHMARK(BM_RecordBatch)
+    ->Arg(0)
+    ->Arg(1)
+    ->ArgName("multiview")
+    ->Iterations(20)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseManualTime();
 
 // One viewer's stereo layers as the server renders them (sRGB8, sparse, level of detail) at
 // 8 viewpoints all around the prop of the default scene, whose one projector leaves the back

@@ -127,6 +127,7 @@ bad --seconds --seconds
 bad --format --format png
 bad --encoding --encoding zip
 bad --pack-tiles --pack-tiles maybe
+bad --multiview --multiview both
 bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 1025

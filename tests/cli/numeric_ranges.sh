@@ -65,6 +65,11 @@ refused --headset-mbps -1 "[0, 100000]" "$hysar" "${S[@]}" --headset-mbps -1
 refused --headset-mbps 3M "[0, 100000]" "$hysar" "${S[@]}" --headset-mbps 3M
 refused --room-mbps 1e6 "[0, 100000]" "$hysar" "${S[@]}" --room-mbps 1e6
 refused --room-mbps 0.05 "below 0.1 Mbit/s" "$hysar" "${S[@]}" --room-mbps 0.05
+# The word flags beside them: one of their words, the same exit before any work.
+CASE_GREP=-F expect "--pack-tiles maybe" 2 err "--pack-tiles: expected auto, on or off, got 'maybe'" \
+  "$hysar" "${S[@]}" --pack-tiles maybe
+CASE_GREP=-F expect "--multiview both" 2 err "--multiview: expected auto, on or off, got 'both'" \
+  "$hysar" "${S[@]}" --multiview both
 
 # hysar cluster config
 refused --agent-port 70000 "[1, 65535]" "$hysar" cluster config --node a=h:1 --agent-port 70000

@@ -3,10 +3,10 @@
 // dome and on a prop drawn with a depth test (occluders), in both formats, recorded on the
 // caller and by the planners, and served; requests that do not fit a target of two views are
 // refused with a reason.
-#include <cstring>
 #include <string>
 
 #include "gpu_fixture.hpp"
+#include "render/blend.hpp"
 #include "scene/camera.hpp"
 #include "served_layers.hpp"
 #include "two_domes.hpp"
@@ -38,17 +38,6 @@ protected:
     }
 };
 
-// A layer's bytes as the wire carries them: the rendered rectangle of `view`, 0 elsewhere.
-std::vector<uint8_t> view_bytes(const gpu::RenderTarget& t, uint32_t view, const Plan& plan) {
-    const size_t px = gpu::bytes_per_pixel(t.format()), w = t.width();
-    std::vector<uint8_t> out(w * t.height() * px, 0);
-    const uint8_t* in = t.readback_data(view);
-    for (uint32_t y = plan.rect.y0; y < plan.rect.y1; ++y)
-        std::memcpy(out.data() + (y * w + plan.rect.x0) * px, in + (y * w + plan.rect.x0) * px,
-                    (plan.rect.x1 - plan.rect.x0) * px);
-    return out;
-}
-
 size_t lit_pixels(const std::vector<uint8_t>& bytes, size_t px) {
     size_t n = 0;
     for (size_t i = 0; i < bytes.size(); i += px)
@@ -73,7 +62,8 @@ TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
             EXPECT_FALSE(per_eye->multiview());
             EXPECT_TRUE(both->multiview());
             const auto k = small_eye(4);
-            // Heads around the prop, and one turned away from it (nothing to draw in either
+            // Heads around the prop; one whose second eye asks for a black material (one view
+            // drawn, the other not); and one turned away from it (nothing to draw in either
             // eye: no pass at all).
             constexpr int kHeads = 6;
             std::vector<gpu::RenderTarget> singles, pairs;
@@ -99,7 +89,9 @@ TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
                     singles.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt,
                                                                 "single", per_eye->uses_depth())
                                           .value());
-                    const auto& spec = s.specular_presets.at(presets[(h + e) % 4]);
+                    scene::Specular spec = s.specular_presets.at(presets[(h + e) % 4]);
+                    if (h == 1 && e == 1)
+                        spec.colour = glm::dvec3(0.0);
                     a.push_back({spec, k, eyes[e], enc, &singles.back(), true});
                     b.push_back({spec, k, eyes[e], enc, &pairs.back(), true, 32, nullptr, e});
                 }
@@ -108,7 +100,7 @@ TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
             auto pb = both->render_layers(b);
             ASSERT_TRUE(pa.ok()) << pa.error().message;
             ASSERT_TRUE(pb.ok()) << pb.error().message;
-            size_t lit = 0;
+            size_t lit = 0, rects_differ = 0;
             for (int h = 0; h < kHeads; ++h)
                 for (uint32_t e = 0; e < 2; ++e) {
                     SCOPED_TRACE("head " + std::to_string(h) + ", eye " + std::to_string(e));
@@ -119,21 +111,81 @@ TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
                     EXPECT_EQ(x.rect.x1, y.rect.x1);
                     EXPECT_EQ(x.rect.y1, y.rect.y1);
                     EXPECT_EQ(x.triangles, y.triangles);
-                    const auto va = view_bytes(singles[i], 0, x);
-                    const auto vb = view_bytes(pairs[size_t(h)], e, y);
+                    const auto va = render::Renderer::layer_bytes(singles[i], x);
+                    const auto vb = render::Renderer::layer_bytes(pairs[size_t(h)], y, e);
                     EXPECT_TRUE(va == vb) << "the layers differ";
                     const size_t n = lit_pixels(va, gpu::bytes_per_pixel(singles[i].format()));
                     lit += n > 100;
-                    if (h == kHeads - 1) {
-                        EXPECT_TRUE(x.rect.empty()) << "the head turned away sees nothing";
+                    if (h == kHeads - 1 || (h == 1 && e == 1)) {
+                        EXPECT_TRUE(x.rect.empty()) << "nothing to draw in this eye";
                         EXPECT_EQ(n, 0u);
                     }
+                    if (e == 1) {
+                        const auto& l = (*pb)[i - 1].rect;
+                        rects_differ += !l.empty() && !y.rect.empty() &&
+                                        (l.x0 != y.rect.x0 || l.x1 != y.rect.x1 ||
+                                         l.y0 != y.rect.y0 || l.y1 != y.rect.y1);
+                    }
                 }
+            EXPECT_GE(rects_differ, 1u) << "a pass over the union of two different rectangles";
             EXPECT_GE(lit, size_t(kHeads)) << "most eyes must show a highlight";
             if (planners) {
                 EXPECT_GT(both->layers_recorded_by_planners(), 0u);
             }
         }
+}
+
+// The headsets' fill-in, set and set again (a reblend, as when a projector goes): the layers
+// of both eyes in one pass stay those of a pass per eye, with the new blend's fill-in.
+TEST_F(Multiview, TheFillInAfterAReblendIsThePerEyeOne) {
+    scene::Scene s = scene::default_scene();
+    s.projector.intrinsics.width /= 4, s.projector.intrinsics.height /= 4;
+    s.projector.intrinsics.fx /= 4, s.projector.intrinsics.fy /= 4;
+    s.projector.intrinsics.cx /= 4, s.projector.intrinsics.cy /= 4;
+    auto per_eye = renderer(s, 0, 0), both = renderer(s, 1, 0);
+    ASSERT_TRUE(per_eye && both);
+    std::vector<scene::Projector> moved = s.projectors();
+    moved.front().pose.position += glm::dvec3(0.3, 0.2, 0.0);
+    const render::Blend first = render::compute_blend(both->mesh(), s.projectors());
+    const render::Blend second = render::compute_blend(both->mesh(), moved);
+    const auto k = small_eye(4);
+    const auto enc = render::LayerEncoding::kSrgb8;
+    const auto fmt = render::layer_target_format(enc);
+    auto head = scene::viewing_pose(s.viewing, 150.0, s.viewing.heights_m.at("M")).value();
+    const auto eyes = scene::eye_poses(head, 0.063);
+    std::vector<std::vector<uint8_t>> layers_before;
+    for (const render::Blend* blend : {&first, &second}) {
+        SCOPED_TRACE(blend == &first ? "the first blend" : "after the reblend");
+        ASSERT_TRUE(per_eye->set_fill(*blend).ok());
+        ASSERT_TRUE(both->set_fill(*blend).ok());
+        std::array<gpu::RenderTarget, 2> singles;
+        for (auto& t : singles)
+            t = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "single", false)
+                    .value();
+        auto pair = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "pair", false,
+                                              nullptr, 0, 2)
+                        .value();
+        const auto spec = s.material.specular;
+        auto pa = per_eye->render_layers(
+            std::vector<Request>{{spec, k, eyes[0], enc, &singles[0], true},
+                                 {spec, k, eyes[1], enc, &singles[1], true}});
+        auto pb = both->render_layers(
+            std::vector<Request>{{spec, k, eyes[0], enc, &pair, true, 32, nullptr, 0},
+                                 {spec, k, eyes[1], enc, &pair, true, 32, nullptr, 1}});
+        ASSERT_TRUE(pa.ok() && pb.ok());
+        std::vector<std::vector<uint8_t>> layers;
+        for (uint32_t e = 0; e < 2; ++e) {
+            EXPECT_GT((*pa)[e].clusters_filled, 0u) << "the eye sees uncovered surface";
+            const auto a = render::Renderer::layer_bytes(singles[e], (*pa)[e]);
+            const auto b = render::Renderer::layer_bytes(pair, (*pb)[e], e);
+            EXPECT_TRUE(a == b) << "eye " << e << ": the layers differ";
+            layers.push_back(a);
+        }
+        if (blend == &second) {
+            EXPECT_FALSE(layers == layers_before) << "the reblend changed the fill-in";
+        }
+        layers_before = layers;
+    }
 }
 
 // A target of two views takes its two requests in a row, views 0 then 1; anything else is

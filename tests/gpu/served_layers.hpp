@@ -29,12 +29,9 @@ struct Served {
 // with `info` (plus the calibration `how` asks for); `read_back`: the stats' bytes the
 // encoders read of the layers' pixels; `one_pass`: the stats' frames whose eyes were rendered in
 // one multiview pass.
-inline std::vector<std::vector<uint8_t>> served_layers(gpu::Device& device, const scene::Scene& s,
-                                                       stream::LoopbackCreateInfo info,
-                                                       const Served& how,
-                                                       const scene::Intrinsics& k,
-                                                       double* read_back = nullptr,
-                                                       uint64_t* one_pass = nullptr) {
+inline std::vector<std::vector<uint8_t>> served_layers(
+    gpu::Device& device, const scene::Scene& s, stream::LoopbackCreateInfo info, const Served& how,
+    const scene::Intrinsics& k, double* read_back = nullptr, uint64_t* one_pass = nullptr) {
     namespace proto = hs::protocol;
     if (how.calibrated)
         info.calibration =
