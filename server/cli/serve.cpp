@@ -108,7 +108,7 @@ const char* kServeHelp =
     "  --pack-tiles auto|on|off (auto: on a GPU): a compute pass packs each sparse layer's lit\n"
     "                      tiles, so only they are read back and encoded (docs/ARCHITECTURE.md)\n"
     "  --multiview auto|on|off (auto: on a GPU): both eyes of a headset in one pass\n"
-    "                      (VK_KHR_multiview), for layers whose tiles are not packed\n"
+    "                      (VK_KHR_multiview), bit for bit the per-eye layers\n"
     "  --layer-quality Q (92): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"

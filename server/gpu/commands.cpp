@@ -98,58 +98,87 @@ struct TilesPush {
 }  // namespace
 
 void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& packer, Area area) {
+    area = whole(t, area);
+    std::array<Area, kMaxTargetViews> areas;
+    areas.fill(area);
+    end_render_and_pack(t, packer, std::span<const Area>(areas.data(), t.views()));
+}
+
+void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& packer,
+                                      std::span<const Area> areas) {
     HS_CHECK(t.packs_tiles(), "end_render_and_pack: the target was made without packing");
+    HS_CHECK(areas.size() == t.views(), "end_render_and_pack: one area per view");
     auto push_fn = device_.push_descriptor_fn();
     HS_CHECK(push_fn != nullptr, "end_render_and_pack: no VK_KHR_push_descriptor");
-    area = whole(t, area);
-    copy_out(t, {&area, 1});
+    copy_out(t, areas);
     const uint32_t ts = t.pack_tile();
-    TilesPush pc{};
-    pc.width = t.width();
-    pc.height = t.height();
-    pc.words = uint32_t(bytes_per_pixel(t.format()) / 4);
-    pc.tile = ts;
-    pc.tiles_x = (t.width() + ts - 1) / ts;
-    pc.tiles_y = (t.height() + ts - 1) / ts;
-    pc.tx0 = area.x / ts;
-    pc.ty0 = area.y / ts;
-    pc.tx1 = std::min(pc.tiles_x, (area.x + area.width + ts - 1) / ts);
-    pc.ty1 = std::min(pc.tiles_y, (area.y + area.height + ts - 1) / ts);
+    // Per view with an area: its push constants (phases 0 and 2 cover the area's tiles).
+    std::array<TilesPush, kMaxTargetViews> pcs{};
+    for (uint32_t v = 0; v < areas.size(); ++v) {
+        const Area& a = areas[v];
+        TilesPush& pc = pcs[v];
+        pc.width = t.width();
+        pc.height = t.height();
+        pc.words = uint32_t(bytes_per_pixel(t.format()) / 4);
+        pc.tile = ts;
+        pc.tiles_x = (t.width() + ts - 1) / ts;
+        pc.tiles_y = (t.height() + ts - 1) / ts;
+        pc.tx0 = a.x / ts;
+        pc.ty0 = a.y / ts;
+        pc.tx1 = std::min(pc.tiles_x, (a.x + a.width + ts - 1) / ts);
+        pc.ty1 = std::min(pc.tiles_y, (a.y + a.height + ts - 1) / ts);
+    }
     // Phase 0 only sets the marks of lit tiles: all start at 0.
     vkCmdFillBuffer(cmd_, t.tile_slots_buffer().vk(), 0, VK_WHOLE_SIZE, 0);
     memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT | VK_PIPELINE_STAGE_2_CLEAR_BIT,
                    VK_ACCESS_2_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
                    VK_ACCESS_2_SHADER_STORAGE_READ_BIT | VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
     vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.vk());
-    const Buffer* buffers[4] = {&t.readback_buffer(), &t.tile_slots_buffer(), &t.tile_info_buffer(),
-                                &t.packed_tiles_buffer()};
-    VkDescriptorBufferInfo infos[4];
-    VkWriteDescriptorSet writes[4];
-    for (uint32_t i = 0; i < 4; ++i) {
-        infos[i] = {buffers[i]->vk(), 0, VK_WHOLE_SIZE};
-        writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
-        writes[i].dstBinding = i;
-        writes[i].descriptorCount = 1;
-        writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-        writes[i].pBufferInfo = &infos[i];
-    }
-    push_fn(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.layout(), 0, 4, writes);
-    // Phases 0 and 2: an invocation per pixel row of each tile of the region, along x the
-    // region's tile columns' rows.
-    const uint32_t rw = pc.tx1 - pc.tx0, rh = pc.ty1 - pc.ty0;
-    const uint32_t groups_x = (rw * ts + HS_TILES_LOCAL_SIZE - 1) / HS_TILES_LOCAL_SIZE;
+    // Each view's part of the four buffers (the whole buffers for a target of one view).
+    const auto bind_view = [&](uint32_t v) {
+        const RenderTarget::ViewBytes &stride = t.view_strides(), &size = t.view_sizes();
+        const bool one = t.views() == 1;
+        const Buffer* buffers[4] = {&t.readback_buffer(), &t.tile_slots_buffer(),
+                                    &t.tile_info_buffer(), &t.packed_tiles_buffer()};
+        const uint64_t offsets[4] = {v * stride.pixels, v * stride.slots, v * stride.info,
+                                     v * stride.tiles};
+        const uint64_t ranges[4] = {size.pixels, size.slots, size.info, size.tiles};
+        VkDescriptorBufferInfo infos[4];
+        VkWriteDescriptorSet writes[4];
+        for (uint32_t i = 0; i < 4; ++i) {
+            infos[i] = {buffers[i]->vk(), one ? 0 : offsets[i], one ? VK_WHOLE_SIZE : ranges[i]};
+            writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
+            writes[i].dstBinding = i;
+            writes[i].descriptorCount = 1;
+            writes[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+            writes[i].pBufferInfo = &infos[i];
+        }
+        push_fn(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.layout(), 0, 4, writes);
+    };
     const auto shader_to_shader = [&] {
         memory_barrier(cmd_, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
                        VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
                        VK_ACCESS_2_SHADER_STORAGE_READ_BIT | VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
     };
+    // Each phase for every view before the barrier to the next.
     for (uint32_t phase = 0; phase < 3; ++phase) {
-        pc.phase = phase;
-        vkCmdPushConstants(cmd_, packer.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), &pc);
-        if (phase == 1)
-            vkCmdDispatch(cmd_, 1, 1, 1);  // places and the mask over the whole target
-        else if (rw > 0 && rh > 0)
-            vkCmdDispatch(cmd_, groups_x, rh, 1);
+        for (uint32_t v = 0; v < areas.size(); ++v) {
+            if (areas[v].width == 0 || areas[v].height == 0)
+                continue;  // nothing of this view is read
+            TilesPush& pc = pcs[v];
+            pc.phase = phase;
+            bind_view(v);
+            vkCmdPushConstants(cmd_, packer.layout(), VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc),
+                               &pc);
+            // Phases 0 and 2: an invocation per pixel row of each tile of the region, along x
+            // the region's tile columns' rows.
+            const uint32_t rw = pc.tx1 - pc.tx0, rh = pc.ty1 - pc.ty0;
+            const uint32_t groups_x = (rw * ts + HS_TILES_LOCAL_SIZE - 1) / HS_TILES_LOCAL_SIZE;
+            if (phase == 1)
+                vkCmdDispatch(cmd_, 1, 1, 1);  // places and the mask over the whole target
+            else if (rw > 0 && rh > 0)
+                vkCmdDispatch(cmd_, groups_x, rh, 1);
+        }
         if (phase < 2)
             shader_to_shader();
     }
@@ -180,7 +209,7 @@ void CommandList::copy_out(RenderTarget& t, std::span<const Area> areas) {
                   VK_ACCESS_2_COLOR_ATTACHMENT_WRITE_BIT, VK_PIPELINE_STAGE_2_COPY_BIT,
                   VK_ACCESS_2_TRANSFER_READ_BIT);
     const uint64_t px = bytes_per_pixel(t.format());
-    const uint64_t view_bytes = uint64_t(t.width()) * t.height() * px;
+    const uint64_t view_bytes = t.view_strides().pixels;
     VkBufferImageCopy regions[kMaxTargetViews];
     uint32_t n = 0;
     for (uint32_t v = 0; v < areas.size() && v < kMaxTargetViews; ++v) {

@@ -69,6 +69,10 @@ public:
     // packs the lit tiles of that area with `packer` (shaders/tiles.comp, push descriptors),
     // so that the host reads only the target's tile_info() and its lit tiles.
     void end_render_and_pack(RenderTarget& target, const ComputePipeline& packer, Area area = {});
+    // The same for a target of several views: view v's `areas[v]` (an empty area: nothing of
+    // that view), each view into its own part of the target's buffers.
+    void end_render_and_pack(RenderTarget& target, const ComputePipeline& packer,
+                             std::span<const Area> areas);
 
     void dispatch(const ComputePipeline& pipeline, const void* push, uint32_t push_size,
                   uint32_t groups_x);

@@ -205,6 +205,7 @@ Result<void> Device::pick_physical_device(DevicePreference preference) {
             queue_family_ = uint32_t(family);
             name_ = props.deviceName;
             max_storage_buffer_range_ = props.limits.maxStorageBufferRange;
+            storage_offset_alignment_ = props.limits.minStorageBufferOffsetAlignment;
             is_cpu_ = cpu;
         }
     }

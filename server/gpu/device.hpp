@@ -56,6 +56,8 @@ public:
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn() const { return push_descriptor_fn_; }
     // The largest storage buffer a shader may be given (bytes; at least 2^27).
     uint64_t max_storage_buffer_range() const { return max_storage_buffer_range_; }
+    // minStorageBufferOffsetAlignment: where a storage buffer's binding may start.
+    uint64_t storage_offset_alignment() const { return storage_offset_alignment_; }
     // Views a multiview pass may render (the feature is enabled when >= 2); 0: no multiview.
     uint32_t max_multiview_views() const {
         return max_multiview_views_ >= 2 ? max_multiview_views_ : 0;
@@ -122,6 +124,7 @@ private:
     PFN_vkSetDebugUtilsObjectNameEXT set_name_fn_ = nullptr;
     PFN_vkCmdPushDescriptorSetKHR push_descriptor_fn_ = nullptr;
     uint64_t max_storage_buffer_range_ = 0;
+    uint64_t storage_offset_alignment_ = 256;
     uint32_t max_multiview_views_ = 0;
     PFN_vkCmdBeginDebugUtilsLabelEXT begin_label_fn_ = nullptr;
     PFN_vkCmdEndDebugUtilsLabelEXT end_label_fn_ = nullptr;

@@ -274,11 +274,6 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
             fmt::format("render target '{}': {} views, but {} renders at most {} "
                         "in one pass (multiview)",
                         name, views, dev.name(), std::max(1u, dev.max_multiview_views())));
-    if (views > 1 && pack_tile > 0)
-        return make_error(ErrorCode::kInvalidArgument,
-                          fmt::format("render target '{}': a target of {} views does not pack "
-                                      "its tiles on the device",
-                                      name, views));
     RenderTarget t;
     t.width_ = w;
     t.height_ = h;
@@ -303,6 +298,7 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     }
     const uint64_t image_bytes = uint64_t(w) * h * bytes_per_pixel(format);
     if (pack_tile == 0) {
+        t.strides_.pixels = image_bytes;
         HS_ASSIGN_OR_RETURN(t.readback_,
                             Buffer::create(dev, image_bytes * views, BufferUsage::kReadback,
                                            name + ".readback", counter));
@@ -316,14 +312,23 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
                                       name, w, h, pack_tile, dev.max_storage_buffer_range()));
     t.pack_tile_ = pack_tile;
     const PackSizes p = pack_sizes(w, h, format, pack_tile);
-    HS_ASSIGN_OR_RETURN(t.readback_, Buffer::create(dev, image_bytes, BufferUsage::kDeviceStorage,
-                                                    name + ".pixels", counter));
-    HS_ASSIGN_OR_RETURN(t.tile_slots_, Buffer::create(dev, p.slots, BufferUsage::kDeviceStorage,
-                                                      name + ".tile_slots", counter));
-    HS_ASSIGN_OR_RETURN(t.tile_info_, Buffer::create(dev, p.info, BufferUsage::kStorageReadback,
-                                                     name + ".tile_info", counter));
-    HS_ASSIGN_OR_RETURN(t.tiles_, Buffer::create(dev, p.tiles, BufferUsage::kStorageReadback,
-                                                 name + ".tiles", counter));
+    // Several views: each view's part of a buffer starts where a storage binding may start.
+    const uint64_t a = std::max<uint64_t>(16, dev.storage_offset_alignment());
+    const auto stride = [&](uint64_t n) { return views > 1 ? (n + a - 1) / a * a : n; };
+    t.strides_ = {stride(image_bytes), stride(p.slots), stride(p.info), stride(p.tiles)};
+    t.sizes_ = {image_bytes, p.slots, p.info, p.tiles};
+    HS_ASSIGN_OR_RETURN(t.readback_,
+                        Buffer::create(dev, t.strides_.pixels * views, BufferUsage::kDeviceStorage,
+                                       name + ".pixels", counter));
+    HS_ASSIGN_OR_RETURN(t.tile_slots_,
+                        Buffer::create(dev, t.strides_.slots * views, BufferUsage::kDeviceStorage,
+                                       name + ".tile_slots", counter));
+    HS_ASSIGN_OR_RETURN(t.tile_info_,
+                        Buffer::create(dev, t.strides_.info * views, BufferUsage::kStorageReadback,
+                                       name + ".tile_info", counter));
+    HS_ASSIGN_OR_RETURN(t.tiles_,
+                        Buffer::create(dev, t.strides_.tiles * views, BufferUsage::kStorageReadback,
+                                       name + ".tiles", counter));
     return t;
 }
 

@@ -140,7 +140,7 @@ public:
     const uint8_t* readback_data() const { return static_cast<const uint8_t*>(readback_.mapped()); }
     const uint8_t* readback_data(uint32_t view) const {
         HS_CHECK(view < views_, "RenderTarget::readback_data: no such view");
-        return readback_data() + size_t(view) * width_ * height_ * bytes_per_pixel(format_);
+        return readback_data() ? readback_data() + view * strides_.pixels : nullptr;
     }
     // Views rendered in one pass (multiview: a 2D array image of that many layers); 1: a plain
     // target.
@@ -152,9 +152,24 @@ public:
     // Once the pack has completed: u32 count of lit tiles, 3 u32 unused, then the presence
     // mask (one bit per tile of the whole target, row-major, LSB first; PROTOCOL.md "Sparse
     // tiles"), in u32 words.
-    const uint32_t* tile_info() const { return static_cast<const uint32_t*>(tile_info_.mapped()); }
+    // A target of several views: each view's, one after the other (view_strides()).
+    const uint32_t* tile_info(uint32_t view = 0) const {
+        HS_CHECK(view < views_, "RenderTarget::tile_info: no such view");
+        return reinterpret_cast<const uint32_t*>(static_cast<const uint8_t*>(tile_info_.mapped()) +
+                                                 view * strides_.info);
+    }
     // The lit tiles in mask order, each pack_tile() x pack_tile() pixels, zero past the edge.
-    const uint8_t* packed_tiles() const { return static_cast<const uint8_t*>(tiles_.mapped()); }
+    const uint8_t* packed_tiles(uint32_t view = 0) const {
+        HS_CHECK(view < views_, "RenderTarget::packed_tiles: no such view");
+        return static_cast<const uint8_t*>(tiles_.mapped()) + view * strides_.tiles;
+    }
+    // Per buffer, the bytes from one view's part to the next (the device's storage offset
+    // alignment apart where the target packs), and the bytes a view's part holds.
+    struct ViewBytes {
+        uint64_t pixels = 0, slots = 0, info = 0, tiles = 0;
+    };
+    const ViewBytes& view_strides() const { return strides_; }
+    const ViewBytes& view_sizes() const { return sizes_; }
     const Buffer& tile_slots_buffer() const { return tile_slots_; }
     const Buffer& tile_info_buffer() const { return tile_info_; }
     const Buffer& packed_tiles_buffer() const { return tiles_; }
@@ -172,6 +187,7 @@ private:
     Buffer readback_;
     uint32_t pack_tile_ = 0;
     uint32_t views_ = 1;
+    ViewBytes strides_, sizes_;
     Buffer tile_slots_, tile_info_, tiles_;
 };
 

@@ -675,9 +675,8 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const bool depth = renderer_->uses_depth();
     const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     const uint32_t pack_tile = layer_pack_tile(device_, renderer_->packs_tiles(), d);
-    // Both eyes in one target of two views, rendered in one pass, where the renderer does so
-    // and the layers are not packed on the device.
-    const uint32_t views = renderer_->multiview() && pack_tile == 0 ? 2 : 1;
+    // Both eyes in one target of two views, rendered in one pass, where the renderer does so.
+    const uint32_t views = renderer_->multiview() ? 2 : 1;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
         slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile &&

@@ -47,8 +47,8 @@ public:
                                plan.rect.x1,
                                plan.rect.y1};
                 if (t.packs_tiles() && !plan.rect.empty()) {
-                    f.pixels[e].tile_info = t.tile_info();
-                    f.pixels[e].tiles = t.packed_tiles();
+                    f.pixels[e].tile_info = t.tile_info(req.view);
+                    f.pixels[e].tiles = t.packed_tiles(req.view);
                 }
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;

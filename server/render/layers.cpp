@@ -326,7 +326,10 @@ void Renderer::record_views(gpu::CommandList& cl, std::span<const LayerRequest> 
     for (uint32_t v = 0; v < views; ++v)
         if (layer_work_[first + v].draw)
             record_draws(cl, reqs[first + v], layer_work_[first + v]);
-    cl.end_render_and_read_back(t, std::span<const gpu::Area>(areas.data(), views));
+    if (t.packs_tiles())
+        cl.end_render_and_pack(t, *packer_, std::span<const gpu::Area>(areas.data(), views));
+    else
+        cl.end_render_and_read_back(t, std::span<const gpu::Area>(areas.data(), views));
 }
 
 void Renderer::record_draws(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {

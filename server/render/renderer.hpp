@@ -70,10 +70,10 @@ struct RendererCreateInfo {
     // Both eyes of a headset in one pass (VK_KHR_multiview, core in Vulkan 1.1): a layer target
     // of two views (gpu::RenderTarget::create's views) is cleared, drawn and read back by one
     // pass, each eye's draws reaching its own view alone, so that its layers are bit for bit
-    // the per-eye path's. -1: on a GPU that has multiview, off on a CPU device (lavapipe, where
-    // every view still runs every draw's vertices: measured slower, README); 0: off; 1: on
-    // where the device has it. Targets that pack their tiles stay one view each. See
-    // multiview().
+    // the per-eye path's (and a packing target packs each view's lit tiles). -1: on a GPU that
+    // has multiview, off on a CPU device (lavapipe, where every view still runs every draw's
+    // vertices and the served rate did not move, README); 0: off; 1: on where the device has
+    // it. See multiview().
     int multiview = -1;
     // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
     // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
@@ -205,7 +205,7 @@ public:
     static bool packs_tiles(const gpu::Device& device, const RendererCreateInfo& info);
     // Whether layer targets of two views are recorded in one multiview pass
     // (RendererCreateInfo::multiview on, and the device has multiview): then make a headset's
-    // targets that do not pack their tiles with views = 2.
+    // targets with views = 2.
     bool multiview() const { return multiview_; }
     // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
     uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }

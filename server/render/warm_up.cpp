@@ -43,13 +43,9 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     // 1. The pipelines: per format the occluder (a prop that is not convex), the generic VD
     // pipeline and, for a few lights, one per subset of them.
     const size_t n = lit_.size();
-    // With multiview the headsets' layers are drawn in passes of two views, and those whose
-    // tiles are packed on the device in passes of one (the frame loop's targets).
-    std::vector<uint32_t> view_counts;
-    if (!multiview_ || packer_)
-        view_counts.push_back(1);
-    if (multiview_)
-        view_counts.push_back(2);
+    // With multiview the headsets' layers are drawn in passes of two views (the frame loop's
+    // targets).
+    const std::vector<uint32_t> view_counts = {multiview_ ? 2u : 1u};
     struct Use {
         Variant* variant;
         gpu::ColorFormat format;

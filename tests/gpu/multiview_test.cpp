@@ -1,8 +1,8 @@
 // Both eyes in one pass (RendererCreateInfo::multiview, VK_KHR_multiview): a target of two views
 // rendered by one pass gives each eye bit for bit the layer of the per-eye path, on the convex
 // dome and on a prop drawn with a depth test (occluders), in both formats, recorded on the
-// caller and by the planners, and served; requests that do not fit a target of two views are
-// refused with a reason.
+// caller and by the planners, and served (with each view's lit tiles packed on the device, too);
+// requests that do not fit a target of two views are refused with a reason.
 #include <string>
 
 #include "gpu_fixture.hpp"
@@ -215,16 +215,11 @@ TEST_F(Multiview, RequestsThatDoNotFitTheViewsAreRefused) {
     refused({{spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0},
              {spec, k, eyes[1], enc, &*t, true, 32, nullptr, 2}},
             "view 2 of a target of 2 views");
-    // Too many views for the device, or views on a target that packs its tiles.
+    // Too many views for the device.
     auto many = gpu::RenderTarget::create(device(), 8, 8, gpu::ColorFormat::kRgba8Unorm, "many",
                                           false, nullptr, 0, device().max_multiview_views() + 1);
     ASSERT_FALSE(many.ok());
     EXPECT_NE(many.error().message.find("views"), std::string::npos) << many.error().message;
-    auto packed = gpu::RenderTarget::create(device(), 64, 64, gpu::ColorFormat::kRgba8Unorm,
-                                            "packed", false, nullptr, 32, 2);
-    ASSERT_FALSE(packed.ok());
-    EXPECT_NE(packed.error().message.find("does not pack"), std::string::npos)
-        << packed.error().message;
     // The right order still renders.
     auto ok =
         r->render_layers(std::vector<Request>{{spec, k, eyes[0], enc, &*t, true, 32, nullptr, 0},
@@ -233,29 +228,40 @@ TEST_F(Multiview, RequestsThatDoNotFitTheViewsAreRefused) {
 }
 
 // Served: a headset gets the same bytes from a server that renders both eyes in one pass as
-// from one that renders them apart: sparse RGBA8 and RGBA16F, raw, and calibrated.
+// from one that renders them apart: sparse RGBA8 and RGBA16F, lossy tiles, raw, and calibrated;
+// and with each view's lit tiles packed on the device (raw layers are never packed).
 TEST_F(Multiview, AHeadsetGetsTheSameBytesEitherWay) {
     const scene::Scene s = scene::default_scene();
     const scene::Intrinsics k = small_eye(4);
     const Served cases[] = {{proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, false},
                             {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba16f, false},
+                            {proto::Encoding::kLossyTiles, proto::PixelFormat::kRgba8, false},
                             {proto::Encoding::kRaw, proto::PixelFormat::kRgba8, false},
                             {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, true}};
     for (const Served& how : cases) {
         SCOPED_TRACE(testing::Message()
                      << "encoding " << int(how.encoding) << ", format " << int(how.format)
                      << (how.calibrated ? ", calibrated" : ""));
-        stream::LoopbackCreateInfo apart, together;
+        stream::LoopbackCreateInfo apart, together, packed;
         apart.multiview = 0;
-        together.multiview = 1;
+        together.multiview = packed.multiview = 1;
         apart.pack_tiles = together.pack_tiles = 0;
-        uint64_t one_pass_apart = 0, one_pass_together = 0;
-        const auto a = served_layers(device(), s, apart, how, k, nullptr, &one_pass_apart);
-        const auto b = served_layers(device(), s, together, how, k, nullptr, &one_pass_together);
-        EXPECT_EQ(one_pass_apart, 0u);
-        EXPECT_EQ(one_pass_together, 2u) << "both frames rendered their eyes in one pass";
+        packed.pack_tiles = 1;
+        uint64_t one_pass[3] = {0, 0, 0};
+        double read_back[3] = {0, 0, 0};
+        const auto a = served_layers(device(), s, apart, how, k, &read_back[0], &one_pass[0]);
+        const auto b = served_layers(device(), s, together, how, k, &read_back[1], &one_pass[1]);
+        const auto c = served_layers(device(), s, packed, how, k, &read_back[2], &one_pass[2]);
+        EXPECT_EQ(one_pass[0], 0u);
+        EXPECT_EQ(one_pass[1], 2u) << "both frames rendered their eyes in one pass";
+        EXPECT_EQ(one_pass[2], 2u) << "both frames rendered their eyes in one pass";
         ASSERT_EQ(a.size(), 4u);
         EXPECT_TRUE(a == b) << "the served layers differ";
+        EXPECT_TRUE(a == c) << "the served layers differ with each view's tiles packed";
+        EXPECT_EQ(read_back[0], read_back[1]);
+        if (how.encoding != proto::Encoding::kRaw) {
+            EXPECT_LT(read_back[2], read_back[1]) << "only the views' lit tiles are read back";
+        }
         size_t lit = 0;
         for (const auto& l : a) lit += l.size() > 200;
         EXPECT_GE(lit, 2u) << "the layers show highlights";
