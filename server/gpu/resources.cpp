@@ -248,7 +248,9 @@ uint64_t RenderTarget::pack_bytes(uint32_t w, uint32_t h, ColorFormat format, ui
     if (tile == 0)
         return 0;
     const PackSizes p = pack_sizes(w, h, format, tile);
-    return p.slots + p.info + p.tiles;
+    // Each view of a target of several views starts its part of the four buffers on the
+    // storage offset alignment (at most 256 bytes in Vulkan): room for that padding.
+    return p.slots + p.info + p.tiles + 4 * kMaxStorageOffsetAlignment;
 }
 
 bool RenderTarget::can_pack(const Device& dev, uint32_t w, uint32_t h, ColorFormat format,
@@ -298,7 +300,7 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     }
     const uint64_t image_bytes = uint64_t(w) * h * bytes_per_pixel(format);
     if (pack_tile == 0) {
-        t.strides_.pixels = image_bytes;
+        t.strides_.pixels = t.sizes_.pixels = image_bytes;
         HS_ASSIGN_OR_RETURN(t.readback_,
                             Buffer::create(dev, image_bytes * views, BufferUsage::kReadback,
                                            name + ".readback", counter));
@@ -313,7 +315,8 @@ Result<RenderTarget> RenderTarget::create(Device& dev, uint32_t w, uint32_t h, C
     t.pack_tile_ = pack_tile;
     const PackSizes p = pack_sizes(w, h, format, pack_tile);
     // Several views: each view's part of a buffer starts where a storage binding may start.
-    const uint64_t a = std::max<uint64_t>(16, dev.storage_offset_alignment());
+    const uint64_t a =
+        std::clamp<uint64_t>(dev.storage_offset_alignment(), 16, kMaxStorageOffsetAlignment);
     const auto stride = [&](uint64_t n) { return views > 1 ? (n + a - 1) / a * a : n; };
     t.strides_ = {stride(image_bytes), stride(p.slots), stride(p.info), stride(p.tiles)};
     t.sizes_ = {image_bytes, p.slots, p.info, p.tiles};

@@ -102,6 +102,8 @@ private:
 
 // The most views a render target holds (RenderTarget::create's `views`).
 inline constexpr uint32_t kMaxTargetViews = 8;
+// Vulkan's bound on minStorageBufferOffsetAlignment.
+inline constexpr uint64_t kMaxStorageOffsetAlignment = 256;
 
 // A colour attachment, a depth attachment (unless made without one) and a readback buffer of
 // one size and format; with `views` > 1, that many layers of each, rendered in one multiview
@@ -115,8 +117,8 @@ public:
                                        ColorFormat format, const std::string& name,
                                        bool with_depth = true, MemoryCounter* counter = nullptr,
                                        uint32_t pack_tile = 0, uint32_t views = 1);
-    // What the packing adds to a target: the tile slots, the presence mask and room for every
-    // tile, padded.
+    // What the packing adds to a view of a target: the tile slots, the presence mask and room
+    // for every tile, padded, and room to align the next view's parts.
     static uint64_t pack_bytes(uint32_t width, uint32_t height, ColorFormat format, uint32_t tile);
     // Whether a target of this size can pack tiles of `tile` on `device`: its pixels and its
     // packed tiles each fit one storage buffer (maxStorageBufferRange, as little as 128 MiB).

@@ -122,11 +122,12 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
                     const auto eyes = scene::eye_poses(h, profile.ipd_m);
                     for (uint32_t i = 0; i < 2; ++i) {
                         if (i % views == 0) {
+                            // Packed where the renderer packs (the tile pass's first use).
                             HS_ASSIGN_OR_RETURN(
-                                auto t, gpu::RenderTarget::create(device_, k.width, k.height,
-                                                                  layer_target_format(e),
-                                                                  "warm_up.layer", uses_depth(),
-                                                                  device_counter(), 0, views));
+                                auto t, gpu::RenderTarget::create(
+                                            device_, k.width, k.height, layer_target_format(e),
+                                            "warm_up.layer", uses_depth(), device_counter(),
+                                            packer_ ? LayerRequest{}.tile : 0, views));
                             targets.push_back(std::move(t));
                         }
                         LayerRequest r;

@@ -239,9 +239,7 @@ TEST_F(Multiview, AHeadsetGetsTheSameBytesEitherWay) {
                             {proto::Encoding::kRaw, proto::PixelFormat::kRgba8, false},
                             {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, true}};
     for (const Served& how : cases) {
-        SCOPED_TRACE(testing::Message()
-                     << "encoding " << int(how.encoding) << ", format " << int(how.format)
-                     << (how.calibrated ? ", calibrated" : ""));
+        SCOPED_TRACE(describe(how));
         stream::LoopbackCreateInfo apart, together, packed;
         apart.multiview = 0;
         together.multiview = packed.multiview = 1;

@@ -25,6 +25,12 @@ struct Served {
     bool calibrated;
 };
 
+// How a case names itself in a test's trace.
+inline std::string describe(const Served& how) {
+    return "encoding " + std::to_string(int(how.encoding)) + ", format " +
+           std::to_string(int(how.format)) + (how.calibrated ? ", calibrated" : "");
+}
+
 // The four layers (two poses, both eyes) a headset of `k` receives from a loopback server made
 // with `info` (plus the calibration `how` asks for); `read_back`: the stats' bytes the
 // encoders read of the layers' pixels; `one_pass`: the stats' frames whose eyes were rendered in

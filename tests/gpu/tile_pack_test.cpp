@@ -279,9 +279,7 @@ TEST_F(TilePacking, AHeadsetGetsTheSameBytesEitherWay) {
                             {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, true},
                             {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba16f, true}};
     for (const Served& how : cases) {
-        SCOPED_TRACE(testing::Message()
-                     << "encoding " << int(how.encoding) << ", format " << int(how.format)
-                     << (how.calibrated ? ", calibrated" : ""));
+        SCOPED_TRACE(describe(how));
         double host_read = 0, packed_read = 0;
         const auto host = served_layers(device(), s, 0, how, k, &host_read);
         const auto packed = served_layers(device(), s, 1, how, k, &packed_read);

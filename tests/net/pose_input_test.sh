@@ -23,7 +23,7 @@ port=$(sed -n 's/.* on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$dir/serve.log" | head -
 [[ -n $port ]] || fail "the server did not start"
 # The scene's warm-up runs after the server listens: until it is done a first pose can wait
 # past the trajectory's second one and be superseded (latest pose wins).
-for _ in $(seq 600); do grep -q "warm-up:" "$dir/serve.log" && break; sleep 0.1; done
+for _ in $(seq 600); do grep -q "warm-up" "$dir/serve.log" && break; sleep 0.1; done
 common=(--connect "127.0.0.1:$port" --token-file "$dir/token" --scale 0.25 --format rgba8 --encoding raw)
 
 # Two poses looking at the dome from 0.8 m: from +z, and from 30 deg to the side (look_at).
