@@ -134,10 +134,13 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
                    VK_ACCESS_2_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_2_COMPUTE_SHADER_BIT,
                    VK_ACCESS_2_SHADER_STORAGE_READ_BIT | VK_ACCESS_2_SHADER_STORAGE_WRITE_BIT);
     vkCmdBindPipeline(cmd_, VK_PIPELINE_BIND_POINT_COMPUTE, packer.vk());
-    // Each view's part of the four buffers (the whole buffers for a target of one view).
+    // Each view's part of the four buffers, pushed when the view changes.
+    int64_t bound = -1;
     const auto bind_view = [&](uint32_t v) {
+        if (bound == int64_t(v))
+            return;
+        bound = v;
         const RenderTarget::ViewBytes &stride = t.view_strides(), &size = t.view_sizes();
-        const bool one = t.views() == 1;
         const Buffer* buffers[4] = {&t.readback_buffer(), &t.tile_slots_buffer(),
                                     &t.tile_info_buffer(), &t.packed_tiles_buffer()};
         const uint64_t offsets[4] = {v * stride.pixels, v * stride.slots, v * stride.info,
@@ -146,7 +149,7 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
         VkDescriptorBufferInfo infos[4];
         VkWriteDescriptorSet writes[4];
         for (uint32_t i = 0; i < 4; ++i) {
-            infos[i] = {buffers[i]->vk(), one ? 0 : offsets[i], one ? VK_WHOLE_SIZE : ranges[i]};
+            infos[i] = {buffers[i]->vk(), offsets[i], ranges[i]};
             writes[i] = {VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET};
             writes[i].dstBinding = i;
             writes[i].descriptorCount = 1;

@@ -45,48 +45,45 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     const size_t n = lit_.size();
     // With multiview the headsets' layers are drawn in passes of two views (the frame loop's
     // targets).
-    const std::vector<uint32_t> view_counts = {multiview_ ? 2u : 1u};
+    const uint32_t views = multiview_ ? 2 : 1;
     struct Use {
         Variant* variant;
         gpu::ColorFormat format;
-        uint32_t views;
     };
     std::vector<Use> uses;
-    for (uint32_t views : view_counts)
-        for (LayerEncoding e : encodings) {
-            const int enc = 1 + int(e);
-            const gpu::ColorFormat format = layer_target_format(e);
-            if (!convex_) {
-                HS_ASSIGN_OR_RETURN(Variant * occ, variant(PassKind::kOccluder, spec, enc,
-                                                           ~uint64_t(0), false, views));
-                uses.push_back({occ, format, views});
-            }
-            HS_ASSIGN_OR_RETURN(Variant * generic,
-                                variant(PassKind::kVd, spec, enc, ~uint64_t(0), false, views));
-            uses.push_back({generic, format, views});
-            if (fill_) {  // the headsets' fill-in: one pipeline per format (record_layers)
-                HS_ASSIGN_OR_RETURN(Variant * f,
-                                    variant(PassKind::kVd, spec, enc, ~uint64_t(0), true, views));
-                uses.push_back({f, format, views});
-            }
-            if (n == 0 || n > kEverySubsetUpTo)
-                continue;
-            for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {
-                HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, false, views));
-                uses.push_back({v, format, views});
-            }
+    for (LayerEncoding e : encodings) {
+        const int enc = 1 + int(e);
+        const gpu::ColorFormat format = layer_target_format(e);
+        if (!convex_) {
+            HS_ASSIGN_OR_RETURN(
+                Variant * occ, variant(PassKind::kOccluder, spec, enc, ~uint64_t(0), false, views));
+            uses.push_back({occ, format});
         }
+        HS_ASSIGN_OR_RETURN(Variant * generic,
+                            variant(PassKind::kVd, spec, enc, ~uint64_t(0), false, views));
+        uses.push_back({generic, format});
+        if (fill_) {  // the headsets' fill-in: one pipeline per format (record_layers)
+            HS_ASSIGN_OR_RETURN(Variant * f,
+                                variant(PassKind::kVd, spec, enc, ~uint64_t(0), true, views));
+            uses.push_back({f, format});
+        }
+        if (n == 0 || n > kEverySubsetUpTo)
+            continue;
+        for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {
+            HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, false, views));
+            uses.push_back({v, format});
+        }
+    }
     // 2. Each drawn once into a tiny target, in one submission: the driver's first-use work
     // (lavapipe compiles its rasteriser's shader variants at the first draw).
-    std::map<std::pair<int, uint32_t>, gpu::RenderTarget> tiny;
+    std::map<int, gpu::RenderTarget> tiny;
     for (const Use& u : uses)
-        if (!tiny.count({int(u.format), u.views})) {
-            HS_ASSIGN_OR_RETURN(
-                auto t, gpu::RenderTarget::create(
-                            device_, 8, 8, u.format,
-                            fmt::format("warm_up.{}.views{}", gpu::to_string(u.format), u.views),
-                            uses_depth(), device_counter(), 0, u.views));
-            tiny.emplace(std::make_pair(int(u.format), u.views), std::move(t));
+        if (!tiny.count(int(u.format))) {
+            HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(
+                                            device_, 8, 8, u.format,
+                                            fmt::format("warm_up.{}", gpu::to_string(u.format)),
+                                            uses_depth(), device_counter(), 0, views));
+            tiny.emplace(int(u.format), std::move(t));
         }
     const scene::Intrinsics tiny_k = scene::intrinsics_from_fov(8, 8, 1.0, 1.0);
     HS_ASSIGN_OR_RETURN(const scene::Pose head,
@@ -94,8 +91,8 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     const uint32_t coarsest = uint32_t(levels_.size() - 1);
     HS_TRY(gpu::execute(device_, "warm_up.pipelines", [&](gpu::CommandList& cl) {
         for (const Use& u : uses)
-            record(cl, *u.variant, tiny.at({int(u.format), u.views}), push_for(tiny_k, head),
-                   "pass.warm-up", coarsest);
+            record(cl, *u.variant, tiny.at(int(u.format)), push_for(tiny_k, head), "pass.warm-up",
+                   coarsest);
     }));
     report.pipelines_drawn = uint32_t(uses.size());
     // 3. Served layers as headsets of the scene's profiles would ask for them, small, from the
@@ -113,36 +110,35 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
                 if (auto p = scene::viewing_pose(scene_.viewing, angle, height);
                     p && heads.size() < kMaxSampleHeads)
                     heads.push_back(*p);
-        for (uint32_t views : view_counts)
-            for (LayerEncoding e : encodings) {
-                std::vector<gpu::RenderTarget> targets;
-                std::vector<LayerRequest> requests;
-                targets.reserve(heads.size() * 2);
-                for (const scene::Pose& h : heads) {
-                    const auto eyes = scene::eye_poses(h, profile.ipd_m);
-                    for (uint32_t i = 0; i < 2; ++i) {
-                        if (i % views == 0) {
-                            // Packed where the renderer packs (the tile pass's first use).
-                            HS_ASSIGN_OR_RETURN(
-                                auto t, gpu::RenderTarget::create(
-                                            device_, k.width, k.height, layer_target_format(e),
-                                            "warm_up.layer", uses_depth(), device_counter(),
-                                            packer_ ? LayerRequest{}.tile : 0, views));
-                            targets.push_back(std::move(t));
-                        }
-                        LayerRequest r;
-                        r.spec = spec;
-                        r.intrinsics = k;
-                        r.eye = eyes[i];
-                        r.encoding = e;
-                        r.target = &targets.back();
-                        r.view = i % views;
-                        requests.push_back(r);
+        for (LayerEncoding e : encodings) {
+            std::vector<gpu::RenderTarget> targets;
+            std::vector<LayerRequest> requests;
+            targets.reserve(heads.size() * 2);
+            for (const scene::Pose& h : heads) {
+                const auto eyes = scene::eye_poses(h, profile.ipd_m);
+                for (uint32_t i = 0; i < 2; ++i) {
+                    if (i % views == 0) {
+                        // Packed where the renderer packs (the tile pass's first use).
+                        HS_ASSIGN_OR_RETURN(auto t,
+                                            gpu::RenderTarget::create(
+                                                device_, k.width, k.height, layer_target_format(e),
+                                                "warm_up.layer", uses_depth(), device_counter(),
+                                                packer_ ? LayerRequest{}.tile : 0, views));
+                        targets.push_back(std::move(t));
                     }
+                    LayerRequest r;
+                    r.spec = spec;
+                    r.intrinsics = k;
+                    r.eye = eyes[i];
+                    r.encoding = e;
+                    r.target = &targets.back();
+                    r.view = i % views;
+                    requests.push_back(r);
                 }
-                HS_TRY(render_layers(requests));
-                report.layers += uint32_t(requests.size());
             }
+            HS_TRY(render_layers(requests));
+            report.layers += uint32_t(requests.size());
+        }
     }
     // The sample views' index buffers are not kept (a served layer brings its own).
     index_scratch_.clear();

@@ -273,6 +273,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
     // The viewer's bit-rate limit may lower its quality (loop/bit_rate.hpp); 0: the server's.
     const int quality =
         f.job.layer_quality > 0 ? std::clamp(f.job.layer_quality, 1, 100) : quality_;
+    out.one_pass = f.one_pass;
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;
@@ -287,7 +288,6 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
         fields.height = f.height;
         const codec::LayerPixels pixels = wire_pixels(f.pixels[e]);
         out.read_back_bytes += read_back_bytes(pixels);
-        out.one_pass = f.one_pass;
         std::vector<uint8_t> buf = pool_->take();
         auto err = protocol::encode_vd_layer_into(buf, fields, 0, [&](std::vector<uint8_t>& o) {
             append_served_layer(o, pixels, drive, encoding, codec, scratch, quality);
