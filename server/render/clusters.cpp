@@ -113,11 +113,57 @@ ClusteredMesh cluster_mesh(scene::Mesh mesh, uint32_t per_cluster, uint32_t per_
 
     per_cluster = std::max<uint32_t>(per_cluster, 1);
     per_group = std::max<uint32_t>(per_group, 1);
-    for (size_t first = 0; first < tris; first += per_cluster)
-        out.clusters.push_back(bound_triangles(mesh, first, std::min(tris, first + per_cluster)));
-    const size_t group_tris = size_t(per_cluster) * per_group;
-    for (size_t first = 0; first < tris; first += group_tris)
-        out.groups.push_back(bound_triangles(mesh, first, std::min(tris, first + group_tris)));
+    // Consecutive runs of at most per_cluster triangles, cut where the curve jumps: at an
+    // octant's edge the next triangle may lie across the prop, and a cluster holding both would
+    // be bounded by a sphere as large as the prop (lit by every light, covering the whole
+    // view: it set the layer's rectangle). Groups are runs of clusters, cut the same way.
+    const auto diagonal = [](const scene::Box& b) { return glm::length(b.hi - b.lo); };
+    // Cuts [0, n) into runs of at most `most` items whose boxes (box_of(i)) lie together.
+    const auto runs = [&](size_t n, size_t most, auto&& box_of, auto&& take) {
+        for (size_t first = 0; first < n;) {
+            scene::Box box = box_of(first);
+            double widest = diagonal(box);  // the largest member's own extent
+            size_t last = first + 1;
+            for (; last < n && last - first < most; ++last) {
+                const scene::Box b = box_of(last);
+                const scene::Box joined{glm::min(box.lo, b.lo), glm::max(box.hi, b.hi)};
+                const double w = std::max(widest, diagonal(b));
+                if (diagonal(joined) > kClusterSpread * w)
+                    break;
+                box = joined;
+                widest = w;
+            }
+            take(first, last);
+            first = last;
+        }
+    };
+    std::vector<scene::Box> boxes(tris);  // per triangle
+    for (size_t t = 0; t < tris; ++t)
+        for (int k = 0; k < 3; ++k) {
+            const glm::dvec3 p = mesh.positions[mesh.indices[3 * t + k]];
+            boxes[t].lo = glm::min(boxes[t].lo, p);
+            boxes[t].hi = glm::max(boxes[t].hi, p);
+        }
+    std::vector<scene::Box> cluster_boxes;
+    runs(
+        tris, per_cluster, [&](size_t t) { return boxes[t]; },
+        [&](size_t first, size_t last) {
+            out.clusters.push_back(bound_triangles(mesh, first, last));
+            scene::Box b;
+            for (size_t t = first; t < last; ++t)
+                b = {glm::min(b.lo, boxes[t].lo), glm::max(b.hi, boxes[t].hi)};
+            cluster_boxes.push_back(b);
+        });
+    runs(
+        out.clusters.size(), per_group, [&](size_t c) { return cluster_boxes[c]; },
+        [&](size_t first, size_t last) {
+            const Cluster& a = out.clusters[first];
+            const Cluster& b = out.clusters[last - 1];
+            out.group_first.push_back(uint32_t(first));
+            out.groups.push_back(
+                bound_triangles(mesh, a.first_index / 3, (b.first_index + b.index_count) / 3));
+        });
+    out.group_first.push_back(uint32_t(out.clusters.size()));
     out.clusters_per_group = per_group;
     out.mesh = std::move(mesh);
     return out;

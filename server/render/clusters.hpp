@@ -43,17 +43,23 @@ struct Shell {
 // bound's CPU time per layer near what 16-triangle clusters cost.
 inline constexpr uint32_t kTrianglesPerCluster = 4;
 inline constexpr uint32_t kClustersPerGroup = 4;
+// A run of triangles (of clusters) is cut before one that would make the run's bounding box's
+// diagonal more than this many times the largest member's own (two quads side by side: about
+// 1.6).
+inline constexpr double kClusterSpread = 2.5;
 
-// A mesh cut into clusters of about `triangles_per_cluster` neighbouring triangles: the
+// A mesh cut into clusters of at most `triangles_per_cluster` neighbouring triangles: the
 // triangles are reordered along a Morton curve of their centroids (the mesh's index buffer is
-// rewritten in that order) and cut into consecutive runs; every `clusters_per_group`
-// consecutive clusters also make a group with bounds of its own.
+// rewritten in that order) and cut into consecutive runs, also where the curve jumps
+// (kClusterSpread); runs of at most `clusters_per_group` consecutive clusters, cut the same way,
+// also make groups with bounds of their own.
 struct ClusteredMesh {
     scene::Mesh mesh;
     std::vector<Cluster> clusters;
-    // Group g holds clusters [g * clusters_per_group, (g + 1) * clusters_per_group) (the last
-    // group may hold fewer); its bounds hold every triangle of theirs.
+    // Group g holds clusters [group_first[g], group_first[g + 1]), at most clusters_per_group
+    // (fewer where the clusters' curve jumps); its bounds hold every triangle of theirs.
     std::vector<Cluster> groups;
+    std::vector<uint32_t> group_first;  // groups.size() + 1 entries
     uint32_t clusters_per_group = kClustersPerGroup;
     // The clusters' bounds are of the mesh's own triangles; for the hemisphere, `shell` says
     // how far the shaded points may lie beyond them.

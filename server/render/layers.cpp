@@ -116,7 +116,6 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     // A dark group's clusters need their rectangles only as occluders (a prop that is not
     // convex).
     PixelRect rect;
-    const size_t per_group = level.clusters_per_group;
     const glm::dmat4 view = scene::frame_from_world(r.eye);
     for (size_t g = 0; g < level.groups.size(); ++g) {
         const Cluster& group = level.groups[g];
@@ -129,8 +128,7 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
                                 cluster_may_face(group, level.shell, r.eye.position);
         if (group_mask == 0 && convex_ && !group_fill)
             continue;
-        const size_t end = std::min(level.clusters.size(), (g + 1) * per_group);
-        for (size_t c = g * per_group; c < end; ++c) {
+        for (size_t c = level.group_first[g]; c < level.group_first[g + 1]; ++c) {
             const Cluster& cl = level.clusters[c];
             rects[c] = project_sphere(cl.centre, cl.radius, k, view, info_.near_m);
             if (rects[c].empty())
@@ -208,7 +206,7 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     w.occ_count = written;
     // The lit clusters grouped by the lights they need (and whether they draw the fill-in):
     // one draw per group, each evaluating only its lights (a handful of groups; past
-    // kMaxLightGroups, one group with every light any of them needs, per fill class).
+    // kMaxLightGroups in a fill class, one group with every light any of its clusters needs).
     auto& order = w.order;
     order.clear();
     for (size_t c = 0; c < level.clusters.size(); ++c)
@@ -217,14 +215,18 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     const auto key = [&](uint32_t c) { return std::make_pair(fills[c] != 0, masks[c]); };
     std::stable_sort(order.begin(), order.end(),
                      [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
-    size_t distinct = 0;
+    // Counted and merged per class, so that the fill-in's clusters never change the lights the
+    // others evaluate (a covered pixel stays bit for bit what it is without the fill-in).
+    size_t distinct[2] = {0, 0};
     uint64_t union_mask[2] = {0, 0};
     for (size_t i = 0; i < order.size(); ++i) {
-        union_mask[fills[order[i]] != 0] |= masks[order[i]];
-        distinct += i == 0 || key(order[i]) != key(order[i - 1]);
+        const bool fill = fills[order[i]] != 0;
+        union_mask[fill] |= masks[order[i]];
+        distinct[fill] += i == 0 || key(order[i]) != key(order[i - 1]);
     }
-    if (distinct > kMaxLightGroups)
-        for (uint32_t c : order) masks[c] = union_mask[fills[c] != 0];
+    for (uint32_t c : order)
+        if (distinct[fills[c] != 0] > kMaxLightGroups)
+            masks[c] = union_mask[fills[c] != 0];
     const uint32_t lit_first = written;
     uint32_t filled = 0;
     for (uint32_t c : order) {

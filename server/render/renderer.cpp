@@ -121,7 +121,8 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
         uint64_t cpu = 0;
         for (const ClusteredMesh& l : r->levels_)
             cpu += scene::mesh_bytes(l.mesh) +
-                   (l.clusters.capacity() + l.groups.capacity()) * sizeof(Cluster);
+                   (l.clusters.capacity() + l.groups.capacity()) * sizeof(Cluster) +
+                   l.group_first.capacity() * sizeof(uint32_t);
         r->version_charge_ = MemoryCharge(&info.ledger->versions, 0);
         r->cpu_charge_ = MemoryCharge(&info.ledger->cpu, int64_t(cpu));
         ++info.ledger->versions_built;
@@ -515,9 +516,9 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         bounds[l] = std::move(u.bounds);
         groups[l].assign(level.groups.size(), 0);
         triangle_first[l].assign(level.clusters.size(), kNoTriangles);
-        for (size_t c = 0; c < clusters[l].size(); ++c)
-            if (clusters[l][c])
-                groups[l][c / level.clusters_per_group] = 1;
+        for (size_t g = 0; g < level.groups.size(); ++g)
+            for (size_t c = level.group_first[g]; c < level.group_first[g + 1]; ++c)
+                groups[l][g] = groups[l][g] | clusters[l][c];
         // Per triangle only where layers use them (Renderer::fill_triangles: a convex prop).
         if (!convex_)
             continue;

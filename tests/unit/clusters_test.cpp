@@ -3,6 +3,7 @@
 // force over every cluster and group of every level of the default hemisphere (with its shell's
 // widening for the eye), for every specular model,
 // many eyes, and lights from far away to a few millimetres off the surface.
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -323,6 +324,50 @@ TEST(Clusters, LevelsEncloseTheDomeWithinTheirError) {
     const size_t far = render::select_level(levels, h.centre + glm::dvec3(0, 1, 4), f);
     EXPECT_GT(far, near);
     EXPECT_EQ(render::select_level(levels, h.centre, f), 0u);  // inside: the finest
+}
+
+// Clusters and groups cover the index buffer in order, each triangle once, and lie together:
+// where the Morton curve jumps across the prop, the run is cut, so no cluster is bounded by a
+// sphere much larger than its neighbours' (before the cut, a few clusters on each level took
+// triangles from both sides of the dome, a radius 11 times the median, which set the layer's
+// rectangle to nearly the whole view).
+TEST(Clusters, ClustersAndGroupsAreRunsOfNeighbours) {
+    const scene::Scene s = scene::default_scene();
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
+    for (size_t i = 0; i < levels.size(); ++i) {
+        const auto& level = levels[i];
+        SCOPED_TRACE("level " + std::to_string(i));
+        uint32_t next = 0;
+        std::vector<double> radii;
+        for (const auto& cl : level.clusters) {
+            ASSERT_EQ(cl.first_index, next);
+            ASSERT_GT(cl.index_count, 0u);
+            ASSERT_LE(cl.index_count, 3 * render::kTrianglesPerCluster);
+            next += cl.index_count;
+            radii.push_back(cl.radius);
+        }
+        EXPECT_EQ(next, level.mesh.indices.size());
+        ASSERT_EQ(level.group_first.size(), level.groups.size() + 1);
+        EXPECT_EQ(level.group_first.front(), 0u);
+        EXPECT_EQ(level.group_first.back(), level.clusters.size());
+        for (size_t g = 0; g < level.groups.size(); ++g) {
+            const uint32_t a = level.group_first[g], b = level.group_first[g + 1];
+            ASSERT_LT(a, b);
+            ASSERT_LE(b - a, level.clusters_per_group);
+            const auto& m = level.mesh;
+            const auto& group = level.groups[g];
+            for (uint32_t c = a; c < b; ++c)
+                for (uint32_t j = 0; j < level.clusters[c].index_count; ++j) {
+                    const glm::dvec3 p = m.positions[m.indices[level.clusters[c].first_index + j]];
+                    ASSERT_LE(glm::length(p - group.centre), group.radius)
+                        << "group " << g << " holds cluster " << c;
+                }
+        }
+        std::sort(radii.begin(), radii.end());
+        EXPECT_LE(radii.back(), 3.0 * radii[radii.size() / 2])
+            << "a cluster spans far more than its neighbours";
+    }
 }
 
 TEST(Clusters, ProjectedRectsContainTheSphere) {
