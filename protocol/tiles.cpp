@@ -129,9 +129,34 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
                        uint32_t h, uint32_t bpp, TileCodec codec, TileRegion region,
                        std::vector<uint8_t>& packed, uint16_t ts, int quality,
                        lossy::Huffman huffman) {
+    encode_tiles_into(out, raw, stride, w, h, bpp, codec, std::span<const TileRegion>(&region, 1),
+                      packed, ts, quality, huffman);
+}
+
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t w,
+                       uint32_t h, uint32_t bpp, TileCodec codec,
+                       std::span<const TileRegion> regions, std::vector<uint8_t>& packed,
+                       uint16_t ts, int quality, lossy::Huffman huffman) {
     const uint32_t tx = (w + ts - 1) / ts, ty = (h + ts - 1) / ts;
-    region.x1 = std::min(region.x1, tx);
-    region.y1 = std::min(region.y1, ty);
+    // The rectangle around the regions, clipped to the layer.
+    size_t n = 0;
+    TileRegion region{UINT32_MAX, UINT32_MAX, 0, 0};
+    for (const TileRegion& r : regions) {
+        const TileRegion c{r.x0, r.y0, std::min(r.x1, tx), std::min(r.y1, ty)};
+        if (c.x0 >= c.x1 || c.y0 >= c.y1)
+            continue;
+        ++n;
+        region = {std::min(region.x0, c.x0), std::min(region.y0, c.y0), std::max(region.x1, c.x1),
+                  std::max(region.y1, c.y1)};
+    }
+    const auto inside = [&](uint32_t bx, uint32_t by) {
+        if (n <= 1)
+            return true;
+        for (const TileRegion& r : regions)
+            if (bx >= r.x0 && bx < r.x1 && by >= r.y0 && by < r.y1)
+                return true;
+        return false;
+    };
     const size_t tile_bytes = size_t(ts) * ts * bpp;
     const Begun b = begin_tiles(out, ts, codec, bpp, (size_t(tx) * ty + 7) / 8, nullptr);
     packed.clear();
@@ -143,7 +168,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
         for (uint32_t bx = region.x0; bx < region.x1; ++bx) {
             const uint32_t x0 = bx * ts, y0 = by * ts, cw = std::min<uint32_t>(ts, w - x0),
                            ch = std::min<uint32_t>(ts, h - y0);
-            if (!tile_lit(raw, stride, x0, y0, cw, ch, bpp))
+            if (!inside(bx, by) || !tile_lit(raw, stride, x0, y0, cw, ch, bpp))
                 continue;
             const size_t tile = size_t(by) * tx + bx;
             out[b.header_at + kFixedHeader + tile / 8] |= uint8_t(1u << (tile % 8));
@@ -160,7 +185,7 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
         }
     if (!end_tiles(out, b, present, tile_bytes, packed, raw, stride, places, ts, quality, packed,
                    huffman))
-        encode_tiles_into(out, raw, stride, w, h, bpp, TileCodec::kLz4, region, packed, ts);
+        encode_tiles_into(out, raw, stride, w, h, bpp, TileCodec::kLz4, regions, packed, ts);
 }
 
 void encode_packed_tiles_into(std::vector<uint8_t>& out, const uint8_t* mask, uint32_t count,

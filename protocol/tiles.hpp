@@ -43,6 +43,13 @@ void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t str
                        TileRegion region, std::vector<uint8_t>& scratch,
                        uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality,
                        lossy::Huffman huffman = lossy::Huffman::kReused);
+// The same where the tiles that may hold non-zero pixels lie in several regions (none: every
+// tile absent); tiles outside all of them are absent and never read.
+void encode_tiles_into(std::vector<uint8_t>& out, const uint8_t* raw, size_t stride, uint32_t width,
+                       uint32_t height, uint32_t bytes_per_pixel, TileCodec codec,
+                       std::span<const TileRegion> regions, std::vector<uint8_t>& scratch,
+                       uint16_t tile_size = kDefaultTileSize, int quality = kDefaultLayerQuality,
+                       lossy::Huffman huffman = lossy::Huffman::kReused);
 
 // The same encoding from tiles already packed (by the device: render/, "Only lit tiles leave
 // the device"): `mask` is the presence mask over the whole w x h layer (one bit per tile,

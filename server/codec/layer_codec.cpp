@@ -67,7 +67,6 @@ void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
                        protocol::Encoding encoding, protocol::TileCodec codec,
                        std::vector<uint8_t>& scratch, int quality) {
     const size_t bpp = px.format == protocol::PixelFormat::kRgba8 ? 4 : 8;
-    const uint32_t x1 = std::min(px.x1, px.width), y1 = std::min(px.y1, px.height);
     if (px.tile_info) {
         HS_CHECK(encoding != protocol::Encoding::kRaw,
                  "append_layer_data: tiles packed on the device make sparse layers only");
@@ -79,21 +78,45 @@ void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& px,
                                            protocol::kDefaultTileSize, quality);
         return;
     }
+    std::array<LayerPart, kMaxLayerParts> areas;
+    const size_t n = px.read_areas(areas);
     if (encoding == protocol::Encoding::kRaw) {
         const size_t at = out.size(), row = size_t(px.width) * bpp;
         out.resize(at + row * px.height);  // zeros: black outside the rectangle
-        if (px.x0 < x1)
-            for (uint32_t y = px.y0; y < y1; ++y)
-                std::memcpy(out.data() + at + y * row + px.x0 * bpp,
-                            px.data + y * px.stride + px.x0 * bpp, (x1 - px.x0) * bpp);
+        for (size_t i = 0; i < n; ++i)
+            for (uint32_t y = areas[i].y0; y < areas[i].y1; ++y)
+                std::memcpy(out.data() + at + y * row + areas[i].x0 * bpp,
+                            px.data + y * px.stride + areas[i].x0 * bpp,
+                            (areas[i].x1 - areas[i].x0) * bpp);
         return;
     }
     const uint32_t ts = protocol::kDefaultTileSize;
-    protocol::TileRegion region{px.x0 / ts, px.y0 / ts, (x1 + ts - 1) / ts, (y1 + ts - 1) / ts};
-    if (px.x0 >= x1 || px.y0 >= y1)
-        region = {0, 0, 0, 0};
+    std::array<protocol::TileRegion, kMaxLayerParts> regions;
+    for (size_t i = 0; i < n; ++i)
+        regions[i] = {areas[i].x0 / ts, areas[i].y0 / ts, (areas[i].x1 + ts - 1) / ts,
+                      (areas[i].y1 + ts - 1) / ts};
     protocol::encode_tiles_into(out, px.data, px.stride, px.width, px.height, uint32_t(bpp), codec,
-                                region, scratch, protocol::kDefaultTileSize, quality);
+                                std::span<const protocol::TileRegion>(regions.data(), n), scratch,
+                                protocol::kDefaultTileSize, quality);
+}
+
+size_t LayerPixels::read_areas(std::array<LayerPart, kMaxLayerParts>& out) const {
+    const uint32_t cx1 = std::min(x1, width), cy1 = std::min(y1, height);
+    if (x0 >= cx1 || y0 >= cy1)
+        return 0;
+    if (part_count <= 1) {
+        out[0] = {x0, y0, cx1, cy1};
+        return 1;
+    }
+    size_t n = 0;
+    for (uint32_t i = 0; i < part_count && i < kMaxLayerParts; ++i) {
+        // Inside the rectangle, whatever the caller said.
+        const LayerPart p{std::max(parts[i].x0, x0), std::max(parts[i].y0, y0),
+                          std::min(parts[i].x1, cx1), std::min(parts[i].y1, cy1)};
+        if (p.x0 < p.x1 && p.y0 < p.y1)
+            out[n++] = p;
+    }
+    return n;
 }
 
 ImageRgba32f decode_pixels(const std::vector<uint8_t>& bytes, uint32_t w, uint32_t h,

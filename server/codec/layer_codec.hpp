@@ -1,6 +1,7 @@
 // Turning a rendered linear-radiance image into layer bytes (PROTOCOL.md, VdLayer) and back.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -41,6 +42,12 @@ constexpr protocol::TileCodec default_tile_codec(protocol::PixelFormat) {
 // of the layer is black. Or, with `tile_info`, the layer's lit tiles packed by the device
 // (gpu::RenderTarget::tile_info and packed_tiles, tiles of protocol::kDefaultTileSize): `data`
 // is then unused, and only sparse encodings can be made of them.
+// Several rectangles far apart may stand for the one around them (`parts`, on the tile grid,
+// disjoint, inside it): only they are read, and the rest of the rectangle is black.
+struct LayerPart {
+    uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+inline constexpr size_t kMaxLayerParts = 4;
 struct LayerPixels {
     const uint8_t* data = nullptr;
     size_t stride = 0;
@@ -49,10 +56,17 @@ struct LayerPixels {
     uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
     const uint32_t* tile_info = nullptr;  // count, 3 unused words, the presence mask's words
     const uint8_t* tiles = nullptr;
+    std::array<LayerPart, kMaxLayerParts> parts{};
+    uint32_t part_count = 0;  // 0 or 1: the whole rectangle
+
+    // The rectangles read: the parts, or the rectangle (clipped to the layer); empty ones left
+    // out. Returns how many were written to `out`.
+    size_t read_areas(std::array<LayerPart, kMaxLayerParts>& out) const;
 };
 // Appends the layer's data bytes in `encoding` to `out`: raw pixels (black outside the
-// rectangle), or sparse tiles (tiles outside it absent, never read; the rectangle should lie
-// on the tile grid). `scratch` and `out` keep their capacity between calls.
+// rectangle, or its parts), or sparse tiles (tiles outside it absent, never read; the
+// rectangle and its parts should lie on the tile grid). `scratch` and `out` keep their capacity
+// between calls.
 void append_layer_data(std::vector<uint8_t>& out, const LayerPixels& pixels,
                        protocol::Encoding encoding, protocol::TileCodec codec,
                        std::vector<uint8_t>& scratch, int quality = protocol::kDefaultLayerQuality);

@@ -110,7 +110,10 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
     HS_CHECK(areas.size() == t.views(), "end_render_and_pack: one area per view");
     auto push_fn = device_.push_descriptor_fn();
     HS_CHECK(push_fn != nullptr, "end_render_and_pack: no VK_KHR_push_descriptor");
-    copy_out(t, areas);
+    std::array<ViewArea, kMaxTargetViews> copies;
+    for (uint32_t v = 0; v < areas.size() && v < kMaxTargetViews; ++v) copies[v] = {v, areas[v]};
+    copy_out(t, std::span<const ViewArea>(copies.data(),
+                                          std::min<size_t>(areas.size(), kMaxTargetViews)));
     const uint32_t ts = t.pack_tile();
     // Per view with an area: its push constants (phases 0 and 2 cover the area's tiles).
     std::array<TilesPush, kMaxTargetViews> pcs{};
@@ -192,19 +195,19 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
 
 void CommandList::end_render_and_read_back(RenderTarget& t, Area area) {
     area = whole(t, area);
-    std::array<Area, kMaxTargetViews> areas;
-    areas.fill(area);
-    end_render_and_read_back(t, std::span<const Area>(areas.data(), t.views()));
+    std::array<ViewArea, kMaxTargetViews> areas;
+    for (uint32_t v = 0; v < kMaxTargetViews; ++v) areas[v] = {v, area};
+    end_render_and_read_back(t, std::span<const ViewArea>(areas.data(), t.views()));
 }
 
-void CommandList::end_render_and_read_back(RenderTarget& t, std::span<const Area> areas) {
-    HS_CHECK(areas.size() == t.views(), "end_render_and_read_back: one area per view");
+void CommandList::end_render_and_read_back(RenderTarget& t, std::span<const ViewArea> areas) {
     copy_out(t, areas);
     host_read_barrier(cmd_, VK_PIPELINE_STAGE_2_COPY_BIT, VK_ACCESS_2_TRANSFER_WRITE_BIT);
     device_.end_label(cmd_);
 }
 
-void CommandList::copy_out(RenderTarget& t, std::span<const Area> areas) {
+void CommandList::copy_out(RenderTarget& t, std::span<const ViewArea> areas) {
+    HS_CHECK(areas.size() <= kMaxCopyAreas, "a read-back of more than kMaxCopyAreas areas");
     vkCmdEndRendering(cmd_);
     image_barrier(cmd_, t.color(), VK_IMAGE_ASPECT_COLOR_BIT,
                   VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL,
@@ -213,10 +216,12 @@ void CommandList::copy_out(RenderTarget& t, std::span<const Area> areas) {
                   VK_ACCESS_2_TRANSFER_READ_BIT);
     const uint64_t px = bytes_per_pixel(t.format());
     const uint64_t view_bytes = t.view_strides().pixels;
-    VkBufferImageCopy regions[kMaxTargetViews];
+    VkBufferImageCopy regions[kMaxCopyAreas];
     uint32_t n = 0;
-    for (uint32_t v = 0; v < areas.size() && v < kMaxTargetViews; ++v) {
-        const Area& a = areas[v];
+    for (const ViewArea& va : areas) {
+        const Area& a = va.area;
+        const uint32_t v = va.view;
+        HS_CHECK(v < t.views(), "a read-back area of a view the target does not have");
         if (a.width == 0 || a.height == 0)
             continue;
         VkBufferImageCopy& region = regions[n++];
@@ -228,9 +233,17 @@ void CommandList::copy_out(RenderTarget& t, std::span<const Area> areas) {
         region.imageOffset = {int32_t(a.x), int32_t(a.y), 0};
         region.imageExtent = {a.width, a.height, 1};
     }
-    if (n > 0)
+    // Within one copy, destination regions may not overlap in memory, and two areas side by
+    // side in a view share the span of buffer rows between them: one copy per area there, one
+    // for all where each view has one.
+    bool shared = false;
+    for (uint32_t i = 0; i < n && !shared; ++i)
+        for (uint32_t j = i + 1; j < n && !shared; ++j)
+            shared = regions[i].imageSubresource.baseArrayLayer ==
+                     regions[j].imageSubresource.baseArrayLayer;
+    for (uint32_t i = 0; i < n; i += shared ? 1 : n)
         vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(),
-                               n, regions);
+                               shared ? 1 : n, &regions[i]);
 }
 
 void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t push_size,

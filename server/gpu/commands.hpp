@@ -21,6 +21,13 @@ class SecondaryBuffers;
 struct Area {
     uint32_t x = 0, y = 0, width = 0, height = 0;
 };
+// An area of one view of a target.
+struct ViewArea {
+    uint32_t view = 0;
+    Area area;
+};
+// The most areas one read-back copies (a copy region each).
+inline constexpr size_t kMaxCopyAreas = 32;
 
 class CommandList {
 public:
@@ -61,9 +68,9 @@ public:
     // target's readback buffer (laid out as the whole image); the rest of it is left as it was.
     // A target of several views: `area` of each.
     void end_render_and_read_back(RenderTarget& target, Area area = {});
-    // The same for a target of several views: view v's `areas[v]` into view v's part of the
-    // read-back buffer (an empty area: nothing of that view).
-    void end_render_and_read_back(RenderTarget& target, std::span<const Area> areas);
+    // The same for any areas of any views (at most kMaxCopyAreas, disjoint within a view): each
+    // into its view's part of the read-back buffer, at its place (an empty area: nothing).
+    void end_render_and_read_back(RenderTarget& target, std::span<const ViewArea> areas);
     // For a target that packs its tiles (RenderTarget::create with pack_tile): ends rendering,
     // copies `area` (on the tile grid, or the whole target) into the device-side pixels, and
     // packs the lit tiles of that area with `packer` (shaders/tiles.comp, push descriptors),
@@ -78,9 +85,9 @@ public:
                   uint32_t groups_x);
 
 private:
-    // Ends rendering and copies `area` of the colour attachment into the target's read-back
+    // Ends rendering and copies `areas` of the colour attachment into the target's read-back
     // buffer.
-    void copy_out(RenderTarget& target, std::span<const Area> areas);
+    void copy_out(RenderTarget& target, std::span<const ViewArea> areas);
 
     Device& device_;
     VkCommandBuffer cmd_;

@@ -49,6 +49,8 @@ public:
                 if (t.packs_tiles() && !plan.rect.empty()) {
                     f.pixels[e].tile_info = t.tile_info(req.view);
                     f.pixels[e].tiles = t.packed_tiles(req.view);
+                } else {
+                    f.pixels[e].parts = plan.parts;
                 }
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;
@@ -71,6 +73,8 @@ public:
                   {"occluding", last_.clusters_occluding}}},
                 {"triangles", last_.triangles},
                 {"pixels", last_.rect.area()},
+                {"pixels_read", last_.parts.area()},
+                {"parts", last_.parts.count},
                 {"lights_skipped", last_.lights_skipped}};
     }
 

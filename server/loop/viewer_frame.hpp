@@ -23,8 +23,10 @@ namespace hs::loop {
 
 // One eye's layer where its pixels lie (a persistently mapped readback buffer, or a captured
 // image): rows `stride` bytes apart, in `encoding`; only the rectangle [x0, x1) x [y0, y1) is
-// read, the rest of the layer is black. Or, from a target that packs its tiles, the lit tiles
-// the device packed (codec::LayerPixels::tile_info; `data` null).
+// read, the rest of the layer is black, and of it only `parts` where there are several (the
+// rest of the rectangle is black too, and its memory not the layer's). Or, from a target that
+// packs its tiles, the lit tiles the device packed (codec::LayerPixels::tile_info; `data`
+// null).
 struct EyePixels {
     const uint8_t* data = nullptr;
     size_t stride = 0;  // bytes
@@ -33,6 +35,7 @@ struct EyePixels {
     uint32_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
     const uint32_t* tile_info = nullptr;
     const uint8_t* tiles = nullptr;
+    render::RectParts parts;  // count <= 1: the whole rectangle
 };
 
 // One submission's figures (stats "frames"): its viewers' eyes, the time from taking the

@@ -474,6 +474,87 @@ PixelRect unite(const PixelRect& a, const PixelRect& b) {
     return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
 }
 
+namespace {
+bool rects_overlap(const PixelRect& a, const PixelRect& b) {
+    return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
+}
+// The pixels joining a and b adds to theirs (they are disjoint).
+uint64_t join_cost(const PixelRect& a, const PixelRect& b) {
+    return unite(a, b).area() - a.area() - b.area();
+}
+}  // namespace
+
+PixelRect RectParts::bounds() const {
+    PixelRect b;
+    for (uint32_t i = 0; i < count; ++i) b = unite(b, parts[i]);
+    return b;
+}
+
+uint64_t RectParts::area() const {
+    uint64_t a = 0;
+    for (uint32_t i = 0; i < count; ++i) a += parts[i].area();
+    return a;
+}
+
+void PartsBuilder::join(size_t i, size_t j) {
+    parts_[i] = unite(parts_[i], parts_[j]);
+    parts_.erase(parts_.begin() + std::ptrdiff_t(j));
+}
+
+void PartsBuilder::join_cheapest() {
+    size_t bi = 0, bj = 1;
+    uint64_t best = UINT64_MAX;
+    for (size_t i = 0; i < parts_.size(); ++i)
+        for (size_t j = i + 1; j < parts_.size(); ++j)
+            if (const uint64_t c = join_cost(parts_[i], parts_[j]); c < best)
+                best = c, bi = i, bj = j;
+    join(bi, bj);
+}
+
+void PartsBuilder::settle() {
+    for (bool joined = true; joined;) {
+        joined = false;
+        for (size_t i = 0; i < parts_.size() && !joined; ++i)
+            for (size_t j = i + 1; j < parts_.size() && !joined; ++j)
+                if (rects_overlap(parts_[i], parts_[j]) || join_cost(parts_[i], parts_[j]) == 0) {
+                    join(i, j);
+                    joined = true;
+                }
+    }
+}
+
+void PartsBuilder::add(const PixelRect& r) {
+    if (r.empty())
+        return;
+    for (PixelRect& p : parts_)
+        if (rects_overlap(p, r) || unite(p, r).area() <= p.area() + r.area()) {
+            p = unite(p, r);
+            return;
+        }
+    parts_.push_back(r);
+    if (parts_.size() > 16) {
+        settle();
+        while (parts_.size() > 16) join_cheapest();
+    }
+}
+
+RectParts PartsBuilder::finish(uint32_t most) {
+    most = std::clamp<uint32_t>(most, 1, kMaxLayerParts);
+    settle();
+    while (parts_.size() > most) {
+        join_cheapest();
+        settle();
+    }
+    RectParts out;
+    for (const PixelRect& p : parts_) out.parts[out.count++] = p;
+    const PixelRect b = out.bounds();
+    if (out.count > 1 && double(out.area()) > kMaxPartsShare * double(b.area())) {
+        out.parts[0] = b;
+        out.count = 1;
+    }
+    return out;
+}
+
 PixelRect project_sphere(const glm::dvec3& centre, double radius, const scene::Intrinsics& k,
                          const scene::Pose& camera, double near_m) {
     return project_sphere(centre, radius, k, scene::frame_from_world(camera), near_m);

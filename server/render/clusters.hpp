@@ -3,6 +3,8 @@
 // detail by projected error). Pure CPU geometry: no GPU, unit-tested on its own.
 #pragma once
 
+#include <array>
+
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -151,6 +153,38 @@ struct PixelRect {
 };
 // The smallest rect containing both.
 PixelRect unite(const PixelRect& a, const PixelRect& b);
+
+// A layer's rectangle as up to kMaxLayerParts disjoint rectangles on the tile grid, where its
+// lit clusters lie in groups far apart (several highlights): only those are copied and read.
+inline constexpr uint32_t kMaxLayerParts = 4;
+// Parts are kept only where they hold at most this share of the pixels of the one rectangle
+// around them (a region per part costs a copy region and a scan's bookkeeping).
+inline constexpr double kMaxPartsShare = 0.8;
+struct RectParts {
+    std::array<PixelRect, kMaxLayerParts> parts{};
+    uint32_t count = 0;
+    PixelRect bounds() const;
+    uint64_t area() const;
+    std::span<const PixelRect> span() const { return {parts.data(), count}; }
+};
+// Gathers rectangles (tile-aligned) into parts: each joins a part it overlaps, or one it extends
+// at no cost in area; parts that come to overlap are joined; past kMaxLayerParts (and past 16
+// while gathering), the two whose union adds the fewest pixels are joined. `spill` is scratch
+// the caller keeps.
+class PartsBuilder {
+public:
+    void clear() { parts_.clear(); }
+    void add(const PixelRect& r);
+    // The parts, disjoint, at most `most` (1 to kMaxLayerParts); one (their bounds) when
+    // several would hold more than kMaxPartsShare of the bounds' pixels.
+    RectParts finish(uint32_t most = kMaxLayerParts);
+
+private:
+    void join(size_t i, size_t j);
+    void join_cheapest();
+    void settle();
+    std::vector<PixelRect> parts_;
+};
 // The pixels a bounding sphere can cover through a pinhole camera (conservative), clipped to
 // the image; empty when it lies wholly behind the near plane, the whole image when it straddles
 // it.

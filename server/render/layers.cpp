@@ -76,6 +76,11 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.clusters_total = uint32_t(level.clusters.size());
     const PixelRect rect = cull_clusters(r, level, w);
     plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
+    plan.parts = r.sparse ? w.parts.finish(info_.max_layer_parts) : RectParts{};
+    if (plan.parts.count <= 1) {
+        plan.parts.parts[0] = plan.rect;
+        plan.parts.count = plan.rect.empty() ? 0 : 1;
+    }
     if (plan.rect.empty()) {
         plan.skipped_because = "nothing view-dependent in view";
         return;
@@ -103,6 +108,8 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     auto& masks = w.masks;
     auto& fills = w.fills;
     rects.assign(level.clusters.size(), PixelRect{});
+    w.parts.clear();
+    const uint32_t tile = std::max<uint32_t>(r.tile, 1);
     masks.assign(level.clusters.size(), 0);
     fills.assign(level.clusters.size(), 0);
     // The fill-in: clusters with uncovered surface that may face the eye are drawn too.
@@ -154,8 +161,10 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
                 if (masks[c] == 0 && fills[c] == 0)  // counted as left out, whole
                     w.plan.fill_triangles_unlit += cl.index_count / 3;
             }
-            if (masks[c] != 0 || fills[c])
+            if (masks[c] != 0 || fills[c]) {
                 rect = unite(rect, rects[c]);
+                w.parts.add(align_to_tiles(rects[c], tile, k.width, k.height));
+            }
         }
     }
     if (!r.sparse)
@@ -262,11 +271,11 @@ std::vector<uint8_t> Renderer::layer_bytes(const gpu::RenderTarget& t, const Lay
     const size_t px = t.format() == gpu::ColorFormat::kRgba8Unorm ? 4 : 8;
     const size_t w = t.width();
     std::vector<uint8_t> out(w * t.height() * px, 0);
-    const PixelRect& r = plan.rect;
     const uint8_t* in = t.readback_data(view);
-    for (uint32_t y = r.y0; y < r.y1; ++y)
-        std::memcpy(out.data() + (y * w + r.x0) * px, in + (y * w + r.x0) * px,
-                    size_t(r.x1 - r.x0) * px);
+    for (const PixelRect& r : plan.parts.span())
+        for (uint32_t y = r.y0; y < r.y1; ++y)
+            std::memcpy(out.data() + (y * w + r.x0) * px, in + (y * w + r.x0) * px,
+                        size_t(r.x1 - r.x0) * px);
     return out;
 }
 
@@ -297,16 +306,26 @@ namespace {
 gpu::Area area_of(const PixelRect& r) {
     return {r.x0, r.y0, r.x1 - r.x0, r.y1 - r.y0};
 }
+
+// The read-back areas of `plan` (its parts) in view `view`, appended at `out[n]`.
+size_t add_parts(const Renderer::LayerPlan& plan, uint32_t view, std::span<gpu::ViewArea> out,
+                 size_t n) {
+    for (const PixelRect& p : plan.parts.span()) out[n++] = {view, area_of(p)};
+    return n;
+}
 }  // namespace
 
 void Renderer::record_layer(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {
     const gpu::Area area = area_of(w.plan.rect);
     cl.begin_render(*r.target, glm::vec4(0.0f), "pass.viewer-vd.layer", area, uses_depth());
     record_draws(cl, r, w);
-    if (r.target->packs_tiles())
+    if (r.target->packs_tiles()) {
         cl.end_render_and_pack(*r.target, *packer_, area);
-    else
-        cl.end_render_and_read_back(*r.target, area);
+    } else {
+        std::array<gpu::ViewArea, kMaxLayerParts> parts;
+        const size_t n = add_parts(w.plan, 0, parts, 0);
+        cl.end_render_and_read_back(*r.target, std::span<const gpu::ViewArea>(parts.data(), n));
+    }
 }
 
 void Renderer::record_views(gpu::CommandList& cl, std::span<const LayerRequest> reqs,
@@ -328,10 +347,17 @@ void Renderer::record_views(gpu::CommandList& cl, std::span<const LayerRequest> 
     for (uint32_t v = 0; v < views; ++v)
         if (layer_work_[first + v].draw)
             record_draws(cl, reqs[first + v], layer_work_[first + v]);
-    if (t.packs_tiles())
+    if (t.packs_tiles()) {
         cl.end_render_and_pack(t, *packer_, std::span<const gpu::Area>(areas.data(), views));
-    else
-        cl.end_render_and_read_back(t, std::span<const gpu::Area>(areas.data(), views));
+        return;
+    }
+    static_assert(gpu::kMaxTargetViews * kMaxLayerParts <= gpu::kMaxCopyAreas);
+    std::array<gpu::ViewArea, gpu::kMaxCopyAreas> parts;
+    size_t n = 0;
+    for (uint32_t v = 0; v < views; ++v)
+        if (layer_work_[first + v].draw)
+            n = add_parts(layer_work_[first + v].plan, v, parts, n);
+    cl.end_render_and_read_back(t, std::span<const gpu::ViewArea>(parts.data(), n));
 }
 
 void Renderer::record_draws(gpu::CommandList& cl, const LayerRequest& r, const LayerWork& w) const {

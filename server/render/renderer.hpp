@@ -60,6 +60,10 @@ struct RendererCreateInfo {
     // without planners; for measuring what the former buys, `hysar bench serve
     // --record-on-render-thread`).
     bool record_on_planners = true;
+    // The most rectangles a sparse layer is read back in (render::kMaxLayerParts at most; 1:
+    // the one rectangle around its lit clusters): where they lie in groups far apart, only the
+    // rectangles around the groups are copied and scanned (RectParts).
+    uint32_t max_layer_parts = kMaxLayerParts;
     // Only lit tiles leave the device: a layer target made with packing
     // (gpu::RenderTarget::create's pack_tile) has its lit tiles classified and packed by a
     // compute pass (shaders/tiles.comp), so the host reads those alone rather than the layer's
@@ -160,12 +164,17 @@ public:
         uint32_t view = 0;
     };
     // What was recorded for one layer. Outside `rect` the layer is black (nothing was drawn or
-    // read back there); an empty rect: no GPU work at all, the layer is black.
+    // read back there), and so it is outside `parts`; an empty rect: no GPU work at all, the
+    // layer is black.
     // The nearest warp plane a plan gives (metres): a prop centre nearer the eye than this (the
     // eye inside the prop) would blow a translation up.
     static constexpr double kMinWarpDepthM = 0.05;
     struct LayerPlan {
         PixelRect rect;
+        // Where the layer's pixels were read back: the rect as up to kMaxLayerParts disjoint
+        // rectangles on the tile grid (one: the rect itself). Inside the rect but outside them
+        // the layer is black, and the target's read-back memory there is not the layer's.
+        RectParts parts;
         std::string skipped_because;  // when rect is empty
         uint32_t level = 0;
         uint32_t clusters_total = 0, clusters_lit = 0, clusters_occluding = 0;
@@ -351,6 +360,7 @@ private:
     // lit clusters grouped by light mask, and the draws that record it.
     struct LayerWork {
         std::vector<PixelRect> rects;
+        PartsBuilder parts;
         std::vector<uint64_t> masks;
         // Per cluster: drawn with the fill-in (0: not), which of its triangles (bit i: the
         // cluster's i-th; kAllTriangles: the whole cluster).

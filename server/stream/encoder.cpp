@@ -27,9 +27,18 @@ uint64_t warp_depth_um(double depth_m) {
     return uint64_t(std::clamp(std::llround(std::min(depth_m, 1e4) * 1e6), 1LL, 10'000'000'000LL));
 }
 
+static_assert(codec::kMaxLayerParts == render::kMaxLayerParts);
+
 codec::LayerPixels wire_pixels(const loop::EyePixels& p) {
-    return {p.data, p.stride, p.width,     p.height, wire_format(p.encoding), p.x0, p.y0,
-            p.x1,   p.y1,     p.tile_info, p.tiles};
+    codec::LayerPixels out{p.data, p.stride, p.width, p.height, wire_format(p.encoding),
+                           p.x0,   p.y0,     p.x1,    p.y1,     p.tile_info,
+                           p.tiles};
+    out.part_count = p.parts.count;
+    for (uint32_t i = 0; i < p.parts.count; ++i) {
+        const auto& r = p.parts.parts[i];
+        out.parts[i] = {r.x0, r.y0, r.x1, r.y1};
+    }
+    return out;
 }
 
 // The bytes of a layer's pixels the host reads: its rectangle, or the lit tiles the device
@@ -41,8 +50,11 @@ uint64_t read_back_bytes(const codec::LayerPixels& p) {
         const uint64_t tiles = ((p.width + ts - 1) / ts) * ((p.height + ts - 1) / ts);
         return p.tile_info[0] * ts * ts * bpp + 16 + (tiles + 31) / 32 * 4;
     }
-    const uint32_t x1 = std::min(p.x1, p.width), y1 = std::min(p.y1, p.height);
-    return p.x0 < x1 && p.y0 < y1 ? uint64_t(x1 - p.x0) * (y1 - p.y0) * bpp : 0;
+    std::array<codec::LayerPart, codec::kMaxLayerParts> areas;
+    uint64_t pixels = 0;
+    for (size_t i = 0, n = p.read_areas(areas); i < n; ++i)
+        pixels += uint64_t(areas[i].x1 - areas[i].x0) * (areas[i].y1 - areas[i].y0);
+    return pixels * bpp;
 }
 
 // The headset drive over tiles the device packed: each tile's pixels inside the layer through
@@ -220,17 +232,21 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
         scratch.driven.reset(new uint8_t[bytes]);  // not zeroed: only what is written is read
         scratch.driven_bytes = bytes;
     }
-    // The tile packer reads whole tiles: the drive covers the rectangle rounded out to the tile
-    // grid, so that no byte of the buffer it reads is left unwritten.
+    // The tile packer reads whole tiles: the drive covers the rectangle (or each of its parts)
+    // rounded out to the tile grid, so that no byte of the buffer it reads is left unwritten.
     const uint32_t ts = protocol::kDefaultTileSize;
-    const uint32_t tx0 = pixels.x0 / ts * ts, ty0 = pixels.y0 / ts * ts;
-    const uint32_t tx1 = std::min(pixels.width, (x1 + ts - 1) / ts * ts),
-                   ty1 = std::min(pixels.height, (y1 + ts - 1) / ts * ts);
     uint8_t* dst = scratch.driven.get();
-    if (rgba8)
-        drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
-    else
-        drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
+    std::array<codec::LayerPart, codec::kMaxLayerParts> areas;
+    for (size_t i = 0, n = pixels.read_areas(areas); i < n; ++i) {
+        const codec::LayerPart& a = areas[i];
+        const uint32_t tx0 = a.x0 / ts * ts, ty0 = a.y0 / ts * ts;
+        const uint32_t tx1 = std::min(pixels.width, (a.x1 + ts - 1) / ts * ts),
+                       ty1 = std::min(pixels.height, (a.y1 + ts - 1) / ts * ts);
+        if (rgba8)
+            drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
+        else
+            drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
+    }
     codec::LayerPixels driven = pixels;
     driven.data = dst;
     driven.stride = stride;

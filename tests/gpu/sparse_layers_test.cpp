@@ -5,10 +5,14 @@
 
 #include <glm/gtc/packing.hpp>
 
+#include "calib/serving.hpp"
+#include "codec/layer_codec.hpp"
 #include "gpu/submit_ring.hpp"
 #include "gpu_fixture.hpp"
 #include "scene/camera.hpp"
 #include "scene/mesh.hpp"
+#include "stream/encoder.hpp"
+#include "synthetic_calibration.hpp"
 #include "two_domes.hpp"
 
 using namespace hs;
@@ -19,23 +23,25 @@ namespace {
 using Request = render::Renderer::LayerRequest;
 using Plan = render::Renderer::LayerPlan;
 
-// A layer as the wire carries it: the rendered rectangle, black elsewhere (4 floats a pixel).
+// A layer as the wire carries it: the rendered rectangle's parts, black elsewhere (4 floats a
+// pixel).
 std::vector<float> layer_values(const gpu::RenderTarget& t, const Plan& plan) {
     const size_t w = t.width(), h = t.height();
     std::vector<float> out(w * h * 4, 0.0f);
     const bool srgb8 = t.format() == gpu::ColorFormat::kRgba8Unorm;
-    for (uint32_t y = plan.rect.y0; y < plan.rect.y1; ++y)
-        for (uint32_t x = plan.rect.x0; x < plan.rect.x1; ++x)
-            for (size_t c = 0; c < 4; ++c) {
-                const size_t i = (y * w + x) * 4 + c;
-                if (srgb8) {
-                    out[i] = float(t.readback_data()[i]);  // codes
-                } else {
-                    uint16_t hv;
-                    std::memcpy(&hv, t.readback_data() + 2 * i, 2);
-                    out[i] = glm::unpackHalf1x16(hv);
+    for (const render::PixelRect& r : plan.parts.span())
+        for (uint32_t y = r.y0; y < r.y1; ++y)
+            for (uint32_t x = r.x0; x < r.x1; ++x)
+                for (size_t c = 0; c < 4; ++c) {
+                    const size_t i = (y * w + x) * 4 + c;
+                    if (srgb8) {
+                        out[i] = float(t.readback_data()[i]);  // codes
+                    } else {
+                        uint16_t hv;
+                        std::memcpy(&hv, t.readback_data() + 2 * i, 2);
+                        out[i] = glm::unpackHalf1x16(hv);
+                    }
                 }
-            }
     return out;
 }
 
@@ -543,6 +549,98 @@ TEST_F(SparseLayers, PlannersRecordThroughASubmitRingTheSameLayers) {
     EXPECT_GE(lit, size_t(kBatches * kEyes / 2)) << "most eyes must show a highlight";
     EXPECT_GE(r3->layers_recorded_by_planners(), uint64_t(kBatches * 2))
         << "the planners recorded the batches' layers";
+}
+
+// Where the lit clusters lie in groups far apart (two domes side by side), a layer is read back
+// as the rectangles around the groups: the same pixels, bytes on the wire (sparse tiles,
+// raw, through a headset drive) as the one rectangle around them all, read from less memory,
+// and nothing outside the parts is read (the read-back is filled with a pattern first).
+TEST_F(SparseLayers, SeveralRectanglesReadTheSameLayer) {
+    const scene::Scene s = domes_apart();
+    render::RendererCreateInfo parts_info, one_info;
+    parts_info.format = one_info.format = gpu::ColorFormat::kRgba8Unorm;
+    one_info.max_layer_parts = 1;
+    auto parts = render::Renderer::create(device(), s, parts_info);
+    auto one = render::Renderer::create(device(), s, one_info);
+    ASSERT_TRUE(parts.ok() && one.ok());
+    ASSERT_TRUE((*parts)->uses_depth());
+    const scene::Intrinsics k = scene::eye_intrinsics(s.viewers.front());
+    const auto enc = render::LayerEncoding::kSrgb8;
+    const auto fmt = render::layer_target_format(enc);
+    std::array<gpu::RenderTarget, 2> t;
+    for (auto& x : t)
+        x = gpu::RenderTarget::create(device(), k.width, k.height, fmt, "t", true).value();
+    const calib::ServingCalibration cal = synthetic(s, k.width, k.height);
+    const calib::LayerDrive drive(cal.hmd.colour, 0.5);
+    size_t split = 0;
+    uint64_t read_parts = 0, read_one = 0;
+    for (double angle = -180; angle < 180; angle += 15) {
+        SCOPED_TRACE("angle " + std::to_string(angle));
+        const scene::Pose head =
+            scene::viewing_pose(s.viewing, angle, s.viewing.heights_m.at(s.viewing.default_height))
+                .value();
+        const scene::Pose eye = scene::eye_poses(head, s.viewers.front().ipd_m)[0];
+        for (auto& x : t)
+            std::memset(const_cast<uint8_t*>(x.readback_data()), 0xab,
+                        size_t(k.width) * k.height * 4);
+        auto a = (*parts)->render_layers(
+            std::vector<Request>{{s.material.specular, k, eye, enc, &t[0], true}});
+        auto b = (*one)->render_layers(
+            std::vector<Request>{{s.material.specular, k, eye, enc, &t[1], true}});
+        ASSERT_TRUE(a.ok() && b.ok());
+        const Plan& pa = (*a)[0];
+        const Plan& pb = (*b)[0];
+        ASSERT_EQ(pa.rect.area(), pb.rect.area());
+        ASSERT_LE(pb.parts.count, 1u);
+        if (pa.rect.empty())
+            continue;
+        // Disjoint parts on the tile grid inside the rectangle.
+        for (uint32_t i = 0; i < pa.parts.count; ++i) {
+            const render::PixelRect& r = pa.parts.parts[i];
+            EXPECT_TRUE(r.x0 >= pa.rect.x0 && r.x1 <= pa.rect.x1 && r.y0 >= pa.rect.y0 &&
+                        r.y1 <= pa.rect.y1);
+            EXPECT_EQ(r.x0 % Request{}.tile, 0u);
+            EXPECT_EQ(r.y0 % Request{}.tile, 0u);
+            for (uint32_t j = i + 1; j < pa.parts.count; ++j) {
+                const render::PixelRect& q = pa.parts.parts[j];
+                EXPECT_FALSE(r.x0 < q.x1 && q.x0 < r.x1 && r.y0 < q.y1 && q.y0 < r.y1);
+            }
+        }
+        split += pa.parts.count > 1;
+        read_parts += pa.parts.area();
+        read_one += pb.parts.area();
+        ASSERT_EQ(render::Renderer::layer_bytes(t[0], pa), render::Renderer::layer_bytes(t[1], pb));
+        // The wire's bytes, as the encoder makes them.
+        const auto pixels = [&](const gpu::RenderTarget& x, const Plan& p) {
+            codec::LayerPixels px;
+            px.data = x.readback_data();
+            px.stride = size_t(k.width) * 4;
+            px.width = k.width;
+            px.height = k.height;
+            px.x0 = p.rect.x0, px.y0 = p.rect.y0, px.x1 = p.rect.x1, px.y1 = p.rect.y1;
+            px.part_count = p.parts.count;
+            for (uint32_t i = 0; i < p.parts.count; ++i) {
+                const auto& r = p.parts.parts[i];
+                px.parts[i] = {r.x0, r.y0, r.x1, r.y1};
+            }
+            return px;
+        };
+        for (const auto encoding : {protocol::Encoding::kSparseTiles, protocol::Encoding::kRaw})
+            for (const calib::LayerDrive* d :
+                 {static_cast<const calib::LayerDrive*>(nullptr), &drive}) {
+                std::vector<uint8_t> wa, wb;
+                stream::LayerScratch sa, sb;
+                stream::append_served_layer(wa, pixels(t[0], pa), d, encoding,
+                                            protocol::TileCodec::kLz4, sa);
+                stream::append_served_layer(wb, pixels(t[1], pb), d, encoding,
+                                            protocol::TileCodec::kLz4, sb);
+                EXPECT_TRUE(wa == wb) << "encoding " << int(encoding) << (d ? ", driven" : "");
+            }
+    }
+    EXPECT_GE(split, 4u) << "views where the domes' highlights lie apart";
+    EXPECT_LT(read_parts, read_one) << "the parts read less";
+    std::printf("[ parts    ] %zu of 24 views split; %.0f k against %.0f k pixels read\n", split,
+                read_parts / 1e3, read_one / 1e3);
 }
 
 }  // namespace

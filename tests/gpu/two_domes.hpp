@@ -8,15 +8,16 @@
 
 namespace hs::test {
 
-// Two domes, one in front of the other: a prop that is not convex, so dark clusters must still
-// hide lit ones (drawn as black occluders).
-inline scene::Scene two_domes() {
+// Two domes as one glTF-like prop: `b` moved by `offset` from the scene's dome, with
+// `b_radius`.
+inline scene::Scene domes(glm::dvec3 a_offset, glm::dvec3 b_offset, double b_radius) {
     scene::Scene s = scene::default_scene();
     scene::Hemisphere a = s.prop.hemisphere, b = a;
     a.segments = b.segments = 64;
     a.rings = b.rings = 16;
-    b.centre += glm::dvec3(0.05, 0.0, 0.25);
-    b.radius = 0.08;
+    a.centre += a_offset;
+    b.centre += b_offset;
+    b.radius = b_radius;
     scene::Mesh m = scene::tessellate_hemisphere(a), mb = scene::tessellate_hemisphere(b);
     const uint32_t base = uint32_t(m.positions.size());
     m.positions.insert(m.positions.end(), mb.positions.begin(), mb.positions.end());
@@ -27,6 +28,19 @@ inline scene::Scene two_domes() {
     s.prop.kind = scene::Prop::Kind::kGltf;
     s.prop.gltf_mesh = std::make_shared<const scene::Mesh>(std::move(m));
     return s;
+}
+
+// Two domes, one in front of the other: a prop that is not convex, so dark clusters must still
+// hide lit ones (drawn as black occluders).
+inline scene::Scene two_domes() {
+    return domes(glm::dvec3(0.0), glm::dvec3(0.05, 0.0, 0.25), 0.08);
+}
+
+// Two domes of the scene's size side by side, 0.4 m apart: their highlights lie far apart in
+// most views.
+inline scene::Scene domes_apart() {
+    const double r = scene::default_scene().prop.hemisphere.radius;
+    return domes(glm::dvec3(-0.2, 0.0, 0.0), glm::dvec3(0.2, 0.0, 0.0), r);
 }
 
 }  // namespace hs::test

@@ -103,3 +103,37 @@ TEST(Tiles, NoPackedTileMakesTheEncodingOfABlackLayer) {
 }
 
 }  // namespace
+
+// Several regions: only their tiles are read (the rest of the layer holds garbage here, as a
+// read-back holds stale memory outside the areas copied), and the bytes are those of the same
+// layer with that garbage black, encoded over one region, for every codec and an edge cut.
+TEST(Tiles, SeveralRegionsReadOnlyTheirTiles) {
+    std::mt19937 rng(11);
+    const uint32_t w = 300, h = 170, bpp = 4;
+    const uint16_t ts = 32;
+    const std::vector<TileRegion> regions = {{0, 0, 2, 2}, {5, 1, 8, 3}, {8, 4, 10, 6}};
+    std::vector<uint8_t> garbage(size_t(w) * h * bpp), clean(garbage.size(), 0);
+    for (auto& v : garbage) v = uint8_t(rng() % 7 == 0 ? rng() : 0);
+    for (const TileRegion& r : regions)
+        for (uint32_t y = r.y0 * ts; y < std::min(h, r.y1 * ts); ++y)
+            for (uint32_t x = r.x0 * ts; x < std::min(w, r.x1 * ts); ++x)
+                for (uint32_t c = 0; c < bpp; ++c) {
+                    const size_t i = (size_t(y) * w + x) * bpp + c;
+                    clean[i] = garbage[i];
+                }
+    for (const TileCodec codec : {TileCodec::kNone, TileCodec::kLz4, TileCodec::kZstd,
+                                  TileCodec::kJpeg}) {
+        std::vector<uint8_t> a, b, scratch;
+        encode_tiles_into(a, garbage.data(), size_t(w) * bpp, w, h, bpp, codec, regions, scratch,
+                          ts, kDefaultLayerQuality, lossy::Huffman::kStandard);
+        encode_tiles_into(b, clean.data(), size_t(w) * bpp, w, h, bpp, codec,
+                          TileRegion{0, 0, 10, 6}, scratch, ts, kDefaultLayerQuality,
+                          lossy::Huffman::kStandard);
+        EXPECT_TRUE(a == b) << "codec " << int(codec);
+        std::vector<uint8_t> whole;
+        encode_tiles_into(whole, garbage.data(), size_t(w) * bpp, w, h, bpp, codec,
+                          TileRegion{0, 0, 10, 6}, scratch, ts, kDefaultLayerQuality,
+                          lossy::Huffman::kStandard);
+        EXPECT_FALSE(a == whole) << "the garbage outside the regions is there to be missed";
+    }
+}

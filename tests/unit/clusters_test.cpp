@@ -393,3 +393,60 @@ TEST(Clusters, ProjectedRectsContainTheSphere) {
 }
 
 }  // namespace
+
+namespace {
+bool contains(const render::PixelRect& outer, const render::PixelRect& r) {
+    return r.x0 >= outer.x0 && r.x1 <= outer.x1 && r.y0 >= outer.y0 && r.y1 <= outer.y1;
+}
+}  // namespace
+
+// A layer's rectangle as parts: every rectangle added lies inside one part, the parts are
+// disjoint and at most the limit, their bounds are the rectangle around all, and several are
+// kept only where they save pixels (random rectangles on a 32-pixel grid, in clumps).
+TEST(Clusters, RectPartsCoverWhatWasAddedInDisjointParts) {
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<uint32_t> cell(0, 39), size(1, 3), clumps(1, 7), count(1, 40);
+    size_t split = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        std::vector<render::PixelRect> added;
+        const uint32_t k = clumps(rng);
+        std::vector<std::pair<uint32_t, uint32_t>> centres;
+        for (uint32_t c = 0; c < k; ++c) centres.push_back({cell(rng), cell(rng) / 2});
+        const uint32_t n = count(rng);
+        for (uint32_t i = 0; i < n; ++i) {
+            const auto [cx, cy] = centres[i % k];
+            const uint32_t x = cx + size(rng) - 1, y = cy + size(rng) - 1;
+            added.push_back({x * 32, y * 32, (x + size(rng)) * 32, (y + size(rng)) * 32});
+        }
+        render::PixelRect all;
+        render::PartsBuilder b;
+        for (const auto& r : added) {
+            b.add(r);
+            all = render::unite(all, r);
+        }
+        for (const uint32_t most : {1u, 2u, render::kMaxLayerParts}) {
+            render::PartsBuilder c = b;
+            const render::RectParts parts = c.finish(most);
+            ASSERT_GE(parts.count, 1u);
+            ASSERT_LE(parts.count, most);
+            const render::PixelRect bounds = parts.bounds();
+            EXPECT_TRUE(bounds.x0 == all.x0 && bounds.y0 == all.y0 && bounds.x1 == all.x1 &&
+                        bounds.y1 == all.y1);
+            for (const auto& r : added) {
+                bool inside = false;
+                for (const auto& p : parts.span()) inside = inside || contains(p, r);
+                ASSERT_TRUE(inside) << "an added rectangle outside every part";
+            }
+            for (uint32_t i = 0; i < parts.count; ++i)
+                for (uint32_t j = i + 1; j < parts.count; ++j) {
+                    const auto &p = parts.parts[i], &q = parts.parts[j];
+                    ASSERT_FALSE(p.x0 < q.x1 && q.x0 < p.x1 && p.y0 < q.y1 && q.y0 < p.y1);
+                }
+            if (parts.count > 1) {
+                EXPECT_LE(double(parts.area()), render::kMaxPartsShare * double(all.area()));
+            }
+            split += parts.count > 1;
+        }
+    }
+    EXPECT_GT(split, 50u) << "clumps far apart make several parts";
+}
