@@ -233,17 +233,12 @@ void CommandList::copy_out(RenderTarget& t, std::span<const ViewArea> areas) {
         region.imageOffset = {int32_t(a.x), int32_t(a.y), 0};
         region.imageExtent = {a.width, a.height, 1};
     }
-    // Within one copy, destination regions may not overlap in memory, and two areas side by
-    // side in a view share the span of buffer rows between them: one copy per area there, one
-    // for all where each view has one.
-    bool shared = false;
-    for (uint32_t i = 0; i < n && !shared; ++i)
-        for (uint32_t j = i + 1; j < n && !shared; ++j)
-            shared = regions[i].imageSubresource.baseArrayLayer ==
-                     regions[j].imageSubresource.baseArrayLayer;
-    for (uint32_t i = 0; i < n; i += shared ? 1 : n)
+    // One copy for every area: its source regions (the image) and destination regions (the
+    // buffer) never share memory; areas of one view lie apart in the image and write different
+    // bytes of the buffer, their rows interleaved.
+    if (n > 0)
         vkCmdCopyImageToBuffer(cmd_, t.color(), VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, t.readback(),
-                               shared ? 1 : n, &regions[i]);
+                               n, regions);
 }
 
 void CommandList::dispatch(const ComputePipeline& p, const void* push, uint32_t push_size,

@@ -54,6 +54,7 @@ public:
                 }
                 recorded = recorded || !plan.rect.empty();
                 last_ = plan;
+                last_packed_ = t.packs_tiles();
             }
             f.one_pass =
                 f.targets[0].views() > 1 && !(f.plans[0].rect.empty() && f.plans[1].rect.empty());
@@ -73,7 +74,7 @@ public:
                   {"occluding", last_.clusters_occluding}}},
                 {"triangles", last_.triangles},
                 {"pixels", last_.rect.area()},
-                {"pixels_read", last_.parts.area()},
+                {"pixels_read", last_packed_ ? last_.rect.area() : last_.parts.area()},
                 {"parts", last_.parts.count},
                 {"lights_skipped", last_.lights_skipped}};
     }
@@ -84,6 +85,7 @@ private:
     std::vector<std::string> effects_;
     std::vector<render::Renderer::LayerRequest> requests_;  // reused: no allocation per frame
     render::Renderer::LayerPlan last_;
+    bool last_packed_ = false;  // last_ was packed on the device, which scans its whole rect
 };
 
 class Captured final : public FrameSource {

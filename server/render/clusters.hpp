@@ -169,8 +169,8 @@ struct RectParts {
 };
 // Gathers rectangles (tile-aligned) into parts: each joins a part it overlaps, or one it extends
 // at no cost in area; parts that come to overlap are joined; past kMaxLayerParts (and past 16
-// while gathering), the two whose union adds the fewest pixels are joined. `spill` is scratch
-// the caller keeps.
+// while gathering), the two whose union adds the fewest pixels are joined. Kept by the caller
+// between layers, so that gathering allocates nothing once it has grown.
 class PartsBuilder {
 public:
     void clear() { parts_.clear(); }

@@ -215,7 +215,7 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     w.occ_count = written;
     // The lit clusters grouped by the lights they need (and whether they draw the fill-in):
     // one draw per group, each evaluating only its lights (a handful of groups; past
-    // kMaxLightGroups in a fill class, one group with every light any of its clusters needs).
+    // kMaxLightGroups sets, one set with every light any of them needs).
     auto& order = w.order;
     order.clear();
     for (size_t c = 0; c < level.clusters.size(); ++c)
@@ -224,18 +224,30 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     const auto key = [&](uint32_t c) { return std::make_pair(fills[c] != 0, masks[c]); };
     std::stable_sort(order.begin(), order.end(),
                      [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
-    // Counted and merged per class, so that the fill-in's clusters never change the lights the
-    // others evaluate (a covered pixel stays bit for bit what it is without the fill-in).
-    size_t distinct[2] = {0, 0};
-    uint64_t union_mask[2] = {0, 0};
-    for (size_t i = 0; i < order.size(); ++i) {
-        const bool fill = fills[order[i]] != 0;
-        union_mask[fill] |= masks[order[i]];
-        distinct[fill] += i == 0 || key(order[i]) != key(order[i - 1]);
+    // Past kMaxLightGroups sets of lights, every lit cluster evaluates them all. Decided from
+    // the lit clusters alone, whatever their fill class, so that the fill-in never changes the
+    // lights a cluster evaluates (a covered pixel stays bit for bit what it is without it);
+    // clusters drawn for the fill-in alone keep none.
+    std::array<uint64_t, kMaxLightGroups + 1> seen{};
+    size_t distinct = 0;
+    uint64_t lit_union = 0;
+    for (uint32_t c : order) {
+        const uint64_t m = masks[c];
+        if (m == 0)
+            continue;
+        lit_union |= m;
+        if (distinct < seen.size() &&
+            std::find(seen.begin(), seen.begin() + std::ptrdiff_t(distinct), m) ==
+                seen.begin() + std::ptrdiff_t(distinct))
+            seen[distinct++] = m;
     }
-    for (uint32_t c : order)
-        if (distinct[fills[c] != 0] > kMaxLightGroups)
-            masks[c] = union_mask[fills[c] != 0];
+    if (distinct > kMaxLightGroups) {
+        for (uint32_t c : order)
+            if (masks[c] != 0)
+                masks[c] = lit_union;
+        std::stable_sort(order.begin(), order.end(),
+                         [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
+    }
     const uint32_t lit_first = written;
     uint32_t filled = 0;
     for (uint32_t c : order) {

@@ -192,7 +192,7 @@ public:
         double warp_depth_m = 0;
     };
     // A rendered layer's readback as the wire's pixel bytes over the whole image: the plan's
-    // rectangle from the target, 0 elsewhere (nothing was drawn or read back there).
+    // parts from the target, 0 elsewhere (nothing was drawn or read back there).
     // `view`: of a target of several views.
     static std::vector<uint8_t> layer_bytes(const gpu::RenderTarget& target, const LayerPlan& plan,
                                             uint32_t view = 0);

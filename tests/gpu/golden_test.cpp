@@ -300,22 +300,20 @@ protected:
         auto plans = renderer.render_layers(std::span(&req, 1));
         if (!plans.ok())
             throw std::runtime_error(plans.error().message);
-        // As the wire carries it: the rendered rectangle, black elsewhere; sRGB8 as its codes.
-        const render::PixelRect rect = (*plans)[0].rect;
+        // As the wire carries it: the rendered rectangle's parts, black elsewhere; sRGB8 as its
+        // codes.
         Rendered out{ImageRgba32f::zeros(k.width, k.height), {}, false};
-        const uint8_t* data = t->readback_data();
-        for (uint32_t y = rect.y0; y < rect.y1; ++y)
-            for (uint32_t x = rect.x0; x < rect.x1; ++x)
-                for (size_t c = 0; c < 4; ++c) {
-                    const size_t i = (size_t(y) * k.width + x) * 4 + c;
-                    if (enc == render::LayerEncoding::kSrgb8) {
-                        out.image.pixels[i] = float(data[i]);
-                    } else {
-                        uint16_t h;
-                        std::memcpy(&h, data + 2 * i, 2);
-                        out.image.pixels[i] = glm::unpackHalf1x16(h);
-                    }
-                }
+        const std::vector<uint8_t> bytes = render::Renderer::layer_bytes(*t, (*plans)[0]);
+        const uint8_t* data = bytes.data();
+        for (size_t i = 0; i < size_t(k.width) * k.height * 4; ++i) {
+            if (enc == render::LayerEncoding::kSrgb8) {
+                out.image.pixels[i] = float(data[i]);
+            } else {
+                uint16_t h;
+                std::memcpy(&h, data + 2 * i, 2);
+                out.image.pixels[i] = glm::unpackHalf1x16(h);
+            }
+        }
         return out;
     }
 };

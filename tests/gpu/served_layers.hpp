@@ -31,13 +31,14 @@ inline std::string describe(const Served& how) {
            std::to_string(int(how.format)) + (how.calibrated ? ", calibrated" : "");
 }
 
-// The four layers (two poses, both eyes) a headset of `k` receives from a loopback server made
-// with `info` (plus the calibration `how` asks for); `read_back`: the stats' bytes the
-// encoders read of the layers' pixels; `one_pass`: the stats' frames whose eyes were rendered in
-// one multiview pass.
+// The layers (per pose of `azimuths`, both eyes; four by default) a headset of `k` receives from a
+// loopback server made with `info` (plus the calibration `how` asks for); `read_back`: the stats'
+// bytes the encoders read of the layers' pixels; `one_pass`: the stats' frames whose eyes were
+// rendered in one multiview pass.
 inline std::vector<std::vector<uint8_t>> served_layers(
     gpu::Device& device, const scene::Scene& s, stream::LoopbackCreateInfo info, const Served& how,
-    const scene::Intrinsics& k, double* read_back = nullptr, uint64_t* one_pass = nullptr) {
+    const scene::Intrinsics& k, double* read_back = nullptr, uint64_t* one_pass = nullptr,
+    std::vector<double> azimuths = {-20.0, 15.0}) {
     namespace proto = hs::protocol;
     if (how.calibrated)
         info.calibration =
@@ -58,7 +59,7 @@ inline std::vector<std::vector<uint8_t>> served_layers(
     d.encoding = how.encoding;
     EXPECT_TRUE(c->send(d));
     std::vector<std::vector<uint8_t>> layers;
-    for (const double azimuth : {-20.0, 15.0}) {
+    for (const double azimuth : azimuths) {
         const auto head = scene::viewing_pose(s.viewing, azimuth, 1.10).value();
         EXPECT_TRUE(c->send(proto::Pose{
             1,

@@ -55,11 +55,12 @@ std::vector<uint8_t> encode(const gpu::RenderTarget& t, const Plan& p, render::L
                 t.packed_tiles(), t.width(), t.height(), bpp, codec, scratch, kTile,
                 proto::kDefaultLayerQuality, proto::lossy::Huffman::kStandard);
         } else {
-            const proto::TileRegion region{p.rect.x0 / kTile, p.rect.y0 / kTile,
-                                           (p.rect.x1 + kTile - 1) / kTile,
-                                           (p.rect.y1 + kTile - 1) / kTile};
+            std::vector<proto::TileRegion> regions;
+            for (const render::PixelRect& r : p.parts.span())
+                regions.push_back({r.x0 / kTile, r.y0 / kTile, (r.x1 + kTile - 1) / kTile,
+                                   (r.y1 + kTile - 1) / kTile});
             proto::encode_tiles_into(out, t.readback_data(), size_t(t.width()) * bpp, t.width(),
-                                     t.height(), bpp, codec, region, scratch, kTile,
+                                     t.height(), bpp, codec, regions, scratch, kTile,
                                      proto::kDefaultLayerQuality, proto::lossy::Huffman::kStandard);
         }
         return out;
@@ -69,6 +70,10 @@ std::vector<uint8_t> encode(const gpu::RenderTarget& t, const Plan& p, render::L
     px.height = t.height();
     px.format = wire(e);
     px.x0 = p.rect.x0, px.y0 = p.rect.y0, px.x1 = p.rect.x1, px.y1 = p.rect.y1;
+    px.part_count = p.parts.count;
+    for (uint32_t i = 0; i < p.parts.count; ++i)
+        px.parts[i] = {p.parts.parts[i].x0, p.parts.parts[i].y0, p.parts.parts[i].x1,
+                       p.parts.parts[i].y1};
     if (t.packs_tiles()) {
         px.tile_info = t.tile_info();
         px.tiles = t.packed_tiles();
@@ -129,20 +134,22 @@ std::vector<Request> with(const Eyes& e, const std::vector<gpu::RenderTarget>& t
 }
 
 // The count of the packed layer's tiles, and of the tiles the host finds lit in the
-// rectangle.
+// rectangle's parts.
 uint32_t host_lit_tiles(const gpu::RenderTarget& t, const Plan& p) {
     const size_t bpp = gpu::bytes_per_pixel(t.format());
     uint32_t lit = 0;
-    for (uint32_t by = p.rect.y0 / kTile; by * kTile < p.rect.y1; ++by)
-        for (uint32_t bx = p.rect.x0 / kTile; bx * kTile < p.rect.x1; ++bx) {
-            bool any = false;
-            for (uint32_t y = by * kTile; y < std::min(t.height(), (by + 1) * kTile) && !any; ++y)
-                for (uint32_t x = bx * kTile; x < std::min(t.width(), (bx + 1) * kTile); ++x) {
-                    const uint8_t* px = t.readback_data() + (size_t(y) * t.width() + x) * bpp;
-                    for (size_t c = 0; c < bpp; ++c) any = any || px[c] != 0;
-                }
-            lit += any;
-        }
+    for (const render::PixelRect& r : p.parts.span())
+        for (uint32_t by = r.y0 / kTile; by * kTile < r.y1; ++by)
+            for (uint32_t bx = r.x0 / kTile; bx * kTile < r.x1; ++bx) {
+                bool any = false;
+                for (uint32_t y = by * kTile; y < std::min(t.height(), (by + 1) * kTile) && !any;
+                     ++y)
+                    for (uint32_t x = bx * kTile; x < std::min(t.width(), (bx + 1) * kTile); ++x) {
+                        const uint8_t* px = t.readback_data() + (size_t(y) * t.width() + x) * bpp;
+                        for (size_t c = 0; c < bpp; ++c) any = any || px[c] != 0;
+                    }
+                lit += any;
+            }
     return lit;
 }
 

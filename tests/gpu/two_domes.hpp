@@ -8,8 +8,8 @@
 
 namespace hs::test {
 
-// Two domes as one glTF-like prop: `b` moved by `offset` from the scene's dome, with
-// `b_radius`.
+// Two domes as one glTF-like prop: the scene's dome moved by `a_offset`, and one moved by
+// `b_offset` with radius `b_radius`.
 inline scene::Scene domes(glm::dvec3 a_offset, glm::dvec3 b_offset, double b_radius) {
     scene::Scene s = scene::default_scene();
     scene::Hemisphere a = s.prop.hemisphere, b = a;
@@ -36,8 +36,9 @@ inline scene::Scene two_domes() {
     return domes(glm::dvec3(0.0), glm::dvec3(0.05, 0.0, 0.25), 0.08);
 }
 
-// Two domes of the scene's size side by side, 0.4 m apart: their highlights lie far apart in
-// most views.
+// Two domes of the scene's size side by side, 0.4 m apart around the viewing orbit's target:
+// their highlights lie far apart in many views. (The projector's principal ray passes between
+// them, so a calibrated server refuses the scene.)
 inline scene::Scene domes_apart() {
     const double r = scene::default_scene().prop.hemisphere.radius;
     return domes(glm::dvec3(-0.2, 0.0, 0.0), glm::dvec3(0.2, 0.0, 0.0), r);

@@ -121,8 +121,8 @@ TEST(Tiles, SeveralRegionsReadOnlyTheirTiles) {
                     const size_t i = (size_t(y) * w + x) * bpp + c;
                     clean[i] = garbage[i];
                 }
-    for (const TileCodec codec : {TileCodec::kNone, TileCodec::kLz4, TileCodec::kZstd,
-                                  TileCodec::kJpeg}) {
+    for (const TileCodec codec :
+         {TileCodec::kNone, TileCodec::kLz4, TileCodec::kZstd, TileCodec::kJpeg}) {
         std::vector<uint8_t> a, b, scratch;
         encode_tiles_into(a, garbage.data(), size_t(w) * bpp, w, h, bpp, codec, regions, scratch,
                           ts, kDefaultLayerQuality, lossy::Huffman::kStandard);
