@@ -9,7 +9,7 @@ PACKAGES=(
   libvulkan-dev mesa-vulkan-drivers vulkan-validationlayers glslang-tools
   libglm-dev libfmt-dev nlohmann-json3-dev libtinygltf-dev libstb-dev libopenexr-dev
   clang-format libgtest-dev libbenchmark-dev libasio-dev liblz4-dev libzstd-dev libjpeg-dev libglfw3-dev libgl-dev xvfb xauth
-  libusb-1.0-0-dev usb.ids umockdev haproxy nats-server libnats-dev
+  libusb-1.0-0-dev usb.ids umockdev haproxy nats-server libnats-dev gdb
   libopencv-dev libopencv-contrib-dev
   libspdlog-dev libcpp-httplib-dev libssl-dev openssl libcli11-dev chromium chromium-driver python3-selenium
 )

@@ -20,7 +20,21 @@ show_log() {  # LOG
   at=$(grep -n -m1 -E 'ERROR: AddressSanitizer|WARNING: ThreadSanitizer|runtime error:' "$1" | cut -d: -f1 || true)
   if [[ -n "$at" ]]; then sed -n "${at},$((at + 60))p" "$1"; else tail -n 12 "$1"; fi
 }
-fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; exit 1; }
+# Where gdb is installed: the scene-bus threads of every render node still running, so that a
+# node that stopped taking the bus's values shows where its watch is.
+bus_stacks() {
+  command -v gdb > /dev/null || return 0
+  local v n p
+  for v in ${!pid_*}; do
+    n=${v#pid_}; p=${!v}
+    kill -0 "$p" 2>/dev/null || continue
+    echo "--- node $n: threads in the scene bus (gdb)"
+    timeout 30 gdb -batch -p "$p" -ex "thread apply all bt 12" 2>/dev/null \
+      | awk '/^Thread /{if (t ~ /SceneBus|kvWatcher|kvStore|js_/) printf "%s", t; t=""} {t=t $0 "\n"}
+             END{if (t ~ /SceneBus|kvWatcher|kvStore|js_/) printf "%s", t}' | head -80
+  done
+}
+fail() { echo "FAIL: $*"; for f in "$dir"/*.log; do echo "--- $f"; show_log "$f"; done; bus_stacks; exit 1; }
 command -v nats-server > /dev/null || fail "nats-server is not installed (scripts/setup.sh)"
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 # Waits for a nats-server's log to say it is ready.
