@@ -272,6 +272,8 @@ SceneBus::~SceneBus() {
     stop_ = true;
     if (thread_.joinable())
         thread_.join();
+    if (check_thread_.joinable())
+        check_thread_.join();
 }
 
 Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
@@ -594,32 +596,43 @@ void SceneBus::watch(std::function<void(const Value&)> on_scene) {
     // Made here, so that every write after watch() returns is delivered after the latest one.
     kvWatcher* first = make_watcher(s_->kv);
     thread_ = std::thread([this, first] { watch_loop(first); });
+    check_thread_ = std::thread([this] { check_loop(); });
+}
+
+void SceneBus::deliver(const Value& v) {
+    std::lock_guard lock(deliver_mutex_);
+    on_scene_(v);
+}
+
+void SceneBus::check_loop() {
+    // Every 2 s the key is read (check_bus): a watch behind it twice in a row is made again (it
+    // can stall without an error when its consumer lived on a server that died, or the bus was
+    // frozen), a bus found empty or behind the held version is refilled, and values the watch
+    // has not delivered are read directly.
+    int behind = 0;
+    while (!stop_) {
+        const auto next = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+        while (!stop_ && std::chrono::steady_clock::now() < next)
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        if (!stop_ && check_bus(behind)) {
+            behind = 0;
+            remake_ = true;
+        }
+    }
 }
 
 void SceneBus::watch_loop(void* first) {
     kvWatcher* w = static_cast<kvWatcher*>(first);
-    // Every 2 s the key is read (check_bus): a watch behind it twice in a row is made again (it
-    // can stall without an error when its consumer lived on a server that died, or the bus was
-    // frozen), and a bus found empty or behind the held version is refilled.
-    auto next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-    int behind = 0;
     // After a reconnect: when the watch is made again (never: not pending), and the latest
     // that may be.
     constexpr auto never = std::chrono::steady_clock::time_point::max();
     auto remake_at = never, remake_by = never;
-    auto stalled = [&] {
-        if (std::chrono::steady_clock::now() < next_check)
-            return false;
-        next_check = std::chrono::steady_clock::now() + std::chrono::seconds(2);
-        return check_bus(behind);
-    };
     while (!stop_) {
         if (!w)
             w = make_watcher(s_->kv);
         if (!w) {
             // No watch (the bucket may be gone with a bus that restarted empty): the check
-            // still runs, and refills it.
-            (void)stalled();
+            // still runs on its own thread, and refills it.
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             continue;
         }
@@ -638,7 +651,8 @@ void SceneBus::watch_loop(void* first) {
                 auto v = check(kvEntry_Revision(e), kvEntry_Created(e),
                                std::string_view(static_cast<const char*>(kvEntry_Value(e)),
                                                 size_t(kvEntry_ValueLen(e))));
-                watched_ = std::max(watched_, kvEntry_Revision(e));
+                if (kvEntry_Revision(e) > watched_)  // this thread alone writes it
+                    watched_ = kvEntry_Revision(e);
                 kvEntry_Destroy(e);
                 if (v) {
                     if (newest)
@@ -647,12 +661,12 @@ void SceneBus::watch_loop(void* first) {
                 }
             }
             if (newest)
-                on_scene_(*newest);
+                deliver(*newest);
             // After a reconnect the watch is made again, but only once the client has had a
             // second to reset its own consumers (destroying a watcher while the library resets
             // it is a race inside libnats): a second after the latest reconnect, and at most
             // three after the first. Until then nothing destroys the watcher, not an error
-            // from it nor a stall; the old watch is read meanwhile.
+            // from it nor the check's request; the old watch is read meanwhile.
             const auto now = std::chrono::steady_clock::now();
             if (s_->reconnected.exchange(false)) {
                 if (remake_at == never)
@@ -665,8 +679,7 @@ void SceneBus::watch_loop(void* first) {
                     std::this_thread::sleep_for(std::chrono::milliseconds(50));
                 continue;
             }
-            if (remake_at != never || failed || stalled()) {
-                behind = 0;
+            if (remake_at != never || failed || remake_.exchange(false)) {
                 remake_at = never;
                 break;  // made again
             }
@@ -770,7 +783,7 @@ void SceneBus::catch_up(uint64_t revision) {
         ++counters_.caught_up;
         log::info("scene bus: the watch is behind the bus; version {} read directly",
                   newest->revision);
-        on_scene_(*newest);
+        deliver(*newest);
     }
 }
 

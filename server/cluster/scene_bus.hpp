@@ -183,6 +183,8 @@ private:
     // The 2-s check of the watch: true when the watch must be made again (it is behind the
     // bus, or the bus was refilled).
     bool check_bus(int& behind);
+    void check_loop();
+    void deliver(const Value& v);
     // Reads the values stored after the newest one seen, up to `revision` (the newest
     // kCatchUpMax at most), and delivers the newest signed one, as the watch would.
     void catch_up(uint64_t revision);
@@ -198,11 +200,16 @@ private:
     // The newest revision seen of any value, and of a signed one (writes go on the former when
     // only unsigned values came after the latter).
     std::atomic<uint64_t> tail_{0}, signed_tail_{0};
-    // The newest revision the watch itself delivered (its thread only): a watch behind the
-    // bus twice in a row is made again.
-    uint64_t watched_ = 0;
+    // The newest revision the watch itself delivered (written by its thread): a watch behind
+    // the bus twice in a row is made again.
+    std::atomic<uint64_t> watched_{0};
     std::atomic<bool> stop_{false};
-    std::thread thread_;
+    // The watch's thread, and the 2-s check's (check_loop), apart so that a watch blocked
+    // inside the client cannot keep the node behind the bus: the check still reads the key,
+    // catches up and refills. It asks the watch to be made again through `remake_`.
+    std::thread thread_, check_thread_;
+    std::atomic<bool> remake_{false};
+    std::mutex deliver_mutex_;  // one scene delivered at a time (on_scene_)
     mutable std::mutex held_mutex_;
     Value held_;
 };

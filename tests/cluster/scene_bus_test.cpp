@@ -69,15 +69,17 @@ TEST(SceneBus, CreateOnceThenCompareAndSet) {
 }
 
 TEST(SceneBus, WatchDeliversTheLatestThenEachNewOneInOrder) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<std::pair<uint64_t, std::string>> seen;
     auto w = bus("watch");
     ASSERT_TRUE(w);
     const BusWrite r1 = w->write(0, "one");
     ASSERT_EQ(r1.error, BusError::kNone) << r1.message;
     const BusWrite r2 = w->write(r1.revision, "two");
     ASSERT_EQ(r2.error, BusError::kNone) << r2.message;
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<std::pair<uint64_t, std::string>> seen;
     w->watch([&](const SceneBus::Value& v) {
         std::lock_guard lock(m);
         seen.emplace_back(v.revision, v.json);
@@ -178,14 +180,16 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
 // A writer without the admin token (here: signing with another) changes nothing: its values are
 // not delivered, are counted, and a node's next write goes over them.
 TEST(SceneBus, AValueWithoutTheAdminCredentialIsIgnored) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
     auto node = bus("intruder");
     auto intruder = bus("intruder", "x", "not-the-admin-token");
     ASSERT_TRUE(node && intruder);
     const BusWrite r1 = node->write(0, "one");
     ASSERT_EQ(r1.error, BusError::kNone) << r1.message;
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
     node->watch([&](const SceneBus::Value& v) {
         std::lock_guard lock(m);
         seen.push_back(v);
@@ -289,14 +293,16 @@ TEST(SceneBus, OfTwoCopiesTheFirstStoredIsTheWrite) {
 
 // A burst is coalesced: a slow consumer gets the newest of it, not each one.
 TEST(SceneBus, ABurstIsCoalescedToItsNewest) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<uint64_t> seen;
     auto node = bus("burst");
     auto writer = bus("burst", "w");
     ASSERT_TRUE(node && writer);
     BusWrite last = writer->write(0, "v0");
     ASSERT_EQ(last.error, BusError::kNone) << last.message;
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<uint64_t> seen;
     node->watch([&](const SceneBus::Value& v) {
         std::this_thread::sleep_for(std::chrono::milliseconds(300));  // a slow scene build
         std::lock_guard lock(m);
@@ -358,6 +364,11 @@ TEST(SceneBus, AnUnreachableBusIsNamed) {
 // the newer's revision: the node that holds the newer version finds that refill on the key,
 // puts its own back over it (as the version it holds), and never applies the older scene.
 TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
     auto a = bus("stale");
     ASSERT_TRUE(a);
     const BusWrite one = a->write(0, "one");
@@ -365,9 +376,6 @@ TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
     const BusWrite two = a->write(one.revision, "two");
     ASSERT_EQ(two.error, BusError::kNone) << two.message;
     a->hold({two.revision, one.revision, two.deadline_ms, "two"});
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
     a->watch([&](const SceneBus::Value& v) {
         std::lock_guard lock(m);
         seen.push_back(v);
