@@ -599,6 +599,13 @@ void SceneBus::watch(std::function<void(const Value&)> on_scene) {
     check_thread_ = std::thread([this] { check_loop(); });
 }
 
+namespace {
+void raise_to(std::atomic<uint64_t>& to, uint64_t revision) {
+    for (uint64_t t = to.load(); revision > t && !to.compare_exchange_weak(t, revision);) {
+    }
+}
+}  // namespace
+
 void SceneBus::deliver(const Value& v) {
     std::lock_guard lock(deliver_mutex_);
     on_scene_(v);
@@ -610,10 +617,15 @@ void SceneBus::check_loop() {
     // frozen), a bus found empty or behind the held version is refilled, and values the watch
     // has not delivered are read directly.
     int behind = 0;
+    uint64_t epoch = watch_epoch_.load();
     while (!stop_) {
         const auto next = std::chrono::steady_clock::now() + std::chrono::seconds(2);
         while (!stop_ && std::chrono::steady_clock::now() < next)
             std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        if (const uint64_t e = watch_epoch_.load(); e != epoch) {
+            epoch = e;  // a watch made since: it is counted behind from now
+            behind = 0;
+        }
         if (!stop_ && check_bus(behind)) {
             behind = 0;
             remake_ = true;
@@ -628,8 +640,12 @@ void SceneBus::watch_loop(void* first) {
     constexpr auto never = std::chrono::steady_clock::time_point::max();
     auto remake_at = never, remake_by = never;
     while (!stop_) {
-        if (!w)
+        if (!w) {
+            remake_ = false;  // a request made before this watcher is answered by it
             w = make_watcher(s_->kv);
+            if (w)
+                ++watch_epoch_;
+        }
         if (!w) {
             // No watch (the bucket may be gone with a bus that restarted empty): the check
             // still runs on its own thread, and refills it.
@@ -641,6 +657,7 @@ void SceneBus::watch_loop(void* first) {
             // delivered: a flood costs one check per value and one scene at most.
             std::optional<Value> newest;
             natsStatus s = NATS_OK;
+            uint64_t read = 0;  // the newest revision of the burst
             for (int taken = 0; taken < 4096; ++taken) {
                 kvEntry* e = nullptr;
                 s = kvWatcher_Next(&e, w, taken == 0 ? 200 : 1);
@@ -653,6 +670,7 @@ void SceneBus::watch_loop(void* first) {
                                                 size_t(kvEntry_ValueLen(e))));
                 if (kvEntry_Revision(e) > watched_)  // this thread alone writes it
                     watched_ = kvEntry_Revision(e);
+                read = std::max(read, kvEntry_Revision(e));
                 kvEntry_Destroy(e);
                 if (v) {
                     if (newest)
@@ -662,6 +680,7 @@ void SceneBus::watch_loop(void* first) {
             }
             if (newest)
                 deliver(*newest);
+            raise_to(delivered_, read);
             // After a reconnect the watch is made again, but only once the client has had a
             // second to reset its own consumers (destroying a watcher while the library resets
             // it is a race inside libnats): a second after the latest reconnect, and at most
@@ -756,17 +775,22 @@ void SceneBus::keep_newest(std::optional<Value>& newest, Value v) {
 }
 
 void SceneBus::catch_up(uint64_t revision) {
-    const uint64_t tail = tail_.load();
+    // From the newest delivered, not the newest seen: the watch may have read values it has
+    // not delivered yet, and the newest write among them and the later ones goes first.
     const uint64_t from =
-        std::max(tail + 1, revision > kCatchUpMax ? revision - kCatchUpMax + 1 : 1);
+        std::max(delivered_.load() + 1, revision > kCatchUpMax ? revision - kCatchUpMax + 1 : 1);
     std::optional<Value> newest;
+    uint64_t through = 0;  // the newest revision read
     for (uint64_t r = from; r <= revision && !stop_; ++r) {
         kvEntry* e = nullptr;
         const natsStatus got = kvStore_GetRevision(&e, s_->kv, kKey, r);
-        if (got == NATS_NOT_FOUND)
+        if (got == NATS_NOT_FOUND) {
+            through = r;
             continue;  // another key's, deleted, or purged
+        }
         if (got != NATS_OK)
             break;  // the bus is slow or away: the next check tries again (no 256 timeouts)
+        through = r;
         if (kvEntry_Operation(e) == kvOp_Put) {
             // Not counted here: a watch that runs again counts what it sees (a remade one sees
             // only the newest value, so ignored values of the gap may go uncounted).
@@ -785,6 +809,7 @@ void SceneBus::catch_up(uint64_t revision) {
                   newest->revision);
         deliver(*newest);
     }
+    raise_to(delivered_, through);
 }
 
 bool SceneBus::refill() {
@@ -870,7 +895,8 @@ bool SceneBus::refill() {
             "wrote meanwhile)",
             rev, plan->revision);
     signed_tail_ = rev;  // before tail_ (see check())
-    tail_ = rev;
+    tail_ = rev;  // lowered where the bus went back (a concurrent raise by the watch recovers)
+    delivered_ = rev;
     ++counters_.refills;
     log::warn(
         "scene bus: the bus came back {} (revision {}, this node holds version {}): put "

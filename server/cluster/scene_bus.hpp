@@ -13,7 +13,8 @@
 // signed value put again is refused). A value the bus stored after its deadline is taken by no
 // node, and a write not confirmed in time is reported applied only if the bus stored it in time: a
 // refused write never lands later. A burst of values is coalesced to its newest signed one.
-// Thread: any; the watch callback runs on the bus's own thread.
+// Thread: any; the watch callback runs on one of the bus's two threads (the watch's, and the
+// 2-s check's), one call at a time.
 #pragma once
 
 #include <atomic>
@@ -111,14 +112,17 @@ public:
     // none yet), or if only unsigned values came after it.
     BusWrite write(uint64_t applied, const std::string& json);
     // Starts delivering the signed revisions of the scene (the latest when this is called
-    // first, then each new one; of a burst, only the newest) to `on_scene` on the bus's thread,
-    // until destruction; the watch is made again after an outage.
+    // first, then each new one; of a burst, only the newest) to `on_scene`, one call at a time
+    // from the bus's threads, until destruction; the watch is made again after an outage. A
+    // revision may come twice (from the watch and from the check's read of the key): the
+    // caller applies only what is newer than what it applied.
     void watch(std::function<void(const Value& value)> on_scene);
     // The value this node serves (it started on it, or applied it from the watch): what it puts
     // back on a bus that comes back empty or behind it (its revisions started again, because
-    // its servers restarted without their stores, or the key was deleted). Every 2 s the watch
-    // reads the key; a bus behind the held version gets its newest scene again, at a revision
-    // no node has applied yet, so every node converges on it and nobody's version goes back.
+    // its servers restarted without their stores, or the key was deleted). Every 2 s a thread
+    // of its own reads the key; a bus behind the held version gets its newest scene again, at a
+    // revision no node has applied yet, so every node converges on it and nobody's version goes
+    // back.
     void hold(const Value& value);
     Value held() const;
     // The rule (unit-tested): nullopt while the bus holds `held` or a later revision. Else the
@@ -209,7 +213,12 @@ private:
     // catches up and refills. It asks the watch to be made again through `remake_`.
     std::thread thread_, check_thread_;
     std::atomic<bool> remake_{false};
-    std::mutex deliver_mutex_;  // one scene delivered at a time (on_scene_)
+    // The newest revision delivered, or read and passed over in a delivered burst, by either
+    // thread: the check's catch-up reads from there, so that a value the watch has read but
+    // not yet delivered is weighed with the newer ones (a copy put again must not go first).
+    std::atomic<uint64_t> delivered_{0};
+    std::atomic<uint64_t> watch_epoch_{0};  // watchers made: the check restarts its count
+    std::mutex deliver_mutex_;              // one scene delivered at a time (on_scene_)
     mutable std::mutex held_mutex_;
     Value held_;
 };
