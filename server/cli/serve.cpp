@@ -888,8 +888,10 @@ int run_serve(const std::vector<std::string>& args) {
     if (setup.admin) {
         auto a = start_admin(*setup.admin, info.token, info.tls_cert_file, info.tls_key_file,
                              *server.value(), bus.get());
-        if (!a)
+        if (!a) {
+            bus.reset();  // its threads apply scenes to the server: they stop before it goes
             return start_error(a.error().message);
+        }
         admin_endpoint = std::move(a).value();
     }
     return serve_until_stopped(*server.value(), std::move(bus), std::move(admin_endpoint),
