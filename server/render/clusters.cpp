@@ -474,13 +474,18 @@ PixelRect unite(const PixelRect& a, const PixelRect& b) {
     return {std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1)};
 }
 
-namespace {
-bool rects_overlap(const PixelRect& a, const PixelRect& b) {
+bool overlaps(const PixelRect& a, const PixelRect& b) {
     return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
 }
+
+namespace {
 // The pixels joining a and b adds to theirs (they are disjoint).
 uint64_t join_cost(const PixelRect& a, const PixelRect& b) {
     return unite(a, b).area() - a.area() - b.area();
+}
+// Whether joining them costs no pixel: they overlap, or their union is just the two.
+bool join_free(const PixelRect& a, const PixelRect& b) {
+    return overlaps(a, b) || join_cost(a, b) == 0;
 }
 }  // namespace
 
@@ -516,7 +521,7 @@ void PartsBuilder::settle() {
         joined = false;
         for (size_t i = 0; i < parts_.size() && !joined; ++i)
             for (size_t j = i + 1; j < parts_.size() && !joined; ++j)
-                if (rects_overlap(parts_[i], parts_[j]) || join_cost(parts_[i], parts_[j]) == 0) {
+                if (join_free(parts_[i], parts_[j])) {
                     join(i, j);
                     joined = true;
                 }
@@ -527,7 +532,7 @@ void PartsBuilder::add(const PixelRect& r) {
     if (r.empty())
         return;
     for (PixelRect& p : parts_)
-        if (rects_overlap(p, r) || unite(p, r).area() <= p.area() + r.area()) {
+        if (join_free(p, r)) {
             p = unite(p, r);
             return;
         }

@@ -153,6 +153,8 @@ struct PixelRect {
 };
 // The smallest rect containing both.
 PixelRect unite(const PixelRect& a, const PixelRect& b);
+// Whether both are non-empty and share a pixel.
+bool overlaps(const PixelRect& a, const PixelRect& b);
 
 // A layer's rectangle as up to kMaxLayerParts disjoint rectangles on the tile grid, where its
 // lit clusters lie in groups far apart (several highlights): only those are copied and read.

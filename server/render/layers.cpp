@@ -17,9 +17,6 @@
 namespace hs::render {
 
 namespace {
-bool overlaps(const PixelRect& a, const PixelRect& b) {
-    return !a.empty() && !b.empty() && a.x0 < b.x1 && b.x0 < a.x1 && a.y0 < b.y1 && b.y0 < a.y1;
-}
 constexpr size_t kMaxLightGroups = 8;
 }  // namespace
 
