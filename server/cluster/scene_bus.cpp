@@ -606,6 +606,12 @@ void raise_to(std::atomic<uint64_t>& to, uint64_t revision) {
 }
 }  // namespace
 
+void SceneBus::pause_watch(bool paused) {
+    watch_paused_ = paused;
+    while (paused && !watch_parked_ && !stop_)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+}
+
 void SceneBus::deliver(const Value& v) {
     std::lock_guard lock(deliver_mutex_);
     on_scene_(v);
@@ -615,7 +621,10 @@ void SceneBus::check_loop() {
     // Every 2 s the key is read (check_bus): a watch behind it twice in a row is made again (it
     // can stall without an error when its consumer lived on a server that died, or the bus was
     // frozen), a bus found empty or behind the held version is refilled, and values the watch
-    // has not delivered are read directly.
+    // has not delivered are read directly. It runs in the seconds after a reconnect too, while
+    // the watch waits to be made again: a bus that came back without its store gets the held
+    // scene back at once, and a read that times out while the bus elects its leaders refills
+    // nothing (refill() takes only a key the bus says is missing for an empty one).
     int behind = 0;
     uint64_t epoch = watch_epoch_.load();
     while (!stop_) {
@@ -653,6 +662,11 @@ void SceneBus::watch_loop(void* first) {
             continue;
         }
         while (!stop_) {
+            while (watch_paused_ && !stop_) {
+                watch_parked_ = true;
+                std::this_thread::sleep_for(std::chrono::milliseconds(10));
+            }
+            watch_parked_ = false;
             // A burst is taken whole (bounded), and only its newest signed value is
             // delivered: a flood costs one check per value and one scene at most.
             std::optional<Value> newest;

@@ -136,6 +136,12 @@ public:
     static std::optional<Refill> plan_refill(const Value& held, uint64_t bus_revision,
                                              uint64_t last, const std::optional<Value>& bus_newest);
 
+    // Stops the watch thread reading, as one blocked inside the NATS client would be, and
+    // returns once it has stopped (true; after watch()); or lets it go on (false). The check
+    // must then keep the node up to the bus on its own. For the scene-bus tests; nothing else
+    // calls it.
+    void pause_watch(bool paused);
+
     // Publishes `json` on node.<id> (best effort).
     void heartbeat(const std::string& json);
     bool connected() const;
@@ -213,6 +219,7 @@ private:
     // catches up and refills. It asks the watch to be made again through `remake_`.
     std::thread thread_, check_thread_;
     std::atomic<bool> remake_{false};
+    std::atomic<bool> watch_paused_{false}, watch_parked_{false};  // pause_watch()
     // The newest revision delivered, or read and passed over in a delivered burst, by either
     // thread: the check's catch-up reads from there, so that a value the watch has read but
     // not yet delivered is weighed with the newer ones (a copy put again must not go first).

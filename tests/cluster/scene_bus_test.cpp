@@ -223,7 +223,8 @@ TEST(SceneBus, AValueWithoutTheAdminCredentialIsIgnored) {
 
 // Puts `value` on the bucket's key as any NATS client can (plain protocol, no JetStream API):
 // what an intruder, or a copy put again, looks like to the nodes. True once the server answered.
-bool raw_put(const std::string& bucket, const std::string& value) {
+// `del`: a delete marker (the KV-Operation header) instead of a value.
+bool raw_put(const std::string& bucket, const std::string& value, bool del = false) {
     const char* url = std::getenv("HYSAR_TEST_NATS_URL");
     if (!url)
         return false;
@@ -236,8 +237,14 @@ bool raw_put(const std::string& bucket, const std::string& value) {
     a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
     if (fd < 0 || ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
         return false;
-    const std::string msg = "CONNECT {\"verbose\":false}\r\nPUB $KV." + bucket + ".scene " +
-                            std::to_string(value.size()) + "\r\n" + value + "\r\nPING\r\n";
+    const std::string subject = "$KV." + bucket + ".scene ";
+    const std::string header = "NATS/1.0\r\nKV-Operation: DEL\r\n\r\n";
+    const std::string msg =
+        "CONNECT {\"verbose\":false,\"headers\":true}\r\n" +
+        (del ? "HPUB " + subject + std::to_string(header.size()) + " " +
+                   std::to_string(header.size()) + "\r\n" + header
+             : "PUB " + subject + std::to_string(value.size()) + "\r\n" + value) +
+        "\r\nPING\r\n";
     bool ok = ::send(fd, msg.data(), msg.size(), 0) == ssize_t(msg.size());
     std::string in;
     char buf[512];
@@ -410,6 +417,65 @@ TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
     ASSERT_TRUE(values.ok()) << values.error().message;
     ASSERT_FALSE(values->empty());
     EXPECT_EQ(values->front().json, "two");
+}
+
+// A watch blocked inside the NATS client (paused here) does not keep a node behind the bus: the
+// 2-s check on its own thread reads the key and delivers the newest write, and puts the held
+// scene back on a key deleted meanwhile; the watch, let go, goes on from there.
+TEST(SceneBus, TheCheckAloneKeepsANodeUpToTheBus) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    auto a = bus("paused");
+    auto writer = bus("paused", "w");
+    ASSERT_TRUE(a && writer);
+    const BusWrite one = a->write(0, "one");
+    ASSERT_EQ(one.error, BusError::kNone) << one.message;
+    a->hold({one.revision, 0, one.deadline_ms, "one"});
+    SceneBus* node = a.get();
+    a->watch([&, node](const SceneBus::Value& v) {
+        node->hold(v);  // as serve holds what it applies
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    const auto delivered = [&](const std::string& json, int seconds) {
+        std::unique_lock lock(m);
+        return cv.wait_for(lock, std::chrono::seconds(seconds),
+                           [&] { return !seen.empty() && seen.back().json == json; });
+    };
+    ASSERT_TRUE(delivered("one", 10)) << "the watch did not deliver the first scene";
+    a->pause_watch(true);
+    const BusWrite two = writer->write(one.revision, "two");
+    ASSERT_EQ(two.error, BusError::kNone) << two.message;
+    const BusWrite three = writer->write(two.revision, "three");
+    ASSERT_EQ(three.error, BusError::kNone) << three.message;
+    ASSERT_TRUE(delivered("three", 15)) << "the check did not bring the node to version "
+                                        << three.revision << " while its watch was stopped";
+    EXPECT_GE(a->counters().caught_up.load(), 1u);
+    // The key deleted while the watch is still stopped: the check puts version three back.
+    ASSERT_TRUE(raw_put("paused", "", true));
+    uint64_t refilled = 0;
+    for (int i = 0; i < 150 && refilled == 0; ++i) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        auto values = writer->signed_values();
+        ASSERT_TRUE(values.ok()) << values.error().message;
+        if (!values->empty() && values->front().refill)
+            refilled = values->front().revision;
+    }
+    ASSERT_GT(refilled, three.revision) << "the check did not refill the deleted key";
+    EXPECT_EQ(a->counters().refills.load(), 1u);
+    EXPECT_EQ(writer->signed_values()->front().json, "three");
+    // Let go, the watch delivers what comes next.
+    a->pause_watch(false);
+    const BusWrite four = writer->write(refilled, "four");
+    ASSERT_EQ(four.error, BusError::kNone) << four.message;
+    ASSERT_TRUE(delivered("four", 15))
+        << "the watch, let go, did not deliver version " << four.revision;
+    std::lock_guard lock(m);
+    for (size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i].revision, seen[i - 1].revision);
 }
 
 // A bus found empty or behind the held version gets the newest scene back, at a revision no
