@@ -3,6 +3,7 @@
 
 #include <atomic>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
@@ -11,6 +12,7 @@
 #include <random>
 #include <thread>
 #include <tuple>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -546,6 +548,11 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                                                     const stream::ServerCreateInfo& info, bool& own,
                                                     cluster::SceneBus::Value& held) {
     own = false;
+    // A key holding only unsigned values (a flood pushed every signed one out of its history)
+    // is put right by a running node's 2-s check, which puts its scene back on top: waited for
+    // (three checks), so that this node joins the cluster's scene instead of putting its own.
+    const auto unsigned_wait_end = std::chrono::steady_clock::now() + std::chrono::seconds(6);
+    bool said = false;
     for (int attempt = 0; attempt < 3; ++attempt) {
         // A bus that just lost a server may take a few seconds to answer (a new leader).
         auto listed = bus.signed_values();
@@ -570,6 +577,16 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
             ++bus.counters().invalid_values;
             log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
                       v.revision, parsed.error().message);
+        }
+        if (values.empty() && bus.newest_seen() > 0 &&
+            std::chrono::steady_clock::now() < unsigned_wait_end) {
+            if (!std::exchange(said, true))
+                log::info(
+                    "scene bus: the key holds only values not signed with the admin credential; "
+                    "waiting up to 6 s for a running node to put the cluster's scene back");
+            std::this_thread::sleep_for(std::chrono::milliseconds(250));
+            --attempt;
+            continue;
         }
         // None to serve: this node's own scene, if no other node puts one first.
         const auto w = bus.write(0, s.scene.text());

@@ -160,15 +160,20 @@ Result<SceneBus::Signed> SceneBus::verify(const std::string& admin_token, std::s
 
 namespace {
 
-// Whether the key's value `e` is another node's refill of a version older than `held`
-// (SceneBus::stale_refill), signed with the admin credential.
-bool stale_refill_entry(kvEntry* e, const std::string& admin_token, uint64_t held) {
+// What the key's current value `e` is to a node that holds version `held` (0: none yet): a value
+// it may leave there, another node's refill of an older version (SceneBus::stale_refill), or a
+// value not signed with the admin credential (put over only where no signed value is left in
+// the key's history).
+enum class Top { kSigned, kStaleRefill, kUnsigned };
+Top top_of(kvEntry* e, const std::string& admin_token, uint64_t held) {
     if (held == 0 || kvEntry_Operation(e) != kvOp_Put)
-        return false;
+        return Top::kSigned;
     auto v = SceneBus::verify(
         admin_token,
         std::string_view(static_cast<const char*>(kvEntry_Value(e)), size_t(kvEntry_ValueLen(e))));
-    return v && v->refill && v->of < held;
+    if (!v)
+        return Top::kUnsigned;
+    return v->refill && v->of < held ? Top::kStaleRefill : Top::kSigned;
 }
 
 }  // namespace
@@ -760,10 +765,18 @@ bool SceneBus::check_bus(int& behind) {
     const natsStatus s = kvStore_Get(&e, s_->kv, kKey);
     if (s == NATS_OK) {
         const uint64_t rev = kvEntry_Revision(e);
-        const bool stale = stale_refill_entry(e, s_->options.admin_token, content);
+        const Top top = top_of(e, s_->options.admin_token, content);
         kvEntry_Destroy(e);
-        if (rev < held || stale)
+        if (rev < held || top == Top::kStaleRefill)
             return refill();
+        // Unsigned values that pushed every signed one out of the key's history (a flood of
+        // more than it keeps): a node started now would find no scene to serve and put its own,
+        // so the held one goes back on top (relabelled by every node, rebuilt by none).
+        if (top == Top::kUnsigned) {
+            auto listed = read_signed(false);
+            if (listed && listed->empty())
+                return refill();
+        }
         // Values stored since the last one seen are read one by one and the newest delivered
         // now: a watch whose consumer lived on a server that died is only made again once the
         // bus's servers elect a new JetStream leader (seconds to tens of seconds on a loaded
@@ -853,7 +866,7 @@ bool SceneBus::refill() {
     // What the bus holds now: its current revision (0: none) and its newest signed write.
     uint64_t bus_revision = 0;
     kvEntry* e = nullptr;
-    bool stale = false;
+    Top top = Top::kSigned;
     // A read that fails says nothing about the key: only NOT_FOUND is an empty one. Taking a
     // timed-out read (a slow or frozen leader, an election) for an empty key would purge the
     // stream and put an older held version back over a newer acknowledged write.
@@ -862,19 +875,21 @@ bool SceneBus::refill() {
         return made;
     if (got == NATS_OK) {
         bus_revision = kvEntry_Revision(e);
-        stale = stale_refill_entry(e, s_->options.admin_token, content_version(held));
+        top = top_of(e, s_->options.admin_token, content_version(held));
         kvEntry_Destroy(e);
     }
-    // The key has a value and the stream (its leader) is at or past the held version: the read
-    // that looked behind came from a follower of a replicated bucket that lags. Not behind,
-    // unless that value is another node's refill of an older version: then it is gone over.
-    if (stale)
-        bus_revision = 0;
-    else if (bus_revision != 0 && last >= held.revision)
-        return made;
     // Likewise the history: one that cannot be read is not one without a newer write.
     auto listed = read_signed(false);
     if (!listed)
+        return made;
+    // The key has a value and the stream (its leader) is at or past the held version: the read
+    // that looked behind came from a follower of a replicated bucket that lags. Not behind,
+    // unless that value is another node's refill of an older version, or is not signed and no
+    // signed value is left in the history: then it is gone over.
+    const bool over = top == Top::kStaleRefill || (top == Top::kUnsigned && listed->empty());
+    if (over)
+        bus_revision = 0;
+    else if (bus_revision != 0 && last >= held.revision)
         return made;
     std::optional<Value> newest;
     if (!listed->empty())
@@ -915,9 +930,10 @@ bool SceneBus::refill() {
     log::warn(
         "scene bus: the bus came back {} (revision {}, this node holds version {}): put "
         "{} back as version {}",
-        stale               ? "with an older version put back by another node"
-        : bus_revision == 0 ? "empty"
-                            : "behind",
+        top == Top::kStaleRefill ? "with an older version put back by another node"
+        : over                   ? "with no signed value left (unsigned values pushed them out)"
+        : bus_revision == 0      ? "empty"
+                                 : "behind",
         bus_revision, held.revision,
         plan->ours ? "the held scene" : fmt::format("the newer write of version {}", from.revision),
         rev);

@@ -108,6 +108,9 @@ public:
     // The signed values the bucket holds, the one to start on first (the greatest BASE, then
     // the newest); empty when it holds none. A node starts on the first that it can serve.
     Result<std::vector<Value>> signed_values();
+    // The newest revision this node has seen of any value, signed or not (0: none): after
+    // signed_values() found none, whether the key holds only values no node may take.
+    uint64_t newest_seen() const { return tail_.load(); }
     // Writes `json`, signed, if the bucket's revision is still `applied` (0: only if there is
     // none yet), or if only unsigned values came after it.
     BusWrite write(uint64_t applied, const std::string& json);
@@ -119,7 +122,8 @@ public:
     void watch(std::function<void(const Value& value)> on_scene);
     // The value this node serves (it started on it, or applied it from the watch): what it puts
     // back on a bus that comes back empty or behind it (its revisions started again, because
-    // its servers restarted without their stores, or the key was deleted). Every 2 s a thread
+    // its servers restarted without their stores, or the key was deleted), or whose key's
+    // history holds no signed value any more (unsigned values pushed them out). Every 2 s a thread
     // of its own reads the key; a bus behind the held version gets its newest scene again, at a
     // revision no node has applied yet, so every node converges on it and nobody's version goes
     // back.
