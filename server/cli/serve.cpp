@@ -1,6 +1,7 @@
 // `hysar serve`: the render server on a scene, until SIGINT or SIGTERM; SIGHUP reloads the scene.
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <chrono>
@@ -93,9 +94,9 @@ const char* kServeHelp =
     "                           a user JWT and its nkey seed); TLS to the bus with a tls://\n"
     "                           URL or --cluster-ca FILE (the bus's CA), --cluster-cert FILE\n"
     "                           --cluster-key FILE when it asks for a client certificate;\n"
-    "                           --cluster-replicas N (1): copies of the bucket a NATS cluster\n"
-    "                           keeps when this node creates it (3 on three servers; give every\n"
-    "                           server's URL, comma-separated)\n"
+    "                           --cluster-replicas N: copies of the bucket a NATS cluster\n"
+    "                           keeps when this node creates it (default 3 where --cluster\n"
+    "                           lists three servers or more, comma-separated, else 1)\n"
     "\n"
     "limits (docs/OPERATIONS.md; every flag's range: docs/LIMITS.md):\n"
     "  --max-sessions N (256)            --max-pending N (32)\n"
@@ -536,7 +537,11 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
     if (!o.tls_key.empty())
         HS_TRY(check_secret_file(o.tls_key, "--cluster-key"));
     o.tls = o.url.rfind("tls://", 0) == 0 || !o.tls_ca.empty() || !o.tls_cert.empty();
-    HS_ASSIGN_OR_RETURN(const uint64_t replicas, parse_count(f, "--cluster-replicas", 1, 1, 5));
+    // Three copies by default where the node is given three servers or more (a NATS cluster
+    // that can lose one), else one.
+    const bool three = std::count(o.url.begin(), o.url.end(), ',') >= 2;
+    HS_ASSIGN_OR_RETURN(const uint64_t replicas,
+                        parse_count(f, "--cluster-replicas", three ? 3 : 1, 1, 5));
     o.replicas = int(replicas);
     return o;
 }

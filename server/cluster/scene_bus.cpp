@@ -384,6 +384,20 @@ Result<std::unique_ptr<SceneBus>> SceneBus::connect(const Options& o) {
                           fmt::format("--cluster {}: cannot open the key-value bucket '{}' "
                                       "(is JetStream on? nats-server -js): {}",
                                       shown, o.bucket, status_text(s)));
+    // A bucket made earlier keeps its replica count: one with fewer copies than asked is
+    // named, since a write it confirms may then sit on fewer servers than the operator thinks.
+    const std::string stream = "KV_" + o.bucket;
+    jsStreamInfo* si = nullptr;
+    if (js_GetStreamInfo(&si, st->js, stream.c_str(), nullptr, nullptr) == NATS_OK && si) {
+        const int have = si->Config ? int(si->Config->Replicas) : 0;
+        jsStreamInfo_Destroy(si);
+        if (have > 0 && have < o.replicas)
+            log::warn(
+                "scene bus: the bucket '{}' exists with {} replica(s), fewer than the {} asked "
+                "(--cluster-replicas): it keeps {} (raise it with `nats stream edit {} "
+                "--replicas {}`)",
+                o.bucket, have, o.replicas, have, stream, o.replicas);
+    }
     return std::unique_ptr<SceneBus>(new SceneBus(std::move(st)));
 }
 

@@ -3,7 +3,8 @@
 # (docs/CLUSTER.md, "Three replicas"), on loopback:
 #   0. a node started while only two of the three servers are up waits for the third (the
 #      bucket's three replicas cannot be placed before) instead of exiting;
-#   1. two render nodes given every server's URL put and share version 1, then 2;
+#   1. two render nodes given every server's URL (no --cluster-replicas: three is the default
+#      there) make the bucket in three replicas, put and share version 1, then 2;
 #   2. one nats-server killed (-9): no node stops, a SceneUpdate is still confirmed (a majority
 #      of two stores it) and reaches both nodes;
 #   3. a third node started afterwards starts on that version: nothing acknowledged was lost;
@@ -36,7 +37,8 @@ leader() { grep -qh "JetStream cluster new metadata leader" "$dir"/nats-n*.log; 
 within 30 leader || fail "two nats-servers elected no JetStream leader within 30 s"
 url=$(for p in "${client_ports[@]}"; do printf 'nats://127.0.0.1:%s,' "$p"; done)
 url=${url%,}
-node_flags=(--cluster-replicas 3)
+# No --cluster-replicas: three copies are the default where three servers are listed.
+node_flags=()
 
 # 0. Node a starts on a bus of two servers: three replicas have no place yet, so it waits.
 launch_node a
@@ -51,7 +53,18 @@ echo "0. node a waited for the third nats-server and then started"
 start_node b
 push a one > "$dir/push.log" 2>&1 || fail "push through a: $(cat "$dir/push.log")"
 within 10 'same_everywhere 2 a b' || fail "version 2 not on both nodes: a: $(applied a); b: $(applied b)"
-echo "1. two nodes on a three-server bus (replicas 3): version 2 on both"
+replicas=$(python3 - "${monitor_ports[@]}" <<'PY'
+import json, sys, urllib.request
+for p in sys.argv[1:]:
+    url = f"http://127.0.0.1:{p}/jsz?accounts=true&streams=true&config=true"
+    for a in json.load(urllib.request.urlopen(url, timeout=5)).get("account_details", []):
+        for st in a.get("stream_detail", []):
+            if st.get("name") == "KV_hysar":
+                print(st.get("config", {}).get("num_replicas")); sys.exit()
+PY
+)
+[[ "$replicas" == 3 ]] || fail "the bucket has ${replicas:-no} replicas on the servers, not 3"
+echo "1. two nodes on a three-server bus (the bucket in $replicas replicas, the default for three servers): version 2 on both"
 
 # 2. The server that holds node a's watch (its consumer) killed: the nodes stay; an update is
 # confirmed by the other two and reaches a, whose watch is stalled until the servers elect a

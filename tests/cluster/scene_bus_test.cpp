@@ -419,6 +419,57 @@ TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
     EXPECT_EQ(values->front().json, "two");
 }
 
+// A signed value the bus stored after its write's deadline (the writer was told the write
+// failed: the bus was frozen, and stored it when thawed) is taken by no node, counted as late,
+// and is not a node's start-up scene either; the next write goes through.
+TEST(SceneBus, AValueStoredAfterItsDeadlineIsTakenByNoNode) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    auto a = bus("late");
+    ASSERT_TRUE(a);
+    const BusWrite one = a->write(0, "one");
+    ASSERT_EQ(one.error, BusError::kNone) << one.message;
+    a->watch([&](const SceneBus::Value& v) {
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
+                                [&] { return !seen.empty() && seen.back().json == "one"; }));
+    }
+    // Following version one as a write would, signed with a deadline 3 s past: the bus stores
+    // it now.
+    const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count());
+    ASSERT_TRUE(raw_put("late", SceneBus::sign(kAdmin, one.revision, now_ms - 3000, "late")));
+    for (int i = 0; i < 100 && a->counters().late_values.load() == 0; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(a->counters().late_values.load(), 1u);
+    EXPECT_NE(a->metrics_text().find("hysar_scene_bus_ignored_values_total{why=\"late\"} 1"),
+              std::string::npos)
+        << a->metrics_text();
+    // A node starting now starts on version one, not on the late value.
+    auto c = bus("late", "c");
+    ASSERT_TRUE(c);
+    auto values = c->signed_values();
+    ASSERT_TRUE(values.ok()) << values.error().message;
+    ASSERT_FALSE(values->empty());
+    EXPECT_EQ(values->front().json, "one");
+    // The next write (on version one: the late value is no one's) reaches the node.
+    const BusWrite two = a->write(one.revision, "two");
+    ASSERT_EQ(two.error, BusError::kNone) << two.message;
+    std::unique_lock lock(m);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
+                            [&] { return !seen.empty() && seen.back().json == "two"; }));
+    for (const auto& v : seen) EXPECT_NE(v.json, "late");
+}
+
 // A watch blocked inside the NATS client (paused here) does not keep a node behind the bus: the
 // 2-s check on its own thread reads the key and delivers the newest write, and puts the held
 // scene back on a key deleted meanwhile; the watch, let go, goes on from there.
