@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The scene bus on a three-server NATS cluster with the bucket in three replicas
-# (docs/CLUSTER.md, "Three replicas"), on loopback:
+# (docs/CLUSTER.md, "Three replicas"; the servers configured as docs/OPERATIONS.md, "The scene
+# bus", shows: TLS, mutual TLS on the routes, a node user), on loopback:
 #   0. a node started while only two of the three servers are up waits for the third (the
 #      bucket's three replicas cannot be placed before) instead of exiting;
 #   1. two render nodes given every server's URL (no --cluster-replicas: three is the default
@@ -17,6 +18,15 @@ client_ports=() route_ports=() monitor_ports=()
 for i in 1 2 3; do
   client_ports+=("$(free_port)"); route_ports+=("$(free_port)"); monitor_ports+=("$(free_port)")
 done
+# The servers as docs/OPERATIONS.md runs them: TLS to the clients, mutual TLS between the
+# servers (one self-signed certificate for 127.0.0.1 here, which is also the CA), and the nodes'
+# own user with a password from a file.
+openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -days 2 \
+  -subj /CN=127.0.0.1 -addext subjectAltName=IP:127.0.0.1 -keyout "$dir/bus.key" \
+  -out "$dir/bus.pem" 2> /dev/null
+(umask 077 && echo "node-password-$RANDOM$RANDOM" > "$dir/bus-password")
+export NODE_PASSWORD
+NODE_PASSWORD=$(cat "$dir/bus-password")
 routes=$(for p in "${route_ports[@]}"; do printf 'nats-route://127.0.0.1:%s,' "$p"; done)
 routes="[${routes%,}]"
 start_server() {  # INDEX
@@ -25,8 +35,15 @@ start_server() {  # INDEX
 server_name: n$i
 listen: 127.0.0.1:${client_ports[$i]}
 http: 127.0.0.1:${monitor_ports[$i]}
+tls { cert_file: "$dir/bus.pem", key_file: "$dir/bus.key" }
 jetstream { store_dir: "$dir/js-n$i" }
-cluster { name: hysar-bus, listen: 127.0.0.1:${route_ports[$i]}, routes: $routes }
+cluster {
+  name: hysar-bus
+  listen: 127.0.0.1:${route_ports[$i]}
+  tls { cert_file: "$dir/bus.pem", key_file: "$dir/bus.key", ca_file: "$dir/bus.pem", verify: true }
+  routes: $routes
+}
+authorization { users = [ { user: node, password: \$NODE_PASSWORD } ] }
 EOF
   nats-server -c "$dir/n$i.conf" > "$dir/nats-n$i.log" 2>&1 &
   servers+=($!)
@@ -35,10 +52,10 @@ start_server 0
 start_server 1
 leader() { grep -qh "JetStream cluster new metadata leader" "$dir"/nats-n*.log; }
 within 30 leader || fail "two nats-servers elected no JetStream leader within 30 s"
-url=$(for p in "${client_ports[@]}"; do printf 'nats://127.0.0.1:%s,' "$p"; done)
+url=$(for p in "${client_ports[@]}"; do printf 'tls://127.0.0.1:%s,' "$p"; done)
 url=${url%,}
 # No --cluster-replicas: three copies are the default where three servers are listed.
-node_flags=()
+node_flags=(--cluster-ca "$dir/bus.pem" --cluster-user node --cluster-password-file "$dir/bus-password")
 
 # 0. Node a starts on a bus of two servers: three replicas have no place yet, so it waits.
 launch_node a
@@ -64,7 +81,8 @@ for p in sys.argv[1:]:
 PY
 )
 [[ "$replicas" == 3 ]] || fail "the bucket has ${replicas:-no} replicas on the servers, not 3"
-echo "1. two nodes on a three-server bus (the bucket in $replicas replicas, the default for three servers): version 2 on both"
+! grep -q "$NODE_PASSWORD" "$dir"/node-*.log || fail "a node printed the bus password"
+echo "1. two nodes on a three-server bus over TLS with a user and password (the bucket in $replicas replicas, the default for three servers): version 2 on both"
 
 # 2. The server that holds node a's watch (its consumer) killed: the nodes stay; an update is
 # confirmed by the other two and reaches a, whose watch is stalled until the servers elect a
