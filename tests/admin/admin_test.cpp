@@ -667,6 +667,91 @@ TEST_F(AdminSlowlorisTest, AnAuthorisedProberIsAnsweredBesideThreeHundredSlowSoc
     EXPECT_EQ(one_frame(*hmd, 0.1, 1).size(), 2u);
 }
 
+// A head deadline and keep-alive of 1 s: a head that stops half way is closed at the deadline
+// (counted as dropped) without an answer, and a kept-alive connection left idle after its
+// answer is closed too; neither waits for the client's 10-s receive timeout.
+class AdminShortDeadlineTest : public AdminTest {
+protected:
+    void admin_options(admin::AdminOptions& o) override {
+        o.deadline_s = 1;
+        o.keep_alive_s = 1;
+    }
+};
+
+TEST_F(AdminShortDeadlineTest, AStalledHeadAndAnIdleConnectionAreClosed) {
+    const double dropped = metrics().get("hysar_admin_connections_dropped_total");
+    const int stalled = raw_client(admin_->port());
+    const int idle = raw_client(admin_->port());
+    const std::string half = "GET /metrics HTTP/1.1\r\nHost: x\r\n";
+    ASSERT_EQ(::send(stalled, half.data(), half.size(), MSG_NOSIGNAL), ssize_t(half.size()));
+    const std::string whole = "GET /metrics HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer " +
+                              std::string(kToken) + "\r\n\r\n";
+    ASSERT_EQ(::send(idle, whole.data(), whole.size(), MSG_NOSIGNAL), ssize_t(whole.size()));
+    const auto t0 = std::chrono::steady_clock::now();
+    char c;
+    const ssize_t stalled_end = ::recv(stalled, &c, 1, 0);  // 0: closed; -1: the 10-s timeout
+    const std::string answered = read_to_close(idle);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ::close(stalled);
+    ::close(idle);
+    EXPECT_EQ(stalled_end, 0) << "the half head was not closed at its deadline";
+    EXPECT_EQ(answered.rfind("HTTP/1.1 200 ", 0), 0u) << answered.substr(0, 200);
+    EXPECT_LT(seconds, 9.0) << "closed by the client's receive timeout, not the server";
+    EXPECT_GE(metrics().get("hysar_admin_connections_dropped_total"), dropped + 1);
+}
+
+// Two workers, one kept for the token, and two places in each queue: sixteen clients that
+// send complete requests without the token as fast as they can fill the others' worker and
+// queue (their surplus answered 503), and an operator's prober with the token is still
+// answered every time.
+class AdminReservedWorkerTest : public AdminTest {
+protected:
+    void admin_options(admin::AdminOptions& o) override {
+        o.threads = 2;
+        o.max_waiting = 2;
+        o.max_per_address = 64;
+    }
+};
+
+TEST_F(AdminReservedWorkerTest, AFloodOfRequestsWithoutTheTokenLeavesRoomForTheOperator) {
+    std::atomic<bool> stop{false};
+    std::atomic<uint64_t> sent{0};
+    std::vector<std::thread> flood;
+    for (int t = 0; t < 16; ++t)
+        flood.emplace_back([&, t] {
+            const std::string source = "127.0.0." + std::to_string(2 + t % 8);
+            const std::string ask =
+                "GET /api/viewers HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n";
+            while (!stop) {
+                const int fd = raw_client(admin_->port(), source.c_str());
+                if (::send(fd, ask.data(), ask.size(), MSG_NOSIGNAL) == ssize_t(ask.size()))
+                    ++sent;
+                (void)read_to_close(fd);  // 401, or 503 when the others' places are taken
+                ::close(fd);
+            }
+        });
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    int answered = 0;
+    for (int i = 0; i < 40; ++i) {
+        httplib::Client prober("127.0.0.1", admin_->port());
+        prober.set_read_timeout(5);
+        prober.set_connection_timeout(5);
+        auto r = prober.Get("/metrics", {{"Authorization", std::string("Bearer ") + kToken}});
+        if (r && r->status == 200)
+            ++answered;
+        else
+            ADD_FAILURE() << "ask " << i << ": "
+                          << (r ? std::to_string(r->status) : httplib::to_string(r.error()));
+    }
+    stop = true;
+    for (auto& t : flood) t.join();
+    EXPECT_EQ(answered, 40);
+    EXPECT_GT(sent.load(), 40u);
+    // The flood did fill the others' places: some of it was refused.
+    EXPECT_GE(metrics().get("hysar_admin_connections_refused_total"), 1.0);
+}
+
 // One worker, and clients that connect and send nothing: they hold no worker, so an ask is
 // answered at once.
 class AdminOneWorkerTest : public AdminTest {
