@@ -548,15 +548,16 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
 
 // The newest signed scene on the bus that this node can serve (the same checks and limits as a
 // SceneUpdate), or this node's own scene put there when it holds none. A value that cannot be
-// served is skipped (counted), never a reason not to start.
+// served is skipped (counted and passed over), never a reason not to start.
 Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, const ServeSetup& s,
                                                     const stream::ServerCreateInfo& info, bool& own,
                                                     cluster::SceneBus::Value& held) {
     own = false;
-    // A key holding only unsigned values (a flood pushed every signed one out of its history)
-    // is put right by a running node's 2-s check, which puts its scene back on top: waited for
-    // (three checks), so that this node joins the cluster's scene instead of putting its own.
-    const auto unsigned_wait_end = std::chrono::steady_clock::now() + std::chrono::seconds(6);
+    // A key holding no value this node can serve (a flood pushed every signed one out of its
+    // history, or a signed one that is no scene is on top) is put right by a running node's 2-s
+    // check, which puts its scene back on top: waited for (three checks), so that this node
+    // joins the cluster's scene instead of putting its own over it.
+    const auto wait_end = std::chrono::steady_clock::now() + std::chrono::seconds(6);
     bool said = false;
     for (int attempt = 0; attempt < 3; ++attempt) {
         // A bus that just lost a server may take a few seconds to answer (a new leader).
@@ -579,21 +580,27 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                 held = v;
                 return std::pair{v.revision, std::move(parsed).value()};
             }
-            ++bus.counters().invalid_values;
-            log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
-                      v.revision, parsed.error().message);
+            if (!said) {
+                ++bus.counters().invalid_values;
+                log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
+                          v.revision, parsed.error().message);
+            }
+            bus.pass_over(v);
         }
-        if (values.empty() && bus.newest_seen() > 0 &&
-            std::chrono::steady_clock::now() < unsigned_wait_end) {
+        if (bus.newest_seen() > 0 && std::chrono::steady_clock::now() < wait_end) {
             if (!std::exchange(said, true))
                 log::info(
-                    "scene bus: the key holds only values not signed with the admin credential; "
-                    "waiting up to 6 s for a running node to put the cluster's scene back");
+                    "scene bus: the key holds no value this node can serve; waiting up to 6 s "
+                    "for a running node to put the cluster's scene back");
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             --attempt;
             continue;
         }
         // None to serve: this node's own scene, if no other node puts one first.
+        if (said)
+            log::warn(
+                "scene bus: no node put a scene this node can serve back within 6 s: it puts its "
+                "own over the bus's values");
         const auto w = bus.write(0, s.scene.text());
         if (w.error == cluster::BusError::kNone) {
             own = true;
@@ -714,11 +721,11 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
                 v.revision, v.base, applied);
             return;
         }
-        // Held even if it cannot be built here: it is the cluster's scene, which this node
-        // puts back on a bus that comes back empty or behind.
-        b->hold(v);
+        // Held once served: the scene this node puts back on a bus that comes back empty or
+        // behind. One it cannot serve is passed over (SceneBus::pass_over): never put back.
         std::lock_guard lock(applied_json->mutex);
         if (v.refill && v.json == applied_json->json) {
+            b->hold(v);
             ++b->counters().relabelled;
             watched->relabel_scene_version(uint32_t(v.revision));
             log::info("scene bus: version {} arrived, the scene already applied: relabelled",
@@ -727,9 +734,11 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
         }
         if (auto r = watched->apply_scene_version(v.json, uint32_t(v.revision)); !r) {
             ++b->counters().invalid_values;
+            b->pass_over(v);
             log::error("scene bus: version {} cannot be served here: {}; the running scene stays",
                        v.revision, r.error().message);
         } else {
+            b->hold(v);
             applied_json->json = v.json;
             log::info("scene bus: version {} arrived", v.revision);
         }

@@ -491,14 +491,19 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
         return {0, 0, BusError::kUnavailable,
                 "the scene bus is unavailable (not connected to " + redacted(s_->options.url) +
                     "); the running scene stays"};
-    // Unsigned values after the applied version are no one's write: write over them.
+    // Unsigned values after the applied version, and a signed one this node cannot serve
+    // (pass_over), are no one's write: write over them.
+    const uint64_t passed = passed_over_.load();
     const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
     const uint64_t expected =
-        std::max(tail > applied && signed_tail <= applied ? tail : applied, over);
+        std::max(tail > applied && signed_tail <= std::max(applied, passed) ? tail : applied, over);
+    // Over a value passed over, the write follows it: a node that did serve it takes it too.
+    const uint64_t base =
+        expected > applied && passed > applied ? std::min(passed, expected) : applied;
     // The bus must store it by the deadline, or no node takes it: a write the admin is told
     // failed never lands later.
     const uint64_t deadline = now_unix_ms() + uint64_t(s_->options.timeout_ms);
-    const std::string value = sign(s_->options.admin_token, applied, deadline, json);
+    const std::string value = sign(s_->options.admin_token, base, deadline, json);
     uint64_t rev = 0;
     const natsStatus s =
         expected == 0
@@ -532,11 +537,12 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
                             std::string_view(static_cast<const char*>(kvEntry_Value(e)),
                                              size_t(kvEntry_ValueLen(e))));
             takeable =
-                v && v->base >= applied &&
+                v && v->base >= applied && now != passed_over_.load() &&
                 uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000) <= v->deadline_ms;
             kvEntry_Destroy(e);
         }
-        // Over a value no node takes (unsigned, late, or an old one put again): written on it.
+        // Over a value no node takes (unsigned, late, or an old one put again) or that this
+        // node cannot serve: written on it.
         if (!takeable && now > expected && attempts > 1)
             return write_on(applied, json, now, attempts - 1);
         return {0, 0, BusError::kConflict, conflict_message(now)};
@@ -755,6 +761,11 @@ SceneBus::Value SceneBus::held() const {
     return held_;
 }
 
+void SceneBus::pass_over(const Value& v) {
+    if (!v.refill)
+        raise_to(passed_over_, v.revision);
+}
+
 std::optional<SceneBus::Refill> SceneBus::plan_refill(const Value& held, uint64_t bus_revision,
                                                       uint64_t last,
                                                       const std::optional<Value>& bus_newest) {
@@ -781,7 +792,8 @@ bool SceneBus::check_bus(int& behind) {
         const uint64_t rev = kvEntry_Revision(e);
         const Top top = top_of(e, s_->options.admin_token, content);
         kvEntry_Destroy(e);
-        if (rev < held || top == Top::kStaleRefill)
+        if (rev < held || top == Top::kStaleRefill ||
+            (top == Top::kSigned && rev == passed_over_.load()))
             return refill();
         // Unsigned values that pushed every signed one out of the key's history (a flood of
         // more than it keeps): a node started now would find no scene to serve and put its own,
@@ -900,14 +912,21 @@ bool SceneBus::refill() {
     // that looked behind came from a follower of a replicated bucket that lags. Not behind,
     // unless that value is another node's refill of an older version, or is not signed and no
     // signed value is left in the history: then it is gone over.
-    const bool over = top == Top::kStaleRefill || (top == Top::kUnsigned && listed->empty());
+    const uint64_t passed = passed_over_.load();
+    const bool over = top == Top::kStaleRefill || (top == Top::kUnsigned && listed->empty()) ||
+                      (top == Top::kSigned && bus_revision == passed);
     if (over)
         bus_revision = 0;
     else if (bus_revision != 0 && last >= held.revision)
         return made;
+    // The newest signed write, of those this node did not pass over (one it passed over, or a
+    // value coalesced before it, is not a scene to put back).
     std::optional<Value> newest;
-    if (!listed->empty())
-        newest = listed->front();
+    for (const auto& v : *listed)
+        if (v.revision <= held.revision || v.revision > passed) {
+            newest = v;
+            break;
+        }
     const auto plan = plan_refill(held, bus_revision, last, newest);
     if (!plan)
         return made;
@@ -944,10 +963,11 @@ bool SceneBus::refill() {
     log::warn(
         "scene bus: the bus came back {} (revision {}, this node holds version {}): put "
         "{} back as version {}",
-        top == Top::kStaleRefill ? "with an older version put back by another node"
-        : over                   ? "with no signed value left (unsigned values pushed them out)"
-        : bus_revision == 0      ? "empty"
-                                 : "behind",
+        top == Top::kStaleRefill      ? "with an older version put back by another node"
+        : top == Top::kSigned && over ? "with a scene on top that this node cannot serve"
+        : over              ? "with no signed value left (unsigned values pushed them out)"
+        : bus_revision == 0 ? "empty"
+                            : "behind",
         bus_revision, held.revision,
         plan->ours ? "the held scene" : fmt::format("the newer write of version {}", from.revision),
         rev);

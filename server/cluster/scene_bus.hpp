@@ -129,6 +129,12 @@ public:
     // back.
     void hold(const Value& value);
     Value held() const;
+    // A signed value this node cannot serve (refused as a SceneUpdate with it would be; serve
+    // says so): it is not held, and is no one's write to this node: its writes go over it
+    // (following it, so that a node that did serve it takes them too), and its check puts the
+    // held scene back over it while it is the key's current value. A refill is never passed
+    // over (another node puts back a scene it served).
+    void pass_over(const Value& v);
     // The rule (unit-tested): nullopt while the bus holds `held` or a later revision. Else the
     // held value goes back, at revision max(held, last + 1) where `last` is the bus's last
     // sequence (the revisions below are purged first); unless the bus's newest signed value
@@ -214,6 +220,7 @@ private:
     // The newest revision seen of any value, and of a signed one (writes go on the former when
     // only unsigned values came after the latter).
     std::atomic<uint64_t> tail_{0}, signed_tail_{0};
+    std::atomic<uint64_t> passed_over_{0};  // the newest revision pass_over() named
     // The newest revision the watch itself delivered (written by its thread): a watch behind
     // the bus twice in a row is made again.
     std::atomic<uint64_t> watched_{0};

@@ -69,8 +69,8 @@ push() {  # NODE NAME
   "$bin/hysar" admin --connect "127.0.0.1:$(eval echo \$port_$1)" --token-file "$dir/admin" \
     --timeout-ms 20000 scene push "$dir/room-$2.json"
 }
-# The versions a node started on and applied, in order.
-applied() { grep -oE "scene version [0-9]+(:|$)" "$dir/node-$1.log" | grep -oE "[0-9]+" | tr '\n' ' '; }
+# The versions a node started on and applied, in order (not those it refused).
+applied() { grep -v "cannot be served" "$dir/node-$1.log" | grep -oE "scene version [0-9]+(:|$)" | grep -oE "[0-9]+" | tr '\n' ' '; }
 last_applied() { applied "$1" | awk '{print $NF}'; }
 same_everywhere() { local v=$1; shift; for n in "$@"; do [[ "$(last_applied "$n")" == "$v" ]] || return 1; done; }
 # True once CONDITION holds, within SECONDS.
