@@ -12,6 +12,7 @@ PACKAGES=(
   libusb-1.0-0-dev usb.ids umockdev haproxy nats-server libnats-dev gdb
   libopencv-dev libopencv-contrib-dev
   libspdlog-dev libcpp-httplib-dev libssl-dev openssl libcli11-dev chromium chromium-driver python3-selenium
+  python3-cryptography
 )
 
 missing=()
