@@ -547,16 +547,18 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
 }
 
 // The newest signed scene on the bus that this node can serve (the same checks and limits as a
-// SceneUpdate), or this node's own scene put there when it holds none. A value that cannot be
-// served is skipped (counted and passed over), never a reason not to start.
+// SceneUpdate), or this node's own scene put there when it holds none. A value that is no scene
+// at all is skipped (counted and passed over), never a reason not to start; a scene that only
+// this node cannot serve (its assets, limits or calibration) is the cluster's, and this node
+// does not start on another.
 Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, const ServeSetup& s,
                                                     const stream::ServerCreateInfo& info, bool& own,
                                                     cluster::SceneBus::Value& held) {
     own = false;
-    // A key holding no value this node can serve (a flood pushed every signed one out of its
-    // history, or a signed one that is no scene is on top) is put right by a running node's 2-s
-    // check, which puts its scene back on top: waited for (three checks), so that this node
-    // joins the cluster's scene instead of putting its own over it.
+    // A key holding no scene (a flood pushed every signed one out of its history, or a signed
+    // value that is no scene is on top) is put right by a running node's 2-s check, which puts
+    // its scene back on top: waited for (three checks), so that this node joins the cluster's
+    // scene instead of putting its own over it.
     const auto wait_end = std::chrono::steady_clock::now() + std::chrono::seconds(6);
     bool said = false;
     for (int attempt = 0; attempt < 3; ++attempt) {
@@ -567,6 +569,7 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
             listed = bus.signed_values();
         }
         HS_ASSIGN_OR_RETURN(auto values, std::move(listed));
+        std::optional<std::pair<uint64_t, std::string>> refused;  // the newest scene refused
         for (const auto& v : values) {
             if (v.revision > 0xffffffffu)
                 continue;
@@ -585,13 +588,22 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                 log::warn("scene bus: version {} cannot be served here ({}); trying an older one",
                           v.revision, parsed.error().message);
             }
-            bus.pass_over(v);
+            if (!scene::is_scene_document(v.json))
+                bus.pass_over(v);
+            else if (!refused)
+                refused.emplace(v.revision, parsed.error().message);
         }
+        if (refused)
+            return make_error(ErrorCode::kIo,
+                              fmt::format("--cluster: the cluster's scene, version {}, cannot be "
+                                          "served here ({}), nor any older one on the bus: this "
+                                          "node does not start on another scene",
+                                          refused->first, refused->second));
         if (bus.newest_seen() > 0 && std::chrono::steady_clock::now() < wait_end) {
             if (!std::exchange(said, true))
                 log::info(
-                    "scene bus: the key holds no value this node can serve; waiting up to 6 s "
-                    "for a running node to put the cluster's scene back");
+                    "scene bus: the key holds no scene; waiting up to 6 s for a running node to "
+                    "put the cluster's scene back");
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             --attempt;
             continue;
@@ -599,8 +611,8 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
         // None to serve: this node's own scene, if no other node puts one first.
         if (said)
             log::warn(
-                "scene bus: no node put a scene this node can serve back within 6 s: it puts its "
-                "own over the bus's values");
+                "scene bus: no node put a scene back within 6 s: this node puts its own over "
+                "the bus's values");
         const auto w = bus.write(0, s.scene.text());
         if (w.error == cluster::BusError::kNone) {
             own = true;
@@ -721,8 +733,9 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
                 v.revision, v.base, applied);
             return;
         }
-        // Held once served: the scene this node puts back on a bus that comes back empty or
-        // behind. One it cannot serve is passed over (SceneBus::pass_over): never put back.
+        // Held, even if it cannot be served here: it is the cluster's scene, which this node puts
+        // back on a bus that comes back empty or behind. A value that is no scene at all is
+        // passed over instead (SceneBus::pass_over): never put back.
         std::lock_guard lock(applied_json->mutex);
         if (v.refill && v.json == applied_json->json) {
             b->hold(v);
@@ -734,7 +747,10 @@ void watch_bus(cluster::SceneBus& bus, stream::Server& server, std::string start
         }
         if (auto r = watched->apply_scene_version(v.json, uint32_t(v.revision)); !r) {
             ++b->counters().invalid_values;
-            b->pass_over(v);
+            if (scene::is_scene_document(v.json))
+                b->hold(v);
+            else
+                b->pass_over(v);
             log::error("scene bus: version {} cannot be served here: {}; the running scene stays",
                        v.revision, r.error().message);
         } else {

@@ -792,8 +792,11 @@ bool SceneBus::check_bus(int& behind) {
         const uint64_t rev = kvEntry_Revision(e);
         const Top top = top_of(e, s_->options.admin_token, content);
         kvEntry_Destroy(e);
-        if (rev < held || top == Top::kStaleRefill ||
-            (top == Top::kSigned && rev == passed_over_.load()))
+        // Behind the held version or a value passed over (which every node took as its
+        // version), or one of those on top.
+        const uint64_t passed = passed_over_.load();
+        if (rev < std::max(held, passed) || top == Top::kStaleRefill ||
+            (top == Top::kSigned && rev == passed))
             return refill();
         // Unsigned values that pushed every signed one out of the key's history (a flood of
         // more than it keeps): a node started now would find no scene to serve and put its own,
@@ -871,6 +874,15 @@ bool SceneBus::refill() {
         std::lock_guard lock(held_mutex_);
         held = held_;
     }
+    // A value passed over raised every node's version to its revision: the held scene goes back
+    // above it (as the same scene: its OF is kept), so that every node takes it.
+    const uint64_t passed = passed_over_.load(), held_revision = held.revision;
+    if (held.revision > 0 && passed >= held.revision) {
+        if (!held.refill)
+            held.of = held.revision;
+        held.refill = true;
+        held.revision = passed + 1;
+    }
     const std::string stream = "KV_" + s_->options.bucket;
     jsStreamInfo* si = nullptr;
     jsErrCode jerr = jsErrCode(0);
@@ -912,9 +924,9 @@ bool SceneBus::refill() {
     // that looked behind came from a follower of a replicated bucket that lags. Not behind,
     // unless that value is another node's refill of an older version, or is not signed and no
     // signed value is left in the history: then it is gone over.
-    const uint64_t passed = passed_over_.load();
     const bool over = top == Top::kStaleRefill || (top == Top::kUnsigned && listed->empty()) ||
                       (top == Top::kSigned && bus_revision == passed);
+    const uint64_t found = bus_revision;
     if (over)
         bus_revision = 0;
     else if (bus_revision != 0 && last >= held.revision)
@@ -923,7 +935,7 @@ bool SceneBus::refill() {
     // value coalesced before it, is not a scene to put back).
     std::optional<Value> newest;
     for (const auto& v : *listed)
-        if (v.revision <= held.revision || v.revision > passed) {
+        if (v.revision <= held_revision || v.revision > passed) {
             newest = v;
             break;
         }
@@ -968,7 +980,7 @@ bool SceneBus::refill() {
         : over              ? "with no signed value left (unsigned values pushed them out)"
         : bus_revision == 0 ? "empty"
                             : "behind",
-        bus_revision, held.revision,
+        found, held_revision,
         plan->ours ? "the held scene" : fmt::format("the newer write of version {}", from.revision),
         rev);
     return true;

@@ -129,11 +129,12 @@ public:
     // back.
     void hold(const Value& value);
     Value held() const;
-    // A signed value this node cannot serve (refused as a SceneUpdate with it would be; serve
-    // says so): it is not held, and is no one's write to this node: its writes go over it
-    // (following it, so that a node that did serve it takes them too), and its check puts the
-    // held scene back over it while it is the key's current value. A refill is never passed
-    // over (another node puts back a scene it served).
+    // A signed value that is no scene at all (scene::is_scene_document: every node refuses it
+    // alike, whatever its assets, limits or calibration; serve says so): it is not held, a write
+    // of this node goes over it (following it), its check puts the held scene back over it while
+    // it is the key's current value, above its revision (every node took that revision as its
+    // version), and a refill never puts it back. A scene that only this node cannot serve is not
+    // passed over: it is held, being another node's scene. A refill is never passed over.
     void pass_over(const Value& v);
     // The rule (unit-tested): nullopt while the bus holds `held` or a later revision. Else the
     // held value goes back, at revision max(held, last + 1) where `last` is the bus's last

@@ -866,6 +866,14 @@ Result<Scene> parse_scene(std::string_view text, const std::string& source,
     }
 }
 
+bool is_scene_document(std::string_view text) {
+    auto root = parse_json_limited(text, "scene", scene_json_limits());
+    if (!root || !root->is_object())
+        return false;
+    const auto v = root->find("schema_version");
+    return v != root->end() && v->is_number_integer();
+}
+
 Result<Scene> load_scene_file(const std::filesystem::path& path,
                               const std::filesystem::path& asset_root, const SceneLimits& limits) {
     std::error_code ec;

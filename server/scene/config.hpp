@@ -49,6 +49,12 @@ Result<Scene> parse_scene(std::string_view json_text, const std::string& source,
                           const std::filesystem::path& asset_root = {},
                           const SceneLimits& limits = {});
 
+// Whether `text` is a scene document at all, whatever build, assets, limits or calibration reads
+// it: JSON within the scene's JSON limits whose top is an object with an integer
+// schema_version. A value that is not is refused by every node alike (the scene bus passes it
+// over); one that is may still fail parse_scene on one node and not on another.
+bool is_scene_document(std::string_view text);
+
 // Reads and parses a scene file. Empty `asset_root`: the scene file's own folder.
 Result<Scene> load_scene_file(const std::filesystem::path& path,
                               const std::filesystem::path& asset_root = {},

@@ -470,6 +470,66 @@ TEST(SceneBus, AValueStoredAfterItsDeadlineIsTakenByNoNode) {
     for (const auto& v : seen) EXPECT_NE(v.json, "late");
 }
 
+// A signed value that is no scene (serve passes it over: pass_over) is put back over by the
+// node's check with the scene it holds, above the value's revision (every node took that as its
+// version), as a refill of the held version; a refill never puts the passed-over value back, and
+// the next write follows.
+TEST(SceneBus, AValuePassedOverIsPutBackOverAboveItsRevision) {
+    // Declared before the bus, so that they outlive its threads (which may deliver until
+    // it is destroyed).
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> seen;
+    auto a = bus("passed");
+    ASSERT_TRUE(a);
+    const BusWrite one = a->write(0, "one");
+    ASSERT_EQ(one.error, BusError::kNone) << one.message;
+    a->hold({one.revision, 0, one.deadline_ms, "one"});
+    SceneBus* node = a.get();
+    a->watch([&, node](const SceneBus::Value& v) {
+        if (v.json == "junk")
+            node->pass_over(v);  // as serve does with a value that is no scene
+        else
+            node->hold(v);
+        std::lock_guard lock(m);
+        seen.push_back(v);
+        cv.notify_all();
+    });
+    const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
+                                     std::chrono::system_clock::now().time_since_epoch())
+                                     .count());
+    ASSERT_TRUE(raw_put("passed", SceneBus::sign(kAdmin, one.revision, now_ms + 5000, "junk")));
+    uint64_t junk = 0;
+    {
+        std::unique_lock lock(m);
+        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] {
+            for (const auto& v : seen)
+                if (v.json == "junk")
+                    junk = v.revision;
+            return junk != 0 && seen.back().json == "one" && seen.back().refill;
+        })) << "the held scene was not put back over the passed-over value";
+        EXPECT_GT(seen.back().revision, junk);
+        EXPECT_EQ(seen.back().of, one.revision);
+    }
+    EXPECT_EQ(a->counters().refills.load(), 1u);
+    auto values = a->signed_values();
+    ASSERT_TRUE(values.ok()) << values.error().message;
+    ASSERT_FALSE(values->empty());
+    EXPECT_EQ(values->front().json, "one");
+    for (const auto& v : *values) EXPECT_NE(v.json, "junk");
+    // The next write follows the refill.
+    uint64_t back = 0;
+    {
+        std::lock_guard lock(m);
+        back = seen.back().revision;
+    }
+    const BusWrite two = a->write(back, "two");
+    ASSERT_EQ(two.error, BusError::kNone) << two.message;
+    std::unique_lock lock(m);
+    ASSERT_TRUE(
+        cv.wait_for(lock, std::chrono::seconds(10), [&] { return seen.back().json == "two"; }));
+}
+
 // A watch blocked inside the NATS client (paused here) does not keep a node behind the bus: the
 // 2-s check on its own thread reads the key and delivers the newest write, and puts the held
 // scene back on a key deleted meanwhile; the watch, let go, goes on from there.
