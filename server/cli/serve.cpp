@@ -551,9 +551,9 @@ Result<cluster::SceneBus::Options> read_bus_options(const Flags& f,
 // at all is skipped (counted and passed over), never a reason not to start; a scene that only
 // this node cannot serve (its assets, limits or calibration) is the cluster's, and this node
 // does not start on another.
-Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, const ServeSetup& s,
-                                                    const stream::ServerCreateInfo& info, bool& own,
-                                                    cluster::SceneBus::Value& held) {
+Result<std::pair<uint64_t, scene::Scene>> bus_scene(
+    cluster::SceneBus& bus, const ServeSetup& s, const stream::ServerCreateInfo& info, bool& own,
+    cluster::SceneBus::Value& held, std::optional<cluster::SceneBus::Value>& newer) {
     own = false;
     // A key holding no scene (a flood pushed every signed one out of its history, or a signed
     // value that is no scene is on top) is put right by a running node's 2-s check, which puts
@@ -569,7 +569,7 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
             listed = bus.signed_values();
         }
         HS_ASSIGN_OR_RETURN(auto values, std::move(listed));
-        std::optional<std::pair<uint64_t, std::string>> refused;  // the newest scene refused
+        std::optional<std::pair<cluster::SceneBus::Value, std::string>> refused;  // the newest
         for (const auto& v : values) {
             if (v.revision > 0xffffffffu)
                 continue;
@@ -581,6 +581,10 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                     parsed = make_error(r.error().code, r.error().message);
             if (parsed) {
                 held = v;
+                // A newer scene refused here is still the cluster's: the caller holds it and
+                // takes its version, as a running node does (its writes then follow it).
+                if (refused && refused->first.revision > v.revision)
+                    newer = refused->first;
                 return std::pair{v.revision, std::move(parsed).value()};
             }
             if (!said) {
@@ -591,14 +595,14 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
             if (!scene::is_scene_document(v.json))
                 bus.pass_over(v);
             else if (!refused)
-                refused.emplace(v.revision, parsed.error().message);
+                refused.emplace(v, parsed.error().message);
         }
         if (refused)
             return make_error(ErrorCode::kIo,
                               fmt::format("--cluster: the cluster's scene, version {}, cannot be "
                                           "served here ({}), nor any older one on the bus: this "
                                           "node does not start on another scene",
-                                          refused->first, refused->second));
+                                          refused->first.revision, refused->second));
         if (bus.newest_seen() > 0 && std::chrono::steady_clock::now() < wait_end) {
             if (!std::exchange(said, true))
                 log::info(
@@ -627,11 +631,19 @@ Result<std::pair<uint64_t, scene::Scene>> bus_scene(cluster::SceneBus& bus, cons
                       "--cluster: the bus's scene kept changing while this node started");
 }
 
+// What a node started on from the bus: the JSON of the scene it serves, and the cluster's newer
+// scene it could not serve, if any (applied once the server runs, so that its version is the
+// cluster's; it is held).
+struct BusStart {
+    std::string json;
+    std::optional<cluster::SceneBus::Value> newer;
+};
+
 // --cluster: joins the scene bus; the bus's scene wins over `scene`, and with none there yet,
 // this node's becomes version 1. Scene updates are then published through it.
 std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scene& scene,
                                 stream::ServerCreateInfo& info,
-                                std::unique_ptr<cluster::SceneBus>& bus) {
+                                std::unique_ptr<cluster::SceneBus>& bus, BusStart& start) {
     if (!f.has("--cluster"))
         return std::nullopt;
     auto options = read_bus_options(f, info);
@@ -645,10 +657,11 @@ std::optional<int> join_cluster(const Flags& f, const ServeSetup& s, scene::Scen
     bus = std::move(b).value();
     bool own = false;
     cluster::SceneBus::Value held;
-    auto current = bus_scene(*bus, s, info, own, held);
+    auto current = bus_scene(*bus, s, info, own, held, start.newer);
     if (!current)
         return start_error(current.error().message);
     bus->hold(held);
+    start.json = held.json;
     scene = std::move(current->second);
     info.initial_scene_version = uint32_t(current->first);
     if (!own)
@@ -915,7 +928,8 @@ int run_serve(const std::vector<std::string>& args) {
         return *stop;
     if (auto stop = read_tokens(f, info))
         return *stop;
-    if (auto stop = join_cluster(f, setup, s.value(), info, bus))
+    BusStart bus_start;
+    if (auto stop = join_cluster(f, setup, s.value(), info, bus, bus_start))
         return *stop;
     if (auto stop = read_tls(f, info))
         return *stop;
@@ -929,8 +943,17 @@ int run_serve(const std::vector<std::string>& args) {
     // The server holds its own copy of the scene, only while it serves it: this one goes, with
     // its meshes and textures, so that a replaced first scene is freed (docs/OPERATIONS.md).
     s.value() = scene::Scene{};
-    if (bus)
-        watch_bus(*bus, *server.value(), bus->held().json);
+    if (bus) {
+        if (const auto& r = bus_start.newer) {
+            bus->hold(*r);
+            if (auto a = server.value()->apply_scene_version(r->json, uint32_t(r->revision)); !a)
+                log::warn(
+                    "scene bus: the cluster's scene, version {}, cannot be served here ({}); "
+                    "this node serves version {} until a newer one",
+                    r->revision, a.error().message, info.initial_scene_version);
+        }
+        watch_bus(*bus, *server.value(), std::move(bus_start.json));
+    }
     std::unique_ptr<admin::AdminServer> admin_endpoint;
     if (setup.admin) {
         auto a = start_admin(*setup.admin, info.token, info.tls_cert_file, info.tls_key_file,

@@ -683,6 +683,7 @@ void SceneBus::watch_loop(void* first) {
         if (!w) {
             // No watch (the bucket may be gone with a bus that restarted empty): the check
             // still runs on its own thread, and refills it.
+            watch_parked_ = watch_paused_.load();
             std::this_thread::sleep_for(std::chrono::milliseconds(250));
             continue;
         }

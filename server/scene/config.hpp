@@ -49,8 +49,9 @@ Result<Scene> parse_scene(std::string_view json_text, const std::string& source,
                           const std::filesystem::path& asset_root = {},
                           const SceneLimits& limits = {});
 
-// Whether `text` is a scene document at all, whatever build, assets, limits or calibration reads
-// it: JSON within the scene's JSON limits whose top is an object with an integer
+// Whether `text` is a scene document at all, whatever assets, limits or calibration a node has:
+// JSON within the scene JSON limits compiled in (kMaxSceneJsonBytes and the others above, alike
+// in every build that has the same constants) whose top is an object with an integer
 // schema_version. A value that is not is refused by every node alike (the scene bus passes it
 // over); one that is may still fail parse_scene on one node and not on another.
 bool is_scene_document(std::string_view text);

@@ -17,6 +17,8 @@
 #      update reaches every node;
 #   5b. the key deleted (a delete marker, as any NATS client may put): a node puts the scene
 #      back, and every node takes it as the same scene under a new version, rebuilding nothing;
+#   5c. a signed scene no node can serve, an unsigned value on top: a node started then takes the
+#      cluster's version, and a push through it reaches every node;
 #   6. a healthy headset is served at the end, the version equal on every node.
 set -euo pipefail
 bin="$1"
@@ -264,6 +266,27 @@ done
   || fail "node a rendered again for the refill: $renders -> $(metric hysar_projector_renders_total)"
 (( $(metric hysar_scene_relabels_total) >= 1 )) || fail "node a counts no relabel"
 echo "5b. the key deleted: refilled as v$want, relabelled on a, b and c with no render (node a: $renders projector renders before and after)"
+
+# 5c. A scene signed with the admin credential that no node can serve (its glTF is missing on
+# every node), then an unsigned value on top of it: every node holds it and takes its version;
+# a node started now serves the last scene it can but takes that version too, so that a push
+# through it follows the cluster's and reaches every node.
+python3 -c 'import json, sys; d = json.load(open(sys.argv[1])); d["name"] = "room unservable"
+d["prop"] = {"kind": "gltf", "gltf": "missing-everywhere.glb"}; print(json.dumps(d))' \
+  "$src/configs/exp1-room.json" > "$dir/unservable.json"
+signed_poison "$want" "$(cat "$dir/unservable.json")" > "$dir/unservable.value"
+intrude "@$dir/unservable.value"
+within 10 'grep -q "cannot be served here.*missing-everywhere" "$dir/node-a.log"' \
+  || fail "node a did not refuse the scene it cannot serve"
+intrude '{"name": "on top"}'
+start_node e
+grep -q "the cluster's scene, version [0-9]*, cannot be served here" "$dir/node-e.log" \
+  || fail "node e did not take the cluster's version: $(grep -E 'cluster|scene bus' "$dir/node-e.log")"
+push e after-unservable > "$dir/push.log" 2>&1 || fail "push through e: $(cat "$dir/push.log")"
+want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
+within 10 'same_everywhere $want a b c d e' \
+  || fail "version $want not on every node: a: $(applied a); b: $(applied b); c: $(applied c); d: $(applied d); e: $(applied e)"
+echo "5c. a signed scene no node can serve, an unsigned value on top: node e started on the last scene it serves at the cluster's version; its push, v$want, on a, b, c, d, e"
 
 # 6. A healthy headset at the end, served the version every node holds.
 mkdir "$dir/p"

@@ -6,8 +6,9 @@
 #      bucket's three replicas cannot be placed before) instead of exiting;
 #   1. two render nodes given every server's URL (no --cluster-replicas: three is the default
 #      there) make the bucket in three replicas, put and share version 1, then 2;
-#   2. one nats-server killed (-9): no node stops, a SceneUpdate is still confirmed (a majority
-#      of two stores it) and reaches both nodes;
+#   2. one nats-server killed (-9) while a SceneUpdate is in flight: that update is acknowledged
+#      and applied, or refused and never lands; no node stops; the next SceneUpdate is confirmed
+#      (a majority of two stores it) and reaches both nodes;
 #   3. a third node started afterwards starts on that version: nothing acknowledged was lost;
 #   4. a projector is served that version, equal on every node.
 set -euo pipefail
@@ -107,8 +108,19 @@ PY
 }
 victim=$(watch_host a || true)
 [[ "$victim" =~ ^[0-2]$ ]] || fail "the servers' monitoring shows no watch consumer of node a"
+# Killed while a push is in flight: the push is either acknowledged (then it must survive) or
+# refused (then it must never land); the next push is confirmed by the other two.
+push b mid > "$dir/push-mid.log" 2>&1 &
+push_pid=$!
+sleep 0.3
 { kill -KILL "${servers[$victim]}"; wait "${servers[$victim]}"; } 2>/dev/null || true
 killed=$(date +%s%N)
+if wait "$push_pid"; then
+  mid="acknowledged as v$(grep -oE "applied: scene version [0-9]+" "$dir/push-mid.log" | grep -oE "[0-9]+$")"
+else
+  grep -qE "refused|unavailable" "$dir/push-mid.log" || fail "the push in flight: $(cat "$dir/push-mid.log")"
+  mid="refused"
+fi
 within 60 'push b two > "$dir/push.log" 2>&1' || fail "no push confirmed after a server was killed: $(cat "$dir/push.log")"
 after_ms=$(( ($(date +%s%N) - killed) / 1000000 ))
 want=$(grep -oE "applied: scene version [0-9]+" "$dir/push.log" | grep -oE "[0-9]+$")
@@ -117,7 +129,12 @@ within 10 'same_everywhere $want a b' || fail "version $want not on both nodes: 
 reached_ms=$(( ($(date +%s%N) - confirmed) / 1000000 ))
 kill -0 "$pid_a" && kill -0 "$pid_b" || fail "a node stopped when a bus server was killed"
 caught=$(grep -c "read directly" "$dir/node-a.log" || true)
-echo "2. nats-server n$victim (holding node a's watch) killed: a push confirmed ${after_ms} ms later by the other two; v$want on a and b ${reached_ms} ms after that (a read it directly, its watch behind: $caught time(s))"
+if [[ "$mid" == refused ]]; then
+  ! grep -q "'room mid'" "$dir"/node-*.log || fail "the refused push landed: $(grep "'room mid'" "$dir"/node-*.log)"
+else
+  grep -q "'room mid'" "$dir/node-a.log" || fail "the push acknowledged mid-kill ($mid) never reached node a"
+fi
+echo "2. nats-server n$victim (holding node a's watch) killed during a push (that push $mid): the next push confirmed ${after_ms} ms after the kill by the other two; v$want on a and b ${reached_ms} ms after that (a read it directly, its watch behind: $caught time(s))"
 
 # 3. A node started now finds the acknowledged version.
 start_node c
