@@ -569,6 +569,24 @@ std::string read_to_close(int fd) {
     return out;
 }
 
+// An operator's prober: `asks` times /metrics with the token, each on a fresh connection with
+// 5-s timeouts; how many were answered 200 (every other answer is a test failure, named).
+int probe_metrics(uint16_t port, int asks) {
+    int answered = 0;
+    for (int i = 0; i < asks; ++i) {
+        httplib::Client prober("127.0.0.1", port);
+        prober.set_read_timeout(5);
+        prober.set_connection_timeout(5);
+        auto r = prober.Get("/metrics", {{"Authorization", std::string("Bearer ") + kToken}});
+        if (r && r->status == 200)
+            ++answered;
+        else
+            ADD_FAILURE() << "ask " << i << ": "
+                          << (r ? std::to_string(r->status) : httplib::to_string(r.error()));
+    }
+    return answered;
+}
+
 // Requests that a lenient parser would answer: each is answered 400 and the connection closed.
 TEST_F(AdminTest, MalformedRequestsAreAnswered400AndClosed) {
     const std::string auth = std::string("Authorization: Bearer ") + kToken + "\r\n";
@@ -643,18 +661,7 @@ TEST_F(AdminSlowlorisTest, AnAuthorisedProberIsAnsweredBesideThreeHundredSlowSoc
         }
     });
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    int answered = 0;
-    for (int i = 0; i < 40; ++i) {
-        httplib::Client prober("127.0.0.1", admin_->port());
-        prober.set_read_timeout(5);
-        prober.set_connection_timeout(5);
-        auto r = prober.Get("/metrics", {{"Authorization", std::string("Bearer ") + kToken}});
-        if (r && r->status == 200)
-            ++answered;
-        else
-            ADD_FAILURE() << "ask " << i << ": "
-                          << (r ? std::to_string(r->status) : httplib::to_string(r.error()));
-    }
+    const int answered = probe_metrics(admin_->port(), 40);
     stop = true;
     trickle.join();
     EXPECT_EQ(answered, 40);
@@ -732,18 +739,7 @@ TEST_F(AdminReservedWorkerTest, AFloodOfRequestsWithoutTheTokenLeavesRoomForTheO
             }
         });
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    int answered = 0;
-    for (int i = 0; i < 40; ++i) {
-        httplib::Client prober("127.0.0.1", admin_->port());
-        prober.set_read_timeout(5);
-        prober.set_connection_timeout(5);
-        auto r = prober.Get("/metrics", {{"Authorization", std::string("Bearer ") + kToken}});
-        if (r && r->status == 200)
-            ++answered;
-        else
-            ADD_FAILURE() << "ask " << i << ": "
-                          << (r ? std::to_string(r->status) : httplib::to_string(r.error()));
-    }
+    const int answered = probe_metrics(admin_->port(), 40);
     stop = true;
     for (auto& t : flood) t.join();
     EXPECT_EQ(answered, 40);

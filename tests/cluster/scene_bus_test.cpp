@@ -12,6 +12,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdlib>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -36,6 +37,39 @@ std::unique_ptr<SceneBus> bus(const std::string& bucket, const std::string& node
     EXPECT_TRUE(b.ok()) << (b.ok() ? "" : b.error().message);
     return b.ok() ? std::move(b).value() : nullptr;
 }
+
+// What a node's watch delivered, for a test to wait on and read. Declared before the bus, so
+// that it outlives the bus's threads (which may deliver until the bus is destroyed).
+struct Seen {
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<SceneBus::Value> values;
+
+    // The watch's callback; `first` runs before the value is recorded, on the bus's thread.
+    std::function<void(const SceneBus::Value&)> callback(
+        std::function<void(const SceneBus::Value&)> first = nullptr) {
+        return [this, first](const SceneBus::Value& v) {
+            if (first)
+                first(v);
+            std::lock_guard lock(m);
+            values.push_back(v);
+            cv.notify_all();
+        };
+    }
+    // True once `done` holds of the values delivered so far, within `seconds`.
+    bool wait(int seconds, const std::function<bool(const std::vector<SceneBus::Value>&)>& done) {
+        std::unique_lock lock(m);
+        return cv.wait_for(lock, std::chrono::seconds(seconds), [&] { return done(values); });
+    }
+    // True once the newest value delivered carries `json`, within `seconds`.
+    bool last_is(const std::string& json, int seconds) {
+        return wait(seconds, [&](const auto& vs) { return !vs.empty() && vs.back().json == json; });
+    }
+    std::vector<SceneBus::Value> all() {
+        std::lock_guard lock(m);
+        return values;
+    }
+};
 
 TEST(SceneBus, CreateOnceThenCompareAndSet) {
     auto a = bus("cas");
@@ -180,40 +214,28 @@ TEST(SceneBus, OnlyAValueSignedWithTheAdminTokenChecks) {
 // A writer without the admin token (here: signing with another) changes nothing: its values are
 // not delivered, are counted, and a node's next write goes over them.
 TEST(SceneBus, AValueWithoutTheAdminCredentialIsIgnored) {
-    // Declared before the bus, so that they outlive its threads (which may deliver until
-    // it is destroyed).
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto node = bus("intruder");
     auto intruder = bus("intruder", "x", "not-the-admin-token");
     ASSERT_TRUE(node && intruder);
     const BusWrite r1 = node->write(0, "one");
     ASSERT_EQ(r1.error, BusError::kNone) << r1.message;
-    node->watch([&](const SceneBus::Value& v) {
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
+    node->watch(seen.callback());
     uint64_t last = r1.revision;
     for (int i = 0; i < 20; ++i) {
         const BusWrite w = intruder->write(last, "evil");
         ASSERT_EQ(w.error, BusError::kNone) << w.message;
         last = w.revision;
     }
-    {
-        std::unique_lock lock(m);
-        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] {
-            return node->counters().unsigned_values.load() >= 20;
-        }) || node->counters().unsigned_values.load() >= 20);
-    }
+    ASSERT_TRUE(seen.wait(10, [&](const auto&) {
+        return node->counters().unsigned_values.load() >= 20;
+    }) || node->counters().unsigned_values.load() >= 20);
     // The node's write (on the version it applied) goes over the unsigned ones.
     const BusWrite r2 = node->write(r1.revision, "two");
     ASSERT_EQ(r2.error, BusError::kNone) << r2.message;
-    std::unique_lock lock(m);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
-                            [&] { return !seen.empty() && seen.back().revision == r2.revision; }));
-    for (const auto& v : seen) EXPECT_NE(v.json, "evil");
+    ASSERT_TRUE(seen.wait(
+        10, [&](const auto& vs) { return !vs.empty() && vs.back().revision == r2.revision; }));
+    for (const auto& v : seen.all()) EXPECT_NE(v.json, "evil");
     auto values = node->signed_values();
     ASSERT_TRUE(values.ok() && !values->empty());
     EXPECT_EQ(values->front().json, "two");
@@ -282,20 +304,12 @@ TEST(SceneBus, OfTwoCopiesTheFirstStoredIsTheWrite) {
     ASSERT_EQ(next.error, BusError::kNone) << next.message;
     EXPECT_EQ(next.revision, w.revision + 2);
     // A node watching from the start takes "one", then "two", never the copy as a version.
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto c = bus("copies", "c");
     ASSERT_TRUE(c);
-    c->watch([&](const SceneBus::Value& v) {
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
-    std::unique_lock lock(m);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
-                            [&] { return !seen.empty() && seen.back().json == "two"; }));
-    EXPECT_EQ(seen.back().revision, next.revision);
+    c->watch(seen.callback());
+    ASSERT_TRUE(seen.last_is("two", 10));
+    EXPECT_EQ(seen.all().back().revision, next.revision);
 }
 
 // A burst is coalesced: a slow consumer gets the newest of it, not each one.
@@ -371,11 +385,7 @@ TEST(SceneBus, AnUnreachableBusIsNamed) {
 // the newer's revision: the node that holds the newer version finds that refill on the key,
 // puts its own back over it (as the version it holds), and never applies the older scene.
 TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
-    // Declared before the bus, so that they outlive its threads (which may deliver until
-    // it is destroyed).
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto a = bus("stale");
     ASSERT_TRUE(a);
     const BusWrite one = a->write(0, "one");
@@ -383,33 +393,28 @@ TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
     const BusWrite two = a->write(one.revision, "two");
     ASSERT_EQ(two.error, BusError::kNone) << two.message;
     a->hold({two.revision, one.revision, two.deadline_ms, "two"});
-    a->watch([&](const SceneBus::Value& v) {
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
+    a->watch(seen.callback());
     // The lagging node's refill of version one, signed as it signs one, stored past "two".
     const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
                                      std::chrono::system_clock::now().time_since_epoch())
                                      .count());
     ASSERT_TRUE(
         raw_put("stale", SceneBus::sign(kAdmin, two.revision, now_ms + 5000, "one", one.revision)));
-    std::unique_lock lock(m);
-    ASSERT_TRUE(cv.wait_for(
-        lock, std::chrono::seconds(15),
-        [&] { return !seen.empty() && seen.back().json == "two" && seen.back().refill; }))
+    ASSERT_TRUE(seen.wait(
+        15,
+        [&](const auto& vs) { return !vs.empty() && vs.back().json == "two" && vs.back().refill; }))
         << "node a did not put version " << two.revision << " back over the stale refill";
-    EXPECT_EQ(seen.back().of, two.revision);
-    EXPECT_GT(seen.back().revision, two.revision + 1);
+    const auto delivered = seen.all();
+    EXPECT_EQ(delivered.back().of, two.revision);
+    EXPECT_GT(delivered.back().revision, two.revision + 1);
     EXPECT_EQ(a->counters().refills.load(), 1u);
     // What the watch delivered before: the stale refill, which stale_refill() names for the
     // node (serve's watch ignores it), and never as anything but a refill of version one.
-    for (const auto& v : seen) {
+    for (const auto& v : delivered) {
         if (v.json == "one" && v.revision > two.revision) {
             EXPECT_TRUE(SceneBus::stale_refill(v, two.revision));
         }
     }
-    lock.unlock();
     // The bus now holds "two" on top: a node starting now serves it.
     auto c = bus("stale", "c");
     ASSERT_TRUE(c);
@@ -423,25 +428,13 @@ TEST(SceneBus, ARefillOfAnOlderVersionIsPutBackOver) {
 // failed: the bus was frozen, and stored it when thawed) is taken by no node, counted as late,
 // and is not a node's start-up scene either; the next write goes through.
 TEST(SceneBus, AValueStoredAfterItsDeadlineIsTakenByNoNode) {
-    // Declared before the bus, so that they outlive its threads (which may deliver until
-    // it is destroyed).
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto a = bus("late");
     ASSERT_TRUE(a);
     const BusWrite one = a->write(0, "one");
     ASSERT_EQ(one.error, BusError::kNone) << one.message;
-    a->watch([&](const SceneBus::Value& v) {
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
-    {
-        std::unique_lock lock(m);
-        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
-                                [&] { return !seen.empty() && seen.back().json == "one"; }));
-    }
+    a->watch(seen.callback());
+    ASSERT_TRUE(seen.last_is("one", 10));
     // Following version one as a write would, signed with a deadline 3 s past: the bus stores
     // it now.
     const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -464,10 +457,8 @@ TEST(SceneBus, AValueStoredAfterItsDeadlineIsTakenByNoNode) {
     // The next write (on version one: the late value is no one's) reaches the node.
     const BusWrite two = a->write(one.revision, "two");
     ASSERT_EQ(two.error, BusError::kNone) << two.message;
-    std::unique_lock lock(m);
-    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10),
-                            [&] { return !seen.empty() && seen.back().json == "two"; }));
-    for (const auto& v : seen) EXPECT_NE(v.json, "late");
+    ASSERT_TRUE(seen.last_is("two", 10));
+    for (const auto& v : seen.all()) EXPECT_NE(v.json, "late");
 }
 
 // A signed value that is no scene (serve passes it over: pass_over) is put back over by the
@@ -475,42 +466,33 @@ TEST(SceneBus, AValueStoredAfterItsDeadlineIsTakenByNoNode) {
 // version), as a refill of the held version; a refill never puts the passed-over value back, and
 // the next write follows.
 TEST(SceneBus, AValuePassedOverIsPutBackOverAboveItsRevision) {
-    // Declared before the bus, so that they outlive its threads (which may deliver until
-    // it is destroyed).
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto a = bus("passed");
     ASSERT_TRUE(a);
     const BusWrite one = a->write(0, "one");
     ASSERT_EQ(one.error, BusError::kNone) << one.message;
     a->hold({one.revision, 0, one.deadline_ms, "one"});
     SceneBus* node = a.get();
-    a->watch([&, node](const SceneBus::Value& v) {
+    a->watch(seen.callback([node](const SceneBus::Value& v) {
         if (v.json == "junk")
             node->pass_over(v);  // as serve does with a value that is no scene
         else
             node->hold(v);
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
+    }));
     const auto now_ms = uint64_t(std::chrono::duration_cast<std::chrono::milliseconds>(
                                      std::chrono::system_clock::now().time_since_epoch())
                                      .count());
     ASSERT_TRUE(raw_put("passed", SceneBus::sign(kAdmin, one.revision, now_ms + 5000, "junk")));
     uint64_t junk = 0;
-    {
-        std::unique_lock lock(m);
-        ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(10), [&] {
-            for (const auto& v : seen)
-                if (v.json == "junk")
-                    junk = v.revision;
-            return junk != 0 && seen.back().json == "one" && seen.back().refill;
-        })) << "the held scene was not put back over the passed-over value";
-        EXPECT_GT(seen.back().revision, junk);
-        EXPECT_EQ(seen.back().of, one.revision);
-    }
+    ASSERT_TRUE(seen.wait(10, [&](const auto& vs) {
+        for (const auto& v : vs)
+            if (v.json == "junk")
+                junk = v.revision;
+        return junk != 0 && vs.back().json == "one" && vs.back().refill;
+    })) << "the held scene was not put back over the passed-over value";
+    const SceneBus::Value back = seen.all().back();
+    EXPECT_GT(back.revision, junk);
+    EXPECT_EQ(back.of, one.revision);
     EXPECT_EQ(a->counters().refills.load(), 1u);
     auto values = a->signed_values();
     ASSERT_TRUE(values.ok()) << values.error().message;
@@ -518,27 +500,16 @@ TEST(SceneBus, AValuePassedOverIsPutBackOverAboveItsRevision) {
     EXPECT_EQ(values->front().json, "one");
     for (const auto& v : *values) EXPECT_NE(v.json, "junk");
     // The next write follows the refill.
-    uint64_t back = 0;
-    {
-        std::lock_guard lock(m);
-        back = seen.back().revision;
-    }
-    const BusWrite two = a->write(back, "two");
+    const BusWrite two = a->write(back.revision, "two");
     ASSERT_EQ(two.error, BusError::kNone) << two.message;
-    std::unique_lock lock(m);
-    ASSERT_TRUE(
-        cv.wait_for(lock, std::chrono::seconds(10), [&] { return seen.back().json == "two"; }));
+    ASSERT_TRUE(seen.last_is("two", 10));
 }
 
 // A watch blocked inside the NATS client (paused here) does not keep a node behind the bus: the
 // 2-s check on its own thread reads the key and delivers the newest write, and puts the held
 // scene back on a key deleted meanwhile; the watch, let go, goes on from there.
 TEST(SceneBus, TheCheckAloneKeepsANodeUpToTheBus) {
-    // Declared before the bus, so that they outlive its threads (which may deliver until
-    // it is destroyed).
-    std::mutex m;
-    std::condition_variable cv;
-    std::vector<SceneBus::Value> seen;
+    Seen seen;
     auto a = bus("paused");
     auto writer = bus("paused", "w");
     ASSERT_TRUE(a && writer);
@@ -546,25 +517,15 @@ TEST(SceneBus, TheCheckAloneKeepsANodeUpToTheBus) {
     ASSERT_EQ(one.error, BusError::kNone) << one.message;
     a->hold({one.revision, 0, one.deadline_ms, "one"});
     SceneBus* node = a.get();
-    a->watch([&, node](const SceneBus::Value& v) {
-        node->hold(v);  // as serve holds what it applies
-        std::lock_guard lock(m);
-        seen.push_back(v);
-        cv.notify_all();
-    });
-    const auto delivered = [&](const std::string& json, int seconds) {
-        std::unique_lock lock(m);
-        return cv.wait_for(lock, std::chrono::seconds(seconds),
-                           [&] { return !seen.empty() && seen.back().json == json; });
-    };
-    ASSERT_TRUE(delivered("one", 10)) << "the watch did not deliver the first scene";
+    a->watch(seen.callback([node](const SceneBus::Value& v) { node->hold(v); }));  // as serve
+    ASSERT_TRUE(seen.last_is("one", 10)) << "the watch did not deliver the first scene";
     a->pause_watch(true);
     const BusWrite two = writer->write(one.revision, "two");
     ASSERT_EQ(two.error, BusError::kNone) << two.message;
     const BusWrite three = writer->write(two.revision, "three");
     ASSERT_EQ(three.error, BusError::kNone) << three.message;
-    ASSERT_TRUE(delivered("three", 15)) << "the check did not bring the node to version "
-                                        << three.revision << " while its watch was stopped";
+    ASSERT_TRUE(seen.last_is("three", 15)) << "the check did not bring the node to version "
+                                           << three.revision << " while its watch was stopped";
     EXPECT_GE(a->counters().caught_up.load(), 1u);
     // The key deleted while the watch is still stopped: the check puts version three back.
     ASSERT_TRUE(raw_put("paused", "", true));
@@ -583,10 +544,11 @@ TEST(SceneBus, TheCheckAloneKeepsANodeUpToTheBus) {
     a->pause_watch(false);
     const BusWrite four = writer->write(refilled, "four");
     ASSERT_EQ(four.error, BusError::kNone) << four.message;
-    ASSERT_TRUE(delivered("four", 15))
+    ASSERT_TRUE(seen.last_is("four", 15))
         << "the watch, let go, did not deliver version " << four.revision;
-    std::lock_guard lock(m);
-    for (size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i].revision, seen[i - 1].revision);
+    const auto delivered = seen.all();
+    for (size_t i = 1; i < delivered.size(); ++i)
+        EXPECT_GE(delivered[i].revision, delivered[i - 1].revision);
 }
 
 // A bus found empty or behind the held version gets the newest scene back, at a revision no
