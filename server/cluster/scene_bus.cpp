@@ -491,13 +491,14 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
         return {0, 0, BusError::kUnavailable,
                 "the scene bus is unavailable (not connected to " + redacted(s_->options.url) +
                     "); the running scene stays"};
-    // Unsigned values after the applied version, and a signed one this node cannot serve
+    // Unsigned values after the applied version, and a signed value that is no scene
     // (pass_over), are no one's write: write over them.
     const uint64_t passed = passed_over_.load();
     const uint64_t tail = tail_.load(), signed_tail = signed_tail_.load();
     const uint64_t expected =
         std::max(tail > applied && signed_tail <= std::max(applied, passed) ? tail : applied, over);
-    // Over a value passed over, the write follows it: a node that did serve it takes it too.
+    // Over a value passed over, the write follows it: every node took its revision as its
+    // version.
     const uint64_t base =
         expected > applied && passed > applied ? std::min(passed, expected) : applied;
     // The bus must store it by the deadline, or no node takes it: a write the admin is told
@@ -541,8 +542,8 @@ BusWrite SceneBus::write_on(uint64_t applied, const std::string& json, uint64_t 
                 uint64_t(std::max<int64_t>(kvEntry_Created(e), 0) / 1000000) <= v->deadline_ms;
             kvEntry_Destroy(e);
         }
-        // Over a value no node takes (unsigned, late, or an old one put again) or that this
-        // node cannot serve: written on it.
+        // Over a value no node takes (unsigned, late, an old one put again, or no scene at
+        // all): written on it.
         if (!takeable && now > expected && attempts > 1)
             return write_on(applied, json, now, attempts - 1);
         return {0, 0, BusError::kConflict, conflict_message(now)};
@@ -926,7 +927,7 @@ bool SceneBus::refill() {
     // unless that value is another node's refill of an older version, or is not signed and no
     // signed value is left in the history: then it is gone over.
     const bool over = top == Top::kStaleRefill || (top == Top::kUnsigned && listed->empty()) ||
-                      (top == Top::kSigned && bus_revision == passed);
+                      (top == Top::kSigned && passed > 0 && bus_revision == passed);
     const uint64_t found = bus_revision;
     if (over)
         bus_revision = 0;
