@@ -170,11 +170,13 @@ rate=$(( (f1 - f0) * 1000000000 / (t1 - t0) ))
   || fail "headsets starved during the flood: $before_rate layers/s before, $rate during"
 # The flood pushed every signed value out of the key's history: a node puts the cluster's scene
 # back on top (the same scene, relabelled), and the nodes converge on it.
+within 10 'grep -q "with no signed value left" "$dir"/node-*.log' \
+  || fail "no node put the scene back after the flood"
 within 10 'v=$(last_applied a); same_everywhere $v a b c' \
   || fail "the nodes differ after the flood: a: $(applied a); b: $(applied b); c: $(applied c)"
 ! grep -q "'flood" "$dir"/node-*.log || fail "a node served a flooded value"
 # A node started while the key holds only unsigned values joins the cluster's scene: it waits
-# for a running node to put it back, rather than putting its own.
+# for a running node to put it back (or finds it back already), rather than putting its own.
 flood=()
 for i in $(seq 100); do flood+=("{\"name\":\"flood again $i\"}"); done
 intrude "${flood[@]}"

@@ -108,17 +108,22 @@ PY
 }
 victim=$(watch_host a || true)
 [[ "$victim" =~ ^[0-2]$ ]] || fail "the servers' monitoring shows no watch consumer of node a"
-# Killed while a push is in flight: the push is either acknowledged (then it must survive) or
-# refused (then it must never land); the next push is confirmed by the other two.
+# Killed 0.3 s into a push (before, during or after its write reaches the bus, as the machine's
+# load decides): the push is either acknowledged (then it must survive) or refused (then it must
+# never land); the next push is confirmed by the other two.
 push b mid > "$dir/push-mid.log" 2>&1 &
 push_pid=$!
 sleep 0.3
 { kill -KILL "${servers[$victim]}"; wait "${servers[$victim]}"; } 2>/dev/null || true
 killed=$(date +%s%N)
+mid_v=""
 if wait "$push_pid"; then
-  mid="acknowledged as v$(grep -oE "applied: scene version [0-9]+" "$dir/push-mid.log" | grep -oE "[0-9]+$")"
+  mid_v=$(grep -oE "applied: scene version [0-9]+" "$dir/push-mid.log" | grep -oE "[0-9]+$" || true)
+  [[ -n "$mid_v" ]] || fail "the push in flight answered without a version: $(cat "$dir/push-mid.log")"
+  mid="acknowledged as v$mid_v"
 else
-  grep -qE "refused|unavailable" "$dir/push-mid.log" || fail "the push in flight: $(cat "$dir/push-mid.log")"
+  grep -qE "refused|unavailable|changed concurrently" "$dir/push-mid.log" \
+    || fail "the push in flight: $(cat "$dir/push-mid.log")"
   mid="refused"
 fi
 within 60 'push b two > "$dir/push.log" 2>&1' || fail "no push confirmed after a server was killed: $(cat "$dir/push.log")"
@@ -132,7 +137,9 @@ caught=$(grep -c "read directly" "$dir/node-a.log" || true)
 if [[ "$mid" == refused ]]; then
   ! grep -q "'room mid'" "$dir"/node-*.log || fail "the refused push landed: $(grep "'room mid'" "$dir"/node-*.log)"
 else
-  grep -q "'room mid'" "$dir/node-a.log" || fail "the push acknowledged mid-kill ($mid) never reached node a"
+  # Acknowledged: the next push followed it (a node that catches up may apply only the newer).
+  (( mid_v < want )) || fail "the push acknowledged mid-kill ($mid) is not below v$want"
+  grep -q "'room mid'" "$dir/node-b.log" || fail "the push acknowledged mid-kill ($mid) never reached node b, its writer"
 fi
 echo "2. nats-server n$victim (holding node a's watch) killed during a push (that push $mid): the next push confirmed ${after_ms} ms after the kill by the other two; v$want on a and b ${reached_ms} ms after that (a read it directly, its watch behind: $caught time(s))"
 

@@ -5,7 +5,7 @@ with them. Writes DIR/operator.jwt, DIR/resolver.conf (for a nats-server configu
 `include`: the operator, the system account, both accounts preloaded) and DIR/node.creds (the
 user's JWT and nkey seed, mode 600), the file `hysar serve --cluster-creds` reads.
 Usage: nats_creds.py DIR"""
-import base64, binascii, hashlib, json, os, sys, time
+import base64, hashlib, json, os, sys, time
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 from cryptography.hazmat.primitives import serialization
 
