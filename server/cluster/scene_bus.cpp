@@ -46,6 +46,12 @@ constexpr uint64_t kClockMarginMs = 500;
 // value in time, before it says the outcome is unknown.
 constexpr uint64_t kSettleLookMs = 15000;
 
+// Raises `to` to `revision` if that is newer (any thread).
+void raise_to(std::atomic<uint64_t>& to, uint64_t revision) {
+    for (uint64_t t = to.load(); revision > t && !to.compare_exchange_weak(t, revision);) {
+    }
+}
+
 // HMAC-SHA256 over "hysar-scene 1\nBASE\nDEADLINE\nJSON" with a key derived from the admin
 // token (so that the token itself is never the key of anything else), as 64 hex digits.
 std::string mac(const std::string& admin_token, uint64_t base, uint64_t deadline_ms,
@@ -412,13 +418,9 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     // value raises signed_tail_ before tail_: a writer never sees it in the tail and not in the
     // signed tail (it would write over a value every node takes, with an older base that every
     // node then refuses: an acknowledged update lost).
-    const auto raise = [revision](std::atomic<uint64_t>& to) {
-        for (uint64_t t = to.load(); revision > t && !to.compare_exchange_weak(t, revision);) {
-        }
-    };
     auto v = verify(s_->options.admin_token, raw);
     if (!v) {
-        raise(tail_);
+        raise_to(tail_, revision);
         if (count) {
             ++counters_.unsigned_values;
             burst_log().note(fmt::format("version {} ignored: {}", revision, v.error().message));
@@ -427,7 +429,7 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
     }
     // Stored after its deadline: its writer was told the write failed, so no node takes it.
     if (stored_ns > 0 && uint64_t(stored_ns / 1000000) > v->deadline_ms) {
-        raise(tail_);
+        raise_to(tail_, revision);
         if (!count)
             return std::nullopt;
         ++counters_.late_values;
@@ -437,8 +439,8 @@ std::optional<SceneBus::Value> SceneBus::check(uint64_t revision, int64_t stored
                         revision, uint64_t(stored_ns / 1000000) - v->deadline_ms));
         return std::nullopt;
     }
-    raise(signed_tail_);
-    raise(tail_);
+    raise_to(signed_tail_, revision);
+    raise_to(tail_, revision);
     return Value{revision, v->base, v->deadline_ms, std::move(v->json), v->refill, v->of};
 }
 
@@ -625,13 +627,6 @@ void SceneBus::watch(std::function<void(const Value&)> on_scene) {
     check_thread_ = std::thread([this] { check_loop(); });
 }
 
-namespace {
-void raise_to(std::atomic<uint64_t>& to, uint64_t revision) {
-    for (uint64_t t = to.load(); revision > t && !to.compare_exchange_weak(t, revision);) {
-    }
-}
-}  // namespace
-
 void SceneBus::pause_watch(bool paused) {
     watch_paused_ = paused;
     while (paused && !watch_parked_ && !stop_)
@@ -803,10 +798,13 @@ bool SceneBus::check_bus(int& behind) {
         // Unsigned values that pushed every signed one out of the key's history (a flood of
         // more than it keeps): a node started now would find no scene to serve and put its own,
         // so the held one goes back on top (relabelled by every node, rebuilt by none).
-        if (top == Top::kUnsigned) {
+        // The history changes only with a new value on top: read once per unsigned top.
+        if (top == Top::kUnsigned && rev != unsigned_top_read_) {
             auto listed = read_signed(false);
             if (listed && listed->empty())
                 return refill();
+            if (listed)
+                unsigned_top_read_ = rev;
         }
         // Values stored since the last one seen are read one by one and the newest delivered
         // now: a watch whose consumer lived on a server that died is only made again once the

@@ -237,7 +237,10 @@ private:
     // not yet delivered is weighed with the newer ones (a copy put again must not go first).
     std::atomic<uint64_t> delivered_{0};
     std::atomic<uint64_t> watch_epoch_{0};  // watchers made: the check restarts its count
-    std::mutex deliver_mutex_;              // one scene delivered at a time (on_scene_)
+    // The unsigned value on top whose history the check found still holding a signed one
+    // (check thread only).
+    uint64_t unsigned_top_read_ = 0;
+    std::mutex deliver_mutex_;  // one scene delivered at a time (on_scene_)
     mutable std::mutex held_mutex_;
     Value held_;
 };

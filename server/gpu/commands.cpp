@@ -111,9 +111,8 @@ void CommandList::end_render_and_pack(RenderTarget& t, const ComputePipeline& pa
     auto push_fn = device_.push_descriptor_fn();
     HS_CHECK(push_fn != nullptr, "end_render_and_pack: no VK_KHR_push_descriptor");
     std::array<ViewArea, kMaxTargetViews> copies;
-    for (uint32_t v = 0; v < areas.size() && v < kMaxTargetViews; ++v) copies[v] = {v, areas[v]};
-    copy_out(t, std::span<const ViewArea>(copies.data(),
-                                          std::min<size_t>(areas.size(), kMaxTargetViews)));
+    for (uint32_t v = 0; v < areas.size(); ++v) copies[v] = {v, areas[v]};
+    copy_out(t, std::span<const ViewArea>(copies.data(), areas.size()));
     const uint32_t ts = t.pack_tile();
     // Per view with an area: its push constants (phases 0 and 2 cover the area's tiles).
     std::array<TilesPush, kMaxTargetViews> pcs{};

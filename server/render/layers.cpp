@@ -73,7 +73,7 @@ void Renderer::plan_layer(const LayerRequest& r, LayerWork& w) const {
     plan.clusters_total = uint32_t(level.clusters.size());
     const PixelRect rect = cull_clusters(r, level, w);
     plan.rect = align_to_tiles(rect, std::max<uint32_t>(r.tile, 1), k.width, k.height);
-    plan.parts = r.sparse ? w.parts.finish(info_.max_layer_parts) : RectParts{};
+    plan.parts = splits_into_parts(r) ? w.parts.finish(info_.max_layer_parts) : RectParts{};
     if (plan.parts.count <= 1) {
         plan.parts.parts[0] = plan.rect;
         plan.parts.count = plan.rect.empty() ? 0 : 1;
@@ -106,6 +106,7 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     auto& fills = w.fills;
     rects.assign(level.clusters.size(), PixelRect{});
     w.parts.clear();
+    const bool split = splits_into_parts(r);
     const uint32_t tile = std::max<uint32_t>(r.tile, 1);
     masks.assign(level.clusters.size(), 0);
     fills.assign(level.clusters.size(), 0);
@@ -160,7 +161,8 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
             }
             if (masks[c] != 0 || fills[c]) {
                 rect = unite(rect, rects[c]);
-                w.parts.add(align_to_tiles(rects[c], tile, k.width, k.height));
+                if (split)
+                    w.parts.add(align_to_tiles(rects[c], tile, k.width, k.height));
             }
         }
     }

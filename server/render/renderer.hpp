@@ -390,6 +390,11 @@ private:
     // Per cluster of `level`, its rectangle and lights (w.rects, w.masks); the rectangle the lit
     // clusters cover (the whole layer when not sparse).
     PixelRect cull_clusters(const LayerRequest& r, const ClusteredMesh& level, LayerWork& w) const;
+    // Whether a layer's rectangle may split into parts: a sparse layer read back as it lies
+    // (a target that packs its tiles reads only the lit ones; a full layer is read whole).
+    bool splits_into_parts(const LayerRequest& r) const {
+        return r.sparse && info_.max_layer_parts > 1 && !(r.target && r.target->packs_tiles());
+    }
     // The drawn clusters' indices into r.indices: the occluders first, then the lit clusters
     // grouped by light mask (w.groups); the plan's counts.
     void gather_indices(const LayerRequest& r, const ClusteredMesh& level, LayerWork& w) const;

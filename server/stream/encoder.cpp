@@ -234,18 +234,16 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
     }
     // The tile packer reads whole tiles: the drive covers the rectangle (or each of its parts)
     // rounded out to the tile grid, so that no byte of the buffer it reads is left unwritten.
-    const uint32_t ts = protocol::kDefaultTileSize;
     uint8_t* dst = scratch.driven.get();
     std::array<codec::LayerPart, codec::kMaxLayerParts> areas;
     for (size_t i = 0, n = pixels.read_areas(areas); i < n; ++i) {
         const codec::LayerPart& a = areas[i];
-        const uint32_t tx0 = a.x0 / ts * ts, ty0 = a.y0 / ts * ts;
-        const uint32_t tx1 = std::min(pixels.width, (a.x1 + ts - 1) / ts * ts),
-                       ty1 = std::min(pixels.height, (a.y1 + ts - 1) / ts * ts);
+        const render::PixelRect t = render::align_to_tiles(
+            {a.x0, a.y0, a.x1, a.y1}, protocol::kDefaultTileSize, pixels.width, pixels.height);
         if (rgba8)
-            drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
+            drive->apply_rgba8(pixels.data, pixels.stride, dst, stride, t.x0, t.y0, t.x1, t.y1);
         else
-            drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, tx0, ty0, tx1, ty1);
+            drive->apply_rgba16f(pixels.data, pixels.stride, dst, stride, t.x0, t.y0, t.x1, t.y1);
     }
     codec::LayerPixels driven = pixels;
     driven.data = dst;
