@@ -458,20 +458,37 @@ void hysar_predictor_destroy(hysar_predictor* predictor) {
     delete predictor;
 }
 
-hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample) {
+hysar_status hysar_predictor_add_with_velocity(hysar_predictor* predictor, const hysar_pose* sample,
+                                               const double angular_velocity[3],
+                                               const double linear_velocity[3]) {
     return guarded([&] {
         if (!predictor || !sample)
             return fail(HYSAR_E_INVALID_ARGUMENT, "predictor and sample must not be NULL");
+        if (!angular_velocity != !linear_velocity)
+            return fail(HYSAR_E_INVALID_ARGUMENT,
+                        std::string(angular_velocity ? "linear_velocity" : "angular_velocity") +
+                            " is NULL: give both velocities, or neither");
         hs::motion::PoseSample s;
         s.time_ns = sample->time_ns;
         for (size_t i = 0; i < 3; ++i) s.position_m[i] = sample->position_m[i];
         for (size_t i = 0; i < 4; ++i) s.orientation_wxyz[i] = sample->orientation_wxyz[i];
+        if (angular_velocity) {
+            s.has_velocity = true;
+            for (size_t i = 0; i < 3; ++i)
+                s.angular_velocity[i] = angular_velocity[i],
+                s.linear_velocity[i] = linear_velocity[i];
+        }
         if (!predictor->predictor.add(s))
             return fail(HYSAR_E_INVALID_ARGUMENT,
-                        "pose sample refused: a non-finite number, a zero quaternion, or a "
-                        "time_ns not after the newest sample's");
+                        std::string("pose sample refused: a non-finite number") +
+                            (s.has_velocity ? " (velocities included)" : "") +
+                            ", a zero quaternion, or a time_ns not after the newest sample's");
         return HYSAR_OK;
     });
+}
+
+hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample) {
+    return hysar_predictor_add_with_velocity(predictor, sample, nullptr, nullptr);
 }
 
 hysar_status hysar_predictor_predict(const hysar_predictor* predictor, uint64_t display_time_ns,

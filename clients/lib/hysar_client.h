@@ -34,7 +34,7 @@ extern "C" {
 #endif
 
 /* The version of this API; hysar_client_api_version() returns the library's. */
-#define HYSAR_CLIENT_API_VERSION 5
+#define HYSAR_CLIENT_API_VERSION 6
 
 typedef enum hysar_status {
     HYSAR_OK = 0,
@@ -247,6 +247,19 @@ HYSAR_API void hysar_predictor_destroy(hysar_predictor* predictor);
 /* A tracker sample (time_ns must be set). One with a non-finite number, a zero quaternion or a
  * time not after the newest is refused (HYSAR_E_INVALID_ARGUMENT) and changes nothing. */
 HYSAR_API hysar_status hysar_predictor_add(hysar_predictor* predictor, const hysar_pose* sample);
+/* API 6: a tracker sample with the velocities the tracker measures at it (an inertial unit; an
+ * OpenXR runtime's XrSpaceVelocity): angular_velocity in rad/s (axis times rate) and
+ * linear_velocity in m/s, both in the world frame of the pose. The predictor then carries the
+ * samples of the last 150 ms (smooth_ms when less) forward to the newest one's time by the
+ * velocities between them and averages them, so that the current pose's error from the poses' noise
+ * falls with the square root of the samples whatever the motion's curvature, and extrapolates the
+ * measured velocities (a least-squares line over the last window_ms, unfiltered). Both NULL: as
+ * hysar_predictor_add. Refused as hysar_predictor_add refuses, and for one velocity NULL or a
+ * non-finite velocity. */
+HYSAR_API hysar_status hysar_predictor_add_with_velocity(hysar_predictor* predictor,
+                                                         const hysar_pose* sample,
+                                                         const double angular_velocity[3],
+                                                         const double linear_velocity[3]);
 /* The pose predicted for display_time_ns (the smoothed current pose at constant angular and
  * linear velocity, filtered, capped); its time_ns is the newest sample's, so a layer's pose says
  * when it was sampled. HYSAR_E_INVALID_ARGUMENT before the first sample. */

@@ -27,6 +27,12 @@ struct PoseSample {
     uint64_t time_ns = 0;  // the client's clock at sampling
     Vec3 position_m{};
     Quat orientation_wxyz{1, 0, 0, 0};
+    // The tracker's own velocities at the sample, where it measures them (an inertial unit; an
+    // OpenXR runtime's XrSpaceVelocity): world-frame angular (rad/s, axis times rate) and linear
+    // (m/s). The predictor then takes the motion from them rather than from the poses'
+    // differences (Predictor::add).
+    bool has_velocity = false;
+    Vec3 angular_velocity{}, linear_velocity{};
 };
 
 struct PredictorConfig {
@@ -59,11 +65,21 @@ std::optional<std::string> check(const PredictorConfig& c);
 // frame, from the relative rotation of the samples across the window) and linear velocity,
 // each filtered, extrapolated at constant velocity and capped. Exact on constant angular and
 // constant linear velocity. Not thread-safe: one owner.
+//
+// Samples that carry the tracker's velocities (PoseSample::has_velocity) are used as an
+// inertial tracker's output is: every sample of the last 150 ms (smooth_ms when less) is carried
+// forward to the newest sample's time by the velocities between them (the trapezoid rule) and the
+// carried poses are averaged, so that the current pose's error from the poses' noise falls with the
+// square root of the samples averaged whatever the motion's curvature (a polynomial fit can
+// only average over the stretch where the motion is near a line); the velocities extrapolated
+// are the measured ones, each a least-squares line over the last window_ms at the newest
+// sample, unfiltered (a filter lags where the head accelerates).
 class Predictor {
 public:
     explicit Predictor(const PredictorConfig& config = {});
-    // Adds a tracker sample. A sample with a non-finite number, a zero quaternion or a time not
-    // after the newest one is ignored (false); the velocities are then as they were.
+    // Adds a tracker sample. A sample with a non-finite number (velocities included, where it
+    // has them), a zero quaternion or a time not after the newest one is ignored (false); the
+    // velocities are then as they were.
     bool add(const PoseSample& s);
     // The pose at `time_ns` (the display time): the current pose (the newest sample, smoothed:
     // smooth_ms) moved by the filtered velocities over min(time_ns - newest, max_horizon) (not
@@ -83,6 +99,8 @@ public:
 
 private:
     void update_noise();
+    // add()'s path for a sample with velocities, over the newest samples that have them.
+    void add_with_velocity(const PoseSample& s);
     PredictorConfig config_;
     std::deque<PoseSample> samples_;
     PoseSample current_;  // the newest sample, smoothed

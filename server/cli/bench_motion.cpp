@@ -15,7 +15,9 @@ namespace {
 constexpr const char* kMotionHelp =
     "usage: hysar bench motion [--traces walk,turn,nod] [--modes none,predict,reproject,both]\n"
     "                          [--seconds S] [--delay-ms MS] [--refresh-hz HZ] [--scale F]\n"
-    "                          [--noise-deg D] [--noise-mm MM] [--overscan-deg D]\n"
+    "                          [--noise-deg D] [--noise-mm MM] [--poses-only]\n"
+    "                          [--velocity-noise-dps D] [--velocity-noise-mm-s MM]\n"
+    "                          [--overscan-deg D]\n"
     "                          [--plane-nearer-m M] [--reference-frames N]\n"
     "                          [--profile NAME] [--json FILE] [--plot FILE.png] [--quick]\n"
     "\n"
@@ -38,6 +40,12 @@ constexpr const char* kMotionHelp =
     "                       are in the profile's own pixels\n"
     "  --noise-deg D        tracker noise per sample, degrees (default 0.05)\n"
     "  --noise-mm MM        tracker noise per sample, millimetres (default 0.5)\n"
+    "  --velocity-noise-dps D, --velocity-noise-mm-s MM\n"
+    "                       the tracker measures its angular and linear velocities too (an\n"
+    "                       inertial unit, as OpenXR's XrSpaceVelocity), with this white noise\n"
+    "                       per sample plus a constant bias of a fifth of it, and the client's\n"
+    "                       predictor takes them (defaults 0.25 deg/s, 5 mm/s)\n"
+    "  --poses-only         the tracker gives poses alone: the predictor differentiates them\n"
     "  --overscan-deg D     reproject and both: the layer is rendered D degrees wider on every\n"
     "                       side than the display and warped back onto it, so that a turn has\n"
     "                       what it brings into view (default 5; 0: none; at most 30)\n"
@@ -79,12 +87,12 @@ Result<std::vector<std::string>> words(const Flags& f, const char* flag,
 
 Result<bench::MotionBenchOptions> parse_motion(const std::vector<std::string>& args) {
     HS_ASSIGN_OR_RETURN(
-        Flags f,
-        parse_flags(args,
-                    {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz", "--scale",
-                     "--noise-deg", "--noise-mm", "--overscan-deg", "--plane-nearer-m",
-                     "--reference-frames", "--profile", "--json", "--plot"},
-                    {"--quick"}));
+        Flags f, parse_flags(args,
+                             {"--traces", "--modes", "--seconds", "--delay-ms", "--refresh-hz",
+                              "--scale", "--noise-deg", "--noise-mm", "--velocity-noise-dps",
+                              "--velocity-noise-mm-s", "--overscan-deg", "--plane-nearer-m",
+                              "--reference-frames", "--profile", "--json", "--plot"},
+                             {"--quick", "--poses-only"}));
     bench::MotionBenchOptions o;
     const std::vector<std::string> traces(std::begin(bench::kMotionTraces),
                                           std::end(bench::kMotionTraces));
@@ -98,6 +106,15 @@ Result<bench::MotionBenchOptions> parse_motion(const std::vector<std::string>& a
     HS_ASSIGN_OR_RETURN(o.scale, parse_number(f, {"--scale", 0.05, 1}, o.scale));
     HS_ASSIGN_OR_RETURN(o.noise_deg, parse_number(f, {"--noise-deg", 0, 5}, o.noise_deg));
     HS_ASSIGN_OR_RETURN(o.noise_mm, parse_number(f, {"--noise-mm", 0, 50}, o.noise_mm));
+    HS_ASSIGN_OR_RETURN(o.velocity_noise_dps,
+                        parse_number(f, {"--velocity-noise-dps", 0, 100}, o.velocity_noise_dps));
+    HS_ASSIGN_OR_RETURN(o.velocity_noise_mm_s,
+                        parse_number(f, {"--velocity-noise-mm-s", 0, 1000}, o.velocity_noise_mm_s));
+    o.tracker_velocity = !f.has("--poses-only");
+    if (!o.tracker_velocity && (f.has("--velocity-noise-dps") || f.has("--velocity-noise-mm-s")))
+        return make_error(ErrorCode::kInvalidArgument,
+                          "--poses-only: the tracker gives no velocities, so their noise "
+                          "(--velocity-noise-dps, --velocity-noise-mm-s) does not apply");
     HS_ASSIGN_OR_RETURN(o.overscan_deg, parse_number(f, {"--overscan-deg", 0, 30}, o.overscan_deg));
     HS_ASSIGN_OR_RETURN(o.plane_nearer_m,
                         parse_number(f, {"--plane-nearer-m", -1, 1}, o.plane_nearer_m));

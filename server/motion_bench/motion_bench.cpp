@@ -188,9 +188,31 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
     const auto ticks = int(o.seconds * o.refresh_hz);
     const int stride = std::max(1, ticks / std::max(1, o.reference_frames));
     auto trace_s = [&](uint64_t t) { return (double(t) - double(t0)) * 1e-9; };
+    const double vnoise_rad = o.velocity_noise_dps * kPi / 180,
+                 vnoise_m = o.velocity_noise_mm_s * 1e-3;
+    motion::Vec3 gyro_bias, velocity_bias;  // constant over the row
+    for (size_t i = 0; i < 3; ++i)
+        gyro_bias[i] = 0.2 * vnoise_rad * gauss(rng),
+        velocity_bias[i] = 0.2 * vnoise_m * gauss(rng);
     auto sample = [&](uint64_t t) {
-        auto s = true_pose(sc.viewing, trace, trace_s(t));
+        const double at = trace_s(t);
+        auto s = true_pose(sc.viewing, trace, at);
         s.time_ns = t;
+        if (o.tracker_velocity) {
+            // The true velocities (central differences over 0.1 ms), measured with noise.
+            constexpr double kEps = 5e-5;
+            const auto ahead = true_pose(sc.viewing, trace, at + kEps),
+                       behind = true_pose(sc.viewing, trace, at - kEps);
+            const motion::Vec3 turn = motion::to_rotation_vector(motion::multiply(
+                ahead.orientation_wxyz, motion::conjugate(behind.orientation_wxyz)));
+            s.has_velocity = true;
+            for (size_t i = 0; i < 3; ++i) {
+                s.angular_velocity[i] =
+                    turn[i] / (2 * kEps) + gyro_bias[i] + gauss(rng) * vnoise_rad;
+                s.linear_velocity[i] = (ahead.position_m[i] - behind.position_m[i]) / (2 * kEps) +
+                                       velocity_bias[i] + gauss(rng) * vnoise_m;
+            }
+        }
         const motion::Vec3 r{gauss(rng) * noise_rad, gauss(rng) * noise_rad,
                              gauss(rng) * noise_rad};
         s.orientation_wxyz = motion::normalized(
@@ -455,13 +477,16 @@ Result<MotionReport> measure_motion(gpu::Device& device, const scene::Scene& sc,
     stream::LoopbackCreateInfo info;
     info.clients = 4;
     HS_ASSIGN_OR_RETURN(auto server, stream::LoopbackServer::start(device, sc, info));
-    say(
-        fmt::format("bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
-                    "{} ms network delay each way, tracker noise {} deg / {} mm, {} s per row, "
-                    "overscan {} deg with reprojection, its plane {} m nearer than the server's",
-                    profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width,
-                    full.height, o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm, o.seconds,
-                    o.overscan_deg, o.plane_nearer_m));
+    say(fmt::format(
+        "bench motion: {} on {}, {}x{} per eye served ({} of {}x{}), {} Hz display, "
+        "{} ms network delay each way, tracker noise {} deg / {} mm{}, {} s per row, "
+        "overscan {} deg with reprojection, its plane {} m nearer than the server's",
+        profile->name, device.name(), d.eye_width, d.eye_height, o.scale, full.width, full.height,
+        o.refresh_hz, o.delay_ms, o.noise_deg, o.noise_mm,
+        o.tracker_velocity ? fmt::format(", velocities measured with {} deg/s / {} mm/s",
+                                         o.velocity_noise_dps, o.velocity_noise_mm_s)
+                           : std::string(", poses alone"),
+        o.seconds, o.overscan_deg, o.plane_nearer_m));
     MotionReport rep;
     rep.profile = profile->name;
     rep.eye_width = d.eye_width, rep.eye_height = d.eye_height;
@@ -519,6 +544,11 @@ int run_motion_bench(const MotionBenchOptions& o) {
         j["delay_ms"] = o.delay_ms;
         j["overscan_deg"] = o.overscan_deg;
         j["plane_nearer_m"] = o.plane_nearer_m;
+        j["tracker"] = {{"noise_deg", o.noise_deg},
+                        {"noise_mm", o.noise_mm},
+                        {"velocity", o.tracker_velocity},
+                        {"velocity_noise_dps", o.tracker_velocity ? o.velocity_noise_dps : 0},
+                        {"velocity_noise_mm_s", o.tracker_velocity ? o.velocity_noise_mm_s : 0}};
         j["seconds"] = measured->seconds;
         j["device"] = measured->device;
         std::ofstream f(o.json_path);

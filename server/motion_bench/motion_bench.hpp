@@ -23,15 +23,22 @@ namespace hs::bench {
 struct MotionBenchOptions {
     std::vector<std::string> traces{"walk", "turn", "nod"};  // of kMotionTraces
     std::vector<std::string> modes{"none", "predict", "reproject", "both"};
-    double seconds = 8;         // served per trace and mode
-    double refresh_hz = 60;     // the simulated display clock
-    double delay_ms = 0;        // injected network delay, each way (milliseconds)
-    double noise_deg = 0.05;    // tracker noise per sample, orientation (degrees, 1 sigma)
-    double noise_mm = 0.5;      // tracker noise per sample, position (millimetres, 1 sigma)
-    double scale = 0.5;         // the profile's resolution times this is served; errors are
-                                // reported in the profile's own pixels
-    double overscan_deg = 5;    // reproject and both: the layer rendered this much wider on
-                                // every side (degrees) than the display it is warped onto; 0: none
+    double seconds = 8;       // served per trace and mode
+    double refresh_hz = 60;   // the simulated display clock
+    double delay_ms = 0;      // injected network delay, each way (milliseconds)
+    double noise_deg = 0.05;  // tracker noise per sample, orientation (degrees, 1 sigma)
+    double noise_mm = 0.5;    // tracker noise per sample, position (millimetres, 1 sigma)
+    // The tracker measures its velocities too (an inertial unit, as an OpenXR runtime's
+    // XrSpaceVelocity reports), with white noise per sample (1 sigma per axis) plus a constant
+    // bias of a fifth of it on each axis, and the client passes them to its predictor
+    // (PoseSample::has_velocity). false: poses alone, the velocities differentiated from them.
+    bool tracker_velocity = true;
+    double velocity_noise_dps = 0.25;  // angular, degrees/s (a consumer MEMS gyroscope's)
+    double velocity_noise_mm_s = 5;    // linear, millimetres/s
+    double scale = 0.5;                // the profile's resolution times this is served; errors are
+                                       // reported in the profile's own pixels
+    double overscan_deg = 5;           // reproject and both: the layer rendered this much wider on
+                              // every side (degrees) than the display it is warped onto; 0: none
     double plane_nearer_m = 0;  // reproject and both: the warp's plane this much nearer the
                                 // eye than the one the server sends (the prop's centre;
                                 // metres; < 0: farther)

@@ -117,10 +117,12 @@ BENCHMARK(BM_ReprojectStereoOverscanned)
     ->UseRealTime();
 
 // One tracker sample into the predictor (a 500 Hz tracker: about 8 per 60 Hz frame), with the
-// current pose smoothed over up to 250 ms (the default) and without (smooth_ms 0).
+// current pose smoothed over up to 250 ms (the default) and without (smooth_ms 0); range(1):
+// the sample carries the tracker's velocities (carried forward over 150 ms and averaged).
 void BM_PredictorAdd(benchmark::State& state) {
     PredictorConfig c;
     c.smooth_ms = double(state.range(0));
+    const bool velocities = state.range(1) != 0;
     Predictor p(c);
     uint32_t seed = 1;
     auto noise = [&] {
@@ -134,13 +136,23 @@ void BM_PredictorAdd(benchmark::State& state) {
         const double sec = double(t) * 1e-9;
         s.orientation_wxyz = from_rotation_vector({noise(), 0.14 * sec + noise(), noise()});
         s.position_m = {0.8 * std::cos(0.14 * sec), 1.6, 0.8 * std::sin(0.14 * sec)};
+        if (velocities) {
+            s.has_velocity = true;
+            s.angular_velocity = {noise(), 0.14 + noise(), noise()};
+            s.linear_velocity = {-0.112 * std::sin(0.14 * sec), 0, 0.112 * std::cos(0.14 * sec)};
+        }
         p.add(s);
         benchmark::DoNotOptimize(p.angular_velocity());
         t += 2000000;
     }
-    state.SetLabel("smooth_ms " + std::to_string(state.range(0)));
+    state.SetLabel("smooth_ms " + std::to_string(state.range(0)) +
+                   (velocities ? ", velocities measured" : ", poses alone"));
 }
-BENCHMARK(BM_PredictorAdd)->Arg(250)->Arg(0)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_PredictorAdd)
+    ->Args({250, 0})
+    ->Args({0, 0})
+    ->Args({250, 1})
+    ->Unit(benchmark::kMicrosecond);
 
 // The plain form of the bilinear filter (clientlib/bilinear_reference.hpp), for comparison:
 // what warp() did before it stepped the position and skipped the black.

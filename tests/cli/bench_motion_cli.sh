@@ -31,13 +31,18 @@ assert j["overscan_deg"] == 5, j["overscan_deg"]
 plain, wide = modes["none"]["served_eye"], modes["both"]["served_eye"]
 assert wide[0] > plain[0] and wide[1] > plain[1], (plain, wide)
 assert plain == j["served_eye"], (plain, j["served_eye"])
+# The tracker measures its velocities by default, and the JSON says with what noise.
+t = j["tracker"]
+assert t["velocity"] is True and t["velocity_noise_dps"] > 0 and t["noise_deg"] > 0, t
 print("bench motion: JSON as documented")
 PY
 grep -q '^turn' "$out/table.txt" || { cat "$out/table.txt"; exit 1; }
 [[ -s "$out/motion.png" && -s "$out/motion.svg" ]] || { echo "no plot written"; exit 1; }
 
 for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" \
-        "--overscan-deg 31" "--plane-nearer-m 2" "--plane-nearer-m nan" "--frobnicate"; do
+        "--overscan-deg 31" "--plane-nearer-m 2" "--plane-nearer-m nan" \
+        "--velocity-noise-dps -1" "--velocity-noise-mm-s nan" \
+        "--poses-only --velocity-noise-dps 1" "--frobnicate"; do
     set +e
     # shellcheck disable=SC2086
     "$hysar" bench motion $bad > "$out/o.txt" 2> "$out/e.txt"

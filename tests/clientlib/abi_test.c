@@ -28,7 +28,7 @@ _Static_assert(offsetof(hysar_event, image) == 112, "event.image moved");
 _Static_assert(offsetof(hysar_event, text) == 144, "event.text moved");
 _Static_assert(sizeof(hysar_client_info) == 32, "hysar_client_info layout changed");
 #endif
-_Static_assert(HYSAR_CLIENT_API_VERSION == 5, "API version");
+_Static_assert(HYSAR_CLIENT_API_VERSION == 6, "API version");
 
 static int failures = 0;
 #define CHECK(cond)                                                                           \
