@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The least registration error a predictor can reach on `hysar bench motion`'s walk.
+"""The least registration error a predictor of poses alone can reach on `hysar bench motion`'s walk.
 
 The walk (server/motion_bench/motion_bench.cpp) orbits the prop at 8 deg/s with a 1 cm bob at
 1.8 Hz, looking at its centre 0.8 m away, so the head pitches by 0.72 deg at 1.8 Hz; the
@@ -11,6 +11,10 @@ error over the whole trace), for the bob's axis (pitch and the vertical position
 orbit's (yaw and the horizontal position, at constant rate), and reports the p95 of the
 highlight's displacement in the HoloLens profile's pixels (1268 px over 30 deg: 41.3 px/deg at
 the centre) when both axes take their best fits. Standard library only; about ten seconds.
+
+A tracker that measures its velocities too (the bench's default; `--poses-only` turns it off)
+is not bound by this: carried forward by the velocities, every sample of a window estimates the
+current pose whatever the motion's curvature (clients/motion/motion.hpp, Predictor).
 
     scripts/walk_noise_bound.py [--noise-deg 0.05] [--noise-mm 0.5] [--trials 400]
 """
