@@ -250,12 +250,12 @@ HYSAR_API hysar_status hysar_predictor_add(hysar_predictor* predictor, const hys
 /* API 6: a tracker sample with the velocities the tracker measures at it (an inertial unit; an
  * OpenXR runtime's XrSpaceVelocity): angular_velocity in rad/s (axis times rate) and
  * linear_velocity in m/s, both in the world frame of the pose. The predictor then carries the
- * samples of the last 150 ms (smooth_ms when less) forward to the newest one's time by the
- * velocities between them and averages them, so that the current pose's error from the poses' noise
- * falls with the square root of the samples whatever the motion's curvature, and extrapolates the
- * measured velocities (a least-squares line over the last window_ms, unfiltered). Both NULL: as
- * hysar_predictor_add. Refused as hysar_predictor_add refuses, and for one velocity NULL or a
- * non-finite velocity. */
+ * recent samples forward to the newest one's time by the velocities between them and averages
+ * them, over a window its measured noises call for (at most 150 ms, smooth_ms when less), so
+ * that the current pose's error from the poses' noise falls with the square root of the samples
+ * whatever the motion's curvature, and extrapolates the measured velocities (a least-squares
+ * line over the last window_ms, unfiltered). Both NULL: as hysar_predictor_add. Refused as
+ * hysar_predictor_add refuses, and for one velocity NULL or a non-finite velocity. */
 HYSAR_API hysar_status hysar_predictor_add_with_velocity(hysar_predictor* predictor,
                                                          const hysar_pose* sample,
                                                          const double angular_velocity[3],

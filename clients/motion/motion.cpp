@@ -108,6 +108,8 @@ void Predictor::reset() {
     have_velocity_ = false;
     noise_rot_ = noise_pos_ = 0;
     have_noise_ = false;
+    noise_omega_ = noise_velocity_ = 0;
+    have_velocity_noise_ = false;
     window_rot_ms_ = window_pos_ms_ = 0;
 }
 
@@ -318,17 +320,58 @@ bool Predictor::add(const PoseSample& in) {
 }
 
 namespace {
-// How far back samples are carried forward by measured velocities (milliseconds; less when
-// smooth_ms is less): the poses' noise averages as one over the square root of the window, and
-// the velocities' bias and noise, integrated, grow with it. Over the walk's bob with the bench's
-// tracker (0.05 deg per pose; 0.25 deg/s per velocity, a fifth of that as bias) the error is
-// flat from 100 to 200 ms and a third higher at 60 or 400.
+// The longest stretch samples are carried forward by measured velocities (milliseconds; less
+// when smooth_ms is less): beyond the window below, a velocity's bias (which the noise measured
+// from its differences does not show) integrates into the carried poses. Over the walk's bob
+// with the bench's tracker (0.05 deg per pose; 0.25 deg/s per velocity, a fifth of that as
+// bias) the error is flat from 100 to 200 ms and a third higher at 60 or 400.
 constexpr double kCarryMs = 150;
+
+// The carry window (seconds) with the least expected error of the carried poses' mean: the
+// poses' noise (sigma_p per sample) averages as sigma_p^2 / N over N samples, the velocities'
+// (sigma_v per sample, integrated over the spacing dt) grows as sigma_v^2 dt^2 N / 3, so that
+// N dt = sqrt(3) sigma_p / sigma_v whatever the rate.
+double carry_window(double pose_var, double velocity_var, double longest) {
+    if (!(velocity_var > 0))
+        return longest;
+    return std::min(longest, std::sqrt(3 * pose_var / velocity_var));
+}
 }  // namespace
+
+// The velocities' own noise from the newest three samples, as update_noise() measures the poses':
+// their second difference has variance (1 + (1 + r)^2 + r^2) sigma^2 per axis.
+void Predictor::update_velocity_noise() {
+    const size_t n = samples_.size();
+    if (n < 3 || !samples_[n - 3].has_velocity)
+        return;
+    const PoseSample &s0 = samples_[n - 3], &s1 = samples_[n - 2], &s2 = samples_[n - 1];
+    const double t0 = double(s1.time_ns - s0.time_ns), t1 = double(s2.time_ns - s1.time_ns);
+    const double r = t1 / t0;
+    const double gain = 1 + (1 + r) * (1 + r) + r * r;
+    double ew = 0, ev = 0;
+    for (size_t i = 0; i < 3; ++i) {
+        const double dw = (s2.angular_velocity[i] - s1.angular_velocity[i]) -
+                          (s1.angular_velocity[i] - s0.angular_velocity[i]) * r;
+        const double dv = (s2.linear_velocity[i] - s1.linear_velocity[i]) -
+                          (s1.linear_velocity[i] - s0.linear_velocity[i]) * r;
+        ew += dw * dw, ev += dv * dv;
+    }
+    ew /= 3 * gain, ev /= 3 * gain;
+    if (!std::isfinite(ew) || !std::isfinite(ev))
+        return;
+    if (!have_velocity_noise_) {
+        noise_omega_ = ew, noise_velocity_ = ev, have_velocity_noise_ = true;
+        return;
+    }
+    const double alpha = 1 - std::exp(-t1 * 1e-9 / 0.5);  // half a second
+    noise_omega_ += alpha * (ew - noise_omega_);
+    noise_velocity_ += alpha * (ev - noise_velocity_);
+}
 
 void Predictor::add_with_velocity(const PoseSample& s) {
     // The newest samples that carry velocities, within smooth_ms (the velocities' own line:
     // within window_ms, at least two samples).
+    update_velocity_noise();
     const size_t n = samples_.size();
     size_t from = n - 1;
     while (from > 0 && samples_[from - 1].has_velocity) --from;
@@ -338,11 +381,17 @@ void Predictor::add_with_velocity(const PoseSample& s) {
         while (i + 1 < n && samples_[i].time_ns + span_ns < s.time_ns) ++i;
         return i;
     };
-    // The current pose: every sample in the window carried forward to the newest one's time by
+    // The current pose: every sample in its window carried forward to the newest one's time by
     // the velocities between them, averaged (as offsets from the newest sample: rotation vectors
-    // in the world frame, displacements).
+    // in the world frame, displacements). Orientation and position each over the window their
+    // measured noises call for.
     if (config_.smooth_ms > 0) {
-        const size_t first = within(std::min(config_.smooth_ms, kCarryMs));
+        const double longest = std::min(config_.smooth_ms, kCarryMs) * 1e-3;
+        const bool known = have_noise_ && have_velocity_noise_;
+        const size_t first_rot =
+            within(1e3 * (known ? carry_window(noise_rot_, noise_omega_, longest) : longest));
+        const size_t first_pos =
+            within(1e3 * (known ? carry_window(noise_pos_, noise_velocity_, longest) : longest));
         const Quat back = conjugate(s.orientation_wxyz);
         Quat carry{1, 0, 0, 0};  // turns sample i's orientation into the newest one's time
         Vec3 moved{}, sum_rot{}, sum_pos{};
@@ -358,19 +407,22 @@ void Predictor::add_with_velocity(const PoseSample& s) {
                 }
                 carry = multiply(carry, from_rotation_vector(turn));
             }
-            const Vec3 r = to_rotation_vector(multiply(multiply(carry, p.orientation_wxyz), back));
-            for (size_t k = 0; k < 3; ++k) {
-                sum_rot[k] += r[k];
-                sum_pos[k] += p.position_m[k] + moved[k] - s.position_m[k];
+            if (i >= first_rot) {
+                const Vec3 r =
+                    to_rotation_vector(multiply(multiply(carry, p.orientation_wxyz), back));
+                for (size_t k = 0; k < 3; ++k) sum_rot[k] += r[k];
             }
-            if (i == first)
+            if (i >= first_pos)
+                for (size_t k = 0; k < 3; ++k)
+                    sum_pos[k] += p.position_m[k] + moved[k] - s.position_m[k];
+            if (i == std::min(first_rot, first_pos))
                 break;
         }
-        const double count = double(n - first);
-        current_.orientation_wxyz = normalized(
-            multiply(from_rotation_vector(scaled(sum_rot, 1 / count)), s.orientation_wxyz));
-        for (size_t k = 0; k < 3; ++k) current_.position_m[k] += sum_pos[k] / count;
-        window_rot_ms_ = window_pos_ms_ = double(s.time_ns - samples_[first].time_ns) * 1e-6;
+        current_.orientation_wxyz = normalized(multiply(
+            from_rotation_vector(scaled(sum_rot, 1 / double(n - first_rot))), s.orientation_wxyz));
+        for (size_t k = 0; k < 3; ++k) current_.position_m[k] += sum_pos[k] / double(n - first_pos);
+        window_rot_ms_ = double(s.time_ns - samples_[first_rot].time_ns) * 1e-6;
+        window_pos_ms_ = double(s.time_ns - samples_[first_pos].time_ns) * 1e-6;
     }
     // The velocities: the measured ones' least-squares line over window_ms, at the newest
     // sample (exact while they change at a constant rate), unfiltered.

@@ -67,13 +67,16 @@ std::optional<std::string> check(const PredictorConfig& c);
 // constant linear velocity. Not thread-safe: one owner.
 //
 // Samples that carry the tracker's velocities (PoseSample::has_velocity) are used as an
-// inertial tracker's output is: every sample of the last 150 ms (smooth_ms when less) is carried
-// forward to the newest sample's time by the velocities between them (the trapezoid rule) and the
-// carried poses are averaged, so that the current pose's error from the poses' noise falls with the
-// square root of the samples averaged whatever the motion's curvature (a polynomial fit can
-// only average over the stretch where the motion is near a line); the velocities extrapolated
-// are the measured ones, each a least-squares line over the last window_ms at the newest
-// sample, unfiltered (a filter lags where the head accelerates).
+// inertial tracker's output is: the samples of a window are carried forward to the newest
+// sample's time by the velocities between them (the trapezoid rule) and the carried poses are
+// averaged, so that the current pose's error from the poses' noise falls with the square root
+// of the samples averaged whatever the motion's curvature (a polynomial fit can only average
+// over the stretch where the motion is near a line). The window, for orientation and position
+// each, is sqrt(3) sigma_pose / sigma_velocity (the least expected error of the mean, both
+// noises measured from the samples' second differences), at most 150 ms (smooth_ms when less),
+// beyond which a velocity's bias would tell. The velocities extrapolated are the measured
+// ones, each a least-squares line over the last window_ms at the newest sample, unfiltered (a
+// filter lags where the head accelerates).
 class Predictor {
 public:
     explicit Predictor(const PredictorConfig& config = {});
@@ -101,6 +104,7 @@ private:
     void update_noise();
     // add()'s path for a sample with velocities, over the newest samples that have them.
     void add_with_velocity(const PoseSample& s);
+    void update_velocity_noise();
     PredictorConfig config_;
     std::deque<PoseSample> samples_;
     PoseSample current_;  // the newest sample, smoothed
@@ -108,6 +112,8 @@ private:
     bool have_velocity_ = false;
     double noise_rot_ = 0, noise_pos_ = 0;  // variances per axis
     bool have_noise_ = false;
+    double noise_omega_ = 0, noise_velocity_ = 0;  // the measured velocities' variances per axis
+    bool have_velocity_noise_ = false;
     double window_rot_ms_ = 0, window_pos_ms_ = 0;
     std::vector<double> tau_;  // add()'s scratch: no allocation per sample once grown
     std::vector<Vec3> rot_, pos_;

@@ -242,13 +242,14 @@ TEST(Predictor, WithVelocitiesExactOnConstantAngularAndLinearVelocity) {
 }
 
 // The walk's bob (0.72 deg of pitch and 1 cm at 1.8 Hz) under 0.05 deg and 0.5 mm of tracker
-// noise per sample: a line over the samples cannot average long where the motion curves, so
-// the poses alone leave the current pose about 0.04 deg off; carried forward by measured
-// velocities (white noise of 0.25 deg/s and 5 mm/s, a constant bias of a fifth of that) a
-// whole 150 ms averages: closer by about three times.
-TEST(Predictor, MeasuredVelocitiesAverageTheNoiseWhereTheMotionCurves) {
-    const double sigma = 0.05 * kPi / 180, sigma_m = 0.5e-3;
-    const double gyro = 0.25 * kPi / 180, vel = 5e-3;
+// noise per sample, 10 s at 500 Hz: the current pose (predict(0)) of a predictor given poses
+// alone and of one given the velocities too, measured with white noise of `gyro` (rad/s) and
+// `vel` (m/s) per sample plus a constant bias of a fifth of that. RMS over the last 8 s.
+struct BobErrors {
+    double rot_poses = 0, rot_measured = 0, pos_poses = 0, pos_measured = 0;
+    double window_rot_ms = 0, window_pos_ms = 0;  // the carry windows, at the end
+};
+BobErrors bob_errors(double sigma, double sigma_m, double gyro, double vel) {
     uint32_t seed = 4242;
     auto gauss = [&] {
         auto uniform = [&] {
@@ -278,9 +279,9 @@ TEST(Predictor, MeasuredVelocitiesAverageTheNoiseWhereTheMotionCurves) {
     };
     const Vec3 gyro_bias{0.2 * gyro, -0.2 * gyro, 0.2 * gyro}, vel_bias{0.2 * vel, 0, -0.2 * vel};
     Predictor poses, measured;
-    double err_poses = 0, err_measured = 0, pos_poses = 0, pos_measured = 0;
+    BobErrors e;
     int counted = 0;
-    for (int i = 0; i <= 2500; ++i) {
+    for (int i = 0; i <= 5000; ++i) {
         Vec3 omega, v;
         const auto want = at(i / 500.0, &omega, &v);
         auto s = want;
@@ -288,31 +289,58 @@ TEST(Predictor, MeasuredVelocitiesAverageTheNoiseWhereTheMotionCurves) {
             multiply(from_rotation_vector({gauss() * sigma, gauss() * sigma, gauss() * sigma}),
                      s.orientation_wxyz));
         for (double& x : s.position_m) x += gauss() * sigma_m;
-        ASSERT_TRUE(poses.add(s));
+        EXPECT_TRUE(poses.add(s));
         for (size_t k = 0; k < 3; ++k)
             omega[k] += gyro_bias[k] + gauss() * gyro, v[k] += vel_bias[k] + gauss() * vel;
-        ASSERT_TRUE(measured.add(with_velocity(s, omega, v)));
-        if (i < 500)
+        EXPECT_TRUE(measured.add(with_velocity(s, omega, v)));
+        if (i < 1000)
             continue;
         const auto a = *poses.predict(0), b = *measured.predict(0);
         const double ea = angle_between(a.orientation_wxyz, want.orientation_wxyz),
                      eb = angle_between(b.orientation_wxyz, want.orientation_wxyz);
-        err_poses += ea * ea, err_measured += eb * eb;
+        e.rot_poses += ea * ea, e.rot_measured += eb * eb;
         for (size_t k = 0; k < 3; ++k) {
             const double da = a.position_m[k] - want.position_m[k],
                          db = b.position_m[k] - want.position_m[k];
-            pos_poses += da * da, pos_measured += db * db;
+            e.pos_poses += da * da, e.pos_measured += db * db;
         }
         ++counted;
     }
-    err_poses = std::sqrt(err_poses / counted), err_measured = std::sqrt(err_measured / counted);
-    pos_poses = std::sqrt(pos_poses / counted), pos_measured = std::sqrt(pos_measured / counted);
+    e.rot_poses = std::sqrt(e.rot_poses / counted);
+    e.rot_measured = std::sqrt(e.rot_measured / counted);
+    e.pos_poses = std::sqrt(e.pos_poses / counted);
+    e.pos_measured = std::sqrt(e.pos_measured / counted);
+    e.window_rot_ms = measured.orientation_window_ms();
+    e.window_pos_ms = measured.position_window_ms();
+    return e;
+}
+
+// A line over the samples cannot average long where the motion curves, so the poses alone
+// leave the current pose about 0.04 deg off; carried forward by velocities measured with
+// 0.25 deg/s and 5 mm/s a whole 150 ms averages: closer by about three times.
+TEST(Predictor, MeasuredVelocitiesAverageTheNoiseWhereTheMotionCurves) {
+    const double sigma = 0.05 * kPi / 180, sigma_m = 0.5e-3;
+    const BobErrors e = bob_errors(sigma, sigma_m, 0.25 * kPi / 180, 5e-3);
     // Measured: 0.039 deg and 0.40 mm from the poses alone, 0.013 deg and 0.16 mm carried.
-    EXPECT_GT(err_poses, 0.5 * sigma) << "the poses alone: the noise a line leaves";
-    EXPECT_LT(err_measured, 0.45 * err_poses);
-    EXPECT_LT(err_measured, 0.35 * sigma);
-    EXPECT_LT(pos_measured, 0.55 * pos_poses);
-    EXPECT_LT(pos_measured, 0.4 * sigma_m);
+    EXPECT_GT(e.rot_poses, 0.5 * sigma) << "the poses alone: the noise a line leaves";
+    EXPECT_LT(e.rot_measured, 0.45 * e.rot_poses);
+    EXPECT_LT(e.rot_measured, 0.35 * sigma);
+    EXPECT_LT(e.pos_measured, 0.55 * e.pos_poses);
+    EXPECT_LT(e.pos_measured, 0.4 * sigma_m);
+    EXPECT_NEAR(e.window_rot_ms, 150, 2) << "the longest carry: velocities this quiet";
+    EXPECT_NEAR(e.window_pos_ms, 150, 2);
+}
+
+// Velocities ten times noisier (2.5 deg/s, 50 mm/s, their biases too): the carry shortens to
+// sqrt(3) sigma_pose / sigma_velocity (35 ms and 17 ms here) and the current pose stays near
+// what the poses alone give, rather than taking the velocities' noise over 150 ms.
+TEST(Predictor, NoisyVelocitiesShortenTheCarry) {
+    const double sigma = 0.05 * kPi / 180, sigma_m = 0.5e-3;
+    const BobErrors e = bob_errors(sigma, sigma_m, 2.5 * kPi / 180, 50e-3);
+    EXPECT_LT(e.window_rot_ms, 60);
+    EXPECT_LT(e.window_pos_ms, 40);
+    EXPECT_LT(e.rot_measured, 1.25 * e.rot_poses);
+    EXPECT_LT(e.pos_measured, 1.25 * e.pos_poses);
 }
 
 TEST(Predictor, RefusesANonFiniteVelocity) {
