@@ -261,8 +261,8 @@ HYSAR_API hysar_status hysar_predictor_add_with_velocity(hysar_predictor* predic
                                                          const double angular_velocity[3],
                                                          const double linear_velocity[3]);
 /* The pose predicted for display_time_ns (the smoothed current pose at constant angular and
- * linear velocity, filtered, capped); its time_ns is the newest sample's, so a layer's pose says
- * when it was sampled. HYSAR_E_INVALID_ARGUMENT before the first sample. */
+ * linear velocity, filtered or measured, capped); its time_ns is the newest sample's, so a layer's
+ * pose says when it was sampled. HYSAR_E_INVALID_ARGUMENT before the first sample. */
 HYSAR_API hysar_status hysar_predictor_predict(const hysar_predictor* predictor,
                                                uint64_t display_time_ns, hysar_pose* out);
 /* The first refresh at or after earliest_ns of a display whose refreshes fall at

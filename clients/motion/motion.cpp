@@ -234,8 +234,13 @@ bool Predictor::add(const PoseSample& in) {
     while (samples_.size() > 2 && samples_.front().time_ns + keep_ns < s.time_ns)
         samples_.pop_front();
     window_rot_ms_ = window_pos_ms_ = 0;
-    if (samples_.size() < 2)
+    if (samples_.size() < 2) {
+        if (s.has_velocity) {  // the first sample: its velocities as they are
+            omega_ = s.angular_velocity, velocity_ = s.linear_velocity;
+            have_velocity_ = true;
+        }
         return true;
+    }
     update_noise();
     if (s.has_velocity) {
         add_with_velocity(s);
@@ -342,7 +347,7 @@ double carry_window(double pose_var, double velocity_var, double longest) {
 // their second difference has variance (1 + (1 + r)^2 + r^2) sigma^2 per axis.
 void Predictor::update_velocity_noise() {
     const size_t n = samples_.size();
-    if (n < 3 || !samples_[n - 3].has_velocity)
+    if (n < 3 || !samples_[n - 3].has_velocity || !samples_[n - 2].has_velocity)
         return;
     const PoseSample &s0 = samples_[n - 3], &s1 = samples_[n - 2], &s2 = samples_[n - 1];
     const double t0 = double(s1.time_ns - s0.time_ns), t1 = double(s2.time_ns - s1.time_ns);

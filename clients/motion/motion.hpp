@@ -41,7 +41,8 @@ struct PredictorConfig {
     // longer window averages more tracker noise, and lags more when the motion changes).
     double window_ms = 40;
     // The velocities then pass an exponential filter with this time constant (milliseconds; 0:
-    // none). A constant velocity passes it unchanged.
+    // none). A constant velocity passes it unchanged. Measured velocities (samples with them)
+    // are a least-squares line over window_ms instead, unfiltered.
     double filter_ms = 20;
     // The current pose the prediction starts from is the samples' least-squares line over the
     // last W milliseconds at the newest sample's time, W chosen per sample for the least error
@@ -85,11 +86,12 @@ public:
     // velocities are then as they were.
     bool add(const PoseSample& s);
     // The pose at `time_ns` (the display time): the current pose (the newest sample, smoothed:
-    // smooth_ms) moved by the filtered velocities over min(time_ns - newest, max_horizon) (not
-    // backwards: a time before the newest sample gives the current pose). Nullopt before the
-    // first sample.
+    // smooth_ms, or carried and averaged) moved by the velocities (filtered, or measured) over
+    // min(time_ns - newest, max_horizon) (not backwards: a time before the newest sample gives the
+    // current pose). Nullopt before the first sample.
     std::optional<PoseSample> predict(uint64_t time_ns) const;
-    // The filtered velocities: world-frame angular (rad/s, axis times rate) and linear (m/s).
+    // The velocities extrapolated: world-frame angular (rad/s, axis times rate) and linear
+    // (m/s); filtered from the poses, or the measured ones' line (samples with velocities).
     Vec3 angular_velocity() const { return omega_; }
     Vec3 linear_velocity() const { return velocity_; }
     // The tracker noise measured so far (one sigma per axis: radians, metres), and the windows

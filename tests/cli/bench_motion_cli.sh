@@ -37,6 +37,19 @@ assert t["velocity"] is True and t["velocity_noise_dps"] > 0 and t["noise_deg"] 
 print("bench motion: JSON as documented")
 PY
 grep -q '^turn' "$out/table.txt" || { cat "$out/table.txt"; exit 1; }
+
+# A tracker of poses alone (--poses-only): served, and the JSON says so.
+if ! "$hysar" bench motion --quick --poses-only --traces walk --modes predict --seconds 1 \
+        --reference-frames 3 --scale 0.25 --json "$out/poses.json" > /dev/null 2> "$out/p.txt"; then
+    cat "$out/p.txt"
+    exit 1
+fi
+python3 - "$out/poses.json" <<'PY'
+import json, sys
+j = json.load(open(sys.argv[1]))
+assert j["tracker"]["velocity"] is False and j["tracker"]["velocity_noise_dps"] == 0, j["tracker"]
+assert j["traces"]["walk"]["predict"]["frames"] > 0, j["traces"]
+PY
 [[ -s "$out/motion.png" && -s "$out/motion.svg" ]] || { echo "no plot written"; exit 1; }
 
 for bad in "--traces run" "--modes fast" "--seconds 0" "--delay-ms -1" "--scale 2" \

@@ -4,6 +4,7 @@
  * server: NULLs refused with a sentence, an unreachable server is HYSAR_E_CONNECT, a profile
  * becomes a display. argv[1]: a headset profile; argv[2]: a Unix socket path nobody listens on. */
 #include <hysar_client.h>
+#include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <string.h>
@@ -172,6 +173,33 @@ int main(int argc, char** argv) {
     hysar_event_release(&event); /* a zeroed event is ignored */
     hysar_event_release(NULL);
     hysar_client_close(NULL);
+
+    /* The predictor with the tracker's velocities (API 6), from C: a head turning at 1 rad/s
+     * about the vertical is predicted 50 ms past its newest sample to the angle it reaches. */
+    {
+        hysar_predictor* predictor = NULL;
+        CHECK(hysar_predictor_create(NULL, &predictor) == HYSAR_OK);
+        const double omega[3] = {0, 1, 0}, still[3] = {0, 0, 0};
+        hysar_pose sample;
+        memset(&sample, 0, sizeof sample);
+        for (int i = 0; i <= 50; ++i) {
+            const double half = 0.5 * (i * 0.002); /* half the angle turned, radians */
+            sample.time_ns = 1000000000ull + (uint64_t)i * 2000000ull;
+            sample.orientation_wxyz[0] = cos(half);
+            sample.orientation_wxyz[2] = sin(half);
+            CHECK(hysar_predictor_add_with_velocity(predictor, &sample, omega, still) == HYSAR_OK);
+        }
+        hysar_pose ahead;
+        CHECK(hysar_predictor_predict(predictor, sample.time_ns + 50000000ull, &ahead) == HYSAR_OK);
+        CHECK(fabs(ahead.orientation_wxyz[2] - sin(0.5 * 0.15)) < 1e-9);
+        sample.time_ns += 2000000ull;
+        CHECK(hysar_predictor_add_with_velocity(predictor, &sample, NULL, still) ==
+              HYSAR_E_INVALID_ARGUMENT);
+        CHECK(strstr(hysar_last_error(), "angular_velocity") != NULL);
+        CHECK(hysar_predictor_add_with_velocity(NULL, &sample, omega, still) ==
+              HYSAR_E_INVALID_ARGUMENT);
+        hysar_predictor_destroy(predictor);
+    }
     if (failures == 0)
         printf("abi_test: the C API behaves as documented from C\n");
     return failures ? 1 : 0;
