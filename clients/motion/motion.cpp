@@ -180,40 +180,48 @@ double best_window(double noise_var, double accel, double rate, double longest) 
     return std::min(longest, std::pow(144 * noise_var / (a2 * rate), 0.2));
 }
 
+// White noise of sigma per axis on three samples: their second difference at the middle one,
+// (x2 - x1) - (x1 - x0) r for spacings in the ratio r, has variance (1 + (1 + r)^2 + r^2)
+// sigma^2 per axis; the motion's own share is a dt^2, far below. Sigma^2, or NaN when the
+// differences overflow.
+double second_difference_variance(const Vec3& x0, const Vec3& x1, const Vec3& x2, double r) {
+    double e = 0;
+    for (size_t i = 0; i < 3; ++i) {
+        const double d = (x2[i] - x1[i]) - (x1[i] - x0[i]) * r;
+        e += d * d;
+    }
+    e /= 3 * (1 + (1 + r) * (1 + r) + r * r);
+    return std::isfinite(e) ? e : std::nan("");
+}
+
+// A noise variance followed over about half a second (`step_ns`: since the last measurement);
+// the first measurement is taken as it is.
+void follow(double& variance, double measured, bool first, double step_ns) {
+    variance =
+        first ? measured : variance + (1 - std::exp(-step_ns * 1e-9 / 0.5)) * (measured - variance);
+}
+
 }  // namespace
 
-// The tracker's noise from the newest three samples: their second difference (of the rotation
-// vectors relative to the newest, and of the positions) has variance (1 + (1 + r)^2 + r^2)
-// sigma^2 per axis for spacings in the ratio r; the motion's own share is a dt^2, far below.
+// The tracker's noise from the newest three samples (second_difference_variance): of the
+// rotation vectors relative to the newest, and of the positions.
 void Predictor::update_noise() {
     const size_t n = samples_.size();
     if (n < 3)
         return;
     const PoseSample &s0 = samples_[n - 3], &s1 = samples_[n - 2], &s2 = samples_[n - 1];
     const double t0 = double(s1.time_ns - s0.time_ns), t1 = double(s2.time_ns - s1.time_ns);
-    const double r = t1 / t0;
-    const double gain = 1 + (1 + r) * (1 + r) + r * r;
     const Quat back = conjugate(s2.orientation_wxyz);
-    const Vec3 a = to_rotation_vector(multiply(s0.orientation_wxyz, back));
-    const Vec3 b = to_rotation_vector(multiply(s1.orientation_wxyz, back));
-    double er = 0, ep = 0;
-    for (size_t i = 0; i < 3; ++i) {
-        // Second difference at s1: (s2 - s1) - (s1 - s0) r, s2's rotation vector being 0.
-        const double dr = -b[i] - (b[i] - a[i]) * r;
-        const double dp =
-            (s2.position_m[i] - s1.position_m[i]) - (s1.position_m[i] - s0.position_m[i]) * r;
-        er += dr * dr, ep += dp * dp;
-    }
-    er /= 3 * gain, ep /= 3 * gain;
-    if (!std::isfinite(er) || !std::isfinite(ep))
+    const double er = second_difference_variance(
+        to_rotation_vector(multiply(s0.orientation_wxyz, back)),
+        to_rotation_vector(multiply(s1.orientation_wxyz, back)), Vec3{}, t1 / t0);
+    const double ep =
+        second_difference_variance(s0.position_m, s1.position_m, s2.position_m, t1 / t0);
+    if (std::isnan(er) || std::isnan(ep))
         return;  // positions so large that their differences overflow: not noise
-    if (!have_noise_) {
-        noise_rot_ = er, noise_pos_ = ep, have_noise_ = true;
-        return;
-    }
-    const double alpha = 1 - std::exp(-t1 * 1e-9 / 0.5);  // half a second
-    noise_rot_ += alpha * (er - noise_rot_);
-    noise_pos_ += alpha * (ep - noise_pos_);
+    follow(noise_rot_, er, !have_noise_, t1);
+    follow(noise_pos_, ep, !have_noise_, t1);
+    have_noise_ = true;
 }
 
 bool Predictor::add(const PoseSample& in) {
@@ -343,34 +351,22 @@ double carry_window(double pose_var, double velocity_var, double longest) {
 }
 }  // namespace
 
-// The velocities' own noise from the newest three samples, as update_noise() measures the poses':
-// their second difference has variance (1 + (1 + r)^2 + r^2) sigma^2 per axis.
+// The velocities' own noise from the newest three samples, as update_noise() measures the poses'.
 void Predictor::update_velocity_noise() {
     const size_t n = samples_.size();
     if (n < 3 || !samples_[n - 3].has_velocity || !samples_[n - 2].has_velocity)
         return;
     const PoseSample &s0 = samples_[n - 3], &s1 = samples_[n - 2], &s2 = samples_[n - 1];
     const double t0 = double(s1.time_ns - s0.time_ns), t1 = double(s2.time_ns - s1.time_ns);
-    const double r = t1 / t0;
-    const double gain = 1 + (1 + r) * (1 + r) + r * r;
-    double ew = 0, ev = 0;
-    for (size_t i = 0; i < 3; ++i) {
-        const double dw = (s2.angular_velocity[i] - s1.angular_velocity[i]) -
-                          (s1.angular_velocity[i] - s0.angular_velocity[i]) * r;
-        const double dv = (s2.linear_velocity[i] - s1.linear_velocity[i]) -
-                          (s1.linear_velocity[i] - s0.linear_velocity[i]) * r;
-        ew += dw * dw, ev += dv * dv;
-    }
-    ew /= 3 * gain, ev /= 3 * gain;
-    if (!std::isfinite(ew) || !std::isfinite(ev))
+    const double ew = second_difference_variance(s0.angular_velocity, s1.angular_velocity,
+                                                 s2.angular_velocity, t1 / t0);
+    const double ev = second_difference_variance(s0.linear_velocity, s1.linear_velocity,
+                                                 s2.linear_velocity, t1 / t0);
+    if (std::isnan(ew) || std::isnan(ev))
         return;
-    if (!have_velocity_noise_) {
-        noise_omega_ = ew, noise_velocity_ = ev, have_velocity_noise_ = true;
-        return;
-    }
-    const double alpha = 1 - std::exp(-t1 * 1e-9 / 0.5);  // half a second
-    noise_omega_ += alpha * (ew - noise_omega_);
-    noise_velocity_ += alpha * (ev - noise_velocity_);
+    follow(noise_omega_, ew, !have_velocity_noise_, t1);
+    follow(noise_velocity_, ev, !have_velocity_noise_, t1);
+    have_velocity_noise_ = true;
 }
 
 void Predictor::add_with_velocity(const PoseSample& s) {
