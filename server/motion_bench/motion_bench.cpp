@@ -190,10 +190,12 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
     auto trace_s = [&](uint64_t t) { return (double(t) - double(t0)) * 1e-9; };
     const double vnoise_rad = o.velocity_noise_dps * kPi / 180,
                  vnoise_m = o.velocity_noise_mm_s * 1e-3;
-    // The velocities' noise from a generator of its own, so that the poses' noise is the same
-    // with and without them (--poses-only). The bias: a fifth of the noise on each axis, its
-    // sign drawn per row.
+    // The velocities' noise from a generator and a distribution of their own (a normal
+    // distribution keeps half of each pair it draws), so that the poses' noise is the same with
+    // and without them (--poses-only). The bias: a fifth of the noise on each axis, its sign
+    // drawn per row.
     std::mt19937 velocity_rng(seed ^ 0x9e3779b9u);
+    std::normal_distribution<double> velocity_gauss(0, 1);
     motion::Vec3 gyro_bias, velocity_bias;
     for (size_t i = 0; i < 3; ++i) {
         gyro_bias[i] = (velocity_rng() & 1 ? 0.2 : -0.2) * vnoise_rad;
@@ -213,9 +215,9 @@ Result<MotionRow> run_row(const stream::LoopbackServer& server, const scene::Sce
             s.has_velocity = true;
             for (size_t i = 0; i < 3; ++i) {
                 s.angular_velocity[i] =
-                    turn[i] / (2 * kEps) + gyro_bias[i] + gauss(velocity_rng) * vnoise_rad;
+                    turn[i] / (2 * kEps) + gyro_bias[i] + velocity_gauss(velocity_rng) * vnoise_rad;
                 s.linear_velocity[i] = (ahead.position_m[i] - behind.position_m[i]) / (2 * kEps) +
-                                       velocity_bias[i] + gauss(velocity_rng) * vnoise_m;
+                                       velocity_bias[i] + velocity_gauss(velocity_rng) * vnoise_m;
             }
         }
         const motion::Vec3 r{gauss(rng) * noise_rad, gauss(rng) * noise_rad,
