@@ -301,13 +301,15 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
                                                 ~uint64_t(0), false, views));
     }
     for (const auto& g : w.groups) {
-        // The fill-in's draws share one pipeline per format (the lights chosen by the push
-        // constants): a pipeline per set of lights would double the compiles, each of which
-        // holds tens of MB of JIT memory on lavapipe, for a few clusters per layer.
-        HS_ASSIGN_OR_RETURN(
-            Variant * lit,
-            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding), ~uint64_t(0), true, views)
-                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask, false, views));
+        // The fill-in's draws share two pipelines per format: one for the clusters drawn for
+        // the fill-in alone (no light's VD term compiled in) and one for the rest (the lights
+        // chosen by the push constants). A pipeline per set of lights would double the
+        // compiles, each of which holds tens of MB of JIT memory on lavapipe, for a few
+        // clusters per layer.
+        HS_ASSIGN_OR_RETURN(Variant * lit,
+                            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding),
+                                             fill_lights(g.mask), true, views)
+                                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask, false, views));
         w.lit.push_back(lit);
     }
     return {};

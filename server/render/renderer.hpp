@@ -440,6 +440,14 @@ private:
     std::vector<std::vector<uint32_t>> fill_triangle_first_;
     static constexpr uint32_t kNoTriangles = ~uint32_t(0);
     static constexpr uint8_t kAllTriangles = 0xFF;
+    // The lights a fill pipeline compiles in for a draw of clusters that need `mask`: none
+    // for clusters drawn for the fill-in alone, where a VD term would be computed for every
+    // pixel and masked to 0 (lavapipe runs both sides of a branch); every light otherwise,
+    // chosen by the push constants, and always with no light sets allowed
+    // (info_.max_light_variants 0).
+    uint64_t fill_lights(uint64_t mask) const {
+        return mask == 0 && info_.max_light_variants > 0 ? 0 : ~uint64_t(0);
+    }
     // The triangles of cluster `c` of level `level` that the fill-in must draw for `r`.
     uint8_t fill_triangles(const LayerRequest& r, size_t level, size_t c, const VdBound& bound,
                            double albedo) const;

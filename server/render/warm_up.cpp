@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <map>
+#include <set>
 #include <string_view>
 
 #include <fmt/format.h>
@@ -62,11 +63,12 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
         HS_ASSIGN_OR_RETURN(Variant * generic,
                             variant(PassKind::kVd, spec, enc, ~uint64_t(0), false, views));
         uses.push_back({generic, format});
-        if (fill_) {  // the headsets' fill-in: one pipeline per format (record_layers)
-            HS_ASSIGN_OR_RETURN(Variant * f,
-                                variant(PassKind::kVd, spec, enc, ~uint64_t(0), true, views));
-            uses.push_back({f, format});
-        }
+        if (fill_)  // the headsets' fill-in: two pipelines per format (resolve_variants)
+            for (uint64_t lights : std::set{fill_lights(0), fill_lights(1)}) {
+                HS_ASSIGN_OR_RETURN(Variant * f,
+                                    variant(PassKind::kVd, spec, enc, lights, true, views));
+                uses.push_back({f, format});
+            }
         if (n == 0 || n > kEverySubsetUpTo)
             continue;
         for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {

@@ -30,19 +30,20 @@ protected:
         return vp.ok() ? vp->camera : scene::Pose{};
     }
     struct Layer {
-        std::vector<uint8_t> codes;  // RGBA8, black outside the plan's rectangle
+        std::vector<uint8_t> codes;  // the wire's pixels, black outside the plan's rectangle
         render::Renderer::LayerPlan plan;
     };
-    Layer layer(render::Renderer& r, const scene::Intrinsics& k, const scene::Pose& eye) {
-        auto t = gpu::RenderTarget::create(test::device(), k.width, k.height,
-                                           gpu::ColorFormat::kRgba8Unorm, "fill.t", r.uses_depth())
+    Layer layer(render::Renderer& r, const scene::Intrinsics& k, const scene::Pose& eye,
+                render::LayerEncoding enc = render::LayerEncoding::kSrgb8) {
+        const auto format = render::layer_target_format(enc);
+        auto t = gpu::RenderTarget::create(test::device(), k.width, k.height, format, "fill.t",
+                                           r.uses_depth())
                      .value();
-        render::Renderer::LayerRequest req{scene_.material.specular,      k,  eye,
-                                           render::LayerEncoding::kSrgb8, &t, true};
+        render::Renderer::LayerRequest req{scene_.material.specular, k, eye, enc, &t, true};
         auto plans = r.render_layers(std::span(&req, 1));
         EXPECT_TRUE(plans.ok()) << (plans.ok() ? "" : plans.error().message);
         Layer out;
-        out.codes.assign(size_t(k.width) * k.height * 4, 0);
+        out.codes.assign(size_t(k.width) * k.height * gpu::bytes_per_pixel(format), 0);
         if (!plans.ok())
             return out;
         out.plan = (*plans)[0];
@@ -223,6 +224,39 @@ TEST_F(Fill, WarmUpPreparesTheFillPipelines) {
     const Layer a = layer(*r, small_eye(4), eye_at(180.0));
     EXPECT_GT(a.plan.clusters_filled, 0u);
     EXPECT_EQ(r->pipelines_built(), built);
+}
+
+// Clusters drawn for the fill-in alone are drawn with a pipeline that compiles no light's VD
+// term in; the rest of the fill-in with the one that masks lights by the push constants. Both
+// draw bit for bit what the masked pipeline alone draws (a renderer allowed no light sets), at
+// views all around the dome and in both layer encodings.
+TEST_F(Fill, FillAlonePipelineDrawsWhatTheMaskedOneDraws) {
+    render::RendererCreateInfo generic_info;
+    generic_info.max_light_variants = 0;
+    auto specialised = make_renderer(scene_);
+    auto generic = render::Renderer::create(test::device(), scene_, generic_info);
+    ASSERT_TRUE(specialised && generic.ok()) << (generic.ok() ? "" : generic.error().message);
+    const render::Blend blend =
+        render::compute_visibility(specialised->mesh(), scene_.projectors());
+    ASSERT_TRUE(specialised->set_fill(blend).ok());
+    ASSERT_TRUE((*generic)->set_fill(blend).ok());
+    const scene::Intrinsics k = small_eye(4);
+    size_t filled = 0, lit = 0;
+    for (double angle : {90.0, 150.0, 180.0, 210.0, 270.0})
+        for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
+            const Layer a = layer(*specialised, k, eye_at(angle), enc);
+            const Layer b = layer(**generic, k, eye_at(angle), enc);
+            EXPECT_EQ(a.plan.clusters_filled, b.plan.clusters_filled);
+            filled += a.plan.clusters_filled;
+            for (size_t i = 0; i < a.codes.size(); ++i) lit += a.codes[i] != 0;
+            EXPECT_TRUE(a.codes == b.codes) << "at " << angle << " deg, encoding " << int(enc);
+        }
+    EXPECT_GT(filled, 0u);
+    EXPECT_GT(lit, 1000u);
+    // The specialised renderer drew with a fill pipeline of its own (the generic one built one
+    // VD and one fill pipeline per encoding).
+    EXPECT_EQ((*generic)->pipelines_built(), 4u);
+    EXPECT_GT(specialised->pipelines_built(), 6u);
 }
 
 // Shadow maps that do not fit one texture are refused with the sizes named (the server then
