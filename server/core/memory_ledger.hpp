@@ -106,6 +106,9 @@ struct SceneLedger {
                               // renderer's own targets (holders: allocations)
     MemoryCounter versions;   // scene versions alive (a renderer built for one; bytes unused)
     MemoryCounter pipelines;  // their pipelines (holders; the driver's memory, not counted)
+    // The command buffers their planning threads record layers into (gpu::SecondaryBuffers;
+    // holders: buffers, each with a command pool of its own; the driver's memory, not counted).
+    MemoryCounter command_buffers;
     std::atomic<uint64_t> versions_built{0}, versions_freed{0};
 };
 

@@ -276,6 +276,7 @@ Result<void> SecondaryBuffers::reserve(size_t n) {
         HS_VK_TRY(vkAllocateCommandBuffers(device_.vk(), &ai, &cmd));
         pools_.push_back(std::move(owned));
         buffers_.push_back(cmd);
+        charges_.emplace_back(counter_, 0);
     }
     return {};
 }

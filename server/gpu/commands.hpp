@@ -10,6 +10,7 @@
 
 #include <glm/vec4.hpp>
 
+#include "core/memory_ledger.hpp"
 #include "gpu/handle.hpp"
 #include "gpu/pipeline.hpp"
 
@@ -100,7 +101,9 @@ private:
 // buffer at a time). Made once and grown when more are needed, never allocated per frame.
 class SecondaryBuffers {
 public:
-    SecondaryBuffers(Device& device, std::string name) : device_(device), name_(std::move(name)) {}
+    // `counter` (optional): each buffer made is a holder on it while this lives.
+    SecondaryBuffers(Device& device, std::string name, MemoryCounter* counter = nullptr)
+        : device_(device), name_(std::move(name)), counter_(counter) {}
     SecondaryBuffers(const SecondaryBuffers&) = delete;
     SecondaryBuffers& operator=(const SecondaryBuffers&) = delete;
 
@@ -117,8 +120,10 @@ public:
 private:
     Device& device_;
     std::string name_;
+    MemoryCounter* counter_ = nullptr;
     std::vector<CommandPoolHandle> pools_;  // one per buffer
     std::vector<VkCommandBuffer> buffers_;  // freed with their pools
+    std::vector<MemoryCharge> charges_;     // one per buffer, on counter_
 };
 
 // Records with `record`, submits and waits (Device::submit_and_wait).

@@ -458,7 +458,8 @@ Result<std::vector<Renderer::LayerPlan>> Renderer::record_layers(
     const size_t set = cl.slot() ? size_t(*cl.slot()) + 1 : 0;
     while (layer_buffers_.size() <= set)
         layer_buffers_.push_back(std::make_unique<gpu::SecondaryBuffers>(
-            device_, fmt::format("viewer-vd.layers.{}", layer_buffers_.size())));
+            device_, fmt::format("viewer-vd.layers.{}", layer_buffers_.size()),
+            info_.ledger ? &info_.ledger->command_buffers : nullptr));
     gpu::SecondaryBuffers& buffers = *layer_buffers_[set];
     HS_TRY(buffers.reserve(drawn.size()));
     planners_->run(drawn.size(), [&](size_t k) {

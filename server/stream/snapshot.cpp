@@ -141,6 +141,7 @@ ServerSnapshot Server::Impl::snapshot() const {
     sm.versions_held_peak = l.versions.peak_holders();
     sm.device_allocations = l.device.holders();
     sm.pipelines = l.pipelines.holders();
+    sm.command_buffers = l.command_buffers.holders();
     sm.versions_built = l.versions_built.load();
     sm.versions_freed = l.versions_freed.load();
     s.pooled_layer_bytes = buffers->pooled_bytes();

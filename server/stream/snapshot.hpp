@@ -161,6 +161,7 @@ struct ServerSnapshot {
     struct SceneMemory {
         int64_t cpu_bytes = 0, device_bytes = 0, cpu_bytes_peak = 0, device_bytes_peak = 0;
         int64_t versions_held = 0, versions_held_peak = 0, device_allocations = 0, pipelines = 0;
+        int64_t command_buffers = 0;
         uint64_t versions_built = 0, versions_freed = 0;
     } scene_memory;
     std::string device, driver;  // the Vulkan device and its driver

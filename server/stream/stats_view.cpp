@@ -150,6 +150,7 @@ nlohmann::json stats_json(const ServerSnapshot& s) {
               {"device_bytes_peak", s.scene_memory.device_bytes_peak},
               {"device_allocations", s.scene_memory.device_allocations},
               {"pipelines", s.scene_memory.pipelines},
+              {"command_buffers", s.scene_memory.command_buffers},
               {"versions_held", s.scene_memory.versions_held},
               {"versions_held_peak", s.scene_memory.versions_held_peak},
               {"versions_built", s.scene_memory.versions_built},

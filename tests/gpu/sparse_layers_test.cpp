@@ -481,6 +481,53 @@ TEST_F(SparseLayers, PlanningOnThreadsGivesTheSameLayers) {
     }
 }
 
+// The command buffers the planners record layers into are made once per layer of the largest
+// batch, counted on the scene ledger while the renderer holds them, and off it when it goes.
+TEST_F(SparseLayers, PlannersCommandBuffersAreMadeOnceAndOnTheLedger) {
+    const scene::Scene s = scene::default_scene();
+    SceneLedger ledger;
+    render::RendererCreateInfo info;
+    info.planning_threads = 2;
+    info.ledger = &ledger;
+    auto made = render::Renderer::create(device(), s, info);
+    ASSERT_TRUE(made.ok()) << made.error().message;
+    auto r = std::move(made).value();
+    const auto k = small_eye(4);
+    std::vector<gpu::RenderTarget> targets;
+    for (int i = 0; i < 8; ++i)
+        targets.push_back(gpu::RenderTarget::create(device(), k.width, k.height,
+                                                    gpu::ColorFormat::kRgba8Unorm, "t")
+                              .value());
+    // A batch of n eyes all around the prop, every one with a highlight in view.
+    auto batch = [&](int n, int frame) {
+        std::vector<Request> reqs;
+        for (int i = 0; i < n; ++i) {
+            const auto head = scene::viewing_pose(s.viewing, -40.0 + 10.0 * i + frame,
+                                                  s.viewing.heights_m.at("M"))
+                                  .value();
+            reqs.push_back({s.material.specular, k, scene::eye_poses(head, 0.063)[i % 2],
+                            render::LayerEncoding::kSrgb8, &targets[size_t(i)], true});
+        }
+        auto plans = r->render_layers(reqs);
+        EXPECT_TRUE(plans.ok()) << (plans.ok() ? "" : plans.error().message);
+        size_t drawn = 0;
+        if (plans.ok())
+            for (const Plan& p : *plans) drawn += !p.rect.empty();
+        EXPECT_EQ(drawn, size_t(n)) << "every eye of the batch draws";
+    };
+    EXPECT_EQ(ledger.command_buffers.holders(), 0);
+    batch(6, 0);
+    EXPECT_EQ(ledger.command_buffers.holders(), 6);
+    for (int frame = 1; frame < 5; ++frame) batch(frame % 2 ? 3 : 6, frame);
+    EXPECT_EQ(ledger.command_buffers.holders(), 6) << "reused, not made per batch";
+    batch(8, 5);
+    EXPECT_EQ(ledger.command_buffers.holders(), 8);
+    EXPECT_EQ(ledger.command_buffers.peak_holders(), 8);
+    EXPECT_EQ(r->layers_recorded_by_planners(), 6u + 3 + 6 + 3 + 6 + 8);
+    r.reset();
+    EXPECT_EQ(ledger.command_buffers.holders(), 0);
+}
+
 // The served path: batches recorded through a submit ring, each batch's layers recorded by the
 // planners into the secondary buffers of the ring slot it goes in, while the previous batch may
 // still be on the device. Four batches over two slots give the bytes of the same layers
