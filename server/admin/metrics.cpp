@@ -287,6 +287,9 @@ void server_families(Writer& w, const stream::ServerSnapshot& s, const AdminFigu
              uint64_t(std::max<int64_t>(sm.device_allocations, 0)));
     w.family("hysar_scene_pipelines", "gauge", "Pipelines the scene versions hold.");
     w.sample("hysar_scene_pipelines", "", uint64_t(std::max<int64_t>(sm.pipelines, 0)));
+    w.family("hysar_scene_command_buffers", "gauge",
+             "Command buffers the scene versions' planning threads record layers into.");
+    w.sample("hysar_scene_command_buffers", "", uint64_t(std::max<int64_t>(sm.command_buffers, 0)));
     w.family("hysar_scene_versions_held", "gauge",
              "Scene versions alive: the one served, and while a new one is built or an old one "
              "is still in use, that one too.");

@@ -7,6 +7,7 @@
 // Thread: one thread at a time (the device's submit lock serialises submissions).
 #pragma once
 
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <optional>
@@ -288,6 +289,12 @@ public:
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
+    // Of the pipelines held, those that draw the headsets' fill-in (at most two per layer
+    // format and view count: fill_lights).
+    size_t fill_pipelines() const {
+        return size_t(std::count_if(variants_.begin(), variants_.end(),
+                                    [](const auto& kv) { return kv.first.ends_with("|fill"); }));
+    }
     // The scene's own tessellation (the finest level).
     const scene::Mesh& mesh() const { return levels_.front().mesh; }
     const std::vector<ClusteredMesh>& levels() const { return levels_; }

@@ -63,8 +63,12 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
         HS_ASSIGN_OR_RETURN(Variant * generic,
                             variant(PassKind::kVd, spec, enc, ~uint64_t(0), false, views));
         uses.push_back({generic, format});
-        if (fill_)  // the headsets' fill-in: two pipelines per format (resolve_variants)
-            for (uint64_t lights : std::set{fill_lights(0), fill_lights(1)}) {
+        // The headsets' fill-in: two pipelines per format (resolve_variants); with emission
+        // every cluster needs its lights, and none is drawn for the fill-in alone.
+        if (fill_)
+            for (uint64_t lights : has_emission(scene_)
+                                       ? std::set{fill_lights(1)}
+                                       : std::set{fill_lights(0), fill_lights(1)}) {
                 HS_ASSIGN_OR_RETURN(Variant * f,
                                     variant(PassKind::kVd, spec, enc, lights, true, views));
                 uses.push_back({f, format});

@@ -295,6 +295,7 @@ TEST_F(AdminTest, MetricsParseAndFollowTheFramesServed) {
                                "hysar_scene_versions_held",
                                "hysar_scene_versions_freed_total",
                                "hysar_scene_pipelines",
+                               "hysar_scene_command_buffers",
                                "hysar_scene_device_allocations"})
         EXPECT_TRUE(before.types.count(family)) << family;
     EXPECT_EQ(before.get("hysar_vd_layers_total"), 0.0);
