@@ -255,7 +255,10 @@ void main() {
         if (kEmission) sum += scene.emission.rgb;
         // The headsets' fill-in (docs/OPTICS.md, "Fill-in"): no projector lights this point, so
         // the viewer's layer carries its VI part as well.
-        if (kFillProjectors > 0 && !fill_covered(p, n)) sum += vi_radiance(p, n, uv, true);
+        // kFillProjectors < 0: the draw's clusters face away from every projector (the
+        // planner's bound), so no projector reaches any of their points.
+        if (kFillProjectors < 0 || (kFillProjectors > 0 && !fill_covered(p, n)))
+            sum += vi_radiance(p, n, uv, true);
     }
     out_radiance = encode_output(sum);
 }

@@ -59,7 +59,8 @@ using uvec4 = glm::uvec4;
 #define HS_SC_FILL \
     16  // int: VD pass, the headsets' fill-in (docs/OPTICS.md, "Fill-in") over this many
         // projectors of the fill block (0: off): where none reaches the shaded point, the VI
-        // term is added too. A constant count lets the loop unroll, so that the projectors'
+        // term is added too; -1: added everywhere, untested (clusters facing away from every
+        // projector). A constant count lets the loop unroll, so that the projectors'
         // parameters are read at constant offsets (one load for all lanes, not one per lane)
 
 struct GpuLight {

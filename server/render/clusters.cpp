@@ -440,6 +440,16 @@ bool cluster_may_face(const Cluster& cl, const Shell& shell, const glm::dvec3& e
     return !view_bound(shaded_bounds(cl, shell, eye), eye).dark;
 }
 
+bool cluster_faces_away(const Cluster& cl, const glm::dvec3& point, double margin) {
+    if (!(cl.cone_angle < kHalfPi))
+        return false;
+    const double alpha = spread_towards(cl.centre, cl.radius, point, 0.0);
+    if (!(alpha < kHalfPi))
+        return false;
+    const double angle = angle_between(cl.cone_axis, glm::normalize(point - cl.centre));
+    return angle - cl.cone_angle - alpha >= kHalfPi + margin;
+}
+
 bool cluster_may_diffuse(const Cluster& rasterised, const Shell& shell, const glm::dvec3& eye,
                          const VdBound& b, double albedo) {
     if (!(albedo > 0) || b.lights.empty())

@@ -127,6 +127,11 @@ Cluster shaded_bounds(const Cluster& cluster, const Shell& shell, const glm::dve
 // Whether any point a VD pass shades on `cluster` may face `eye` (n.v > 0; conservative).
 bool cluster_may_face(const Cluster& cluster, const Shell& shell, const glm::dvec3& eye);
 
+// Whether every point of `shaded` (shaded_bounds) faces away from `point` by at least `margin`
+// radians beyond 90 degrees: n . (point - p) < 0 everywhere, with room for a shader's float
+// error. False where the bounds say nothing (a cone of 90 degrees or more, `point` inside).
+bool cluster_faces_away(const Cluster& shaded, const glm::dvec3& point, double margin);
+
 // Whether the VI term (albedo / pi) sum_i E_i max(n.l_i, 0) can reach `bound.threshold`
 // anywhere a pass shades on `cluster` seen from `eye` (the headsets' fill-in draws it): a
 // conservative test from the gate n.l > 0 and the light's irradiance bound, as for the VD term.

@@ -110,6 +110,7 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     const uint32_t tile = std::max<uint32_t>(r.tile, 1);
     masks.assign(level.clusters.size(), 0);
     fills.assign(level.clusters.size(), 0);
+    w.fill_modes.assign(level.clusters.size(), Fill::kNone);
     // The fill-in: clusters with uncovered surface that may face the eye are drawn too.
     const size_t level_index = size_t(&level - levels_.data());
     const std::vector<uint8_t>* fill_clusters = fill_ ? &fill_clusters_[level_index] : nullptr;
@@ -158,6 +159,9 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
                                    : kAllTriangles;
                 if (masks[c] == 0 && fills[c] == 0)  // counted as left out, whole
                     w.plan.fill_triangles_unlit += cl.index_count / 3;
+                if (fills[c] != 0)
+                    w.fill_modes[c] = masks[c] == 0 && fill_untested(r, level, c) ? Fill::kUntested
+                                                                                  : Fill::kTested;
             }
             if (masks[c] != 0 || fills[c]) {
                 rect = unite(rect, rects[c]);
@@ -169,6 +173,16 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     if (!r.sparse)
         rect = {0, 0, k.width, k.height};
     return rect;
+}
+
+bool Renderer::fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c) const {
+    if (info_.max_light_variants == 0 || fill_params_.empty())
+        return false;
+    const Cluster shaded = shaded_bounds(level.clusters[c], level.shell, r.eye.position);
+    for (const gpu::GpuFillProjector& p : fill_params_)
+        if (!cluster_faces_away(shaded, glm::dvec3(p.position), kFillAwayMargin))
+            return false;
+    return true;
 }
 
 uint8_t Renderer::fill_triangles(const LayerRequest& r, size_t level, size_t c,
@@ -220,7 +234,8 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     for (size_t c = 0; c < level.clusters.size(); ++c)
         if (drawn(c))
             order.push_back(uint32_t(c));
-    const auto key = [&](uint32_t c) { return std::make_pair(fills[c] != 0, masks[c]); };
+    const auto& modes = w.fill_modes;
+    const auto key = [&](uint32_t c) { return std::make_pair(modes[c], masks[c]); };
     std::stable_sort(order.begin(), order.end(),
                      [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
     // Past kMaxLightGroups sets of lights, every lit cluster evaluates them all. Decided from
@@ -248,13 +263,14 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
                          [&](uint32_t a, uint32_t b) { return key(a) < key(b); });
     }
     const uint32_t lit_first = written;
-    uint32_t filled = 0;
+    uint32_t filled = 0, untested = 0;
     for (uint32_t c : order) {
         const Cluster& cc = level.clusters[c];
         filled += fills[c] != 0;
+        untested += modes[c] == Fill::kUntested;
         if (w.groups.empty() || w.groups.back().mask != masks[c] ||
-            w.groups.back().fill != bool(fills[c]))
-            w.groups.push_back({masks[c], written, 0, bool(fills[c])});
+            w.groups.back().fill != modes[c])
+            w.groups.push_back({masks[c], written, 0, modes[c]});
         uint32_t n = cc.index_count;
         if (fills[c] == 0 || fills[c] == kAllTriangles) {
             std::memcpy(gathered + written, source + cc.first_index, cc.index_count * 4);
@@ -274,6 +290,7 @@ void Renderer::gather_indices(const LayerRequest& r, const ClusteredMesh& level,
     plan.clusters_occluding = occ_clusters;
     plan.clusters_lit = uint32_t(order.size());
     plan.clusters_filled = filled;
+    plan.clusters_filled_untested = untested;
     plan.triangles = (w.occ_count + lit_count) / 3;
 }
 
@@ -298,7 +315,7 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
     const uint32_t views = r.target->views();
     if (w.occ_count > 0) {
         HS_ASSIGN_OR_RETURN(w.occluder, variant(PassKind::kOccluder, r.spec, 1 + int(r.encoding),
-                                                ~uint64_t(0), false, views));
+                                                ~uint64_t(0), Fill::kNone, views));
     }
     for (const auto& g : w.groups) {
         // The fill-in's draws share two pipelines per format: one for the clusters drawn for
@@ -307,9 +324,10 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
         // compiles, each of which holds tens of MB of JIT memory on lavapipe, for a few
         // clusters per layer.
         HS_ASSIGN_OR_RETURN(Variant * lit,
-                            g.fill ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding),
-                                             fill_lights(g.mask), true, views)
-                                   : vd_variant(r.spec, 1 + int(r.encoding), g.mask, false, views));
+                            g.fill != Fill::kNone
+                                ? variant(PassKind::kVd, r.spec, 1 + int(r.encoding),
+                                          fill_lights(g.mask), g.fill, views)
+                                : vd_variant(r.spec, 1 + int(r.encoding), g.mask, views));
         w.lit.push_back(lit);
     }
     return {};

@@ -231,7 +231,7 @@ int whole_exponent(const scene::Specular& sp) {
 }
 
 std::string Renderer::variant_key(PassKind kind, const scene::Specular& spec, int encoding,
-                                  uint64_t lights, bool fill) {
+                                  uint64_t lights, Fill fill) {
     const bool vd = kind == PassKind::kVd;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
@@ -239,14 +239,17 @@ std::string Renderer::variant_key(PassKind kind, const scene::Specular& spec, in
                        sp.colour.r, sp.colour.g, sp.colour.b, sp.exponent, sp.alpha_x, sp.alpha_y,
                        sp.tangent_axis.x, sp.tangent_axis.y, sp.tangent_axis.z,
                        int(sp.tangent_source), encoding, lights) +
-           (fill && vd ? "|fill" : "");
+           (fill == Fill::kNone || !vd ? ""
+            : fill == Fill::kTested    ? "|fill"
+                                       : "|untested|fill");
 }
 
 Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specular& spec,
-                                             int encoding, uint64_t lights, bool fill,
+                                             int encoding, uint64_t lights, Fill fill,
                                              uint32_t views) {
     const bool vd = kind == PassKind::kVd;
-    fill = fill && vd;
+    if (!vd)
+        fill = Fill::kNone;
     const scene::Specular none{};
     const scene::Specular& sp = vd ? spec : none;
     // The views before the fill-in's mark: set_fill finds the fill-in's pipelines by it.
@@ -260,7 +263,7 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         v.effects = {"occluder"};
     else
         v.effects = effects_of(scene_, vd, sp, info_.area_light_samples);
-    if (fill)
+    if (fill != Fill::kNone)
         v.effects.push_back("headset-fill");
     const bool area = has_light(scene_, scene::LightType::kRect);
     const bool falloff = scene_.effects.point_light_falloff;
@@ -286,8 +289,11 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
         .set_bool(HS_SC_ANISOTROPIC, sp.anisotropic())
         .set_bool(HS_SC_MESH_TANGENT,
                   sp.uses_tangent() && sp.tangent_source == scene::Specular::TangentSource::kMesh)
-        .set_bool(HS_SC_ALBEDO_TEXTURE, (!vd || fill) && scene_.material.albedo_texture != nullptr)
-        .set_int(HS_SC_FILL, fill ? int(fill_projectors_) : 0)
+        .set_bool(HS_SC_ALBEDO_TEXTURE,
+                  (!vd || fill != Fill::kNone) && scene_.material.albedo_texture != nullptr)
+        .set_int(HS_SC_FILL, fill == Fill::kNone     ? 0
+                             : fill == Fill::kTested ? int(fill_projectors_)
+                                                     : -1)
         .set_int(HS_SC_AREA_SAMPLES, area ? int(info_.area_light_samples) : 0)
         .set_int(HS_SC_OUTPUT_ENCODING, encoding)
         .set_bool(HS_SC_ANALYTIC_SPHERE, convex_)
@@ -298,17 +304,17 @@ Result<Renderer::Variant*> Renderer::variant(PassKind kind, const scene::Specula
 }
 
 Result<Renderer::Variant*> Renderer::vd_variant(const scene::Specular& spec, int encoding,
-                                                uint64_t lights, bool fill, uint32_t views) {
+                                                uint64_t lights, uint32_t views) {
     // The budget counts sets of lights, whatever the views: a set compiled for one view count
     // is compiled for the other too, so that a headset's layers do not depend on whether its
     // eyes share a pass.
-    std::string set = variant_key(PassKind::kVd, spec, encoding, lights, fill);
+    std::string set = variant_key(PassKind::kVd, spec, encoding, lights, Fill::kNone);
     if (!light_sets_.count(set)) {
         if (light_sets_.size() >= info_.max_light_variants)
-            return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), fill, views);
+            return variant(PassKind::kVd, spec, encoding, ~uint64_t(0), Fill::kNone, views);
         light_sets_.insert(std::move(set));
     }
-    return variant(PassKind::kVd, spec, encoding, lights, fill, views);
+    return variant(PassKind::kVd, spec, encoding, lights, Fill::kNone, views);
 }
 
 Result<Renderer::Variant*> Renderer::build_variant(const std::string& key, Variant v,

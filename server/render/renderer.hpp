@@ -182,6 +182,8 @@ public:
         // Of the drawn clusters, those drawn with the headsets' fill-in (set_fill): uncovered
         // surface that may face the eye. 0: the layer is what it is without the fill-in.
         uint32_t clusters_filled = 0;
+        // Of those, drawn without the coverage test: they face away from every projector.
+        uint32_t clusters_filled_untested = 0;
         // Triangles of clusters drawn for the fill-in alone that it left out: no light reaches
         // them (Renderer::fill_triangles).
         uint32_t fill_triangles_unlit = 0;
@@ -316,17 +318,20 @@ private:
     // encoding: 0 linear radiance in info_.format, else 1 + LayerEncoding. lights: the VD
     // lights compiled in (bit i: lit_[i]); all ones: every light, chosen per draw by the push
     // constants' light_mask.
-    // fill: a VD pass with the headsets' fill-in (HS_SC_FILL).
+    // fill: a VD pass with the headsets' fill-in (HS_SC_FILL), each pixel tested for coverage
+    // or, for clusters that face away from every projector, untested.
+    enum class Fill : uint8_t { kNone = 0, kTested = 1, kUntested = 2 };
     // A variant's key, less the views it draws (variant adds them).
     static std::string variant_key(PassKind kind, const scene::Specular& spec, int encoding,
-                                   uint64_t lights, bool fill);
+                                   uint64_t lights, Fill fill);
     // views: of the multiview pass it draws in (1: none).
     Result<Variant*> variant(PassKind kind, const scene::Specular& spec, int encoding = 0,
-                             uint64_t lights = ~uint64_t(0), bool fill = false, uint32_t views = 1);
+                             uint64_t lights = ~uint64_t(0), Fill fill = Fill::kNone,
+                             uint32_t views = 1);
     // The VD pipeline for a draw that needs `lights`: one compiled for exactly those lights, or
     // past info_.max_light_variants of them the generic one.
     Result<Variant*> vd_variant(const scene::Specular& spec, int encoding, uint64_t lights,
-                                bool fill = false, uint32_t views = 1);
+                                uint32_t views = 1);
     Result<Variant*> variant(bool vd, const scene::Specular& spec) {
         return variant(vd ? PassKind::kVd : PassKind::kVi, spec);
     }
@@ -372,6 +377,9 @@ private:
         // Per cluster: drawn with the fill-in (0: not), which of its triangles (bit i: the
         // cluster's i-th; kAllTriangles: the whole cluster).
         std::vector<uint8_t> fills;
+        // Per cluster drawn with the fill-in: how (Fill), kUntested where it faces away from
+        // every projector.
+        std::vector<Fill> fill_modes;
         std::vector<uint32_t> order;
         LayerPlan plan;
         std::string error;  // the request is invalid: record_layers returns this
@@ -380,7 +388,7 @@ private:
         struct Group {
             uint64_t mask;
             uint32_t first, count;
-            bool fill;
+            Fill fill;
         };
         std::vector<Group> groups;
         // The pipelines the draws bind (resolve_variants, on the caller: looking one up may
@@ -455,6 +463,12 @@ private:
     uint64_t fill_lights(uint64_t mask) const {
         return mask == 0 && info_.max_light_variants > 0 ? 0 : ~uint64_t(0);
     }
+    // Whether cluster `c` of `level`, drawn for the fill-in alone in `r`, may skip the coverage
+    // test: every point it shades faces away from every projector, by kFillAwayMargin (well
+    // above the shader's float error). Only where pipelines may be specialised
+    // (info_.max_light_variants > 0), as fill_lights.
+    static constexpr double kFillAwayMargin = 1e-3;
+    bool fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c) const;
     // The triangles of cluster `c` of level `level` that the fill-in must draw for `r`.
     uint8_t fill_triangles(const LayerRequest& r, size_t level, size_t c, const VdBound& bound,
                            double albedo) const;

@@ -56,27 +56,34 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
         const int enc = 1 + int(e);
         const gpu::ColorFormat format = layer_target_format(e);
         if (!convex_) {
-            HS_ASSIGN_OR_RETURN(
-                Variant * occ, variant(PassKind::kOccluder, spec, enc, ~uint64_t(0), false, views));
+            HS_ASSIGN_OR_RETURN(Variant * occ, variant(PassKind::kOccluder, spec, enc, ~uint64_t(0),
+                                                       Fill::kNone, views));
             uses.push_back({occ, format});
         }
         HS_ASSIGN_OR_RETURN(Variant * generic,
-                            variant(PassKind::kVd, spec, enc, ~uint64_t(0), false, views));
+                            variant(PassKind::kVd, spec, enc, ~uint64_t(0), Fill::kNone, views));
         uses.push_back({generic, format});
-        // The headsets' fill-in: two pipelines per format (resolve_variants); with emission
-        // every cluster needs its lights, and none is drawn for the fill-in alone.
-        if (fill_)
-            for (uint64_t lights : has_emission(scene_)
-                                       ? std::set{fill_lights(1)}
-                                       : std::set{fill_lights(0), fill_lights(1)}) {
+        // The headsets' fill-in: up to three pipelines per format (resolve_variants): tested,
+        // for clusters with lights of their own and for those drawn for it alone, and
+        // untested for the latter. With emission every cluster needs its lights, and none is
+        // drawn for the fill-in alone.
+        if (fill_) {
+            std::set<std::pair<uint64_t, Fill>> fills{{fill_lights(1), Fill::kTested}};
+            if (!has_emission(scene_)) {
+                fills.insert({fill_lights(0), Fill::kTested});
+                if (info_.max_light_variants > 0)
+                    fills.insert({fill_lights(0), Fill::kUntested});
+            }
+            for (const auto& [lights, fill] : fills) {
                 HS_ASSIGN_OR_RETURN(Variant * f,
-                                    variant(PassKind::kVd, spec, enc, lights, true, views));
+                                    variant(PassKind::kVd, spec, enc, lights, fill, views));
                 uses.push_back({f, format});
             }
+        }
         if (n == 0 || n > kEverySubsetUpTo)
             continue;
         for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {
-            HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, false, views));
+            HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, views));
             uses.push_back({v, format});
         }
     }

@@ -227,9 +227,10 @@ TEST_F(Fill, WarmUpPreparesTheFillPipelines) {
 }
 
 // Clusters drawn for the fill-in alone are drawn with a pipeline that compiles no light's VD
-// term in; the rest of the fill-in with the one that masks lights by the push constants. Both
-// draw bit for bit what the masked pipeline alone draws (a renderer allowed no light sets), at
-// views all around the dome and in both layer encodings.
+// term in, and those of them that face away from every projector with one that skips the
+// coverage test too; the rest of the fill-in with the one that masks lights by the push
+// constants. Together they draw bit for bit what the masked pipeline alone draws (a renderer
+// allowed no light sets), at views all around the dome and in both layer encodings.
 TEST_F(Fill, FillAlonePipelineDrawsWhatTheMaskedOneDraws) {
     render::RendererCreateInfo generic_info;
     generic_info.max_light_variants = 0;
@@ -241,24 +242,28 @@ TEST_F(Fill, FillAlonePipelineDrawsWhatTheMaskedOneDraws) {
     ASSERT_TRUE(specialised->set_fill(blend).ok());
     ASSERT_TRUE((*generic)->set_fill(blend).ok());
     const scene::Intrinsics k = small_eye(4);
-    size_t filled = 0, lit = 0;
+    size_t filled = 0, untested = 0, lit = 0;
     for (double angle : {90.0, 150.0, 180.0, 210.0, 270.0})
         for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
             const Layer a = layer(*specialised, k, eye_at(angle), enc);
             const Layer b = layer(**generic, k, eye_at(angle), enc);
             EXPECT_EQ(a.plan.clusters_filled, b.plan.clusters_filled);
             filled += a.plan.clusters_filled;
+            untested += a.plan.clusters_filled_untested;
+            EXPECT_EQ(b.plan.clusters_filled_untested, 0u);
             for (size_t i = 0; i < a.codes.size(); ++i) lit += a.codes[i] != 0;
             EXPECT_TRUE(a.codes == b.codes) << "at " << angle << " deg, encoding " << int(enc);
         }
     EXPECT_GT(filled, 0u);
+    EXPECT_GT(untested, 0u);
+    EXPECT_LT(untested, filled);
     EXPECT_GT(lit, 1000u);
     // Nothing was warmed up: the pipelines held are those the layers drew with (a pipeline is
     // made when a draw group asks for it). Per encoding, the generic renderer drew the fill-in
-    // with the masked pipeline alone, the specialised one with that and the fill-alone one.
+    // with the masked pipeline alone, the specialised one with that and the two fill-alone ones.
     EXPECT_EQ((*generic)->pipelines_built(), 4u);
     EXPECT_EQ((*generic)->fill_pipelines(), 2u);
-    EXPECT_EQ(specialised->fill_pipelines(), 4u);
+    EXPECT_EQ(specialised->fill_pipelines(), 6u);
 }
 
 // Shadow maps that do not fit one texture are refused with the sizes named (the server then
