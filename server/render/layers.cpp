@@ -318,9 +318,10 @@ Result<void> Renderer::resolve_variants(const LayerRequest& r, LayerWork& w) {
                                                 ~uint64_t(0), Fill::kNone, views));
     }
     for (const auto& g : w.groups) {
-        // The fill-in's draws share two pipelines per format: one for the clusters drawn for
-        // the fill-in alone (no light's VD term compiled in) and one for the rest (the lights
-        // chosen by the push constants). A pipeline per set of lights would double the
+        // The fill-in's draws share three pipelines per format: two for the clusters drawn for
+        // the fill-in alone (no light's VD term compiled in; with the coverage test, and
+        // without it for those that face away from every projector) and one for the rest (the
+        // lights chosen by the push constants). A pipeline per set of lights would double the
         // compiles, each of which holds tens of MB of JIT memory on lavapipe, for a few
         // clusters per layer.
         HS_ASSIGN_OR_RETURN(Variant * lit,

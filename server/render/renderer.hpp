@@ -291,8 +291,8 @@ public:
 
     uint64_t projector_render_count() const { return projector_renders_; }
     uint64_t pipelines_built() const { return pipelines_built_; }
-    // Of the pipelines held, those that draw the headsets' fill-in (at most two per layer
-    // format and view count: fill_lights).
+    // Of the pipelines held, those that draw the headsets' fill-in (at most three per layer
+    // format and view count: fill_lights, fill_untested).
     size_t fill_pipelines() const {
         return size_t(std::count_if(variants_.begin(), variants_.end(),
                                     [](const auto& kv) { return kv.first.ends_with("|fill"); }));
