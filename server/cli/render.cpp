@@ -727,6 +727,7 @@ Result<json> render_around(gpu::Device& device, const Plan& p, const Options& o)
                                    {"mean_de00", fs.mean_de00},
                                    {"max_de00", fs.max_de00},
                                    {"clusters_filled", fl.plan.clusters_filled},
+                                   {"clusters_filled_untested", fl.plan.clusters_filled_untested},
                                    {"fill_triangles_unlit", fl.plan.fill_triangles_unlit},
                                    {"rect_pixels", fl.plan.rect.area()},
                                    {"rect_pixels_without", plain.plan.rect.area()},

@@ -179,10 +179,22 @@ bool Renderer::fill_untested(const LayerRequest& r, const ClusteredMesh& level, 
     if (info_.max_light_variants == 0 || fill_params_.empty())
         return false;
     const Cluster shaded = shaded_bounds(level.clusters[c], level.shell, r.eye.position);
+    const double margin = fill_away_margin(r.eye.position);
     for (const gpu::GpuFillProjector& p : fill_params_)
-        if (!cluster_faces_away(shaded, glm::dvec3(p.position), kFillAwayMargin))
+        if (!cluster_faces_away(shaded, glm::dvec3(p.position), margin))
             return false;
     return true;
+}
+
+double Renderer::fill_away_margin(const glm::dvec3& eye) const {
+    constexpr double kMeshMargin = 1e-3;
+    if (!convex_)
+        return kMeshMargin;
+    const scene::Hemisphere& h = scene_.prop.hemisphere;
+    if (!(h.radius > 0))
+        return 2.0;  // past any bound: nothing skips the test
+    const double ray_error = std::sqrt(4.0 * 1.2e-7) * glm::length(eye - h.centre) / h.radius;
+    return kMeshMargin + 4.0 * ray_error;
 }
 
 uint8_t Renderer::fill_triangles(const LayerRequest& r, size_t level, size_t c,

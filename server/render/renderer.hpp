@@ -464,11 +464,16 @@ private:
         return mask == 0 && info_.max_light_variants > 0 ? 0 : ~uint64_t(0);
     }
     // Whether cluster `c` of `level`, drawn for the fill-in alone in `r`, may skip the coverage
-    // test: every point it shades faces away from every projector, by kFillAwayMargin (well
-    // above the shader's float error). Only where pipelines may be specialised
-    // (info_.max_light_variants > 0), as fill_lights.
-    static constexpr double kFillAwayMargin = 1e-3;
+    // test: every point it shades faces away from every projector, by fill_away_margin. Only
+    // where pipelines may be specialised (info_.max_light_variants > 0), as fill_lights.
     bool fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c) const;
+    // The margin (radians beyond 90 degrees) by which the bound must put the shaded normals
+    // away from a projector, above the shader's float error in them as seen from `eye`:
+    // 1e-3 for a mesh's interpolated normals (about 1e-7); on the analytic dome the ray cast
+    // cancels in its discriminant near the silhouette, which moves the hit by up to about
+    // sqrt(4 eps) |eye - centre| (eps: float's 1.2e-7) and its normal by that over the
+    // radius, so four times that is added.
+    double fill_away_margin(const glm::dvec3& eye) const;
     // The triangles of cluster `c` of level `level` that the fill-in must draw for `r`.
     uint8_t fill_triangles(const LayerRequest& r, size_t level, size_t c, const VdBound& bound,
                            double albedo) const;

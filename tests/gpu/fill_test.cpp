@@ -223,6 +223,7 @@ TEST_F(Fill, WarmUpPreparesTheFillPipelines) {
     const uint64_t built = r->pipelines_built();
     const Layer a = layer(*r, small_eye(4), eye_at(180.0));
     EXPECT_GT(a.plan.clusters_filled, 0u);
+    EXPECT_GT(a.plan.clusters_filled_untested, 0u) << "the untested fill pipeline drew too";
     EXPECT_EQ(r->pipelines_built(), built);
 }
 

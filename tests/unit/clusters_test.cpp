@@ -296,6 +296,66 @@ TEST(Clusters, ShadedPointsLieWithinTheShadedBounds) {
     EXPECT_GT(tighter, bounded / 4) << tighter << " of " << bounded;
 }
 
+// What cluster_faces_away promises, point by point: where it says a cluster's shaded points face
+// away from a point by a margin, every sphere point a pixel of its facing triangles shades has
+// n . (point - q) < 0, by at least that margin's sine; checked for every cluster of every level
+// from eyes and points all around the dome, and it must say so for a good share of them.
+TEST(Clusters, FacingAwayHoldsForEveryShadedPoint) {
+    const scene::Scene s = scene::default_scene();
+    const auto& h = s.prop.hemisphere;
+    const auto levels = dome_levels(s);
+    ASSERT_FALSE(levels.empty());
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const auto around = [&](double from, double to) {
+        const double az = 6.2831853 * u(rng), el = 1.5 * u(rng);
+        return h.centre + (from + (to - from) * u(rng)) * glm::dvec3(std::cos(el) * std::cos(az),
+                                                                     std::sin(el),
+                                                                     std::cos(el) * std::sin(az));
+    };
+    constexpr double kMargin = 1e-3;
+    size_t points = 0, away = 0, tested = 0;
+    double closest = -2.0;  // the largest n . direction seen on a cluster said to face away
+    for (size_t li = 0; li < levels.size(); ++li) {
+        const auto& level = levels[li];
+        for (int e = 0; e < 6; ++e) {
+            const glm::dvec3 eye = around(0.4, 1.5), projector = around(0.5, 3.0);
+            for (size_t ci = 0; ci < level.clusters.size(); ci += 1 + li) {
+                const auto& cl = level.clusters[ci];
+                ++tested;
+                const render::Cluster b = render::shaded_bounds(cl, level.shell, eye);
+                if (!render::cluster_faces_away(b, projector, kMargin))
+                    continue;
+                ++away;
+                const auto& m = level.mesh;
+                for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
+                    const glm::dvec3 p0 = m.positions[m.indices[i]],
+                                     p1 = m.positions[m.indices[i + 1]],
+                                     p2 = m.positions[m.indices[i + 2]];
+                    if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
+                        continue;
+                    for (int k = 0; k < 6; ++k) {
+                        double w0 = u(rng), w1 = u(rng);
+                        if (w0 + w1 > 1)
+                            w0 = 1 - w0, w1 = 1 - w1;
+                        const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0));
+                        if (!q)
+                            continue;
+                        ++points;
+                        const glm::dvec3 n = glm::normalize(*q - h.centre);
+                        const double c = glm::dot(n, glm::normalize(projector - *q));
+                        closest = std::max(closest, c);
+                        EXPECT_LT(c, -std::sin(kMargin)) << "level " << li << " cluster " << ci;
+                    }
+                }
+            }
+        }
+    }
+    EXPECT_GT(points, 5000u);
+    EXPECT_GT(away, tested / 10) << away << " of " << tested;
+    EXPECT_GT(closest, -0.5) << "some points come near the bound";
+}
+
 TEST(Clusters, LevelsEncloseTheDomeWithinTheirError) {
     const scene::Scene s = scene::default_scene();
     const auto& h = s.prop.hemisphere;
