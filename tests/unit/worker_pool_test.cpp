@@ -59,13 +59,19 @@ TEST(ParallelRows, EveryRowOnceAndAThrowReachesTheCaller) {
     std::vector<std::atomic<int>> seen(1000);
     hs::parallel_rows(1000, [&](uint32_t y) { ++seen[y]; });
     for (const auto& s : seen) EXPECT_EQ(s.load(), 1);
+    // Rows after the throwing one take 1 ms each, so that the others cannot all run in the
+    // microseconds the throw takes to stop them (at 1 us a row they once did, under load):
+    // all of them would take 100 s over 16 threads, against a few ms when they stop.
     std::atomic<int> ran{0};
-    EXPECT_THROW(hs::parallel_rows(100000,
-                                   [&](uint32_t y) {
-                                       ++ran;
-                                       if (y == 7)
-                                           throw std::bad_alloc();
-                                   }),
-                 std::bad_alloc);
+    EXPECT_THROW(
+        hs::parallel_rows(100000,
+                          [&](uint32_t y) {
+                              ++ran;
+                              if (y == 7)
+                                  throw std::bad_alloc();
+                              if (y > 7)
+                                  std::this_thread::sleep_for(std::chrono::milliseconds(1));
+                          }),
+        std::bad_alloc);
     EXPECT_LT(ran.load(), 100000);
 }
