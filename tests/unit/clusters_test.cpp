@@ -62,6 +62,28 @@ void for_each_shaded_point(const render::ClusteredMesh& level, const render::Clu
     }
 }
 
+// The same, at `per_triangle` random points of each facing triangle (uniform over it).
+template <typename Fn>
+void for_each_random_shaded_point(const render::ClusteredMesh& level, const render::Cluster& cl,
+                                  const scene::Hemisphere& h, glm::dvec3 eye, std::mt19937& rng,
+                                  int per_triangle, Fn&& fn) {
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const auto& m = level.mesh;
+    for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
+        const glm::dvec3 p0 = m.positions[m.indices[i]], p1 = m.positions[m.indices[i + 1]],
+                         p2 = m.positions[m.indices[i + 2]];
+        if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
+            continue;
+        for (int k = 0; k < per_triangle; ++k) {
+            double w0 = u(rng), w1 = u(rng);
+            if (w0 + w1 > 1)
+                w0 = 1 - w0, w1 = 1 - w1;
+            if (const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0)))
+                fn(*q, glm::normalize(*q - h.centre));
+        }
+    }
+}
+
 // The largest VD radiance (any channel) the reference finds on `cl` from `eye`.
 double brute_force_peak(const render::ClusteredMesh& level, const render::Cluster& cl,
                         const scene::Hemisphere& h, const scene::Specular& spec,
@@ -266,29 +288,15 @@ TEST(Clusters, ShadedPointsLieWithinTheShadedBounds) {
                     ++bounded;
                     tighter += b.cone_angle < any.cone_angle && b.radius < any.radius;
                 }
-                const auto& m = level.mesh;
-                for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
-                    const glm::dvec3 p0 = m.positions[m.indices[i]],
-                                     p1 = m.positions[m.indices[i + 1]],
-                                     p2 = m.positions[m.indices[i + 2]];
-                    if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
-                        continue;
-                    for (int k = 0; k < 6; ++k) {
-                        double w0 = u(rng), w1 = u(rng);
-                        if (w0 + w1 > 1)
-                            w0 = 1 - w0, w1 = 1 - w1;
-                        const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0));
-                        if (!q)
-                            continue;
+                for_each_random_shaded_point(
+                    level, cl, h, eye, rng, 6, [&](const glm::dvec3& q, const glm::dvec3& n) {
                         ++points;
-                        EXPECT_LE(glm::length(*q - b.centre), b.radius)
+                        EXPECT_LE(glm::length(q - b.centre), b.radius)
                             << "level " << li << " cluster " << ci;
-                        const glm::dvec3 n = glm::normalize(*q - h.centre);
                         const double angle = std::atan2(glm::length(glm::cross(n, b.cone_axis)),
                                                         glm::dot(n, b.cone_axis));
                         EXPECT_LE(angle, b.cone_angle) << "level " << li << " cluster " << ci;
-                    }
-                }
+                    });
             }
         }
     }
@@ -327,27 +335,13 @@ TEST(Clusters, FacingAwayHoldsForEveryShadedPoint) {
                 if (!render::cluster_faces_away(b, projector, kMargin))
                     continue;
                 ++away;
-                const auto& m = level.mesh;
-                for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
-                    const glm::dvec3 p0 = m.positions[m.indices[i]],
-                                     p1 = m.positions[m.indices[i + 1]],
-                                     p2 = m.positions[m.indices[i + 2]];
-                    if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
-                        continue;
-                    for (int k = 0; k < 6; ++k) {
-                        double w0 = u(rng), w1 = u(rng);
-                        if (w0 + w1 > 1)
-                            w0 = 1 - w0, w1 = 1 - w1;
-                        const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0));
-                        if (!q)
-                            continue;
+                for_each_random_shaded_point(
+                    level, cl, h, eye, rng, 6, [&](const glm::dvec3& q, const glm::dvec3& n) {
                         ++points;
-                        const glm::dvec3 n = glm::normalize(*q - h.centre);
-                        const double c = glm::dot(n, glm::normalize(projector - *q));
+                        const double c = glm::dot(n, glm::normalize(projector - q));
                         closest = std::max(closest, c);
                         EXPECT_LT(c, -std::sin(kMargin)) << "level " << li << " cluster " << ci;
-                    }
-                }
+                    });
             }
         }
     }
