@@ -114,6 +114,10 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     // The fill-in: clusters with uncovered surface that may face the eye are drawn too.
     const size_t level_index = size_t(&level - levels_.data());
     const std::vector<uint8_t>* fill_clusters = fill_ ? &fill_clusters_[level_index] : nullptr;
+    // The margin a fill-alone cluster's normals must keep from every projector to skip the
+    // coverage test: the same for every cluster of the layer (negative: none skips it).
+    const double away_margin =
+        fill_ && info_.max_light_variants > 0 ? fill_away_margin(r.eye.position) : -1.0;
     const double fill_albedo =
         std::max({scene_.material.albedo.x, scene_.material.albedo.y, scene_.material.albedo.z});
     const uint64_t all_lights = lit_.size() >= 64 ? ~uint64_t(0) : (uint64_t(1) << lit_.size()) - 1;
@@ -160,8 +164,9 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
                 if (masks[c] == 0 && fills[c] == 0)  // counted as left out, whole
                     w.plan.fill_triangles_unlit += cl.index_count / 3;
                 if (fills[c] != 0)
-                    w.fill_modes[c] = masks[c] == 0 && fill_untested(r, level, c) ? Fill::kUntested
-                                                                                  : Fill::kTested;
+                    w.fill_modes[c] = masks[c] == 0 && fill_untested(r, level, c, away_margin)
+                                          ? Fill::kUntested
+                                          : Fill::kTested;
             }
             if (masks[c] != 0 || fills[c]) {
                 rect = unite(rect, rects[c]);
@@ -175,11 +180,11 @@ PixelRect Renderer::cull_clusters(const LayerRequest& r, const ClusteredMesh& le
     return rect;
 }
 
-bool Renderer::fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c) const {
-    if (info_.max_light_variants == 0 || fill_params_.empty())
+bool Renderer::fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c,
+                             double margin) const {
+    if (margin < 0 || fill_params_.empty())
         return false;
     const Cluster shaded = shaded_bounds(level.clusters[c], level.shell, r.eye.position);
-    const double margin = fill_away_margin(r.eye.position);
     for (const gpu::GpuFillProjector& p : fill_params_)
         if (!cluster_faces_away(shaded, glm::dvec3(p.position), margin))
             return false;

@@ -464,9 +464,11 @@ private:
         return mask == 0 && info_.max_light_variants > 0 ? 0 : ~uint64_t(0);
     }
     // Whether cluster `c` of `level`, drawn for the fill-in alone in `r`, may skip the coverage
-    // test: every point it shades faces away from every projector, by fill_away_margin. Only
-    // where pipelines may be specialised (info_.max_light_variants > 0), as fill_lights.
-    bool fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c) const;
+    // test: every point it shades faces away from every projector, by `margin`
+    // (fill_away_margin of the eye; negative: never). Only where pipelines may be specialised
+    // (info_.max_light_variants > 0), as fill_lights: the caller passes -1 otherwise.
+    bool fill_untested(const LayerRequest& r, const ClusteredMesh& level, size_t c,
+                       double margin) const;
     // The margin (radians beyond 90 degrees) by which the bound must put the shaded normals
     // away from a projector, above the shader's float error in them as seen from `eye`:
     // 1e-3 for a mesh's interpolated normals (about 1e-7); on the analytic dome the ray cast
