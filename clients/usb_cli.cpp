@@ -266,8 +266,10 @@ int watch_devices(const Args& args, const std::vector<KnownHeadset>& table) {
     };
     auto failure = watch_usb_devices(
         seconds, [] { return g_stop != 0; }, report);
-    std::signal(SIGINT, SIG_DFL);
-    std::signal(SIGTERM, SIG_DFL);
+    // The process ends here: a second stop signal (timeout and a shell send one to the command
+    // and then to its process group) must not kill it while it reports, as SIG_DFL would.
+    std::signal(SIGINT, SIG_IGN);
+    std::signal(SIGTERM, SIG_IGN);
     if (failure) {
         std::fprintf(stderr, "hysar-hmd: --watch-devices: %s\n", failure->c_str());
         return 1;
