@@ -94,7 +94,7 @@ const char* kBenchServeHelp =
     "                         [--lp-threads N,M] [--encoder-threads N]\n"
     "                         [--max-batch-viewers N] [--planning-threads N]\n"
     "                         [--record-on-render-thread] [--pack-tiles auto|on|off]\n"
-    "                         [--multiview auto|on|off]\n"
+    "                         [--multiview auto|on|off] [--headsets-per-pass N]\n"
     "                         [--max-target-mib MIB] [--submissions-in-flight N]\n"
     "                         [--headset-mbps X] [--room-mbps Y] [--layer-quality Q]\n"
     "                         [--overscan-deg D]\n"
@@ -135,6 +135,8 @@ const char* kBenchServeHelp =
     "                       compute pass packs the lit tiles, only they are read back\n"
     "  --multiview auto|on|off  the server's --multiview (default auto: on a GPU): both\n"
     "                       eyes of a headset in one pass\n"
+    "  --headsets-per-pass N  the server's --headsets-per-pass (default 1): with\n"
+    "                       multiview, up to N headsets' eyes in one pass\n"
     "  --headset-mbps X, --room-mbps Y  the server's bit-rate limits, Mbit/s (as hysar\n"
     "                       serve; default 0: none); each row then reports the Mbit/s per\n"
     "                       headset, the layer quality and the frame rate they were kept at\n"
@@ -183,7 +185,8 @@ const std::vector<std::string> kServeValued{"--headsets",
                                             "--layer-quality",
                                             "--overscan-deg",
                                             "--pack-tiles",
-                                            "--multiview"};
+                                            "--multiview",
+                                            "--headsets-per-pass"};
 
 // A whole number in [lo, hi] of `flag`, when it is given, into `field`.
 template <typename T>
@@ -210,6 +213,7 @@ Result<void> read_serve_numbers(const Flags& f, bench::ServeBenchOptions& o) {
     HS_TRY(read_count(f, "--max-target-mib", 1, 1u << 20, o.max_target_mib));
     HS_TRY(read_count(f, "--submissions-in-flight", 1, 16, o.submissions_in_flight));
     HS_TRY(read_count(f, "--planning-threads", 0, 64, o.planning_threads));
+    HS_TRY(read_count(f, "--headsets-per-pass", 1, gpu::kMaxTargetViews / 2, o.headsets_per_pass));
     HS_TRY(read_count(f, "--layer-quality", 1, 100, o.layer_quality));
     if (f.has("--overscan-deg")) {
         HS_ASSIGN_OR_RETURN(o.overscan_deg,

@@ -112,6 +112,9 @@ const char* kServeHelp =
     "                      tiles, so only they are read back and encoded (docs/ARCHITECTURE.md)\n"
     "  --multiview auto|on|off (auto: on a GPU): both eyes of a headset in one pass\n"
     "                      (VK_KHR_multiview), bit for bit the per-eye layers\n"
+    "  --headsets-per-pass N (1, at most 4): with multiview, up to N headsets of the same\n"
+    "                      display in one pass (2N views, as the device allows), bit for bit\n"
+    "                      each headset's own pass\n"
     "  --layer-quality Q (92): JPEG quality 1..100 of lossy-tile layers (headsets that register\n"
     "                      encoding 3; the others get the lossless encoding they ask for)\n"
     "  --headset-mbps X (0: none)  --room-mbps Y (0: none): bit-rate limits of the layers,\n"
@@ -287,6 +290,7 @@ const std::vector<std::string> kServeFlags{"--scene",
                                            "--tile-codec",
                                            "--pack-tiles",
                                            "--multiview",
+                                           "--headsets-per-pass",
                                            "--layer-quality",
                                            "--calibration",
                                            "--compensation",
@@ -401,6 +405,12 @@ std::optional<int> read_engine(const Flags& f, ServeSetup& s) {
         return usage_error(q.error().message);
     if (auto n = parse_count(f, "--encoder-threads", info.encoder_threads, 0, 64); n)
         info.encoder_threads = uint32_t(n.value());
+    else
+        return usage_error(n.error().message);
+    if (auto n = parse_count(f, "--headsets-per-pass", info.renderer.headsets_per_pass, 1,
+                             gpu::kMaxTargetViews / 2);
+        n)
+        info.renderer.headsets_per_pass = uint32_t(n.value());
     else
         return usage_error(n.error().message);
     if (f.has("--planning-threads")) {

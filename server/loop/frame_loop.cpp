@@ -403,6 +403,7 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     (void)ring_->wait_idle();
     sink_->drain();
     source_.reset();
+    shared_.clear();                    // no frame holds one: made again for the new version
     renderer_ = std::move(b.renderer);  // the old version's renderer is destroyed here
     current_ = next;
     source_ = current_.captured_material
@@ -639,6 +640,7 @@ Result<calib::SceneDrives> FrameLoop::calibrate(render::Renderer& r, const scene
 void FrameLoop::update_held_bytes() {
     uint64_t n = renderer_ ? renderer_->target_bytes() : 0, indices = 0;
     for (const auto& [id, f] : frames_) n += f->target_bytes, indices += f->index_bytes;
+    for (const auto& t : shared_) n += t->bytes;
     host_.held_bytes(n, indices);
 }
 
@@ -675,12 +677,17 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const bool depth = renderer_->uses_depth();
     const gpu::ColorFormat cf = render::layer_target_format(d.encoding);
     const uint32_t pack_tile = layer_pack_tile(device_, renderer_->packs_tiles(), d);
-    // Both eyes in one target of two views, rendered in one pass, where the renderer does so.
+    // Both eyes in one target of two views, rendered in one pass, where the renderer does so;
+    // none of its own where headsets share targets (share_targets).
     const uint32_t views = renderer_->multiview() ? 2 : 1;
+    const bool own = renderer_->pass_headsets() == 1 || !source_->uses_gpu();
+    static const gpu::RenderTarget kNone;
+    const gpu::RenderTarget& t = slot ? slot->targets[0] : kNone;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
-        slot->targets[0].has_depth() == depth && slot->targets[0].pack_tile() == pack_tile &&
-        slot->targets[0].views() == views)
+        (own ? t.width() != 0 && t.has_depth() == depth && t.pack_tile() == pack_tile &&
+                   t.views() == views
+             : t.width() == 0))
         return slot.get();
     // A new display, or a scene that needs a depth buffer where the last did not (or the
     // other way round): new targets (the old frame, if the encoder still holds it, lives on
@@ -691,7 +698,7 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     f->height = d.eye.height;
     f->encoding = d.encoding;
     for (size_t e = 0; e < 2; ++e) {
-        if (e < 2 / views) {
+        if (own && e < 2 / views) {
             HS_ASSIGN_OR_RETURN(f->targets[e],
                                 gpu::RenderTarget::create(
                                     device_, d.eye.width, d.eye.height, cf,
@@ -704,18 +711,131 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
             gpu::Buffer::create(device_, index_bytes, gpu::BufferUsage::kIndex,
                                 fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
     }
-    f->target_bytes =
+    f->own_target_bytes =
         2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth, pack_tile);
+    f->target_bytes = own ? f->own_target_bytes : 0;
     f->index_bytes = 2 * index_bytes;
     slot = std::move(f);
     update_held_bytes();
     return slot.get();
 }
 
+Result<SharedTarget*> FrameLoop::shared_target(const ViewerFrame& f, uint32_t pack_tile,
+                                               uint32_t views, uint32_t holders) {
+    const bool depth = renderer_->uses_depth();
+    const gpu::ColorFormat cf = render::layer_target_format(f.encoding);
+    const auto now = Clock::now();
+    for (const auto& s : shared_) {
+        const gpu::RenderTarget& t = s->target;
+        // Acquire: the encoders' reads of its pixels happen before it is drawn into again.
+        if (s->holders.load(std::memory_order_acquire) == 0 && t.width() == f.width &&
+            t.height() == f.height && t.format() == cf && t.has_depth() == depth &&
+            t.pack_tile() == pack_tile && t.views() == views) {
+            s->holders.store(holders, std::memory_order_relaxed);
+            s->last_used = now;
+            return s.get();
+        }
+    }
+    // Within its budget: idle targets of other shapes go first, least recently used first.
+    const uint64_t need =
+        views * render::Renderer::target_bytes_for(f.width, f.height, cf, depth, pack_tile);
+    uint64_t budget = 0, held = 0;
+    for (const auto& [id, frame] : frames_) budget += 2 * frame->own_target_bytes;
+    for (const auto& s : shared_) held += s->bytes;
+    while (held + need > budget) {
+        auto idle = shared_.end();
+        for (auto it = shared_.begin(); it != shared_.end(); ++it)
+            if ((*it)->holders.load(std::memory_order_acquire) == 0 &&
+                (idle == shared_.end() || (*it)->last_used < (*idle)->last_used))
+                idle = it;
+        if (idle == shared_.end())
+            break;
+        held -= (*idle)->bytes;
+        shared_.erase(idle);
+    }
+    if (held + need > budget) {
+        update_held_bytes();
+        return make_error(ErrorCode::kDevice,
+                          fmt::format("a shared target of {} views would take the headsets' "
+                                      "shared targets to {} MiB, over their budget of {} MiB",
+                                      views, (held + need) >> 20, budget >> 20));
+    }
+    auto s = std::make_unique<SharedTarget>();
+    HS_ASSIGN_OR_RETURN(s->target,
+                        gpu::RenderTarget::create(device_, f.width, f.height, cf,
+                                                  fmt::format("shared.{}x{}.views{}.{}", f.width,
+                                                              f.height, views, shared_.size()),
+                                                  depth, nullptr, pack_tile, views));
+    s->bytes = views * render::Renderer::target_bytes_for(f.width, f.height, cf, depth, pack_tile);
+    s->holders.store(holders, std::memory_order_relaxed);
+    s->last_used = now;
+    shared_.push_back(std::move(s));
+    update_held_bytes();
+    return shared_.back().get();
+}
+
+void FrameLoop::share_targets() {
+    const uint32_t most = renderer_->pass_headsets();
+    if (most < 2 || !source_->uses_gpu())
+        return;
+    // Targets no frame has used for a while go (a display that left, a batch that was larger).
+    const auto now = Clock::now();
+    const size_t pooled = shared_.size();
+    std::erase_if(shared_, [&](const std::unique_ptr<SharedTarget>& s) {
+        return s->holders.load(std::memory_order_acquire) == 0 &&
+               now - s->last_used > std::chrono::seconds(2);
+    });
+    if (shared_.size() != pooled)
+        update_held_bytes();
+    // The slots of one display next to each other (the renderer takes a target's views in a
+    // row), in the order the scheduler gave them otherwise.
+    struct Keyed {
+        std::tuple<uint32_t, uint32_t, int, uint32_t> key;  // size, encoding, packing
+        FrameSlot slot;
+    };
+    std::vector<Keyed> keyed;
+    keyed.reserve(slots_.size());
+    for (const FrameSlot& s : slots_) {
+        const ViewerFrame& f = *s.frame;
+        keyed.push_back({{f.width, f.height, int(f.encoding),
+                          layer_pack_tile(device_, renderer_->packs_tiles(), f.job.display)},
+                         s});
+    }
+    std::stable_sort(keyed.begin(), keyed.end(),
+                     [](const Keyed& a, const Keyed& b) { return a.key < b.key; });
+    slots_.clear();
+    for (size_t i = 0; i < keyed.size();) {
+        size_t end = i + 1;
+        while (end < keyed.size() && end - i < most && keyed[end].key == keyed[i].key) ++end;
+        const auto m = uint32_t(end - i);
+        const uint32_t pack_tile = std::get<3>(keyed[i].key);
+        auto t = shared_target(*keyed[i].slot.frame, pack_tile, 2 * m, m);
+        for (size_t j = i; j < end; ++j) {
+            ViewerFrame& f = *keyed[j].slot.frame;
+            if (t) {
+                f.shared = *t;
+                f.first_view = uint32_t(2 * (j - i));
+            } else {
+                // Over the budget (targets still being read): each in a target of its own
+                // size, or dropped this frame.
+                auto one = shared_target(f, pack_tile, 2, 1);
+                if (!one) {
+                    host_.job_dropped(f.viewer,
+                                      "no render target for this display: " + one.error().message);
+                    continue;
+                }
+                f.shared = *one;
+                f.first_view = 0;
+            }
+            slots_.push_back(keyed[j].slot);
+        }
+        i = end;
+    }
+}
+
 void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
     const auto taken = Clock::now();
     slots_.clear();
-    std::vector<std::shared_ptr<ViewerFrame>> filled;
     for (ViewerJob& job : batch) {
         auto frame = frame_for(job);
         if (!frame) {
@@ -729,12 +849,16 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
         f->timeline = 0;
         f->keep_alive.reset();
         f->batch.reset();
+        f->let_go_of_shared();  // none: its last frame was encoded before this job was given
+        f->pass_headsets = 0;
         slots_.push_back({f, f->job.pose.T_world_head});
-        filled.push_back(frames_[f->viewer]);
     }
     batch.clear();
+    share_targets();
     if (slots_.empty())
         return;
+    std::vector<std::shared_ptr<ViewerFrame>> filled;
+    for (const FrameSlot& s : slots_) filled.push_back(frames_[s.frame->viewer]);
     uint64_t value = 0;
     bool recorded = false;
     try {
@@ -742,8 +866,10 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
     } catch (const std::exception& e) {
         // One failed batch costs its viewers this frame, never the server.
         log::error("render: {}", e.what());
-        for (const FrameSlot& s : slots_)
+        for (const FrameSlot& s : slots_) {
+            s.frame->let_go_of_shared();
             host_.job_dropped(s.frame->viewer, "rendering this frame failed");
+        }
         return;
     }
     const auto now = Clock::now();

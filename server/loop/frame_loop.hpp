@@ -275,6 +275,14 @@ private:
     double last_record_ms_ = 0, last_submit_ms_ = 0;  // the last submit()'s (BatchFigures)
     // The viewer's frame for this display, made or re-made as needed.
     Result<ViewerFrame*> frame_for(const ViewerJob& job);
+    // Where several headsets share a pass (render::Renderer::pass_headsets): the slots of one
+    // display put next to each other, up to that many to a shared target. A slot whose target
+    // cannot be made is dropped, with why.
+    void share_targets();
+    // A free pooled target for `views` views of `f`'s display, held by `holders` frames; made
+    // when none is free.
+    Result<SharedTarget*> shared_target(const ViewerFrame& f, uint32_t pack_tile, uint32_t views,
+                                        uint32_t holders);
     void update_held_bytes();
 
     FrameLoopInfo info_;
@@ -290,6 +298,9 @@ private:
     std::map<uint32_t, std::shared_ptr<ViewerFrame>> frames_;
     std::deque<ViewerJob> large_;   // large displays waiting for a turn of their own
     std::vector<FrameSlot> slots_;  // reused per batch
+    // Targets the headsets of a batch share (share_targets), kept while in use and for a
+    // moment after (a display that comes back often reuses them).
+    std::vector<std::unique_ptr<SharedTarget>> shared_;
 
     std::unique_ptr<BlendTask> blend_;
     // reblend_missing: the running version's projector frames as rendered (not weighted),

@@ -23,10 +23,9 @@ public:
             ViewerFrame& f = *s.frame;
             const Display& d = f.job.display;
             const auto eyes = scene::eye_poses(s.head, d.ipd_m);
-            const bool views = f.targets[0].views() > 1;  // both eyes in targets[0]
             for (size_t e = 0; e < 2; ++e)
-                requests_.push_back({spec_, d.eye, eyes[e], f.encoding, &f.targets[views ? 0 : e],
-                                     true, kLayerTile, &f.indices[e], views ? uint32_t(e) : 0});
+                requests_.push_back({spec_, d.eye, eyes[e], f.encoding, &f.eye_target(e), true,
+                                     kLayerTile, &f.indices[e], f.eye_view(e)});
         }
         HS_ASSIGN_OR_RETURN(auto plans, renderer_.record_layers(*cl, requests_));
         bool recorded = false;
@@ -56,8 +55,17 @@ public:
                 last_ = plan;
                 last_packed_ = t.packs_tiles();
             }
-            f.one_pass =
-                f.targets[0].views() > 1 && !(f.plans[0].rect.empty() && f.plans[1].rect.empty());
+            const uint32_t views = requests_[2 * i].target->views();
+            const bool drawn = !(f.plans[0].rect.empty() && f.plans[1].rect.empty());
+            f.one_pass = views > 1 && drawn;
+            // The headsets whose eyes this pass drew (a view drawn: the pass ran).
+            f.pass_headsets = 0;
+            if (drawn) {
+                const size_t first = 2 * i - requests_[2 * i].view;
+                for (size_t v = 0; v < views; v += 2)
+                    f.pass_headsets +=
+                        plans[first + v].rect.empty() && plans[first + v + 1].rect.empty() ? 0 : 1;
+            }
         }
         return recorded;
     }

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <memory>
@@ -51,6 +52,17 @@ struct BatchFigures {
     nlohmann::json report;
 };
 
+// A layer target headsets of one batch share (render::Renderer::pass_headsets): headset i's
+// eyes are its views 2i and 2i + 1, all drawn in one pass. The frame loop keeps these in a pool;
+// each frame drawn into one holds it until the encoder has read its pixels
+// (ViewerFrame::let_go_of_shared), and the frame loop draws into it again only once none does.
+struct SharedTarget {
+    gpu::RenderTarget target;
+    std::atomic<uint32_t> holders{0};  // frames that still read it
+    uint64_t bytes = 0;                // what it holds
+    Clock::time_point last_used;       // render thread
+};
+
 struct ViewerFrame {
     uint32_t viewer = 0;
     uint32_t width = 0, height = 0;
@@ -61,19 +73,43 @@ struct ViewerFrame {
     std::array<gpu::Buffer, 2> indices;  // per eye, the drawn clusters' indices
     uint64_t target_bytes = 0;           // what the two targets hold
     uint64_t index_bytes = 0;            // what the two index buffers hold
+    // What its own two targets hold or, sharing, would hold: the pool of shared targets is
+    // kept within twice the sum of these (the server reserves as much per display).
+    uint64_t own_target_bytes = 0;
 
     // Per frame, written by the render thread before the frame goes to the encoder.
     ViewerJob job;
     std::array<EyePixels, 2> pixels;  // what each eye's layer is made of
     std::array<render::Renderer::LayerPlan, 2> plans;
     bool one_pass = false;  // both eyes were drawn by one multiview pass
-    uint64_t timeline = 0;  // the submission whose completion makes `pixels` valid; 0: none
+    // Or both eyes in views first_view and first_view + 1 of a target shared with other
+    // headsets of the batch, from when the render thread takes the frame until the encoder has
+    // read it; then the frame's own targets are not made.
+    SharedTarget* shared = nullptr;
+    uint32_t first_view = 0;
+    uint32_t pass_headsets = 0;  // headsets whose eyes the frame's pass drew (0: no pass)
+    uint64_t timeline = 0;       // the submission whose completion makes `pixels` valid; 0: none
     std::chrono::steady_clock::time_point taken, submitted;
     // Keeps the pixels a captured material's frame points at alive while it is encoded.
     std::shared_ptr<const void> keep_alive;
     // What the batch it was rendered in did, carried to the stats on the frame of the batch
     // that comes first (null on the others): the frame loop writes no stats of its own.
     std::shared_ptr<const BatchFigures> batch;
+
+    // Eye e's target and view in it.
+    gpu::RenderTarget& eye_target(size_t e) {
+        return shared ? shared->target : targets[targets[0].views() > 1 ? 0 : e];
+    }
+    uint32_t eye_view(size_t e) const {
+        return shared ? first_view + uint32_t(e) : targets[0].views() > 1 ? uint32_t(e) : 0;
+    }
+    // Done with the shared target (its pixels read, or the frame given up): the frame loop may
+    // draw into it again once every frame in it has let go. Thread: whoever holds the frame.
+    void let_go_of_shared() {
+        if (shared)
+            shared->holders.fetch_sub(1, std::memory_order_release);
+        shared = nullptr;
+    }
 };
 
 }  // namespace hs::loop

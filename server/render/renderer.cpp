@@ -192,7 +192,20 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     if (multiview && !r->multiview_ && info.multiview > 0)
         log::warn("{} has no multiview: each eye of a headset is rendered in a pass of its own",
                   device.name());
+    r->pass_headsets_ = pass_headsets(device, info);
+    if (r->multiview_ && info.headsets_per_pass > r->pass_headsets_)
+        log::warn("{} renders at most {} views in one pass: {} headset(s) per pass, not {}",
+                  device.name(), device.max_multiview_views(), r->pass_headsets_,
+                  info.headsets_per_pass);
     return r;
+}
+
+uint32_t Renderer::pass_headsets(const gpu::Device& device, const RendererCreateInfo& info) {
+    const bool multiview = info.multiview > 0 || (info.multiview < 0 && !device.is_cpu());
+    if (!multiview || device.max_multiview_views() < 2)
+        return 1;
+    const uint32_t most = std::min(device.max_multiview_views(), gpu::kMaxTargetViews) / 2;
+    return std::clamp<uint32_t>(info.headsets_per_pass, 1, most);
 }
 
 bool Renderer::packs_tiles(const gpu::Device& device, const RendererCreateInfo& info) {

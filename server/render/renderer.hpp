@@ -80,6 +80,12 @@ struct RendererCreateInfo {
     // vertices and the served rate did not move, README); 0: off; 1: on where the device has
     // it. See multiview().
     int multiview = -1;
+    // With multiview, up to this many headsets' eyes in one pass (a target of twice as many
+    // views, gpu::kMaxTargetViews at most, and no more than the device's multiview allows):
+    // the frame loop gives headsets of the same display in a batch one shared target, so that
+    // a pass (its begin, clear, end and read-back copies) serves several of them. Their layers
+    // are bit for bit each headset's own pass's. 1: a pass per headset. See pass_headsets().
+    uint32_t headsets_per_pass = 1;
     // Where the renderer is counted as a scene version (versions alive, its CPU copies of the
     // prop and every device allocation it makes, until it is destroyed); null: nowhere. Must
     // outlive the renderer.
@@ -219,6 +225,11 @@ public:
     // (RendererCreateInfo::multiview on, and the device has multiview): then make a headset's
     // targets with views = 2.
     bool multiview() const { return multiview_; }
+    // How many headsets' eyes one pass may draw (RendererCreateInfo::headsets_per_pass, as the
+    // device allows): then a target of 2, 4, ... 2 x this views takes them. 1 without multiview.
+    uint32_t pass_headsets() const { return pass_headsets_; }
+    // pass_headsets() of a renderer made with `info` on `device`.
+    static uint32_t pass_headsets(const gpu::Device& device, const RendererCreateInfo& info);
     // Bytes of the index buffer a LayerRequest needs (the finest level's indices).
     uint64_t layer_index_bytes() const { return levels_.front().mesh.indices.size() * 4; }
     // Whether a layer of `spec` can ever be non-zero in this scene (a specular term with a
@@ -437,6 +448,7 @@ private:
     std::unique_ptr<gpu::ComputePipeline> packer_;  // shaders/tiles.comp; null: host scans
     std::vector<uint32_t> layer_drawn_;  // record_layers: the passes' first requests (reused)
     bool multiview_ = false;
+    uint32_t pass_headsets_ = 1;
     std::vector<gpu::Buffer> index_scratch_;  // render_layers' index buffers, one per request
     gpu::Texture albedo_texture_;  // the material's, or 1x1 white (never sampled) without one
     // The fill-in (set_fill): the atlas every pipeline binds, the projectors, and per level

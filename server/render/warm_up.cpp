@@ -45,58 +45,62 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     // pipeline and, for a few lights, one per subset of them.
     const size_t n = lit_.size();
     // With multiview the headsets' layers are drawn in passes of two views (the frame loop's
-    // targets).
+    // targets), and of 4, 6, ... where several headsets share a pass (pass_headsets()).
     const uint32_t views = multiview_ ? 2 : 1;
+    std::vector<uint32_t> view_counts;
+    for (uint32_t h = 1; h <= pass_headsets_; ++h) view_counts.push_back(views * h);
     struct Use {
         Variant* variant;
         gpu::ColorFormat format;
+        uint32_t views;
     };
     std::vector<Use> uses;
-    for (LayerEncoding e : encodings) {
-        const int enc = 1 + int(e);
-        const gpu::ColorFormat format = layer_target_format(e);
-        if (!convex_) {
-            HS_ASSIGN_OR_RETURN(Variant * occ, variant(PassKind::kOccluder, spec, enc, ~uint64_t(0),
-                                                       Fill::kNone, views));
-            uses.push_back({occ, format});
-        }
-        HS_ASSIGN_OR_RETURN(Variant * generic,
-                            variant(PassKind::kVd, spec, enc, ~uint64_t(0), Fill::kNone, views));
-        uses.push_back({generic, format});
-        // The headsets' fill-in: up to three pipelines per format (resolve_variants): tested,
-        // for clusters with lights of their own and for those drawn for it alone, and
-        // untested for the latter. With emission every cluster needs its lights, and none is
-        // drawn for the fill-in alone.
-        if (fill_) {
-            std::set<std::pair<uint64_t, Fill>> fills{{fill_lights(1), Fill::kTested}};
-            if (!has_emission(scene_)) {
-                fills.insert({fill_lights(0), Fill::kTested});
-                if (info_.max_light_variants > 0)
-                    fills.insert({fill_lights(0), Fill::kUntested});
+    for (LayerEncoding e : encodings)
+        for (const uint32_t vc : view_counts) {
+            const int enc = 1 + int(e);
+            const gpu::ColorFormat format = layer_target_format(e);
+            if (!convex_) {
+                HS_ASSIGN_OR_RETURN(Variant * occ, variant(PassKind::kOccluder, spec, enc,
+                                                           ~uint64_t(0), Fill::kNone, vc));
+                uses.push_back({occ, format, vc});
             }
-            for (const auto& [lights, fill] : fills) {
-                HS_ASSIGN_OR_RETURN(Variant * f,
-                                    variant(PassKind::kVd, spec, enc, lights, fill, views));
-                uses.push_back({f, format});
+            HS_ASSIGN_OR_RETURN(Variant * generic,
+                                variant(PassKind::kVd, spec, enc, ~uint64_t(0), Fill::kNone, vc));
+            uses.push_back({generic, format, vc});
+            // The headsets' fill-in: up to three pipelines per format (resolve_variants):
+            // tested, for clusters with lights of their own and for those drawn for it alone,
+            // and untested for the latter. With emission every cluster needs its lights, and
+            // none is drawn for the fill-in alone.
+            if (fill_) {
+                std::set<std::pair<uint64_t, Fill>> fills{{fill_lights(1), Fill::kTested}};
+                if (!has_emission(scene_)) {
+                    fills.insert({fill_lights(0), Fill::kTested});
+                    if (info_.max_light_variants > 0)
+                        fills.insert({fill_lights(0), Fill::kUntested});
+                }
+                for (const auto& [lights, fill] : fills) {
+                    HS_ASSIGN_OR_RETURN(Variant * f,
+                                        variant(PassKind::kVd, spec, enc, lights, fill, vc));
+                    uses.push_back({f, format, vc});
+                }
+            }
+            if (n == 0 || n > kEverySubsetUpTo)
+                continue;
+            for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {
+                HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, vc));
+                uses.push_back({v, format, vc});
             }
         }
-        if (n == 0 || n > kEverySubsetUpTo)
-            continue;
-        for (uint64_t mask = 1; mask < (uint64_t(1) << n); ++mask) {
-            HS_ASSIGN_OR_RETURN(Variant * v, vd_variant(spec, enc, mask, views));
-            uses.push_back({v, format});
-        }
-    }
     // 2. Each drawn once into a tiny target, in one submission: the driver's first-use work
     // (lavapipe compiles its rasteriser's shader variants at the first draw).
-    std::map<int, gpu::RenderTarget> tiny;
+    std::map<std::pair<int, uint32_t>, gpu::RenderTarget> tiny;
     for (const Use& u : uses)
-        if (!tiny.count(int(u.format))) {
+        if (!tiny.count({int(u.format), u.views})) {
             HS_ASSIGN_OR_RETURN(auto t, gpu::RenderTarget::create(
                                             device_, 8, 8, u.format,
                                             fmt::format("warm_up.{}", gpu::to_string(u.format)),
-                                            uses_depth(), device_counter(), 0, views));
-            tiny.emplace(int(u.format), std::move(t));
+                                            uses_depth(), device_counter(), 0, u.views));
+            tiny.emplace(std::pair{int(u.format), u.views}, std::move(t));
         }
     const scene::Intrinsics tiny_k = scene::intrinsics_from_fov(8, 8, 1.0, 1.0);
     HS_ASSIGN_OR_RETURN(const scene::Pose head,
@@ -104,8 +108,8 @@ Result<Renderer::WarmUpReport> Renderer::warm_up(std::span<const LayerEncoding> 
     const uint32_t coarsest = uint32_t(levels_.size() - 1);
     HS_TRY(gpu::execute(device_, "warm_up.pipelines", [&](gpu::CommandList& cl) {
         for (const Use& u : uses)
-            record(cl, *u.variant, tiny.at(int(u.format)), push_for(tiny_k, head), "pass.warm-up",
-                   coarsest);
+            record(cl, *u.variant, tiny.at({int(u.format), u.views}), push_for(tiny_k, head),
+                   "pass.warm-up", coarsest);
     }));
     report.pipelines_drawn = uint32_t(uses.size());
     // 3. Served layers as headsets of the scene's profiles would ask for them, small, from the

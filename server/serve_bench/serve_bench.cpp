@@ -494,6 +494,7 @@ Result<std::vector<ServedRow>> serve_rows(gpu::Device& device, const scene::Scen
     info.record_on_planners = !o.record_on_render_thread;
     info.pack_tiles = o.pack_tiles;
     info.multiview = o.multiview;
+    info.headsets_per_pass = o.headsets_per_pass;
     info.encoder_threads = o.encoder_threads;
     info.headset_mbps = o.headset_mbps;
     info.room_mbps = o.room_mbps;
@@ -823,6 +824,7 @@ json config_json(const ServeBenchOptions& o, const scene::Scene& sc,
             {"multiview", o.multiview < 0 ? "auto"
                           : o.multiview   ? "on"
                                           : "off"},
+            {"headsets_per_pass", o.headsets_per_pass},
             {"headset_mbps", o.headset_mbps},
             {"room_mbps", o.room_mbps},
             {"layer_quality", o.layer_quality},

@@ -61,6 +61,7 @@ struct ServeBenchOptions {
     bool record_on_render_thread = false;  // planners plan only; the render thread records
     int pack_tiles = -1;                   // RendererCreateInfo::pack_tiles (-1 auto, 0 off, 1 on)
     int multiview = -1;                    // RendererCreateInfo::multiview (-1 auto, 0 off, 1 on)
+    uint32_t headsets_per_pass = 1;        // RendererCreateInfo::headsets_per_pass
     double headset_mbps = 0;               // as `hysar serve --headset-mbps`; 0: no limit
     double room_mbps = 0;                  // as `hysar serve --room-mbps`; 0: no limit
     int layer_quality = 0;                 // as `hysar serve --layer-quality`; 0: its default

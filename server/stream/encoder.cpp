@@ -254,6 +254,11 @@ void append_served_layer(std::vector<uint8_t>& out, const codec::LayerPixels& pi
 EncodedFrame Encoder::encode(std::shared_ptr<loop::ViewerFrame> frame,
                              const calib::LayerDrive* drive, LayerScratch& scratch) {
     const loop::ViewerFrame& f = *frame;
+    // A target shared with other headsets' frames is theirs again once this one is read.
+    struct LetGo {
+        loop::ViewerFrame& f;
+        ~LetGo() { f.let_go_of_shared(); }
+    } let_go{*frame};
     EncodedFrame out;
     out.viewer = f.viewer;
     out.pose_received = f.job.pose.received;
@@ -288,6 +293,7 @@ bool Encoder::encode_layers(const loop::ViewerFrame& f, const calib::LayerDrive*
     const int quality =
         f.job.layer_quality > 0 ? std::clamp(f.job.layer_quality, 1, 100) : quality_;
     out.one_pass = f.one_pass;
+    out.pass_headsets = f.pass_headsets;
     for (uint8_t e = 0; e < 2; ++e) {
         protocol::VdLayer fields;
         fields.frame_id = f.job.frame_id;

@@ -85,7 +85,8 @@ struct EncodedFrame {
     // What the encoder read of the two layers' pixels, as the device left them for the host:
     // the rectangles, or (packed on the device) the lit tiles with the count and the mask.
     uint64_t read_back_bytes = 0;
-    bool one_pass = false;  // both eyes were rendered in one multiview pass
+    bool one_pass = false;       // both eyes were rendered in one multiview pass
+    uint32_t pass_headsets = 0;  // headsets whose eyes that pass drew (several: a shared one)
 };
 
 // Owns its queue (under its lock: the render thread pushes, its threads take) and its threads.

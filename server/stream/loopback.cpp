@@ -54,6 +54,7 @@ ServerCreateInfo server_info(const LoopbackCreateInfo& o) {
     info.renderer.record_on_planners = o.record_on_planners;
     info.renderer.pack_tiles = o.pack_tiles;
     info.renderer.multiview = o.multiview;
+    info.renderer.headsets_per_pass = o.headsets_per_pass;
     info.renderer.max_layer_parts = o.max_layer_parts;
     info.calibration = o.calibration;
     return info;

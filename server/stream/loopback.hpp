@@ -43,6 +43,7 @@ struct LoopbackCreateInfo {
     bool record_on_planners = true;      // RendererCreateInfo::record_on_planners
     int pack_tiles = -1;                 // RendererCreateInfo::pack_tiles
     int multiview = -1;                  // RendererCreateInfo::multiview
+    uint32_t headsets_per_pass = 1;      // RendererCreateInfo::headsets_per_pass
     uint32_t max_layer_parts = 4;        // RendererCreateInfo::max_layer_parts
     // Bit-rate limits, Mbit/s (ServerLimits::headset_mbps, room_mbps; 0: none).
     double headset_mbps = 0, room_mbps = 0;

@@ -284,6 +284,7 @@ void Server::Impl::on_encoded(EncodedFrame done) {
         if (ok) {
             st.bytes_read_back += done.read_back_bytes;  // per layer sent, as `layers`
             st.frames_one_pass += done.one_pass ? 1 : 0;
+            st.frames_shared_pass += done.pass_headsets > 1 ? 1 : 0;
             st.frames += 1;
             st.layers += 2;
             st.bytes += done.layers[0]->size() + done.layers[1]->size();

@@ -350,11 +350,12 @@ std::optional<proto::Error> Server::Impl::admit_display(uint32_t id, const loop:
     if (auto why = scheduler.refusal(d))
         return proto::Error{proto::ErrorCode::kInvalidDisplay, std::move(*why)};
     // Reserved with a depth buffer whatever the running scene: a new scene may need one (the
-    // dome's targets have none, so they hold less than this).
-    const uint64_t need =
-        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height,
-                                               render::layer_target_format(d.encoding), true,
-                                               loop::layer_pack_tile(device, packs_tiles, d));
+    // dome's targets have none, so they hold less than this). Twice that where headsets share
+    // targets (the frame loop keeps its pool within it).
+    const uint64_t need = (shares_targets ? 4 : 2) *
+                          render::Renderer::target_bytes_for(
+                              d.eye.width, d.eye.height, render::layer_target_format(d.encoding),
+                              true, loop::layer_pack_tile(device, packs_tiles, d));
     const uint64_t had = target_bytes_of.count(id) ? target_bytes_of[id] : 0;
     const uint64_t others = reserved_target_bytes - had;
     if (others + need > limits.max_target_bytes)

@@ -152,6 +152,9 @@ struct Server::Impl final : loop::FrameLoopHost {
     // Sparse layers' tiles are packed on the device (render::Renderer::packs_tiles): their
     // targets hold the packed tiles too.
     bool packs_tiles = false;
+    // Headsets share targets (render::Renderer::pass_headsets > 1): a shared target stays until
+    // the last of its headsets is encoded, so each display reserves twice its own targets.
+    bool shares_targets = false;
     uint16_t bound_port = 0;
     uint32_t encoder_threads = 1;
     scene::Scene initial_scene;  // handed to the render thread when it starts (then empty)
@@ -251,7 +254,8 @@ struct Server::Impl final : loop::FrameLoopHost {
         : device(d),
           info(i),
           limits(info.limits),
-          packs_tiles(render::Renderer::packs_tiles(d, info.renderer)) {}
+          packs_tiles(render::Renderer::packs_tiles(d, info.renderer)),
+          shares_targets(render::Renderer::pass_headsets(d, info.renderer) > 1) {}
     void accept_tcp();
     void accept_unix();
     void accept_agent();

@@ -70,6 +70,8 @@ struct FrameStats {
     uint64_t bytes_read_back = 0;
     // Frames whose two eyes were rendered in one multiview pass (`--multiview`).
     uint64_t frames_one_pass = 0;
+    // Of those, frames whose pass drew other headsets' eyes too (`--headsets-per-pass`).
+    uint64_t frames_shared_pass = 0;
     // Stages: queue = taken from the scheduler to submitted (culling and recording, per
     // batch); pass = submitted to the GPU done, the copy into mapped memory included (per
     // frame); device = the device's own time on the frame's submission, from its timestamps

@@ -21,6 +21,7 @@ nlohmann::json frames_json(const FrameStats& f) {
             {"max_eyes", f.max_eyes},
             {"eyes_per_submission", f.submissions ? double(f.eyes) / double(f.submissions) : 0.0},
             {"frames_one_pass", f.frames_one_pass},
+            {"frames_shared_pass", f.frames_shared_pass},
             {"large_display_turns", f.large_turns},
             {"sparse",
              {{"layers_black", f.layers_black},

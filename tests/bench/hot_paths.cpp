@@ -129,45 +129,53 @@ BENCHMARK(BM_VdLayers)
 
 // What the render thread (or a planner) spends recording a batch of 8 headsets' sparse layers
 // into a command buffer: the planning and the Vulkan calls, not the device's work (which runs
-// after, untimed). range(0): 1 both eyes of a headset in one multiview pass, 0 a pass per
-// eye (RendererCreateInfo::multiview). On a GPU the recording is what bounds the served path
-// (README, "On a GPU").
+// after, untimed). range(0): headsets per multiview pass (RendererCreateInfo::multiview and
+// headsets_per_pass): 0 a pass per eye, 1 both eyes of a headset in one pass, 3 three headsets'
+// eyes in a pass of six views (8 headsets: passes of 3, 3 and 2). On a GPU the recording is
+// what bounds the served path (README, "On a GPU").
 void BM_RecordBatch(benchmark::State& state) {
     auto& g = Gpu::get();
-    const bool multiview = state.range(0) != 0;
-    if (multiview && g.device->max_multiview_views() < 2) {
-        state.SkipWithError("the device has no multiview");
+    const auto per = uint32_t(state.range(0));
+    const bool multiview = per > 0;
+    if (multiview && g.device->max_multiview_views() < 2 * per) {
+        state.SkipWithError("the device has too few multiview views");
         return;
     }
     render::RendererCreateInfo info;
     info.multiview = multiview ? 1 : 0;
+    info.headsets_per_pass = std::max(per, 1u);
     info.planning_threads = 0;
     auto r = render::Renderer::create(*g.device, g.scene, info);
     if (!r) {
         state.SkipWithError(r.error().message.c_str());
         return;
     }
-    constexpr size_t kHeadsets = 8;
+    constexpr uint32_t kHeadsets = 8;
     std::vector<gpu::RenderTarget> targets;
     std::vector<gpu::Buffer> indices;
-    for (size_t i = 0; i < kHeadsets * 2; ++i) {
-        if (!multiview || i % 2 == 0)
-            targets.push_back(gpu::RenderTarget::create(*g.device, g.eye_k.width, g.eye_k.height,
-                                                        gpu::ColorFormat::kRgba8Unorm, "bench.eye",
-                                                        false, nullptr, 0, multiview ? 2 : 1)
+    for (uint32_t h = 0; h < kHeadsets; ++h) {
+        // Per eye: two targets; else one per `per` headsets, of two views per headset.
+        for (uint32_t e = 0; e < 2; ++e) {
+            if (!multiview || (h % per == 0 && e == 0))
+                targets.push_back(gpu::RenderTarget::create(
+                                      *g.device, g.eye_k.width, g.eye_k.height,
+                                      gpu::ColorFormat::kRgba8Unorm, "bench.eye", false, nullptr, 0,
+                                      multiview ? 2 * std::min(per, kHeadsets - h) : 1)
+                                      .value());
+            indices.push_back(gpu::Buffer::create(*g.device, r.value()->layer_index_bytes(),
+                                                  gpu::BufferUsage::kIndex, "bench.indices")
                                   .value());
-        indices.push_back(gpu::Buffer::create(*g.device, r.value()->layer_index_bytes(),
-                                              gpu::BufferUsage::kIndex, "bench.indices")
-                              .value());
+        }
     }
     const auto batch = [&](size_t frame) {
         std::vector<render::Renderer::LayerRequest> reqs;
-        for (size_t h = 0; h < kHeadsets; ++h) {
+        for (uint32_t h = 0; h < kHeadsets; ++h) {
             const auto eyes = scene::eye_poses(g.heads[(frame + 3 * h) % g.heads.size()], 0.063);
             for (uint32_t e = 0; e < 2; ++e)
                 reqs.push_back({g.scene.material.specular, g.eye_k, eyes[e],
-                                render::LayerEncoding::kSrgb8, &targets[multiview ? h : 2 * h + e],
-                                true, 32, &indices[2 * h + e], multiview ? e : 0});
+                                render::LayerEncoding::kSrgb8,
+                                &targets[multiview ? h / per : 2 * h + e], true, 32,
+                                &indices[2 * h + e], multiview ? 2 * (h % per) + e : 0});
         }
         return reqs;
     };
@@ -195,7 +203,8 @@ void BM_RecordBatch(benchmark::State& state) {
 BENCHMARK(BM_RecordBatch)
     ->Arg(0)
     ->Arg(1)
-    ->ArgName("multiview")
+    ->Arg(3)
+    ->ArgName("headsets_per_pass")
     ->Iterations(20)
     ->Unit(benchmark::kMicrosecond)
     ->UseManualTime();

@@ -128,6 +128,8 @@ bad --format --format png
 bad --encoding --encoding zip
 bad --pack-tiles --pack-tiles maybe
 bad --multiview --multiview both
+bad --headsets-per-pass --headsets-per-pass 0
+bad --headsets-per-pass --headsets-per-pass 9
 bad --lp-threads --lp-threads x
 bad --encoder-threads --encoder-threads 65
 bad --max-batch-viewers --max-batch-viewers 1025

@@ -59,6 +59,8 @@ refused --max-eye-pixels 1e300 "[1, 67108864]" "$hysar" "${S[@]}" --max-eye-pixe
 refused --max-viewer-hz 1.5 "[0, 1000]" "$hysar" "${S[@]}" --max-viewer-hz 1.5
 refused --encoder-threads 65 "[0, 64]" "$hysar" "${S[@]}" --encoder-threads 65
 refused --planning-threads 65 "[0, 64]" "$hysar" "${S[@]}" --planning-threads 65
+refused --headsets-per-pass 0 "[1, 4]" "$hysar" "${S[@]}" --headsets-per-pass 0
+refused --headsets-per-pass 5 "[1, 4]" "$hysar" "${S[@]}" --headsets-per-pass 5
 refused --agent-port 0 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 0
 refused --agent-port 1e3 "[1, 65535]" "$hysar" "${S[@]}" --agent-port 1e3
 refused --headset-mbps -1 "[0, 100000]" "$hysar" "${S[@]}" --headset-mbps -1

@@ -52,87 +52,96 @@ size_t lit_pixels(const std::vector<uint8_t>& bytes, size_t px) {
 TEST_F(Multiview, BothEyesInOnePassAreThePerEyeLayers) {
     const char* presets[] = {"phong", "ward-aniso", "kajiya-kay", "blinn-phong"};
     for (const bool domes : {false, true})
-        for (const int planners : {0, 2}) {
-            SCOPED_TRACE(std::string(domes ? "two domes" : "dome") +
-                         (planners ? ", recorded by planners" : ", recorded on the caller"));
-            const scene::Scene s = domes ? two_domes() : scene::default_scene();
-            auto per_eye = renderer(s, 0, planners);
-            auto both = renderer(s, 1, planners);
-            ASSERT_TRUE(per_eye && both);
-            EXPECT_FALSE(per_eye->multiview());
-            EXPECT_TRUE(both->multiview());
-            const auto k = small_eye(4);
-            // Heads around the prop; one whose second eye asks for a black material (one view
-            // drawn, the other not); and one turned away from it (nothing to draw in either
-            // eye: no pass at all).
-            constexpr int kHeads = 6;
-            std::vector<gpu::RenderTarget> singles, pairs;
-            std::vector<gpu::Buffer> indices;
-            std::vector<Request> a, b;
-            singles.reserve(2 * kHeads);
-            pairs.reserve(kHeads);
-            for (int h = 0; h < kHeads; ++h) {
-                const auto enc =
-                    h % 2 ? render::LayerEncoding::kHalf : render::LayerEncoding::kSrgb8;
-                const auto fmt = render::layer_target_format(enc);
-                auto head =
-                    scene::viewing_pose(s.viewing, -50.0 + 20.0 * h, s.viewing.heights_m.at("M"))
-                        .value();
-                if (h == kHeads - 1)  // looking away
-                    head.orientation =
-                        head.orientation * glm::angleAxis(glm::pi<double>(), glm::dvec3(0, 1, 0));
-                const auto eyes = scene::eye_poses(head, 0.063);
-                pairs.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt, "pair",
-                                                          both->uses_depth(), nullptr, 0, 2)
-                                    .value());
-                for (uint32_t e = 0; e < 2; ++e) {
-                    singles.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt,
-                                                                "single", per_eye->uses_depth())
-                                          .value());
-                    scene::Specular spec = s.specular_presets.at(presets[(h + e) % 4]);
-                    if (h == 1 && e == 1)
-                        spec.colour = glm::dvec3(0.0);
-                    a.push_back({spec, k, eyes[e], enc, &singles.back(), true});
-                    b.push_back({spec, k, eyes[e], enc, &pairs.back(), true, 32, nullptr, e});
-                }
-            }
-            auto pa = per_eye->render_layers(a);
-            auto pb = both->render_layers(b);
-            ASSERT_TRUE(pa.ok()) << pa.error().message;
-            ASSERT_TRUE(pb.ok()) << pb.error().message;
-            size_t lit = 0, rects_differ = 0;
-            for (int h = 0; h < kHeads; ++h)
-                for (uint32_t e = 0; e < 2; ++e) {
-                    SCOPED_TRACE("head " + std::to_string(h) + ", eye " + std::to_string(e));
-                    const size_t i = 2 * size_t(h) + e;
-                    const Plan &x = (*pa)[i], &y = (*pb)[i];
-                    EXPECT_EQ(x.rect.x0, y.rect.x0);
-                    EXPECT_EQ(x.rect.y0, y.rect.y0);
-                    EXPECT_EQ(x.rect.x1, y.rect.x1);
-                    EXPECT_EQ(x.rect.y1, y.rect.y1);
-                    EXPECT_EQ(x.triangles, y.triangles);
-                    const auto va = render::Renderer::layer_bytes(singles[i], x);
-                    const auto vb = render::Renderer::layer_bytes(pairs[size_t(h)], y, e);
-                    EXPECT_TRUE(va == vb) << "the layers differ";
-                    const size_t n = lit_pixels(va, gpu::bytes_per_pixel(singles[i].format()));
-                    lit += n > 100;
-                    if (h == kHeads - 1 || (h == 1 && e == 1)) {
-                        EXPECT_TRUE(x.rect.empty()) << "nothing to draw in this eye";
-                        EXPECT_EQ(n, 0u);
-                    }
-                    if (e == 1) {
-                        const auto& l = (*pb)[i - 1].rect;
-                        rects_differ += !l.empty() && !y.rect.empty() &&
-                                        (l.x0 != y.rect.x0 || l.x1 != y.rect.x1 ||
-                                         l.y0 != y.rect.y0 || l.y1 != y.rect.y1);
+        for (const int planners : {0, 2})
+            for (const int per : {1, 3}) {
+                SCOPED_TRACE(std::string(domes ? "two domes" : "dome") +
+                             (planners ? ", recorded by planners" : ", recorded on the caller") +
+                             (per > 1 ? ", three headsets to a target of six views" : ""));
+                const scene::Scene s = domes ? two_domes() : scene::default_scene();
+                auto per_eye = renderer(s, 0, planners);
+                auto both = renderer(s, 1, planners);
+                ASSERT_TRUE(per_eye && both);
+                EXPECT_FALSE(per_eye->multiview());
+                EXPECT_TRUE(both->multiview());
+                const auto k = small_eye(4);
+                // Heads around the prop; one whose second eye asks for a black material (one view
+                // drawn, the other not); and one turned away from it (nothing to draw in either
+                // eye: no pass at all, or, sharing a target, a pass with its views undrawn).
+                // `per` heads' eyes to a target, in one format (its views').
+                constexpr int kHeads = 6;
+                std::vector<gpu::RenderTarget> singles, pairs;
+                std::vector<gpu::Buffer> indices;
+                std::vector<Request> a, b;
+                singles.reserve(2 * kHeads);
+                pairs.reserve(kHeads);
+                for (int h = 0; h < kHeads; ++h) {
+                    const auto enc = (h / per) % 2 ? render::LayerEncoding::kHalf
+                                                   : render::LayerEncoding::kSrgb8;
+                    const auto fmt = render::layer_target_format(enc);
+                    auto head = scene::viewing_pose(s.viewing, -50.0 + 20.0 * h,
+                                                    s.viewing.heights_m.at("M"))
+                                    .value();
+                    if (h == kHeads - 1)  // looking away
+                        head.orientation = head.orientation *
+                                           glm::angleAxis(glm::pi<double>(), glm::dvec3(0, 1, 0));
+                    const auto eyes = scene::eye_poses(head, 0.063);
+                    if (h % per == 0)
+                        pairs.push_back(gpu::RenderTarget::create(device(), k.width, k.height, fmt,
+                                                                  "pair", both->uses_depth(),
+                                                                  nullptr, 0, uint32_t(2 * per))
+                                            .value());
+                    const uint32_t first_view = uint32_t(2 * (h % per));
+                    for (uint32_t e = 0; e < 2; ++e) {
+                        singles.push_back(gpu::RenderTarget::create(device(), k.width, k.height,
+                                                                    fmt, "single",
+                                                                    per_eye->uses_depth())
+                                              .value());
+                        scene::Specular spec = s.specular_presets.at(presets[(h + e) % 4]);
+                        if (h == 1 && e == 1)
+                            spec.colour = glm::dvec3(0.0);
+                        a.push_back({spec, k, eyes[e], enc, &singles.back(), true});
+                        b.push_back({spec, k, eyes[e], enc, &pairs.back(), true, 32, nullptr,
+                                     first_view + e});
                     }
                 }
-            EXPECT_GE(rects_differ, 1u) << "a pass over the union of two different rectangles";
-            EXPECT_GE(lit, size_t(kHeads)) << "most eyes must show a highlight";
-            if (planners) {
-                EXPECT_GT(both->layers_recorded_by_planners(), 0u);
+                auto pa = per_eye->render_layers(a);
+                auto pb = both->render_layers(b);
+                ASSERT_TRUE(pa.ok()) << pa.error().message;
+                ASSERT_TRUE(pb.ok()) << pb.error().message;
+                size_t lit = 0, rects_differ = 0;
+                for (int h = 0; h < kHeads; ++h)
+                    for (uint32_t e = 0; e < 2; ++e) {
+                        SCOPED_TRACE("head " + std::to_string(h) + ", eye " + std::to_string(e));
+                        const size_t i = 2 * size_t(h) + e;
+                        const Plan &x = (*pa)[i], &y = (*pb)[i];
+                        EXPECT_EQ(x.rect.x0, y.rect.x0);
+                        EXPECT_EQ(x.rect.y0, y.rect.y0);
+                        EXPECT_EQ(x.rect.x1, y.rect.x1);
+                        EXPECT_EQ(x.rect.y1, y.rect.y1);
+                        EXPECT_EQ(x.triangles, y.triangles);
+                        const auto va = render::Renderer::layer_bytes(singles[i], x);
+                        const auto vb = render::Renderer::layer_bytes(pairs[size_t(h / per)], y,
+                                                                      uint32_t(2 * (h % per)) + e);
+                        EXPECT_TRUE(va == vb) << "the layers differ";
+                        const size_t n = lit_pixels(va, gpu::bytes_per_pixel(singles[i].format()));
+                        lit += n > 100;
+                        if (h == kHeads - 1 || (h == 1 && e == 1)) {
+                            EXPECT_TRUE(x.rect.empty()) << "nothing to draw in this eye";
+                            EXPECT_EQ(n, 0u);
+                        }
+                        if (e == 1) {
+                            const auto& l = (*pb)[i - 1].rect;
+                            rects_differ += !l.empty() && !y.rect.empty() &&
+                                            (l.x0 != y.rect.x0 || l.x1 != y.rect.x1 ||
+                                             l.y0 != y.rect.y0 || l.y1 != y.rect.y1);
+                        }
+                    }
+                EXPECT_GE(rects_differ, 1u) << "a pass over the union of two different rectangles";
+                EXPECT_GE(lit, size_t(kHeads)) << "most eyes must show a highlight";
+                if (planners) {
+                    EXPECT_GT(both->layers_recorded_by_planners(), 0u);
+                }
             }
-        }
 }
 
 // The headsets' fill-in, set and set again (a reblend, as when a projector goes): the layers
@@ -267,3 +276,116 @@ TEST_F(Multiview, AHeadsetGetsTheSameBytesEitherWay) {
 }
 
 }  // namespace
+
+namespace {
+// Three headsets of one display served by a loopback server made with `info`, `rounds` times
+// each: every headset sends its pose and asks for a frame, then each receives both eyes. The
+// layers in order (round, headset, eye); `shared`: the stats' frames drawn in a pass with
+// other headsets; `held`, `reserved`: the render targets' bytes held and reserved at the end.
+std::vector<std::vector<uint8_t>> three_headsets(gpu::Device& device, const scene::Scene& s,
+                                                 const stream::LoopbackCreateInfo& info,
+                                                 const Served& how, const scene::Intrinsics& k,
+                                                 int rounds, uint64_t& shared, uint64_t& held,
+                                                 uint64_t& reserved) {
+    auto server = stream::LoopbackServer::start(device, s, info);
+    EXPECT_TRUE(server.ok()) << server.error().message;
+    if (!server.ok())
+        return {};
+    std::vector<std::unique_ptr<client::Connection>> headsets;
+    for (int c = 0; c < 3; ++c) {
+        auto opened = client::Connection::open((*server)->address());
+        if (auto* e = std::get_if<std::string>(&opened)) {
+            ADD_FAILURE() << *e;
+            return {};
+        }
+        headsets.push_back(std::move(std::get<std::unique_ptr<client::Connection>>(opened)));
+        auto& h = *headsets.back();
+        EXPECT_FALSE(h.hello(proto::Role::kHmd, (*server)->token(), "three-test"));
+        proto::RegisterDisplay d{k.width, k.height, k.fx, k.fy, k.cx, k.cy, 0.063};
+        d.format = how.format;
+        d.encoding = how.encoding;
+        EXPECT_TRUE(h.send(d));
+    }
+    std::vector<std::vector<uint8_t>> layers;
+    for (int r = 0; r < rounds; ++r) {
+        for (int c = 0; c < 3; ++c) {
+            const auto head =
+                scene::viewing_pose(s.viewing, -40.0 + 35.0 * c + 4.0 * r, 1.10).value();
+            EXPECT_TRUE(headsets[size_t(c)]->send(proto::Pose{
+                1,
+                {head.position.x, head.position.y, head.position.z},
+                {head.orientation.w, head.orientation.x, head.orientation.y, head.orientation.z}}));
+            EXPECT_TRUE(headsets[size_t(c)]->send(proto::FrameRequest{}));
+        }
+        for (auto& h : headsets) {
+            std::vector<uint8_t> eyes[2];
+            size_t got = 0;
+            const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+            while (got < 2 && std::chrono::steady_clock::now() < deadline) {
+                auto m = h->receive(500);
+                if (auto* e = std::get_if<std::string>(&m)) {
+                    ADD_FAILURE() << *e;
+                    return layers;
+                }
+                if (auto* msg = std::get_if<proto::Message>(&m)) {
+                    EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
+                    if (auto* l = std::get_if<proto::VdLayer>(msg); l && l->eye < 2) {
+                        eyes[l->eye] = l->data;
+                        ++got;
+                    }
+                }
+            }
+            EXPECT_EQ(got, 2u) << "both eyes' layers";
+            layers.push_back(std::move(eyes[0]));
+            layers.push_back(std::move(eyes[1]));
+        }
+    }
+    const auto stats = (*server)->stats();
+    shared = stats["frames"]["frames_shared_pass"].get<uint64_t>();
+    held = stats["memory_bytes"]["render_targets"].get<uint64_t>();
+    reserved = stats["memory_bytes"]["render_targets_reserved"].get<uint64_t>();
+    (*server)->stop();
+    return layers;
+}
+}  // namespace
+
+// Served: headsets of one display whose frames are taken in one batch share a target of up to
+// six views, drawn in one pass (--headsets-per-pass 3); each still gets the bytes of a pass of
+// its own, sparse RGBA8 and RGBA16F, raw, and packed on the device.
+TEST_F(Multiview, HeadsetsSharingAPassGetTheBytesOfTheirOwn) {
+    const scene::Scene s = scene::default_scene();
+    const scene::Intrinsics k = small_eye(4);
+    const Served cases[] = {{proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba8, false},
+                            {proto::Encoding::kSparseTiles, proto::PixelFormat::kRgba16f, false},
+                            {proto::Encoding::kRaw, proto::PixelFormat::kRgba8, false}};
+    for (const Served& how : cases)
+        for (const int pack : {0, 1}) {
+            if (pack && how.encoding == proto::Encoding::kRaw)
+                continue;  // raw layers are never packed
+            SCOPED_TRACE(describe(how) + (pack ? ", packed on the device" : ""));
+            stream::LoopbackCreateInfo own, shared;
+            own.multiview = shared.multiview = 1;
+            own.pack_tiles = shared.pack_tiles = pack;
+            shared.headsets_per_pass = 3;
+            constexpr int kRounds = 4;
+            uint64_t shared_frames[2] = {0, 0}, held[2] = {0, 0}, reserved[2] = {0, 0};
+            const auto a = three_headsets(device(), s, own, how, k, kRounds, shared_frames[0],
+                                          held[0], reserved[0]);
+            const auto b = three_headsets(device(), s, shared, how, k, kRounds, shared_frames[1],
+                                          held[1], reserved[1]);
+            ASSERT_EQ(a.size(), size_t(6 * kRounds));
+            EXPECT_TRUE(a == b) << "the served layers differ";
+            EXPECT_EQ(shared_frames[0], 0u);
+            // The three requests of a round arrive together: past the first batch of a round,
+            // which may take one alone, the others share its next.
+            EXPECT_GE(shared_frames[1], 2u) << "headsets shared a pass";
+            // The shared targets stay within twice the headsets' own (what each display
+            // reserves in addition): held beside the renderer's own targets, which are the
+            // same in both.
+            EXPECT_EQ(reserved[1], 2 * reserved[0]);
+            EXPECT_LE(held[1], held[0] + reserved[0]) << "the shared targets' pool grew";
+            size_t lit = 0;
+            for (const auto& l : a) lit += l.size() > 200;
+            EXPECT_GE(lit, size_t(3 * kRounds)) << "the layers show highlights";
+        }
+}
