@@ -161,8 +161,9 @@ struct CostSnapshot {
     std::optional<double> render_busy_ns;
     std::map<std::string, double> busy_ms;  // stats "busy_ms": render_thread, device, encoders
     double encoder_threads = 0;
-    double layers_replaced = 0;              // over the connected viewers
-    double layers = 0, bytes_read_back = 0;  // stats "frames"
+    double layers_replaced = 0;                 // over the connected viewers
+    double layers = 0, bytes_read_back = 0;     // stats "frames"
+    double frames_sent = 0, frames_shared = 0;  // stats "frames": frames, in a shared pass
     uint64_t at_ns = 0;
 };
 CostSnapshot cost_snapshot(const json& stats) {
@@ -187,6 +188,10 @@ CostSnapshot cost_snapshot(const json& stats) {
         s.layers = *n;
     if (const auto b = json_at<double>(stats, {"frames", "sparse", "bytes_read_back"}))
         s.bytes_read_back = *b;
+    if (const auto n = json_at<double>(stats, {"frames", "frames"}))
+        s.frames_sent = *n;
+    if (const auto n = json_at<double>(stats, {"frames", "frames_shared_pass"}))
+        s.frames_shared = *n;
     if (!stats.is_object() || !stats.contains("cost_ms") || !stats["cost_ms"].is_object())
         return s;
     const json& cost = stats["cost_ms"];
@@ -382,6 +387,9 @@ ServedRow row_from(const std::vector<HeadsetTally>& tallies, const RowWindow& m,
     if (m.c1.layers > m.c0.layers)
         r.read_back_bytes_per_layer =
             (m.c1.bytes_read_back - m.c0.bytes_read_back) / (m.c1.layers - m.c0.layers);
+    if (m.c1.frames_sent > m.c0.frames_sent)
+        r.shared_pass_fraction =
+            (m.c1.frames_shared - m.c0.frames_shared) / (m.c1.frames_sent - m.c0.frames_sent);
     if (o.seconds > 0 && headsets > 0)
         r.mbps_per_headset = double(bytes) * 8e-6 / o.seconds / double(headsets);
     if (r.stereo_layers > 0)
@@ -850,6 +858,8 @@ const json& report_notes() {
         "from the device: the rendered rectangle, or with pack_tiles on only the lit tiles, "
         "their count and mask (the server's stats frames.sparse.bytes_read_back over the "
         "window's layers)",
+        "shared_pass_fraction: of the window's frames, those drawn in one pass with other "
+        "headsets' (headsets_per_pass above 1; the server's stats frames.frames_shared_pass)",
         "mbps_per_headset: wire Mbit/s per headset over the window; layer_quality_mean, "
         "rate_limit_hz_mean: what the bit-rate limits (headset_mbps, room_mbps) did at the "
         "window's end, the mean over the headsets (0 Hz: no frame rate was lowered)",

@@ -103,6 +103,8 @@ struct ServedRow {
     // What the encoders read of each eye layer's pixels from the device's read-back, bytes:
     // the rectangle, or the lit tiles where the device packs them (--pack-tiles).
     std::optional<double> read_back_bytes_per_layer;
+    // Of the window's frames, those drawn in one pass with other headsets' (headsets_per_pass).
+    std::optional<double> shared_pass_fraction;
     // What the bit-rate limits did at the window's end, the mean over the headsets (the
     // server's stats): the JPEG quality of their lossy layers (0: lossless) and the frame rate
     // they were lowered to (0: none was).

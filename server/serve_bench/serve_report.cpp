@@ -143,6 +143,7 @@ json row_json(const ServedRow& r) {
             {"stage_ms_mean", stages},
             {"bytes_per_layer", opt(r.bytes_per_layer)},
             {"read_back_bytes_per_layer", opt(r.read_back_bytes_per_layer)},
+            {"shared_pass_fraction", opt(r.shared_pass_fraction)},
             {"mbps_per_headset", opt(r.mbps_per_headset)},
             {"layer_quality_mean", opt(r.layer_quality_mean)},
             {"rate_limit_hz_mean", opt(r.rate_limit_hz_mean)},
@@ -182,6 +183,7 @@ ServedRow row_of(const json& j) {
                 r.stage_ms[k] = v.get<double>();
     r.bytes_per_layer = opt_of(j, "bytes_per_layer");
     r.read_back_bytes_per_layer = opt_of(j, "read_back_bytes_per_layer");
+    r.shared_pass_fraction = opt_of(j, "shared_pass_fraction");
     r.mbps_per_headset = opt_of(j, "mbps_per_headset");
     r.layer_quality_mean = opt_of(j, "layer_quality_mean");
     r.rate_limit_hz_mean = opt_of(j, "rate_limit_hz_mean");
