@@ -414,6 +414,7 @@ void FrameLoop::finish_build(std::unique_ptr<BlendTask> task) {
     for (auto& [id, f] : frames_) {
         f->keep_alive.reset();
         f->batch.reset();
+        f->shared = nullptr;  // the pool was cleared above; none is held now
     }
     sink_->set_layer_drive(std::move(b.layer_drive));  // drained: no frame in flight
     unweighted_ = std::move(b.unweighted);
@@ -657,8 +658,10 @@ std::set<uint32_t> FrameLoop::free_released() {
             return true;
         });
     }
-    if (!gone.empty())
+    if (!gone.empty()) {
         update_held_bytes();
+        trim_shared();  // when the last headsets leave, their shared targets go too
+    }
     return {gone.begin(), gone.end()};
 }
 
@@ -681,14 +684,18 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     // none of its own where headsets share targets (share_targets).
     const uint32_t views = renderer_->multiview() ? 2 : 1;
     const bool own = renderer_->pass_headsets() == 1 || !source_->uses_gpu();
+    const uint64_t own_bytes =
+        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth, pack_tile);
     static const gpu::RenderTarget kNone;
     const gpu::RenderTarget& t = slot ? slot->targets[0] : kNone;
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
         (own ? t.width() != 0 && t.has_depth() == depth && t.pack_tile() == pack_tile &&
                    t.views() == views
-             : t.width() == 0))
+             : t.width() == 0)) {
+        slot->own_target_bytes = own_bytes;  // sharing: the scene's depth may have changed
         return slot.get();
+    }
     // A new display, or a scene that needs a depth buffer where the last did not (or the
     // other way round): new targets (the old frame, if the encoder still holds it, lives on
     // until it is done).
@@ -711,9 +718,8 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
             gpu::Buffer::create(device_, index_bytes, gpu::BufferUsage::kIndex,
                                 fmt::format("viewer{}.eye{}.indices", job.session_id, e)));
     }
-    f->own_target_bytes =
-        2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth, pack_tile);
-    f->target_bytes = own ? f->own_target_bytes : 0;
+    f->own_target_bytes = own_bytes;
+    f->target_bytes = own ? own_bytes : 0;
     f->index_bytes = 2 * index_bytes;
     slot = std::move(f);
     update_held_bytes();
@@ -725,40 +731,49 @@ Result<SharedTarget*> FrameLoop::shared_target(const ViewerFrame& f, uint32_t pa
     const bool depth = renderer_->uses_depth();
     const gpu::ColorFormat cf = render::layer_target_format(f.encoding);
     const auto now = Clock::now();
+    // Acquire: the encoders' reads of a target's pixels happen before it is drawn into again.
+    const auto idle = [](const std::unique_ptr<SharedTarget>& s) {
+        return s->holders.load(std::memory_order_acquire) == 0;
+    };
     for (const auto& s : shared_) {
         const gpu::RenderTarget& t = s->target;
-        // Acquire: the encoders' reads of its pixels happen before it is drawn into again.
-        if (s->holders.load(std::memory_order_acquire) == 0 && t.width() == f.width &&
-            t.height() == f.height && t.format() == cf && t.has_depth() == depth &&
-            t.pack_tile() == pack_tile && t.views() == views) {
+        if (idle(s) && t.width() == f.width && t.height() == f.height && t.format() == cf &&
+            t.has_depth() == depth && t.pack_tile() == pack_tile && t.views() == views) {
             s->holders.store(holders, std::memory_order_relaxed);
             s->last_used = now;
             return s.get();
         }
     }
-    // Within its budget: idle targets of other shapes go first, least recently used first.
+    // Within its budget, twice the headsets' own targets: idle targets of other shapes go,
+    // least recently used first, but only where that makes room.
     const uint64_t need =
         views * render::Renderer::target_bytes_for(f.width, f.height, cf, depth, pack_tile);
-    uint64_t budget = 0, held = 0;
+    uint64_t budget = 0, held = 0, idle_bytes = 0;
     for (const auto& [id, frame] : frames_) budget += 2 * frame->own_target_bytes;
-    for (const auto& s : shared_) held += s->bytes;
-    while (held + need > budget) {
-        auto idle = shared_.end();
-        for (auto it = shared_.begin(); it != shared_.end(); ++it)
-            if ((*it)->holders.load(std::memory_order_acquire) == 0 &&
-                (idle == shared_.end() || (*it)->last_used < (*idle)->last_used))
-                idle = it;
-        if (idle == shared_.end())
-            break;
-        held -= (*idle)->bytes;
-        shared_.erase(idle);
+    for (const auto& s : shared_) {
+        held += s->bytes;
+        idle_bytes += idle(s) ? s->bytes : 0;
     }
-    if (held + need > budget) {
-        update_held_bytes();
+    if (held - idle_bytes + need > budget)
         return make_error(ErrorCode::kDevice,
                           fmt::format("a shared target of {} views would take the headsets' "
                                       "shared targets to {} MiB, over their budget of {} MiB",
-                                      views, (held + need) >> 20, budget >> 20));
+                                      views, (held - idle_bytes + need) >> 20, budget >> 20));
+    if (held + need > budget) {
+        std::vector<std::unique_ptr<SharedTarget>*> order;
+        for (auto& s : shared_)
+            if (idle(s))
+                order.push_back(&s);
+        std::sort(order.begin(), order.end(),
+                  [](const auto* a, const auto* b) { return (*a)->last_used < (*b)->last_used; });
+        for (auto* s : order) {
+            if (held + need <= budget)
+                break;
+            held -= (*s)->bytes;
+            s->reset();
+        }
+        std::erase(shared_, nullptr);
+        update_held_bytes();
     }
     auto s = std::make_unique<SharedTarget>();
     HS_ASSIGN_OR_RETURN(s->target,
@@ -766,7 +781,7 @@ Result<SharedTarget*> FrameLoop::shared_target(const ViewerFrame& f, uint32_t pa
                                                   fmt::format("shared.{}x{}.views{}.{}", f.width,
                                                               f.height, views, shared_.size()),
                                                   depth, nullptr, pack_tile, views));
-    s->bytes = views * render::Renderer::target_bytes_for(f.width, f.height, cf, depth, pack_tile);
+    s->bytes = need;
     s->holders.store(holders, std::memory_order_relaxed);
     s->last_used = now;
     shared_.push_back(std::move(s));
@@ -774,19 +789,22 @@ Result<SharedTarget*> FrameLoop::shared_target(const ViewerFrame& f, uint32_t pa
     return shared_.back().get();
 }
 
-void FrameLoop::share_targets() {
-    const uint32_t most = renderer_->pass_headsets();
-    if (most < 2 || !source_->uses_gpu())
-        return;
-    // Targets no frame has used for a while go (a display that left, a batch that was larger).
+void FrameLoop::trim_shared() {
     const auto now = Clock::now();
     const size_t pooled = shared_.size();
     std::erase_if(shared_, [&](const std::unique_ptr<SharedTarget>& s) {
-        return s->holders.load(std::memory_order_acquire) == 0 &&
-               now - s->last_used > std::chrono::seconds(2);
+        return s->holders.load(std::memory_order_acquire) == 0 && now - s->last_used > kSharedIdle;
     });
     if (shared_.size() != pooled)
         update_held_bytes();
+}
+
+std::vector<std::pair<uint32_t, std::string>> FrameLoop::share_targets() {
+    std::vector<std::pair<uint32_t, std::string>> refused;
+    const uint32_t most = renderer_->pass_headsets();
+    if (most < 2 || !source_->uses_gpu())
+        return refused;
+    trim_shared();
     // The slots of one display next to each other (the renderer takes a target's views in a
     // row), in the order the scheduler gave them otherwise.
     struct Keyed {
@@ -803,7 +821,9 @@ void FrameLoop::share_targets() {
     }
     std::stable_sort(keyed.begin(), keyed.end(),
                      [](const Keyed& a, const Keyed& b) { return a.key < b.key; });
-    slots_.clear();
+    // slots_ is replaced only at the end: on an exception it still names every frame taken.
+    std::vector<FrameSlot> grouped;
+    grouped.reserve(keyed.size());
     for (size_t i = 0; i < keyed.size();) {
         size_t end = i + 1;
         while (end < keyed.size() && end - i < most && keyed[end].key == keyed[i].key) ++end;
@@ -816,21 +836,23 @@ void FrameLoop::share_targets() {
                 f.shared = *t;
                 f.first_view = uint32_t(2 * (j - i));
             } else {
-                // Over the budget (targets still being read): each in a target of its own
-                // size, or dropped this frame.
-                auto one = shared_target(f, pack_tile, 2, 1);
+                // Over the budget (targets still being read): each headset in a target of its
+                // own size, or none this frame.
+                auto one = m > 1 ? shared_target(f, pack_tile, 2, 1) : t;
                 if (!one) {
-                    host_.job_dropped(f.viewer,
-                                      "no render target for this display: " + one.error().message);
+                    refused.emplace_back(
+                        f.viewer, "no render target for this display: " + one.error().message);
                     continue;
                 }
                 f.shared = *one;
                 f.first_view = 0;
             }
-            slots_.push_back(keyed[j].slot);
+            grouped.push_back(keyed[j].slot);
         }
         i = end;
     }
+    slots_ = std::move(grouped);
+    return refused;
 }
 
 void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
@@ -854,38 +876,39 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
         slots_.push_back({f, f->job.pose.T_world_head});
     }
     batch.clear();
-    share_targets();
-    if (slots_.empty())
-        return;
-    std::vector<std::shared_ptr<ViewerFrame>> filled;
-    for (const FrameSlot& s : slots_) filled.push_back(frames_[s.frame->viewer]);
-    uint64_t value = 0;
-    bool recorded = false;
+    // From here a frame may hold a shared target until the encoder lets go of it: one that does
+    // not reach the encoder (a failed batch) lets go here.
+    size_t pushed = 0;
     try {
-        std::tie(value, recorded) = submit();
+        for (auto& [viewer, why] : share_targets()) host_.job_dropped(viewer, why);
+        if (slots_.empty())
+            return;
+        std::vector<std::shared_ptr<ViewerFrame>> filled;
+        for (const FrameSlot& s : slots_) filled.push_back(frames_[s.frame->viewer]);
+        const auto [value, recorded] = submit();
+        const auto now = Clock::now();
+        auto figures = std::make_shared<BatchFigures>();
+        figures->eyes = 2 * slots_.size();
+        figures->queue_ms = std::chrono::duration<double, std::milli>(now - taken).count();
+        figures->record_ms = last_record_ms_;
+        figures->submit_ms = last_submit_ms_;
+        figures->large_turn = large_turn;
+        figures->report = source_->report();
+        filled.front()->batch = std::move(figures);
+        for (auto& f : filled) {
+            // A submission with nothing recorded (every layer black) needs no wait.
+            f->timeline = recorded ? value : 0;
+            f->submitted = now;
+            sink_->push(std::move(f));
+            ++pushed;
+        }
     } catch (const std::exception& e) {
         // One failed batch costs its viewers this frame, never the server.
         log::error("render: {}", e.what());
-        for (const FrameSlot& s : slots_) {
-            s.frame->let_go_of_shared();
-            host_.job_dropped(s.frame->viewer, "rendering this frame failed");
+        for (size_t i = pushed; i < slots_.size(); ++i) {
+            slots_[i].frame->let_go_of_shared();
+            host_.job_dropped(slots_[i].frame->viewer, "rendering this frame failed");
         }
-        return;
-    }
-    const auto now = Clock::now();
-    auto figures = std::make_shared<BatchFigures>();
-    figures->eyes = 2 * slots_.size();
-    figures->queue_ms = std::chrono::duration<double, std::milli>(now - taken).count();
-    figures->record_ms = last_record_ms_;
-    figures->submit_ms = last_submit_ms_;
-    figures->large_turn = large_turn;
-    figures->report = source_->report();
-    filled.front()->batch = std::move(figures);
-    for (auto& f : filled) {
-        // A submission with nothing recorded (every layer black) needs no wait.
-        f->timeline = recorded ? value : 0;
-        f->submitted = now;
-        sink_->push(std::move(f));
     }
 }
 

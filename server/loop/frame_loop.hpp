@@ -276,9 +276,12 @@ private:
     // The viewer's frame for this display, made or re-made as needed.
     Result<ViewerFrame*> frame_for(const ViewerJob& job);
     // Where several headsets share a pass (render::Renderer::pass_headsets): the slots of one
-    // display put next to each other, up to that many to a shared target. A slot whose target
-    // cannot be made is dropped, with why.
-    void share_targets();
+    // display put next to each other, up to that many to a shared target. Returns the viewers
+    // whose slot was taken out (no target could be made for it), with why.
+    std::vector<std::pair<uint32_t, std::string>> share_targets();
+    // Shared targets no frame has held for kSharedIdle go.
+    void trim_shared();
+    static constexpr std::chrono::seconds kSharedIdle{2};
     // A free pooled target for `views` views of `f`'s display, held by `holders` frames; made
     // when none is free.
     Result<SharedTarget*> shared_target(const ViewerFrame& f, uint32_t pack_tile, uint32_t views,

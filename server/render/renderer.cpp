@@ -195,8 +195,12 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
     r->pass_headsets_ = pass_headsets(device, info);
     if (r->multiview_ && info.headsets_per_pass > r->pass_headsets_)
         log::warn("{} renders at most {} views in one pass: {} headset(s) per pass, not {}",
-                  device.name(), device.max_multiview_views(), r->pass_headsets_,
-                  info.headsets_per_pass);
+                  device.name(), 2 * r->pass_headsets_, r->pass_headsets_, info.headsets_per_pass);
+    else if (!r->multiview_ && info.headsets_per_pass > 1)
+        log::warn(
+            "{} headsets per pass need multiview, which is off on {} (give --multiview on): a "
+            "pass per headset",
+            info.headsets_per_pass, device.name());
     return r;
 }
 

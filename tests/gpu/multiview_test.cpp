@@ -371,13 +371,16 @@ TEST_F(Multiview, HeadsetsSharingAPassGetTheBytesOfTheirOwn) {
             uint64_t shared_frames[2] = {0, 0}, held[2] = {0, 0}, reserved[2] = {0, 0};
             const auto a = three_headsets(device(), s, own, how, k, kRounds, shared_frames[0],
                                           held[0], reserved[0]);
-            const auto b = three_headsets(device(), s, shared, how, k, kRounds, shared_frames[1],
-                                          held[1], reserved[1]);
+            // The three requests of a round arrive together: past the first batch of a round,
+            // which may take one alone, the others share its next. A machine too busy to
+            // batch any round (each request rendered before the next arrives) runs it again.
+            std::vector<std::vector<uint8_t>> b;
+            for (int attempt = 0; attempt < 3 && shared_frames[1] < 2; ++attempt)
+                b = three_headsets(device(), s, shared, how, k, kRounds, shared_frames[1], held[1],
+                                   reserved[1]);
             ASSERT_EQ(a.size(), size_t(6 * kRounds));
             EXPECT_TRUE(a == b) << "the served layers differ";
             EXPECT_EQ(shared_frames[0], 0u);
-            // The three requests of a round arrive together: past the first batch of a round,
-            // which may take one alone, the others share its next.
             EXPECT_GE(shared_frames[1], 2u) << "headsets shared a pass";
             // The shared targets stay within twice the headsets' own (what each display
             // reserves in addition): held beside the renderer's own targets, which are the
