@@ -579,8 +579,11 @@ Result<void> Renderer::set_fill(const Blend& blend) {
         gpu::Texture::create_r32f(device_, atlas.width, atlas.height, atlas.depth.data(),
                                   "fill.shadow_maps", device_counter()));
     for (auto& [key, v] : variants_) v.pipeline.bind_second_texture(device_, texture);
-    // Fill pipelines of an earlier call read its projectors from their scene blocks: made anew.
-    std::erase_if(variants_, [](const auto& kv) { return kv.first.ends_with("|fill"); });
+    // Fill pipelines of an earlier call read its projectors from their scene blocks: made anew;
+    // but for the untested ones, which read no projector (HS_SC_FILL -1).
+    std::erase_if(variants_, [](const auto& kv) {
+        return kv.first.ends_with("|fill") && !kv.first.ends_with("|untested|fill");
+    });
     fill_texture_ = std::move(texture);
     fill_params_ = std::move(atlas.projectors);
     fill_clusters_ = std::move(clusters);

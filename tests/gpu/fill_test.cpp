@@ -265,6 +265,26 @@ TEST_F(Fill, FillAlonePipelineDrawsWhatTheMaskedOneDraws) {
     EXPECT_EQ((*generic)->pipelines_built(), 4u);
     EXPECT_EQ((*generic)->fill_pipelines(), 2u);
     EXPECT_EQ(specialised->fill_pipelines(), 6u);
+    // A re-blend (the projector moved): the tested pipelines read the projectors and are made
+    // anew; the untested ones read none and are kept, and still draw what the masked one does.
+    scene::Scene moved = scene_;
+    moved.projector.pose.position += glm::dvec3(0.25, 0.1, 0.0);
+    const render::Blend again = render::compute_visibility(specialised->mesh(), moved.projectors());
+    ASSERT_TRUE(specialised->set_fill(again).ok());
+    ASSERT_TRUE((*generic)->set_fill(again).ok());
+    EXPECT_EQ(specialised->fill_pipelines(), 2u) << "the untested fill pipelines are kept";
+    const uint64_t built = specialised->pipelines_built();
+    untested = 0;
+    for (auto enc : {render::LayerEncoding::kSrgb8, render::LayerEncoding::kHalf}) {
+        const Layer a = layer(*specialised, k, eye_at(270.0), enc);
+        const Layer b = layer(**generic, k, eye_at(270.0), enc);
+        untested += a.plan.clusters_filled_untested;
+        EXPECT_TRUE(a.codes == b.codes) << "after the re-blend, encoding " << int(enc);
+    }
+    EXPECT_GT(untested, 0u);
+    // Every pipeline made since is a tested fill pipeline (the others were kept).
+    EXPECT_GT(specialised->pipelines_built(), built);
+    EXPECT_EQ(specialised->pipelines_built() - built, specialised->fill_pipelines() - 2);
 }
 
 // Shadow maps that do not fit one texture are refused with the sizes named (the server then
