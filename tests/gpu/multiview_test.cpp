@@ -308,37 +308,11 @@ std::vector<std::vector<uint8_t>> three_headsets(gpu::Device& device, const scen
     }
     std::vector<std::vector<uint8_t>> layers;
     for (int r = 0; r < rounds; ++r) {
-        for (int c = 0; c < 3; ++c) {
-            const auto head =
-                scene::viewing_pose(s.viewing, -40.0 + 35.0 * c + 4.0 * r, 1.10).value();
-            EXPECT_TRUE(headsets[size_t(c)]->send(proto::Pose{
-                1,
-                {head.position.x, head.position.y, head.position.z},
-                {head.orientation.w, head.orientation.x, head.orientation.y, head.orientation.z}}));
-            EXPECT_TRUE(headsets[size_t(c)]->send(proto::FrameRequest{}));
-        }
-        for (auto& h : headsets) {
-            std::vector<uint8_t> eyes[2];
-            size_t got = 0;
-            const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-            while (got < 2 && std::chrono::steady_clock::now() < deadline) {
-                auto m = h->receive(500);
-                if (auto* e = std::get_if<std::string>(&m)) {
-                    ADD_FAILURE() << *e;
-                    return layers;
-                }
-                if (auto* msg = std::get_if<proto::Message>(&m)) {
-                    EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
-                    if (auto* l = std::get_if<proto::VdLayer>(msg); l && l->eye < 2) {
-                        eyes[l->eye] = l->data;
-                        ++got;
-                    }
-                }
-            }
-            EXPECT_EQ(got, 2u) << "both eyes' layers";
-            layers.push_back(std::move(eyes[0]));
-            layers.push_back(std::move(eyes[1]));
-        }
+        for (int c = 0; c < 3; ++c)
+            ask_for_frame(*headsets[size_t(c)], s, -40.0 + 35.0 * c + 4.0 * r);
+        for (auto& h : headsets)
+            if (!receive_both_eyes(*h, layers))
+                return layers;
     }
     const auto stats = (*server)->stats();
     shared = stats["frames"]["frames_shared_pass"].get<uint64_t>();

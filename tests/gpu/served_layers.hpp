@@ -31,6 +31,44 @@ inline std::string describe(const Served& how) {
            std::to_string(int(how.format)) + (how.calibrated ? ", calibrated" : "");
 }
 
+// Sends the head pose at `azimuth` degrees around the prop (1.10 m high) and asks for a frame.
+inline void ask_for_frame(client::Connection& c, const scene::Scene& s, double azimuth) {
+    namespace proto = hs::protocol;
+    const auto head = scene::viewing_pose(s.viewing, azimuth, 1.10).value();
+    EXPECT_TRUE(c.send(proto::Pose{
+        1,
+        {head.position.x, head.position.y, head.position.z},
+        {head.orientation.w, head.orientation.x, head.orientation.y, head.orientation.z}}));
+    EXPECT_TRUE(c.send(proto::FrameRequest{}));
+}
+
+// The frame's two layers appended to `layers` in eye order (empty where one did not come in
+// 60 s, which fails the test); false when the connection failed.
+inline bool receive_both_eyes(client::Connection& c, std::vector<std::vector<uint8_t>>& layers) {
+    namespace proto = hs::protocol;
+    std::vector<uint8_t> eyes[2];
+    size_t got = 0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (got < 2 && std::chrono::steady_clock::now() < deadline) {
+        auto m = c.receive(500);
+        if (auto* e = std::get_if<std::string>(&m)) {
+            ADD_FAILURE() << *e;
+            return false;
+        }
+        if (auto* msg = std::get_if<proto::Message>(&m)) {
+            EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
+            if (auto* l = std::get_if<proto::VdLayer>(msg); l && l->eye < 2) {
+                eyes[l->eye] = l->data;
+                ++got;
+            }
+        }
+    }
+    EXPECT_EQ(got, 2u) << "both eyes' layers";
+    layers.push_back(std::move(eyes[0]));
+    layers.push_back(std::move(eyes[1]));
+    return true;
+}
+
 // The layers (per pose of `azimuths`, both eyes; four by default) a headset of `k` receives from a
 // loopback server made with `info` (plus the calibration `how` asks for); `read_back`: the stats'
 // bytes the encoders read of the layers' pixels; `one_pass`: the stats' frames whose eyes were
@@ -60,29 +98,9 @@ inline std::vector<std::vector<uint8_t>> served_layers(
     EXPECT_TRUE(c->send(d));
     std::vector<std::vector<uint8_t>> layers;
     for (const double azimuth : azimuths) {
-        const auto head = scene::viewing_pose(s.viewing, azimuth, 1.10).value();
-        EXPECT_TRUE(c->send(proto::Pose{
-            1,
-            {head.position.x, head.position.y, head.position.z},
-            {head.orientation.w, head.orientation.x, head.orientation.y, head.orientation.z}}));
-        EXPECT_TRUE(c->send(proto::FrameRequest{}));
-        size_t got = 0;
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-        while (got < 2 && std::chrono::steady_clock::now() < deadline) {
-            auto m = c->receive(500);
-            if (auto* e = std::get_if<std::string>(&m)) {
-                ADD_FAILURE() << *e;
-                return layers;
-            }
-            if (auto* msg = std::get_if<proto::Message>(&m)) {
-                EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
-                if (auto* l = std::get_if<proto::VdLayer>(msg)) {
-                    layers.push_back(l->data);
-                    ++got;
-                }
-            }
-        }
-        EXPECT_EQ(got, 2u) << "both eyes' layers";
+        ask_for_frame(*c, s, azimuth);
+        if (!receive_both_eyes(*c, layers))
+            return layers;
     }
     const auto stats = (*server)->stats();
     if (read_back)  // what the encoders read of the layers' pixels
