@@ -117,9 +117,7 @@ std::optional<std::string> connect_within(int fd, const sockaddr* sa, socklen_t 
         const auto deadline =
             std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
         for (;;) {
-            const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                     deadline - std::chrono::steady_clock::now())
-                                     .count());
+            const int left = ms_until(deadline);
             if (left <= 0)
                 return "no answer within " + format_number(timeout_ms / 1000.0) + " s";
             pollfd pfd{fd, POLLOUT, 0};
@@ -281,9 +279,7 @@ bool Connection::fill(size_t want, int timeout_ms) {
             close();
             return false;
         }
-        const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                 deadline - std::chrono::steady_clock::now())
-                                 .count());
+        const int left = ms_until(deadline);
         pollfd pfd{fd_, tls_->wanted_events(), 0};
         const int rc = ::poll(&pfd, 1, std::max(left, 0));
         if (rc < 0 && errno == EINTR)
@@ -292,9 +288,7 @@ bool Connection::fill(size_t want, int timeout_ms) {
             return false;
     }
     while (inbox_len_ < want) {
-        const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                 deadline - std::chrono::steady_clock::now())
-                                 .count());
+        const int left = ms_until(deadline);
         pollfd pfd{fd_, POLLIN, 0};
         const int rc = ::poll(&pfd, 1, std::max(left, 0));
         if (rc < 0 && errno == EINTR)

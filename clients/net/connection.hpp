@@ -2,6 +2,8 @@
 // library only. Thread: one thread per Connection.
 #pragma once
 
+#include <algorithm>
+#include <chrono>
 #include <memory>
 #include <optional>
 #include <string>
@@ -12,6 +14,15 @@
 #include "protocol/protocol.hpp"
 
 namespace hs::client {
+
+// Whole milliseconds from now until `deadline`, rounded up, for poll(): a wait of less than a
+// millisecond is one, not none, so that a short timeout waits rather than returning at once
+// (a caller asking for 1 ms would otherwise spin). 0 once the deadline has passed.
+inline int ms_until(std::chrono::steady_clock::time_point deadline) {
+    const auto left =
+        std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    return int(std::max<std::chrono::milliseconds::rep>(left.count(), 0));
+}
 
 // Where the server listens: "HOST:PORT" (an IPv6 host in brackets, "[::1]:7700"; PORT
 // 1..65535) or "unix:PATH".

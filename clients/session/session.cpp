@@ -130,10 +130,7 @@ std::variant<std::unique_ptr<Connection>, Session::ConnectError> Session::open_s
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::milliseconds(config_.connect_timeout_ms);
     for (;;) {
-        const int left = int(std::chrono::duration_cast<std::chrono::milliseconds>(
-                                 deadline - std::chrono::steady_clock::now())
-                                 .count());
-        auto r = conn->receive(std::max(left, 0));
+        auto r = conn->receive(client::ms_until(deadline));
         if (auto* e = std::get_if<std::string>(&r))
             return ConnectError{false, at + "no answer to Hello: " + *e};
         if (std::holds_alternative<std::monostate>(r))

@@ -3,6 +3,10 @@
 // pose and an unanswered FrameRequest are sent again without the application doing anything),
 // giving up, an operator's Kick (no reconnect), the bounded queue, and bad arguments. The
 // fallbacks against an older server are in client_lib_old_server_test.cpp.
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
 #include <cstring>
 #include <filesystem>
 #include <map>
@@ -361,6 +365,40 @@ TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
         EXPECT_LE(hi, int(full)) << "attempt " << attempt;
         EXPECT_GT(hi - lo, int(full * 0.2)) << "no jitter at attempt " << attempt;
     }
+}
+
+// A short receive timeout is waited out, not skipped: receive(1) on a silent connection used
+// to round its millisecond down to none and return at once, so a headset loop that waited
+// for its next pose with it spun on poll() (the bench's headsets took a core from the server
+// they measured). Only a lower bound: a slow machine waits longer, never shorter.
+TEST(ClientConnection, AShortReceiveTimeoutIsWaitedOut) {
+    const auto dir =
+        std::filesystem::temp_directory_path() / ("hs-silent-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir);
+    const std::string path = (dir / "s.sock").string();
+    const int listener = ::socket(AF_UNIX, SOCK_STREAM, 0);
+    ASSERT_GE(listener, 0);
+    sockaddr_un sa{};
+    sa.sun_family = AF_UNIX;
+    std::strncpy(sa.sun_path, path.c_str(), sizeof sa.sun_path - 1);
+    ASSERT_EQ(::bind(listener, reinterpret_cast<const sockaddr*>(&sa), sizeof sa), 0);
+    ASSERT_EQ(::listen(listener, 1), 0);
+    auto opened = client::Connection::open("unix:" + path);
+    ASSERT_TRUE(std::holds_alternative<std::unique_ptr<client::Connection>>(opened));
+    auto& c = *std::get<std::unique_ptr<client::Connection>>(opened);
+    constexpr int kCalls = 40;
+    for (const int timeout_ms : {1, 3}) {
+        const auto t0 = std::chrono::steady_clock::now();
+        for (int i = 0; i < kCalls; ++i)
+            EXPECT_TRUE(std::holds_alternative<std::monostate>(c.receive(timeout_ms)));
+        const double ms =
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count();
+        EXPECT_GE(ms, double(kCalls * timeout_ms)) << kCalls << " x receive(" << timeout_ms << ")";
+    }
+    c.close();
+    ::close(listener);
+    std::filesystem::remove_all(dir);
 }
 
 // PROTOCOL.md, "Time": the library measures the clock offset over Ping/Pong (server and client
