@@ -396,9 +396,8 @@ int play_trajectory(Run& run, const std::vector<Step>& steps, int64_t limit) {
             const auto at = start + std::chrono::duration_cast<Clock::duration>(
                                         std::chrono::duration<double>(pass * pass_s + s.t_s));
             while (!done() && Clock::now() < at) {
-                const auto left =
-                    std::chrono::duration_cast<std::chrono::milliseconds>(at - Clock::now());
-                if (run.pump(int(std::clamp<int64_t>(left.count(), 0, 50))) == Run::Saw::kClosed)
+                // Rounded up: a remainder under a millisecond waits rather than spinning.
+                if (run.pump(std::min(client::ms_until(at), 50)) == Run::Saw::kClosed)
                     return 1;
             }
             if (done())

@@ -13,9 +13,12 @@
 #   script to run beside the rows, e.g. ../shared/perf/lean-baseline.sh) in the environment.
 # Exit status: 1 when a test failed, 2 when a measurement could not be made; all of it is run.
 set -uo pipefail
+# Both folders as the caller named them, before moving to the repository root.
+B=$(realpath -m "${1:-build}")
+OUT=$(realpath -m "${2:-gpu-rows}")
+[[ -n "${LEAN:-}" ]] && LEAN=$(realpath -m "$LEAN")
 cd "$(dirname "$0")/.."
-B=${1:-build}
-OUT=${2:-gpu-rows}
+
 HEADSETS=${HEADSETS:-8,32,64,128}
 SECONDS_PER_ROW=${ROW_SECONDS:-5}
 MIB=${MAX_TARGET_MIB:-8192}
@@ -31,11 +34,12 @@ step() { echo "[$(date -u +%H:%M:%S)] $*"; }
 } > "$OUT/gpu.txt"
 
 step "GPU tests (validation on) -> $OUT/tests.txt"
-{
-  HYSAR_VALIDATION=1 "$B/tests/hs_gpu_tests" \
-    --gtest_filter='Multiview.*:SparseLayers.*:TilePacking.*:WarmUp.*' &&
-    HYSAR_VALIDATION=1 "$B/tests/hs_projectors_gpu_tests" --gtest_filter='Fill.*'
-} > "$OUT/tests.txt" 2>&1 || { status=1; step "a GPU test failed: see $OUT/tests.txt"; }
+: > "$OUT/tests.txt"
+HYSAR_VALIDATION=1 "$B/tests/hs_gpu_tests" \
+  --gtest_filter='Multiview.*:SparseLayers.*:TilePacking.*:WarmUp.*' >> "$OUT/tests.txt" 2>&1 ||
+  { status=1; step "a GPU test failed: see $OUT/tests.txt"; }
+HYSAR_VALIDATION=1 "$B/tests/hs_projectors_gpu_tests" --gtest_filter='Fill.*' \
+  >> "$OUT/tests.txt" 2>&1 || { status=1; step "a GPU test failed: see $OUT/tests.txt"; }
 grep -E '^\[  (PASSED|FAILED) ' "$OUT/tests.txt"
 
 lean=()
@@ -45,7 +49,7 @@ serve() {
   shift
   step "hysar bench serve $* -> $OUT/serve-$name"
   "$B/hysar" bench serve --headsets "$HEADSETS" --seconds "$SECONDS_PER_ROW" \
-    --max-target-mib "$MIB" "${lean[@]}" "$@" --out "$OUT/serve-$name" \
+    --max-target-mib "$MIB" ${lean[@]+"${lean[@]}"} "$@" --out "$OUT/serve-$name" \
     > "$OUT/serve-$name.log" 2>&1 || { status=2; step "failed: see $OUT/serve-$name.log"; }
 }
 serve per-headset --multiview on --headsets-per-pass 1

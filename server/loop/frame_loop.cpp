@@ -658,10 +658,9 @@ std::set<uint32_t> FrameLoop::free_released() {
             return true;
         });
     }
-    if (!gone.empty()) {
+    if (!gone.empty())
         update_held_bytes();
-        trim_shared();  // when the last headsets leave, their shared targets go too
-    }
+    trim_shared();
     return {gone.begin(), gone.end()};
 }
 
@@ -790,13 +789,25 @@ Result<SharedTarget*> FrameLoop::shared_target(const ViewerFrame& f, uint32_t pa
 }
 
 void FrameLoop::trim_shared() {
+    if (shared_.empty())
+        return;
+    // With no headset left, every idle one goes at once.
     const auto now = Clock::now();
     const size_t pooled = shared_.size();
     std::erase_if(shared_, [&](const std::unique_ptr<SharedTarget>& s) {
-        return s->holders.load(std::memory_order_acquire) == 0 && now - s->last_used > kSharedIdle;
+        return s->holders.load(std::memory_order_acquire) == 0 &&
+               (frames_.empty() || now - s->last_used > kSharedIdle);
     });
     if (shared_.size() != pooled)
         update_held_bytes();
+    // Looked at again when the oldest can go (or, with no headset left, once the encoders have
+    // let go of the rest), whether or not a batch comes.
+    Clock::time_point next = Clock::time_point::max();
+    for (const auto& s : shared_)
+        next = std::min(next, frames_.empty() ? now + std::chrono::milliseconds(100)
+                                              : s->last_used + kSharedIdle);
+    if (next != Clock::time_point::max())
+        scheduler_.wake_at(next);
 }
 
 std::vector<std::pair<uint32_t, std::string>> FrameLoop::share_targets() {
@@ -804,7 +815,6 @@ std::vector<std::pair<uint32_t, std::string>> FrameLoop::share_targets() {
     const uint32_t most = renderer_->pass_headsets();
     if (most < 2 || !source_->uses_gpu())
         return refused;
-    trim_shared();
     // The slots of one display next to each other (the renderer takes a target's views in a
     // row), in the order the scheduler gave them otherwise.
     struct Keyed {
@@ -903,8 +913,12 @@ void FrameLoop::serve(std::vector<ViewerJob>& batch, bool large_turn) {
             ++pushed;
         }
     } catch (const std::exception& e) {
-        // One failed batch costs its viewers this frame, never the server.
+        // One failed batch costs its viewers this frame, never the server. Its work may have
+        // been submitted: the shared targets it draws into are let go of once it is done (an
+        // idle one may be destroyed at the next batch).
         log::error("render: {}", e.what());
+        if (!shared_.empty())
+            (void)ring_->wait_idle();
         for (size_t i = pushed; i < slots_.size(); ++i) {
             slots_[i].frame->let_go_of_shared();
             host_.job_dropped(slots_[i].frame->viewer, "rendering this frame failed");

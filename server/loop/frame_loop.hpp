@@ -279,7 +279,8 @@ private:
     // display put next to each other, up to that many to a shared target. Returns the viewers
     // whose slot was taken out (no target could be made for it), with why.
     std::vector<std::pair<uint32_t, std::string>> share_targets();
-    // Shared targets no frame has held for kSharedIdle go.
+    // Shared targets no frame has held for kSharedIdle go (all idle ones when no headset is
+    // left); the scheduler wakes the render thread when the next may go. Each turn.
     void trim_shared();
     static constexpr std::chrono::seconds kSharedIdle{2};
     // A free pooled target for `views` views of `f`'s display, held by `holders` frames; made

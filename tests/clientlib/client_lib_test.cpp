@@ -372,15 +372,17 @@ TEST(ClientLibBackoff, DoublesUpToTheMaximumWithJitter) {
 // for its next pose with it spun on poll() (the bench's headsets took a core from the server
 // they measured). Only a lower bound: a slow machine waits longer, never shorter.
 TEST(ClientConnection, AShortReceiveTimeoutIsWaitedOut) {
-    const auto dir =
-        std::filesystem::temp_directory_path() / ("hs-silent-" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir);
+    std::string dir_template =
+        (std::filesystem::temp_directory_path() / "hs-silent-XXXXXX").string();
+    ASSERT_NE(::mkdtemp(dir_template.data()), nullptr);
+    const std::filesystem::path dir = dir_template;
     const std::string path = (dir / "s.sock").string();
+    sockaddr_un sa{};
+    ASSERT_LT(path.size(), sizeof sa.sun_path) << path;
     const int listener = ::socket(AF_UNIX, SOCK_STREAM, 0);
     ASSERT_GE(listener, 0);
-    sockaddr_un sa{};
     sa.sun_family = AF_UNIX;
-    std::strncpy(sa.sun_path, path.c_str(), sizeof sa.sun_path - 1);
+    std::memcpy(sa.sun_path, path.c_str(), path.size() + 1);
     ASSERT_EQ(::bind(listener, reinterpret_cast<const sockaddr*>(&sa), sizeof sa), 0);
     ASSERT_EQ(::listen(listener, 1), 0);
     auto opened = client::Connection::open("unix:" + path);

@@ -281,16 +281,22 @@ namespace {
 // Three headsets of one display served by a loopback server made with `info`, `rounds` times
 // each: every headset sends its pose and asks for a frame, then each receives both eyes. The
 // layers in order (round, headset, eye); `shared`: the stats' frames drawn in a pass with
-// other headsets; `held`, `reserved`: the render targets' bytes held and reserved at the end.
+// other headsets; `held`, `reserved`: the render targets' bytes held and reserved at the end;
+// `left`: what the render targets hold once the headsets have gone, waited for until it is
+// `expect_left` (0: until it stays the same for 300 ms), 5 s at most.
 std::vector<std::vector<uint8_t>> three_headsets(gpu::Device& device, const scene::Scene& s,
                                                  const stream::LoopbackCreateInfo& info,
                                                  const Served& how, const scene::Intrinsics& k,
                                                  int rounds, uint64_t& shared, uint64_t& held,
-                                                 uint64_t& reserved) {
+                                                 uint64_t& reserved, uint64_t expect_left,
+                                                 uint64_t& left) {
     auto server = stream::LoopbackServer::start(device, s, info);
     EXPECT_TRUE(server.ok()) << server.error().message;
     if (!server.ok())
         return {};
+    const auto targets_held = [&] {
+        return (*server)->stats()["memory_bytes"]["render_targets"].get<uint64_t>();
+    };
     std::vector<std::unique_ptr<client::Connection>> headsets;
     for (int c = 0; c < 3; ++c) {
         auto opened = client::Connection::open((*server)->address());
@@ -318,6 +324,19 @@ std::vector<std::vector<uint8_t>> three_headsets(gpu::Device& device, const scen
     shared = stats["frames"]["frames_shared_pass"].get<uint64_t>();
     held = stats["memory_bytes"]["render_targets"].get<uint64_t>();
     reserved = stats["memory_bytes"]["render_targets_reserved"].get<uint64_t>();
+    for (auto& h : headsets) h->close();
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+    left = targets_held();
+    auto same_since = std::chrono::steady_clock::now();
+    while (std::chrono::steady_clock::now() < until) {
+        if (expect_left
+                ? left == expect_left
+                : std::chrono::steady_clock::now() - same_since > std::chrono::milliseconds(300))
+            break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        if (const uint64_t now = targets_held(); now != left)
+            left = now, same_since = std::chrono::steady_clock::now();
+    }
     (*server)->stop();
     return layers;
 }
@@ -343,15 +362,16 @@ TEST_F(Multiview, HeadsetsSharingAPassGetTheBytesOfTheirOwn) {
             shared.headsets_per_pass = 3;
             constexpr int kRounds = 4;
             uint64_t shared_frames[2] = {0, 0}, held[2] = {0, 0}, reserved[2] = {0, 0};
+            uint64_t left[2] = {0, 0};
             const auto a = three_headsets(device(), s, own, how, k, kRounds, shared_frames[0],
-                                          held[0], reserved[0]);
+                                          held[0], reserved[0], 0, left[0]);
             // The three requests of a round arrive together: past the first batch of a round,
             // which may take one alone, the others share its next. A machine too busy to
             // batch any round (each request rendered before the next arrives) runs it again.
             std::vector<std::vector<uint8_t>> b;
             for (int attempt = 0; attempt < 3 && shared_frames[1] < 2; ++attempt)
                 b = three_headsets(device(), s, shared, how, k, kRounds, shared_frames[1], held[1],
-                                   reserved[1]);
+                                   reserved[1], left[0], left[1]);
             ASSERT_EQ(a.size(), size_t(6 * kRounds));
             EXPECT_TRUE(a == b) << "the served layers differ";
             EXPECT_EQ(shared_frames[0], 0u);
@@ -361,6 +381,10 @@ TEST_F(Multiview, HeadsetsSharingAPassGetTheBytesOfTheirOwn) {
             // same in both.
             EXPECT_EQ(reserved[1], 2 * reserved[0]);
             EXPECT_LE(held[1], held[0] + reserved[0]) << "the shared targets' pool grew";
+            // Once the headsets have gone, neither server holds anything of theirs: the one
+            // that shared holds what the other does (the renderer's own targets).
+            EXPECT_LT(left[0], held[0]) << "the headsets' own targets went";
+            EXPECT_EQ(left[1], left[0]) << "the shared targets outlived their headsets";
             size_t lit = 0;
             for (const auto& l : a) lit += l.size() > 200;
             EXPECT_GE(lit, size_t(3 * kRounds)) << "the layers show highlights";

@@ -47,9 +47,9 @@ inline void ask_for_frame(client::Connection& c, const scene::Scene& s, double a
 inline bool receive_both_eyes(client::Connection& c, std::vector<std::vector<uint8_t>>& layers) {
     namespace proto = hs::protocol;
     std::vector<uint8_t> eyes[2];
-    size_t got = 0;
+    unsigned got = 0;  // a bit per eye
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-    while (got < 2 && std::chrono::steady_clock::now() < deadline) {
+    while (got != 3 && std::chrono::steady_clock::now() < deadline) {
         auto m = c.receive(500);
         if (auto* e = std::get_if<std::string>(&m)) {
             ADD_FAILURE() << *e;
@@ -58,12 +58,13 @@ inline bool receive_both_eyes(client::Connection& c, std::vector<std::vector<uin
         if (auto* msg = std::get_if<proto::Message>(&m)) {
             EXPECT_FALSE(std::holds_alternative<proto::Error>(*msg));
             if (auto* l = std::get_if<proto::VdLayer>(msg); l && l->eye < 2) {
+                EXPECT_FALSE(got & (1u << l->eye)) << "eye " << int(l->eye) << " came twice";
                 eyes[l->eye] = l->data;
-                ++got;
+                got |= 1u << l->eye;
             }
         }
     }
-    EXPECT_EQ(got, 2u) << "both eyes' layers";
+    EXPECT_EQ(got, 3u) << "both eyes' layers";
     layers.push_back(std::move(eyes[0]));
     layers.push_back(std::move(eyes[1]));
     return true;
