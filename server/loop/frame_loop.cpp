@@ -685,13 +685,15 @@ Result<ViewerFrame*> FrameLoop::frame_for(const ViewerJob& job) {
     const bool own = renderer_->pass_headsets() == 1 || !source_->uses_gpu();
     const uint64_t own_bytes =
         2 * render::Renderer::target_bytes_for(d.eye.width, d.eye.height, cf, depth, pack_tile);
-    static const gpu::RenderTarget kNone;
-    const gpu::RenderTarget& t = slot ? slot->targets[0] : kNone;
+    // Its targets as this display and scene need them: its own, or none while sharing.
+    const auto targets_fit = [&](const gpu::RenderTarget& t) {
+        return own ? t.width() != 0 && t.has_depth() == depth && t.pack_tile() == pack_tile &&
+                         t.views() == views
+                   : t.width() == 0;
+    };
     if (slot && slot->width == d.eye.width && slot->height == d.eye.height &&
         slot->encoding == d.encoding && slot->indices[0].size() >= index_bytes &&
-        (own ? t.width() != 0 && t.has_depth() == depth && t.pack_tile() == pack_tile &&
-                   t.views() == views
-             : t.width() == 0)) {
+        targets_fit(slot->targets[0])) {
         slot->own_target_bytes = own_bytes;  // sharing: the scene's depth may have changed
         return slot.get();
     }

@@ -101,6 +101,10 @@ namespace {
 bool wants_packed_tiles(const gpu::Device& device, const RendererCreateInfo& info) {
     return info.pack_tiles > 0 || (info.pack_tiles < 0 && !device.is_cpu());
 }
+// --multiview on, or auto on a GPU (RendererCreateInfo::multiview); used where the device has it.
+bool wants_multiview(const gpu::Device& device, const RendererCreateInfo& info) {
+    return info.multiview > 0 || (info.multiview < 0 && !device.is_cpu());
+}
 }  // namespace
 
 Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const scene::Scene& scene,
@@ -187,7 +191,7 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
             "the host scans the layers' tiles",
             device.name());
     }
-    const bool multiview = info.multiview > 0 || (info.multiview < 0 && !device.is_cpu());
+    const bool multiview = wants_multiview(device, info);
     r->multiview_ = multiview && device.max_multiview_views() >= 2;
     if (multiview && !r->multiview_ && info.multiview > 0)
         log::warn("{} has no multiview: each eye of a headset is rendered in a pass of its own",
@@ -205,8 +209,7 @@ Result<std::unique_ptr<Renderer>> Renderer::create(gpu::Device& device, const sc
 }
 
 uint32_t Renderer::pass_headsets(const gpu::Device& device, const RendererCreateInfo& info) {
-    const bool multiview = info.multiview > 0 || (info.multiview < 0 && !device.is_cpu());
-    if (!multiview || device.max_multiview_views() < 2)
+    if (!wants_multiview(device, info) || device.max_multiview_views() < 2)
         return 1;
     const uint32_t most = std::min(device.max_multiview_views(), gpu::kMaxTargetViews) / 2;
     return std::clamp<uint32_t>(info.headsets_per_pass, 1, most);

@@ -41,17 +41,25 @@ std::vector<render::ClusteredMesh> dome_levels(const scene::Scene& s) {
     return render::prop_levels(s.prop, finest.value());
 }
 
-// The sphere points (and normals) a pass shades on `cl` from `eye`, sampled: each triangle that
-// faces the eye (the others are culled) at its corners, edge midpoints and centroid.
+// The corners of each triangle of `cl` that faces `eye` (a pass culls the others).
 template <typename Fn>
-void for_each_shaded_point(const render::ClusteredMesh& level, const render::Cluster& cl,
-                           const scene::Hemisphere& h, glm::dvec3 eye, Fn&& fn) {
+void for_each_facing_triangle(const render::ClusteredMesh& level, const render::Cluster& cl,
+                              glm::dvec3 eye, Fn&& fn) {
     const auto& m = level.mesh;
     for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
         const glm::dvec3 a = m.positions[m.indices[i]], b = m.positions[m.indices[i + 1]],
                          c = m.positions[m.indices[i + 2]];
-        if (glm::dot(glm::cross(b - a, c - a), eye - a) <= 0)
-            continue;
+        if (glm::dot(glm::cross(b - a, c - a), eye - a) > 0)
+            fn(a, b, c);
+    }
+}
+
+// The sphere points (and normals) a pass shades on `cl` from `eye`, sampled: each facing
+// triangle at its corners, edge midpoints and centroid.
+template <typename Fn>
+void for_each_shaded_point(const render::ClusteredMesh& level, const render::Cluster& cl,
+                           const scene::Hemisphere& h, glm::dvec3 eye, Fn&& fn) {
+    for_each_facing_triangle(level, cl, eye, [&](glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
         for (const glm::dvec3 w :
              {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1), glm::dvec3(.5, .5, 0),
               glm::dvec3(0, .5, .5), glm::dvec3(.5, 0, .5), glm::dvec3(1, 1, 1) / 3.0}) {
@@ -59,7 +67,7 @@ void for_each_shaded_point(const render::ClusteredMesh& level, const render::Clu
             if (q)
                 fn(*q, glm::normalize(*q - h.centre));
         }
-    }
+    });
 }
 
 // The same, at `per_triangle` random points of each facing triangle (uniform over it).
@@ -68,12 +76,7 @@ void for_each_random_shaded_point(const render::ClusteredMesh& level, const rend
                                   const scene::Hemisphere& h, glm::dvec3 eye, std::mt19937& rng,
                                   int per_triangle, Fn&& fn) {
     std::uniform_real_distribution<double> u(0.0, 1.0);
-    const auto& m = level.mesh;
-    for (uint32_t i = cl.first_index; i + 2 < cl.first_index + cl.index_count; i += 3) {
-        const glm::dvec3 p0 = m.positions[m.indices[i]], p1 = m.positions[m.indices[i + 1]],
-                         p2 = m.positions[m.indices[i + 2]];
-        if (glm::dot(glm::cross(p1 - p0, p2 - p0), eye - p0) <= 0)
-            continue;
+    for_each_facing_triangle(level, cl, eye, [&](glm::dvec3 p0, glm::dvec3 p1, glm::dvec3 p2) {
         for (int k = 0; k < per_triangle; ++k) {
             double w0 = u(rng), w1 = u(rng);
             if (w0 + w1 > 1)
@@ -81,7 +84,7 @@ void for_each_random_shaded_point(const render::ClusteredMesh& level, const rend
             if (const auto q = dome_hit(h, eye, p0 + w0 * (p1 - p0) + w1 * (p2 - p0)))
                 fn(*q, glm::normalize(*q - h.centre));
         }
-    }
+    });
 }
 
 // The largest VD radiance (any channel) the reference finds on `cl` from `eye`.
